@@ -1,0 +1,142 @@
+"""Headless OpenGL context through EGL (Mesa llvmpipe or an NVIDIA GPU), with the project's GL conventions.
+
+Depth convention, used by every renderer: reversed Z. ``glClipControl(GL_LOWER_LEFT, GL_ZERO_TO_ONE)`` is
+set once when the context is made, projections map the near plane to depth 1 and the far plane to 0, the
+depth buffer is 32-bit float, cleared to 0, and the depth test is GREATER. This keeps the relative depth
+precision near 1e-7 at every distance, so raster and ray-cast tiles resolve the same way at 100 km.
+"""
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import os
+from dataclasses import dataclass
+
+from .errors import GLContextError
+
+GL_LOWER_LEFT = 0x8CA1
+GL_ZERO_TO_ONE = 0x935F
+DEVICE_ENV = "TERRABENCH_GL_DEVICE"
+
+
+@dataclass(frozen=True)
+class GLInfo:
+    """What the driver reports about the context."""
+
+    renderer: str
+    vendor: str
+    version: str
+    glsl: str
+    device_index: int | None
+
+    @property
+    def is_software(self) -> bool:
+        """True on Mesa's CPU rasterizers (llvmpipe, softpipe), where GPU timer queries are wrong."""
+        r = self.renderer.lower()
+        return "llvmpipe" in r or "softpipe" in r or "swrast" in r
+
+
+def _proc_address(name: bytes) -> int:
+    lib = ctypes.util.find_library("EGL") or "libEGL.so.1"
+    egl = ctypes.CDLL(lib)
+    egl.eglGetProcAddress.restype = ctypes.c_void_p
+    egl.eglGetProcAddress.argtypes = [ctypes.c_char_p]
+    return egl.eglGetProcAddress(name) or 0
+
+
+def _set_clip_control() -> None:
+    addr = _proc_address(b"glClipControl")
+    if not addr:
+        raise GLContextError("the GL driver has no glClipControl (needs OpenGL 4.5 or ARB_clip_control)")
+    fn = ctypes.CFUNCTYPE(None, ctypes.c_uint, ctypes.c_uint)(addr)
+    fn(GL_LOWER_LEFT, GL_ZERO_TO_ONE)
+
+
+def create_context(device: int | None = None, require: int = 430):
+    """Make a headless EGL core context (GL >= 4.3), set reversed-Z clip control, and return it.
+
+    ``device`` picks an EGL device by index; when None, the environment variable TERRABENCH_GL_DEVICE is
+    used if set. Any failure ends in GLContextError with the reason.
+    """
+    try:
+        import moderngl
+    except ImportError as exc:  # pragma: no cover - dependency is declared
+        raise GLContextError(f"moderngl is not installed: {exc}") from None
+    if device is None and os.environ.get(DEVICE_ENV, "") != "":
+        raw = os.environ[DEVICE_ENV]
+        try:
+            device = int(raw)
+        except ValueError:
+            raise GLContextError(f"{DEVICE_ENV} must be a device index >= 0, got {raw!r}") from None
+    kwargs = {"backend": "egl", "require": require}
+    if device is not None:
+        if isinstance(device, bool) or not isinstance(device, int) or device < 0:
+            raise GLContextError(f"GL device index must be an integer >= 0, got {device!r}")
+        kwargs["device_index"] = device
+    try:
+        ctx = moderngl.create_standalone_context(**kwargs)
+    except Exception as exc:  # glcontext raises bare Exceptions with terse texts
+        text = str(exc).strip() or type(exc).__name__
+        if device is not None and ("device" in text.lower() or "index" in text.lower()):
+            raise GLContextError(f"no EGL device with index {device} ({text})") from None
+        if "libEGL" in text or "egl" in text.lower():
+            raise GLContextError(
+                f"cannot open a headless EGL context ({text}); install Mesa's EGL (libegl1, libgl1-mesa-dri)"
+            ) from None
+        raise GLContextError(f"cannot create an OpenGL {require // 100}.{require % 100 // 10} core context: {text}") from None
+    if ctx.version_code < require:
+        ver = ctx.info.get("GL_VERSION", "?")
+        ctx.release()
+        raise GLContextError(f"OpenGL {require // 100}.{require % 100 // 10} or newer is needed, the driver gives {ver}")
+    _set_clip_control()
+    ctx.extra = {"device_index": device}
+    return ctx
+
+
+def gl_info(ctx) -> GLInfo:
+    """Renderer, vendor and version strings of a context."""
+    info = ctx.info
+    extra = getattr(ctx, "extra", None) or {}
+    return GLInfo(
+        renderer=str(info.get("GL_RENDERER", "?")),
+        vendor=str(info.get("GL_VENDOR", "?")),
+        version=str(info.get("GL_VERSION", "?")),
+        glsl=str(info.get("GL_SHADING_LANGUAGE_VERSION", "?")),
+        device_index=extra.get("device_index"),
+    )
+
+
+_SHARED = None
+
+
+def shared_context():
+    """One process-wide context (made on first use), for the CLI and the tests."""
+    global _SHARED
+    if _SHARED is None:
+        _SHARED = create_context()
+    return _SHARED
+
+
+def _gl_function(name: bytes, *argtypes):
+    addr = _proc_address(name)
+    if not addr:
+        raise GLContextError(f"the GL driver has no {name.decode()}")
+    return ctypes.CFUNCTYPE(None, *argtypes)(addr)
+
+
+def depth32f_texture(ctx, size: tuple[int, int]):
+    """A depth texture with 32-bit float storage (GL_DEPTH_COMPONENT32F), usable as depth attachment.
+
+    moderngl's depth_texture allocates 24-bit fixed point, which wastes reversed Z; the storage is
+    re-specified through the driver directly.
+    """
+    tex = ctx.depth_texture(tuple(size))
+    u, i = ctypes.c_uint, ctypes.c_int
+    bind = _gl_function(b"glBindTexture", u, u)
+    image = _gl_function(b"glTexImage2D", u, i, i, i, i, i, u, u, ctypes.c_void_p)
+    GL_TEXTURE_2D, GL_DEPTH_COMPONENT32F, GL_DEPTH_COMPONENT, GL_FLOAT = 0x0DE1, 0x8CAC, 0x1902, 0x1406
+    bind(GL_TEXTURE_2D, tex.glo)
+    image(GL_TEXTURE_2D, 0, GL_DEPTH_COMPONENT32F, int(size[0]), int(size[1]), 0, GL_DEPTH_COMPONENT, GL_FLOAT, None)
+    bind(GL_TEXTURE_2D, 0)
+    tex.filter = (ctx.NEAREST, ctx.NEAREST) if hasattr(ctx, "NEAREST") else tex.filter
+    return tex

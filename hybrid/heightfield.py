@@ -1,0 +1,137 @@
+"""The height field: real or synthetic terrain as a regular grid of heights in metres.
+
+Conventions (the README states them once for the whole project):
+- World frame: right-handed, x east, y north, z up, metres, float64 on the CPU.
+- ``heights[i, j]``: row i counts from the SOUTH edge, column j from the WEST edge. Loaders flip
+  north-up files (PNG, GeoTIFF, SRTM) on reading, so row order matches OpenGL textures (row 0 at t = 0).
+- Sample (i, j) sits at world (origin_x + j*spacing, origin_y + i*spacing, origin_z + heights[i, j]).
+- Texel space of the height grid: sample (i, j) is texel coordinate (u, v) = (j, i); a cell (i, j) is
+  the square between samples (i, j) and (i+1, j+1). Cell diagonal: from (i, j) to (i+1, j+1)
+  (south-west to north-east) for every triangulated surface.
+- The optional colour texture is cell-centred: texel (i, j) covers cell (i, j), so it has one row and
+  one column fewer than the heights, and the same south-up row order.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import TerrabenchError
+
+
+@dataclass
+class HeightField:
+    """Heights in metres (float32, rows south to north) with spacing, world origin, name and texture."""
+
+    heights: np.ndarray
+    spacing: float
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    name: str = "terrain"
+    texture: np.ndarray | None = None
+    nodata_filled: int = 0
+    source: str = ""
+    notes: list[str] = field(default_factory=list)
+
+    def __post_init__(self):
+        h = np.asarray(self.heights)
+        if h.ndim != 2:
+            raise TerrabenchError(f"heights of {self.name!r} must be a 2-D array, got shape {h.shape}")
+        if h.shape[0] < 2 or h.shape[1] < 2:
+            raise TerrabenchError(f"heights of {self.name!r} need at least 2x2 samples, got {h.shape[0]}x{h.shape[1]}")
+        if not np.issubdtype(h.dtype, np.number) or np.issubdtype(h.dtype, np.complexfloating):
+            raise TerrabenchError(f"heights of {self.name!r} must be real numbers, got dtype {h.dtype}")
+        h = h.astype(np.float32, copy=False)
+        if not np.all(np.isfinite(h)):
+            bad = int(np.count_nonzero(~np.isfinite(h)))
+            raise TerrabenchError(
+                f"heights of {self.name!r} hold {bad} NaN/inf samples; load through hybrid.loaders "
+                "(which fills no-data) or fill them first"
+            )
+        self.heights = np.ascontiguousarray(h)
+        if not (np.isfinite(self.spacing) and self.spacing > 0):
+            raise TerrabenchError(f"spacing of {self.name!r} must be finite and > 0 metres, got {self.spacing!r}")
+        self.spacing = float(self.spacing)
+        o = tuple(float(v) for v in self.origin)
+        if len(o) != 3 or not all(np.isfinite(o)):
+            raise TerrabenchError(f"origin of {self.name!r} must be 3 finite numbers (x, y, z), got {self.origin!r}")
+        self.origin = o
+        if self.texture is not None:
+            t = np.asarray(self.texture)
+            want = (h.shape[0] - 1, h.shape[1] - 1)
+            if t.ndim != 3 or t.shape[:2] != want or t.shape[2] not in (3, 4) or t.dtype != np.uint8:
+                raise TerrabenchError(
+                    f"texture of {self.name!r} must be uint8 of shape {want + (3,)} (cell-centred), "
+                    f"got {t.dtype} {t.shape}"
+                )
+            self.texture = np.ascontiguousarray(t[..., :3])
+
+    @property
+    def rows(self) -> int:
+        """Number of sample rows (south to north)."""
+        return int(self.heights.shape[0])
+
+    @property
+    def cols(self) -> int:
+        """Number of sample columns (west to east)."""
+        return int(self.heights.shape[1])
+
+    @property
+    def extent(self) -> tuple[float, float]:
+        """Width (x) and depth (y) of the terrain in metres."""
+        return ((self.cols - 1) * self.spacing, (self.rows - 1) * self.spacing)
+
+    @property
+    def height_range(self) -> tuple[float, float]:
+        """Minimum and maximum height in metres (relative to origin z)."""
+        return float(self.heights.min()), float(self.heights.max())
+
+    def world_of(self, i, j) -> np.ndarray:
+        """World position(s) (float64, metres) of sample(s) at row i, column j (may be fractional)."""
+        i = np.asarray(i, dtype=np.float64)
+        j = np.asarray(j, dtype=np.float64)
+        x = self.origin[0] + j * self.spacing
+        y = self.origin[1] + i * self.spacing
+        z = self.origin[2] + self.sample_bilinear(i, j)
+        return np.stack([x, y, z], axis=-1)
+
+    def sample_bilinear(self, i, j) -> np.ndarray:
+        """Bilinearly interpolated height (metres, relative to origin z) at fractional row i, column j."""
+        i = np.clip(np.asarray(i, dtype=np.float64), 0, self.rows - 1)
+        j = np.clip(np.asarray(j, dtype=np.float64), 0, self.cols - 1)
+        i0 = np.minimum(np.floor(i).astype(np.int64), self.rows - 2)
+        j0 = np.minimum(np.floor(j).astype(np.int64), self.cols - 2)
+        fi, fj = i - i0, j - j0
+        h = self.heights
+        a, b = h[i0, j0], h[i0, j0 + 1]
+        c, d = h[i0 + 1, j0], h[i0 + 1, j0 + 1]
+        return (a * (1 - fj) + b * fj) * (1 - fi) + (c * (1 - fj) + d * fj) * fi
+
+    def ground_height(self, x, y) -> np.ndarray:
+        """World z (metres) of the terrain below world (x, y), clamped to the terrain's edge."""
+        j = (np.asarray(x, dtype=np.float64) - self.origin[0]) / self.spacing
+        i = (np.asarray(y, dtype=np.float64) - self.origin[1]) / self.spacing
+        return self.origin[2] + self.sample_bilinear(i, j)
+
+    def summary(self) -> str:
+        """A few lines describing the height field, for `terrabench info`."""
+        lo, hi = self.height_range
+        w, d = self.extent
+        lines = [
+            f"name:        {self.name}",
+            f"source:      {self.source or '(in memory)'}",
+            f"samples:     {self.cols} x {self.rows} (columns x rows)",
+            f"spacing:     {self.spacing:g} m",
+            f"extent:      {w / 1000:.2f} km x {d / 1000:.2f} km",
+            f"heights:     {lo:.1f} .. {hi:.1f} m (mean {float(self.heights.mean()):.1f} m)",
+            f"origin:      ({self.origin[0]:g}, {self.origin[1]:g}, {self.origin[2]:g}) m",
+            f"texture:     {'%dx%d RGB' % (self.texture.shape[1], self.texture.shape[0]) if self.texture is not None else 'none'}",
+            f"no-data:     {self.nodata_filled} samples filled",
+        ]
+        lines += [f"note:        {n}" for n in self.notes]
+        return "\n".join(lines)
+
+    def moved(self, origin) -> "HeightField":
+        """The same terrain placed at another world origin (x, y, z) in metres."""
+        return HeightField(self.heights, self.spacing, tuple(origin), self.name, self.texture,
+                           self.nodata_filled, self.source, list(self.notes))

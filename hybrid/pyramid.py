@@ -1,0 +1,225 @@
+"""The tile pyramid: square tiles of N cells (N+1 samples, borders shared) at every level of detail.
+
+Level 0 is the full-resolution grid; level l keeps every 2^l-th sample of level 0 (subsampling, as
+Bhattacharjee et al.), not 2x2 averages (Dick et al.). We subsample because then every coarse sample is a
+real level-0 sample: tile borders of all levels lie exactly on the level-0 surface, the geometric error
+below is a plain maximum deviation from measured heights, and a coarse tile never lifts or sinks the
+terrain as averaging does at peaks and cliffs (a summit keeps its height until its sample is dropped).
+
+The grid is padded by repeating its edge samples up to N*2^L + 1 samples a side so tiles are whole; the
+padding is never drawn: each tile carries ``clip`` (the world rectangle of real terrain it covers) and
+renderers clip to it. A tile's AABB spans the level-0 heights over its clipped region, so it bounds the
+surface of every level; ``error`` is the largest vertical distance (metres) between the tile's
+triangulated level-l surface and the level-0 samples it covers, made monotone (a parent's error is at
+least its children's).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from .errors import TerrabenchError
+from .heightfield import HeightField
+
+EDGE_W, EDGE_E, EDGE_S, EDGE_N = 1, 2, 4, 8
+
+
+@dataclass(frozen=True, order=True)
+class TileKey:
+    """A tile's address: pyramid level (0 = finest) and column tx / row ty among that level's tiles."""
+
+    level: int
+    tx: int
+    ty: int
+
+    def children(self) -> tuple["TileKey", ...]:
+        """The four tiles of the next finer level covering this one (SW, SE, NW, NE)."""
+        l, x, y = self.level - 1, 2 * self.tx, 2 * self.ty
+        return (TileKey(l, x, y), TileKey(l, x + 1, y), TileKey(l, x, y + 1), TileKey(l, x + 1, y + 1))
+
+    def parent(self) -> "TileKey":
+        """The tile of the next coarser level that contains this one."""
+        return TileKey(self.level + 1, self.tx // 2, self.ty // 2)
+
+
+@dataclass(frozen=True)
+class Tile:
+    """What a renderer needs of one tile: its level-l samples and where they sit in the world.
+
+    heights: (N+1, N+1) float32 metres relative to the terrain's origin z, rows south to north.
+    origin: world (x, y, z) of sample [0, 0] (z is the terrain's origin z), float64 metres.
+    spacing: metres between this tile's samples (terrain spacing * 2^level).
+    clip: world rectangle (x0, y0, x1, y1) of real terrain inside the tile; never draw outside it.
+    zmin, zmax: world heights bounding the tile's surface at every level.
+    error: geometric error in metres of this tile's level against level 0.
+    """
+
+    key: TileKey
+    heights: np.ndarray
+    origin: tuple[float, float, float]
+    spacing: float
+    clip: tuple[float, float, float, float]
+    zmin: float
+    zmax: float
+    error: float
+
+    @property
+    def n(self) -> int:
+        """Cells per side."""
+        return self.heights.shape[0] - 1
+
+    @property
+    def aabb(self) -> tuple[np.ndarray, np.ndarray]:
+        """World-space (min corner, max corner) of the tile's clipped bounding box, float64."""
+        x0, y0, x1, y1 = self.clip
+        return np.array([x0, y0, self.zmin]), np.array([x1, y1, self.zmax])
+
+    @property
+    def nbytes_heights(self) -> int:
+        """Bytes of the tile's heights as float32."""
+        return int(self.heights.size * 4)
+
+
+def interpolate_level(h: np.ndarray, k: int) -> np.ndarray:
+    """Triangulated surface of the every-k-th-sample grid of h, evaluated at every sample of h (float64).
+
+    h has (m*k + 1)² samples; cells are split along the (i, j) -> (i+1, j+1) diagonal.
+    """
+    c = h[::k, ::k].astype(np.float64)
+    n = h.shape[0]
+    idx = np.arange(n)
+    I = np.minimum(idx // k, c.shape[0] - 2)
+    f = (idx - I * k) / k
+    fi, fj = f[:, None], f[None, :]
+    h00 = c[np.ix_(I, I)]
+    h01 = c[np.ix_(I, I + 1)]
+    h10 = c[np.ix_(I + 1, I)]
+    h11 = c[np.ix_(I + 1, I + 1)]
+    lower = h00 + fj * (h01 - h00) + fi * (h11 - h01)   # fj >= fi: triangle (i,j) (i,j+1) (i+1,j+1)
+    upper = h00 + fi * (h10 - h00) + fj * (h11 - h10)   # fi > fj: triangle (i,j) (i+1,j) (i+1,j+1)
+    return np.where(fj >= fi, lower, upper)
+
+
+def _block_reduce(a: np.ndarray, b: int, fn) -> np.ndarray:
+    """Reduce an (m*b, m*b) array over b x b blocks with fn (np.max or np.min)."""
+    m = a.shape[0] // b
+    return fn(a[:m * b, :m * b].reshape(m, b, m, b), axis=(1, 3))
+
+
+class TilePyramid:
+    """Tiles of ``tile_size`` cells over a height field at levels 0..max_level, with AABBs and errors."""
+
+    def __init__(self, hf: HeightField, tile_size: int = 256):
+        if isinstance(tile_size, bool) or not isinstance(tile_size, (int, np.integer)) or tile_size < 2 \
+                or tile_size & (tile_size - 1):
+            raise TerrabenchError(f"tile size must be a power of two >= 2 cells, got {tile_size!r}")
+        self.hf = hf
+        self.n = int(tile_size)
+        cells = max(hf.rows, hf.cols) - 1
+        tiles0 = -(-cells // self.n)
+        self.max_level = int(np.ceil(np.log2(tiles0))) if tiles0 > 1 else 0
+        self.size = self.n * (1 << self.max_level) + 1
+        pad = ((0, self.size - hf.rows), (0, self.size - hf.cols))
+        self.padded = np.pad(hf.heights, pad, mode="edge")
+        self._build_bounds()
+
+    # --- per-level arrays -------------------------------------------------------------------------
+    def tiles_per_side(self, level: int) -> int:
+        """Number of tile columns (= rows) at a level, padding included."""
+        return 1 << (self.max_level - level)
+
+    def _build_bounds(self):
+        n, L = self.n, self.max_level
+        hf = self.hf
+        valid = np.zeros((self.size - 1, self.size - 1), bool)
+        valid[:hf.rows - 1, :hf.cols - 1] = True
+        # per level-0 cell: min/max of its four corners (bounds every reconstruction of the cell)
+        p = self.padded
+        cmax = np.maximum(np.maximum(p[:-1, :-1], p[:-1, 1:]), np.maximum(p[1:, :-1], p[1:, 1:]))
+        cmin = np.minimum(np.minimum(p[:-1, :-1], p[:-1, 1:]), np.minimum(p[1:, :-1], p[1:, 1:]))
+        cmax = np.where(valid, cmax, -np.inf)
+        cmin = np.where(valid, cmin, np.inf)
+        self._zmax, self._zmin, self._err, self._exists = {}, {}, {}, {}
+        for level in range(L + 1):
+            b = n << level
+            self._zmax[level] = _block_reduce(cmax, b, np.max)
+            self._zmin[level] = _block_reduce(cmin, b, np.min)
+            self._exists[level] = _block_reduce(valid, b, np.max)
+            if level == 0:
+                err_cells = np.zeros_like(cmax)
+            else:
+                dev = np.abs(interpolate_level(p, 1 << level) - p)
+                # sample deviations onto cells: a cell's error is the max over its four corner samples
+                err_cells = np.maximum(np.maximum(dev[:-1, :-1], dev[:-1, 1:]), np.maximum(dev[1:, :-1], dev[1:, 1:]))
+                err_cells = np.where(valid, err_cells, 0.0)
+            e = _block_reduce(err_cells, b, np.max)
+            if level > 0:
+                prev = self._err[level - 1]
+                m = prev.shape[0] // 2
+                e = np.maximum(e, prev.reshape(m, 2, m, 2).max(axis=(1, 3)))
+            self._err[level] = e
+
+    # --- tiles ------------------------------------------------------------------------------------
+    def exists(self, key: TileKey) -> bool:
+        """True if the tile covers any real (unpadded) terrain."""
+        if not (0 <= key.level <= self.max_level):
+            return False
+        t = self.tiles_per_side(key.level)
+        return 0 <= key.tx < t and 0 <= key.ty < t and bool(self._exists[key.level][key.ty, key.tx])
+
+    def root(self) -> TileKey:
+        """The single tile of the coarsest level."""
+        return TileKey(self.max_level, 0, 0)
+
+    def keys(self, level: int) -> list[TileKey]:
+        """All existing tiles of a level, row by row from the south."""
+        t = self.tiles_per_side(level)
+        ex = self._exists[level]
+        return [TileKey(level, x, y) for y in range(t) for x in range(t) if ex[y, x]]
+
+    def error(self, key: TileKey) -> float:
+        """Geometric error (metres) of the tile's level-l surface against level 0."""
+        return float(self._err[key.level][key.ty, key.tx])
+
+    def zrange(self, key: TileKey) -> tuple[float, float]:
+        """World z range (min, max) in metres bounding the tile's surface."""
+        oz = self.hf.origin[2]
+        return oz + float(self._zmin[key.level][key.ty, key.tx]), oz + float(self._zmax[key.level][key.ty, key.tx])
+
+    def clip(self, key: TileKey) -> tuple[float, float, float, float]:
+        """World rectangle (x0, y0, x1, y1) of real terrain inside the tile."""
+        hf = self.hf
+        span = (self.n << key.level) * hf.spacing
+        ox, oy = hf.origin[0], hf.origin[1]
+        x0, y0 = ox + key.tx * span, oy + key.ty * span
+        x1 = min(x0 + span, ox + (hf.cols - 1) * hf.spacing)
+        y1 = min(y0 + span, oy + (hf.rows - 1) * hf.spacing)
+        return (x0, y0, x1, y1)
+
+    def aabb(self, key: TileKey) -> tuple[np.ndarray, np.ndarray]:
+        """World-space (min, max) corners of the tile's bounding box."""
+        x0, y0, x1, y1 = self.clip(key)
+        z0, z1 = self.zrange(key)
+        return np.array([x0, y0, z0]), np.array([x1, y1, z1])
+
+    def tile(self, key: TileKey) -> Tile:
+        """The tile's level-l samples and placement."""
+        if not self.exists(key):
+            raise TerrabenchError(f"tile {key} does not exist (levels 0..{self.max_level}, "
+                                  f"{self.tiles_per_side(key.level) if 0 <= key.level <= self.max_level else 0} tiles a side)")
+        k = 1 << key.level
+        i0, j0 = key.ty * self.n * k, key.tx * self.n * k
+        h = self.padded[i0:i0 + self.n * k + 1:k, j0:j0 + self.n * k + 1:k]
+        hf = self.hf
+        origin = (hf.origin[0] + j0 * hf.spacing, hf.origin[1] + i0 * hf.spacing, hf.origin[2])
+        z0, z1 = self.zrange(key)
+        return Tile(key, np.ascontiguousarray(h, dtype=np.float32), origin, hf.spacing * k, self.clip(key),
+                    z0, z1, self.error(key))
+
+    def texture_rect(self, key: TileKey) -> tuple[int, int, int, int]:
+        """Cell (texel) index range (j0, i0, j1, i1) of the terrain's texture that the tile covers."""
+        k = self.n << key.level
+        hf = self.hf
+        return (key.tx * k, key.ty * k, min((key.tx + 1) * k, hf.cols - 1), min((key.ty + 1) * k, hf.rows - 1))

@@ -1,0 +1,90 @@
+"""The frame target every method draws into: RGBA8 colour + 32-bit float reversed-Z depth, and its read-back."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import TerrabenchError
+from .glcontext import depth32f_texture
+from .view import View
+
+SKY = (0.62, 0.74, 0.88, 0.0)
+
+
+@dataclass
+class RenderResult:
+    """One rendered frame: colour (H, W, 3 uint8, top row first), hit distance in metres (inf = no terrain)."""
+
+    colour: np.ndarray
+    distance: np.ndarray
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def mask(self) -> np.ndarray:
+        """Coverage: True where a pixel shows terrain."""
+        return np.isfinite(self.distance)
+
+    def save(self, path) -> tuple[Path, Path]:
+        """Write PATH.png and PATH.depth.npy (float32 metres, inf where no terrain); returns both paths."""
+        from PIL import Image
+        path = Path(path)
+        if path.suffix.lower() != ".png":
+            raise TerrabenchError(f"output must be a .png path, got {path}")
+        folder = path.parent if str(path.parent) else Path(".")
+        if not folder.is_dir():
+            raise TerrabenchError(f"output folder {folder} does not exist")
+        depth_path = path.parent / (path.stem + ".depth.npy")
+        try:
+            Image.fromarray(self.colour).save(path)
+            np.save(depth_path, self.distance.astype(np.float32))
+        except OSError as exc:
+            raise TerrabenchError(f"cannot write {path}: {exc.strerror or exc}") from None
+        return path, depth_path
+
+
+class FrameTarget:
+    """GPU colour + depth attachments of one viewport size; clear, bind and read back."""
+
+    def __init__(self, ctx, width: int, height: int):
+        self.ctx = ctx
+        self.size = (int(width), int(height))
+        self.colour = ctx.texture(self.size, 4)
+        self.depth = depth32f_texture(ctx, self.size)
+        self.fbo = ctx.framebuffer(color_attachments=[self.colour], depth_attachment=self.depth)
+
+    @property
+    def nbytes(self) -> int:
+        """GPU bytes of the attachments (4 colour + 4 depth bytes a pixel)."""
+        return self.size[0] * self.size[1] * 8
+
+    def clear(self, colour=SKY) -> None:
+        """Clear colour to the sky and depth to 0 (reversed Z: 0 is the far plane)."""
+        self.fbo.clear(*colour, depth=0.0)
+
+    def use(self) -> None:
+        """Bind as the draw framebuffer with the project's depth state (GREATER, writes on)."""
+        self.fbo.use()
+        self.ctx.enable(self.ctx.DEPTH_TEST)
+        self.ctx.depth_func = ">"
+
+    def read_depth(self) -> np.ndarray:
+        """Raw reversed-Z depth, (H, W) float32, top row first."""
+        d = np.frombuffer(self.depth.read(alignment=4), dtype=np.float32).reshape(self.size[1], self.size[0])
+        return d[::-1].copy()
+
+    def read_colour(self) -> np.ndarray:
+        """Colour as (H, W, 3) uint8, top row first."""
+        c = np.frombuffer(self.fbo.read(components=4, alignment=1), dtype=np.uint8)
+        return c.reshape(self.size[1], self.size[0], 4)[::-1, :, :3].copy()
+
+    def read(self, view: View, stats: dict | None = None) -> RenderResult:
+        """Colour and per-pixel hit distance (metres, inf where empty) for the view that was drawn."""
+        dist = view.distance_from_depth(self.read_depth())
+        return RenderResult(self.read_colour(), dist, dict(stats or {}))
+
+    def release(self) -> None:
+        """Free the GPU attachments."""
+        for o in (self.fbo, self.colour, self.depth):
+            o.release()

@@ -1,0 +1,202 @@
+"""Views: camera placement, float64 view/projection matrices, frusta, pixel rays and depth-to-distance.
+
+Camera frame: right-handed, looking down -z of eye space, +y up on screen. Projection: reversed Z with
+clip depth in [0, 1] (near plane -> 1, far plane -> 0; see hybrid.glcontext). What goes to the GPU is
+relative to the eye: ``view_proj_rel`` maps (world - eye) to clip space, so terrain far from the world
+origin loses no float32 precision. Images are stored top row first; pixel (r, c) has its centre at
+(c + 0.5, r + 0.5) from the top-left corner.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import TerrabenchError, check_positive, check_range
+
+MAX_VIEWPORT = 16384
+
+
+def _vec3(name, v) -> np.ndarray:
+    try:
+        a = np.asarray(v, dtype=np.float64).reshape(3)
+    except (TypeError, ValueError):
+        raise TerrabenchError(f"{name} must be 3 numbers (x, y, z), got {v!r}") from None
+    if not np.all(np.isfinite(a)):
+        raise TerrabenchError(f"{name} must be finite, got {v!r}")
+    return a
+
+
+@dataclass(frozen=True)
+class View:
+    """A pinhole camera: eye and target in world metres, vertical FOV in degrees, viewport in pixels."""
+
+    eye: np.ndarray
+    target: np.ndarray
+    fov_y: float = 60.0
+    width: int = 640
+    height: int = 360
+    near: float = 1.0
+    far: float = 1.0e6
+    up: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+
+    def __post_init__(self):
+        object.__setattr__(self, "eye", _vec3("eye", self.eye))
+        object.__setattr__(self, "target", _vec3("target", self.target))
+        object.__setattr__(self, "up", _vec3("up", self.up))
+        check_range("fov_y (degrees)", self.fov_y, 0.0, 180.0)
+        for name in ("width", "height"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not (1 <= v <= MAX_VIEWPORT):
+                raise TerrabenchError(f"viewport {name} must be an integer in [1, {MAX_VIEWPORT}] pixels, got {v!r}")
+            object.__setattr__(self, name, int(v))
+        check_positive("near (metres)", self.near)
+        check_positive("far (metres)", self.far)
+        if not self.far > self.near:
+            raise TerrabenchError(f"far ({self.far}) must be greater than near ({self.near})")
+        d = self.target - self.eye
+        if np.linalg.norm(d) <= 1e-9 * max(1.0, np.linalg.norm(self.eye)):
+            raise TerrabenchError("target must differ from eye")
+        object.__setattr__(self, "fov_y", float(self.fov_y))
+        object.__setattr__(self, "near", float(self.near))
+        object.__setattr__(self, "far", float(self.far))
+
+    # --- camera frame -------------------------------------------------------------------------
+    @property
+    def forward(self) -> np.ndarray:
+        """Unit viewing direction in world space."""
+        d = self.target - self.eye
+        return d / np.linalg.norm(d)
+
+    def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Right, up and back unit vectors of the camera in world space (rows of the view rotation).
+
+        When the view direction is (nearly) parallel to ``up``, world north (0, 1, 0) is used as up.
+        """
+        f = self.forward
+        up = self.up / np.linalg.norm(self.up)
+        if abs(np.dot(f, up)) > 1.0 - 1e-9:
+            up = np.array([0.0, 1.0, 0.0]) if abs(f[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        r = np.cross(f, up)
+        r /= np.linalg.norm(r)
+        u = np.cross(r, f)
+        return r, u, -f
+
+    @property
+    def aspect(self) -> float:
+        """Viewport width / height."""
+        return self.width / self.height
+
+    @property
+    def tan_half_fov(self) -> float:
+        """tan(fov_y / 2)."""
+        return float(np.tan(np.radians(self.fov_y) * 0.5))
+
+    @property
+    def pixels_per_radian(self) -> float:
+        """Screen-space scale K: a length L metres at distance d metres spans about K*L/d pixels."""
+        return self.height / (2.0 * self.tan_half_fov)
+
+    def rotation(self) -> np.ndarray:
+        """3x3 world-to-eye rotation (float64)."""
+        r, u, b = self.basis()
+        return np.stack([r, u, b])
+
+    def view_matrix(self) -> np.ndarray:
+        """4x4 world-to-eye matrix in float64 (absolute world coordinates)."""
+        m = np.eye(4)
+        R = self.rotation()
+        m[:3, :3] = R
+        m[:3, 3] = -R @ self.eye
+        return m
+
+    def projection(self) -> np.ndarray:
+        """4x4 reversed-Z perspective projection to clip space with depth in [0, 1] (float64)."""
+        n, f = self.near, self.far
+        t = 1.0 / self.tan_half_fov
+        p = np.zeros((4, 4))
+        p[0, 0] = t / self.aspect
+        p[1, 1] = t
+        p[2, 2] = n / (f - n)
+        p[2, 3] = n * f / (f - n)
+        p[3, 2] = -1.0
+        return p
+
+    @property
+    def view_proj_rel(self) -> np.ndarray:
+        """4x4 float64 matrix from eye-relative world coordinates (world - eye) to clip space."""
+        m = np.eye(4)
+        m[:3, :3] = self.rotation()
+        return self.projection() @ m
+
+    def view_proj(self) -> np.ndarray:
+        """4x4 float64 matrix from absolute world coordinates to clip space."""
+        return self.projection() @ self.view_matrix()
+
+    def frustum_planes_rel(self) -> np.ndarray:
+        """6x4 planes (a, b, c, d), a*x+b*y+c*z+d >= 0 inside, for eye-relative world points; unit normals.
+
+        Order: left, right, bottom, top, near, far.
+        """
+        m = self.view_proj_rel
+        rows = [m[3] + m[0], m[3] - m[0], m[3] + m[1], m[3] - m[1], m[3] - m[2], m[2]]
+        planes = np.array(rows)
+        planes /= np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
+        return planes
+
+    # --- rays and depth -----------------------------------------------------------------------
+    def pixel_dirs_eye(self, rows=None, cols=None) -> np.ndarray:
+        """Eye-space directions (x, y, -1) through pixel centres; full image (H, W, 3) if rows/cols None."""
+        if rows is None:
+            rows, cols = np.mgrid[0:self.height, 0:self.width]
+        rows = np.asarray(rows, dtype=np.float64)
+        cols = np.asarray(cols, dtype=np.float64)
+        ndc_x = (cols + 0.5) / self.width * 2.0 - 1.0
+        ndc_y = 1.0 - (rows + 0.5) / self.height * 2.0
+        t = self.tan_half_fov
+        return np.stack([ndc_x * t * self.aspect, ndc_y * t, -np.ones_like(ndc_x)], axis=-1)
+
+    def pixel_rays(self, rows=None, cols=None) -> np.ndarray:
+        """Unit world-space ray directions (float64) through pixel centres, shape (..., 3)."""
+        d = self.pixel_dirs_eye(rows, cols) @ self.rotation()
+        return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+    def distance_from_depth(self, depth: np.ndarray) -> np.ndarray:
+        """Eye-to-surface distance in metres from a reversed-Z depth image (top row first); inf where 0."""
+        depth = np.asarray(depth, dtype=np.float64)
+        n, f = self.near, self.far
+        a, b = n / (f - n), n * f / (f - n)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            zdist = b / (a + depth)
+        norm = np.linalg.norm(self.pixel_dirs_eye(), axis=-1)
+        dist = zdist * norm
+        return np.where(depth > 0.0, dist, np.inf).astype(np.float32)
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """Screen position (col, row, depth) of world points (float64), rows from the top; depth reversed-Z."""
+        p = np.asarray(points, dtype=np.float64) - self.eye
+        h = np.concatenate([p, np.ones(p.shape[:-1] + (1,))], axis=-1) @ self.view_proj_rel.T
+        ndc = h[..., :3] / h[..., 3:4]
+        col = (ndc[..., 0] + 1) * 0.5 * self.width
+        row = (1 - ndc[..., 1]) * 0.5 * self.height
+        return np.stack([col, row, ndc[..., 2]], axis=-1)
+
+    def with_size(self, width: int, height: int) -> "View":
+        """The same camera with another viewport size."""
+        return View(self.eye, self.target, self.fov_y, width, height, self.near, self.far, self.up)
+
+    def moved(self, offset) -> "View":
+        """The same camera translated by a world offset (metres)."""
+        o = _vec3("offset", offset)
+        return View(self.eye + o, self.target + o, self.fov_y, self.width, self.height, self.near, self.far, self.up)
+
+
+def default_view(hf, width=640, height=360, fov_y=60.0) -> View:
+    """A three-quarter view of the whole terrain from the south-west, above its highest point."""
+    w, d = hf.extent
+    lo, hi = hf.height_range
+    ox, oy, oz = hf.origin
+    size = max(w, d)
+    eye = np.array([ox + 0.25 * w, oy - 0.08 * d, oz + hi + 0.12 * size])
+    target = np.array([ox + 0.55 * w, oy + 0.55 * d, oz + lo])
+    return View(eye, target, fov_y, width, height, near=max(0.5, size * 1e-5), far=size * 6 + (hi - lo) * 4)
