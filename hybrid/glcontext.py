@@ -106,15 +106,17 @@ def gl_info(ctx) -> GLInfo:
     )
 
 
-_SHARED = None
+_SHARED: dict = {}
 
 
-def shared_context():
-    """One process-wide context (made on first use), for the CLI and the tests."""
-    global _SHARED
-    if _SHARED is None:
-        _SHARED = create_context()
-    return _SHARED
+def shared_context(device: int | None = None):
+    """One process-wide context per device (made on first use), for the CLI and the tests.
+
+    Standalone contexts do not switch on use, so a process should draw with one context only.
+    """
+    if device not in _SHARED:
+        _SHARED[device] = create_context(device)
+    return _SHARED[device]
 
 
 def _gl_function(name: bytes, *argtypes):

@@ -107,11 +107,25 @@ class HeightField:
         c, d = h[i0 + 1, j0], h[i0 + 1, j0 + 1]
         return (a * (1 - fj) + b * fj) * (1 - fi) + (c * (1 - fj) + d * fj) * fi
 
+    def sample_triangles(self, i, j) -> np.ndarray:
+        """Height (metres, relative to origin z) of the triangulated surface (SW-NE diagonal) at row i, column j."""
+        i = np.clip(np.asarray(i, dtype=np.float64), 0, self.rows - 1)
+        j = np.clip(np.asarray(j, dtype=np.float64), 0, self.cols - 1)
+        i0 = np.minimum(np.floor(i).astype(np.int64), self.rows - 2)
+        j0 = np.minimum(np.floor(j).astype(np.int64), self.cols - 2)
+        fi, fj = i - i0, j - j0
+        h = self.heights
+        h00, h01 = h[i0, j0].astype(np.float64), h[i0, j0 + 1]
+        h10, h11 = h[i0 + 1, j0], h[i0 + 1, j0 + 1]
+        lower = h00 + fj * (h01 - h00) + fi * (h11 - h01)
+        upper = h00 + fi * (h10 - h00) + fj * (h11 - h10)
+        return np.where(fj >= fi, lower, upper)
+
     def ground_height(self, x, y) -> np.ndarray:
-        """World z (metres) of the terrain below world (x, y), clamped to the terrain's edge."""
+        """World z (metres) of the drawn (triangulated) terrain below world (x, y), clamped to the edge."""
         j = (np.asarray(x, dtype=np.float64) - self.origin[0]) / self.spacing
         i = (np.asarray(y, dtype=np.float64) - self.origin[1]) / self.spacing
-        return self.origin[2] + self.sample_bilinear(i, j)
+        return self.origin[2] + self.sample_triangles(i, j)
 
     def summary(self) -> str:
         """A few lines describing the height field, for `terrabench info`."""

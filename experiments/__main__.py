@@ -1,0 +1,4 @@
+"""`python -m experiments` is the same as the `terrabench` command."""
+from .cli import main
+
+raise SystemExit(main())

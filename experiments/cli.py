@@ -1,0 +1,227 @@
+"""The `terrabench` command line: one entry point with subcommands.
+
+Every user error ends with one line `terrabench: error: ...` naming the argument and exit code 2;
+nothing is written before the inputs are checked.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from hybrid.errors import TerrabenchError
+
+METHODS = ("reference", "raster", "raycast", "hybrid", "fullres", "tin")
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        self.print_usage(sys.stderr)
+        print(f"{self.prog}: error: {message}", file=sys.stderr)
+        raise SystemExit(2)
+
+
+def _vec(text: str, name: str) -> np.ndarray:
+    try:
+        v = [float(s) for s in text.split(",")]
+    except ValueError:
+        raise TerrabenchError(f"--{name} must be three numbers x,y,z in metres, got {text!r}") from None
+    if len(v) != 3:
+        raise TerrabenchError(f"--{name} must be three numbers x,y,z in metres, got {text!r}")
+    return np.array(v)
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(s) for s in text.lower().split("x"))
+    except ValueError:
+        raise TerrabenchError(f"--size must be WIDTHxHEIGHT in pixels (e.g. 640x360), got {text!r}") from None
+    return w, h
+
+
+def add_terrain_args(p: argparse.ArgumentParser) -> None:
+    """Options naming a terrain: bundled/synthetic name or a file, with scale and spacing overrides."""
+    p.add_argument("--dataset", default="puget", help="bundled name (puget, fbm, ridged, spike, cliff, staircase, flat, ridges) or a file")
+    p.add_argument("--size-samples", type=int, default=None, help="samples per side for synthetic data, or a crop of puget")
+    p.add_argument("--seed", type=int, default=0, help="seed for synthetic data")
+    p.add_argument("--vertical-scale", type=float, default=None, help="metres per stored unit (files)")
+    p.add_argument("--spacing", type=float, default=None, help="metres between samples (files)")
+    p.add_argument("--raw-shape", default=None, help="ROWSxCOLS for raw files")
+    p.add_argument("--raw-dtype", default=None, help="NumPy dtype for raw files, e.g. <u2, <f4")
+    p.add_argument("--offset", default=None, help="place the terrain at world x,y,z metres")
+
+
+def load_terrain_arg(args):
+    """The HeightField named by --dataset (and friends)."""
+    from hybrid.datasets import NAMES, get_dataset
+    from hybrid.loaders import load_terrain
+    name = args.dataset
+    if name in NAMES:
+        hf = get_dataset(name, size=args.size_samples, seed=args.seed)
+    elif Path(name).suffix:
+        opts = {"vertical_scale": args.vertical_scale, "spacing": args.spacing}
+        if args.raw_shape:
+            try:
+                opts["shape"] = tuple(int(s) for s in args.raw_shape.lower().split("x"))
+            except ValueError:
+                raise TerrabenchError(f"--raw-shape must be ROWSxCOLS, got {args.raw_shape!r}") from None
+            opts["dtype"] = args.raw_dtype
+        hf = load_terrain(name, **opts)
+    else:
+        raise TerrabenchError(f"unknown dataset {name!r}; choose one of {', '.join(NAMES)} or give a file path")
+    if getattr(args, "offset", None):
+        hf = hf.moved(_vec(args.offset, "offset"))
+    return hf
+
+
+def add_view_args(p: argparse.ArgumentParser) -> None:
+    """Options choosing the view: eye/target/fov/size or a flight frame."""
+    p.add_argument("--eye", default=None, help="eye x,y,z in world metres")
+    p.add_argument("--target", default=None, help="look-at point x,y,z in world metres")
+    p.add_argument("--fov", type=float, default=60.0, help="vertical field of view in degrees, (0, 180)")
+    p.add_argument("--size", default="640x360", help="viewport WIDTHxHEIGHT in pixels")
+    p.add_argument("--near", type=float, default=None, help="near plane in metres")
+    p.add_argument("--far", type=float, default=None, help="far plane in metres")
+    p.add_argument("--flight", default=None, help="preset (orbit, flyover, grazing, lookdown) or a .json/.csv flight")
+    p.add_argument("--frames", type=int, default=60, help="frames of a preset flight")
+    p.add_argument("--frame", type=int, default=0, help="frame of the flight to render")
+
+
+def view_from_args(args, hf):
+    """The View named by the view options."""
+    from hybrid.flight import get_flight
+    from hybrid.view import View, default_view
+    w, h = _size(args.size)
+    if args.flight:
+        if args.eye or args.target:
+            raise TerrabenchError("give either --flight or --eye/--target, not both")
+        v = get_flight(args.flight, hf, frames=args.frames, width=w, height=h).view(args.frame, w, h)
+    elif args.eye or args.target:
+        if not (args.eye and args.target):
+            raise TerrabenchError("--eye and --target must be given together")
+        d = default_view(hf, 16, 16)
+        v = View(_vec(args.eye, "eye"), _vec(args.target, "target"), args.fov, w, h,
+                 args.near if args.near is not None else d.near, args.far if args.far is not None else d.far)
+        return v
+    else:
+        v = default_view(hf, w, h, args.fov)
+    if args.near is not None or args.far is not None or args.fov != v.fov_y:
+        v = View(v.eye, v.target, args.fov, v.width, v.height,
+                 args.near if args.near is not None else v.near, args.far if args.far is not None else v.far)
+    return v
+
+
+def cmd_info(args) -> int:
+    """Print the GL context (and the terrain when a file or dataset is named)."""
+    from hybrid.glcontext import gl_info, shared_context
+    if args.file or args.dataset_given:
+        if args.file:
+            args.dataset = args.file
+        hf = load_terrain_arg(args)
+        print(hf.summary())
+        from hybrid.pyramid import TilePyramid
+        pyr = TilePyramid(hf, args.tile_size)
+        print(f"tiles:       {args.tile_size} cells, levels 0..{pyr.max_level}, "
+              f"{sum(len(pyr.keys(l)) for l in range(pyr.max_level + 1))} tiles")
+    if not args.no_gl:
+        info = gl_info(shared_context(args.device))
+        print(f"GL renderer: {info.renderer}\nGL vendor:   {info.vendor}\nGL version:  {info.version}")
+    return 0
+
+
+def render_method(ctx, hf, view, method: str, args):
+    """Render one view with a method; returns a RenderResult."""
+    if method == "reference":
+        from hybrid.reference import ReferenceRenderer
+        r = ReferenceRenderer(ctx, hf)
+        try:
+            return r.render(view, args.shading, args.supersample)
+        finally:
+            r.release()
+    from hybrid.frame import SingleStrategyRenderer, STRATEGIES
+    if method not in STRATEGIES:
+        raise TerrabenchError(f"method {method!r} is not available in this build; available: "
+                              f"reference, {', '.join(sorted(STRATEGIES))}")
+    r = SingleStrategyRenderer(ctx, hf, method, tile_size=args.tile_size)
+    try:
+        opts = {}
+        if args.shading:
+            opts["mode"] = args.shading
+        return r.render(view, args.tau, **opts)
+    finally:
+        r.release()
+
+
+def cmd_render(args) -> int:
+    """Render one view with a method; write PATH.png and PATH.depth.npy."""
+    from hybrid.errors import check_positive
+    from hybrid.glcontext import shared_context
+    out = Path(args.out)
+    if out.suffix.lower() != ".png":
+        raise TerrabenchError(f"--out must end in .png, got {args.out!r}")
+    folder = out.parent if str(out.parent) else Path(".")
+    if not folder.is_dir():
+        raise TerrabenchError(f"--out folder {folder} does not exist")
+    check_positive("--tau (pixels)", args.tau)
+    hf = load_terrain_arg(args)
+    view = view_from_args(args, hf)
+    ctx = shared_context(args.device)
+    result = render_method(ctx, hf, view, args.method, args)
+    png, depth = result.save(out)
+    cover = float(result.mask.mean()) * 100
+    print(f"{args.method}: wrote {png} and {depth} ({view.width}x{view.height}, terrain on {cover:.1f} % of pixels)")
+    for k, v in result.stats.items():
+        print(f"  {k}: {v:.4g}" if isinstance(v, float) else f"  {k}: {v}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with every subcommand."""
+    p = _Parser(prog="terrabench", description="Rasterize meshes or ray-cast the height field, tile by tile: "
+                "render, measure and compare on real elevation data.")
+    p.add_argument("--device", type=int, default=None, help="EGL device index (or TERRABENCH_GL_DEVICE)")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+
+    pi = sub.add_parser("info", help="GL renderer and, given a file or --dataset, what was loaded")
+    pi.add_argument("file", nargs="?", default=None, help="a height-field file to describe")
+    add_terrain_args(pi)
+    pi.add_argument("--tile-size", type=int, default=256)
+    pi.add_argument("--no-gl", action="store_true", help="do not open a GL context")
+    pi.set_defaults(func=cmd_info)
+
+    pr = sub.add_parser("render", help="render one view with a method to PNG + depth (.depth.npy)")
+    add_terrain_args(pr)
+    add_view_args(pr)
+    pr.add_argument("--method", default="reference", choices=METHODS)
+    pr.add_argument("--out", required=True, help="output PNG path; the depth goes to PATH.depth.npy")
+    pr.add_argument("--shading", default=None, help="texture, shaded or height (default: texture if present)")
+    pr.add_argument("--supersample", type=int, default=1, help="reference colour supersampling factor (1..8)")
+    pr.add_argument("--tau", type=float, default=2 / 3, help="screen-space error bound in pixels (> 0)")
+    pr.add_argument("--tile-size", type=int, default=256, help="cells per tile side (power of two)")
+    pr.set_defaults(func=cmd_render)
+    return p
+
+
+def main(argv=None) -> int:
+    """Run the command line; returns the exit code (2 for user errors)."""
+    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = parser.parse_args(argv)
+    if not getattr(args, "command", None):
+        parser.print_help()
+        return 2
+    args.dataset_given = "--dataset" in argv
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("default")
+            return int(args.func(args) or 0)
+    except TerrabenchError as exc:
+        print(f"terrabench: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,1 @@
+"""Raster strategy: restricted-quadtree tilelet meshes through the geometry shader, and mesh baselines."""

@@ -1,0 +1,1 @@
+"""Ray-cast strategy: per-tile GPU ray casting over a maximum mipmap (Dick et al.)."""
