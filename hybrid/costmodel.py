@@ -1,0 +1,173 @@
+"""The per-tile cost model: predicted milliseconds of each strategy from features known before drawing.
+
+Two linear models with non-negative coefficients, simple enough to print and explain:
+
+    raster_ms  = r0 + r_tri * triangles + r_px * pixels
+    raycast_ms = c0 + c_px * pixels + c_step * pixels * log2(1 + slab_cells)
+
+``terrabench calibrate`` times tiles one by one on this device, fits the coefficients by non-negative
+least squares on relative error (rows weighted by 1 / measured time, so small tiles count as much as big
+ones), reports the median absolute relative error on held-out tiles, and saves the model keyed by the GL
+renderer string. ``load_cost_model`` finds it again: the user's file ($TERRABENCH_COSTS or
+~/.config/terrabench/costs.json), then the defaults shipped in hybrid/costs_default.json (matched by a
+key contained in the renderer string, e.g. 'llvmpipe').
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import asdict, dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from .errors import TerrabenchError
+from .features import TileFeatures
+from .nnls import nnls
+
+TERMS = {"raster": ("const", "triangles", "pixels"), "raycast": ("const", "pixels", "pixel_steps")}
+
+
+def term_values(f: TileFeatures, strategy: str) -> np.ndarray:
+    """The model's input terms for one tile and strategy."""
+    if strategy == "raster":
+        return np.array([1.0, f.triangles, f.pixels])
+    if strategy == "raycast":
+        return np.array([1.0, f.pixels, f.pixels * np.log2(1.0 + f.slab_cells)])
+    raise TerrabenchError(f"unknown strategy {strategy!r} for the cost model; choose raster or raycast")
+
+
+@dataclass
+class CostModel:
+    """Coefficients (milliseconds per unit of each term) for raster and raycast, and how well they fit."""
+
+    renderer: str
+    raster: dict
+    raycast: dict
+    fit_error: dict = field(default_factory=dict)
+    tiles: int = 0
+    source: str = ""
+
+    def predict(self, f: TileFeatures) -> dict[str, float]:
+        """Predicted milliseconds of each strategy for one tile."""
+        out = {}
+        for s in ("raster", "raycast"):
+            coef = np.array([getattr(self, s)[t] for t in TERMS[s]])
+            out[s] = float(term_values(f, s) @ coef)
+        return out
+
+    def explain(self) -> str:
+        """The two formulas with their coefficients, and the held-out error."""
+        def fmt(s):
+            c = getattr(self, s)
+            parts = [f"{c['const']:.4g}"] + [f"{c[t]:.4g}*{t}" for t in TERMS[s][1:]]
+            return f"{s:8s} ms = " + " + ".join(parts)
+        lines = [f"cost model for {self.renderer} ({self.source or 'unsaved'}, {self.tiles} tiles)",
+                 fmt("raster"), fmt("raycast"),
+                 "  pixel_steps = pixels * log2(1 + slab_cells)"]
+        for s, e in self.fit_error.items():
+            lines.append(f"  held-out median |relative error| {s}: {100 * e:.1f} %")
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        """JSON-ready form."""
+        return asdict(self)
+
+
+def fit_strategy(features: list[TileFeatures], ms: np.ndarray, strategy: str) -> dict:
+    """Non-negative coefficients of one strategy's terms, fitted on relative error."""
+    ms = np.asarray(ms, dtype=np.float64)
+    if len(features) != len(ms) or len(ms) < len(TERMS[strategy]):
+        raise TerrabenchError(f"need at least {len(TERMS[strategy])} timed tiles with matching features to fit "
+                              f"{strategy}, got {len(ms)}")
+    if not np.all(np.isfinite(ms)) or np.any(ms <= 0):
+        raise TerrabenchError("measured times must be finite and > 0 ms")
+    A = np.array([term_values(f, strategy) for f in features])
+    scale = np.maximum(A.max(axis=0), 1e-12)                 # condition the columns
+    w = 1.0 / ms
+    x = nnls(A / scale * w[:, None], ms * w) / scale
+    return dict(zip(TERMS[strategy], map(float, x)))
+
+
+def median_rel_error(model: CostModel, features: list[TileFeatures], ms: np.ndarray, strategy: str) -> float:
+    """Median |predicted - measured| / measured over tiles."""
+    pred = np.array([model.predict(f)[strategy] for f in features])
+    ms = np.asarray(ms, dtype=np.float64)
+    return float(np.median(np.abs(pred - ms) / ms))
+
+
+def fit_cost_model(features: list[TileFeatures], raster_ms, raycast_ms, renderer: str,
+                   holdout: float = 0.3, seed: int = 0) -> CostModel:
+    """Fit both strategies on a random (1 - holdout) share of tiles; report errors on the rest."""
+    n = len(features)
+    raster_ms, raycast_ms = np.asarray(raster_ms, float), np.asarray(raycast_ms, float)
+    if not (0.0 <= holdout < 1.0):
+        raise TerrabenchError(f"holdout must lie in [0, 1), got {holdout}")
+    idx = np.random.default_rng(seed).permutation(n)
+    n_test = int(round(holdout * n))
+    test, train = idx[:n_test], idx[n_test:]
+    ftrain = [features[i] for i in train]
+    model = CostModel(renderer, fit_strategy(ftrain, raster_ms[train], "raster"),
+                      fit_strategy(ftrain, raycast_ms[train], "raycast"), tiles=n)
+    if n_test:
+        ftest = [features[i] for i in test]
+        model.fit_error = {"raster": median_rel_error(model, ftest, raster_ms[test], "raster"),
+                           "raycast": median_rel_error(model, ftest, raycast_ms[test], "raycast")}
+    return model
+
+
+def user_costs_path() -> Path:
+    """Where calibrated models are saved: $TERRABENCH_COSTS or ~/.config/terrabench/costs.json."""
+    env = os.environ.get("TERRABENCH_COSTS")
+    return Path(env) if env else Path.home() / ".config" / "terrabench" / "costs.json"
+
+
+def save_cost_model(model: CostModel, path: Path | None = None) -> Path:
+    """Add or replace the model (keyed by its renderer string) in the costs file; returns the path."""
+    path = Path(path) if path else user_costs_path()
+    data = {}
+    if path.exists():
+        try:
+            data = json.loads(path.read_text())
+        except json.JSONDecodeError:
+            raise TerrabenchError(f"{path}: existing costs file is not valid JSON; move it away") from None
+    d = model.to_dict()
+    d.pop("source", None)
+    data[model.renderer] = d
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(data, indent=1))
+    except OSError as exc:
+        raise TerrabenchError(f"cannot write costs file {path}: {exc.strerror or exc}") from None
+    return path
+
+
+def _from_dict(d: dict, source: str) -> CostModel:
+    try:
+        m = CostModel(d["renderer"], dict(d["raster"]), dict(d["raycast"]), dict(d.get("fit_error", {})),
+                      int(d.get("tiles", 0)), source)
+        for s in ("raster", "raycast"):
+            for t in TERMS[s]:
+                float(getattr(m, s)[t])
+        return m
+    except (KeyError, TypeError, ValueError) as exc:
+        raise TerrabenchError(f"{source}: malformed cost model ({exc})") from None
+
+
+def load_cost_model(renderer: str, path: Path | None = None) -> CostModel:
+    """The calibrated model for a GL renderer: the user's file first, then the shipped defaults."""
+    path = Path(path) if path else user_costs_path()
+    if path.exists():
+        try:
+            data = json.loads(path.read_text())
+        except json.JSONDecodeError:
+            raise TerrabenchError(f"{path}: costs file is not valid JSON") from None
+        if renderer in data:
+            return _from_dict(data[renderer], str(path))
+    shipped = json.loads((resources.files("hybrid") / "costs_default.json").read_text())
+    low = renderer.lower()
+    for key, d in shipped.items():
+        if key != "fallback" and key in low:
+            return _from_dict(d, f"shipped default '{key}'")
+    return _from_dict(shipped["fallback"], "shipped fallback (uncalibrated; run terrabench calibrate)")

@@ -1,0 +1,80 @@
+"""GPU residency of uploaded tiles: a byte budget with least-recently-used eviction.
+
+Each entry is one tile uploaded by one strategy; its size is the strategy's exact ``nbytes`` (the sum of
+the buffers and textures it allocated). A resident tile is never uploaded again; when an upload would pass
+the budget, the least recently used entries not needed by the current frame are released first.
+"""
+from __future__ import annotations
+
+from collections import OrderedDict
+from dataclasses import dataclass
+
+from .errors import TerrabenchError
+
+
+@dataclass
+class ResidencyStats:
+    """Counters since the cache was made."""
+
+    uploads: int = 0
+    hits: int = 0
+    evictions: int = 0
+    peak_bytes: int = 0
+
+
+class ResidencyCache:
+    """Uploaded tiles keyed by (strategy name, tile key), within ``budget_bytes`` (None = unlimited)."""
+
+    def __init__(self, budget_bytes: int | None = None):
+        if budget_bytes is not None and (not isinstance(budget_bytes, int) or budget_bytes <= 0):
+            raise TerrabenchError(f"GPU memory budget must be a positive number of bytes, got {budget_bytes!r}")
+        self.budget = budget_bytes
+        self.entries: OrderedDict = OrderedDict()
+        self.bytes = 0
+        self.stats = ResidencyStats()
+
+    def get(self, strategy_name: str, strategy, tile_key, make_tile, pinned: set = frozenset()):
+        """The resident GPU tile for (strategy, key), uploading ``make_tile()`` if absent; pinned keys stay."""
+        k = (strategy_name, tile_key)
+        if k in self.entries:
+            self.entries.move_to_end(k)
+            self.stats.hits += 1
+            return self.entries[k]
+        gpu = strategy.upload(make_tile())
+        size = int(gpu.nbytes)
+        if self.budget is not None:
+            for old in list(self.entries):
+                if self.bytes + size <= self.budget:
+                    break
+                if old in pinned:
+                    continue
+                self._evict(old)
+            if self.bytes + size > self.budget:
+                gpu.release()
+                raise TerrabenchError(
+                    f"GPU memory budget of {self.budget} bytes is too small for this frame: the tiles it needs "
+                    f"take {self.bytes + size} bytes; raise the budget")
+        self.entries[k] = gpu
+        self.bytes += size
+        self.stats.uploads += 1
+        self.stats.peak_bytes = max(self.stats.peak_bytes, self.bytes)
+        return gpu
+
+    def _evict(self, k) -> None:
+        gpu = self.entries.pop(k)
+        self.bytes -= int(gpu.nbytes)
+        gpu.release()
+        self.stats.evictions += 1
+
+    def bytes_by_strategy(self) -> dict[str, int]:
+        """Resident bytes per strategy name."""
+        out: dict[str, int] = {}
+        for (name, _), gpu in self.entries.items():
+            out[name] = out.get(name, 0) + int(gpu.nbytes)
+        return out
+
+    def clear(self) -> None:
+        """Release every resident tile."""
+        for k in list(self.entries):
+            self._evict(k)
+        self.stats.evictions = 0
