@@ -51,16 +51,24 @@ class FrameStats:
     counters: dict = field(default_factory=dict)
 
 
+def make_strategy(name: str, ctx, hf: HeightField):
+    """A strategy instance by registered name."""
+    if name not in STRATEGIES:
+        raise TerrabenchError(f"unknown strategy {name!r}; available: {', '.join(sorted(STRATEGIES)) or 'none'}")
+    return STRATEGIES[name](ctx, hf, shading_source())
+
+
 class SingleStrategyRenderer:
     """Renders whole views with one strategy over the tile tree (resident tiles kept between frames)."""
 
-    def __init__(self, ctx, hf: HeightField, strategy: str, tile_size: int = 256, pyramid: TilePyramid | None = None):
-        if strategy not in STRATEGIES:
-            raise TerrabenchError(f"unknown strategy {strategy!r}; available: {', '.join(sorted(STRATEGIES)) or 'none'}")
+    def __init__(self, ctx, hf: HeightField, strategy: str, tile_size: int = 256, pyramid: TilePyramid | None = None,
+                 **draw_options):
         self.ctx, self.hf = ctx, hf
+        self.name = strategy
+        self.strategy = make_strategy(strategy, ctx, hf)
         self.pyramid = pyramid or TilePyramid(hf, tile_size)
-        self.strategy = STRATEGIES[strategy](ctx, hf, shading_source())
         self.resident: dict = {}
+        self.draw_options = draw_options
 
     def render(self, view: View, tau: float = DEFAULT_TAU, **options) -> RenderResult:
         """Draw the view and read it back (colour, distance) with the strategy's counters in stats."""
@@ -80,10 +88,10 @@ class SingleStrategyRenderer:
             target.use()
             self.ctx.finish()
             t0 = time.perf_counter()
-            counters = self.strategy.draw_tiles(target, view, items, **options) or {}
+            counters = self.strategy.draw_tiles(target, view, items, **{**self.draw_options, **options}) or {}
             self.ctx.finish()
             wall = (time.perf_counter() - t0) * 1e3
-            stats = {"tiles": len(items), "uploaded": uploaded, "wall_ms": wall,
+            stats = {"tiles": len(items), f"tiles_{self.name}": len(items), "uploaded": uploaded, "wall_ms": wall,
                      "gpu_bytes": sum(g.nbytes for g, _ in self.resident.values()), **counters}
             return target.read(view, stats)
         finally:
@@ -95,3 +103,43 @@ class SingleStrategyRenderer:
             g.release()
         self.resident.clear()
         self.strategy.release()
+
+
+class ReferenceFrameRenderer:
+    """The reference renderer behind the same render(view, tau) interface, timed like the strategies."""
+
+    def __init__(self, ctx, hf: HeightField):
+        from .reference import ReferenceRenderer
+        self.ctx, self.ref = ctx, ReferenceRenderer(ctx, hf)
+
+    def render(self, view: View, tau: float = DEFAULT_TAU, **options) -> RenderResult:
+        """Draw the full-resolution surface (tau is ignored: the reference has no level of detail)."""
+        target = FrameTarget(self.ctx, view.width, view.height)
+        try:
+            target.clear()
+            self.ctx.finish()
+            t0 = time.perf_counter()
+            self.ref.draw(target, view, options.get("mode"))
+            self.ctx.finish()
+            wall = (time.perf_counter() - t0) * 1e3
+            return target.read(view, {"wall_ms": wall, "triangles": self.ref.triangles, "tiles": 1,
+                                      "gpu_bytes": self.ref.nbytes})
+        finally:
+            target.release()
+
+    def release(self) -> None:
+        """Free the GPU objects."""
+        self.ref.release()
+
+
+def make_renderer(ctx, hf: HeightField, policy: str, tile_size: int = 256, reconstruction: str = "triangles",
+                  **options):
+    """A whole-view renderer for a policy: reference, a single strategy, or a hybrid policy."""
+    if policy == "reference":
+        return ReferenceFrameRenderer(ctx, hf)
+    if policy in ("hybrid", "heuristic", "oracle"):
+        from .hybrid_frame import HybridRenderer
+        return HybridRenderer(ctx, hf, policy, tile_size=tile_size, reconstruction=reconstruction, **options)
+    if policy == "raycast":
+        return SingleStrategyRenderer(ctx, hf, "raycast", tile_size, reconstruction=reconstruction, **options)
+    return SingleStrategyRenderer(ctx, hf, policy, tile_size, **options)

@@ -59,6 +59,19 @@ class ReferenceRenderer:
             self.texture.repeat_x = self.texture.repeat_y = False
         self.triangles = 2 * (hf.rows - 1) * (hf.cols - 1)
 
+    @property
+    def nbytes(self) -> int:
+        """GPU bytes of the height texture, index buffer and colour texture (with its mipmaps)."""
+        n = self.heights.width * self.heights.height * 4 + self.ibo.size
+        if self.texture is not None:
+            w, h = self.texture.size
+            while True:
+                n += w * h * 3
+                if w == 1 and h == 1:
+                    break
+                w, h = max(w // 2, 1), max(h // 2, 1)
+        return n
+
     def draw(self, target: FrameTarget, view: View, mode: str | None = None) -> None:
         """Draw the whole surface into target (which must match the view's size) for the view."""
         mode = resolve_mode(self.hf, mode)

@@ -20,6 +20,7 @@ class RenderResult:
     colour: np.ndarray
     distance: np.ndarray
     stats: dict = field(default_factory=dict)
+    maps: dict = field(default_factory=dict)
 
     @property
     def mask(self) -> np.ndarray:

@@ -1,0 +1,237 @@
+"""`terrabench run SPEC`: every configuration of a spec over the same (paired) views, written as it goes.
+
+Run folder layout (runs/<name>/):
+    spec.json, env.json             what was asked and where it ran
+    frames.jsonl, tiles.jsonl       the journal: one finished row a line, flushed as it is written
+    errors.jsonl                    configurations that failed, with their error; the rest goes on
+    frames.parquet, tiles.parquet   the tables, rewritten from the journal after every configuration
+    images/                         colour + depth of the spec's image_frames for every configuration
+An interrupted run resumes from the journal without redoing finished (configuration, frame) rows.
+"""
+from __future__ import annotations
+
+import json
+import platform
+import sys
+import time
+import traceback
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from hybrid.errors import TerrabenchError
+
+from .metrics import frame_accuracy, temporal_errors
+from .spec import Spec
+
+
+def environment(ctx) -> dict:
+    """GL renderer, CPU and package versions of this machine."""
+    from importlib import metadata
+    from hybrid.glcontext import gl_info
+    info = gl_info(ctx)
+    cpu = platform.processor() or ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    import os
+    pkgs = {}
+    for name in ("terrabench", "moderngl", "numpy", "pandas", "matplotlib", "scikit-image", "flip-evaluator",
+                 "fast-simplification", "trimesh"):
+        try:
+            pkgs[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            pkgs[name] = "not installed"
+    return {"gl_renderer": info.renderer, "gl_vendor": info.vendor, "gl_version": info.version,
+            "cpu": cpu, "cpu_count": os.cpu_count(), "python": platform.python_version(),
+            "platform": platform.platform(), "packages": pkgs}
+
+
+def _jsonable(v):
+    if isinstance(v, (np.floating, float)):
+        return float(v)
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    return v
+
+
+class Journal:
+    """Append-only JSON-lines files of a run folder."""
+
+    def __init__(self, folder: Path):
+        self.folder = folder
+
+    def rows(self, name: str) -> list[dict]:
+        """All rows of a journal file (a torn last line from an interruption is ignored)."""
+        p = self.folder / f"{name}.jsonl"
+        out = []
+        if p.exists():
+            for line in p.read_text().splitlines():
+                try:
+                    out.append(json.loads(line))
+                except json.JSONDecodeError:
+                    continue
+        return out
+
+    def append(self, name: str, rows: list[dict]) -> None:
+        """Append rows and flush them to disk."""
+        if not rows:
+            return
+        with (self.folder / f"{name}.jsonl").open("a") as f:
+            for r in rows:
+                f.write(json.dumps({k: _jsonable(v) for k, v in r.items()}) + "\n")
+            f.flush()
+
+    def write_tables(self) -> None:
+        """Rewrite frames.parquet and tiles.parquet from the journal."""
+        for name in ("frames", "tiles"):
+            rows = self.rows(name)
+            if rows:
+                pd.DataFrame(rows).to_parquet(self.folder / f"{name}.parquet", index=False)
+
+
+class Progress:
+    """A one-line progress bar with the time left, on stderr."""
+
+    def __init__(self, total: int, done: int, enabled: bool = True):
+        self.total, self.done, self.enabled = total, done, enabled
+        self.start, self.start_done = time.perf_counter(), done
+
+    def step(self, label: str) -> None:
+        """Count one unit of work finished and redraw."""
+        self.done += 1
+        if not self.enabled:
+            return
+        el = time.perf_counter() - self.start
+        rate = (self.done - self.start_done) / el if el > 0 else 0
+        left = (self.total - self.done) / rate if rate > 0 else float("nan")
+        frac = self.done / max(self.total, 1)
+        bar = "#" * int(30 * frac) + "-" * (30 - int(30 * frac))
+        eta = f"{int(left // 60)}m{int(left % 60):02d}s" if np.isfinite(left) else "?"
+        sys.stderr.write(f"\r[{bar}] {self.done}/{self.total} {100 * frac:5.1f} % left {eta}  {label[:60]:60s}")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        """End the line."""
+        if self.enabled:
+            sys.stderr.write("\n")
+
+
+def _load_dataset(name: str, size: int, seed: int):
+    from hybrid.datasets import NAMES, get_dataset
+    from hybrid.loaders import load_terrain
+    if name in NAMES:
+        return get_dataset(name, size=size or None, seed=seed)
+    return load_terrain(name)
+
+
+def _size(s: str) -> tuple[int, int]:
+    w, h = (int(x) for x in s.lower().split("x"))
+    return w, h
+
+
+def _save_image(folder: Path, stem: str, result) -> None:
+    from PIL import Image
+    Image.fromarray(result.colour).save(folder / f"{stem}.png")
+    np.save(folder / f"{stem}.depth.npy", result.distance)
+    for name, arr in getattr(result, "maps", {}).items():
+        np.save(folder / f"{stem}.{name}.npy", arr)
+
+
+def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: bool = False) -> Path:
+    """Run (or resume) every configuration of spec into runs_dir/<name>; returns the run folder."""
+    from hybrid.flight import get_flight
+    from hybrid.frame import make_renderer
+    from hybrid.glcontext import shared_context
+    from hybrid.reference import ReferenceRenderer
+
+    runs_dir = Path(runs_dir)
+    folder = runs_dir / spec.name
+    try:
+        (folder / "images").mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise TerrabenchError(f"cannot create run folder {folder}: {exc.strerror or exc}") from None
+    ctx = ctx or shared_context()
+    old = folder / "spec.json"
+    if old.exists() and json.loads(old.read_text()) != json.loads(json.dumps(spec.to_dict())):
+        raise TerrabenchError(f"{folder} holds a run of a different spec; choose another name or folder")
+    old.write_text(json.dumps(spec.to_dict(), indent=1))
+    (folder / "env.json").write_text(json.dumps(environment(ctx), indent=1))
+    journal = Journal(folder)
+    done = {(r["config"], r["frame"]) for r in journal.rows("frames")}
+    configs = spec.configs()
+    bar = Progress(len(configs) * spec.frames, sum(1 for c in configs for k in range(spec.frames)
+                                                     if (c["config"], k) in done), progress)
+    groups: dict = {}
+    for c in configs:
+        groups.setdefault((c["dataset"], c["seed"], c["flight"], c["size"]), []).append(c)
+
+    for (ds, seed, fl, size), group in groups.items():
+        if all((c["config"], k) in done for c in group for k in range(spec.frames)):
+            continue
+        w, h = _size(size)
+        try:
+            hf = _load_dataset(ds, spec.dataset_size, seed)
+            views = get_flight(fl, hf, frames=spec.frames, width=w, height=h).views()
+        except TerrabenchError as exc:
+            journal.append("errors", [{**c, "error": str(exc)} for c in group])
+            bar.done += len(group) * spec.frames
+            continue
+        reference = ReferenceRenderer(ctx, hf)
+        refs: dict[int, object] = {}
+        gid = f"{Path(str(ds)).stem}-s{seed}-{Path(str(fl)).stem}-{size}"
+
+        def ref(k):
+            if k not in refs:
+                refs[k] = reference.render(views[k], supersample=spec.supersample)
+                if k in spec.image_frames:
+                    _save_image(folder / "images", f"ref-{gid}-f{k}", refs[k])
+            return refs[k]
+
+        for c in group:
+            todo = [k for k in range(spec.frames) if (c["config"], k) not in done]
+            if not todo:
+                continue
+            renderer = None
+            try:
+                renderer = make_renderer(ctx, hf, c["policy"], tile_size=spec.tile_size,
+                                         reconstruction=c["reconstruction"])
+                prev = None
+                for k in todo:
+                    if k > 0 and (prev is None or prev[0] != k - 1):
+                        prev = (k - 1, renderer.render(views[k - 1], c["tau"]))
+                    results = [renderer.render(views[k], c["tau"]) for _ in range(spec.repeats)]
+                    res = results[-1]
+                    walls = [r.stats.get("wall_ms", np.nan) for r in results]
+                    stats = {kk: v for kk, v in res.stats.items() if not isinstance(v, (list, dict))}
+                    row = {**c, "frame": k, **stats, "wall_ms": float(np.median(walls)),
+                           "wall_ms_min": float(np.min(walls)), **frame_accuracy(res, ref(k), flip=spec.flip)}
+                    if k > 0:
+                        row.update(temporal_errors(prev[1], res, ref(k - 1), ref(k)))
+                    journal.append("frames", [row])
+                    journal.append("tiles", [{"config": c["config"], "frame": k, "policy": c["policy"], **t}
+                                             for t in res.stats.get("tile_rows", [])])
+                    if k in spec.image_frames:
+                        _save_image(folder / "images", f"{c['config']}-f{k}", res)
+                    prev = (k, res)
+                    bar.step(f"{c['config']} frame {k}")
+            except Exception as exc:  # a failed configuration is recorded; the rest goes on
+                if fail_fast:
+                    raise
+                journal.append("errors", [{**c, "error": f"{type(exc).__name__}: {exc}",
+                                           "trace": traceback.format_exc(limit=4)}])
+                bar.done += len([k for k in todo if (c["config"], k) not in
+                                 {(r["config"], r["frame"]) for r in journal.rows("frames")}])
+            finally:
+                if renderer is not None:
+                    renderer.release()
+            journal.write_tables()
+        reference.release()
+    bar.close()
+    journal.write_tables()
+    return folder

@@ -1,0 +1,154 @@
+"""Experiment specs (TOML): which datasets, flights, policies, tau values, sizes and modes to pair.
+
+    name = "puget-default"
+    datasets = ["puget"]              # bundled names or height-field files
+    dataset_size = 0                  # samples a side for synthetic data / crop of puget (0 = as is)
+    flights = ["flyover", "orbit"]    # presets or .json/.csv flight files
+    frames = 12
+    policies = ["raster", "raycast", "hybrid", "heuristic", "oracle"]
+    taus = [0.6667]
+    sizes = ["640x360"]
+    reconstructions = ["triangles"]   # ray-cast surface reconstructions
+    repeats = 3                       # timed repeats a frame (median kept)
+    seeds = [0]
+    tile_size = 256
+    supersample = 2                   # reference colour supersampling
+    flip = true                       # compute mean FLIP (slower)
+    image_frames = [0]                # frames whose images are kept for the report
+"""
+from __future__ import annotations
+
+import itertools
+import tomllib
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from hybrid.errors import TerrabenchError
+
+POLICIES = ("reference", "raster", "raycast", "hybrid", "heuristic", "oracle", "fullres", "tin")
+RECONSTRUCTIONS = ("planes", "linear", "triangles", "bilinear")
+
+
+@dataclass
+class Spec:
+    """A parsed, checked experiment spec."""
+
+    name: str
+    datasets: list = field(default_factory=lambda: ["puget"])
+    dataset_size: int = 0
+    flights: list = field(default_factory=lambda: ["flyover"])
+    frames: int = 12
+    policies: list = field(default_factory=lambda: ["raster", "raycast", "hybrid"])
+    taus: list = field(default_factory=lambda: [2 / 3])
+    sizes: list = field(default_factory=lambda: ["640x360"])
+    reconstructions: list = field(default_factory=lambda: ["triangles"])
+    repeats: int = 3
+    seeds: list = field(default_factory=lambda: [0])
+    tile_size: int = 256
+    supersample: int = 2
+    flip: bool = True
+    image_frames: list = field(default_factory=lambda: [0])
+
+    def configs(self) -> list[dict]:
+        """Every combination, one dict each, with a stable id; frames of one (dataset, seed, flight, size) are paired."""
+        out = []
+        for ds, seed, fl, size, tau, rec, pol in itertools.product(self.datasets, self.seeds, self.flights, self.sizes,
+                                                                   self.taus, self.reconstructions, self.policies):
+            if pol in ("raster", "fullres", "tin", "reference") and rec != self.reconstructions[0]:
+                continue                      # reconstruction only matters where rays are cast
+            if pol == "reference" and tau != self.taus[0]:
+                continue
+            cid = f"{Path(str(ds)).stem}-s{seed}-{Path(str(fl)).stem}-{size}-tau{tau:.4g}-{rec}-{pol}"
+            out.append({"config": cid, "dataset": ds, "seed": seed, "flight": fl, "size": size, "tau": tau,
+                        "reconstruction": rec, "policy": pol})
+        return out
+
+    def to_dict(self) -> dict:
+        """Plain form."""
+        return asdict(self)
+
+
+def _list(d, key, kind, check=None):
+    v = d.get(key)
+    if v is None:
+        return None
+    if not isinstance(v, list) or not v:
+        raise TerrabenchError(f"spec: '{key}' must be a non-empty list, got {v!r}")
+    for x in v:
+        if not isinstance(x, kind) or isinstance(x, bool):
+            raise TerrabenchError(f"spec: '{key}' entries must be {getattr(kind, '__name__', kind)}, got {x!r}")
+        if check:
+            check(x)
+    return v
+
+
+def parse_spec(text: str, source: str = "spec") -> Spec:
+    """Parse and check TOML text; every problem names the key and the accepted values."""
+    try:
+        d = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise TerrabenchError(f"{source}: not valid TOML ({exc})") from None
+    known = set(Spec.__dataclass_fields__)
+    unknown = set(d) - known
+    if unknown:
+        raise TerrabenchError(f"{source}: unknown keys {sorted(unknown)}; known: {sorted(known)}")
+
+    def policy_ok(p):
+        if p not in POLICIES:
+            raise TerrabenchError(f"{source}: unknown policy {p!r}; choose from {', '.join(POLICIES)}")
+
+    def rec_ok(r):
+        if r not in RECONSTRUCTIONS:
+            raise TerrabenchError(f"{source}: unknown reconstruction {r!r}; choose from {', '.join(RECONSTRUCTIONS)}")
+
+    def tau_ok(t):
+        if not (t > 0 and t < 1e3):
+            raise TerrabenchError(f"{source}: tau must lie in (0, 1000) pixels, got {t!r}")
+
+    def size_ok(s):
+        try:
+            w, h = (int(x) for x in s.lower().split("x"))
+        except ValueError:
+            raise TerrabenchError(f"{source}: size must be WIDTHxHEIGHT, got {s!r}") from None
+        if not (1 <= w <= 16384 and 1 <= h <= 16384):
+            raise TerrabenchError(f"{source}: size {s!r} must have width and height in [1, 16384]")
+
+    kw = {"name": d.get("name", Path(source).stem)}
+    if not isinstance(kw["name"], str) or not kw["name"] or any(c in kw["name"] for c in "/\\ "):
+        raise TerrabenchError(f"{source}: name must be a non-empty word without slashes or spaces, got {kw['name']!r}")
+    for key, kind, check in (("datasets", str, None), ("flights", str, None), ("policies", str, policy_ok),
+                             ("taus", (int, float), tau_ok), ("sizes", str, size_ok),
+                             ("reconstructions", str, rec_ok), ("seeds", int, None), ("image_frames", int, None)):
+        v = _list(d, key, kind, check)
+        if v is not None:
+            kw[key] = [float(x) for x in v] if key == "taus" else v
+    for key, lo, hi in (("frames", 1, 100000), ("repeats", 1, 1000), ("tile_size", 2, 65536),
+                        ("supersample", 1, 8), ("dataset_size", 0, 16385)):
+        if key in d:
+            v = d[key]
+            if isinstance(v, bool) or not isinstance(v, int) or not (lo <= v <= hi):
+                raise TerrabenchError(f"{source}: '{key}' must be an integer in [{lo}, {hi}], got {v!r}")
+            kw[key] = v
+    if "tile_size" in kw and kw["tile_size"] & (kw["tile_size"] - 1):
+        raise TerrabenchError(f"{source}: 'tile_size' must be a power of two, got {kw['tile_size']}")
+    if "flip" in d:
+        if not isinstance(d["flip"], bool):
+            raise TerrabenchError(f"{source}: 'flip' must be true or false, got {d['flip']!r}")
+        kw["flip"] = d["flip"]
+    spec = Spec(**kw)
+    bad = [f for f in spec.image_frames if not (0 <= f < spec.frames)]
+    if bad:
+        raise TerrabenchError(f"{source}: image_frames {bad} outside [0, {spec.frames - 1}]")
+    return spec
+
+
+def load_spec(path) -> Spec:
+    """Read and check a spec file."""
+    p = Path(path)
+    if not p.is_file():
+        raise TerrabenchError(f"{path}: no such spec file")
+    try:
+        text = p.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise TerrabenchError(f"{path}: cannot read spec ({exc})") from None
+    return parse_spec(text, str(p))

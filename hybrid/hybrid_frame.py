@@ -1,0 +1,154 @@
+"""The hybrid frame: each tile drawn by the strategy chosen for it, both into one colour + depth buffer.
+
+Order within a frame: the raster tiles first (front to back), then the ray-cast tiles front to back with
+the tile-ID pre-pass, so no ray is cast where a nearer raster tile already covers the pixel. Both strategies
+write depth from the same reversed-Z projection, so a world point has one depth whichever draws it.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .costmodel import CostModel, load_cost_model
+from .errors import TerrabenchError
+from .frame import make_strategy
+from .glcontext import gl_info
+from .heightfield import HeightField
+from .planner import TilePlan, plan_frame
+from .pyramid import TilePyramid
+from .residency import ResidencyCache
+from .target import FrameTarget, RenderResult
+from .tiletree import DEFAULT_TAU
+from .view import View
+
+STRATEGY_CODES = {"raster": 1, "raycast": 2}
+
+
+class HybridRenderer:
+    """Whole views drawn tile by tile with a policy's choice of strategy, with exact GPU-memory accounting."""
+
+    def __init__(self, ctx, hf: HeightField, policy: str = "hybrid", tile_size: int = 256,
+                 reconstruction: str = "triangles", cost_model: CostModel | None = None,
+                 budget_bytes: int | None = None, threshold: float = 1.0, prepass: bool = True,
+                 pyramid: TilePyramid | None = None, oracle_repeats: int = 3):
+        self.ctx, self.hf, self.policy = ctx, hf, policy
+        self.pyramid = pyramid or TilePyramid(hf, tile_size)
+        self.strategies = {"raster": make_strategy("raster", ctx, hf), "raycast": make_strategy("raycast", ctx, hf)}
+        self.options = {"raster": {}, "raycast": {"reconstruction": reconstruction, "prepass": prepass}}
+        self.model = cost_model or load_cost_model(gl_info(ctx).renderer)
+        self.cache = ResidencyCache(budget_bytes)
+        self.threshold = threshold
+        self.oracle_repeats = oracle_repeats
+        self._tiles: dict = {}
+
+    # --- planning (CPU) ---------------------------------------------------------------------------
+    def tile(self, key):
+        """The pyramid tile (CPU copy, cached)."""
+        if key not in self._tiles:
+            self._tiles[key] = self.pyramid.tile(key)
+        return self._tiles[key]
+
+    def triangles(self, key, selected, view, tau) -> int:
+        """Triangles the raster strategy draws for a tile at this view."""
+        return int(self.strategies["raster"].count_triangles(self.tile(key), selected, view, tau))
+
+    def plan(self, view: View, tau: float = DEFAULT_TAU) -> list[TilePlan]:
+        """The frame's tiles with features, predicted costs and choices."""
+        return plan_frame(self.pyramid, view, self.model, self.triangles, self.policy, tau, self.threshold)
+
+    # --- drawing ----------------------------------------------------------------------------------
+    def _resident(self, name, key, pinned):
+        return self.cache.get(name, self.strategies[name], key, lambda: self.tile(key), pinned)
+
+    def _draw(self, target, view, plans: list[TilePlan], pinned) -> dict:
+        counters: dict = {}
+        for name in ("raster", "raycast"):
+            items = [(self._resident(name, p.key, pinned), self.tile(p.key), p.selected) for p in plans if p.choice == name]
+            if items:
+                c = self.strategies[name].draw_tiles(target, view, items, **self.options[name]) or {}
+                for k, v in c.items():
+                    if isinstance(v, (int, float, np.integer, np.floating)):
+                        counters[k] = counters.get(k, 0) + v
+        return counters
+
+    def time_tile(self, view: View, plan: TilePlan, name: str, target: FrameTarget, pinned=frozenset()) -> float:
+        """Median wall milliseconds of drawing one tile alone with one strategy (ctx.finish() around it)."""
+        item = [(self._resident(name, plan.key, pinned), self.tile(plan.key), plan.selected)]
+        times = []
+        for _ in range(self.oracle_repeats):
+            target.clear()
+            target.use()
+            self.ctx.finish()
+            t0 = time.perf_counter()
+            self.strategies[name].draw_tiles(target, view, item, **self.options[name])
+            self.ctx.finish()
+            times.append((time.perf_counter() - t0) * 1e3)
+        return float(np.median(times))
+
+    def render(self, view: View, tau: float = DEFAULT_TAU, measure: bool = False) -> RenderResult:
+        """Draw the view and read it back; stats carry counters, memory and one row per tile.
+
+        With ``measure`` (always for the oracle) every tile is also timed alone both ways.
+        """
+        plans = self.plan(view, tau)
+        pinned = {(p.choice, p.key) for p in plans}
+        target = FrameTarget(self.ctx, view.width, view.height)
+        try:
+            if measure or self.policy == "oracle":
+                pinned |= {(n, p.key) for p in plans for n in ("raster", "raycast")}
+                for p in plans:
+                    p.measured = {n: self.time_tile(view, p, n, target, pinned) for n in ("raster", "raycast")}
+                    if self.policy == "oracle":
+                        p.choice = min(p.measured, key=p.measured.get)
+            # upload everything first so the timed frame measures drawing only
+            for p in plans:
+                self._resident(p.choice, p.key, pinned)
+            target.clear()
+            target.use()
+            self.ctx.finish()
+            t0 = time.perf_counter()
+            counters = self._draw(target, view, plans, pinned)
+            self.ctx.finish()
+            wall = (time.perf_counter() - t0) * 1e3
+            by = self.cache.bytes_by_strategy()
+            n_r = sum(p.choice == "raster" for p in plans)
+            stats = {"wall_ms": wall, "tiles": len(plans), "tiles_raster": n_r, "tiles_raycast": len(plans) - n_r,
+                     "gpu_bytes": self.cache.bytes, "gpu_bytes_raster": by.get("raster", 0),
+                     "gpu_bytes_raycast": by.get("raycast", 0), "uploads": self.cache.stats.uploads,
+                     "evictions": self.cache.stats.evictions,
+                     "pred_ms": float(sum(p.predicted[p.choice] for p in plans)), **counters,
+                     "tile_rows": [p.row() for p in plans]}
+            result = target.read(view, stats)
+            result.maps = {"strategy": self.strategy_map(view, plans)}
+            return result
+        finally:
+            target.release()
+
+    def strategy_map(self, view: View, plans: list[TilePlan]) -> np.ndarray:
+        """Per pixel: 0 no terrain, 1 drawn by a raster tile, 2 by a ray-cast tile (compares depth per strategy)."""
+        depths = {}
+        for name in ("raster", "raycast"):
+            sub = [p for p in plans if p.choice == name]
+            t = FrameTarget(self.ctx, view.width, view.height)
+            try:
+                t.clear()
+                t.use()
+                if sub:
+                    items = [(self._resident(name, p.key, set()), self.tile(p.key), p.selected) for p in sub]
+                    self.strategies[name].draw_tiles(t, view, items, **{**self.options[name], "prepass": False}
+                                                     if name == "raycast" else self.options[name])
+                depths[name] = t.read_depth()
+            finally:
+                t.release()
+        out = np.zeros((view.height, view.width), np.uint8)
+        r, c = depths["raster"], depths["raycast"]
+        out[(r > 0) & (r >= c)] = STRATEGY_CODES["raster"]
+        out[(c > 0) & (c > r)] = STRATEGY_CODES["raycast"]
+        return out
+
+    def release(self) -> None:
+        """Free resident tiles and strategies."""
+        self.cache.clear()
+        for s in self.strategies.values():
+            s.release()

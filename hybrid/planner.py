@@ -1,0 +1,76 @@
+"""Per-frame plan without a GL context: selected tiles, their features, predicted costs and the choice.
+
+Policies:
+    raster, raycast   every tile the same way;
+    hybrid            the strategy the cost model predicts faster for each tile;
+    heuristic         Dick et al.'s fixed rule: ray cast a tile when its triangles outnumber the pixels it
+                      covers by more than ``threshold`` (default 1), else rasterize;
+    oracle            each tile timed both ways and the faster kept (an evaluation bound: the choice is
+                      filled in by the renderer, which measures).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from .costmodel import CostModel
+from .errors import TerrabenchError
+from .features import TileFeatures, tile_features
+from .pyramid import TileKey, TilePyramid
+from .tiletree import DEFAULT_TAU, SelectedTile, select_tiles
+from .view import View
+
+POLICIES = ("raster", "raycast", "hybrid", "heuristic", "oracle")
+
+
+@dataclass
+class TilePlan:
+    """One tile of a frame: where it is, what it costs (predicted, and measured where measured), how it is drawn."""
+
+    selected: SelectedTile
+    features: TileFeatures
+    predicted: dict
+    choice: str
+    measured: dict = field(default_factory=dict)
+
+    @property
+    def key(self) -> TileKey:
+        """The tile's address."""
+        return self.selected.key
+
+    def row(self) -> dict:
+        """A flat dict for the tiles table."""
+        k = self.selected.key
+        return {"level": k.level, "tx": k.tx, "ty": k.ty, "strategy": self.choice,
+                **{f"f_{n}": v for n, v in self.features.as_dict().items() if n != "level"},
+                "pred_raster_ms": self.predicted.get("raster"), "pred_raycast_ms": self.predicted.get("raycast"),
+                "meas_raster_ms": self.measured.get("raster"), "meas_raycast_ms": self.measured.get("raycast")}
+
+
+def choose(policy: str, features: TileFeatures, predicted: dict, threshold: float = 1.0) -> str:
+    """The strategy a policy picks for one tile (oracle: 'raster' until measured)."""
+    if policy in ("raster", "raycast"):
+        return policy
+    if policy == "hybrid":
+        return "raster" if predicted["raster"] <= predicted["raycast"] else "raycast"
+    if policy == "heuristic":
+        return "raycast" if features.triangles > threshold * max(features.pixels, 1.0) else "raster"
+    if policy == "oracle":
+        return "raster"
+    raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
+
+
+def plan_frame(pyramid: TilePyramid, view: View, model: CostModel, triangles_fn, policy: str = "hybrid",
+               tau: float = DEFAULT_TAU, threshold: float = 1.0) -> list[TilePlan]:
+    """Selected tiles front to back with features, predicted ms of both strategies and the policy's choice.
+
+    ``triangles_fn(key, selected, view, tau)`` gives the raster mesh's triangle count for a tile at this
+    view (``raster.quadtree`` computes it on the CPU, no GL needed).
+    """
+    if policy not in POLICIES:
+        raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
+    plans = []
+    for s in select_tiles(pyramid, view, tau):
+        f = tile_features(pyramid, view, s, triangles_fn(s.key, s, view, tau))
+        p = model.predict(f)
+        plans.append(TilePlan(s, f, p, choose(policy, f, p, threshold)))
+    return plans
