@@ -178,6 +178,50 @@ def cmd_render(args) -> int:
     return 0
 
 
+def cmd_run(args) -> int:
+    """Run (or resume) an experiment spec."""
+    from .runner import run_spec
+    from .spec import load_spec
+    spec = load_spec(args.spec)
+    if args.name:
+        spec.name = args.name
+    folder = run_spec(spec, Path(args.runs), progress=not args.quiet)
+    print(f"run folder: {folder}")
+    if args.report:
+        from .report import write_report
+        print(f"report: {write_report(folder, Path(args.reports))}")
+    return 0
+
+
+def cmd_report(args) -> int:
+    """Write the report of a run folder."""
+    from .report import write_report
+    path = write_report(Path(args.run), Path(args.reports), args.name)
+    print(f"wrote {path} and {path.with_suffix('.html')}")
+    return 0
+
+
+def cmd_calibrate(args) -> int:
+    """Time tiles both ways on this device, fit the cost model, report held-out error, save it."""
+    from hybrid.calibrate import calibrate
+    from hybrid.costmodel import save_cost_model
+    from hybrid.errors import check_positive
+    from hybrid.flight import get_flight
+    from hybrid.glcontext import shared_context
+    check_positive("--tau (pixels)", args.tau)
+    hf = load_terrain_arg(args)
+    w, h = _size(args.size)
+    views = []
+    for name in args.flights.split(","):
+        views += get_flight(name.strip(), hf, frames=args.frames, width=w, height=h).views()
+    ctx = shared_context(args.device)
+    cal = calibrate(ctx, hf, views, args.tau, args.tile_size, args.repeats, args.holdout)
+    print(cal.model.explain())
+    if args.save:
+        print(f"saved to {save_cost_model(cal.model, Path(args.save) if args.save != 'user' else None)}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand."""
     p = _Parser(prog="terrabench", description="Rasterize meshes or ray-cast the height field, tile by tile: "
@@ -202,6 +246,33 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--tau", type=float, default=2 / 3, help="screen-space error bound in pixels (> 0)")
     pr.add_argument("--tile-size", type=int, default=256, help="cells per tile side (power of two)")
     pr.set_defaults(func=cmd_render)
+
+    pn = sub.add_parser("run", help="run an experiment spec (TOML): paired flights, tables, images")
+    pn.add_argument("spec", help="experiment spec file (.toml)")
+    pn.add_argument("--runs", default="runs", help="folder that holds run folders")
+    pn.add_argument("--name", default=None, help="run name (default: the spec's)")
+    pn.add_argument("--report", action="store_true", help="write the report when done")
+    pn.add_argument("--reports", default="reports", help="folder for reports")
+    pn.add_argument("--quiet", action="store_true", help="no progress bar")
+    pn.set_defaults(func=cmd_run)
+
+    pp = sub.add_parser("report", help="write reports/<name>/report.md + .html from a run folder")
+    pp.add_argument("run", help="run folder (runs/<name>)")
+    pp.add_argument("--reports", default="reports", help="folder for reports")
+    pp.add_argument("--name", default=None, help="report name (default: the run's)")
+    pp.set_defaults(func=cmd_report)
+
+    pc = sub.add_parser("calibrate", help="time tiles both ways on this device and fit the cost model")
+    add_terrain_args(pc)
+    pc.add_argument("--flights", default="flyover,orbit", help="comma-separated flights to sample views from")
+    pc.add_argument("--frames", type=int, default=6, help="views per flight")
+    pc.add_argument("--size", default="640x360", help="viewport WIDTHxHEIGHT")
+    pc.add_argument("--tau", type=float, default=2 / 3, help="screen-space error bound in pixels")
+    pc.add_argument("--tile-size", type=int, default=256)
+    pc.add_argument("--repeats", type=int, default=3, help="timed draws per tile and strategy (median)")
+    pc.add_argument("--holdout", type=float, default=0.3, help="share of tiles held out to measure the fit")
+    pc.add_argument("--save", default="user", help="'user' (default costs file), a path, or '' for no save")
+    pc.set_defaults(func=cmd_calibrate)
     return p
 
 
