@@ -1,0 +1,109 @@
+"""The cost model: the fit recovers known coefficients; the choice follows the predicted costs; files round-trip."""
+import json
+
+import numpy as np
+import pytest
+
+from hybrid.costmodel import CostModel, fit_cost_model, load_cost_model, save_cost_model
+from hybrid.errors import TerrabenchError
+from hybrid.features import TileFeatures, _hull_area_clipped, footprint_pixels
+from hybrid.planner import choose
+from hybrid.residency import ResidencyCache
+from hybrid.view import View
+
+TRUE = CostModel("test", {"const": 0.3, "triangles": 2e-4, "pixels": 1e-5},
+                 {"const": 0.5, "pixels": 3e-5, "pixel_steps": 1e-5})
+
+
+def synthetic_tiles(n=300, seed=0):
+    rng = np.random.default_rng(seed)
+    return [TileFeatures(float(rng.uniform(10, 50000)), float(rng.uniform(0, 130000)), float(rng.uniform(0, 300)),
+                         int(rng.integers(0, 3)), float(rng.uniform(1e3, 1e5))) for _ in range(n)]
+
+
+def test_fit_recovers_known_coefficients():
+    feats = synthetic_tiles()
+    rng = np.random.default_rng(1)
+    ras = np.array([TRUE.predict(f)["raster"] for f in feats]) * rng.normal(1, 0.02, len(feats))
+    ray = np.array([TRUE.predict(f)["raycast"] for f in feats]) * rng.normal(1, 0.02, len(feats))
+    m = fit_cost_model(feats, ras, ray, "test")
+    for s in ("raster", "raycast"):
+        for t, v in getattr(TRUE, s).items():
+            assert np.isclose(getattr(m, s)[t], v, rtol=0.1), (s, t)
+        assert m.fit_error[s] < 0.03                          # held-out median relative error ~ the noise
+    assert "raster   ms = " in m.explain()
+
+
+def test_choice_follows_predicted_costs():
+    flat_small = TileFeatures(pixels=20000, triangles=512, slab_cells=0.5, level=0, distance=5e3)
+    rough_big = TileFeatures(pixels=60000, triangles=131072, slab_cells=40, level=0, distance=5e3)
+    a, b = TRUE.predict(flat_small), TRUE.predict(rough_big)
+    assert a["raster"] < a["raycast"] and b["raycast"] < b["raster"]
+    assert choose("hybrid", flat_small, a) == "raster"
+    assert choose("hybrid", rough_big, b) == "raycast"
+    # the same tiles under a device where rays are very expensive go to raster both
+    costly_rays = CostModel("x", TRUE.raster, {"const": 5.0, "pixels": 1e-3, "pixel_steps": 1e-3})
+    assert choose("hybrid", rough_big, costly_rays.predict(rough_big)) == "raster"
+    assert choose("heuristic", rough_big, b) == "raycast" and choose("heuristic", flat_small, a) == "raster"
+    with pytest.raises(TerrabenchError, match="unknown policy"):
+        choose("fastest", flat_small, a)
+
+
+def test_fit_rejects_bad_timings():
+    feats = synthetic_tiles(10)
+    with pytest.raises(TerrabenchError, match="finite and > 0"):
+        fit_cost_model(feats, np.zeros(10), np.ones(10), "t")
+    with pytest.raises(TerrabenchError, match="at least 3"):
+        fit_cost_model(feats[:2], np.ones(2), np.ones(2), "t", holdout=0.0)
+
+
+def test_save_load_by_renderer(tmp_path):
+    p = tmp_path / "costs.json"
+    save_cost_model(TRUE, p)
+    got = load_cost_model("test", p)
+    assert got.raster == TRUE.raster and got.raycast == TRUE.raycast
+    shipped = load_cost_model("llvmpipe (LLVM 15.0.6, 256 bits)", p)
+    assert "llvmpipe" in shipped.source
+    other = load_cost_model("Some Unknown GPU", p)
+    assert "fallback" in other.source
+    p.write_text("{broken")
+    with pytest.raises(TerrabenchError, match="not valid JSON"):
+        load_cost_model("test", p)
+
+
+def test_footprint_of_box():
+    assert np.isclose(_hull_area_clipped(np.array([[-10, -10], [20, -10], [20, 20], [-10, 20.0]]), 10, 10), 100)
+    assert np.isclose(_hull_area_clipped(np.array([[0, 0], [4, 0], [0, 4.0]]), 10, 10), 8)
+    v = View([0, -100, 0], [0, 0, 0], 90, 100, 100, 1, 1e4)
+    # a 2 x 2 m square facing the camera 100 m away at fov 90: 1 m = 0.5 px -> 1 px²
+    a = footprint_pixels(v, np.array([-1, 0, -1.0]), np.array([1, 0, 1.0]))
+    assert np.isclose(a, 1.0, rtol=1e-6)
+    assert footprint_pixels(v, np.array([-1, -200, -1.0]), np.array([1, 0, 1.0])) == 100 * 100   # behind the eye
+
+
+class _Fake:
+    def __init__(self, n):
+        self.nbytes, self.released = n, False
+
+    def release(self):
+        self.released = True
+
+
+class _Strategy:
+    def upload(self, tile):
+        return _Fake(tile)
+
+
+def test_residency_budget_and_lru():
+    c = ResidencyCache(250)
+    s = _Strategy()
+    a = c.get("raster", s, "a", lambda: 100)
+    c.get("raster", s, "b", lambda: 100)
+    assert c.get("raster", s, "a", lambda: 100) is a and c.stats.hits == 1     # resident: not uploaded again
+    c.get("raycast", s, "c", lambda: 100)                                       # evicts b (least recent)
+    assert c.bytes == 200 and c.stats.evictions == 1 and ("raster", "b") not in c.entries
+    assert c.bytes_by_strategy() == {"raster": 100, "raycast": 100}
+    with pytest.raises(TerrabenchError, match="too small"):
+        c.get("raster", s, "d", lambda: 300)
+    with pytest.raises(TerrabenchError, match="budget"):
+        ResidencyCache(-1)
