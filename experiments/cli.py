@@ -189,14 +189,14 @@ def cmd_run(args) -> int:
     print(f"run folder: {folder}")
     if args.report:
         from .report import write_report
-        print(f"report: {write_report(folder, Path(args.reports))}")
+        print(f"report: {write_report(folder, Path(args.reports), video=spec.video)}")
     return 0
 
 
 def cmd_report(args) -> int:
-    """Write the report of a run folder."""
+    """Write the report of a run folder (and the flight animations with --video)."""
     from .report import write_report
-    path = write_report(Path(args.run), Path(args.reports), args.name)
+    path = write_report(Path(args.run), Path(args.reports), args.name, video=args.video)
     print(f"wrote {path} and {path.with_suffix('.html')}")
     return 0
 
@@ -248,7 +248,7 @@ def build_parser() -> argparse.ArgumentParser:
     pr.set_defaults(func=cmd_render)
 
     pn = sub.add_parser("run", help="run an experiment spec (TOML): paired flights, tables, images")
-    pn.add_argument("spec", help="experiment spec file (.toml)")
+    pn.add_argument("spec", help="experiment spec file (.toml) or a bundled one: default, tiny, stress")
     pn.add_argument("--runs", default="runs", help="folder that holds run folders")
     pn.add_argument("--name", default=None, help="run name (default: the spec's)")
     pn.add_argument("--report", action="store_true", help="write the report when done")
@@ -260,6 +260,7 @@ def build_parser() -> argparse.ArgumentParser:
     pp.add_argument("run", help="run folder (runs/<name>)")
     pp.add_argument("--reports", default="reports", help="folder for reports")
     pp.add_argument("--name", default=None, help="report name (default: the run's)")
+    pp.add_argument("--video", action="store_true", help="also write the flight as GIF animations (spec video = true)")
     pp.set_defaults(func=cmd_report)
 
     pc = sub.add_parser("calibrate", help="time tiles both ways on this device and fit the cost model")

@@ -85,7 +85,7 @@ def reading(frames: pd.DataFrame, errors: list[dict]) -> list[str]:
     return out
 
 
-def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | None = None) -> Path:
+def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | None = None, video: bool = False) -> Path:
     """Charts, tables and reading of a run folder into reports_dir/<name>/; returns the report.md path."""
     run = Path(run)
     if not (run / "frames.parquet").exists():
@@ -101,6 +101,9 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
     except OSError as exc:
         raise TerrabenchError(f"cannot create report folder {out}: {exc.strerror or exc}") from None
     charts = all_charts(run, frames, out, spec.get("image_frames", [0]))
+    if video:
+        from .video import write_videos
+        charts["video"] = write_videos(run, frames, out)
     table = summary_table(frames)
     lines = reading(frames, errors)
     md = [f"# terrabench report: {spec['name']}", "",
@@ -116,9 +119,9 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
           "", "## Summary", "", md_table(table), ""]
     titles = {"frame_time": "Frame time over the flight", "gpu_memory": "GPU memory over the flight",
               "speed_vs_accuracy": "Speed against accuracy", "strategy_mix": "Strategy mix per frame",
-              "images": "Images"}
+              "images": "Images", "video": "Flight animation"}
     for key, files in charts.items():
-        pngs = [p for p in files if p.suffix == ".png"]
+        pngs = [p for p in files if p.suffix in (".png", ".gif")]
         if not pngs:
             continue
         md += [f"## {titles[key]}", ""] + [f"![{p.stem}]({p.name})" for p in pngs] + [""]
@@ -132,7 +135,7 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
          "<h2>Reading</h2><ul>" + "".join(f"<li>{html.escape(l.strip()).replace('**', '')}</li>" for l in lines) + "</ul>",
          "<h2>Summary</h2>", table.to_html(index=False, float_format=lambda v: f"{v:.3g}")]
     for key, files in charts.items():
-        pngs = [p for p in files if p.suffix == ".png"]
+        pngs = [p for p in files if p.suffix in (".png", ".gif")]
         if pngs:
             h.append(f"<h2>{titles[key]}</h2>" + "".join(f"<p><img src='{p.name}'></p>" for p in pngs))
     h.append(f"<hr><p>{html.escape(CREDIT)}.</p></body></html>")

@@ -135,12 +135,13 @@ def _size(s: str) -> tuple[int, int]:
     return w, h
 
 
-def _save_image(folder: Path, stem: str, result) -> None:
+def _save_image(folder: Path, stem: str, result, full: bool = True) -> None:
     from PIL import Image
     Image.fromarray(result.colour).save(folder / f"{stem}.png")
-    np.save(folder / f"{stem}.depth.npy", result.distance)
-    for name, arr in getattr(result, "maps", {}).items():
-        np.save(folder / f"{stem}.{name}.npy", arr)
+    if full:
+        np.save(folder / f"{stem}.depth.npy", result.distance)
+        for name, arr in getattr(result, "maps", {}).items():
+            np.save(folder / f"{stem}.{name}.npy", arr)
 
 
 def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: bool = False) -> Path:
@@ -189,8 +190,8 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
         def ref(k):
             if k not in refs:
                 refs[k] = reference.render(views[k], supersample=spec.supersample)
-                if k in spec.image_frames:
-                    _save_image(folder / "images", f"ref-{gid}-f{k}", refs[k])
+                if k in spec.image_frames or spec.video:
+                    _save_image(folder / "images", f"ref-{gid}-f{k}", refs[k], k in spec.image_frames)
             return refs[k]
 
         for c in group:
@@ -216,8 +217,8 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
                     journal.append("frames", [row])
                     journal.append("tiles", [{"config": c["config"], "frame": k, "policy": c["policy"], **t}
                                              for t in res.stats.get("tile_rows", [])])
-                    if k in spec.image_frames:
-                        _save_image(folder / "images", f"{c['config']}-f{k}", res)
+                    if k in spec.image_frames or spec.video:
+                        _save_image(folder / "images", f"{c['config']}-f{k}", res, k in spec.image_frames)
                     prev = (k, res)
                     bar.step(f"{c['config']} frame {k}")
             except Exception as exc:  # a failed configuration is recorded; the rest goes on

@@ -15,6 +15,7 @@
     supersample = 2                   # reference colour supersampling
     flip = true                       # compute mean FLIP (slower)
     image_frames = [0]                # frames whose images are kept for the report
+    video = false                     # keep every frame's image for `terrabench report --video`
 """
 from __future__ import annotations
 
@@ -48,6 +49,7 @@ class Spec:
     supersample: int = 2
     flip: bool = True
     image_frames: list = field(default_factory=lambda: [0])
+    video: bool = False
 
     def configs(self) -> list[dict]:
         """Every combination, one dict each, with a stable id; frames of one (dataset, seed, flight, size) are paired."""
@@ -131,10 +133,11 @@ def parse_spec(text: str, source: str = "spec") -> Spec:
             kw[key] = v
     if "tile_size" in kw and kw["tile_size"] & (kw["tile_size"] - 1):
         raise TerrabenchError(f"{source}: 'tile_size' must be a power of two, got {kw['tile_size']}")
-    if "flip" in d:
-        if not isinstance(d["flip"], bool):
-            raise TerrabenchError(f"{source}: 'flip' must be true or false, got {d['flip']!r}")
-        kw["flip"] = d["flip"]
+    for key in ("flip", "video"):
+        if key in d:
+            if not isinstance(d[key], bool):
+                raise TerrabenchError(f"{source}: '{key}' must be true or false, got {d[key]!r}")
+            kw[key] = d[key]
     spec = Spec(**kw)
     bad = [f for f in spec.image_frames if not (0 <= f < spec.frames)]
     if bad:
@@ -142,8 +145,14 @@ def parse_spec(text: str, source: str = "spec") -> Spec:
     return spec
 
 
+BUNDLED = {"default": "default.toml", "tiny": "tiny.toml", "stress": "stress.toml"}
+
+
 def load_spec(path) -> Spec:
-    """Read and check a spec file."""
+    """Read and check a spec file, or a bundled spec by name (default, tiny, stress)."""
+    if str(path) in BUNDLED:
+        from importlib import resources
+        return parse_spec((resources.files("experiments") / BUNDLED[str(path)]).read_text(), str(path))
     p = Path(path)
     if not p.is_file():
         raise TerrabenchError(f"{path}: no such spec file")
