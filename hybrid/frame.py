@@ -95,3 +95,5 @@ class SingleStrategyRenderer:
             g.release()
         self.resident.clear()
         self.strategy.release()
+
+from . import strategies  # noqa: E402,F401  (registers the raster and raycast strategies)
