@@ -58,23 +58,23 @@ float rc_cell_hit(vec3 A, vec3 B, vec2 c0, float S, vec4 hc, float H) {
 #else
     vec2 df = fb - fa;
     float a = hc.y - hc.x, b = hc.z - hc.x, c = hc.x - hc.y - hc.z + hc.w;
-    float c0 = A.z - (hc.x + a * fa.x + b * fa.y + c * fa.x * fa.y);
-    if (c0 <= 0.0) return 0.0;
-    float c1 = (B.z - A.z) - (a * df.x + b * df.y + c * (fa.x * df.y + fa.y * df.x));
-    float c2 = -c * df.x * df.y;
-    float dend = c0 + c1 + c2;
-    if (abs(c2) <= 1e-6 * (abs(c1) + abs(c0))) {
-        if (dend <= 0.0) return c0 / (c0 - dend);
+    float k0 = A.z - (hc.x + a * fa.x + b * fa.y + c * fa.x * fa.y);
+    if (k0 <= 0.0) return 0.0;
+    float k1 = (B.z - A.z) - (a * df.x + b * df.y + c * (fa.x * df.y + fa.y * df.x));
+    float k2 = -c * df.x * df.y;
+    float dend = k0 + k1 + k2;
+    if (abs(k2) <= 1e-6 * (abs(k1) + abs(k0))) {
+        if (dend <= 0.0) return k0 / (k0 - dend);
         return -1.0;
     }
-    float disc = c1 * c1 - 4.0 * c2 * c0;
+    float disc = k1 * k1 - 4.0 * k2 * k0;
     if (disc < 0.0) return -1.0;
     float sq = sqrt(disc);
-    float q = -0.5 * (c1 + (c1 >= 0.0 ? sq : -sq));
+    float q = -0.5 * (k1 + (k1 >= 0.0 ? sq : -sq));
     float u = RC_FAR;
-    float r1 = q / c2;
+    float r1 = q / k2;
     if (r1 >= 0.0 && r1 <= 1.0) u = r1;
-    if (q != 0.0) { float r2 = c0 / q; if (r2 >= 0.0 && r2 <= 1.0) u = min(u, r2); }
+    if (q != 0.0) { float r2 = k0 / q; if (r2 >= 0.0 && r2 <= 1.0) u = min(u, r2); }
     if (u <= 1.0) return u;
     if (dend <= 0.0) return 1.0;
     return -1.0;
@@ -132,6 +132,9 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
     vec2 lo = vec2(mx ? Nf - ext.x : 0.0, my ? Nf - ext.y : 0.0);
     vec2 hi = vec2(mx ? Nf : ext.x, my ? Nf : ext.y);
     P.xy = clamp(P.xy, lo, hi);
+    // every exit is computed from the entry point P0 (no accumulated rounding): X = P0 + s * D
+    vec3 P0 = P;
+    float sP = 0.0;
     int ltop = max(LMAX - 1, 0);
     lmin = min(lmin, ltop);
 #if NAIVE
@@ -159,12 +162,12 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
         ivec2 ri = ivec2(mx ? nl - 1 - int(ij.x) : int(ij.x), my ? nl - 1 - int(ij.y) : int(ij.y));
         float H = texelFetch(mmap, ri, l).r;
         vec2 e = (ij + 1.0) * s;
-        float dtx = D.x > 0.0 ? (e.x - P.x) / D.x : RC_FAR;
-        float dty = D.y > 0.0 ? (e.y - P.y) / D.y : RC_FAR;
-        float dtz = D.z < 0.0 ? (zr.x - P.z) / D.z : (D.z > 0.0 ? (zr.y - P.z) / D.z : RC_FAR);
-        float dt = min(min(dtx, dty), dtz);
+        float dtx = D.x > 0.0 ? (e.x - P0.x) / D.x : RC_FAR;
+        float dty = D.y > 0.0 ? (e.y - P0.y) / D.y : RC_FAR;
+        float dtz = D.z < 0.0 ? (zr.x - P0.z) / D.z : (D.z > 0.0 ? (zr.y - P0.z) / D.z : RC_FAR);
+        float dt = max(min(min(dtx, dty), dtz), sP);
         bool cx = dtx <= dt, cy = dty <= dt, cz = dtz <= dt;
-        vec3 X = P + dt * D;
+        vec3 X = P0 + dt * D;
         if (cx) X.x = e.x;
         if (cy) X.y = e.y;
         if (cz) X.z = D.z < 0.0 ? zr.x : zr.y;
@@ -175,7 +178,10 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
             fin = fin || rc_lod_final(l, ij, H, Om, zr.x, spacing, lod_k);
 #endif
             if (!fin) {
-                if (D.z < 0.0) { P += max((H - P.z) / D.z, 0.0) * D; P.xy = min(P.xy, e); }
+                if (D.z < 0.0) {
+                    float sa = (H - P0.z) / D.z;
+                    if (sa > sP) { sP = sa; P = P0 + sa * D; P.xy = min(P.xy, e); moved = true; }
+                }
                 l--;
                 continue;
             }
@@ -198,6 +204,7 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
         }
         if (cz) return RC_MISS;
         P = X;
+        sP = dt;
         moved = true;
 #if !NAIVE
         bool up = (cx && ((int(ij.x) + 1) & 1) == 0) || (cy && ((int(ij.y) + 1) & 1) == 0);
