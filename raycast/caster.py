@@ -105,7 +105,7 @@ class RaycastStrategy:
             t = np.ascontiguousarray(hf.texture)
             self.texture = ctx.texture((t.shape[1], t.shape[0]), 3, t.tobytes())
             self.texture.build_mipmaps()
-            self.texture.anisotropy = 16.0
+            self.texture.anisotropy = 1.0   # anisotropy is done in the shader (aniso_texture)
             self.texture.repeat_x = self.texture.repeat_y = False
         self.stats_buf = ctx.buffer(reserve=32 * 64)
         self.ids = None
