@@ -143,3 +143,6 @@ def make_renderer(ctx, hf: HeightField, policy: str, tile_size: int = 256, recon
     if policy == "raycast":
         return SingleStrategyRenderer(ctx, hf, "raycast", tile_size, reconstruction=reconstruction, **options)
     return SingleStrategyRenderer(ctx, hf, policy, tile_size, **options)
+
+
+from . import strategies  # noqa: E402,F401  (registers the raster and raycast strategies)

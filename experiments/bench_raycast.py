@@ -1,0 +1,97 @@
+"""Ray-caster benchmark (issue 3, section 9): naive stepping vs max mipmap vs max mipmap + tile-ID pre-pass.
+
+Renders the frames of a flight with hybrid.frame.SingleStrategyRenderer('raycast') and reports, per
+configuration, rays/s, mean steps per ray and ms/frame. Times are wall clock around ctx.finish() of the
+draw calls only (tile selection, uploads and read-back excluded), from a pass with statistics off (no atomics);
+ray and step counts come from a second pass with statistics on. On llvmpipe timings are noisy.
+
+    python -m experiments.bench_raycast [--frames 8] [--width 640] [--height 360] [--dataset puget]
+"""
+from __future__ import annotations
+
+import argparse
+
+import pandas as pd
+
+CONFIGS = {
+    "naive": dict(traversal="naive", prepass=False),
+    "maxmip": dict(traversal="maxmip", prepass=False),
+    "maxmip+prepass": dict(traversal="maxmip", prepass=True),
+}
+
+
+def run_benchmark(ctx, hf, views, configs: dict | None = None, tau: float = 2.0 / 3.0, mode: str = "shaded",
+                  tile_size: int = 256) -> pd.DataFrame:
+    """One row per (configuration, frame): wall ms, rays started, hits, steps, capped, tiles; for the views."""
+    from hybrid.frame import SingleStrategyRenderer
+    configs = configs or CONFIGS
+    rows = []
+    r = SingleStrategyRenderer(ctx, hf, "raycast", tile_size=tile_size)
+    try:
+        for name, opts in configs.items():
+            r.render(views[0], tau, mode=mode, stats=False, **opts)      # warm-up: compile, upload
+            r.render(views[0], tau, mode=mode, stats=True, **opts)
+            for k, view in enumerate(views):
+                timed = r.render(view, tau, mode=mode, stats=False, **opts)
+                counted = r.render(view, tau, mode=mode, stats=True, **opts)
+                s = counted.stats
+                rows.append({"config": name, "frame": k, "wall_ms": timed.stats["wall_ms"],
+                             "wall_ms_stats": s["wall_ms"], "tiles": s["tiles"], "rays": s["rays"], "hits": s["hits"],
+                             "steps": s["steps"], "max_steps": s["max_steps"], "capped": s["capped"],
+                             "pixels": view.width * view.height, "coverage": float(counted.mask.mean())})
+    finally:
+        r.release()
+    return pd.DataFrame(rows)
+
+
+def summarize(df: pd.DataFrame) -> pd.DataFrame:
+    """Per configuration: ms/frame, rays/s (started rays), mean steps/ray, pixels/s, speed-ups."""
+    g = df.groupby("config", sort=False)
+    out = pd.DataFrame({
+        "ms/frame": g["wall_ms"].mean(),
+        "M rays/s": g["rays"].sum() / (g["wall_ms"].sum() / 1e3) / 1e6,
+        "M pixels/s": g["pixels"].sum() / (g["wall_ms"].sum() / 1e3) / 1e6,
+        "rays/frame": g["rays"].mean(),
+        "steps/ray": g["steps"].sum() / g["rays"].sum(),
+        "max steps": g["max_steps"].max(),
+        "capped": g["capped"].sum(),
+        "tiles/frame": g["tiles"].mean(),
+        "coverage": g["coverage"].mean(),
+        "ms/frame (stats on)": g["wall_ms_stats"].mean(),
+    })
+    base = out["ms/frame"].get("naive")
+    if base is not None:
+        out["speed-up vs naive"] = base / out["ms/frame"]
+    return out
+
+
+def main(argv=None) -> int:
+    """Run the benchmark on a dataset's flyover flight and print the table."""
+    from hybrid.datasets import get_dataset
+    from hybrid.flight import preset
+    from hybrid.glcontext import gl_info, shared_context
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--dataset", default="puget")
+    p.add_argument("--flight", default="flyover")
+    p.add_argument("--frames", type=int, default=8)
+    p.add_argument("--width", type=int, default=640)
+    p.add_argument("--height", type=int, default=360)
+    p.add_argument("--tau", type=float, default=2.0 / 3.0)
+    p.add_argument("--csv", default=None, help="also write the per-frame rows to this CSV file")
+    a = p.parse_args(argv)
+    hf = get_dataset(a.dataset)
+    views = preset(a.flight, hf, frames=a.frames, width=a.width, height=a.height).views()
+    ctx = shared_context()
+    df = run_benchmark(ctx, hf, views, tau=a.tau)
+    if a.csv:
+        df.to_csv(a.csv, index=False)
+    info = gl_info(ctx)
+    print(f"ray caster on {hf.name} {hf.cols}x{hf.rows}, {a.flight} flight, {a.frames} frames at {a.width}x{a.height}, "
+          f"tau {a.tau:.3g} px, GL {info.renderer}")
+    with pd.option_context("display.width", 200, "display.max_columns", 20, "display.float_format", "{:.3g}".format):
+        print(summarize(df))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

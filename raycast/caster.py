@@ -1,0 +1,319 @@
+"""The ray-cast tile strategy on the GPU: per-tile height + max-mip textures, one box pass per tile.
+
+Satisfies the tile-strategy contract of hybrid.frame (duck-typed; nothing from hybrid is imported):
+``upload(tile) -> GpuTile``, ``draw_tiles(target, view, items, **options) -> dict``, ``release()``.
+Each tile pass rasterizes the back faces of the tile's clipped bounding box; the fragment shader casts the
+pixel-centre ray (from the camera basis, as View.pixel_dirs_eye), traverses the max mipmap in the tile's
+texel space (mirrored so Dir_x, Dir_y >= 0), intersects the chosen reconstruction, shades the hit and writes
+gl_FragDepth = clip.z / clip.w with the view's reversed-Z ``view_proj_rel``. Misses and capped rays discard.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .glsl import load_glsl
+from .maxmip import MaxMipBuilder, level_count, maxmip_nbytes
+from .options import MODES, RECONSTRUCTIONS, CastOptions, default_max_steps
+
+STAT_FIELDS = ("rays", "hits", "steps", "max_steps", "capped", "shadow_rays", "shadow_steps", "shadow_capped")
+
+
+def _cube_back_face_triangles() -> np.ndarray:
+    """36 unit-cube corners (float32), 12 triangles wound counter-clockwise seen from outside the cube."""
+    quads = [((0, 0, 0), (0, 1, 0), (1, 1, 0), (1, 0, 0)),   # bottom, normal -z
+             ((0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)),   # top, +z
+             ((0, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1)),   # south, -y
+             ((0, 1, 0), (0, 1, 1), (1, 1, 1), (1, 1, 0)),   # north, +y
+             ((0, 0, 0), (0, 0, 1), (0, 1, 1), (0, 1, 0)),   # west, -x
+             ((1, 0, 0), (1, 1, 0), (1, 1, 1), (1, 0, 1))]   # east, +x
+    tris = []
+    for a, b, c, d in quads:
+        tris += [a, b, c, a, c, d]
+    return np.array(tris, dtype=np.float32)
+
+
+@dataclass
+class GpuTile:
+    """One tile on the GPU: R32F (N+1)² heights and R32F N² max mipmap with all levels; exact byte count."""
+
+    heights: object
+    maxmip: object
+    n: int
+    nbytes: int
+
+    def release(self) -> None:
+        """Free both textures."""
+        self.heights.release()
+        self.maxmip.release()
+
+
+@dataclass
+class _Grid:
+    """The whole terrain as one power-of-two grid, for shadow rays (built on the first shadowed draw)."""
+
+    heights: object
+    maxmip: object
+    n: int
+    ext: tuple
+    zr: tuple
+    nbytes: int
+
+
+def outer_faces(clip, hf) -> int:
+    """Bit mask of a tile's box sides lying on the terrain's outer boundary (W 1, E 2, S 4, N 8)."""
+    x0, y0, x1, y1 = (float(v) for v in clip)
+    ox, oy = float(hf.origin[0]), float(hf.origin[1])
+    w, d = hf.extent
+    tol = 1e-6 * float(hf.spacing)
+    return ((abs(x0 - ox) <= tol) * 1 | (abs(x1 - (ox + w)) <= tol) * 2
+            | (abs(y0 - oy) <= tol) * 4 | (abs(y1 - (oy + d)) <= tol) * 8)
+
+
+def _set(prog, name, value):
+    """Set a uniform if the compiled program still has it (unused ones are optimised away)."""
+    try:
+        prog[name].value = value
+    except KeyError:
+        pass
+
+
+def _write(prog, name, data: bytes):
+    try:
+        prog[name].write(data)
+    except KeyError:
+        pass
+
+
+class RaycastStrategy:
+    """GPU ray caster of height-field tiles over maximum mipmaps (Dick et al. 2009) with Qu's reconstructions."""
+
+    def __init__(self, ctx, hf, shading_source: str, **options):
+        self.ctx, self.hf = ctx, hf
+        self.shading_source = shading_source
+        self.options = CastOptions().updated(**options)
+        self._check_mode(self.options)
+        self.builder = MaxMipBuilder(ctx)
+        self.cube = ctx.buffer(_cube_back_face_triangles().tobytes())
+        self.prepass_prog = ctx.program(vertex_shader=load_glsl("box.vert.glsl"),
+                                        fragment_shader=load_glsl("prepass.frag.glsl"))
+        self.prepass_vao = ctx.vertex_array(self.prepass_prog, [(self.cube, "3f", "corner")])
+        self.programs: dict = {}
+        self.texture = None
+        if hf.texture is not None:
+            t = np.ascontiguousarray(hf.texture)
+            self.texture = ctx.texture((t.shape[1], t.shape[0]), 3, t.tobytes())
+            self.texture.build_mipmaps()
+            self.texture.anisotropy = 1.0   # anisotropy is done in the shader (aniso_texture)
+            self.texture.repeat_x = self.texture.repeat_y = False
+        self.stats_buf = ctx.buffer(reserve=32 * 64)
+        self.ids = None
+        self._next_id = 1
+        self.grid: _Grid | None = None
+        self.last_tile_stats = np.zeros((0, len(STAT_FIELDS)), np.int64)
+
+    # --- options and programs ---------------------------------------------------------------------
+    def _check_mode(self, opts: CastOptions) -> str:
+        mode = opts.mode or ("texture" if self.hf.texture is not None else "shaded")
+        if mode in ("texture", "texture_plain") and self.hf.texture is None:
+            raise ValueError(f"mode {mode!r} needs a terrain texture; {getattr(self.hf, 'name', 'this terrain')!r} "
+                             "has none (use 'shaded', 'height', ...)")
+        return mode
+
+    def _program(self, opts: CastOptions, mode: str):
+        key = (opts.reconstruction, opts.traversal, opts.lod is not None, opts.prepass, opts.stats, opts.shadows, mode)
+        if key not in self.programs:
+            defines = {"RECON": RECONSTRUCTIONS.index(opts.reconstruction), "NAIVE": int(opts.traversal == "naive"),
+                       "LOD": int(opts.lod is not None), "PREPASS": int(opts.prepass), "STATS": int(opts.stats),
+                       "SHADOWS": int(opts.shadows), "MODE": MODES.index(mode)}
+            frag = load_glsl("raycast.frag.glsl", defines).replace("//@shading", self.shading_source)
+            prog = self.ctx.program(vertex_shader=load_glsl("box.vert.glsl"), fragment_shader=frag)
+            vao = self.ctx.vertex_array(prog, [(self.cube, "3f", "corner")])
+            self.programs[key] = (prog, vao)
+        return self.programs[key]
+
+    # --- tiles ------------------------------------------------------------------------------------
+    def upload(self, tile) -> GpuTile:
+        """Put a tile's (N+1)² float32 heights on the GPU and build its max mipmap there."""
+        h = np.ascontiguousarray(tile.heights, dtype=np.float32)
+        n = h.shape[0] - 1
+        if h.ndim != 2 or h.shape[1] != h.shape[0] or n < 2 or n & (n - 1):
+            raise ValueError(f"tile heights must be (N+1, N+1) with N a power of two >= 2, got {h.shape}")
+        ht = self.ctx.texture((n + 1, n + 1), 1, h.tobytes(), dtype="f4")
+        ht.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+        mm = self.builder.build(ht, n)
+        return GpuTile(ht, mm, n, h.nbytes + maxmip_nbytes(n))
+
+    def _shadow_grid(self) -> _Grid:
+        if self.grid is None:
+            hf = self.hf
+            h = np.asarray(hf.heights, dtype=np.float32)
+            cells = max(h.shape) - 1
+            n = 1 << max(1, int(np.ceil(np.log2(max(cells, 2)))))
+            pad = np.pad(h, ((0, n + 1 - h.shape[0]), (0, n + 1 - h.shape[1])), mode="edge")
+            g = self.upload_grid(pad)
+            lo, hi = float(h.min()), float(h.max())
+            self.grid = _Grid(g.heights, g.maxmip, n, (float(h.shape[1] - 1), float(h.shape[0] - 1)), (lo, hi), g.nbytes)
+        return self.grid
+
+    def upload_grid(self, heights: np.ndarray) -> GpuTile:
+        """Heights (N+1)² (N a power of two) and their max mipmap on the GPU, as for a tile."""
+        h = np.ascontiguousarray(heights, dtype=np.float32)
+        n = h.shape[0] - 1
+        ht = self.ctx.texture((n + 1, n + 1), 1, h.tobytes(), dtype="f4")
+        ht.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+        return GpuTile(ht, self.builder.build(ht, n), n, h.nbytes + maxmip_nbytes(n))
+
+    def _ids_texture(self, size):
+        if self.ids is None or self.ids.size != tuple(size):
+            if self.ids is not None:
+                self.ids.release()
+            self.ids = self.ctx.texture(tuple(size), 1, dtype="u4")
+            self.ids.write(np.zeros(size[0] * size[1], np.uint32).tobytes())
+            self.ids.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+            self._next_id = 1
+        return self.ids
+
+    # --- drawing ----------------------------------------------------------------------------------
+    def draw_tiles(self, target, view, items, **options) -> dict:
+        """Ray cast the (gpu_tile, tile, selected) items, front to back, into the bound target for the view."""
+        opts = self.options.updated(**options)
+        mode = self._check_mode(opts)
+        prog, vao = self._program(opts, mode)
+        ctx, hf = self.ctx, self.hf
+        eye = np.asarray(view.eye, dtype=np.float64)
+        W, H = int(view.width), int(view.height)
+        if tuple(target.size) != (W, H):
+            raise ValueError(f"target size {tuple(target.size)} does not match the view's {W}x{H} pixels")
+        vp = np.asarray(view.view_proj_rel, dtype=np.float64)
+        _write(prog, "view_proj_rel", vp.T.astype(np.float32).tobytes())
+        self.prepass_prog["view_proj_rel"].write(vp.T.astype(np.float32).tobytes())
+        _write(prog, "cam_to_world", np.asarray(view.rotation(), np.float64).astype(np.float32).tobytes())
+        t = float(view.tan_half_fov)
+        _set(prog, "ndc_scale", (t * W / H, t))
+        _set(prog, "viewport", (float(W), float(H)))
+        _set(prog, "near_plane", float(view.near))
+        _set(prog, "far_plane", float(view.far))
+        lo, hi = hf.height_range
+        _set(prog, "hrange", (lo, hi))
+        _set(prog, "heat_max", float(opts.heat_max))
+        K = float(view.height) / (2.0 * t)
+        ext_w, ext_d = hf.extent
+        if self.texture is not None:
+            self.texture.use(2)
+            _set(prog, "tex", 2)
+        _set(prog, "hmap", 0)
+        _set(prog, "mmap", 1)
+        grid = None
+        if opts.shadows:
+            grid = self._shadow_grid()
+            grid.heights.use(3)
+            grid.maxmip.use(5)
+            _set(prog, "g_hmap", 3)
+            _set(prog, "g_mmap", 5)
+            _set(prog, "g_cells", grid.n)
+            _set(prog, "g_levels", level_count(grid.n) - 1)
+            _set(prog, "g_ext", grid.ext)
+            _set(prog, "g_zr", grid.zr)
+            _set(prog, "g_spacing", float(hf.spacing))
+            _set(prog, "g_max_steps", opts.max_steps or default_max_steps(grid.n))
+        n_items = len(items)
+        need = 32 * max(n_items, 1)
+        if self.stats_buf.size < need:
+            self.stats_buf.release()
+            self.stats_buf = ctx.buffer(reserve=need)
+        self.stats_buf.clear()
+        self.stats_buf.bind_to_storage_buffer(0)
+        id_fbo = None
+        if opts.prepass and n_items:
+            ids = self._ids_texture((W, H))
+            if self._next_id + n_items >= 2 ** 32 - 1:
+                ids.write(np.zeros(W * H, np.uint32).tobytes())
+                self._next_id = 1
+            ids.use(4)
+            _set(prog, "ids", 4)
+            id_fbo = ctx.framebuffer(color_attachments=[ids], depth_attachment=target.depth)
+            id_fbo.depth_mask = False
+        ctx.enable(ctx.CULL_FACE)
+        ctx.front_face = "ccw"
+        ctx.cull_face = "front"
+        try:
+            for k, (g, tile, _sel) in enumerate(items):
+                sp = float(tile.spacing)
+                org = np.asarray(tile.origin, dtype=np.float64)
+                x0, y0, x1, y1 = (float(v) for v in tile.clip)
+                pad = 1e-3 * sp + 0.01
+                box_lo = np.array([x0 - pad, y0 - pad, tile.zmin - pad]) - eye
+                box_hi = np.array([x1 + pad, y1 + pad, tile.zmax + pad]) - eye
+                for p in (prog, self.prepass_prog):
+                    _set(p, "box_lo", tuple(box_lo.astype(np.float32)))
+                    _set(p, "box_hi", tuple(box_hi.astype(np.float32)))
+                level = int(tile.key.level) if hasattr(tile, "key") else 0
+                _set(prog, "n_cells", g.n)
+                _set(prog, "n_levels", level_count(g.n) - 1)
+                _set(prog, "ext", ((x1 - x0) / sp, (y1 - y0) / sp))
+                _set(prog, "zr", (tile.zmin - org[2], tile.zmax - org[2]))
+                e = eye - org
+                _set(prog, "eye_tex", (e[0] / sp, e[1] / sp, e[2]))
+                _set(prog, "origin_rel", tuple((org - eye).astype(np.float32)))
+                _set(prog, "spacing", sp)
+                _set(prog, "tile_level", level)
+                _set(prog, "uv_off", ((org[0] - hf.origin[0]) / ext_w, (org[1] - hf.origin[1]) / ext_d))
+                _set(prog, "uv_scale", (sp / ext_w, sp / ext_d))
+                _set(prog, "lod_k", sp * K / float(opts.lod) if opts.lod else 0.0)
+                _set(prog, "max_steps", opts.max_steps or default_max_steps(g.n))
+                _set(prog, "tile_index", k)
+                _set(prog, "outer", outer_faces(tile.clip, hf))
+                if grid is not None:
+                    _set(prog, "g_tile_off", ((org[0] - hf.origin[0]) / hf.spacing, (org[1] - hf.origin[1]) / hf.spacing))
+                if id_fbo is not None:
+                    tid = self._next_id
+                    self._next_id += 1
+                    self.prepass_prog["tile_id"].value = tid
+                    _set(prog, "tile_id", tid)
+                    id_fbo.use()
+                    ctx.depth_func = ">"
+                    self.prepass_vao.render()
+                    target.fbo.use()
+                    ctx.depth_func = ">"
+                g.heights.use(0)
+                g.maxmip.use(1)
+                vao.render()
+        finally:
+            ctx.disable(ctx.CULL_FACE)
+            ctx.cull_face = "back"
+            if id_fbo is not None:
+                target.fbo.use()
+                id_fbo.release()
+        ctx.memory_barrier()
+        counters = {"rays": 0, "hits": 0, "steps": 0, "max_steps": 0, "capped": 0}
+        if opts.stats and n_items:
+            st = np.frombuffer(self.stats_buf.read(size=32 * n_items), dtype=np.uint32).reshape(n_items, 8).astype(np.int64)
+            self.last_tile_stats = st
+            tot = st.sum(axis=0)
+            counters = {f: int(tot[i]) for i, f in enumerate(STAT_FIELDS)}
+            counters["max_steps"] = int(st[:, 3].max())
+            counters["mean_steps"] = counters["steps"] / max(counters["rays"], 1)
+            if not opts.shadows:
+                for f in ("shadow_rays", "shadow_steps", "shadow_capped"):
+                    counters.pop(f)
+        counters["tiles_cast"] = n_items
+        if grid is not None:
+            counters["shadow_grid_bytes"] = grid.nbytes
+        return counters
+
+    def release(self) -> None:
+        """Free programs, buffers and textures (not the tiles: release those through their GpuTile)."""
+        for prog, vao in self.programs.values():
+            vao.release()
+            prog.release()
+        self.programs.clear()
+        for o in (self.prepass_vao, self.prepass_prog, self.cube, self.stats_buf, self.texture, self.ids):
+            if o is not None:
+                o.release()
+        if self.grid is not None:
+            self.grid.heights.release()
+            self.grid.maxmip.release()
+            self.grid = None
+        self.builder.release()

@@ -1,0 +1,70 @@
+"""Options of the ray caster (reconstruction, traversal, pre-pass, LOD, shading mode, shadows, caps), checked."""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+
+RECONSTRUCTIONS = ("planes", "linear", "triangles", "bilinear")
+TRAVERSALS = ("maxmip", "naive")
+MODES = ("texture", "texture_plain", "shaded", "height", "normal", "depth", "level", "steps")
+
+
+@dataclass(frozen=True)
+class CastOptions:
+    """How tiles are ray cast and shaded.
+
+    reconstruction: surface inside a cell ('planes' = piecewise constant box of the cell's max-mip height
+      (Dick), 'linear' = Qu's linear approximation planes, 'triangles' = two triangles split SW-NE (Qu 3.2,
+      the reference surface), 'bilinear' = bilinear patch, intersected analytically).
+    traversal: 'maxmip' (hierarchical, Dick 3.2) or 'naive' (every level-0 texel along the ray).
+    prepass: tile-ID pre-pass so only pixels still empty cast a ray (Dick 3.4).
+    lod: None, or tau in pixels: stop descending at the level whose texel projects to <= tau pixels.
+    mode: shading mode (None = 'texture' when the terrain has one, else 'shaded').
+    shadows: cast a shadow ray toward LIGHT_DIR from every hit (whole terrain, primary ray's level).
+    max_steps: step cap per ray (None = 8 N + 64 for a grid of N cells); capped rays are misses.
+    stats: count rays, hits, steps and capped rays per tile with atomics.
+    heat_max: steps mapped to the top of the 'steps' heat map.
+    """
+
+    reconstruction: str = "triangles"
+    traversal: str = "maxmip"
+    prepass: bool = True
+    lod: float | None = None
+    mode: str | None = None
+    shadows: bool = False
+    max_steps: int | None = None
+    stats: bool = True
+    heat_max: float = 64.0
+
+    def __post_init__(self):
+        if self.reconstruction not in RECONSTRUCTIONS:
+            raise ValueError(f"reconstruction must be one of {', '.join(RECONSTRUCTIONS)}, got {self.reconstruction!r}")
+        if self.traversal not in TRAVERSALS:
+            raise ValueError(f"traversal must be one of {', '.join(TRAVERSALS)}, got {self.traversal!r}")
+        if self.mode is not None and self.mode not in MODES:
+            raise ValueError(f"mode must be one of {', '.join(MODES)} (or None), got {self.mode!r}")
+        for name in ("prepass", "shadows", "stats"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
+        if self.lod is not None:
+            if isinstance(self.lod, bool) or not isinstance(self.lod, (int, float)) or not (0 < float(self.lod) < 1e6):
+                raise ValueError(f"lod must be None or a tau in pixels in (0, 1e6), got {self.lod!r}")
+            if self.traversal == "naive":
+                raise ValueError("lod needs traversal='maxmip' (naive stepping stays at level 0)")
+        if self.max_steps is not None and (isinstance(self.max_steps, bool) or not isinstance(self.max_steps, int)
+                                           or not (1 <= self.max_steps <= 1_000_000)):
+            raise ValueError(f"max_steps must be None or an integer in [1, 1000000], got {self.max_steps!r}")
+        if isinstance(self.heat_max, bool) or not isinstance(self.heat_max, (int, float)) or not self.heat_max > 0:
+            raise ValueError(f"heat_max must be a number of steps > 0, got {self.heat_max!r}")
+
+    def updated(self, **changes) -> "CastOptions":
+        """A copy with some options changed; unknown names raise ValueError."""
+        known = {f.name for f in fields(self)}
+        bad = sorted(set(changes) - known)
+        if bad:
+            raise ValueError(f"unknown ray-cast option(s) {', '.join(bad)}; known: {', '.join(sorted(known))}")
+        return replace(self, **changes)
+
+
+def default_max_steps(n: int) -> int:
+    """Default step cap for a grid of n cells a side: 8 n + 64 (naive stepping needs at most 2 n + 1)."""
+    return 8 * int(n) + 64

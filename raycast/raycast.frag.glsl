@@ -1,0 +1,202 @@
+#version 430
+// One tile's ray-casting pass: the fragment of a back face of the tile's box casts the pixel-centre ray.
+// Defines (set by raycast.caster): RECON, NAIVE, LOD, PREPASS, STATS, SHADOWS, MODE
+// MODE: 0 texture (textureGrad), 1 texture_plain (texture), 2 shaded, 3 height, 4 normal, 5 depth,
+//       6 level, 7 steps
+//#include traverse.glsl
+
+// --- view ---
+uniform mat4 view_proj_rel;    // (world - eye) -> clip, reversed Z
+uniform mat3 cam_to_world;     // eye-space direction -> world direction (columns right, up, back)
+uniform vec2 ndc_scale;        // (tan(fov/2) * aspect, tan(fov/2))
+uniform vec2 viewport;         // pixels
+uniform float near_plane;      // metres (view depth)
+uniform float far_plane;
+// --- tile ---
+uniform sampler2D hmap;        // R32F (N+1)², heights in metres relative to terrain origin z
+uniform sampler2D mmap;        // R32F N², max mip levels 0..log2 N
+uniform int n_cells;           // N
+uniform int n_levels;          // log2 N
+uniform vec2 ext;              // clip rectangle size in texels
+uniform vec2 zr;               // tile z range, metres relative to terrain origin z
+uniform vec3 eye_tex;          // eye in tile texel space
+uniform vec3 origin_rel;       // tile origin (sample [0,0] at terrain origin z) minus eye, metres
+uniform float spacing;         // metres per tile texel
+uniform int tile_level;        // pyramid level of the tile
+uniform vec2 uv_off;           // texture coordinate of the tile origin
+uniform vec2 uv_scale;         // texture coordinate per tile texel
+uniform float lod_k;           // spacing * K / tau (metres), for LOD
+uniform int max_steps;
+uniform int outer;             // tile box sides on the terrain's outer boundary (W 1, E 2, S 4, N 8)
+uniform int tile_index;        // index into the statistics array
+uniform uint tile_id;          // pre-pass ID
+uniform usampler2D ids;        // pre-pass target
+// --- shading ---
+uniform sampler2D tex;         // terrain colour, whole terrain, mipmapped
+uniform vec2 hrange;           // terrain height range (metres, relative)
+uniform float heat_max;        // steps at the top of the heat map
+// --- shadows: the whole terrain as one grid ---
+uniform sampler2D g_hmap;
+uniform sampler2D g_mmap;
+uniform int g_cells;
+uniform int g_levels;
+uniform vec2 g_ext;
+uniform vec2 g_zr;
+uniform vec2 g_tile_off;       // tile origin in level-0 terrain texels
+uniform float g_spacing;       // terrain spacing, metres
+uniform int g_max_steps;
+
+layout(std430, binding = 0) buffer Stats { uint stats[]; };
+
+layout(location = 0) out vec4 frag;
+layout(location = 1) out vec4 aux;   // (hit x, hit y in tile texels, hit z in metres, steps) for tests
+
+//@shading
+
+vec3 heat(float x) {
+    x = clamp(x, 0.0, 1.0);
+    return clamp(vec3(1.5 - abs(4.0 * x - 3.0), 1.5 - abs(4.0 * x - 2.0), 1.5 - abs(4.0 * x - 1.0)), 0.0, 1.0);
+}
+
+vec3 level_colour(int l) {
+    const vec3 pal[8] = vec3[8](vec3(0.90, 0.10, 0.10), vec3(0.95, 0.55, 0.10), vec3(0.95, 0.90, 0.15),
+        vec3(0.25, 0.80, 0.20), vec3(0.15, 0.75, 0.80), vec3(0.20, 0.35, 0.90), vec3(0.60, 0.25, 0.85),
+        vec3(0.85, 0.85, 0.85));
+    return pal[l & 7];
+}
+
+// Anisotropic filtering from explicit derivatives (uv per pixel along x and y): up to 16 textureGrad taps
+// along the footprint's major axis, each filtered isotropically at the minor axis' size. Done by hand because
+// the driver's anisotropic path may ignore textureGrad's derivatives (Mesa llvmpipe does); the texture
+// object therefore has anisotropy 1.
+vec3 aniso_texture(vec2 uv, vec2 gx, vec2 gy) {
+    vec2 ts = vec2(textureSize(tex, 0));
+    float lx = length(gx * ts), ly = length(gy * ts);
+    vec2 major = lx >= ly ? gx : gy;
+    float lmaj = max(lx, ly), lmin = min(lx, ly);
+    int taps = int(clamp(ceil(lmaj / max(lmin, 1e-8)), 1.0, 16.0));
+    float lm = max(lmin, lmaj / 16.0);
+    vec2 g = vec2(lm, 0.0) / ts;
+    vec3 acc = vec3(0.0);
+    for (int k = 0; k < taps; k++) {
+        vec2 off = major * ((float(k) + 0.5) / float(taps) - 0.5);
+        acc += textureGrad(tex, uv + off, g, g.yx).rgb;
+    }
+    return acc / float(taps);
+}
+
+float hsample(ivec2 p) { return texelFetch(hmap, clamp(p, ivec2(0), ivec2(n_cells)), 0).r; }
+
+// Height gradient (metres per texel) at sample p by central differences with stride S (one-sided at borders).
+vec2 central_grad(ivec2 p, int S) {
+    ivec2 a = max(p - ivec2(S, 0), ivec2(0)), b = min(p + ivec2(S, 0), ivec2(n_cells));
+    ivec2 c = max(p - ivec2(0, S), ivec2(0)), d = min(p + ivec2(0, S), ivec2(n_cells));
+    return vec2((hsample(b) - hsample(a)) / float(b.x - a.x), (hsample(d) - hsample(c)) / float(d.y - c.y));
+}
+
+// Surface normal (world, unnormalised) at hit point Q of the cell (corner c0, size S, corner heights hc).
+vec3 surface_normal(vec3 Q, ivec2 c0, int S, vec4 hc) {
+    vec2 f = (Q.xy - vec2(c0)) / float(S);
+    vec2 g;
+#if RECON == 2
+    g = (f.x >= f.y) ? vec2(hc.y - hc.x, hc.w - hc.y) : vec2(hc.w - hc.z, hc.z - hc.x);
+    g /= float(S);
+#elif RECON == 3
+    float c = hc.x - hc.y - hc.z + hc.w;
+    g = vec2(hc.y - hc.x + c * f.y, hc.z - hc.x + c * f.x) / float(S);
+#else
+    vec2 g00 = central_grad(c0, S), g01 = central_grad(c0 + ivec2(S, 0), S);
+    vec2 g10 = central_grad(c0 + ivec2(0, S), S), g11 = central_grad(c0 + ivec2(S, S), S);
+    g = mix(mix(g00, g01, f.x), mix(g10, g11, f.x), f.y);
+#endif
+    return vec3(-g / spacing, 1.0);
+}
+
+void main() {
+#if PREPASS
+    if (texelFetch(ids, ivec2(gl_FragCoord.xy), 0).r != tile_id) discard;
+#endif
+    vec2 ndc = gl_FragCoord.xy / viewport * 2.0 - 1.0;
+    vec3 dir_eye = vec3(ndc * ndc_scale, -1.0);
+    vec3 d = cam_to_world * dir_eye;              // world direction, view depth 1 per unit of t
+    vec3 D = vec3(d.xy / spacing, d.z);
+    vec3 Q; ivec2 cell; int lev; vec4 hc; int steps;
+    int r = rc_traverse(hmap, mmap, n_cells, n_levels, ext, zr, eye_tex, D, near_plane, 0, spacing, lod_k,
+                        max_steps, outer, Q, cell, lev, hc, steps);
+#if STATS
+    int base = tile_index * 8;
+    atomicAdd(stats[base + 0], 1u);
+    atomicAdd(stats[base + 2], uint(steps));
+    atomicMax(stats[base + 3], uint(steps));
+    if (r == RC_CAPPED) atomicAdd(stats[base + 4], 1u);
+    if (r == RC_HIT) atomicAdd(stats[base + 1], 1u);
+#endif
+    if (r != RC_HIT) discard;
+    vec3 rel = origin_rel + vec3(Q.xy * spacing, Q.z);
+    vec4 clip = view_proj_rel * vec4(rel, 1.0);
+    gl_FragDepth = clip.z / clip.w;
+    int S = 1 << lev;
+    ivec2 c0 = cell * S;
+    vec3 n = surface_normal(Q, c0, S, hc);
+    float lit = 1.0;
+#if SHADOWS
+    vec3 L = LIGHT_DIR;
+    if (dot(n, L) <= 0.0) {
+        lit = 0.0;
+    } else {
+        int gl = tile_level + lev;
+        float k = float(1 << tile_level);
+        vec3 Og = vec3(g_tile_off + Q.xy * k, Q.z + 1e-3 * spacing * float(S) + 0.01);
+        vec3 Dg = vec3(L.xy / g_spacing, L.z);
+        vec3 Qs; ivec2 cs; int ls; vec4 hs; int ssteps;
+        int rs = rc_traverse(g_hmap, g_mmap, g_cells, g_levels, g_ext, g_zr, Og, Dg, 0.0, gl, g_spacing, 0.0,
+                             g_max_steps, 15, Qs, cs, ls, hs, ssteps);
+        if (rs != RC_MISS) lit = 0.0;
+#if STATS
+        atomicAdd(stats[base + 5], 1u);
+        atomicAdd(stats[base + 6], uint(ssteps));
+        if (rs == RC_CAPPED) atomicAdd(stats[base + 7], 1u);
+#endif
+    }
+#endif
+    vec2 uv = uv_off + Q.xy * uv_scale;
+    vec3 c;
+#if MODE == 0
+    // analytic footprint: intersect the neighbouring pixel rays with the tangent plane at the hit
+    vec3 nw = normalize(n);
+    vec3 dx = cam_to_world * vec3(2.0 * ndc_scale.x / viewport.x, 0.0, 0.0);
+    vec3 dy = cam_to_world * vec3(0.0, 2.0 * ndc_scale.y / viewport.y, 0.0);
+    float pn = dot(nw, rel);
+    float sx = dot(nw, d + dx), sy = dot(nw, d + dy);
+    float lim = length(d) / 16.0;        // footprint stretch at most 16x (the anisotropy limit)
+    sx = sign(sx) * max(abs(sx), lim); sy = sign(sy) * max(abs(sy), lim);
+    vec3 px = pn / sx * (d + dx) - rel, py = pn / sy * (d + dy) - rel;
+    vec2 uv_per_m = uv_scale / spacing;
+    vec2 gx = px.xy * uv_per_m, gy = py.xy * uv_per_m;
+    gx = gx * min(1.0, 1.0 / max(length(gx), 1e-30)); gy = gy * min(1.0, 1.0 / max(length(gy), 1e-30));
+    c = aniso_texture(uv, gx, gy);
+#elif MODE == 1
+    c = texture(tex, uv).rgb;
+#elif MODE == 2
+    c = lambert(height_ramp(Q.z, hrange), n);
+#elif MODE == 3
+    c = height_ramp(Q.z, hrange);
+#elif MODE == 4
+    c = normalize(n) * 0.5 + 0.5;
+#elif MODE == 5
+    c = vec3(clamp(1.0 - log(1.0 + length(rel)) / log(1.0 + far_plane), 0.0, 1.0));
+#elif MODE == 6
+    c = level_colour(tile_level + lev);
+#else
+    c = heat(float(steps) / heat_max);
+#endif
+#if SHADOWS
+#if MODE == 2
+    if (lit == 0.0) c = height_ramp(Q.z, hrange) * AMBIENT;
+#else
+    if (lit == 0.0) c *= 0.5;
+#endif
+#endif
+    frag = vec4(c, 1.0);
+    aux = vec4(Q, float(steps));
+}

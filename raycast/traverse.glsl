@@ -1,0 +1,215 @@
+// Height-field ray traversal over a maximum mipmap (Dick et al. 2009, sections 3.1-3.2), shared by primary
+// and shadow rays. Texel space: x, y in texels of the grid (sample (i, j) at (j, i)), z in metres relative to
+// the terrain's origin z; a ray is P(t) = O + t * D. The grid has N cells a side (N a power of two), the real
+// terrain covers [0, ext.x] x [0, ext.y] of it and heights lie in [zr.x, zr.y]. Max-mip level l texel (i, j)
+// bounds the cells [i*2^l, (i+1)*2^l) x [j*2^l, (j+1)*2^l).
+//
+// Defines: RECON 0 planes (piecewise constant: a cell is a box of its max-mip height), 1 linear approximation
+// planes (Qu 3.1), 2 triangle mesh with the SW-NE diagonal (Qu 3.2), 3 bilinear patch (analytic);
+// NAIVE 1 = step level-0 (or lmin) texels only; LOD 1 = stop descending where the projected texel is small.
+
+#define RC_MISS 0
+#define RC_HIT 1
+#define RC_CAPPED 2
+#define RC_FAR 1e30
+
+// Offset of the point at fraction f of a cell from the interpolating surface of its corners (bilinear).
+float rc_bilin(vec4 hc, vec2 f) {
+    return mix(mix(hc.x, hc.y, f.x), mix(hc.z, hc.w, f.x), f.y);
+}
+
+// Height of the triangle (lower: fx >= fy, else upper) at fraction f; hc = (h00, h01, h10, h11).
+float rc_tri(vec4 hc, vec2 f, bool lower) {
+    return lower ? hc.x + f.x * (hc.y - hc.x) + f.y * (hc.w - hc.y)
+                 : hc.x + f.y * (hc.z - hc.x) + f.x * (hc.w - hc.z);
+}
+
+// First hit on the segment A -> B (real texel space) inside the cell at corner c0 of size S: fraction u in
+// [0, 1], or -1. hc are the corner heights (h00, h01 east, h10 north, h11), H the cell's max-mip height.
+float rc_cell_hit(vec3 A, vec3 B, vec2 c0, float S, vec4 hc, float H) {
+#if RECON == 0
+    if (A.z <= H) return 0.0;
+    if (B.z <= H) return (H - A.z) / (B.z - A.z);
+    return -1.0;
+#else
+    vec2 fa = (A.xy - c0) / S, fb = (B.xy - c0) / S;
+#if RECON == 1
+    float d1 = A.z - rc_bilin(hc, fa), d2 = B.z - rc_bilin(hc, fb);
+    if (d1 <= 0.0) return 0.0;
+    if (d2 <= 0.0) return d1 / (d1 - d2);
+    return -1.0;
+#elif RECON == 2
+    float ga = fa.x - fa.y, gb = fb.x - fb.y;
+    float ud = (ga * gb < 0.0) ? ga / (ga - gb) : 1.0;
+    bool lower = mix(ga, gb, 0.5 * ud) >= 0.0;
+    float d0 = A.z - rc_tri(hc, fa, lower);
+    if (d0 <= 0.0) return 0.0;
+    vec2 fd = mix(fa, fb, ud);
+    float zd = mix(A.z, B.z, ud);
+    float dd = zd - rc_tri(hc, fd, lower);
+    if (dd <= 0.0) return ud * d0 / (d0 - dd);
+    if (ud < 1.0) {
+        float dd2 = zd - rc_tri(hc, fd, !lower);
+        if (dd2 <= 0.0) return ud;
+        float d1 = B.z - rc_tri(hc, fb, !lower);
+        if (d1 <= 0.0) return ud + (1.0 - ud) * dd2 / (dd2 - d1);
+    }
+    return -1.0;
+#else
+    vec2 df = fb - fa;
+    float a = hc.y - hc.x, b = hc.z - hc.x, c = hc.x - hc.y - hc.z + hc.w;
+    float k0 = A.z - (hc.x + a * fa.x + b * fa.y + c * fa.x * fa.y);
+    if (k0 <= 0.0) return 0.0;
+    float k1 = (B.z - A.z) - (a * df.x + b * df.y + c * (fa.x * df.y + fa.y * df.x));
+    float k2 = -c * df.x * df.y;
+    float dend = k0 + k1 + k2;
+    if (abs(k2) <= 1e-6 * (abs(k1) + abs(k0))) {
+        if (dend <= 0.0) return k0 / (k0 - dend);
+        return -1.0;
+    }
+    float disc = k1 * k1 - 4.0 * k2 * k0;
+    if (disc < 0.0) return -1.0;
+    float sq = sqrt(disc);
+    float q = -0.5 * (k1 + (k1 >= 0.0 ? sq : -sq));
+    float u = RC_FAR;
+    float r1 = q / k2;
+    if (r1 >= 0.0 && r1 <= 1.0) u = r1;
+    if (q != 0.0) { float r2 = k0 / q; if (r2 >= 0.0 && r2 <= 1.0) u = min(u, r2); }
+    if (u <= 1.0) return u;
+    if (dend <= 0.0) return 1.0;
+    return -1.0;
+#endif
+#endif
+}
+
+// Level-of-detail stop (coherent per patch): a level-l texel is final when a texel of its size, seen from
+// the eye at the nearest point of the texel's box, spans at most tau pixels: size_m * K <= tau * distance.
+// Om: eye in the mirrored texel space; lod_k = spacing * K / tau (metres); spacing in metres per texel.
+bool rc_lod_final(int l, vec2 ij, float H, vec3 Om, float zlo, float spacing, float lod_k) {
+    float s = float(1 << l);
+    vec2 lo = ij * s, hi = lo + s;
+    vec2 dxy = max(max(lo - Om.xy, Om.xy - hi), 0.0) * spacing;
+    float dz = max(max(zlo - Om.z, Om.z - H), 0.0);
+    return s * lod_k <= length(vec3(dxy, dz));
+}
+
+// Cast one ray through the grid: returns RC_MISS, RC_HIT or RC_CAPPED. On a hit, hit is the point (real texel
+// space), cell the hit texel (x, y) at level `level`, hc its corner heights. tmin: smallest ray parameter
+// (near plane); lmin: the finest level to descend to; steps: texels visited.
+int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 zr, vec3 O, vec3 D,
+                float tmin, int lmin, float spacing, float lod_k, int max_steps, int outer,
+                out vec3 hit, out ivec2 cell, out int level, out vec4 hc, out int steps) {
+    steps = 0; level = 0; cell = ivec2(0); hit = vec3(0.0); hc = vec4(0.0);
+    // entry into the box; `face` is the box side the ray enters through (EDGE_W/E/S/N bits, 0 for the top,
+    // the bottom or a start inside at tmin). A ray entering below the surface through a side that is the
+    // terrain's outer boundary passes under the surface sheet: it is a miss, not a hit on a wall.
+    float t0 = tmin, t1 = RC_FAR;
+    int face = 0;
+    if (D.x != 0.0) {
+        float ta = -O.x / D.x, tb = (ext.x - O.x) / D.x;
+        if (min(ta, tb) > t0) { t0 = min(ta, tb); face = D.x > 0.0 ? 1 : 2; }
+        t1 = min(t1, max(ta, tb));
+    } else if (O.x < 0.0 || O.x > ext.x) return RC_MISS;
+    if (D.y != 0.0) {
+        float ta = -O.y / D.y, tb = (ext.y - O.y) / D.y;
+        if (min(ta, tb) > t0) { t0 = min(ta, tb); face = D.y > 0.0 ? 4 : 8; }
+        t1 = min(t1, max(ta, tb));
+    } else if (O.y < 0.0 || O.y > ext.y) return RC_MISS;
+    if (D.z != 0.0) {
+        float ta = (zr.x - O.z) / D.z, tb = (zr.y - O.z) / D.z;
+        if (min(ta, tb) > t0) { t0 = min(ta, tb); face = 0; }
+        t1 = min(t1, max(ta, tb));
+    } else if (O.z < zr.x || O.z > zr.y) return RC_MISS;
+    if (t0 > t1) return RC_MISS;
+    bool outer_entry = (face & outer) != 0;
+    bool moved = false;
+    float Nf = float(N);
+    bool mx = D.x < 0.0, my = D.y < 0.0;
+    vec3 P = O + t0 * D;
+    vec3 Om = O;
+    if (mx) { P.x = Nf - P.x; D.x = -D.x; Om.x = Nf - O.x; }
+    if (my) { P.y = Nf - P.y; D.y = -D.y; Om.y = Nf - O.y; }
+    vec2 lo = vec2(mx ? Nf - ext.x : 0.0, my ? Nf - ext.y : 0.0);
+    vec2 hi = vec2(mx ? Nf : ext.x, my ? Nf : ext.y);
+    P.xy = clamp(P.xy, lo, hi);
+    // every exit is computed from the entry point P0 (no accumulated rounding): X = P0 + s * D
+    vec3 P0 = P;
+    float sP = 0.0;
+    int ltop = max(LMAX - 1, 0);
+    lmin = min(lmin, ltop);
+#if NAIVE
+    int l = lmin;
+#else
+    int l = ltop;
+#endif
+    while (steps < max_steps) {
+        if (P.x >= hi.x || P.y >= hi.y) return RC_MISS;
+        if (D.z >= 0.0 && P.z > zr.y) return RC_MISS;
+        steps++;
+        float s = float(1 << l);
+        vec2 ij = floor(P.xy / s);
+        int nl = N >> l;
+#if LOD
+        // coherent LOD: a texel whose parent is already final belongs to the parent's level
+        while (l < ltop) {
+            vec2 pij = floor(ij * 0.5);
+            ivec2 pri = ivec2(mx ? (nl >> 1) - 1 - int(pij.x) : int(pij.x), my ? (nl >> 1) - 1 - int(pij.y) : int(pij.y));
+            float PH = texelFetch(mmap, pri, l + 1).r;
+            if (!rc_lod_final(l + 1, pij, PH, Om, zr.x, spacing, lod_k)) break;
+            l++; s *= 2.0; ij = pij; nl >>= 1;
+        }
+#endif
+        ivec2 ri = ivec2(mx ? nl - 1 - int(ij.x) : int(ij.x), my ? nl - 1 - int(ij.y) : int(ij.y));
+        float H = texelFetch(mmap, ri, l).r;
+        vec2 e = (ij + 1.0) * s;
+        float dtx = D.x > 0.0 ? (e.x - P0.x) / D.x : RC_FAR;
+        float dty = D.y > 0.0 ? (e.y - P0.y) / D.y : RC_FAR;
+        float dtz = D.z < 0.0 ? (zr.x - P0.z) / D.z : (D.z > 0.0 ? (zr.y - P0.z) / D.z : RC_FAR);
+        float dt = max(min(min(dtx, dty), dtz), sP);
+        bool cx = dtx <= dt, cy = dty <= dt, cz = dtz <= dt;
+        vec3 X = P0 + dt * D;
+        if (cx) X.x = e.x;
+        if (cy) X.y = e.y;
+        if (cz) X.z = D.z < 0.0 ? zr.x : zr.y;
+        bool boxhit = D.z >= 0.0 ? P.z <= H : X.z <= H;
+        if (boxhit) {
+            bool fin = l <= lmin;
+#if LOD
+            fin = fin || rc_lod_final(l, ij, H, Om, zr.x, spacing, lod_k);
+#endif
+            if (!fin) {
+                if (D.z < 0.0) {
+                    float sa = (H - P0.z) / D.z;
+                    if (sa > sP) { sP = sa; P = P0 + sa * D; P.xy = min(P.xy, e); moved = true; }
+                }
+                l--;
+                continue;
+            }
+            vec3 A = P, B = X;
+            if (mx) { A.x = Nf - A.x; B.x = Nf - B.x; }
+            if (my) { A.y = Nf - A.y; B.y = Nf - B.y; }
+            ivec2 c0 = ri * (1 << l);
+            int S = 1 << l;
+            vec4 h4 = vec4(texelFetch(hmap, c0, 0).r, texelFetch(hmap, c0 + ivec2(S, 0), 0).r,
+                           texelFetch(hmap, c0 + ivec2(0, S), 0).r, texelFetch(hmap, c0 + ivec2(S, S), 0).r);
+            float u = rc_cell_hit(A, B, vec2(c0), float(S), h4, H);
+            if (u >= 0.0) {
+                if (u == 0.0 && outer_entry && !moved) return RC_MISS;
+                vec3 Q = mix(A, B, u);
+                if (Q.x > ext.x + 1e-4 || Q.y > ext.y + 1e-4) return RC_MISS;   // first hit lies in the padding
+                Q.xy = clamp(Q.xy, vec2(0.0), ext);
+                hit = Q; cell = ri; level = l; hc = h4;
+                return RC_HIT;
+            }
+        }
+        if (cz) return RC_MISS;
+        P = X;
+        sP = dt;
+        moved = true;
+#if !NAIVE
+        bool up = (cx && ((int(ij.x) + 1) & 1) == 0) || (cy && ((int(ij.y) + 1) & 1) == 0);
+        if (up) l = min(l + 1, ltop);
+#endif
+    }
+    return RC_CAPPED;
+}
