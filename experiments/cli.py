@@ -14,7 +14,7 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 
-METHODS = ("reference", "raster", "raycast", "hybrid", "fullres", "tin")
+METHODS = ("reference", "raster", "raycast", "hybrid", "heuristic", "oracle", "fullres", "tin")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -145,14 +145,42 @@ def render_method(ctx, hf, view, method: str, args):
     if method not in STRATEGIES:
         raise TerrabenchError(f"method {method!r} is not available in this build; available: "
                               f"reference, {', '.join(sorted(STRATEGIES))}")
+    opts = draw_options(args, method)
+    if method in ("hybrid", "heuristic", "oracle"):
+        from hybrid.hybrid_frame import HybridRenderer
+        r = HybridRenderer(ctx, hf, method, tile_size=args.tile_size, reconstruction=args.reconstruction,
+                           prepass=not args.no_prepass)
+        try:
+            return r.render(view, args.tau)
+        finally:
+            r.release()
     r = SingleStrategyRenderer(ctx, hf, method, tile_size=args.tile_size)
     try:
-        opts = {}
-        if args.shading:
-            opts["mode"] = args.shading
         return r.render(view, args.tau, **opts)
     finally:
         r.release()
+
+
+def draw_options(args, method: str) -> dict:
+    """Strategy draw options from the command line (only those the user gave, so defaults stay the strategy's)."""
+    opts = {}
+    if args.shading:
+        opts["mode"] = args.shading
+    if method == "raycast":
+        opts["reconstruction"] = args.reconstruction
+        opts["traversal"] = args.traversal
+        opts["prepass"] = not args.no_prepass
+        if args.shadows:
+            opts["shadows"] = True
+        if args.lod:
+            opts["lod"] = args.tau
+    elif args.shadows or args.lod or args.no_prepass or args.traversal != "maxmip":
+        raise TerrabenchError("--shadows, --lod, --no-prepass and --traversal apply to --method raycast only")
+    if args.wireframe:
+        if method not in ("raster", "fullres", "tin"):
+            raise TerrabenchError("--wireframe applies to the raster methods (raster, fullres, tin)")
+        opts["wireframe"] = True
+    return opts
 
 
 def cmd_render(args) -> int:
@@ -171,6 +199,12 @@ def cmd_render(args) -> int:
     ctx = shared_context(args.device)
     result = render_method(ctx, hf, view, args.method, args)
     png, depth = result.save(out)
+    if args.show_strategy:
+        if "strategy" not in result.maps:
+            raise TerrabenchError("--show-strategy needs a mixed policy: --method hybrid (or heuristic, oracle)")
+        smap = out.parent / (out.stem + ".strategy.png")
+        save_strategy_map(result, smap)
+        print(f"strategy map: {smap} (blue raster, orange ray cast)")
     cover = float(result.mask.mean()) * 100
     print(f"{args.method}: wrote {png} and {depth} ({view.width}x{view.height}, terrain on {cover:.1f} % of pixels)")
     for k, v in result.stats.items():
@@ -222,6 +256,18 @@ def cmd_calibrate(args) -> int:
     return 0
 
 
+def save_strategy_map(result, path: Path) -> None:
+    """Write the per-pixel strategy map blended over the frame: blue = raster tile, orange = ray-cast tile."""
+    from PIL import Image
+    m = result.maps["strategy"]
+    col = result.colour.astype(np.float32)
+    tint = np.zeros_like(col)
+    tint[m == 1] = (40, 110, 255)
+    tint[m == 2] = (255, 140, 20)
+    mix = np.where((m > 0)[..., None], 0.45 * col + 0.55 * tint, col)
+    Image.fromarray(np.clip(mix, 0, 255).astype(np.uint8)).save(path)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand."""
     p = _Parser(prog="terrabench", description="Rasterize meshes or ray-cast the height field, tile by tile: "
@@ -245,6 +291,13 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--supersample", type=int, default=1, help="reference colour supersampling factor (1..8)")
     pr.add_argument("--tau", type=float, default=2 / 3, help="screen-space error bound in pixels (> 0)")
     pr.add_argument("--tile-size", type=int, default=256, help="cells per tile side (power of two)")
+    pr.add_argument("--reconstruction", default="triangles", help="ray-cast surface: planes, linear, triangles, bilinear")
+    pr.add_argument("--traversal", default="maxmip", help="ray-cast traversal: maxmip or naive (level-0 stepping)")
+    pr.add_argument("--no-prepass", action="store_true", help="ray casting without the tile-ID pre-pass")
+    pr.add_argument("--lod", action="store_true", help="ray casting stops descending at tau pixels (LOD)")
+    pr.add_argument("--shadows", action="store_true", help="ray-cast shadow rays toward the light")
+    pr.add_argument("--wireframe", action="store_true", help="raster methods: draw edges only")
+    pr.add_argument("--show-strategy", action="store_true", help="hybrid: also write PATH.strategy.png")
     pr.set_defaults(func=cmd_render)
 
     pn = sub.add_parser("run", help="run an experiment spec (TOML): paired flights, tables, images")
@@ -290,7 +343,7 @@ def main(argv=None) -> int:
         with warnings.catch_warnings():
             warnings.simplefilter("default")
             return int(args.func(args) or 0)
-    except TerrabenchError as exc:
+    except (TerrabenchError, ValueError) as exc:   # the API's bad-input errors are ValueErrors
         print(f"terrabench: error: {exc}", file=sys.stderr)
         return 2
 
