@@ -256,6 +256,38 @@ def cmd_calibrate(args) -> int:
     return 0
 
 
+def _names(text: str, allowed, what: str) -> list[str]:
+    names = [t.strip() for t in text.split(",") if t.strip()]
+    bad = [n for n in names if n not in allowed]
+    if not names or bad:
+        raise TerrabenchError(f"--{what}: unknown {bad or text!r}; choose from {', '.join(allowed)}")
+    return names
+
+
+def cmd_stress(args) -> int:
+    """Run the stress scenes and views with every method; write the table, chart and report section."""
+    from hybrid.glcontext import shared_context
+    from .runner import Progress
+    from .stress import METHODS, SCENES, VIEWS, run_stress, write_stress_report
+    scenes = _names(args.scenes, SCENES, "scenes")
+    views = _names(args.views, VIEWS, "views")
+    methods = _names(args.methods, METHODS, "methods")
+    w, h = _size(args.size)
+    if not (17 <= args.size_samples <= 4097):
+        raise TerrabenchError(f"--size-samples must lie in [17, 4097], got {args.size_samples}")
+    out = Path(args.out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise TerrabenchError(f"cannot create --out folder {out}: {exc.strerror or exc}") from None
+    bar = Progress(len(scenes) * len(views) * len(methods), 0, not args.quiet)
+    df = run_stress(shared_context(args.device), scenes, views, methods, args.size_samples, w, h, args.tile_size,
+                    progress=bar.step)
+    bar.close()
+    print(f"wrote {write_stress_report(df, out)}")
+    return 0
+
+
 def save_strategy_map(result, path: Path) -> None:
     """Write the per-pixel strategy map blended over the frame: blue = raster tile, orange = ray-cast tile."""
     from PIL import Image
@@ -327,6 +359,18 @@ def build_parser() -> argparse.ArgumentParser:
     pc.add_argument("--holdout", type=float, default=0.3, help="share of tiles held out to measure the fit")
     pc.add_argument("--save", default="user", help="'user' (default costs file), a path, or '' for no save")
     pc.set_defaults(func=cmd_calibrate)
+
+    from .stress import METHODS as SM, SCENES as SS, VIEWS as SV
+    ps = sub.add_parser("stress", help="scenes and views that break methods: failure table, chart, report section")
+    ps.add_argument("--scenes", default=",".join(SS), help="comma-separated: " + ", ".join(SS))
+    ps.add_argument("--views", default=",".join(SV), help="comma-separated: " + ", ".join(SV))
+    ps.add_argument("--methods", default=",".join(SM), help="comma-separated: " + ", ".join(SM))
+    ps.add_argument("--size-samples", type=int, default=257, help="samples a side of each scene")
+    ps.add_argument("--size", default="320x180", help="viewport WIDTHxHEIGHT")
+    ps.add_argument("--tile-size", type=int, default=64, help="cells per tile side")
+    ps.add_argument("--out", default="reports/stress", help="folder for stress.md, the chart and the table")
+    ps.add_argument("--quiet", action="store_true")
+    ps.set_defaults(func=cmd_stress)
     return p
 
 

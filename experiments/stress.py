@@ -1,0 +1,249 @@
+"""`terrabench stress`: scenes and views made to break methods, every method measured where it fails.
+
+Scenes: spike, cliff, staircase, ridges, flat, Puget (a full-resolution window) and Puget with x100 vertical
+exaggeration. Views: grazing (eye 2 m above ground at the horizon), straight down, eye inside a tile's AABB,
+eye below the surface, view directions exactly along the x and y axes, the terrain 10^6 and 10^7 m from
+the origin, and a tiny near / huge far plane. For every method and reconstruction: capped rays, NaN pixels,
+hole pixels against the reference coverage, depth error, steps per ray, triangles and frame time.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from hybrid.datasets import get_dataset, puget
+from hybrid.errors import TerrabenchError
+from hybrid.heightfield import HeightField
+from hybrid.view import View
+
+SCENES = ("spike", "cliff", "staircase", "ridges", "flat", "puget", "puget_x100")
+VIEWS = ("grazing", "down", "inside_aabb", "below", "axis_x", "axis_y", "offset_1e6", "offset_1e7", "near_far")
+METHODS = ("raster", "raycast/planes", "raycast/linear", "raycast/triangles", "raycast/bilinear", "hybrid",
+           "fullres", "tin")
+
+
+def make_scene(name: str, size: int = 257) -> HeightField:
+    """A stress scene by name, size x size samples."""
+    if name == "puget":
+        return puget(size=size)
+    if name == "puget_x100":
+        p = puget(size=size)
+        return HeightField(p.heights * 100.0, p.spacing, p.origin, "puget_x100", p.texture)
+    if name in SCENES:
+        return get_dataset(name, size=size)
+    raise TerrabenchError(f"unknown stress scene {name!r}; choose from {', '.join(SCENES)}")
+
+
+def _oblique(hf: HeightField, width, height, near=None, far=None) -> View:
+    w, d = hf.extent
+    ox, oy, oz = hf.origin
+    lo, hi = hf.height_range
+    size = max(w, d)
+    eye = np.array([ox + 0.2 * w, oy + 0.1 * d, oz + hi + 0.15 * size + 0.05 * (hi - lo)])
+    tgt = np.array([ox + 0.6 * w, oy + 0.6 * d, oz + lo])
+    return View(eye, tgt, 60.0, width, height, near or max(0.5, size * 1e-5), far or size * 8 + (hi - lo) * 4)
+
+
+def stress_view(hf: HeightField, kind: str, width: int = 320, height: int = 180, tile_size: int = 64):
+    """(terrain, view) for a stress view kind; offset kinds move the terrain (and the camera with it)."""
+    w, d = hf.extent
+    ox, oy, oz = hf.origin
+    lo, hi = hf.height_range
+    size = max(w, d)
+    far = size * 8 + (hi - lo) * 4
+    g = lambda x, y: float(hf.ground_height(x, y))  # noqa: E731
+    if kind == "grazing":
+        x, y = ox + 0.3 * w, oy + 0.35 * d
+        z = g(x, y) + 2.0
+        return hf, View([x, y, z], [x + w, y + 0.7 * d, z], 60.0, width, height, 0.25, far)
+    if kind == "down":
+        c = [ox + 0.5 * w, oy + 0.5 * d]
+        return hf, View(c + [oz + hi + 0.3 * size], c + [oz + lo], 60.0, width, height, 1.0, far)
+    if kind == "inside_aabb":
+        # lowest sample of the central tile-sized block, eye halfway between it and the block's top
+        n = min(tile_size, hf.rows - 1, hf.cols - 1)
+        i0, j0 = (hf.rows - 1 - n) // 2, (hf.cols - 1 - n) // 2
+        block = hf.heights[i0:i0 + n + 1, j0:j0 + n + 1]
+        i, j = np.unravel_index(np.argmin(block), block.shape)
+        x, y = ox + (j0 + j) * hf.spacing, oy + (i0 + i) * hf.spacing
+        z = g(x, y) + max(0.5 * (float(block.max()) + oz - g(x, y)), 2.0)
+        return hf, View([x, y, z], [x + 0.3 * w, y + 0.2 * d, g(x, y)], 70.0, width, height, 0.5, far)
+    if kind == "below":
+        x, y = ox + 0.5 * w, oy + 0.5 * d
+        z = g(x, y) - 20.0
+        return hf, View([x, y, z], [x + w, y + 0.3 * d, z], 60.0, width, height, 0.5, far)
+    if kind in ("axis_x", "axis_y"):
+        z = oz + hi + 0.05 * size
+        if kind == "axis_x":
+            e, t = [ox + 0.05 * w, oy + 0.5 * d, z], [ox + 0.95 * w, oy + 0.5 * d, oz + lo]
+        else:
+            e, t = [ox + 0.5 * w, oy + 0.05 * d, z], [ox + 0.5 * w, oy + 0.95 * d, oz + lo]
+        return hf, View(e, t, 60.0, width, height, 0.5, far)
+    if kind in ("offset_1e6", "offset_1e7"):
+        off = np.array([1e6, 1e6, 0.0]) if kind == "offset_1e6" else np.array([1e7, 1e7, 0.0])
+        moved = hf.moved(np.array(hf.origin) + off)
+        return moved, _oblique(hf, width, height).moved(off)
+    if kind == "near_far":
+        return hf, _oblique(hf, width, height, near=1e-3, far=1e9)
+    if kind == "origin":
+        return hf, _oblique(hf, width, height)
+    raise TerrabenchError(f"unknown stress view {kind!r}; choose from {', '.join(VIEWS)}")
+
+
+def _renderer(ctx, hf, method: str, tile_size: int):
+    from hybrid.frame import make_renderer
+    policy, _, rec = method.partition("/")
+    return make_renderer(ctx, hf, policy, tile_size=tile_size, reconstruction=rec or "triangles")
+
+
+@dataclass
+class StressCase:
+    """One measured (scene, view, method)."""
+
+    scene: str
+    view: str
+    method: str
+    row: dict
+
+
+def measure(result, ref) -> dict:
+    """Failure measures of a frame against the reference frame."""
+    from .metrics import hole_pixels_in_columns
+    m, r = np.isfinite(result.distance), np.isfinite(ref.distance)
+    both = m & r
+    rel = np.abs(result.distance[both].astype(np.float64) - ref.distance[both]) / ref.distance[both] if both.any() \
+        else np.array([0.0])
+    s = result.stats
+    rays = float(s.get("rays", 0) or 0)
+    return {"nan_px": int(np.isnan(result.distance).sum()), "hole_px": int((r & ~m).sum()),
+            "extra_px": int((m & ~r).sum()), "crack_px": int(hole_pixels_in_columns(result).sum()),
+            "ref_crack_px": int(hole_pixels_in_columns(ref).sum()),
+            "depth_rel_p99": float(np.percentile(rel, 99)), "depth_rel_max": float(rel.max()),
+            "depth_rel_median": float(np.median(rel)),
+            "capped": int(s.get("capped", 0) or 0), "rays": int(rays),
+            "capped_frac": float(s.get("capped", 0) or 0) / rays if rays else 0.0,
+            "mean_steps": float(s.get("mean_steps", np.nan) if rays else np.nan),
+            "max_steps": float(s.get("max_steps", np.nan) if rays else np.nan),
+            "triangles": int(s.get("triangles", 0) or 0), "wall_ms": float(s.get("wall_ms", np.nan)),
+            "tiles_raster": int(s.get("tiles_raster", 0)), "tiles_raycast": int(s.get("tiles_raycast", 0))}
+
+
+def run_stress(ctx, scenes=SCENES, views=VIEWS, methods=METHODS, size: int = 257, width: int = 320,
+               height: int = 180, tile_size: int = 64, progress=None) -> pd.DataFrame:
+    """Every (scene, view, method): a row of failure measures; a method that raises is recorded, not fatal."""
+    from hybrid.reference import ReferenceRenderer
+    rows = []
+    for sc in scenes:
+        base = make_scene(sc, size)
+        for vk in views:
+            hf, view = stress_view(base, vk, width, height, tile_size)
+            ref_r = ReferenceRenderer(ctx, hf)
+            ref = ref_r.render(view)
+            ref_r.release()
+            for m in methods:
+                row = {"scene": sc, "view": vk, "method": m}
+                try:
+                    r = _renderer(ctx, hf, m, tile_size)
+                    try:
+                        row.update(measure(r.render(view), ref))
+                    finally:
+                        r.release()
+                    row["error"] = ""
+                except Exception as exc:  # recorded as the method's failure on this case
+                    row["error"] = f"{type(exc).__name__}: {exc}"
+                rows.append(row)
+                if progress:
+                    progress(f"{sc} {vk} {m}")
+    return pd.DataFrame(rows)
+
+
+def failure_chart(df: pd.DataFrame, folder: Path) -> list[Path]:
+    """Heat maps (scene/view x method) of hole fraction, depth error, capped rays and steps per ray."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    d = df.copy()
+    d["case"] = d["scene"] + " / " + d["view"]
+    px = d.get("hole_px", 0) + d.get("crack_px", 0)
+    d["holes+cracks"] = px
+    panels = [("holes+cracks", "hole + crack pixels (log10(1+n))", lambda v: np.log10(1 + v)),
+              ("depth_rel_p99", "p99 relative depth error (log10)", lambda v: np.log10(np.maximum(v, 1e-8))),
+              ("capped", "capped rays", lambda v: np.log10(1 + v)),
+              ("mean_steps", "mean steps per ray", lambda v: v)]
+    cases = list(dict.fromkeys(d["case"]))
+    methods = list(dict.fromkeys(d["method"]))
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 0.22 * len(cases) + 2.5))
+    for ax, (col, title, tf) in zip(axes, panels):
+        grid = np.full((len(cases), len(methods)), np.nan)
+        if col in d:
+            piv = d.pivot_table(index="case", columns="method", values=col, aggfunc="max")
+            for i, c in enumerate(cases):
+                for j, m in enumerate(methods):
+                    if c in piv.index and m in piv.columns:
+                        grid[i, j] = tf(piv.loc[c, m])
+        im = ax.imshow(grid, aspect="auto", cmap="magma", interpolation="nearest")
+        ax.set_xticks(range(len(methods)), methods, rotation=60, ha="right", fontsize=7)
+        ax.set_yticks(range(len(cases)), cases if ax is axes[0] else [""] * len(cases), fontsize=6)
+        ax.set_title(title, fontsize=9)
+        fig.colorbar(im, ax=ax, shrink=0.5)
+    out = []
+    for ext in ("png", "svg"):
+        p = folder / f"stress_failures.{ext}"
+        fig.savefig(p, dpi=110, bbox_inches="tight")
+        out.append(p)
+    plt.close(fig)
+    return out
+
+
+def stress_reading(df: pd.DataFrame) -> list[str]:
+    """Where each method breaks down, in numbers, and where the hybrid avoided it."""
+    out = []
+    ok = df[df["error"] == ""] if "error" in df else df
+    for m, g in ok.groupby("method", sort=False):
+        worst = g.sort_values("depth_rel_p99", ascending=False).iloc[0]
+        holes = g[(g["hole_px"] > 0) | (g["crack_px"] > g["ref_crack_px"])]
+        s = (f"{m}: worst p99 depth error {worst['depth_rel_p99']:.2e} on {worst['scene']}/{worst['view']}; "
+             f"holes or cracks on {len(holes)} of {len(g)} cases")
+        if len(holes):
+            h = holes.sort_values("hole_px", ascending=False).iloc[0]
+            s += f" (most: {int(h['hole_px'])} hole px, {int(h['crack_px'])} crack px on {h['scene']}/{h['view']})"
+        if g["rays"].sum() > 0:
+            s += (f"; capped rays {int(g['capped'].sum())} of {int(g['rays'].sum())}; mean steps/ray up to "
+                  f"{g['mean_steps'].max():.1f} ({g.loc[g['mean_steps'].idxmax(), 'scene']}/"
+                  f"{g.loc[g['mean_steps'].idxmax(), 'view']})")
+        if g["nan_px"].sum():
+            s += f"; NaN pixels {int(g['nan_px'].sum())}"
+        out.append(s + ".")
+    if "error" in df:
+        for _, r in df[df["error"] != ""].iterrows():
+            out.append(f"{r['method']} failed on {r['scene']}/{r['view']}: {r['error']}.")
+    for sc in ok["scene"].unique():
+        a = ok[(ok["scene"] == sc) & (ok["view"] == "offset_1e7")]
+        b = ok[(ok["scene"] == sc) & (ok["view"] == "offset_1e6")]
+        if len(a) and len(b):
+            out.append(f"{sc}: p99 depth error at 10^7 m offset {a['depth_rel_p99'].max():.2e} "
+                       f"(worst method) vs {b['depth_rel_p99'].max():.2e} at 10^6 m.")
+    return out
+
+
+def write_stress_report(df: pd.DataFrame, folder: Path) -> Path:
+    """stress.md (+ table as parquet/csv and the chart) into folder."""
+    from .report import md_table
+    folder.mkdir(parents=True, exist_ok=True)
+    df.to_parquet(folder / "stress.parquet", index=False)
+    df.to_csv(folder / "stress.csv", index=False)
+    chart = failure_chart(df, folder)
+    cols = [c for c in ("scene", "view", "method", "hole_px", "crack_px", "depth_rel_p99", "capped", "mean_steps",
+                        "max_steps", "triangles", "wall_ms", "nan_px") if c in df]
+    md = ["# Stability where methods fail", "",
+          "Each row renders one stress case with one method and compares it to the full-resolution reference "
+          "of the same view. *Holes* are pixels where the reference has terrain and the method has none; "
+          "*cracks* are pixels without terrain with terrain above them in their image column.", "",
+          "## Reading", ""] + [f"- {s}" for s in stress_reading(df)] + [
+          "", f"![failures]({chart[0].name})", "", "## All cases", "", md_table(df[cols]), ""]
+    p = folder / "stress.md"
+    p.write_text("\n".join(md))
+    return p
