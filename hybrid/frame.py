@@ -95,3 +95,6 @@ class SingleStrategyRenderer:
             g.release()
         self.resident.clear()
         self.strategy.release()
+
+
+from . import strategies  # noqa: E402,F401  (registers the strategies of raster/ and raycast/)
