@@ -86,6 +86,7 @@ class TileletStrategy:
         self.flags = None
         self.last_sets = {}
         self.last_culled = {}
+        self._cpu_pyramids = {}
 
     @property
     def shared_nbytes(self) -> int:
@@ -95,6 +96,15 @@ class TileletStrategy:
     def upload(self, tile) -> TileletTile:
         """Put one tile on the GPU (heights texture + point buffer) and compute its error pyramid."""
         return TileletTile(self, tile)
+
+    def count_triangles(self, tile, selected, view, tau: float | None = None) -> int:
+        """Triangles (stitched) this strategy draws for one tile alone at a view, CPU only (no upload needed)."""
+        key = _key(tile.key)
+        if key not in self._cpu_pyramids:
+            self._cpu_pyramids[key] = error_pyramid(np.asarray(tile.heights, dtype=np.float32), self.beta)
+        tau = self.tau if tau is None else float(tau)
+        tol = tau * float(selected.distance) / view.pixels_per_radian
+        return restrict_frame([TileLod(key, self._cpu_pyramids[key], tol)])[key].triangles
 
     def leaf_sets(self, view, items, tau: float | None = None, morph: bool = True) -> dict:
         """Restricted tilelet sets of a frame's items for a view: {key tuple: TileletSet}."""
