@@ -117,11 +117,13 @@ class TileletStrategy:
 
     def draw_tiles(self, target, view, items, mode: str | None = None, wireframe: bool = False,
                    stitching: bool = True, morph: bool = True, culling: bool = True,
-                   leaf_tau: float | None = None, record_culling: bool = False, **_ignored) -> dict:
+                   leaf_tau: float | None = None, record_culling: bool = False, count_culled: bool = True,
+                   **_ignored) -> dict:
         """Draw (gpu_tile, tile, selected) items front to back into target; returns counters.
 
         Counters: triangles (GL_PRIMITIVES_GENERATED), triangles_cpu (same count from the leaf sets and the
         CPU mirror of the culling test), tilelets, tilelets_culled, lod_ms (CPU leaf selection time).
+        count_culled=False skips the CPU mirror (for timing): tilelets_culled and triangles_cpu are then -1.
         """
         mode = resolve_mode(self.hf, mode)
         ctx, prog = self.ctx, self.prog
@@ -176,6 +178,10 @@ class TileletStrategy:
                     prog["tile_level"].value = int(key[0])
                     g.heights.use(0)
                     g.vao.render(ctx.POINTS, vertices=g.count)
+                    if do_cull and not count_culled and not record_culling:
+                        tilelets += len(rec)
+                        tri_cpu = culled_total = -1
+                        continue
                     if do_cull:
                         c = cull_tilelets(tile.heights, tset.leaves, origin_rel, tile.spacing, planes)
                     else:
@@ -186,9 +192,10 @@ class TileletStrategy:
                         gpu = np.frombuffer(self.flags.read(size=len(rec) * 4), dtype=np.uint32).astype(bool)
                         self.last_culled[key] = (c, gpu)
                     drops = np.unpackbits(rec["node"][:, 3].astype(np.uint8)[:, None], axis=1).sum(axis=1)
-                    tri_cpu += int(np.sum((8 - drops)[~c]))
                     tilelets += len(rec)
-                    culled_total += int(c.sum())
+                    if tri_cpu >= 0:
+                        tri_cpu += int(np.sum((8 - drops)[~c]))
+                        culled_total += int(c.sum())
         finally:
             for i in range(4):
                 ctx.disable_direct(GL_CLIP_DISTANCE0 + i)

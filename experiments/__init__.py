@@ -1,0 +1,1 @@
+"""The runner: the `terrabench` command line, paired flights, tables, charts and reports."""
