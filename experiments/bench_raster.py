@@ -1,0 +1,255 @@
+"""Benchmark of the raster strategies (issue 4 §7): prints tables; run `python -m experiments.bench_raster`.
+
+1. Triangles against max vertical error on Puget tiles: restricted quadtree (plain and morph-safe errors)
+   vs pymartini (RTIN), pydelatin and fast-simplification, every max error measured the same way.
+2. Per-view leaf selection + restriction time of a 257² tile.
+3. GPU bytes per tile and representation, next to the paper's 96 bits (12 bytes) per triangle.
+4. Geometry-shader tilelet throughput against an indexed triangle list of the same triangles.
+5. Tilelet culling gain on a low view.
+Timings: wall clock around ctx.finish() (GPU timer queries are wrong on llvmpipe); median of repeats.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+
+def _median_ms(fn, repeats=5, ctx=None):
+    times = []
+    for _ in range(repeats):
+        if ctx is not None:
+            ctx.finish()
+        t0 = time.perf_counter()
+        fn()
+        if ctx is not None:
+            ctx.finish()
+        times.append((time.perf_counter() - t0) * 1e3)
+    return float(np.median(times))
+
+
+def _table(title, header, rows):
+    print(f"\n{title}")
+    widths = [max(len(str(h)), *(len(str(r[i])) for r in rows)) for i, h in enumerate(header)]
+    print("  ".join(str(h).rjust(w) for h, w in zip(header, widths)))
+    for r in rows:
+        print("  ".join(str(v).rjust(w) for v, w in zip(r, widths)))
+
+
+def puget_tiles(count=4):
+    """A few 257² full-resolution tiles of the bundled Puget Sound model (tile size 256)."""
+    from hybrid.datasets import puget
+    from hybrid.pyramid import TilePyramid
+    hf = puget(with_texture=False)
+    pyr = TilePyramid(hf, 256)
+    keys = pyr.keys(0)
+    step = max(1, len(keys) // count)
+    return hf, [pyr.tile(k) for k in keys[::step][:count]]
+
+
+def triangles_vs_error(tiles, errors=(5.0, 10.0, 20.0, 40.0, 80.0)):
+    """Rows (target error, method, triangles summed over tiles, measured max error) for each method."""
+    from pydelatin import Delatin
+    from pymartini import Martini
+    from raster.quadtree import drawn_max_error, error_pyramid
+    from raster.restriction import TileLod, restrict_frame
+    from raster.tin import TinMesh, build_tin, tin_max_error
+    rows = []
+    pyrs = [error_pyramid(t.heights) for t in tiles]
+    n = tiles[0].n
+    martini = Martini(n + 1)
+    for e in errors:
+        res = {}
+        for name in ("quadtree", "quadtree-morph", "martini", "delatin", "fast-simpl"):
+            tri, err = 0, 0.0
+            for t, p in zip(tiles, pyrs):
+                h = np.asarray(t.heights, dtype=np.float32)
+                if name.startswith("quadtree"):
+                    ts = restrict_frame([TileLod((0, 0, 0), p, e)], morph=name.endswith("morph"),
+                                        use_effective=name.endswith("morph"))[(0, 0, 0)]
+                    tri += ts.triangles
+                    err = max(err, float(drawn_max_error(h, ts.leaves, ts.coarser).max()))
+                    continue
+                if name == "martini":
+                    # martini checks its error only at split midpoints: bisect its parameter until the
+                    # error measured at every sample meets the target
+                    tile_m = martini.create_tile(h)
+
+                    def mesh_at(param):
+                        v, f = tile_m.get_mesh(param)
+                        v = v.astype(np.float64)
+                        return TinMesh(np.column_stack([v[:, 0], v[:, 1], h[v[:, 1].astype(int), v[:, 0].astype(int)]]),
+                                       f.astype(np.int64))
+                    lo, hi, mesh = 0.0, e, mesh_at(0.0)
+                    for _ in range(7):
+                        mid = 0.5 * (lo + hi)
+                        cand = mesh_at(mid)
+                        if tin_max_error(cand, h, 1.0)[0] <= e:
+                            lo, mesh = mid, cand
+                        else:
+                            hi = mid
+                elif name == "delatin":
+                    d = Delatin(h, max_error=e)
+                    V = np.asarray(d.vertices, dtype=np.float64)
+                    V[:, 1] = n - V[:, 1]          # delatin's rows run north to south
+                    mesh = TinMesh(V, np.asarray(d.triangles, dtype=np.int64))
+                else:
+                    mesh = build_tin(h, 1.0, max_error=e, preserve_border=True)
+                me, unc = tin_max_error(mesh, h, 1.0)
+                tri += mesh.triangles
+                err = max(err, me if unc == 0 else float("inf"))
+            res[name] = (tri, err)
+        for name, (tri, err) in res.items():
+            rows.append((f"{e:g}", name, tri, f"{err:.2f}", f"{tri / res['delatin'][0]:.2f}",
+                         f"{tri / res['martini'][0]:.2f}"))
+    return rows
+
+
+def leaf_timing(tiles, tolerances=(0.0, 10.0, 40.0, 160.0)):
+    """Rows (tolerance, leaves, ms) of the per-view leaf set + restriction of one 257² tile."""
+    from raster.quadtree import error_pyramid
+    from raster.restriction import TileLod, restrict_frame
+    p = error_pyramid(tiles[0].heights)
+    rows = []
+    for tol in tolerances:
+        ms = _median_ms(lambda: restrict_frame([TileLod((0, 0, 0), p, tol)]), repeats=7)
+        rows.append((f"{tol:g}", len(restrict_frame([TileLod((0, 0, 0), p, tol)])[(0, 0, 0)].leaves), f"{ms:.2f}"))
+    t0 = time.perf_counter()
+    error_pyramid(tiles[0].heights)
+    rows.append(("(pyramid, once)", "", f"{(time.perf_counter() - t0) * 1e3:.2f}"))
+    return rows
+
+
+def memory_rows(ctx, hf, tiles):
+    """Rows (representation, bytes per tile, triangles, bytes per triangle)."""
+    from hybrid.frame import shading_source
+    from raster.tilelets import TileletStrategy
+    from raster.tin import TinStrategy
+    from raster.trianglelist import TriangleListStrategy
+    src = shading_source()
+    rows = []
+    tile = tiles[0]
+    full_tris = 2 * tile.n * tile.n
+    for name, cls, kw in (("tilelets (GS)", TileletStrategy, {}), ("fullres list", TriangleListStrategy, {}),
+                          ("tin 90% reduced", TinStrategy, {"reduction": 0.9})):
+        s = cls(ctx, hf, src, **kw)
+        g = s.upload(tile)
+        tris = getattr(g, "triangles", full_tris)
+        rows.append((name, g.nbytes, tris, f"{g.nbytes / tris:.1f}"))
+        g.release()
+        s.release()
+    rows.append(("paper: list indices", full_tris * 12, full_tris, "12.0 (96 bits)"))
+    return rows
+
+
+def _top_view(hf, width=320, height=180):
+    from hybrid.view import View
+    w, d = hf.extent
+    ox, oy, oz = hf.origin
+    c = np.array([ox + w / 2, oy + d / 2, oz])
+    return View(c + np.array([0.0, -0.3 * d, 2.5 * max(w, d)]), c, 40, width, height, near=10.0, far=20 * max(w, d))
+
+
+def throughput_rows(ctx, repeats=5):
+    """Rows comparing the GS tilelet path with an indexed list of the same triangles (Mtri/s)."""
+    from hybrid.datasets import puget
+    from hybrid.frame import shading_source
+    from hybrid.pyramid import TilePyramid
+    from hybrid.target import FrameTarget
+    from hybrid.tiletree import SelectedTile
+    from raster.meshes import MeshStrategyBase, MeshTile
+    from raster.tilelets import TileletStrategy
+    from raster.trianglelist import grid_vertices, tilelet_faces
+    hf = puget(with_texture=False, size=513)
+    pyr = TilePyramid(hf, 256)
+    view = _top_view(hf)
+    strat = TileletStrategy(ctx, hf, shading_source())
+    mesh = MeshStrategyBase(ctx, hf, shading_source())
+    target = FrameTarget(ctx, view.width, view.height)
+    rows = []
+    try:
+        keys = pyr.keys(0)
+        tiles = [pyr.tile(k) for k in keys]
+        gs = [strat.upload(t) for t in tiles]
+        for leaf_tau in (0.05, 2.0 / 3.0):
+            items = [(g, t, SelectedTile(t.key, 1000.0 * 0 + np.linalg.norm(view.eye[:2] - np.array(t.origin[:2])), 0.0, 0, True))
+                     for g, t in zip(gs, tiles)]
+            opts = dict(mode="shaded", morph=False, culling=False, leaf_tau=leaf_tau, count_culled=False)
+            target.clear()
+            target.use()
+            c = strat.draw_tiles(target, view, items, **opts)
+            sets = strat.last_sets
+            lists = [MeshTile(ctx, mesh.prog, t.key, grid_vertices(t.heights, t.spacing),
+                              tilelet_faces(sets[(t.key.level, t.key.tx, t.key.ty)], t.n)) for t in tiles]
+            litems = [(m, t, it[2]) for m, t, it in zip(lists, tiles, items)]
+            tris = c["triangles"]
+
+            def gs_draw():
+                strat.draw_tiles(target, view, items, **opts)
+
+            def list_draw():
+                mesh.draw_tiles(target, view, litems, mode="shaded")
+            # leaf selection is CPU work: time the GPU part by subtracting it (lod_ms) from the draw
+            gs_ms = _median_ms(gs_draw, repeats, ctx) - c["lod_ms"]
+            list_ms = _median_ms(list_draw, repeats, ctx)
+            rows.append((f"{leaf_tau:g}", tris, f"{gs_ms:.1f}", f"{tris / gs_ms / 1e3:.2f}", f"{list_ms:.1f}",
+                         f"{tris / list_ms / 1e3:.2f}", f"{list_ms / gs_ms:.2f}"))
+            for m in lists:
+                m.release()
+        for g in gs:
+            g.release()
+    finally:
+        target.release()
+        strat.release()
+        mesh.release()
+    return rows
+
+
+def culling_rows(ctx, repeats=5):
+    """Rows (culling, tilelets drawn, culled, triangles, ms) on a low view with much of each tile outside."""
+    from hybrid.datasets import puget
+    from hybrid.frame import SingleStrategyRenderer
+    from hybrid.view import View
+    hf = puget(with_texture=False, size=513)
+    w, d = hf.extent
+    ox, oy, oz = hf.origin
+    eye = np.array([ox + 0.3 * w, oy + 0.3 * d, hf.ground_height(ox + 0.3 * w, oy + 0.3 * d) + 60.0])
+    view = View(eye, eye + np.array([3000.0, 1000.0, -600.0]), 40, 320, 180, near=1.0, far=10 * w)
+    r = SingleStrategyRenderer(ctx, hf, "raster", tile_size=128)
+    rows = []
+    try:
+        r.render(view, mode="shaded")
+        base = {}
+        for cull in (False, True):
+            res = [r.render(view, mode="shaded", culling=cull, count_culled=False) for _ in range(repeats)]
+            counted = r.render(view, mode="shaded", culling=cull)
+            ms = float(np.median([x.stats["wall_ms"] - x.stats["lod_ms"] for x in res]))
+            s = counted.stats
+            base[cull] = ms
+            rows.append(("on" if cull else "off", s["tilelets"] - s["tilelets_culled"], s["tilelets_culled"],
+                         s["triangles"], f"{ms:.1f}"))
+        rows.append(("gain", "", "", "", f"{base[False] / base[True]:.2f}x"))
+    finally:
+        r.release()
+    return rows
+
+
+def main() -> None:
+    """Run every benchmark and print its table."""
+    from hybrid.glcontext import gl_info, shared_context
+    ctx = shared_context()
+    info = gl_info(ctx)
+    print(f"terrabench raster benchmark on {info.renderer} ({info.version})")
+    hf, tiles = puget_tiles()
+    _table("1. triangles vs max vertical error, 4 Puget tiles of 257² (160 m spacing); error in metres",
+           ["target", "method", "triangles", "max err", "x delatin", "x martini"], triangles_vs_error(tiles))
+    _table("2. per-view leaf set + restriction of one 257² tile", ["tolerance m", "leaves", "ms"], leaf_timing(tiles))
+    _table("3. GPU bytes per 257² tile", ["representation", "bytes", "triangles", "bytes/tri"], memory_rows(ctx, hf, tiles))
+    _table("4. GS tilelets vs indexed list of the same triangles (4 tiles, top view, 320x180)",
+           ["leaf tau", "triangles", "GS ms", "GS Mtri/s", "list ms", "list Mtri/s", "GS/list"], throughput_rows(ctx))
+    _table("5. tilelet culling on a low view (Puget 513², tiles of 128)",
+           ["culling", "tilelets drawn", "culled", "triangles", "draw ms"], culling_rows(ctx))
+
+
+if __name__ == "__main__":
+    main()

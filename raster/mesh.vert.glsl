@@ -1,0 +1,28 @@
+#version 430
+// Baseline meshes (full-resolution triangle list, decimated TIN): tile-local vertex positions in metres.
+in vec3 a_pos;                 // (x, y) metres from tile sample [0, 0], z metres above the terrain origin z
+uniform vec3 origin_rel;       // tile sample [0, 0] minus eye
+uniform mat4 view_proj_rel;
+uniform vec4 clip_rel;         // tile.clip minus eye: x0, y0, x1, y1
+uniform vec2 uv_origin;
+uniform vec2 uv_per_metre;
+uniform int tile_level;
+out vec3 v_rel;
+out vec2 v_uv;
+out float v_h;
+flat out int v_level;
+noperspective out vec3 v_bary;
+out float gl_ClipDistance[4];
+void main() {
+    vec3 p = origin_rel + a_pos;
+    v_rel = p;
+    v_h = a_pos.z;
+    v_uv = uv_origin + a_pos.xy * uv_per_metre;
+    v_level = tile_level;
+    v_bary = vec3(1.0);
+    gl_ClipDistance[0] = p.x - clip_rel.x;
+    gl_ClipDistance[1] = p.y - clip_rel.y;
+    gl_ClipDistance[2] = clip_rel.z - p.x;
+    gl_ClipDistance[3] = clip_rel.w - p.y;
+    gl_Position = view_proj_rel * vec4(p, 1.0);
+}

@@ -1,0 +1,293 @@
+"""Restricted quadtree of tilelets inside one tile: error pyramid, per-view leaf levels, leaf lists.
+
+A tile has n cells a side (n a power of two >= 2). A node at local level m covers 2^(m+1) x 2^(m+1) tile
+cells; drawn as a leaf it is a tilelet: 3x3 posts at spacing 2^m cells, an 8-triangle fan around the
+centre post (paper §3.2). Levels run 0 (posts = every tile sample) .. top = log2(n) - 1 (one tilelet for
+the whole tile). Node (a, b) of level m has its south-west post at tile sample (row a*2^(m+1), col b*2^(m+1)).
+
+Error pyramid (view-independent, computed once per tile):
+- ``errors[m]``: the largest vertical distance in metres between a node's drawn surface and the tile's
+  samples it covers, over both the full fan and the fully stitched fan (all four edge midpoints dropped;
+  any mix of dropped edges lies piecewise on one of the two), made monotone (a parent's error is at least
+  its children's).
+- ``effective[m]``: ``errors`` raised so that a node's value is at least 1/beta times that of its children
+  and of every level-(m-1) node touching its edges from outside. Splitting on it ("split while
+  effective > tolerance") gives a quadtree that is restricted inside the tile by construction and lets
+  the morph factors of raster.morph reach 0 before any neighbour splits (so no vertex ever jumps).
+
+Leaf levels are kept as a map over level-0 tilelets ("units", (n/2) x (n/2)): the level of the leaf
+covering each unit. Restriction: edge-adjacent units differ by at most one level; caps (max level per
+unit, from neighbouring tiles) force extra splits.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+DEFAULT_BETA = 0.7
+
+
+def _check_tile_size(n) -> int:
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 2 or n & (n - 1):
+        raise ValueError(f"tile cells per side must be a power of two >= 2, got {n!r}")
+    return int(n)
+
+
+def _block(a: np.ndarray, b: int, fn) -> np.ndarray:
+    """Reduce a square array over b x b blocks with fn (np.max, np.min, np.any)."""
+    if b == 1:
+        return a
+    m = a.shape[0] // b
+    return fn(a.reshape(m, b, m, b), axis=(1, 3))
+
+
+def _expand(a: np.ndarray, b: int) -> np.ndarray:
+    """Repeat every element of a square array into a b x b block."""
+    if b == 1:
+        return a
+    m = a.shape[0]
+    return np.broadcast_to(a[:, None, :, None], (m, b, m, b)).reshape(m * b, m * b)
+
+
+def _dilate4(a: np.ndarray) -> np.ndarray:
+    """Max of each element and its four edge neighbours (no wrap)."""
+    out = a.copy()
+    np.maximum(out[1:], a[:-1], out=out[1:])
+    np.maximum(out[:-1], a[1:], out=out[:-1])
+    np.maximum(out[:, 1:], a[:, :-1], out=out[:, 1:])
+    np.maximum(out[:, :-1], a[:, 1:], out=out[:, :-1])
+    return out
+
+
+def _erode4(a: np.ndarray, fill) -> np.ndarray:
+    """Min over the four edge neighbours of each element (not the element itself); ``fill`` outside."""
+    out = np.full_like(a, fill)
+    np.minimum(out[1:], a[:-1], out=out[1:])
+    np.minimum(out[:-1], a[1:], out=out[:-1])
+    np.minimum(out[:, 1:], a[:, :-1], out=out[:, 1:])
+    np.minimum(out[:, :-1], a[:, 1:], out=out[:, :-1])
+    return out
+
+
+def fan_surfaces(heights: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """Heights (metres, float64) of the level-m tilelet fans at every tile sample: (full fan, stitched fan).
+
+    The full fan splits each of a tilelet's four quadrants along the diagonal through the centre post; the
+    stitched fan is the four triangles centre-corner-corner (every edge midpoint dropped).
+    """
+    h = np.asarray(heights, dtype=np.float64)
+    n = _check_tile_size(h.shape[0] - 1)
+    k = 1 << m
+    s = 2 * k
+    if s > n:
+        raise ValueError(f"tilelet level m must lie in [0, {int(np.log2(n)) - 1}] for a {n}-cell tile, got {m}")
+    idx = np.arange(n + 1)
+    # full fan: quads of the post grid, diagonal SW-NE where (I + J) is even, NW-SE where odd
+    I = np.minimum(idx // k, n // k - 1)
+    f = (idx - I * k) / k
+    fi, fj = f[:, None], f[None, :]
+    p = h[::k, ::k]
+    h00, h01 = p[np.ix_(I, I)], p[np.ix_(I, I + 1)]
+    h10, h11 = p[np.ix_(I + 1, I)], p[np.ix_(I + 1, I + 1)]
+    main = np.where(fj >= fi, h00 + fj * (h01 - h00) + fi * (h11 - h01), h00 + fi * (h10 - h00) + fj * (h11 - h10))
+    anti = np.where(fi + fj <= 1.0, h00 + fj * (h01 - h00) + fi * (h10 - h00),
+                    h11 + (1.0 - fj) * (h10 - h11) + (1.0 - fi) * (h01 - h11))
+    odd = ((I[:, None] + I[None, :]) & 1).astype(bool)
+    full = np.where(odd, anti, main)
+    # stitched fan: four triangles around the centre, local coordinates u (east), v (north) in [0, 2]
+    A = np.minimum(idx // s, n // s - 1)
+    t = (idx - A * s) / k
+    v, u = t[:, None], t[None, :]
+    sw, se = h[np.ix_(A * s, A * s)], h[np.ix_(A * s, A * s + s)]
+    nw, ne = h[np.ix_(A * s + s, A * s)], h[np.ix_(A * s + s, A * s + s)]
+    c = h[np.ix_(A * s + k, A * s + k)]
+    bottom = sw + 0.5 * u * (se - sw) + v * (c - 0.5 * (sw + se))
+    right = se + 0.5 * v * (ne - se) + (2.0 - u) * (c - 0.5 * (se + ne))
+    top = nw + 0.5 * u * (ne - nw) + (2.0 - v) * (c - 0.5 * (nw + ne))
+    left = sw + 0.5 * v * (nw - sw) + u * (c - 0.5 * (sw + nw))
+    below_main = v <= u            # below the SW-NE diagonal
+    below_anti = v <= 2.0 - u      # below the NW-SE diagonal
+    stitched = np.where(below_main, np.where(below_anti, bottom, right), np.where(below_anti, left, top))
+    return full, stitched
+
+
+@dataclass(frozen=True)
+class ErrorPyramid:
+    """Per-node vertical errors (metres vs the tile's samples) of one tile, levels 0..top.
+
+    errors[m] and effective[m] have shape (n >> (m+1))² with row a from the south, column b from the west.
+    zmin/zmax[m]: range of the tile's sample heights under each node (metres, relative to terrain origin z).
+    """
+
+    n: int
+    beta: float
+    errors: tuple
+    effective: tuple
+    zmin: tuple
+    zmax: tuple
+
+    @property
+    def top(self) -> int:
+        """The coarsest local level (one tilelet for the whole tile)."""
+        return len(self.errors) - 1
+
+    @property
+    def units(self) -> int:
+        """Level-0 tilelets per side (n / 2)."""
+        return self.n // 2
+
+
+def error_pyramid(heights: np.ndarray, beta: float = DEFAULT_BETA) -> ErrorPyramid:
+    """Error pyramid (metres) of a tile's (n+1)² heights; beta in (0, 1) sets the morph-safe error growth."""
+    h = np.asarray(heights)
+    if h.ndim != 2 or h.shape[0] != h.shape[1]:
+        raise ValueError(f"tile heights must be a square (n+1)x(n+1) array, got shape {h.shape}")
+    n = _check_tile_size(h.shape[0] - 1)
+    if not (0.0 < float(beta) < 1.0):
+        raise ValueError(f"beta must lie in (0, 1), got {beta!r}")
+    h = h.astype(np.float64)
+    top = int(np.log2(n)) - 1
+    cmax = np.maximum(np.maximum(h[:-1, :-1], h[:-1, 1:]), np.maximum(h[1:, :-1], h[1:, 1:]))
+    cmin = np.minimum(np.minimum(h[:-1, :-1], h[:-1, 1:]), np.minimum(h[1:, :-1], h[1:, 1:]))
+    errors, effective, zmin, zmax = [], [], [], []
+    for m in range(top + 1):
+        full, stitched = fan_surfaces(h, m)
+        dev = np.maximum(np.abs(full - h), np.abs(stitched - h))
+        dcell = np.maximum(np.maximum(dev[:-1, :-1], dev[:-1, 1:]), np.maximum(dev[1:, :-1], dev[1:, 1:]))
+        b = 2 << m
+        e = _block(dcell, b, np.max)
+        zmin.append(_block(cmin, b, np.min))
+        zmax.append(_block(cmax, b, np.max))
+        if m > 0:
+            e = np.maximum(e, _block(errors[-1], 2, np.max))
+            eff = np.maximum(e, _block(_dilate4(effective[-1]), 2, np.max) / beta)
+        else:
+            eff = e
+        errors.append(e)
+        effective.append(eff)
+    return ErrorPyramid(n, float(beta), tuple(errors), tuple(effective), tuple(zmin), tuple(zmax))
+
+
+def leaf_levels(pyr: ErrorPyramid, tolerance: float, cap: np.ndarray | None = None,
+                use_effective: bool = True) -> np.ndarray:
+    """Map (n/2)² of leaf local levels: split while error > tolerance (metres), restricted, level <= cap."""
+    tol = float(tolerance)
+    if not (tol >= 0.0) or tol == np.inf:
+        raise ValueError(f"tolerance must be finite and >= 0 metres, got {tolerance!r}")
+    E = pyr.effective if use_effective else pyr.errors
+    top, U = pyr.top, pyr.units
+    if cap is None:
+        cap = np.full((U, U), top, dtype=np.int16)
+    else:
+        cap = np.asarray(cap, dtype=np.int16)
+        if cap.shape != (U, U):
+            raise ValueError(f"cap must have shape {(U, U)}, got {cap.shape}")
+        if cap.min() < 0:
+            raise ValueError(f"cap levels must be >= 0, got minimum {int(cap.min())} (tiles not restricted?)")
+    need = [e > tol for e in E]
+    while True:
+        levels = np.full((U, U), top, dtype=np.int16)
+        below = None
+        for m in range(1, top + 1):
+            s = need[m] | (_block(cap, 1 << m, np.min) < m)
+            if below is not None:
+                s |= _block(below, 2, np.any)
+            below = s
+            levels -= _expand(s, 1 << m).astype(np.int16)
+        allowed = _erode4(levels, top) + 1
+        if not np.any(levels > allowed):
+            return levels
+        cap = np.minimum(cap, allowed)
+
+
+@dataclass(frozen=True)
+class Leaves:
+    """Leaves of one tile: south-west post (row i0, column j0 in tile cells) and local level, int32 arrays."""
+
+    i0: np.ndarray
+    j0: np.ndarray
+    level: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.level.size)
+
+    @property
+    def size(self) -> np.ndarray:
+        """Side of each leaf in tile cells (2^(level+1))."""
+        return 2 << self.level
+
+
+def leaves_from_levels(levels: np.ndarray) -> Leaves:
+    """The leaf list of a leaf-level map (one entry per leaf, coarsest levels first)."""
+    U = levels.shape[0]
+    top = int(np.log2(U)) if U > 1 else 0
+    i0s, j0s, ms = [], [], []
+    for m in range(top, -1, -1):
+        step = 1 << m
+        a, b = np.nonzero(levels[::step, ::step] == m)
+        i0s.append(a * 2 * step)
+        j0s.append(b * 2 * step)
+        ms.append(np.full(a.size, m))
+    cat = lambda xs: np.concatenate(xs).astype(np.int32)  # noqa: E731
+    return Leaves(cat(i0s), cat(j0s), cat(ms))
+
+
+def leaf_heights(heights: np.ndarray, leaves: Leaves) -> np.ndarray:
+    """(count, 3, 3) post heights of each leaf (metres), [row from south, column from west]."""
+    h = np.asarray(heights)
+    k = 1 << leaves.level
+    r = leaves.i0[:, None] + k[:, None] * np.arange(3)[None, :]
+    c = leaves.j0[:, None] + k[:, None] * np.arange(3)[None, :]
+    return h[r[:, :, None], c[:, None, :]]
+
+
+def drawn_max_error(heights: np.ndarray, leaves: Leaves, dropped: np.ndarray | None = None) -> np.ndarray:
+    """Per leaf: max vertical distance (metres) between its drawn (stitched, unmorphed) fan and the tile samples.
+
+    dropped: per leaf bit mask of edges W=1, E=2, S=4, N=8 whose midpoint is dropped (None: none).
+    """
+    h = np.asarray(heights, dtype=np.float64)
+    out = np.zeros(len(leaves))
+    dropped = np.zeros(len(leaves), np.int32) if dropped is None else np.asarray(dropped)
+    for m in np.unique(leaves.level):
+        sel = np.nonzero(leaves.level == m)[0]
+        k = 1 << int(m)
+        t = np.arange(2 * k + 1)
+        r = leaves.i0[sel, None] + t[None, :]
+        c = leaves.j0[sel, None] + t[None, :]
+        samples = h[r[:, :, None], c[:, None, :]]
+        P = samples[:, ::k, ::k]
+        tt = t / k
+        surf = fan_at(P, tt[None, :], tt[:, None], dropped[sel])
+        out[sel] = np.abs(surf - samples).max(axis=(1, 2))
+    return out
+
+
+def fan_at(P: np.ndarray, u: np.ndarray, v: np.ndarray, dropped) -> np.ndarray:
+    """Heights of fans with posts P (..., 3, 3) [row, col] at local (u east, v north) in [0, 2] (post units).
+
+    dropped (...,): edge bits W=1, E=2, S=4, N=8 whose midpoint is left out (stitched). Result (..., *uv).
+    """
+    P = np.asarray(P, dtype=np.float64)
+    lead = P.shape[:-2]
+    ex = (slice(None),) * len(lead) + (None, None)
+    dropped = np.broadcast_to(np.asarray(dropped), lead)[ex]
+    c = P[..., 1, 1][ex]
+    below_main = v <= u
+    below_anti = v <= 2.0 - u
+    sector = np.where(below_main, np.where(below_anti, 0, 1), np.where(below_anti, 3, 2))  # S, E, N, W
+    out = np.zeros(lead + np.broadcast(u, v).shape)
+    # per sector: the edge's corners a, b and midpoint, coordinate s along it, distance w from the centre
+    # line (1 on the edge, 0 at the centre); the fan is linear along rays from the centre
+    sectors = ((0, (0, 0), (0, 1), (0, 2), u, 1.0 - v, 4), (1, (0, 2), (1, 2), (2, 2), v, u - 1.0, 2),
+               (2, (2, 0), (2, 1), (2, 2), u, v - 1.0, 8), (3, (0, 0), (1, 0), (2, 0), v, 1.0 - u, 1))
+    for sec, ia, im, ib, s, w, bit in sectors:
+        a, mid, b = P[..., ia[0], ia[1]][ex], P[..., im[0], im[1]][ex], P[..., ib[0], ib[1]][ex]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            foot = np.where(w > 0, 1.0 + (s - 1.0) / np.where(w > 0, w, 1.0), 1.0)
+        split = np.where(foot <= 1.0, a + foot * (mid - a), mid + (foot - 1.0) * (b - mid))
+        straight = a + 0.5 * foot * (b - a)
+        edge = np.where((dropped & bit) != 0, straight, split)
+        out = np.where(sector == sec, c + w * (edge - c), out)
+    return out

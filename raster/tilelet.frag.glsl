@@ -1,0 +1,35 @@
+#version 430
+in vec3 v_rel;
+in vec2 v_uv;
+in float v_h;
+flat in int v_level;
+noperspective in vec3 v_bary;
+uniform int mode;              // 0 texture, 1 shaded, 2 height, 3 level
+uniform bool wireframe;        // darken triangle edges
+uniform sampler2D tex;
+uniform vec2 hrange;
+out vec4 frag;
+//#include shading.glsl
+
+vec3 level_colour(int l) {
+    const vec3 pal[8] = vec3[8](vec3(0.90, 0.25, 0.20), vec3(0.95, 0.60, 0.15), vec3(0.95, 0.90, 0.25),
+                                vec3(0.45, 0.80, 0.30), vec3(0.25, 0.75, 0.75), vec3(0.25, 0.45, 0.90),
+                                vec3(0.55, 0.35, 0.85), vec3(0.85, 0.40, 0.70));
+    return pal[l & 7];
+}
+
+void main() {
+    vec3 n = cross(dFdx(v_rel), dFdy(v_rel));
+    if (n.z < 0.0) n = -n;
+    vec3 c;
+    if (mode == 0) c = texture(tex, v_uv).rgb;
+    else if (mode == 1) c = lambert(height_ramp(v_h, hrange), n);
+    else if (mode == 2) c = height_ramp(v_h, hrange);
+    else c = lambert(level_colour(v_level), n);
+    if (wireframe) {
+        vec3 d = fwidth(v_bary);
+        vec3 a = smoothstep(vec3(0.0), 1.5 * d, v_bary);
+        c = mix(vec3(0.05), c, min(min(a.x, a.y), a.z));
+    }
+    frag = vec4(c, 1.0);
+}

@@ -1,0 +1,61 @@
+#version 430
+// Expand a tilelet point into its 8-triangle fan around the centre; on an edge whose neighbour is one
+// level coarser the midpoint is dropped and its two triangles become one (stitching, paper Fig. 5).
+layout(points) in;
+layout(triangle_strip, max_vertices = 24) out;
+in Tilelet {
+    flat ivec4 node;
+    flat int culled;
+    float h[9];
+} gs_in[];
+uniform vec3 origin_rel;       // tile sample [0, 0] minus eye, metres
+uniform float spacing;         // metres between tile samples
+uniform mat4 view_proj_rel;    // (world - eye) -> clip, reversed Z
+uniform vec4 clip_rel;         // tile.clip minus eye: x0, y0, x1, y1
+uniform vec2 uv_origin;        // texture coordinate of tile sample [0, 0]
+uniform vec2 uv_per_cell;      // texture coordinate step per tile cell
+uniform int tile_level;        // pyramid level of the tile
+out vec3 v_rel;
+out vec2 v_uv;
+out float v_h;
+flat out int v_level;
+noperspective out vec3 v_bary;
+out float gl_ClipDistance[4];
+
+vec3 post(int c, int r) {
+    int k = 1 << gs_in[0].node.z;
+    ivec2 jk = gs_in[0].node.xy + ivec2(c * k, r * k);
+    return origin_rel + vec3(vec2(jk) * spacing, gs_in[0].h[r * 3 + c]);
+}
+
+void vert(vec3 p, vec3 bary) {
+    v_rel = p;
+    v_h = p.z - origin_rel.z;
+    v_uv = uv_origin + (p.xy - origin_rel.xy) / spacing * uv_per_cell;
+    v_level = tile_level + gs_in[0].node.z;
+    v_bary = bary;
+    gl_ClipDistance[0] = p.x - clip_rel.x;
+    gl_ClipDistance[1] = p.y - clip_rel.y;
+    gl_ClipDistance[2] = clip_rel.z - p.x;
+    gl_ClipDistance[3] = clip_rel.w - p.y;
+    gl_Position = view_proj_rel * vec4(p, 1.0);
+    EmitVertex();
+}
+
+void tri(vec3 a, vec3 b, vec3 c) {
+    vert(a, vec3(1, 0, 0)); vert(b, vec3(0, 1, 0)); vert(c, vec3(0, 0, 1));
+    EndPrimitive();
+}
+
+void main() {
+    if (gs_in[0].culled != 0) return;
+    int drop = gs_in[0].node.w;   // W=1, E=2, S=4, N=8
+    vec3 C = post(1, 1);
+    vec3 SW = post(0, 0), S = post(1, 0), SE = post(2, 0), E = post(2, 1);
+    vec3 NE = post(2, 2), N = post(1, 2), NW = post(0, 2), W = post(0, 1);
+    // counter-clockwise seen from above
+    if ((drop & 4) != 0) tri(C, SW, SE); else { tri(C, SW, S); tri(C, S, SE); }
+    if ((drop & 2) != 0) tri(C, SE, NE); else { tri(C, SE, E); tri(C, E, NE); }
+    if ((drop & 8) != 0) tri(C, NE, NW); else { tri(C, NE, N); tri(C, N, NW); }
+    if ((drop & 1) != 0) tri(C, NW, SW); else { tri(C, NW, W); tri(C, W, SW); }
+}

@@ -1,0 +1,121 @@
+"""CPU tests of the restricted tilelet quadtree: error pyramid, restriction inside and across tiles, error
+bound of the drawn (stitched) mesh, crack-free morphed vertices, input checks."""
+import numpy as np
+import pytest
+
+from hybrid.pyramid import TilePyramid
+from hybrid.tiletree import select_tiles
+from raster.morph import morphed_posts
+from raster.quadtree import drawn_max_error, error_pyramid, fan_surfaces, leaf_levels, leaf_heights, leaves_from_levels
+from raster.restriction import TileLod, restrict_frame
+from raster_helpers import border_views
+
+
+def _frame(hf, view, tau=2 / 3, tile_size=64, morph=True):
+    pyr = TilePyramid(hf, tile_size)
+    sel = select_tiles(pyr, view)
+    tiles = {s.key: pyr.tile(s.key) for s in sel}
+    K = view.pixels_per_radian
+    lods = [TileLod(s.key, error_pyramid(tiles[s.key].heights), tau * s.distance / K) for s in sel]
+    return tiles, {(l.key.level, l.key.tx, l.key.ty): l for l in lods}, restrict_frame(lods, morph=morph)
+
+
+def test_error_pyramid_monotone_and_exact_at_level0(synthetic):
+    h = synthetic("fbm").heights[:65, :65]
+    p = error_pyramid(h)
+    assert p.top == 5 and p.errors[0].shape == (32, 32) and p.errors[-1].shape == (1, 1)
+    for m in range(1, p.top + 1):
+        kids = p.errors[m - 1].reshape(p.errors[m].shape[0], 2, -1, 2).max(axis=(1, 3))
+        assert np.all(p.errors[m] >= kids)
+        assert np.all(p.effective[m] >= p.errors[m])
+        # effective error grows by at least 1/beta over every child and every finer edge neighbour
+        assert np.all(p.effective[m] * p.beta >= p.effective[m - 1].reshape(p.errors[m].shape[0], 2, -1, 2).max(axis=(1, 3)) - 1e-9)
+    full, _ = fan_surfaces(h, 0)
+    assert np.allclose(full, h)        # level-0 posts are the tile's samples
+
+
+def test_leaf_levels_restricted_partition_and_caps(synthetic):
+    h = synthetic("spike").heights[:129, :129]
+    p = error_pyramid(h)
+    for tol in (0.0, 1.0, 30.0, 1e9):
+        L = leaf_levels(p, tol)
+        assert np.abs(np.diff(L, axis=0)).max(initial=0) <= 1 and np.abs(np.diff(L, axis=1)).max(initial=0) <= 1
+        lv = leaves_from_levels(L)
+        assert int(np.sum((2 << lv.level.astype(np.int64)) ** 2)) == 128 * 128      # leaves tile the tile exactly
+    assert len(leaves_from_levels(leaf_levels(p, 1e9))) == 1
+    cap = np.full((64, 64), p.top, np.int16)
+    cap[:, 0] = 0                                                                    # west border at level 0
+    L = leaf_levels(p, 1e9, cap)
+    assert np.all(L[:, 0] == 0) and np.abs(np.diff(L, axis=1)).max() <= 1
+
+
+def test_drawn_error_within_tolerance(puget257, synthetic):
+    for hf in (puget257, synthetic("cliff"), synthetic("staircase")):
+        for view in border_views(hf)[:3]:
+            tiles, lods, sets = _frame(hf, view)
+            for key, ts in sets.items():
+                t = tiles[type(next(iter(tiles))).__call__(*key)] if False else tiles[[k for k in tiles if (k.level, k.tx, k.ty) == key][0]]
+                err = drawn_max_error(t.heights, ts.leaves, ts.coarser)
+                assert err.max(initial=0) <= lods[key].tolerance + 1e-4, (hf.name, key, err.max(), lods[key].tolerance)
+
+
+def _global_vertices(tiles, sets):
+    """All drawn (morphed, stitched) vertices in level-0 cell coordinates with heights: (x, y, h) rows."""
+    out = []
+    for k, t in tiles.items():
+        ts = sets[(k.level, k.tx, k.ty)]
+        lv = ts.leaves
+        P = morphed_posts(leaf_heights(t.heights, lv), lv.i0, lv.j0, lv.level, ts.morph)
+        step = 1 << k.level
+        base_x, base_y = k.tx * t.n * step, k.ty * t.n * step
+        kk = (1 << lv.level) * step
+        for r in range(3):
+            for c in range(3):
+                keep = np.ones(len(lv), bool)
+                if (r, c) == (1, 0): keep = (ts.coarser & 1) == 0
+                if (r, c) == (1, 2): keep = (ts.coarser & 2) == 0
+                if (r, c) == (0, 1): keep = (ts.coarser & 4) == 0
+                if (r, c) == (2, 1): keep = (ts.coarser & 8) == 0
+                x = base_x + lv.j0 * step + c * kk
+                y = base_y + lv.i0 * step + r * kk
+                out.append(np.stack([x[keep], y[keep], P[keep, r, c]], axis=1))
+    return np.concatenate(out)
+
+
+@pytest.mark.parametrize("name", ["puget", "cliff", "staircase"])
+def test_frame_restricted_across_tiles_and_vertices_agree(name, puget257, synthetic):
+    hf = puget257 if name == "puget" else synthetic(name)
+    for view in border_views(hf):
+        tiles, lods, sets = _frame(hf, view)
+        # global level map at level-0 cell resolution: neighbours differ by at most one level everywhere
+        size = hf.cols - 1
+        G = np.full((size, size), -1)
+        for k, t in tiles.items():
+            ts = sets[(k.level, k.tx, k.ty)]
+            cells = np.repeat(np.repeat(ts.level_map + k.level, 2 << k.level, 0), 2 << k.level, 1)
+            s = t.n << k.level
+            y0, x0 = k.ty * s, k.tx * s
+            G[y0:y0 + s, x0:x0 + s][:min(s, size - y0), :min(s, size - x0)] = cells[:min(s, size - y0), :min(s, size - x0)]
+        covered = G >= 0
+        dx = np.abs(np.diff(G, axis=1))[covered[:, 1:] & covered[:, :-1]]
+        dy = np.abs(np.diff(G, axis=0))[covered[1:] & covered[:-1]]
+        assert max(dx.max(initial=0), dy.max(initial=0)) <= 1
+        # every drawn vertex position gets one height from every leaf that draws it (no crack, morph included)
+        V = _global_vertices(tiles, sets)
+        order = np.lexsort((V[:, 1], V[:, 0]))
+        V = V[order]
+        same = (np.diff(V[:, 0]) == 0) & (np.diff(V[:, 1]) == 0)
+        gap = np.abs(np.diff(V[:, 2]))[same]
+        assert gap.max(initial=0) < 1e-3, (name, gap.max())
+
+
+def test_morph_off_gives_zero_alpha_and_bad_input(puget257):
+    view = border_views(puget257)[0]
+    _, _, sets = _frame(puget257, view, morph=False)
+    assert all(np.all(ts.morph == 0) for ts in sets.values())
+    with pytest.raises(ValueError, match="tolerance"):
+        leaf_levels(error_pyramid(np.zeros((5, 5), np.float32)), -1.0)
+    with pytest.raises(ValueError, match="power of two"):
+        error_pyramid(np.zeros((6, 6), np.float32))
+    with pytest.raises(ValueError, match="beta"):
+        error_pyramid(np.zeros((5, 5), np.float32), beta=1.5)
