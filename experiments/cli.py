@@ -142,7 +142,7 @@ def render_method(ctx, hf, view, method: str, args):
         finally:
             r.release()
     from hybrid.frame import SingleStrategyRenderer, STRATEGIES
-    if method not in STRATEGIES:
+    if method not in STRATEGIES and method not in ("hybrid", "heuristic", "oracle"):
         raise TerrabenchError(f"method {method!r} is not available in this build; available: "
                               f"reference, {', '.join(sorted(STRATEGIES))}")
     opts = draw_options(args, method)
@@ -151,7 +151,7 @@ def render_method(ctx, hf, view, method: str, args):
         r = HybridRenderer(ctx, hf, method, tile_size=args.tile_size, reconstruction=args.reconstruction,
                            prepass=not args.no_prepass)
         try:
-            return r.render(view, args.tau)
+            return r.render(view, args.tau, maps=args.show_strategy)
         finally:
             r.release()
     r = SingleStrategyRenderer(ctx, hf, method, tile_size=args.tile_size)
@@ -194,20 +194,22 @@ def cmd_render(args) -> int:
     if not folder.is_dir():
         raise TerrabenchError(f"--out folder {folder} does not exist")
     check_positive("--tau (pixels)", args.tau)
+    if args.show_strategy and args.method not in ("hybrid", "heuristic", "oracle"):
+        raise TerrabenchError("--show-strategy needs a mixed policy: --method hybrid (or heuristic, oracle)")
     hf = load_terrain_arg(args)
     view = view_from_args(args, hf)
     ctx = shared_context(args.device)
     result = render_method(ctx, hf, view, args.method, args)
     png, depth = result.save(out)
     if args.show_strategy:
-        if "strategy" not in result.maps:
-            raise TerrabenchError("--show-strategy needs a mixed policy: --method hybrid (or heuristic, oracle)")
         smap = out.parent / (out.stem + ".strategy.png")
         save_strategy_map(result, smap)
         print(f"strategy map: {smap} (blue raster, orange ray cast)")
     cover = float(result.mask.mean()) * 100
     print(f"{args.method}: wrote {png} and {depth} ({view.width}x{view.height}, terrain on {cover:.1f} % of pixels)")
     for k, v in result.stats.items():
+        if isinstance(v, (list, dict)):
+            continue
         print(f"  {k}: {v:.4g}" if isinstance(v, float) else f"  {k}: {v}")
     return 0
 

@@ -206,7 +206,10 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
                 for k in todo:
                     if k > 0 and (prev is None or prev[0] != k - 1):
                         prev = (k - 1, renderer.render(views[k - 1], c["tau"]))
-                    results = [renderer.render(views[k], c["tau"]) for _ in range(spec.repeats)]
+                    extra = {"maps": True} if (k in spec.image_frames and
+                                               c["policy"] in ("hybrid", "heuristic", "oracle")) else {}
+                    results = [renderer.render(views[k], c["tau"]) for _ in range(spec.repeats - 1)]
+                    results.append(renderer.render(views[k], c["tau"], **extra))
                     res = results[-1]
                     walls = [r.stats.get("wall_ms", np.nan) for r in results]
                     stats = {kk: v for kk, v in res.stats.items() if not isinstance(v, (list, dict))}

@@ -5,6 +5,11 @@ Two linear models with non-negative coefficients, simple enough to print and exp
     raster_ms  = r0 + r_tri * triangles + r_px * pixels
     raycast_ms = c0 + c_px * pixels + c_step * pixels * log2(1 + slab_cells)
 
+per tile, plus each strategy's per-frame overhead (state setup, the raster path's frame-level quadtree
+restriction, the ray caster's pre-pass target and counters) paid once when any tile uses it:
+
+    frame_ms = overhead_raster * [any raster tile] + overhead_raycast * [any ray-cast tile] + sum of tiles
+
 ``terrabench calibrate`` times tiles one by one on this device, fits the coefficients by non-negative
 least squares on relative error (rows weighted by 1 / measured time, so small tiles count as much as big
 ones), reports the median absolute relative error on held-out tiles, and saves the model keyed by the GL
@@ -48,9 +53,14 @@ class CostModel:
     fit_error: dict = field(default_factory=dict)
     tiles: int = 0
     source: str = ""
+    overhead: dict = field(default_factory=lambda: {"raster": 0.0, "raycast": 0.0})
+
+    def frame_ms(self, tile_costs: list[float], strategies: set) -> float:
+        """Predicted frame time: the tiles' costs plus the overhead of each strategy used."""
+        return float(sum(tile_costs) + sum(self.overhead.get(s, 0.0) for s in strategies))
 
     def predict(self, f: TileFeatures) -> dict[str, float]:
-        """Predicted milliseconds of each strategy for one tile."""
+        """Predicted milliseconds each strategy adds to a frame for one tile (overhead not included)."""
         out = {}
         for s in ("raster", "raycast"):
             coef = np.array([getattr(self, s)[t] for t in TERMS[s]])
@@ -65,7 +75,9 @@ class CostModel:
             return f"{s:8s} ms = " + " + ".join(parts)
         lines = [f"cost model for {self.renderer} ({self.source or 'unsaved'}, {self.tiles} tiles)",
                  fmt("raster"), fmt("raycast"),
-                 "  pixel_steps = pixels * log2(1 + slab_cells)"]
+                 "  pixel_steps = pixels * log2(1 + slab_cells)",
+                 f"  per-frame overhead: raster {self.overhead.get('raster', 0):.3g} ms, "
+                 f"raycast {self.overhead.get('raycast', 0):.3g} ms"]
         for s, e in self.fit_error.items():
             lines.append(f"  held-out median |relative error| {s}: {100 * e:.1f} %")
         return "\n".join(lines)
@@ -75,8 +87,12 @@ class CostModel:
         return asdict(self)
 
 
-def fit_strategy(features: list[TileFeatures], ms: np.ndarray, strategy: str) -> dict:
-    """Non-negative coefficients of one strategy's terms, fitted on relative error."""
+def fit_strategy(features: list[TileFeatures], ms: np.ndarray, strategy: str, overhead: float = 0.0) -> dict:
+    """Non-negative per-tile coefficients of one strategy, fitted on the relative error of single-tile times.
+
+    ``ms`` are times of drawing each tile alone (one call), so each includes the strategy's per-frame
+    ``overhead``, which is taken off before fitting.
+    """
     ms = np.asarray(ms, dtype=np.float64)
     if len(features) != len(ms) or len(ms) < len(TERMS[strategy]):
         raise TerrabenchError(f"need at least {len(TERMS[strategy])} timed tiles with matching features to fit "
@@ -86,20 +102,29 @@ def fit_strategy(features: list[TileFeatures], ms: np.ndarray, strategy: str) ->
     A = np.array([term_values(f, strategy) for f in features])
     scale = np.maximum(A.max(axis=0), 1e-12)                 # condition the columns
     w = 1.0 / ms
-    x = nnls(A / scale * w[:, None], ms * w) / scale
+    x = nnls(A / scale * w[:, None], (ms - overhead) * w) / scale
     return dict(zip(TERMS[strategy], map(float, x)))
 
 
 def median_rel_error(model: CostModel, features: list[TileFeatures], ms: np.ndarray, strategy: str) -> float:
-    """Median |predicted - measured| / measured over tiles."""
-    pred = np.array([model.predict(f)[strategy] for f in features])
+    """Median |predicted - measured| / measured over single-tile times (overhead included on both sides)."""
+    pred = np.array([model.predict(f)[strategy] for f in features]) + model.overhead.get(strategy, 0.0)
     ms = np.asarray(ms, dtype=np.float64)
     return float(np.median(np.abs(pred - ms) / ms))
 
 
+def estimate_overhead(single_ms: list[np.ndarray], together_ms: list[float]) -> float:
+    """Per-frame overhead from frames timed tile by tile and all at once: (sum singles - together) / (k - 1)."""
+    est = [(float(np.sum(s)) - t) / (len(s) - 1) for s, t in zip(single_ms, together_ms) if len(s) >= 2]
+    return float(max(np.median(est), 0.0)) if est else 0.0
+
+
 def fit_cost_model(features: list[TileFeatures], raster_ms, raycast_ms, renderer: str,
-                   holdout: float = 0.3, seed: int = 0) -> CostModel:
-    """Fit both strategies on a random (1 - holdout) share of tiles; report errors on the rest."""
+                   holdout: float = 0.3, seed: int = 0, overhead: dict | None = None) -> CostModel:
+    """Fit both strategies on a random (1 - holdout) share of tiles; report errors on the rest.
+
+    ``overhead`` (ms per frame and strategy, see estimate_overhead) is taken off the single-tile times.
+    """
     n = len(features)
     raster_ms, raycast_ms = np.asarray(raster_ms, float), np.asarray(raycast_ms, float)
     if not (0.0 <= holdout < 1.0):
@@ -108,8 +133,10 @@ def fit_cost_model(features: list[TileFeatures], raster_ms, raycast_ms, renderer
     n_test = int(round(holdout * n))
     test, train = idx[:n_test], idx[n_test:]
     ftrain = [features[i] for i in train]
-    model = CostModel(renderer, fit_strategy(ftrain, raster_ms[train], "raster"),
-                      fit_strategy(ftrain, raycast_ms[train], "raycast"), tiles=n)
+    overhead = {"raster": 0.0, "raycast": 0.0, **(overhead or {})}
+    model = CostModel(renderer, fit_strategy(ftrain, raster_ms[train], "raster", overhead["raster"]),
+                      fit_strategy(ftrain, raycast_ms[train], "raycast", overhead["raycast"]), tiles=n,
+                      overhead=overhead)
     if n_test:
         ftest = [features[i] for i in test]
         model.fit_error = {"raster": median_rel_error(model, ftest, raster_ms[test], "raster"),
@@ -146,7 +173,7 @@ def save_cost_model(model: CostModel, path: Path | None = None) -> Path:
 def _from_dict(d: dict, source: str) -> CostModel:
     try:
         m = CostModel(d["renderer"], dict(d["raster"]), dict(d["raycast"]), dict(d.get("fit_error", {})),
-                      int(d.get("tiles", 0)), source)
+                      int(d.get("tiles", 0)), source, {"raster": 0.0, "raycast": 0.0, **d.get("overhead", {})})
         for s in ("raster", "raycast"):
             for t in TERMS[s]:
                 float(getattr(m, s)[t])

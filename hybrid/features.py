@@ -70,15 +70,32 @@ def _hull_area_clipped(pts: np.ndarray, w: float, h: float) -> float:
     return float(0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
 
 
+_BOX_EDGES = [(a, b) for a in range(8) for b in range(a + 1, 8) if bin(a ^ b).count("1") == 1]
+
+
 def footprint_pixels(view: View, lo: np.ndarray, hi: np.ndarray) -> float:
-    """Screen area in pixels of a world AABB's projection, clipped to the viewport."""
+    """Screen area in pixels of a world AABB's projection, clipped to the near plane and the viewport.
+
+    The box cut by the near plane is a convex polyhedron; its projection is the convex hull of its projected
+    vertices: the corners in front of the plane and the points where box edges cross it.
+    """
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    rel = corners - view.eye
-    depth = -(rel @ view.rotation().T)[:, 2]
-    if np.any(depth <= view.near):
-        return float(view.width * view.height)
-    p = view.project(corners)
-    return _hull_area_clipped(p[:, :2], view.width, view.height)
+    rel = (corners - view.eye) @ view.rotation().T            # eye space, camera looks down -z
+    depth = -rel[:, 2]
+    near = view.near * (1 + 1e-9)
+    pts = [rel[i] for i in range(8) if depth[i] >= near]
+    for a, b in _BOX_EDGES:
+        if (depth[a] - near) * (depth[b] - near) < 0:
+            t = (near - depth[a]) / (depth[b] - depth[a])
+            pts.append(rel[a] + t * (rel[b] - rel[a]))
+    if len(pts) < 3:
+        return 0.0
+    pts = np.array(pts)
+    t = view.tan_half_fov
+    x = (pts[:, 0] / -pts[:, 2]) / (t * view.aspect)
+    y = (pts[:, 1] / -pts[:, 2]) / t
+    screen = np.stack([(x + 1) * 0.5 * view.width, (1 - y) * 0.5 * view.height], axis=1)
+    return _hull_area_clipped(screen, view.width, view.height)
 
 
 def slab_cells(view: View, lo: np.ndarray, hi: np.ndarray, spacing: float, n: int) -> float:

@@ -1,5 +1,9 @@
 """Drawing one frame: select tiles for a view, upload what is missing, let each strategy draw its tiles.
 
+Frame time (``wall_ms``) is what a user waits for a frame: the CPU planning of the frame (tile selection,
+and for the mixed policies the features and choices) plus the drawing, wall clock with ctx.finish() on
+both sides. Uploads of tiles not yet resident are not in it (counted apart as ``uploaded``).
+
 Strategies are GPU classes from ``raster`` and ``raycast`` with one shape (duck-typed, no import of
 hybrid on their side):
 
@@ -15,7 +19,6 @@ Strategies are registered by name in ``STRATEGIES`` (factory ``(ctx, hf, shading
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 
 from .errors import TerrabenchError
 from .heightfield import HeightField
@@ -41,16 +44,6 @@ def shading_source() -> str:
     return load_source("hybrid", "shading.glsl")
 
 
-@dataclass
-class FrameStats:
-    """Counters of one frame."""
-
-    tiles: int = 0
-    wall_ms: float = 0.0
-    uploaded: int = 0
-    counters: dict = field(default_factory=dict)
-
-
 def make_strategy(name: str, ctx, hf: HeightField):
     """A strategy instance by registered name."""
     if name not in STRATEGIES:
@@ -72,7 +65,9 @@ class SingleStrategyRenderer:
 
     def render(self, view: View, tau: float = DEFAULT_TAU, **options) -> RenderResult:
         """Draw the view and read it back (colour, distance) with the strategy's counters in stats."""
+        t_plan = time.perf_counter()
         selected = select_tiles(self.pyramid, view, tau)
+        plan_ms = (time.perf_counter() - t_plan) * 1e3
         target = FrameTarget(self.ctx, view.width, view.height)
         try:
             uploaded = 0
@@ -88,10 +83,14 @@ class SingleStrategyRenderer:
             target.use()
             self.ctx.finish()
             t0 = time.perf_counter()
-            counters = self.strategy.draw_tiles(target, view, items, **{**self.draw_options, **options}) or {}
+            opts = {**self.draw_options, **options}
+            if self.name == "raster":
+                opts.setdefault("leaf_tau", tau)          # the in-tile quadtree follows the frame's bound
+            counters = self.strategy.draw_tiles(target, view, items, **opts) or {}
             self.ctx.finish()
-            wall = (time.perf_counter() - t0) * 1e3
-            stats = {"tiles": len(items), f"tiles_{self.name}": len(items), "uploaded": uploaded, "wall_ms": wall,
+            draw = (time.perf_counter() - t0) * 1e3
+            stats = {"tiles": len(items), f"tiles_{self.name}": len(items), "uploaded": uploaded,
+                     "wall_ms": plan_ms + draw, "plan_ms": plan_ms, "draw_ms": draw,
                      "gpu_bytes": sum(g.nbytes for g, _ in self.resident.values()), **counters}
             return target.read(view, stats)
         finally:
@@ -122,7 +121,7 @@ class ReferenceFrameRenderer:
             self.ref.draw(target, view, options.get("mode"))
             self.ctx.finish()
             wall = (time.perf_counter() - t0) * 1e3
-            return target.read(view, {"wall_ms": wall, "triangles": self.ref.triangles, "tiles": 1,
+            return target.read(view, {"wall_ms": wall, "plan_ms": 0.0, "draw_ms": wall, "triangles": self.ref.triangles, "tiles": 1,
                                       "gpu_bytes": self.ref.nbytes})
         finally:
             target.release()

@@ -142,3 +142,35 @@ def depth32f_texture(ctx, size: tuple[int, int]):
     bind(GL_TEXTURE_2D, 0)
     tex.filter = (ctx.NEAREST, ctx.NEAREST) if hasattr(ctx, "NEAREST") else tex.filter
     return tex
+
+
+_BYTES_PER_TEXEL = {0x822E: 4, 0x8058: 4, 0x8051: 3, 0x8236: 4, 0x8CAC: 4, 0x81A6: 4, 0x8229: 1, 0x822D: 2,
+                    0x8814: 16, 0x8815: 12, 0x8230: 8}   # R32F RGBA8 RGB8 R32UI DEPTH32F DEPTH24 R8 R16F RGBA32F RGB32F RG32F
+
+
+def driver_texture_bytes(tex) -> int:
+    """Bytes of all mip levels of a texture as the driver reports them (width x height x texel size)."""
+    u, i = ctypes.c_uint, ctypes.c_int
+    get = _gl_function(b"glGetTextureLevelParameteriv", u, i, u, ctypes.POINTER(i))
+    total, level = 0, 0
+    while level < 32:
+        w, h, f = i(), i(), i()
+        get(tex.glo, level, 0x1000, ctypes.byref(w))      # GL_TEXTURE_WIDTH
+        if w.value == 0:
+            break
+        get(tex.glo, level, 0x1001, ctypes.byref(h))      # GL_TEXTURE_HEIGHT
+        get(tex.glo, level, 0x1003, ctypes.byref(f))      # GL_TEXTURE_INTERNAL_FORMAT
+        if f.value not in _BYTES_PER_TEXEL:
+            raise GLContextError(f"unknown texture internal format 0x{f.value:x}")
+        total += w.value * h.value * _BYTES_PER_TEXEL[f.value]
+        level += 1
+    return total
+
+
+def driver_buffer_bytes(buf) -> int:
+    """Size of a buffer object as the driver reports it (GL_BUFFER_SIZE)."""
+    u, i = ctypes.c_uint, ctypes.c_int
+    get = _gl_function(b"glGetNamedBufferParameteriv", u, u, ctypes.POINTER(i))
+    n = i()
+    get(buf.glo, 0x8764, ctypes.byref(n))
+    return n.value

@@ -51,7 +51,7 @@ class HybridRenderer:
 
     def triangles(self, key, selected, view, tau) -> int:
         """Triangles the raster strategy draws for a tile at this view."""
-        return int(self.strategies["raster"].count_triangles(self.tile(key), selected, view, tau))
+        return int(self.strategies["raster"].estimate_triangles(self.tile(key), selected, view, tau))
 
     def plan(self, view: View, tau: float = DEFAULT_TAU) -> list[TilePlan]:
         """The frame's tiles with features, predicted costs and choices."""
@@ -61,18 +61,22 @@ class HybridRenderer:
     def _resident(self, name, key, pinned):
         return self.cache.get(name, self.strategies[name], key, lambda: self.tile(key), pinned)
 
-    def _draw(self, target, view, plans: list[TilePlan], pinned) -> dict:
+    def _opts(self, name: str, tau: float) -> dict:
+        return {**self.options[name], "leaf_tau": tau} if name == "raster" else self.options[name]
+
+    def _draw(self, target, view, plans: list[TilePlan], pinned, tau) -> dict:
         counters: dict = {}
         for name in ("raster", "raycast"):
             items = [(self._resident(name, p.key, pinned), self.tile(p.key), p.selected) for p in plans if p.choice == name]
             if items:
-                c = self.strategies[name].draw_tiles(target, view, items, **self.options[name]) or {}
+                c = self.strategies[name].draw_tiles(target, view, items, **self._opts(name, tau)) or {}
                 for k, v in c.items():
                     if isinstance(v, (int, float, np.integer, np.floating)):
                         counters[k] = counters.get(k, 0) + v
         return counters
 
-    def time_tile(self, view: View, plan: TilePlan, name: str, target: FrameTarget, pinned=frozenset()) -> float:
+    def time_tile(self, view: View, plan: TilePlan, name: str, target: FrameTarget, pinned=frozenset(),
+                  tau: float = DEFAULT_TAU) -> float:
         """Median wall milliseconds of drawing one tile alone with one strategy (ctx.finish() around it)."""
         item = [(self._resident(name, plan.key, pinned), self.tile(plan.key), plan.selected)]
         times = []
@@ -81,26 +85,47 @@ class HybridRenderer:
             target.use()
             self.ctx.finish()
             t0 = time.perf_counter()
-            self.strategies[name].draw_tiles(target, view, item, **self.options[name])
+            self.strategies[name].draw_tiles(target, view, item, **self._opts(name, tau))
             self.ctx.finish()
             times.append((time.perf_counter() - t0) * 1e3)
         return float(np.median(times))
 
-    def render(self, view: View, tau: float = DEFAULT_TAU, measure: bool = False) -> RenderResult:
+    def time_frame(self, view: View, plans: list[TilePlan], name: str, target: FrameTarget, pinned, tau) -> float:
+        """Median wall ms of drawing all the frame's tiles with one strategy in one call."""
+        items = [(self._resident(name, p.key, pinned), self.tile(p.key), p.selected) for p in plans]
+        times = []
+        for _ in range(self.oracle_repeats):
+            target.clear()
+            target.use()
+            self.ctx.finish()
+            t0 = time.perf_counter()
+            self.strategies[name].draw_tiles(target, view, items, **self._opts(name, tau))
+            self.ctx.finish()
+            times.append((time.perf_counter() - t0) * 1e3)
+        return float(np.median(times))
+
+    def render(self, view: View, tau: float = DEFAULT_TAU, measure: bool = False, maps: bool = False) -> RenderResult:
         """Draw the view and read it back; stats carry counters, memory and one row per tile.
 
-        With ``measure`` (always for the oracle) every tile is also timed alone both ways.
+        With ``measure`` (always for the oracle) every tile is also timed alone both ways; with ``maps`` the
+        result also carries the per-pixel strategy map (two extra untimed renders).
         """
+        t_plan = time.perf_counter()
         plans = self.plan(view, tau)
+        plan_ms = (time.perf_counter() - t_plan) * 1e3
         pinned = {(p.choice, p.key) for p in plans}
         target = FrameTarget(self.ctx, view.width, view.height)
+        together = {}
         try:
             if measure or self.policy == "oracle":
                 pinned |= {(n, p.key) for p in plans for n in ("raster", "raycast")}
                 for p in plans:
-                    p.measured = {n: self.time_tile(view, p, n, target, pinned) for n in ("raster", "raycast")}
+                    p.measured = {n: self.time_tile(view, p, n, target, pinned, tau) for n in ("raster", "raycast")}
                     if self.policy == "oracle":
                         p.choice = min(p.measured, key=p.measured.get)
+            if measure and plans:
+                for n in ("raster", "raycast"):
+                    together[f"together_{n}_ms"] = self.time_frame(view, plans, n, target, pinned, tau)
             # upload everything first so the timed frame measures drawing only
             for p in plans:
                 self._resident(p.choice, p.key, pinned)
@@ -108,24 +133,26 @@ class HybridRenderer:
             target.use()
             self.ctx.finish()
             t0 = time.perf_counter()
-            counters = self._draw(target, view, plans, pinned)
+            counters = self._draw(target, view, plans, pinned, tau)
             self.ctx.finish()
-            wall = (time.perf_counter() - t0) * 1e3
+            draw = (time.perf_counter() - t0) * 1e3
             by = self.cache.bytes_by_strategy()
             n_r = sum(p.choice == "raster" for p in plans)
-            stats = {"wall_ms": wall, "tiles": len(plans), "tiles_raster": n_r, "tiles_raycast": len(plans) - n_r,
+            stats = {"wall_ms": plan_ms + draw, "plan_ms": plan_ms, "draw_ms": draw, "tiles": len(plans), "tiles_raster": n_r, "tiles_raycast": len(plans) - n_r,
                      "gpu_bytes": self.cache.bytes, "gpu_bytes_raster": by.get("raster", 0),
                      "gpu_bytes_raycast": by.get("raycast", 0), "uploads": self.cache.stats.uploads,
                      "evictions": self.cache.stats.evictions,
-                     "pred_ms": float(sum(p.predicted[p.choice] for p in plans)), **counters,
+                     "pred_ms": self.model.frame_ms([p.predicted[p.choice] for p in plans], {p.choice for p in plans}),
+                     **together, **counters,
                      "tile_rows": [p.row() for p in plans]}
             result = target.read(view, stats)
-            result.maps = {"strategy": self.strategy_map(view, plans)}
+            if maps:
+                result.maps = {"strategy": self.strategy_map(view, plans, tau)}
             return result
         finally:
             target.release()
 
-    def strategy_map(self, view: View, plans: list[TilePlan]) -> np.ndarray:
+    def strategy_map(self, view: View, plans: list[TilePlan], tau: float = DEFAULT_TAU) -> np.ndarray:
         """Per pixel: 0 no terrain, 1 drawn by a raster tile, 2 by a ray-cast tile (compares depth per strategy)."""
         depths = {}
         for name in ("raster", "raycast"):
@@ -136,8 +163,9 @@ class HybridRenderer:
                 t.use()
                 if sub:
                     items = [(self._resident(name, p.key, set()), self.tile(p.key), p.selected) for p in sub]
-                    self.strategies[name].draw_tiles(t, view, items, **{**self.options[name], "prepass": False}
-                                                     if name == "raycast" else self.options[name])
+                    opts = self._opts(name, tau)
+                    self.strategies[name].draw_tiles(t, view, items, **({**opts, "prepass": False}
+                                                                        if name == "raycast" else opts))
                 depths[name] = t.read_depth()
             finally:
                 t.release()

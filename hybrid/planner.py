@@ -2,7 +2,8 @@
 
 Policies:
     raster, raycast   every tile the same way;
-    hybrid            the strategy the cost model predicts faster for each tile;
+    hybrid            the strategy the cost model predicts faster for each tile, unless drawing every tile
+                      one way is predicted faster once the per-frame overheads are counted;
     heuristic         Dick et al.'s fixed rule: ray cast a tile when its triangles outnumber the pixels it
                       covers by more than ``threshold`` (default 1), else rasterize;
     oracle            each tile timed both ways and the faster kept (an evaluation bound: the choice is
@@ -73,4 +74,11 @@ def plan_frame(pyramid: TilePyramid, view: View, model: CostModel, triangles_fn,
         f = tile_features(pyramid, view, s, triangles_fn(s.key, s, view, tau))
         p = model.predict(f)
         plans.append(TilePlan(s, f, p, choose(policy, f, p, threshold)))
+    if policy == "hybrid" and plans:
+        options = {"mixed": [p.choice for p in plans], "raster": ["raster"] * len(plans),
+                   "raycast": ["raycast"] * len(plans)}
+        cost = {k: model.frame_ms([p.predicted[c] for p, c in zip(plans, ch)], set(ch)) for k, ch in options.items()}
+        best = min(cost, key=cost.get)
+        for p, c in zip(plans, options[best]):
+            p.choice = c
     return plans

@@ -78,7 +78,11 @@ def test_footprint_of_box():
     # a 2 x 2 m square facing the camera 100 m away at fov 90: 1 m = 0.5 px -> 1 px²
     a = footprint_pixels(v, np.array([-1, 0, -1.0]), np.array([1, 0, 1.0]))
     assert np.isclose(a, 1.0, rtol=1e-6)
-    assert footprint_pixels(v, np.array([-1, -200, -1.0]), np.array([1, 0, 1.0])) == 100 * 100   # behind the eye
+    # a box reaching behind the eye is cut at the near plane: the 2 x 2 m section 1 m ahead fills the view
+    assert np.isclose(footprint_pixels(v, np.array([-1, -200, -1.0]), np.array([1, 0, 1.0])), 100 * 100)
+    assert footprint_pixels(v, np.array([-1, -200, -1.0]), np.array([1, -150, 1.0])) == 0.0     # wholly behind
+    # eye inside a long box: the near-plane section (2 x 2 m at 1 m) covers the whole 90-degree view
+    assert np.isclose(footprint_pixels(v, np.array([-1, -101, -1.0]), np.array([1, 0, 1.0])), 100 * 100)
 
 
 class _Fake:

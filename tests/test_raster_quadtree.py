@@ -119,3 +119,22 @@ def test_morph_off_gives_zero_alpha_and_bad_input(puget257):
         error_pyramid(np.zeros((6, 6), np.float32))
     with pytest.raises(ValueError, match="beta"):
         error_pyramid(np.zeros((5, 5), np.float32), beta=1.5)
+
+
+def test_triangle_estimate_tracks_exact_count(ctx, puget_full):
+    """The cost model's cheap triangle estimate stays within 10 % of the exact restricted, stitched count."""
+    from hybrid.flight import preset
+    from hybrid.frame import make_strategy
+    from hybrid.pyramid import TilePyramid
+    from hybrid.tiletree import select_tiles
+    pyr = TilePyramid(puget_full, 256)
+    r = make_strategy("raster", ctx, puget_full)
+    ratios = []
+    for v in (preset("flyover", puget_full, 6, 320, 180).view(2), preset("orbit", puget_full, 6, 320, 180).view(3)):
+        for s in select_tiles(pyr, v):
+            t = pyr.tile(s.key)
+            exact = r.count_triangles(t, s, v, 2 / 3)
+            ratios.append(r.estimate_triangles(t, s, v, 2 / 3) / exact)
+    r.release()
+    assert len(ratios) > 8
+    assert 0.98 <= min(ratios) and max(ratios) <= 1.1
