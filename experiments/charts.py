@@ -10,6 +10,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from matplotlib.colors import ListedColormap  # noqa: E402
+
+STRATEGY_CMAP = ListedColormap(["#f2f2f2", "#2b6cff", "#ff8c14"])   # no terrain, raster, ray cast
 CREDIT = "Puget Sound terrain: USGS, via the Georgia Tech Large Geometric Models Archive"
 
 
@@ -163,9 +166,11 @@ def image_panels(run: Path, f: pd.DataFrame, folder: Path, frames: list[int]) ->
                 h = axes[i, 1].imshow(err, cmap="magma", vmin=0, vmax=64)
                 axes[i, 1].set_title("|error| (8-bit)", fontsize=8)
                 for j, (name, arr) in enumerate(sorted(extra.items()), start=2):
-                    cmap = "coolwarm" if name == "strategy" else "inferno"
-                    axes[i, j].imshow(arr, cmap=cmap, interpolation="nearest")
-                    axes[i, j].set_title({"strategy": "strategy (blue raster, red ray cast)"}.get(name, name), fontsize=8)
+                    if name == "strategy":
+                        axes[i, j].imshow(arr, cmap=STRATEGY_CMAP, vmin=0, vmax=2, interpolation="nearest")
+                    else:
+                        axes[i, j].imshow(arr, cmap="inferno", interpolation="nearest")
+                    axes[i, j].set_title({"strategy": "strategy (blue raster, orange ray cast)"}.get(name, name), fontsize=8)
             fig.colorbar(h, ax=axes[1:, 1].tolist(), shrink=0.6)
             safe = scene.replace(" / ", "_").replace(" ", "")
             out += _save(fig, folder, f"images_{safe}_f{k}")

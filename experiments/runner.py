@@ -82,7 +82,15 @@ class Journal:
         """Append rows and flush them to disk."""
         if not rows:
             return
-        with (self.folder / f"{name}.jsonl").open("a") as f:
+        path = self.folder / f"{name}.jsonl"
+        if path.exists() and path.stat().st_size:
+            with path.open("rb") as f:                    # an interruption may have left a torn last line
+                f.seek(-1, 2)
+                torn = f.read(1) != b"\n"
+            if torn:
+                with path.open("a") as f:
+                    f.write("\n")
+        with path.open("a") as f:
             for r in rows:
                 f.write(json.dumps({k: _jsonable(v) for k, v in r.items()}) + "\n")
             f.flush()

@@ -1,0 +1,124 @@
+"""The experiment runner end to end on a tiny spec: tables, charts, report, resume, failures, bad specs."""
+import json
+
+import pandas as pd
+import pytest
+
+from experiments.report import write_report
+from experiments.runner import run_spec
+from experiments.spec import load_spec, parse_spec
+from hybrid.errors import TerrabenchError
+
+TINY = """
+name = "t"
+datasets = ["fbm"]
+dataset_size = 129
+flights = ["flyover"]
+frames = 3
+policies = ["raster", "raycast", "hybrid"]
+sizes = ["160x90"]
+repeats = 1
+tile_size = 32
+supersample = 1
+image_frames = [1]
+"""
+
+
+@pytest.fixture(scope="module")
+def run(ctx, tmp_path_factory):
+    base = tmp_path_factory.mktemp("runs")
+    folder = run_spec(parse_spec(TINY), base, ctx, progress=False)
+    return base, folder
+
+
+def test_tables_have_expected_rows_and_columns(run):
+    _, folder = run
+    f = pd.read_parquet(folder / "frames.parquet")
+    assert len(f) == 3 * 3 and set(f["policy"]) == {"raster", "raycast", "hybrid"}
+    for col in ("wall_ms", "plan_ms", "draw_ms", "gpu_bytes", "hole_px", "extra_px", "depth_rel_median",
+                "depth_rel_p99", "depth_rel_max", "psnr", "ssim", "flip", "change_ratio", "error_flicker", "tiles"):
+        assert col in f, col
+    assert f["wall_ms"].gt(0).all() and f["gpu_bytes"].gt(0).all()
+    assert f.loc[f["frame"] > 0, "error_flicker"].notna().all()
+    h = f[f["policy"] == "hybrid"]
+    assert (h["tiles_raster"] + h["tiles_raycast"] == h["tiles"]).all()
+    assert f.loc[f["policy"] == "raycast", "rays"].gt(0).all()
+    assert f.loc[f["policy"] == "raster", "triangles"].gt(0).all()
+    t = pd.read_parquet(folder / "tiles.parquet")
+    assert len(t) == int(h["tiles"].sum())                     # one row per hybrid tile and frame
+    assert set(t["strategy"]) <= {"raster", "raycast"} and t["pred_raycast_ms"].notna().all()
+    assert (folder / "images" / "ref-fbm-s0-flyover-160x90-f1.png").exists()
+    assert (folder / "images" / "fbm-s0-flyover-160x90-tau0.6667-triangles-hybrid-f1.strategy.npy").exists()
+
+
+def test_report_and_charts(run, tmp_path):
+    _, folder = run
+    md = write_report(folder, tmp_path)
+    text = md.read_text()
+    for part in ("## Environment", "GL renderer:", "## Reading", "## Summary", "frame_time.png", "speed_vs_accuracy.png",
+                 "Puget Sound terrain: USGS"):
+        assert part in text, part
+    for name in ("frame_time", "gpu_memory", "speed_vs_accuracy", "strategy_mix", "images_fbm_flyover_160x90_f1"):
+        assert (md.parent / f"{name}.png").stat().st_size > 5000 and (md.parent / f"{name}.svg").exists()
+    assert (md.parent / "report.html").read_text().count("<img") >= 5
+
+
+def test_interrupted_run_resumes_without_redoing(run, ctx):
+    base, folder = run
+    journal = folder / "frames.jsonl"
+    lines = journal.read_text().splitlines()
+    kept, dropped = lines[:-2], lines[-2:]                   # as if killed during the last configuration
+    journal.write_text("\n".join(kept) + "\n" + dropped[0][:17])   # and a torn last line
+    before = {(json.loads(l)["config"], json.loads(l)["frame"]): json.loads(l)["wall_ms"] for l in kept}
+    run_spec(parse_spec(TINY), base, ctx, progress=False)
+    rows = [json.loads(l) for l in journal.read_text().splitlines() if l.startswith("{") and l.endswith("}")]
+    keys = [(r["config"], r["frame"]) for r in rows]
+    assert len(keys) == len(set(keys)) == 9                  # nothing twice, nothing missing
+    for r in rows:
+        if (r["config"], r["frame"]) in before:
+            assert r["wall_ms"] == before[(r["config"], r["frame"])]   # finished rows were not redone
+    assert len(pd.read_parquet(folder / "frames.parquet")) == 9
+
+
+def test_failed_configuration_is_recorded(ctx, tmp_path):
+    spec = parse_spec(TINY.replace('datasets = ["fbm"]', 'datasets = ["fbm", "missing.tif"]').replace("frames = 3", "frames = 2")
+                      .replace("image_frames = [1]", "image_frames = [0]"))
+    folder = run_spec(spec, tmp_path, ctx, progress=False)
+    errors = [json.loads(l) for l in (folder / "errors.jsonl").read_text().splitlines()]
+    assert errors and all("missing.tif" in e["error"] for e in errors)
+    assert len(pd.read_parquet(folder / "frames.parquet")) == 3 * 2      # the rest went on
+
+
+def test_other_spec_refuses_existing_folder(run, ctx):
+    base, _ = run
+    with pytest.raises(TerrabenchError, match="different spec"):
+        run_spec(parse_spec(TINY.replace("repeats = 1", "repeats = 2")), base, ctx, progress=False)
+
+
+@pytest.mark.parametrize("text, match", [
+    ("frames = [", "not valid TOML"),
+    ("colour = 1", "unknown keys"),
+    ('policies = ["fastest"]', "unknown policy"),
+    ("taus = [0]", "tau must lie"),
+    ('sizes = ["0x10"]', "width and height"),
+    ("frames = 0", "'frames' must be an integer"),
+    ("tile_size = 100", "power of two"),
+    ('reconstructions = ["cubic"]', "unknown reconstruction"),
+    ("image_frames = [99]", "outside"),
+    ('name = "a/b"', "name must be"),
+])
+def test_bad_specs(text, match):
+    with pytest.raises(TerrabenchError, match=match):
+        parse_spec(text)
+
+
+def test_bundled_specs_parse():
+    for name in ("default", "tiny"):
+        assert load_spec(name).configs()
+    with pytest.raises(TerrabenchError, match="no such spec"):
+        load_spec("nowhere.toml")
+
+
+def test_report_needs_a_run(tmp_path):
+    with pytest.raises(TerrabenchError, match="not a run folder"):
+        write_report(tmp_path, tmp_path)
