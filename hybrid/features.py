@@ -108,6 +108,8 @@ def slab_cells(view: View, lo: np.ndarray, hi: np.ndarray, spacing: float, n: in
     diag = n * np.sqrt(2.0)
     if tan_el == np.inf or dz == 0.0:
         return 0.0 if dz == 0.0 else 1.0
+    if tan_el == 0.0:
+        return float(diag)
     return float(min(dz / (spacing * tan_el), diag))
 
 

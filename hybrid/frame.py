@@ -86,6 +86,7 @@ class SingleStrategyRenderer:
             opts = {**self.draw_options, **options}
             if self.name == "raster":
                 opts.setdefault("leaf_tau", tau)          # the in-tile quadtree follows the frame's bound
+                opts.setdefault("count_culled", False)    # the CPU mirror of GPU culling is a check, not timed
             counters = self.strategy.draw_tiles(target, view, items, **opts) or {}
             self.ctx.finish()
             draw = (time.perf_counter() - t0) * 1e3

@@ -19,7 +19,8 @@ from .planner import TilePlan, plan_frame
 from .pyramid import TilePyramid
 from .residency import ResidencyCache
 from .target import FrameTarget, RenderResult
-from .tiletree import DEFAULT_TAU
+from .pyramid import EDGE_E, EDGE_N, EDGE_S, EDGE_W
+from .tiletree import DEFAULT_TAU, edge_neighbours
 from .view import View
 
 STRATEGY_CODES = {"raster": 1, "raycast": 2}
@@ -35,7 +36,7 @@ class HybridRenderer:
         self.ctx, self.hf, self.policy = ctx, hf, policy
         self.pyramid = pyramid or TilePyramid(hf, tile_size)
         self.strategies = {"raster": make_strategy("raster", ctx, hf), "raycast": make_strategy("raycast", ctx, hf)}
-        self.options = {"raster": {}, "raycast": {"reconstruction": reconstruction, "prepass": prepass}}
+        self.options = {"raster": {"count_culled": False}, "raycast": {"reconstruction": reconstruction, "prepass": prepass}}
         self.model = cost_model or load_cost_model(gl_info(ctx).renderer)
         self.cache = ResidencyCache(budget_bytes)
         self.threshold = threshold
@@ -64,12 +65,32 @@ class HybridRenderer:
     def _opts(self, name: str, tau: float) -> dict:
         return {**self.options[name], "leaf_tau": tau} if name == "raster" else self.options[name]
 
+    def skirts(self, plans: list[TilePlan]) -> dict:
+        """Edge bits of every raster tile that touches a ray-cast tile: skirts close the seam there."""
+        choice = {p.key: p.choice for p in plans}
+        keys = set(choice)
+        out = {}
+        for p in plans:
+            if p.choice != "raster":
+                continue
+            bits = 0
+            for bit, dx, dy in ((EDGE_W, -1, 0), (EDGE_E, 1, 0), (EDGE_S, 0, -1), (EDGE_N, 0, 1)):
+                if any(choice[k] == "raycast" for k in edge_neighbours(keys, p.key, dx, dy, self.pyramid.max_level)):
+                    bits |= bit
+            if bits:
+                out[p.key] = bits
+        return out
+
     def _draw(self, target, view, plans: list[TilePlan], pinned, tau) -> dict:
         counters: dict = {}
+        skirts = self.skirts(plans)
         for name in ("raster", "raycast"):
             items = [(self._resident(name, p.key, pinned), self.tile(p.key), p.selected) for p in plans if p.choice == name]
             if items:
-                c = self.strategies[name].draw_tiles(target, view, items, **self._opts(name, tau)) or {}
+                opts = self._opts(name, tau)
+                if name == "raster" and skirts:
+                    opts = {**opts, "skirts": skirts}
+                c = self.strategies[name].draw_tiles(target, view, items, **opts) or {}
                 for k, v in c.items():
                     if isinstance(v, (int, float, np.integer, np.floating)):
                         counters[k] = counters.get(k, 0) + v

@@ -162,3 +162,24 @@ def select_tiles(pyramid: TilePyramid, view: View, tau: float = DEFAULT_TAU) -> 
 
     visit(pyramid.root())
     return [SelectedTile(k, info[k][0], info[k][1], result_edges[k], info[k][2] == 1) for k in order]
+
+
+def edge_neighbours(keys: set, key: TileKey, dx: int, dy: int, max_level: int) -> list[TileKey]:
+    """Tiles of a selection that touch ``key``'s edge in direction (dx, dy): same level, coarser or finer."""
+    nx, ny = key.tx + dx, key.ty + dy
+    if nx < 0 or ny < 0:
+        return []
+    cov = _covering(keys, TileKey(key.level, nx, ny), max_level)
+    if cov is not None:
+        return [cov]
+    out, frontier = [], [TileKey(key.level, nx, ny)]
+    while frontier and frontier[0].level > 0:
+        nxt = []
+        for k in frontier:
+            for c in k.children():
+                # keep the children on the side that faces key
+                if (dx == 1 and c.tx % 2 == 0) or (dx == -1 and c.tx % 2 == 1) or \
+                        (dy == 1 and c.ty % 2 == 0) or (dy == -1 and c.ty % 2 == 1):
+                    (out if c in keys else nxt).append(c)
+        frontier = nxt
+    return out

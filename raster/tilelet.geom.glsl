@@ -2,7 +2,7 @@
 // Expand a tilelet point into its 8-triangle fan around the centre; on an edge whose neighbour is one
 // level coarser the midpoint is dropped and its two triangles become one (stitching, paper Fig. 5).
 layout(points) in;
-layout(triangle_strip, max_vertices = 24) out;
+layout(triangle_strip, max_vertices = 40) out;
 in Tilelet {
     flat ivec4 node;
     flat int culled;
@@ -15,6 +15,9 @@ uniform vec4 clip_rel;         // tile.clip minus eye: x0, y0, x1, y1
 uniform vec2 uv_origin;        // texture coordinate of tile sample [0, 0]
 uniform vec2 uv_per_cell;      // texture coordinate step per tile cell
 uniform int tile_level;        // pyramid level of the tile
+uniform int n_cells;           // cells a tile side
+uniform int skirt_edges;       // tile edges (W=1, E=2, S=4, N=8) that hang a skirt (they face a ray-cast tile)
+uniform float skirt_bottom;    // z of the skirts' lower edge, eye-relative metres (below the tile's lowest point)
 out vec3 v_rel;
 out vec2 v_uv;
 out float v_h;
@@ -42,6 +45,35 @@ void vert(vec3 p, vec3 bary) {
     EmitVertex();
 }
 
+// One skirt quad below the edge segment a-b, with clipping off across the skirt's own plane (it lies on the
+// tile border, exactly on the clip rectangle's side).
+void skirt_vert(vec3 p, int axis) {
+    v_rel = p;
+    v_h = p.z - origin_rel.z;
+    v_level = tile_level + gs_in[0].node.z;
+    v_bary = vec3(1.0, 0.0, 0.0);
+    gl_ClipDistance[0] = axis == 0 ? 1.0 : p.x - clip_rel.x;
+    gl_ClipDistance[1] = axis == 1 ? 1.0 : p.y - clip_rel.y;
+    gl_ClipDistance[2] = axis == 0 ? 1.0 : clip_rel.z - p.x;
+    gl_ClipDistance[3] = axis == 1 ? 1.0 : clip_rel.w - p.y;
+    gl_Position = view_proj_rel * vec4(p, 1.0);
+    EmitVertex();
+}
+
+void skirt(vec3 a, vec3 b, int axis) {
+    vec2 uva = uv_origin + (a.xy - origin_rel.xy) / spacing * uv_per_cell;
+    vec2 uvb = uv_origin + (b.xy - origin_rel.xy) / spacing * uv_per_cell;
+    v_uv = uva; skirt_vert(a, axis);
+    v_uv = uva; skirt_vert(vec3(a.xy, skirt_bottom), axis);
+    v_uv = uvb; skirt_vert(b, axis);
+    v_uv = uvb; skirt_vert(vec3(b.xy, skirt_bottom), axis);
+    EndPrimitive();
+}
+
+void edge_skirt(vec3 a, vec3 mid, vec3 b, bool dropped, int axis) {
+    if (dropped) skirt(a, b, axis); else { skirt(a, mid, axis); skirt(mid, b, axis); }
+}
+
 void tri(vec3 a, vec3 b, vec3 c) {
     vert(a, vec3(1, 0, 0)); vert(b, vec3(0, 1, 0)); vert(c, vec3(0, 0, 1));
     EndPrimitive();
@@ -58,4 +90,12 @@ void main() {
     if ((drop & 2) != 0) tri(C, SE, NE); else { tri(C, SE, E); tri(C, E, NE); }
     if ((drop & 8) != 0) tri(C, NE, NW); else { tri(C, NE, N); tri(C, N, NW); }
     if ((drop & 1) != 0) tri(C, NW, SW); else { tri(C, NW, W); tri(C, W, SW); }
+    if (skirt_edges != 0) {
+        int span = 2 << gs_in[0].node.z;
+        ivec2 p0 = gs_in[0].node.xy;
+        if ((skirt_edges & 1) != 0 && p0.x == 0) edge_skirt(SW, W, NW, (drop & 1) != 0, 0);
+        if ((skirt_edges & 2) != 0 && p0.x + span == n_cells) edge_skirt(SE, E, NE, (drop & 2) != 0, 0);
+        if ((skirt_edges & 4) != 0 && p0.y == 0) edge_skirt(SW, S, SE, (drop & 4) != 0, 1);
+        if ((skirt_edges & 8) != 0 && p0.y + span == n_cells) edge_skirt(NW, N, NE, (drop & 8) != 0, 1);
+    }
 }

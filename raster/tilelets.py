@@ -38,6 +38,12 @@ def point_records(tset, stitching: bool = True) -> np.ndarray:
     return rec
 
 
+def _set_uniform(prog, name: str, value) -> None:
+    """Set a uniform if the linked program kept it (the compiler drops unused ones)."""
+    if name in prog:
+        prog[name].value = value
+
+
 class TileletTile:
     """GPU objects of one tile (heights texture, point buffer, vertex array) and its CPU error pyramid."""
 
@@ -139,12 +145,15 @@ class TileletStrategy:
     def draw_tiles(self, target, view, items, mode: str | None = None, wireframe: bool = False,
                    stitching: bool = True, morph: bool = True, culling: bool = True,
                    leaf_tau: float | None = None, record_culling: bool = False, count_culled: bool = True,
-                   **_ignored) -> dict:
+                   skirts: dict | None = None, **_ignored) -> dict:
         """Draw (gpu_tile, tile, selected) items front to back into target; returns counters.
 
         Counters: triangles (GL_PRIMITIVES_GENERATED), triangles_cpu (same count from the leaf sets and the
         CPU mirror of the culling test), tilelets, tilelets_culled, lod_ms (CPU leaf selection time).
         count_culled=False skips the CPU mirror (for timing): tilelets_culled and triangles_cpu are then -1.
+        skirts: {tile key: edge bits W=1, E=2, S=4, N=8}: hang vertical skirts from those tile edges down to
+        below the tile's lowest point (the hybrid frame asks for them where a raster tile meets a ray-cast
+        tile, whose edge may lie lower); skirt triangles are counted in ``triangles`` (the GL query) only.
         """
         mode = resolve_mode(self.hf, mode)
         ctx, prog = self.ctx, self.prog
@@ -197,6 +206,9 @@ class TileletStrategy:
                     prog["uv_origin"].value = tuple(((np.asarray(tile.origin[:2]) - hf_origin[:2]) / extent).astype(np.float32))
                     prog["uv_per_cell"].value = tuple((float(tile.spacing) / extent).astype(np.float32))
                     prog["tile_level"].value = int(key[0])
+                    _set_uniform(prog, "n_cells", int(g.n))
+                    _set_uniform(prog, "skirt_edges", int((skirts or {}).get(sel.key, 0)))
+                    _set_uniform(prog, "skirt_bottom", float(tile.zmin - view.eye[2] - 1.0 - 0.01 * tile.spacing))
                     g.heights.use(0)
                     g.vao.render(ctx.POINTS, vertices=g.count)
                     if do_cull and not count_culled and not record_culling:

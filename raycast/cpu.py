@@ -141,6 +141,7 @@ def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="
     t0 = np.full(M, float(tmin))
     t1 = np.full(M, FAR)
     face = np.zeros(M, np.int64)
+    zentry = np.zeros(M, bool)
     dead = np.zeros(M, bool)
     bounds = ((0.0, ext[0], 1, 2), (0.0, ext[1], 4, 8), (zr0, zr1, 0, 0))
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -152,11 +153,14 @@ def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="
             upd = nz & (tn > t0)
             t0 = np.where(upd, tn, t0)
             face = np.where(upd, np.where(D[:, a] > 0, fpos, fneg), face)
+            zentry = np.where(upd, a == 2, zentry)
             t1 = np.where(nz, np.minimum(t1, tf), t1)
             dead |= ~nz & ((O[:, a] < lo) | (O[:, a] > hi))
     dead |= t0 > t1
     outer_entry = (face & int(outer)) != 0
     P = O + t0[:, None] * D
+    # entered through the bottom or top face: exactly on it, so rounding cannot put it outside the slab
+    P[:, 2] = np.where(zentry, np.where(D[:, 2] > 0, zr0, zr1), P[:, 2])
     mx, my = D[:, 0] < 0, D[:, 1] < 0
     Om = O.copy()
     P[:, 0] = np.where(mx, n - P[:, 0], P[:, 0])

@@ -105,6 +105,7 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
     // terrain's outer boundary passes under the surface sheet: it is a miss, not a hit on a wall.
     float t0 = tmin, t1 = RC_FAR;
     int face = 0;
+    bool zentry = false;   // entered through the bottom or top face: put P exactly on it (no rounding above/below)
     if (D.x != 0.0) {
         float ta = -O.x / D.x, tb = (ext.x - O.x) / D.x;
         if (min(ta, tb) > t0) { t0 = min(ta, tb); face = D.x > 0.0 ? 1 : 2; }
@@ -117,7 +118,7 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
     } else if (O.y < 0.0 || O.y > ext.y) return RC_MISS;
     if (D.z != 0.0) {
         float ta = (zr.x - O.z) / D.z, tb = (zr.y - O.z) / D.z;
-        if (min(ta, tb) > t0) { t0 = min(ta, tb); face = 0; }
+        if (min(ta, tb) > t0) { t0 = min(ta, tb); face = 0; zentry = true; }
         t1 = min(t1, max(ta, tb));
     } else if (O.z < zr.x || O.z > zr.y) return RC_MISS;
     if (t0 > t1) return RC_MISS;
@@ -126,6 +127,7 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
     float Nf = float(N);
     bool mx = D.x < 0.0, my = D.y < 0.0;
     vec3 P = O + t0 * D;
+    if (zentry) P.z = D.z > 0.0 ? zr.x : zr.y;
     vec3 Om = O;
     if (mx) { P.x = Nf - P.x; D.x = -D.x; Om.x = Nf - O.x; }
     if (my) { P.y = Nf - P.y; D.y = -D.y; Om.y = Nf - O.y; }

@@ -28,7 +28,7 @@ def test_crack_free_and_unstitched_holes(renderers, name):
     for view in border_views(hf):
         rf = ref.render(view, "shaded")
         for morph in (True, False):
-            res = r.render(view, mode="shaded", morph=morph)
+            res = r.render(view, mode="shaded", morph=morph, count_culled=True)
             assert holes(res, rf, view, hf) == 0, (name, morph)
             assert res.stats["triangles"] == res.stats["triangles_cpu"]
         levels = {int(g) for s in r.strategy.last_sets.values() for g in np.unique(s.global_level)}
@@ -64,7 +64,7 @@ def test_triangle_count_and_culling_only_drops_outside(renderers):
             pos = np.where(n[None] >= 0, hi_b[:, None], lo_b[:, None])
             dist = np.einsum("cpk,pk->cp", pos, n) + planes[None, :, 3]
             assert np.all(dist[gpu].min(axis=1) < 1e-2)     # really outside one plane (float32 margin)
-    off = r.render(view, mode="shaded", culling=False)
+    off = r.render(view, mode="shaded", culling=False, count_culled=True)
     assert off.stats["tilelets_culled"] == 0 and off.stats["triangles"] > on.stats["triangles"]
     assert off.stats["triangles"] == off.stats["triangles_cpu"]
     assert np.array_equal(on.colour, off.colour) and np.array_equal(on.mask, off.mask)
