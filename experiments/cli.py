@@ -42,6 +42,26 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
+def check_tile_size(n) -> int:
+    """--tile-size must be a power of two in [2, 4096] cells."""
+    if not (2 <= n <= 4096) or n & (n - 1):
+        raise TerrabenchError(f"--tile-size must be a power of two in [2, 4096] cells, got {n}")
+    return n
+
+
+def writable_folder(path: Path, what: str) -> Path:
+    """Create the folder if needed and prove it writable with a probe file; else a clear error."""
+    import tempfile
+    path = Path(path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path, prefix=".terrabench-probe-"):
+            pass
+    except OSError as exc:
+        raise TerrabenchError(f"{what} {path} is not a writable folder ({exc.strerror or exc})") from None
+    return path
+
+
 def add_terrain_args(p: argparse.ArgumentParser) -> None:
     """Options naming a terrain: bundled/synthetic name or a file, with scale and spacing overrides."""
     p.add_argument("--dataset", default="puget", help="bundled name (puget, fbm, ridged, spike, cliff, staircase, flat, ridges) or a file")
@@ -193,7 +213,9 @@ def cmd_render(args) -> int:
     folder = out.parent if str(out.parent) else Path(".")
     if not folder.is_dir():
         raise TerrabenchError(f"--out folder {folder} does not exist")
+    writable_folder(folder, "--out folder")
     check_positive("--tau (pixels)", args.tau)
+    check_tile_size(args.tile_size)
     if args.show_strategy and args.method not in ("hybrid", "heuristic", "oracle"):
         raise TerrabenchError("--show-strategy needs a mixed policy: --method hybrid (or heuristic, oracle)")
     hf = load_terrain_arg(args)
@@ -221,6 +243,9 @@ def cmd_run(args) -> int:
     spec = load_spec(args.spec)
     if args.name:
         spec.name = args.name
+    writable_folder(Path(args.runs), "--runs")
+    if args.report:
+        writable_folder(Path(args.reports), "--reports")
     folder = run_spec(spec, Path(args.runs), progress=not args.quiet)
     print(f"run folder: {folder}")
     if args.report:
@@ -232,6 +257,9 @@ def cmd_run(args) -> int:
 def cmd_report(args) -> int:
     """Write the report of a run folder (and the flight animations with --video)."""
     from .report import write_report
+    if not (Path(args.run) / "frames.parquet").exists():
+        raise TerrabenchError(f"{args.run}: not a run folder with results (no frames.parquet); run `terrabench run SPEC` first")
+    writable_folder(Path(args.reports), "--reports")
     path = write_report(Path(args.run), Path(args.reports), args.name, video=args.video)
     print(f"wrote {path} and {path.with_suffix('.html')}")
     return 0
@@ -245,8 +273,17 @@ def cmd_calibrate(args) -> int:
     from hybrid.flight import get_flight
     from hybrid.glcontext import shared_context
     check_positive("--tau (pixels)", args.tau)
+    if not (1 <= args.frames <= 1000):
+        raise TerrabenchError(f"--frames must lie in [1, 1000], got {args.frames}")
+    if not (1 <= args.repeats <= 100):
+        raise TerrabenchError(f"--repeats must lie in [1, 100], got {args.repeats}")
+    check_tile_size(args.tile_size)
+    if args.save and args.save != "user":
+        writable_folder(Path(args.save).parent if str(Path(args.save).parent) else Path("."), "--save folder")
     hf = load_terrain_arg(args)
     w, h = _size(args.size)
+    from hybrid.view import View
+    View([0, 0, 1], [1, 0, 0], 60, w, h)                     # checks the viewport size
     views = []
     for name in args.flights.split(","):
         views += get_flight(name.strip(), hf, frames=args.frames, width=w, height=h).views()
@@ -277,16 +314,56 @@ def cmd_stress(args) -> int:
     w, h = _size(args.size)
     if not (17 <= args.size_samples <= 4097):
         raise TerrabenchError(f"--size-samples must lie in [17, 4097], got {args.size_samples}")
-    out = Path(args.out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise TerrabenchError(f"cannot create --out folder {out}: {exc.strerror or exc}") from None
+    out = writable_folder(Path(args.out), "--out")
+    from hybrid.view import View
+    View([0, 0, 1], [1, 0, 0], 60, w, h)                     # checks the viewport size
     bar = Progress(len(scenes) * len(views) * len(methods), 0, not args.quiet)
     df = run_stress(shared_context(args.device), scenes, views, methods, args.size_samples, w, h, args.tile_size,
                     progress=bar.step)
     bar.close()
     print(f"wrote {write_stress_report(df, out)}")
+    return 0
+
+
+BENCHES = ("raycast", "raster", "hybrid")
+
+
+def cmd_bench(args) -> int:
+    """Run the raster, ray-cast and hybrid benchmarks in one process and print (and save) their tables."""
+    import contextlib
+    import io
+    from hybrid.glcontext import gl_info, shared_context
+    which = _names(args.which, BENCHES, "which")
+    info = gl_info(shared_context(args.device))
+    out = Path(args.out) if args.out else None
+    if out is not None:
+        writable_folder(out.parent if str(out.parent) else Path("."), "--out folder")
+    if not (1 <= args.frames <= 1000):
+        raise TerrabenchError(f"--frames must lie in [1, 1000], got {args.frames}")
+    import os
+    import platform
+    head = (f"# terrabench benchmarks\n\ndevice: {info.renderer} ({info.version}); CPU cores: {os.cpu_count()}; "
+            f"{platform.platform()}\n")
+    print(head)
+    text = [head]
+    for name in which:
+        buf = io.StringIO()
+        with contextlib.redirect_stdout(buf):
+            if name == "raycast":
+                from .bench_raycast import main as run
+                run(["--frames", str(args.frames)])
+            elif name == "raster":
+                from .bench_raster import main as run
+                run()
+            else:
+                from .bench_hybrid import main as run
+                run(["--frames", str(args.frames)])
+        section = f"## {name}\n\n```\n{buf.getvalue().rstrip()}\n```\n"
+        print(section)
+        text.append(section)
+    if out is not None:
+        out.write_text("\n".join(text))
+        print(f"wrote {out}")
     return 0
 
 
@@ -373,6 +450,12 @@ def build_parser() -> argparse.ArgumentParser:
     ps.add_argument("--out", default="reports/stress", help="folder for stress.md, the chart and the table")
     ps.add_argument("--quiet", action="store_true")
     ps.set_defaults(func=cmd_stress)
+
+    pb = sub.add_parser("bench", help="the raster, ray-cast and hybrid benchmarks in one run, with the device named")
+    pb.add_argument("--which", default=",".join(BENCHES), help="comma-separated: " + ", ".join(BENCHES))
+    pb.add_argument("--frames", type=int, default=8, help="frames of each flight")
+    pb.add_argument("--out", default=None, help="also write the tables to this markdown file")
+    pb.set_defaults(func=cmd_bench)
     return p
 
 

@@ -1,0 +1,72 @@
+"""Bad input everywhere a user can reach: one clear message naming the argument, exit code 2 for the CLI,
+a ValueError (TerrabenchError) for the API, and nothing partially written."""
+import numpy as np
+import pytest
+
+from experiments.cli import main
+from hybrid.errors import TerrabenchError
+
+UNWRITABLE = "/proc/terrabench-out"          # not writable, even for root
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["render", "--out", UNWRITABLE + "/a.png"], "does not exist"),
+    (["render", "--out", "/proc/a.png"], "not a writable folder"),
+    (["render", "--out", "OUT/a.png", "--method", "raycast", "--reconstruction", "cubic"], "reconstruction"),
+    (["render", "--out", "OUT/a.png", "--method", "raycast", "--traversal", "teleport"], "traversal"),
+    (["render", "--out", "OUT/a.png", "--method", "raster", "--shadows"], "--method raycast only"),
+    (["render", "--out", "OUT/a.png", "--method", "raycast", "--wireframe"], "raster methods"),
+    (["render", "--out", "OUT/a.png", "--method", "raster", "--show-strategy"], "mixed policy"),
+    (["render", "--out", "OUT/a.png", "--tile-size", "100"], "power of two"),
+    (["render", "--out", "OUT/a.png", "--dataset", "fbm", "--size-samples", "2"], "dataset size"),
+    (["render", "--out", "OUT/a.png", "--method", "raster", "--shading", "sparkly"], "sparkly"),
+    (["run", "OUT/missing.toml"], "no such spec"),
+    (["run", "BADSPEC"], "not valid TOML"),
+    (["run", "tiny", "--runs", UNWRITABLE], "not a writable folder"),
+    (["report", "OUT"], "not a run folder"),
+    (["calibrate", "--tau", "0"], "tau"),
+    (["calibrate", "--flights", "loop"], "unknown flight"),
+    (["calibrate", "--size", "0x0"], "width"),
+    (["calibrate", "--frames", "0"], "--frames"),
+    (["calibrate", "--save", UNWRITABLE + "/c.json"], "not a writable folder"),
+    (["stress", "--scenes", "moon"], "--scenes"),
+    (["stress", "--views", "sideways"], "--views"),
+    (["stress", "--methods", "magic"], "--methods"),
+    (["stress", "--size-samples", "5"], "--size-samples"),
+    (["stress", "--out", UNWRITABLE], "not a writable folder"),
+    (["bench", "--which", "gpu"], "--which"),
+    (["bench", "--frames", "0"], "--frames"),
+    (["info", "OUT/corrupt.tif", "--no-gl"], "not a readable TIFF"),
+    (["info", "--dataset", "fbm", "--size-samples", "99999", "--no-gl"], "dataset size"),
+])
+def test_cli_bad_input(tmp_path, capsys, ctx, argv, match):
+    (tmp_path / "bad.toml").write_text("frames = [")
+    (tmp_path / "corrupt.tif").write_bytes(b"II*\x00garbage")
+    before = set(tmp_path.rglob("*"))
+    argv = [a.replace("OUT", str(tmp_path)).replace("BADSPEC", str(tmp_path / "bad.toml")) for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert match in err and "Traceback" not in err, err
+    assert set(tmp_path.rglob("*")) == before                  # nothing partially written
+
+
+def test_api_bad_input(ctx, puget257):
+    from hybrid.frame import make_renderer
+    from hybrid.hybrid_frame import HybridRenderer
+    from hybrid.pyramid import TilePyramid
+    from hybrid.tiletree import select_tiles
+    from hybrid.view import View, default_view
+    with pytest.raises(TerrabenchError, match="unknown strategy"):
+        make_renderer(ctx, puget257, "magic")
+    with pytest.raises(ValueError, match="tau"):
+        select_tiles(TilePyramid(puget257, 64), default_view(puget257), tau=float("nan"))
+    with pytest.raises(TerrabenchError, match="budget"):
+        HybridRenderer(ctx, puget257, "hybrid", budget_bytes=0)
+    with pytest.raises(TerrabenchError, match="unknown policy"):
+        HybridRenderer(ctx, puget257, "best").plan(default_view(puget257, 32, 18))
+    with pytest.raises(TerrabenchError, match="fov_y"):
+        View([0, 0, 1], [1, 0, 0], float("nan"), 10, 10)
+    r = make_renderer(ctx, puget257, "raycast", tile_size=64)
+    with pytest.raises(ValueError, match="tau"):
+        r.render(default_view(puget257, 32, 18), tau=-1.0)
+    r.release()
