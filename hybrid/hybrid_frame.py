@@ -15,7 +15,7 @@ from .errors import TerrabenchError
 from .frame import make_strategy
 from .glcontext import gl_info
 from .heightfield import HeightField
-from .planner import TilePlan, plan_frame
+from .planner import RasterTriangleEstimator, TilePlan, plan_frame
 from .pyramid import TilePyramid
 from .residency import ResidencyCache
 from .target import FrameTarget, RenderResult
@@ -42,6 +42,7 @@ class HybridRenderer:
         self.threshold = threshold
         self.oracle_repeats = oracle_repeats
         self._tiles: dict = {}
+        self.triangles = RasterTriangleEstimator(self.pyramid)
 
     # --- planning (CPU) ---------------------------------------------------------------------------
     def tile(self, key):
@@ -49,10 +50,6 @@ class HybridRenderer:
         if key not in self._tiles:
             self._tiles[key] = self.pyramid.tile(key)
         return self._tiles[key]
-
-    def triangles(self, key, selected, view, tau) -> int:
-        """Triangles the raster strategy draws for a tile at this view."""
-        return int(self.strategies["raster"].estimate_triangles(self.tile(key), selected, view, tau))
 
     def plan(self, view: View, tau: float = DEFAULT_TAU) -> list[TilePlan]:
         """The frame's tiles with features, predicted costs and choices."""

@@ -60,15 +60,37 @@ def choose(policy: str, features: TileFeatures, predicted: dict, threshold: floa
     raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
 
 
-def plan_frame(pyramid: TilePyramid, view: View, model: CostModel, triangles_fn, policy: str = "hybrid",
+class RasterTriangleEstimator:
+    """Triangles the raster strategy draws for a tile at a view, from its quadtree node errors (CPU only).
+
+    Per tile, the error pyramid is built once (raster.quadtree) and its node errors sorted, so each query
+    is one binary search; the estimate is within 10 % of the exact restricted, stitched count (tested).
+    """
+
+    def __init__(self, pyramid: TilePyramid, beta: float | None = None):
+        from raster.quadtree import DEFAULT_BETA
+        self.pyramid = pyramid
+        self.beta = DEFAULT_BETA if beta is None else beta
+        self._errors: dict = {}
+
+    def __call__(self, key: TileKey, selected: SelectedTile, view: View, tau: float) -> int:
+        """Estimated triangles of tile ``key`` at ``view`` for the error bound tau (pixels)."""
+        from raster.quadtree import error_pyramid, estimate_triangles, split_errors
+        if key not in self._errors:
+            self._errors[key] = split_errors(error_pyramid(self.pyramid.tile(key).heights, self.beta))
+        return estimate_triangles(self._errors[key], tau * selected.distance / view.pixels_per_radian)
+
+
+def plan_frame(pyramid: TilePyramid, view: View, model: CostModel, triangles_fn=None, policy: str = "hybrid",
                tau: float = DEFAULT_TAU, threshold: float = 1.0) -> list[TilePlan]:
     """Selected tiles front to back with features, predicted ms of both strategies and the policy's choice.
 
     ``triangles_fn(key, selected, view, tau)`` gives the raster mesh's triangle count for a tile at this
-    view (``raster.quadtree`` computes it on the CPU, no GL needed).
+    view; by default a RasterTriangleEstimator of the pyramid (CPU only, no GL needed).
     """
     if policy not in POLICIES:
         raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
+    triangles_fn = triangles_fn or RasterTriangleEstimator(pyramid)
     plans = []
     for s in select_tiles(pyramid, view, tau):
         f = tile_features(pyramid, view, s, triangles_fn(s.key, s, view, tau))

@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from .culling import cull_tilelets
-from .quadtree import DEFAULT_BETA, error_pyramid
+from .quadtree import DEFAULT_BETA, error_pyramid, estimate_triangles, split_errors
 from .restriction import TileLod, restrict_frame
 from .shading import MODES, load_glsl, resolve_mode, terrain_texture, texture_nbytes
 
@@ -114,24 +114,15 @@ class TileletStrategy:
         return restrict_frame([TileLod(key, self._cpu_pyramids[key], tol)])[key].triangles
 
     def estimate_triangles(self, tile, selected, view, tau: float | None = None) -> int:
-        """Triangles of one tile at a view from its node errors alone (8 per tilelet, no restriction), O(log n).
-
-        A node at local level m >= 1 splits when its effective error exceeds the tolerance, adding 3 leaves;
-        the sorted effective errors are kept per tile, so a count is one binary search. Restriction and
-        stitching change the true count by a few percent (see tests).
-        """
+        """Triangles of one tile at a view from its node errors alone (quadtree.estimate_triangles), O(log n)."""
         key = _key(tile.key)
         errs = self._sorted_errors.get(key)
         if errs is None:
             if key not in self._cpu_pyramids:
                 self._cpu_pyramids[key] = error_pyramid(np.asarray(tile.heights, dtype=np.float32), self.beta)
-            pyr = self._cpu_pyramids[key]
-            errs = np.sort(np.concatenate([e.ravel() for e in pyr.effective[1:]])) if pyr.top >= 1 else np.zeros(0)
-            self._sorted_errors[key] = errs
+            errs = self._sorted_errors[key] = split_errors(self._cpu_pyramids[key])
         tau = self.tau if tau is None else float(tau)
-        tol = tau * float(selected.distance) / view.pixels_per_radian
-        splits = len(errs) - int(np.searchsorted(errs, tol, side="right"))
-        return 8 * (1 + 3 * splits)
+        return estimate_triangles(errs, tau * float(selected.distance) / view.pixels_per_radian)
 
     def leaf_sets(self, view, items, tau: float | None = None, morph: bool = True) -> dict:
         """Restricted tilelet sets of a frame's items for a view: {key tuple: TileletSet}."""
