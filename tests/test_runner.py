@@ -122,3 +122,16 @@ def test_bundled_specs_parse():
 def test_report_needs_a_run(tmp_path):
     with pytest.raises(TerrabenchError, match="not a run folder"):
         write_report(tmp_path, tmp_path)
+
+
+def test_video_animation(ctx, tmp_path):
+    from PIL import Image
+    spec = parse_spec(TINY.replace('policies = ["raster", "raycast", "hybrid"]', 'policies = ["raster", "raycast"]')
+                      + "video = true\n")
+    folder = run_spec(spec, tmp_path / "runs", ctx, progress=False)
+    md = write_report(folder, tmp_path / "reports", video=True)
+    gifs = list(md.parent.glob("flight_*.gif"))
+    assert len(gifs) == 1 and gifs[0].name in md.read_text()
+    with Image.open(gifs[0]) as im:
+        assert im.n_frames == 3
+        assert im.size == (3 * 160, 90)                     # reference + two methods side by side
