@@ -4,20 +4,14 @@ in vec3 a_pos;                 // (x, y) metres from tile sample [0, 0], z metre
 uniform vec3 origin_rel;       // tile sample [0, 0] minus eye
 uniform mat4 view_proj_rel;
 uniform vec4 clip_rel;         // tile.clip minus eye: x0, y0, x1, y1
-uniform vec2 uv_origin;
-uniform vec2 uv_per_metre;
 uniform int tile_level;
-out vec3 v_rel;
-out vec2 v_uv;
-out float v_h;
+out vec3 v_rel;                // eye-relative position; the fragment shader derives height and uv from it
 flat out int v_level;
 noperspective out vec3 v_bary;
 out float gl_ClipDistance[4];
 void main() {
     vec3 p = origin_rel + a_pos;
     v_rel = p;
-    v_h = a_pos.z;
-    v_uv = uv_origin + a_pos.xy * uv_per_metre;
     v_level = tile_level;
     v_bary = vec3(1.0);
     gl_ClipDistance[0] = p.x - clip_rel.x;

@@ -91,7 +91,8 @@ class MeshStrategyBase:
                     prog["clip_rel"].value = (float(x0 - view.eye[0]), float(y0 - view.eye[1]),
                                               float(x1 - view.eye[0]), float(y1 - view.eye[1]))
                     prog["uv_origin"].value = tuple(((np.asarray(tile.origin[:2]) - hf_origin[:2]) / extent).astype(np.float32))
-                    prog["uv_per_metre"].value = tuple((1.0 / extent).astype(np.float32))
+                    prog["spacing"].value = 1.0          # mesh positions are in metres: one "cell" a metre
+                    prog["uv_per_cell"].value = tuple((1.0 / extent).astype(np.float32))
                     prog["tile_level"].value = int(sel.key.level)
                     g.vao.render(ctx.TRIANGLES)
                     cpu += g.triangles

@@ -1,13 +1,15 @@
 #version 430
-in vec3 v_rel;
-in vec2 v_uv;
-in float v_h;
+in vec3 v_rel;                 // eye-relative position (metres)
 flat in int v_level;
 noperspective in vec3 v_bary;
 uniform int mode;              // 0 texture, 1 shaded, 2 height, 3 level
 uniform bool wireframe;        // darken triangle edges
 uniform sampler2D tex;
 uniform vec2 hrange;
+uniform vec3 origin_rel;       // tile sample [0, 0] minus eye, metres
+uniform float spacing;         // metres between tile samples
+uniform vec2 uv_origin;        // texture coordinate of tile sample [0, 0]
+uniform vec2 uv_per_cell;      // texture coordinate step per tile cell
 out vec4 frag;
 //#include shading.glsl
 
@@ -19,6 +21,8 @@ vec3 level_colour(int l) {
 }
 
 void main() {
+    vec2 v_uv = uv_origin + (v_rel.xy - origin_rel.xy) / spacing * uv_per_cell;
+    float v_h = v_rel.z - origin_rel.z;
     vec3 n = cross(dFdx(v_rel), dFdy(v_rel));
     if (n.z < 0.0) n = -n;
     vec3 c;

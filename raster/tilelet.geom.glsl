@@ -2,7 +2,7 @@
 // Expand a tilelet point into its 8-triangle fan around the centre; on an edge whose neighbour is one
 // level coarser the midpoint is dropped and its two triangles become one (stitching, paper Fig. 5).
 layout(points) in;
-layout(triangle_strip, max_vertices = 40) out;
+layout(triangle_strip, max_vertices = 32) out;
 in Tilelet {
     flat ivec4 node;
     flat int culled;
@@ -18,9 +18,7 @@ uniform int tile_level;        // pyramid level of the tile
 uniform int n_cells;           // cells a tile side
 uniform int skirt_edges;       // tile edges (W=1, E=2, S=4, N=8) that hang a skirt (they face a ray-cast tile)
 uniform float skirt_bottom;    // z of the skirts' lower edge, eye-relative metres (below the tile's lowest point)
-out vec3 v_rel;
-out vec2 v_uv;
-out float v_h;
+out vec3 v_rel;                // eye-relative position; the fragment shader derives height and uv from it
 flat out int v_level;
 noperspective out vec3 v_bary;
 out float gl_ClipDistance[4];
@@ -33,8 +31,6 @@ vec3 post(int c, int r) {
 
 void vert(vec3 p, vec3 bary) {
     v_rel = p;
-    v_h = p.z - origin_rel.z;
-    v_uv = uv_origin + (p.xy - origin_rel.xy) / spacing * uv_per_cell;
     v_level = tile_level + gs_in[0].node.z;
     v_bary = bary;
     gl_ClipDistance[0] = p.x - clip_rel.x;
@@ -49,7 +45,6 @@ void vert(vec3 p, vec3 bary) {
 // tile border, exactly on the clip rectangle's side).
 void skirt_vert(vec3 p, int axis) {
     v_rel = p;
-    v_h = p.z - origin_rel.z;
     v_level = tile_level + gs_in[0].node.z;
     v_bary = vec3(1.0, 0.0, 0.0);
     gl_ClipDistance[0] = axis == 0 ? 1.0 : p.x - clip_rel.x;
@@ -61,12 +56,10 @@ void skirt_vert(vec3 p, int axis) {
 }
 
 void skirt(vec3 a, vec3 b, int axis) {
-    vec2 uva = uv_origin + (a.xy - origin_rel.xy) / spacing * uv_per_cell;
-    vec2 uvb = uv_origin + (b.xy - origin_rel.xy) / spacing * uv_per_cell;
-    v_uv = uva; skirt_vert(a, axis);
-    v_uv = uva; skirt_vert(vec3(a.xy, skirt_bottom), axis);
-    v_uv = uvb; skirt_vert(b, axis);
-    v_uv = uvb; skirt_vert(vec3(b.xy, skirt_bottom), axis);
+    skirt_vert(a, axis);
+    skirt_vert(vec3(a.xy, skirt_bottom), axis);
+    skirt_vert(b, axis);
+    skirt_vert(vec3(b.xy, skirt_bottom), axis);
     EndPrimitive();
 }
 
@@ -79,17 +72,23 @@ void tri(vec3 a, vec3 b, vec3 c) {
     EndPrimitive();
 }
 
+void pair(vec3 a, vec3 m, vec3 c, vec3 b) {
+    vert(a, vec3(1, 0, 0)); vert(m, vec3(0, 1, 0)); vert(c, vec3(0, 0, 1)); vert(b, vec3(1, 0, 0));
+    EndPrimitive();
+}
+
 void main() {
     if (gs_in[0].culled != 0) return;
     int drop = gs_in[0].node.w;   // W=1, E=2, S=4, N=8
     vec3 C = post(1, 1);
     vec3 SW = post(0, 0), S = post(1, 0), SE = post(2, 0), E = post(2, 1);
     vec3 NE = post(2, 2), N = post(1, 2), NW = post(0, 2), W = post(0, 1);
-    // counter-clockwise seen from above
-    if ((drop & 4) != 0) tri(C, SW, SE); else { tri(C, SW, S); tri(C, S, SE); }
-    if ((drop & 2) != 0) tri(C, SE, NE); else { tri(C, SE, E); tri(C, E, NE); }
-    if ((drop & 8) != 0) tri(C, NE, NW); else { tri(C, NE, N); tri(C, N, NW); }
-    if ((drop & 1) != 0) tri(C, NW, SW); else { tri(C, NW, W); tri(C, W, SW); }
+    // counter-clockwise seen from above; an edge's two triangles (C, a, m) and (C, m, b) go out as one
+    // strip a, m, C, b (4 vertices instead of 6; the strip's odd triangle is (C, m, b) in GL's order)
+    if ((drop & 4) != 0) tri(C, SW, SE); else pair(SW, S, C, SE);
+    if ((drop & 2) != 0) tri(C, SE, NE); else pair(SE, E, C, NE);
+    if ((drop & 8) != 0) tri(C, NE, NW); else pair(NE, N, C, NW);
+    if ((drop & 1) != 0) tri(C, NW, SW); else pair(NW, W, C, SW);
     if (skirt_edges != 0) {
         int span = 2 << gs_in[0].node.z;
         ivec2 p0 = gs_in[0].node.xy;
