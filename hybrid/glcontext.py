@@ -36,12 +36,17 @@ class GLInfo:
         return "llvmpipe" in r or "softpipe" in r or "swrast" in r
 
 
+_EGL = None
+_FUNCTIONS: dict = {}
+
+
 def _proc_address(name: bytes) -> int:
-    lib = ctypes.util.find_library("EGL") or "libEGL.so.1"
-    egl = ctypes.CDLL(lib)
-    egl.eglGetProcAddress.restype = ctypes.c_void_p
-    egl.eglGetProcAddress.argtypes = [ctypes.c_char_p]
-    return egl.eglGetProcAddress(name) or 0
+    global _EGL
+    if _EGL is None:
+        _EGL = ctypes.CDLL(ctypes.util.find_library("EGL") or "libEGL.so.1")
+        _EGL.eglGetProcAddress.restype = ctypes.c_void_p
+        _EGL.eglGetProcAddress.argtypes = [ctypes.c_char_p]
+    return _EGL.eglGetProcAddress(name) or 0
 
 
 def _set_clip_control() -> None:
@@ -120,10 +125,13 @@ def shared_context(device: int | None = None):
 
 
 def _gl_function(name: bytes, *argtypes):
-    addr = _proc_address(name)
-    if not addr:
-        raise GLContextError(f"the GL driver has no {name.decode()}")
-    return ctypes.CFUNCTYPE(None, *argtypes)(addr)
+    key = (name, argtypes)
+    if key not in _FUNCTIONS:
+        addr = _proc_address(name)
+        if not addr:
+            raise GLContextError(f"the GL driver has no {name.decode()}")
+        _FUNCTIONS[key] = ctypes.CFUNCTYPE(None, *argtypes)(addr)
+    return _FUNCTIONS[key]
 
 
 def depth32f_texture(ctx, size: tuple[int, int]):
