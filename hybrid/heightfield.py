@@ -95,13 +95,17 @@ class HeightField:
         z = self.origin[2] + self.sample_bilinear(i, j)
         return np.stack([x, y, z], axis=-1)
 
-    def sample_bilinear(self, i, j) -> np.ndarray:
-        """Bilinearly interpolated height (metres, relative to origin z) at fractional row i, column j."""
+    def _cell(self, i, j):
+        """Cell corner (i0, j0) and fractions (fi, fj) of fractional sample positions, clamped to the grid."""
         i = np.clip(np.asarray(i, dtype=np.float64), 0, self.rows - 1)
         j = np.clip(np.asarray(j, dtype=np.float64), 0, self.cols - 1)
         i0 = np.minimum(np.floor(i).astype(np.int64), self.rows - 2)
         j0 = np.minimum(np.floor(j).astype(np.int64), self.cols - 2)
-        fi, fj = i - i0, j - j0
+        return i0, j0, i - i0, j - j0
+
+    def sample_bilinear(self, i, j) -> np.ndarray:
+        """Bilinearly interpolated height (metres, relative to origin z) at fractional row i, column j."""
+        i0, j0, fi, fj = self._cell(i, j)
         h = self.heights
         a, b = h[i0, j0], h[i0, j0 + 1]
         c, d = h[i0 + 1, j0], h[i0 + 1, j0 + 1]
@@ -109,11 +113,7 @@ class HeightField:
 
     def sample_triangles(self, i, j) -> np.ndarray:
         """Height (metres, relative to origin z) of the triangulated surface (SW-NE diagonal) at row i, column j."""
-        i = np.clip(np.asarray(i, dtype=np.float64), 0, self.rows - 1)
-        j = np.clip(np.asarray(j, dtype=np.float64), 0, self.cols - 1)
-        i0 = np.minimum(np.floor(i).astype(np.int64), self.rows - 2)
-        j0 = np.minimum(np.floor(j).astype(np.int64), self.cols - 2)
-        fi, fj = i - i0, j - j0
+        i0, j0, fi, fj = self._cell(i, j)
         h = self.heights
         h00, h01 = h[i0, j0].astype(np.float64), h[i0, j0 + 1]
         h10, h11 = h[i0 + 1, j0], h[i0 + 1, j0 + 1]

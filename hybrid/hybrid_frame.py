@@ -93,23 +93,9 @@ class HybridRenderer:
                         counters[k] = counters.get(k, 0) + v
         return counters
 
-    def time_tile(self, view: View, plan: TilePlan, name: str, target: FrameTarget, pinned=frozenset(),
+    def time_draw(self, view: View, plans: list[TilePlan], name: str, target: FrameTarget, pinned=frozenset(),
                   tau: float = DEFAULT_TAU) -> float:
-        """Median wall milliseconds of drawing one tile alone with one strategy (ctx.finish() around it)."""
-        item = [(self._resident(name, plan.key, pinned), self.tile(plan.key), plan.selected)]
-        times = []
-        for _ in range(self.oracle_repeats):
-            target.clear()
-            target.use()
-            self.ctx.finish()
-            t0 = time.perf_counter()
-            self.strategies[name].draw_tiles(target, view, item, **self._opts(name, tau))
-            self.ctx.finish()
-            times.append((time.perf_counter() - t0) * 1e3)
-        return float(np.median(times))
-
-    def time_frame(self, view: View, plans: list[TilePlan], name: str, target: FrameTarget, pinned, tau) -> float:
-        """Median wall ms of drawing all the frame's tiles with one strategy in one call."""
+        """Median wall ms of drawing the plans' tiles with one strategy in one call (ctx.finish() around it)."""
         items = [(self._resident(name, p.key, pinned), self.tile(p.key), p.selected) for p in plans]
         times = []
         for _ in range(self.oracle_repeats):
@@ -138,12 +124,12 @@ class HybridRenderer:
             if measure or self.policy == "oracle":
                 pinned |= {(n, p.key) for p in plans for n in ("raster", "raycast")}
                 for p in plans:
-                    p.measured = {n: self.time_tile(view, p, n, target, pinned, tau) for n in ("raster", "raycast")}
+                    p.measured = {n: self.time_draw(view, [p], n, target, pinned, tau) for n in ("raster", "raycast")}
                     if self.policy == "oracle":
                         p.choice = min(p.measured, key=p.measured.get)
             if measure and plans:
                 for n in ("raster", "raycast"):
-                    together[f"together_{n}_ms"] = self.time_frame(view, plans, n, target, pinned, tau)
+                    together[f"together_{n}_ms"] = self.time_draw(view, plans, n, target, pinned, tau)
             # upload everything first so the timed frame measures drawing only
             for p in plans:
                 self._resident(p.choice, p.key, pinned)
