@@ -2,8 +2,8 @@
 
 Renders the frames of a flight with hybrid.frame.SingleStrategyRenderer('raycast') and reports, per
 configuration, rays/s, mean steps per ray and ms/frame. Times are wall clock around ctx.finish() of the
-draw calls only (tile selection, uploads and read-back excluded), from a pass with statistics off (no atomics);
-ray and step counts come from a second pass with statistics on. On llvmpipe timings are noisy.
+draw calls plus tile selection (uploads and read-back excluded), from a pass with statistics off; ray
+and step counts come from a second pass with statistics on (exact). On llvmpipe timings are noisy.
 
     python -m experiments.bench_raycast [--frames 8] [--width 640] [--height 360] [--dataset puget]
 """

@@ -18,6 +18,8 @@ from .maxmip import MaxMipBuilder, level_count, maxmip_nbytes
 from .options import MODES, RECONSTRUCTIONS, CastOptions, default_max_steps
 
 STAT_FIELDS = ("rays", "hits", "steps", "max_steps", "capped", "shadow_rays", "shadow_steps", "shadow_capped")
+STAT_SLOTS = 64          # copies of each tile's counters (one per 64x64 screen bin, modulo), as in raycast.frag.glsl
+STAT_STRIDE = 64         # bytes between copies (16 uints: one cache line, 8 used)
 
 
 def _cube_back_face_triangles() -> np.ndarray:
@@ -107,7 +109,7 @@ class RaycastStrategy:
             self.texture.build_mipmaps()
             self.texture.anisotropy = 1.0   # anisotropy is done in the shader (aniso_texture)
             self.texture.repeat_x = self.texture.repeat_y = False
-        self.stats_buf = ctx.buffer(reserve=32 * 64)
+        self.stats_buf = ctx.buffer(reserve=STAT_SLOTS * STAT_STRIDE)
         self.ids = None
         self._next_id = 1
         self.grid: _Grid | None = None
@@ -219,7 +221,8 @@ class RaycastStrategy:
             _set(prog, "g_spacing", float(hf.spacing))
             _set(prog, "g_max_steps", opts.max_steps or default_max_steps(grid.n))
         n_items = len(items)
-        need = 32 * max(n_items, 1)
+        _set(prog, "stat_bins_x", (W + 63) // 64)
+        need = STAT_SLOTS * STAT_STRIDE * max(n_items, 1)
         if self.stats_buf.size < need:
             self.stats_buf.release()
             self.stats_buf = ctx.buffer(reserve=need)
@@ -289,7 +292,10 @@ class RaycastStrategy:
         ctx.memory_barrier()
         counters = {"rays": 0, "hits": 0, "steps": 0, "max_steps": 0, "capped": 0}
         if opts.stats and n_items:
-            st = np.frombuffer(self.stats_buf.read(size=32 * n_items), dtype=np.uint32).reshape(n_items, 8).astype(np.int64)
+            raw = np.frombuffer(self.stats_buf.read(size=STAT_SLOTS * STAT_STRIDE * n_items), dtype=np.uint32)
+            raw = raw.reshape(n_items, STAT_SLOTS, STAT_STRIDE // 4)[:, :, :len(STAT_FIELDS)].astype(np.int64)
+            st = raw.sum(axis=1)
+            st[:, 3] = raw[:, :, 3].max(axis=1)
             self.last_tile_stats = st
             tot = st.sum(axis=0)
             counters = {f: int(tot[i]) for i, f in enumerate(STAT_FIELDS)}

@@ -21,7 +21,7 @@ class CastOptions:
     mode: shading mode (None = 'texture' when the terrain has one, else 'shaded').
     shadows: cast a shadow ray toward LIGHT_DIR from every hit (whole terrain, primary ray's level).
     max_steps: step cap per ray (None = 8 N + 64 for a grid of N cells); capped rays are misses.
-    stats: count rays, hits, steps and capped rays per tile with atomics.
+    stats: count rays, hits, steps and capped rays per tile, exactly (summed per subgroup, then atomics).
     heat_max: steps mapped to the top of the 'steps' heat map.
     """
 

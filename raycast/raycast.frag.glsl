@@ -3,6 +3,11 @@
 // Defines (set by raycast.caster): RECON, NAIVE, LOD, PREPASS, STATS, SHADOWS, MODE
 // MODE: 0 texture (textureGrad), 1 texture_plain (texture), 2 shaded, 3 height, 4 normal, 5 depth,
 //       6 level, 7 steps
+#if STATS
+#extension GL_ARB_shader_ballot : enable
+#extension GL_ARB_gpu_shader_int64 : enable
+#extension GL_ARB_ES3_1_compatibility : enable
+#endif
 //#include traverse.glsl
 
 // --- view ---
@@ -29,6 +34,7 @@ uniform float lod_k;           // spacing * K / tau (metres), for LOD
 uniform int max_steps;
 uniform int outer;             // tile box sides on the terrain's outer boundary (W 1, E 2, S 4, N 8)
 uniform int tile_index;        // index into the statistics array
+uniform int stat_bins_x;       // 64-pixel screen bins a row (statistics slots follow the rasterizer's bins)
 uniform uint tile_id;          // pre-pass ID
 uniform usampler2D ids;        // pre-pass target
 // --- shading ---
@@ -46,7 +52,53 @@ uniform vec2 g_tile_off;       // tile origin in level-0 terrain texels
 uniform float g_spacing;       // terrain spacing, metres
 uniform int g_max_steps;
 
+#if STATS
+// STAT_SLOTS copies of each tile's 8 counters, 16 uints (a cache line) apart; a fragment adds to the copy of
+// its 64x64-pixel screen bin, so rasterizer threads (which take whole bins) rarely share a counter line.
+// The caster sums (and maxes) the copies.
+#define STAT_SLOTS 64
 layout(std430, binding = 0) buffer Stats { uint stats[]; };
+
+#if defined(GL_ARB_shader_ballot) && defined(GL_ARB_gpu_shader_int64)
+// Counters summed over the subgroup first (ballot + readInvocation), then one atomic per counter per
+// subgroup from its lowest live invocation: exact counts without serialising every fragment on the atomics.
+#if defined(GL_ARB_ES3_1_compatibility) || __VERSION__ >= 450
+#define RC_LIVE (!gl_HelperInvocation)
+#else
+#define RC_LIVE true
+#endif
+uint rc_count(uint64_t m) { uvec2 v = unpackUint2x32(m); return uint(bitCount(v.x) + bitCount(v.y)); }
+
+// Adds one ray (and `flag0`, `flag1` if set, and v to the sum and max) of every live invocation to
+// stats[i_ray], stats[i_f0], stats[i_f1], stats[i_sum], stats[i_max] (an index < 0 is skipped).
+void stats_add(int i_ray, int i_f0, bool flag0, int i_f1, bool flag1, int i_sum, int i_max, uint v) {
+    uint64_t live = ballotARB(RC_LIVE);
+    uint n = rc_count(live), n0 = rc_count(ballotARB(RC_LIVE && flag0)), n1 = rc_count(ballotARB(RC_LIVE && flag1));
+    uint vs = 0u, vm = 0u;
+    for (uint i = 0u; i < gl_SubGroupSizeARB; i++) {
+        uint x = readInvocationARB(v, i);
+        if (((live >> i) & 1ul) != 0ul) { vs += x; vm = max(vm, x); }
+    }
+    uvec2 lv = unpackUint2x32(live);
+    uint first = lv.x != 0u ? uint(findLSB(lv.x)) : 32u + uint(findLSB(lv.y));
+    if (gl_SubGroupInvocationARB == first) {
+        atomicAdd(stats[i_ray], n);
+        if (i_f0 >= 0 && n0 > 0u) atomicAdd(stats[i_f0], n0);
+        if (i_f1 >= 0 && n1 > 0u) atomicAdd(stats[i_f1], n1);
+        if (vs > 0u) atomicAdd(stats[i_sum], vs);
+        if (i_max >= 0) atomicMax(stats[i_max], vm);
+    }
+}
+#else
+void stats_add(int i_ray, int i_f0, bool flag0, int i_f1, bool flag1, int i_sum, int i_max, uint v) {
+    atomicAdd(stats[i_ray], 1u);
+    if (i_f0 >= 0 && flag0) atomicAdd(stats[i_f0], 1u);
+    if (i_f1 >= 0 && flag1) atomicAdd(stats[i_f1], 1u);
+    atomicAdd(stats[i_sum], v);
+    if (i_max >= 0) atomicMax(stats[i_max], v);
+}
+#endif
+#endif
 
 layout(location = 0) out vec4 frag;
 layout(location = 1) out vec4 aux;   // (hit x, hit y in tile texels, hit z in metres, steps) for tests
@@ -124,12 +176,9 @@ void main() {
     int r = rc_traverse(hmap, mmap, n_cells, n_levels, ext, zr, eye_tex, D, near_plane, 0, spacing, lod_k,
                         max_steps, outer, Q, cell, lev, hc, steps);
 #if STATS
-    int base = tile_index * 8;
-    atomicAdd(stats[base + 0], 1u);
-    atomicAdd(stats[base + 2], uint(steps));
-    atomicMax(stats[base + 3], uint(steps));
-    if (r == RC_CAPPED) atomicAdd(stats[base + 4], 1u);
-    if (r == RC_HIT) atomicAdd(stats[base + 1], 1u);
+    ivec2 bin = ivec2(gl_FragCoord.xy) >> 6;
+    int base = (tile_index * STAT_SLOTS + ((bin.x + bin.y * stat_bins_x) & (STAT_SLOTS - 1))) * 16;
+    stats_add(base + 0, base + 1, r == RC_HIT, base + 4, r == RC_CAPPED, base + 2, base + 3, uint(steps));
 #endif
     if (r != RC_HIT) discard;
     vec3 rel = origin_rel + vec3(Q.xy * spacing, Q.z);
@@ -153,9 +202,7 @@ void main() {
                              g_max_steps, 15, Qs, cs, ls, hs, ssteps);
         if (rs != RC_MISS) lit = 0.0;
 #if STATS
-        atomicAdd(stats[base + 5], 1u);
-        atomicAdd(stats[base + 6], uint(ssteps));
-        if (rs == RC_CAPPED) atomicAdd(stats[base + 7], 1u);
+        stats_add(base + 5, base + 7, rs == RC_CAPPED, -1, false, base + 6, -1, uint(ssteps));
 #endif
     }
 #endif

@@ -144,42 +144,53 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
 #else
     int l = ltop;
 #endif
-    while (steps < max_steps) {
-        if (P.x >= hi.x || P.y >= hi.y) return RC_MISS;
-        if (D.z >= 0.0 && P.z > zr.y) return RC_MISS;
-        steps++;
-        float s = float(1 << l);
-        vec2 ij = floor(P.xy / s);
-        int nl = N >> l;
+    // Two nested loops: the inner one only steps texels (cheap: one max-mip fetch a step) and stops at a
+    // level-0 (final) texel whose box the ray enters; the outer one intersects that cell's surface. On a SIMD
+    // rasterizer every statement of a loop body runs for all lanes, so the costly cell test (four height
+    // fetches and the reconstruction) is kept out of the per-step body. Same steps, same order, same floats.
+    float s, H, dt;
+    vec2 ij, e;
+    ivec2 ri;
+    bool cx, cy, cz;
+    vec3 X;
+    for (;;) {
+        bool cand = false;
+        while (steps < max_steps) {
+            if (P.x >= hi.x || P.y >= hi.y) return RC_MISS;
+            if (D.z >= 0.0 && P.z > zr.y) return RC_MISS;
+            steps++;
+            s = float(1 << l);
+            ij = floor(P.xy / s);
+            int nl = N >> l;
 #if LOD
-        // coherent LOD: a texel whose parent is already final belongs to the parent's level
-        while (l < ltop) {
-            vec2 pij = floor(ij * 0.5);
-            ivec2 pri = ivec2(mx ? (nl >> 1) - 1 - int(pij.x) : int(pij.x), my ? (nl >> 1) - 1 - int(pij.y) : int(pij.y));
-            float PH = texelFetch(mmap, pri, l + 1).r;
-            if (!rc_lod_final(l + 1, pij, PH, Om, zr.x, spacing, lod_k)) break;
-            l++; s *= 2.0; ij = pij; nl >>= 1;
-        }
+            // coherent LOD: a texel whose parent is already final belongs to the parent's level
+            while (l < ltop) {
+                vec2 pij = floor(ij * 0.5);
+                ivec2 pri = ivec2(mx ? (nl >> 1) - 1 - int(pij.x) : int(pij.x), my ? (nl >> 1) - 1 - int(pij.y) : int(pij.y));
+                float PH = texelFetch(mmap, pri, l + 1).r;
+                if (!rc_lod_final(l + 1, pij, PH, Om, zr.x, spacing, lod_k)) break;
+                l++; s *= 2.0; ij = pij; nl >>= 1;
+            }
 #endif
-        ivec2 ri = ivec2(mx ? nl - 1 - int(ij.x) : int(ij.x), my ? nl - 1 - int(ij.y) : int(ij.y));
-        float H = texelFetch(mmap, ri, l).r;
-        vec2 e = (ij + 1.0) * s;
-        float dtx = D.x > 0.0 ? (e.x - P0.x) / D.x : RC_FAR;
-        float dty = D.y > 0.0 ? (e.y - P0.y) / D.y : RC_FAR;
-        float dtz = D.z < 0.0 ? (zr.x - P0.z) / D.z : (D.z > 0.0 ? (zr.y - P0.z) / D.z : RC_FAR);
-        float dt = max(min(min(dtx, dty), dtz), sP);
-        bool cx = dtx <= dt, cy = dty <= dt, cz = dtz <= dt;
-        vec3 X = P0 + dt * D;
-        if (cx) X.x = e.x;
-        if (cy) X.y = e.y;
-        if (cz) X.z = D.z < 0.0 ? zr.x : zr.y;
-        bool boxhit = D.z >= 0.0 ? P.z <= H : X.z <= H;
-        if (boxhit) {
-            bool fin = l <= lmin;
+            ri = ivec2(mx ? nl - 1 - int(ij.x) : int(ij.x), my ? nl - 1 - int(ij.y) : int(ij.y));
+            H = texelFetch(mmap, ri, l).r;
+            e = (ij + 1.0) * s;
+            float dtx = D.x > 0.0 ? (e.x - P0.x) / D.x : RC_FAR;
+            float dty = D.y > 0.0 ? (e.y - P0.y) / D.y : RC_FAR;
+            float dtz = D.z < 0.0 ? (zr.x - P0.z) / D.z : (D.z > 0.0 ? (zr.y - P0.z) / D.z : RC_FAR);
+            dt = max(min(min(dtx, dty), dtz), sP);
+            cx = dtx <= dt; cy = dty <= dt; cz = dtz <= dt;
+            X = P0 + dt * D;
+            if (cx) X.x = e.x;
+            if (cy) X.y = e.y;
+            if (cz) X.z = D.z < 0.0 ? zr.x : zr.y;
+            bool boxhit = D.z >= 0.0 ? P.z <= H : X.z <= H;
+            if (boxhit) {
+                bool fin = l <= lmin;
 #if LOD
-            fin = fin || rc_lod_final(l, ij, H, Om, zr.x, spacing, lod_k);
+                fin = fin || rc_lod_final(l, ij, H, Om, zr.x, spacing, lod_k);
 #endif
-            if (!fin) {
+                if (fin) { cand = true; break; }
                 if (D.z < 0.0) {
                     float sa = (H - P0.z) / D.z;
                     if (sa > sP) { sP = sa; P = P0 + sa * D; P.xy = min(P.xy, e); moved = true; }
@@ -187,22 +198,32 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
                 l--;
                 continue;
             }
-            vec3 A = P, B = X;
-            if (mx) { A.x = Nf - A.x; B.x = Nf - B.x; }
-            if (my) { A.y = Nf - A.y; B.y = Nf - B.y; }
-            ivec2 c0 = ri * (1 << l);
-            int S = 1 << l;
-            vec4 h4 = vec4(texelFetch(hmap, c0, 0).r, texelFetch(hmap, c0 + ivec2(S, 0), 0).r,
-                           texelFetch(hmap, c0 + ivec2(0, S), 0).r, texelFetch(hmap, c0 + ivec2(S, S), 0).r);
-            float u = rc_cell_hit(A, B, vec2(c0), float(S), h4, H);
-            if (u >= 0.0) {
-                if (u == 0.0 && outer_entry && !moved) return RC_MISS;
-                vec3 Q = mix(A, B, u);
-                if (Q.x > ext.x + 1e-4 || Q.y > ext.y + 1e-4) return RC_MISS;   // first hit lies in the padding
-                Q.xy = clamp(Q.xy, vec2(0.0), ext);
-                hit = Q; cell = ri; level = l; hc = h4;
-                return RC_HIT;
-            }
+            if (cz) return RC_MISS;
+            P = X;
+            sP = dt;
+            moved = true;
+#if !NAIVE
+            bool up = (cx && ((int(ij.x) + 1) & 1) == 0) || (cy && ((int(ij.y) + 1) & 1) == 0);
+            if (up) l = min(l + 1, ltop);
+#endif
+        }
+        if (!cand) return RC_CAPPED;
+        // the ray enters the box of final texel ri at level l between P and X: intersect the cell's surface
+        vec3 A = P, B = X;
+        if (mx) { A.x = Nf - A.x; B.x = Nf - B.x; }
+        if (my) { A.y = Nf - A.y; B.y = Nf - B.y; }
+        ivec2 c0 = ri * (1 << l);
+        int S = 1 << l;
+        vec4 h4 = vec4(texelFetch(hmap, c0, 0).r, texelFetch(hmap, c0 + ivec2(S, 0), 0).r,
+                       texelFetch(hmap, c0 + ivec2(0, S), 0).r, texelFetch(hmap, c0 + ivec2(S, S), 0).r);
+        float u = rc_cell_hit(A, B, vec2(c0), float(S), h4, H);
+        if (u >= 0.0) {
+            if (u == 0.0 && outer_entry && !moved) return RC_MISS;
+            vec3 Q = mix(A, B, u);
+            if (Q.x > ext.x + 1e-4 || Q.y > ext.y + 1e-4) return RC_MISS;   // first hit lies in the padding
+            Q.xy = clamp(Q.xy, vec2(0.0), ext);
+            hit = Q; cell = ri; level = l; hc = h4;
+            return RC_HIT;
         }
         if (cz) return RC_MISS;
         P = X;
@@ -213,5 +234,4 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
         if (up) l = min(l + 1, ltop);
 #endif
     }
-    return RC_CAPPED;
 }
