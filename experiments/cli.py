@@ -291,6 +291,8 @@ def cmd_calibrate(args) -> int:
     cal = calibrate(ctx, hf, views, args.tau, args.tile_size, args.repeats, args.holdout)
     print(cal.model.explain())
     if args.save:
+        if args.key:
+            cal.model.renderer = args.key
         print(f"saved to {save_cost_model(cal.model, Path(args.save) if args.save != 'user' else None)}")
     return 0
 
@@ -437,6 +439,8 @@ def build_parser() -> argparse.ArgumentParser:
     pc.add_argument("--repeats", type=int, default=3, help="timed draws per tile and strategy (median)")
     pc.add_argument("--holdout", type=float, default=0.3, help="share of tiles held out to measure the fit")
     pc.add_argument("--save", default="user", help="'user' (default costs file), a path, or '' for no save")
+    pc.add_argument("--key", default=None, help="save under this key instead of the full GL renderer string "
+                    "(the shipped defaults use a substring such as 'llvmpipe')")
     pc.set_defaults(func=cmd_calibrate)
 
     from .stress import METHODS as SM, SCENES as SS, VIEWS as SV

@@ -42,7 +42,7 @@ def time_tiles(ctx, hf: HeightField, views: list[View], tau: float = DEFAULT_TAU
                            for n in ("raster", "raycast")})
             for row in rows:
                 feats.append(TileFeatures(row["f_pixels"], row["f_triangles"], row["f_slab_cells"], row["level"],
-                                          row["f_distance"]))
+                                          row["f_distance"], row["f_visible"], row["f_surface_pixels"]))
                 ras.append(row["meas_raster_ms"])
                 ray.append(row["meas_raycast_ms"])
     finally:

@@ -2,8 +2,8 @@
 
 Two linear models with non-negative coefficients, simple enough to print and explain:
 
-    raster_ms  = r0 + r_tri * triangles + r_px * pixels
-    raycast_ms = c0 + c_px * pixels + c_step * pixels * log2(1 + slab_cells)
+    raster_ms  = r0 + r_tri * triangles + r_vis * triangles * visible + r_px * pixels
+    raycast_ms = c0 + c_px * pixels + c_hit * surface_pixels + c_step * pixels * log2(1 + slab_cells)
 
 per tile, plus each strategy's per-frame overhead (state setup, the raster path's frame-level quadtree
 restriction, the ray caster's pre-pass target and counters) paid once when any tile uses it:
@@ -31,15 +31,16 @@ from .errors import TerrabenchError
 from .features import TileFeatures
 from .nnls import nnls
 
-TERMS = {"raster": ("const", "triangles", "pixels"), "raycast": ("const", "pixels", "pixel_steps")}
+TERMS = {"raster": ("const", "triangles", "visible_triangles", "pixels"),
+         "raycast": ("const", "pixels", "surface_pixels", "pixel_steps")}
 
 
 def term_values(f: TileFeatures, strategy: str) -> np.ndarray:
     """The model's input terms for one tile and strategy."""
     if strategy == "raster":
-        return np.array([1.0, f.triangles, f.pixels])
+        return np.array([1.0, f.triangles, f.triangles * f.visible, f.pixels])
     if strategy == "raycast":
-        return np.array([1.0, f.pixels, f.pixels * np.log2(1.0 + f.slab_cells)])
+        return np.array([1.0, f.pixels, f.surface_pixels, f.pixels * np.log2(1.0 + f.slab_cells)])
     raise TerrabenchError(f"unknown strategy {strategy!r} for the cost model; choose raster or raycast")
 
 
@@ -75,7 +76,7 @@ class CostModel:
             return f"{s:8s} ms = " + " + ".join(parts)
         lines = [f"cost model for {self.renderer} ({self.source or 'unsaved'}, {self.tiles} tiles)",
                  fmt("raster"), fmt("raycast"),
-                 "  pixel_steps = pixels * log2(1 + slab_cells)",
+                 "  pixel_steps = pixels * log2(1 + slab_cells); visible_triangles = triangles * visible",
                  f"  per-frame overhead: raster {self.overhead.get('raster', 0):.3g} ms, "
                  f"raycast {self.overhead.get('raycast', 0):.3g} ms"]
         for s, e in self.fit_error.items():
@@ -176,6 +177,7 @@ def _from_dict(d: dict, source: str) -> CostModel:
                       int(d.get("tiles", 0)), source, {"raster": 0.0, "raycast": 0.0, **d.get("overhead", {})})
         for s in ("raster", "raycast"):
             for t in TERMS[s]:
+                getattr(m, s).setdefault(t, 0.0)     # a model saved before a term existed has it at 0
                 float(getattr(m, s)[t])
         return m
     except (KeyError, TypeError, ValueError) as exc:

@@ -20,6 +20,10 @@ class TileFeatures:
     slab_cells: level-0-of-the-tile cells a ray crosses inside the tile's height slab at this view's
       elevation angle, (zmax - zmin) / (spacing * tan(elevation)), at most the tile's diagonal; the
       maximum-mipmap traversal takes about log2(1 + slab_cells) steps more per ray as it grows.
+    visible: share of the AABB's projection (cut at the near plane) inside the viewport, in [0, 1]; the raster
+      path culls tilelets outside the frustum, so its cost follows ``triangles * visible``.
+    surface_pixels: screen area of the tile's rectangle at mid height (the surface's rough footprint): rays
+      there hit and pay for shading, rays elsewhere in the box leave it early.
     """
 
     pixels: float
@@ -27,6 +31,8 @@ class TileFeatures:
     slab_cells: float
     level: int
     distance: float
+    visible: float = 1.0
+    surface_pixels: float = 0.0
 
     def as_dict(self) -> dict:
         """Plain dict of the features."""
@@ -34,7 +40,7 @@ class TileFeatures:
 
 
 def _hull_area_clipped(pts: np.ndarray, w: float, h: float) -> float:
-    """Area of the convex hull of 2-D points clipped to the rectangle [0, w] x [0, h]."""
+    """Area of the convex hull of 2-D points clipped to the rectangle [0, w] x [0, h] (w = inf: unclipped)."""
     pts = sorted(set(map(tuple, np.round(pts, 6))))
     if len(pts) < 3:
         return 0.0
@@ -51,7 +57,8 @@ def _hull_area_clipped(pts: np.ndarray, w: float, h: float) -> float:
             upper.pop()
         upper.append(p)
     poly = lower[:-1] + upper[:-1]
-    for axis, bound, keep_less in ((0, 0.0, False), (0, w, True), (1, 0.0, False), (1, h, True)):
+    bounds = () if w == np.inf else ((0, 0.0, False), (0, w, True), (1, 0.0, False), (1, h, True))
+    for axis, bound, keep_less in bounds:
         out = []
         for i, cur in enumerate(poly):
             prev = poly[i - 1]
@@ -73,8 +80,10 @@ def _hull_area_clipped(pts: np.ndarray, w: float, h: float) -> float:
 _BOX_EDGES = [(a, b) for a in range(8) for b in range(a + 1, 8) if bin(a ^ b).count("1") == 1]
 
 
-def footprint_pixels(view: View, lo: np.ndarray, hi: np.ndarray) -> float:
+def footprint_pixels(view: View, lo: np.ndarray, hi: np.ndarray, with_visible: bool = False):
     """Screen area in pixels of a world AABB's projection, clipped to the near plane and the viewport.
+
+    With ``with_visible`` returns (area, share of the near-clipped projection inside the viewport).
 
     The box cut by the near plane is a convex polyhedron; its projection is the convex hull of its projected
     vertices: the corners in front of the plane and the points where box edges cross it.
@@ -89,13 +98,17 @@ def footprint_pixels(view: View, lo: np.ndarray, hi: np.ndarray) -> float:
             t = (near - depth[a]) / (depth[b] - depth[a])
             pts.append(rel[a] + t * (rel[b] - rel[a]))
     if len(pts) < 3:
-        return 0.0
+        return (0.0, 0.0) if with_visible else 0.0
     pts = np.array(pts)
     t = view.tan_half_fov
     x = (pts[:, 0] / -pts[:, 2]) / (t * view.aspect)
     y = (pts[:, 1] / -pts[:, 2]) / t
     screen = np.stack([(x + 1) * 0.5 * view.width, (1 - y) * 0.5 * view.height], axis=1)
-    return _hull_area_clipped(screen, view.width, view.height)
+    area = _hull_area_clipped(screen, view.width, view.height)
+    if not with_visible:
+        return area
+    whole = _hull_area_clipped(screen, np.inf, np.inf)
+    return area, (min(area / whole, 1.0) if whole > 0 else 0.0)
 
 
 def slab_cells(view: View, lo: np.ndarray, hi: np.ndarray, spacing: float, n: int) -> float:
@@ -117,5 +130,7 @@ def tile_features(pyramid: TilePyramid, view: View, sel: SelectedTile, triangles
     """Features of one selected tile; ``triangles`` comes from the raster strategy's mesh for this view."""
     lo, hi = pyramid.aabb(sel.key)
     spacing = pyramid.hf.spacing * (1 << sel.key.level)
-    return TileFeatures(footprint_pixels(view, lo, hi), float(triangles), slab_cells(view, lo, hi, spacing, pyramid.n),
-                        sel.key.level, sel.distance)
+    area, visible = footprint_pixels(view, lo, hi, with_visible=True)
+    mid = np.array([lo[0], lo[1], 0.5 * (lo[2] + hi[2])]), np.array([hi[0], hi[1], 0.5 * (lo[2] + hi[2])])
+    return TileFeatures(area, float(triangles), slab_cells(view, lo, hi, spacing, pyramid.n), sel.key.level,
+                        sel.distance, visible, footprint_pixels(view, *mid))

@@ -11,14 +11,16 @@ from hybrid.planner import choose
 from hybrid.residency import ResidencyCache
 from hybrid.view import View
 
-TRUE = CostModel("test", {"const": 0.3, "triangles": 2e-4, "pixels": 1e-5},
-                 {"const": 0.5, "pixels": 3e-5, "pixel_steps": 1e-5})
+TRUE = CostModel("test", {"const": 0.3, "triangles": 5e-5, "visible_triangles": 1.5e-4, "pixels": 1e-5},
+                 {"const": 0.5, "pixels": 2e-5, "surface_pixels": 1e-5, "pixel_steps": 1e-5})
 
 
 def synthetic_tiles(n=300, seed=0):
     rng = np.random.default_rng(seed)
     return [TileFeatures(float(rng.uniform(10, 50000)), float(rng.uniform(0, 130000)), float(rng.uniform(0, 300)),
-                         int(rng.integers(0, 3)), float(rng.uniform(1e3, 1e5))) for _ in range(n)]
+                         int(rng.integers(0, 3)), float(rng.uniform(1e3, 1e5)), float(rng.uniform(0.05, 1.0)),
+                         float(rng.uniform(0, 40000)))
+            for _ in range(n)]
 
 
 def test_fit_recovers_known_coefficients():
@@ -35,14 +37,14 @@ def test_fit_recovers_known_coefficients():
 
 
 def test_choice_follows_predicted_costs():
-    flat_small = TileFeatures(pixels=20000, triangles=512, slab_cells=0.5, level=0, distance=5e3)
-    rough_big = TileFeatures(pixels=60000, triangles=131072, slab_cells=40, level=0, distance=5e3)
+    flat_small = TileFeatures(pixels=20000, triangles=512, slab_cells=0.5, level=0, distance=5e3, surface_pixels=15000)
+    rough_big = TileFeatures(pixels=60000, triangles=131072, slab_cells=40, level=0, distance=5e3, surface_pixels=40000)
     a, b = TRUE.predict(flat_small), TRUE.predict(rough_big)
     assert a["raster"] < a["raycast"] and b["raycast"] < b["raster"]
     assert choose("hybrid", flat_small, a) == "raster"
     assert choose("hybrid", rough_big, b) == "raycast"
     # the same tiles under a device where rays are very expensive go to raster both
-    costly_rays = CostModel("x", TRUE.raster, {"const": 5.0, "pixels": 1e-3, "pixel_steps": 1e-3})
+    costly_rays = CostModel("x", TRUE.raster, {"const": 5.0, "pixels": 1e-3, "surface_pixels": 0.0, "pixel_steps": 1e-3})
     assert choose("hybrid", rough_big, costly_rays.predict(rough_big)) == "raster"
     assert choose("heuristic", rough_big, b) == "raycast" and choose("heuristic", flat_small, a) == "raster"
     with pytest.raises(TerrabenchError, match="unknown policy"):
@@ -53,7 +55,7 @@ def test_fit_rejects_bad_timings():
     feats = synthetic_tiles(10)
     with pytest.raises(TerrabenchError, match="finite and > 0"):
         fit_cost_model(feats, np.zeros(10), np.ones(10), "t")
-    with pytest.raises(TerrabenchError, match="at least 3"):
+    with pytest.raises(TerrabenchError, match="at least 4"):
         fit_cost_model(feats[:2], np.ones(2), np.ones(2), "t", holdout=0.0)
 
 

@@ -15,8 +15,8 @@ from hybrid.reference import ReferenceRenderer
 SIZE = (320, 180)
 # a model under which raster wins for tiles with few triangles and ray casting for the rest, so the
 # frames below really mix both strategies with shared borders
-SPLIT = CostModel("split", {"const": 0.0, "triangles": 1e-3, "pixels": 0.0},
-                  {"const": 10.0, "pixels": 0.0, "pixel_steps": 0.0})
+SPLIT = CostModel("split", {"const": 0.0, "triangles": 1e-3, "visible_triangles": 0.0, "pixels": 0.0},
+                  {"const": 10.0, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0})
 
 
 def _views(hf):
