@@ -246,6 +246,24 @@ def cmd_run(args) -> int:
     writable_folder(Path(args.runs), "--runs")
     if args.report:
         writable_folder(Path(args.reports), "--reports")
+    from .spec import StressSpec
+    if isinstance(spec, StressSpec):
+        from hybrid.glcontext import shared_context
+        from .runner import Progress
+        from .stress import run_stress, write_stress_report
+        folder = writable_folder(Path(args.runs) / spec.name, "run folder")
+        import json
+        (folder / "spec.json").write_text(json.dumps(spec.to_dict(), indent=1))
+        w, h = _size(spec.size)
+        bar = Progress(len(spec.scenes) * len(spec.views) * len(spec.methods), 0, not args.quiet)
+        df = run_stress(shared_context(args.device), spec.scenes, spec.views, spec.methods, spec.size_samples, w, h,
+                        spec.tile_size, progress=bar.step)
+        bar.close()
+        df.to_parquet(folder / "stress.parquet", index=False)
+        print(f"run folder: {folder}")
+        if args.report:
+            print(f"report: {write_stress_report(df, Path(args.reports) / spec.name)}")
+        return 0
     folder = run_spec(spec, Path(args.runs), progress=not args.quiet)
     print(f"run folder: {folder}")
     if args.report:
@@ -257,6 +275,12 @@ def cmd_run(args) -> int:
 def cmd_report(args) -> int:
     """Write the report of a run folder (and the flight animations with --video)."""
     from .report import write_report
+    if (Path(args.run) / "stress.parquet").exists():
+        import pandas as pd
+        from .stress import write_stress_report
+        out = writable_folder(Path(args.reports) / (args.name or Path(args.run).name), "--reports")
+        print(f"wrote {write_stress_report(pd.read_parquet(Path(args.run) / 'stress.parquet'), out)}")
+        return 0
     if not (Path(args.run) / "frames.parquet").exists():
         raise TerrabenchError(f"{args.run}: not a run folder with results (no frames.parquet); run `terrabench run SPEC` first")
     writable_folder(Path(args.reports), "--reports")

@@ -109,6 +109,8 @@ class Progress:
     def __init__(self, total: int, done: int, enabled: bool = True):
         self.total, self.done, self.enabled = total, done, enabled
         self.start, self.start_done = time.perf_counter(), done
+        self.tty = sys.stderr.isatty()
+        self.last_decile = -1
 
     def step(self, label: str) -> None:
         """Count one unit of work finished and redraw."""
@@ -121,12 +123,17 @@ class Progress:
         frac = self.done / max(self.total, 1)
         bar = "#" * int(30 * frac) + "-" * (30 - int(30 * frac))
         eta = f"{int(left // 60)}m{int(left % 60):02d}s" if np.isfinite(left) else "?"
-        sys.stderr.write(f"\r[{bar}] {self.done}/{self.total} {100 * frac:5.1f} % left {eta}  {label[:60]:60s}")
+        line = f"[{bar}] {self.done}/{self.total} {100 * frac:5.1f} % left {eta}  {label[:60]:60s}"
+        if self.tty:
+            sys.stderr.write("\r" + line)
+        elif int(10 * frac) != self.last_decile:      # a log file gets one line per 10 %
+            self.last_decile = int(10 * frac)
+            sys.stderr.write(line.rstrip() + "\n")
         sys.stderr.flush()
 
     def close(self) -> None:
         """End the line."""
-        if self.enabled:
+        if self.enabled and self.tty:
             sys.stderr.write("\n")
 
 

@@ -84,12 +84,67 @@ def _list(d, key, kind, check=None):
     return v
 
 
-def parse_spec(text: str, source: str = "spec") -> Spec:
-    """Parse and check TOML text; every problem names the key and the accepted values."""
+@dataclass
+class StressSpec:
+    """A stress experiment (kind = "stress"): scenes x views x methods, see experiments.stress."""
+
+    name: str
+    scenes: list
+    views: list
+    methods: list
+    size_samples: int = 257
+    size: str = "320x180"
+    tile_size: int = 64
+
+    def to_dict(self) -> dict:
+        """Plain form."""
+        return {"kind": "stress", **asdict(self)}
+
+
+def parse_stress_spec(d: dict, source: str) -> StressSpec:
+    """Check a kind = "stress" spec: names from experiments.stress, sizes in range."""
+    from .stress import METHODS, SCENES, VIEWS
+    known = set(StressSpec.__dataclass_fields__) | {"kind"}
+    if set(d) - known:
+        raise TerrabenchError(f"{source}: unknown keys {sorted(set(d) - known)}; known: {sorted(known)}")
+    kw = {"name": d.get("name", Path(source).stem)}
+    for key, allowed in (("scenes", SCENES), ("views", VIEWS), ("methods", METHODS)):
+        v = _list(d, key, str)
+        bad = [x for x in (v or []) if x not in allowed]
+        if bad:
+            raise TerrabenchError(f"{source}: unknown {key} {bad}; choose from {', '.join(allowed)}")
+        kw[key] = v or list(allowed)
+    if "size_samples" in d:
+        v = d["size_samples"]
+        if isinstance(v, bool) or not isinstance(v, int) or not (17 <= v <= 4097):
+            raise TerrabenchError(f"{source}: 'size_samples' must be an integer in [17, 4097], got {v!r}")
+        kw["size_samples"] = v
+    if "size" in d:
+        try:
+            w, h = (int(x) for x in str(d["size"]).lower().split("x"))
+            assert 1 <= w <= 16384 and 1 <= h <= 16384
+        except (ValueError, AssertionError):
+            raise TerrabenchError(f"{source}: size must be WIDTHxHEIGHT in [1, 16384], got {d['size']!r}") from None
+        kw["size"] = str(d["size"])
+    if "tile_size" in d:
+        v = d["tile_size"]
+        if isinstance(v, bool) or not isinstance(v, int) or v < 2 or v & (v - 1):
+            raise TerrabenchError(f"{source}: 'tile_size' must be a power of two >= 2, got {v!r}")
+        kw["tile_size"] = v
+    return StressSpec(**kw)
+
+
+def parse_spec(text: str, source: str = "spec"):
+    """Parse and check TOML text (a paired-flight Spec, or a StressSpec when kind = "stress")."""
     try:
         d = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise TerrabenchError(f"{source}: not valid TOML ({exc})") from None
+    kind = d.pop("kind", "flights")
+    if kind == "stress":
+        return parse_stress_spec(d, source)
+    if kind != "flights":
+        raise TerrabenchError(f"{source}: kind must be 'flights' (default) or 'stress', got {kind!r}")
     known = set(Spec.__dataclass_fields__)
     unknown = set(d) - known
     if unknown:

@@ -135,3 +135,22 @@ def test_video_animation(ctx, tmp_path):
     with Image.open(gifs[0]) as im:
         assert im.n_frames == 3
         assert im.size == (3 * 160, 90)                     # reference + two methods side by side
+
+
+def test_stress_spec_runs_through_the_runner(ctx, tmp_path, capsys):
+    from experiments.cli import main
+    spec = tmp_path / "s.toml"
+    spec.write_text('kind = "stress"\nname = "s"\nscenes = ["spike"]\nviews = ["grazing", "down"]\n'
+                    'methods = ["raster", "raycast/triangles"]\nsize_samples = 65\nsize = "96x54"\ntile_size = 16\n')
+    assert main(["run", str(spec), "--runs", str(tmp_path / "runs"), "--report", "--reports", str(tmp_path / "rep"),
+                 "--quiet"]) == 0
+    df = pd.read_parquet(tmp_path / "runs" / "s" / "stress.parquet")
+    assert len(df) == 4 and (df["error"] == "").all()
+    assert (tmp_path / "rep" / "s" / "stress.md").exists() and (tmp_path / "rep" / "s" / "stress_failures.png").exists()
+    assert main(["report", str(tmp_path / "runs" / "s"), "--reports", str(tmp_path / "rep2")]) == 0
+    assert (tmp_path / "rep2" / "s" / "stress.md").exists()
+    with pytest.raises(TerrabenchError, match="unknown views"):
+        parse_spec('kind = "stress"\nviews = ["sideways"]')
+    with pytest.raises(TerrabenchError, match="kind must be"):
+        parse_spec('kind = "party"')
+    assert load_spec("stress").methods
