@@ -93,8 +93,16 @@ def speed_accuracy_chart(f, folder) -> list[Path]:
     for ax, sc in zip(axes[0], scenes):
         a = agg[agg["scene"] == sc].reset_index(drop=True)
         ax.scatter(a["ms"], a["err"], zorder=3)
-        for _, r in a.iterrows():
-            ax.annotate(r["method"], (r["ms"], r["err"]), fontsize=8, xytext=(4, 3), textcoords="offset points")
+        # methods that land on top of each other get their labels stacked instead of overprinted
+        order = a.sort_values(["err", "ms"]).reset_index(drop=True)
+        span_x = max(float(a["ms"].max() - a["ms"].min()), 1e-9)
+        span_y = max(float(a["err"].max() - a["err"].min()), 1e-12)
+        placed = []
+        for _, r in order.iterrows():
+            near = [k for (x, y, k) in placed if abs(x - r["ms"]) < 0.15 * span_x and abs(y - r["err"]) < 0.05 * span_y]
+            k = max(near) + 1 if near else 0
+            placed.append((r["ms"], r["err"], k))
+            ax.annotate(r["method"], (r["ms"], r["err"]), fontsize=8, xytext=(4, 3 + 10 * k), textcoords="offset points")
         pts = a[["ms", "err"]].to_numpy()
         ok = np.all(np.isfinite(pts), axis=1)
         if ok.sum() >= 1:

@@ -98,9 +98,13 @@ class View:
         return self.height / (2.0 * self.tan_half_fov)
 
     def rotation(self) -> np.ndarray:
-        """3x3 world-to-eye rotation (float64)."""
-        r, u, b = self.basis()
-        return np.stack([r, u, b])
+        """3x3 world-to-eye rotation (float64); computed once per view (views are immutable)."""
+        rot = self.__dict__.get("_rotation")
+        if rot is None:
+            rot = np.stack(self.basis())
+            rot.setflags(write=False)
+            self.__dict__["_rotation"] = rot
+        return rot
 
     def view_matrix(self) -> np.ndarray:
         """4x4 world-to-eye matrix in float64 (absolute world coordinates)."""
