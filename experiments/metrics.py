@@ -5,7 +5,12 @@ there is no terrain). Pixels are compared one to one (same view, same size).
 """
 from __future__ import annotations
 
+import os
+
 import numpy as np
+
+# FLIP's worker threads otherwise spin after each evaluation and slow the next timed frame
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from hybrid.errors import TerrabenchError
 

@@ -7,6 +7,10 @@ Run folder layout (runs/<name>/):
     frames.parquet, tiles.parquet   the tables, rewritten from the journal after every configuration
     images/                         colour + depth of the spec's image_frames for every configuration
 An interrupted run resumes from the journal without redoing finished (configuration, frame) rows.
+
+Timing is kept apart from measuring: a configuration's frames are all drawn and timed first (results kept
+in memory), and only then compared with the references, so the metrics' own threads (FLIP) and the
+reference renders never run between timed draws.
 """
 from __future__ import annotations
 
@@ -23,6 +27,8 @@ import pandas as pd
 from hybrid.errors import TerrabenchError
 
 from .metrics import frame_accuracy, temporal_errors
+
+SETTLE_S = 0.3   # seconds of idle before a configuration's timed frames
 from .spec import Spec
 
 
@@ -214,38 +220,40 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
             if not todo:
                 continue
             renderer = None
+            timed: dict = {}
             try:
                 renderer = make_renderer(ctx, hf, c["policy"], tile_size=spec.tile_size,
                                          reconstruction=c["reconstruction"])
-                prev = None
+                # 1. time every frame first: metric code (FLIP's threads, references) never runs between
+                #    a frame's timed draws; a short settle lets threads of earlier work go idle
+                time.sleep(SETTLE_S)
                 for k in todo:
-                    if k > 0 and (prev is None or prev[0] != k - 1):
-                        prev = (k - 1, renderer.render(views[k - 1], c["tau"]))
                     extra = {"maps": True} if (k in spec.image_frames and
                                                c["policy"] in ("hybrid", "heuristic", "oracle")) else {}
                     results = [renderer.render(views[k], c["tau"]) for _ in range(spec.repeats - 1)]
                     results.append(renderer.render(views[k], c["tau"], **extra))
-                    res = results[-1]
-                    walls = [r.stats.get("wall_ms", np.nan) for r in results]
+                    timed[k] = (results[-1], [r.stats.get("wall_ms", np.nan) for r in results])
+                    bar.step(f"{c['config']} frame {k}")
+                # 2. then accuracy against the references, and the journal
+                for k in todo:
+                    res, walls = timed[k]
                     stats = {kk: v for kk, v in res.stats.items() if not isinstance(v, (list, dict))}
                     row = {**c, "frame": k, **stats, "wall_ms": float(np.median(walls)),
                            "wall_ms_min": float(np.min(walls)), **frame_accuracy(res, ref(k), flip=spec.flip)}
                     if k > 0:
-                        row.update(temporal_errors(prev[1], res, ref(k - 1), ref(k)))
+                        prev = timed[k - 1][0] if k - 1 in timed else renderer.render(views[k - 1], c["tau"])
+                        row.update(temporal_errors(prev, res, ref(k - 1), ref(k)))
                     journal.append("frames", [row])
                     journal.append("tiles", [{"config": c["config"], "frame": k, "policy": c["policy"], **t}
                                              for t in res.stats.get("tile_rows", [])])
                     if k in spec.image_frames or spec.video:
                         _save_image(folder / "images", f"{c['config']}-f{k}", res, k in spec.image_frames)
-                    prev = (k, res)
-                    bar.step(f"{c['config']} frame {k}")
             except Exception as exc:  # a failed configuration is recorded; the rest goes on
                 if fail_fast:
                     raise
                 journal.append("errors", [{**c, "error": f"{type(exc).__name__}: {exc}",
                                            "trace": traceback.format_exc(limit=4)}])
-                bar.done += len([k for k in todo if (c["config"], k) not in
-                                 {(r["config"], r["frame"]) for r in journal.rows("frames")}])
+                bar.done += len([k for k in todo if k not in timed])     # frames it never reached
             finally:
                 if renderer is not None:
                     renderer.release()
