@@ -1,0 +1,32 @@
+"""The headless context: renderer reported, reversed-Z clip control set, bad device choices named."""
+import numpy as np
+import pytest
+
+from hybrid.errors import GLContextError
+from hybrid.glcontext import create_context, depth32f_texture, driver_texture_bytes, gl_info
+
+
+def test_info_and_float_depth(ctx):
+    info = gl_info(ctx)
+    assert info.renderer != "?" and "4." in info.version
+    tex = depth32f_texture(ctx, (8, 4))
+    assert driver_texture_bytes(tex) == 8 * 4 * 4             # 32-bit float depth, not 24-bit fixed point
+    fbo = ctx.framebuffer(color_attachments=[ctx.texture((8, 4), 4)], depth_attachment=tex)
+    fbo.clear(depth=0.123456789)
+    d = np.frombuffer(tex.read(), np.float32)
+    assert np.all(d == np.float32(0.123456789))               # exact float storage
+    fbo.release()
+    tex.release()
+
+
+@pytest.mark.parametrize("device, match", [(99, "no EGL device with index 99"), (-1, "integer >= 0"),
+                                           ("0", "integer >= 0")])
+def test_bad_device_index(ctx, device, match):
+    with pytest.raises(GLContextError, match=match):
+        create_context(device)
+
+
+def test_bad_device_environment(ctx, monkeypatch):
+    monkeypatch.setenv("TERRABENCH_GL_DEVICE", "gpu0")
+    with pytest.raises(GLContextError, match="TERRABENCH_GL_DEVICE"):
+        create_context()
