@@ -26,6 +26,7 @@ from .pyramid import TilePyramid
 from .shaders import load_source
 from .target import FrameTarget, RenderResult
 from .tiletree import DEFAULT_TAU, select_tiles
+from .timing import timed
 from .view import View
 
 STRATEGIES: dict = {}
@@ -81,17 +82,14 @@ class SingleStrategyRenderer:
                 items.append((g, tile, s))
             target.clear()
             target.use()
-            self.ctx.finish()
-            t0 = time.perf_counter()
             opts = {**self.draw_options, **options}
             if self.name == "raster":
                 opts.setdefault("leaf_tau", tau)          # the in-tile quadtree follows the frame's bound
                 opts.setdefault("count_culled", False)    # the CPU mirror of GPU culling is a check, not timed
-            counters = self.strategy.draw_tiles(target, view, items, **opts) or {}
-            self.ctx.finish()
-            draw = (time.perf_counter() - t0) * 1e3
+            counters, draw, gpu = timed(self.ctx, lambda: self.strategy.draw_tiles(target, view, items, **opts))
+            counters = counters or {}
             stats = {"tiles": len(items), f"tiles_{self.name}": len(items), "uploaded": uploaded,
-                     "wall_ms": plan_ms + draw, "plan_ms": plan_ms, "draw_ms": draw,
+                     "wall_ms": plan_ms + draw, "plan_ms": plan_ms, "draw_ms": draw, "gpu_ms": gpu,
                      "gpu_bytes": sum(g.nbytes for g, _ in self.resident.values()), **counters}
             return target.read(view, stats)
         finally:
@@ -117,13 +115,9 @@ class ReferenceFrameRenderer:
         target = FrameTarget(self.ctx, view.width, view.height)
         try:
             target.clear()
-            self.ctx.finish()
-            t0 = time.perf_counter()
-            self.ref.draw(target, view, options.get("mode"))
-            self.ctx.finish()
-            wall = (time.perf_counter() - t0) * 1e3
-            return target.read(view, {"wall_ms": wall, "plan_ms": 0.0, "draw_ms": wall, "triangles": self.ref.triangles, "tiles": 1,
-                                      "gpu_bytes": self.ref.nbytes})
+            _, wall, gpu = timed(self.ctx, lambda: self.ref.draw(target, view, options.get("mode")))
+            return target.read(view, {"wall_ms": wall, "plan_ms": 0.0, "draw_ms": wall, "gpu_ms": gpu,
+                                      "triangles": self.ref.triangles, "tiles": 1, "gpu_bytes": self.ref.nbytes})
         finally:
             target.release()
 

@@ -11,13 +11,13 @@ import time
 import numpy as np
 
 from .costmodel import CostModel, load_cost_model
-from .errors import TerrabenchError
 from .frame import make_strategy
 from .glcontext import gl_info
 from .heightfield import HeightField
 from .planner import RasterTriangleEstimator, TilePlan, plan_frame
 from .pyramid import TilePyramid
 from .residency import ResidencyCache
+from .timing import timed
 from .target import FrameTarget, RenderResult
 from .pyramid import EDGE_E, EDGE_N, EDGE_S, EDGE_W
 from .tiletree import DEFAULT_TAU, edge_neighbours
@@ -95,17 +95,16 @@ class HybridRenderer:
 
     def time_draw(self, view: View, plans: list[TilePlan], name: str, target: FrameTarget, pinned=frozenset(),
                   tau: float = DEFAULT_TAU) -> float:
-        """Median wall ms of drawing the plans' tiles with one strategy in one call (ctx.finish() around it)."""
+        """Median ms of drawing the plans' tiles with one strategy in one call: the GL timer query on real
+        GPUs, the wall clock around ctx.finish() on CPU rasterizers (where timer queries are wrong)."""
         items = [(self._resident(name, p.key, pinned), self.tile(p.key), p.selected) for p in plans]
         times = []
         for _ in range(self.oracle_repeats):
             target.clear()
             target.use()
-            self.ctx.finish()
-            t0 = time.perf_counter()
-            self.strategies[name].draw_tiles(target, view, items, **self._opts(name, tau))
-            self.ctx.finish()
-            times.append((time.perf_counter() - t0) * 1e3)
+            _, wall, gpu = timed(self.ctx, lambda: self.strategies[name].draw_tiles(target, view, items,
+                                                                                    **self._opts(name, tau)))
+            times.append(wall if gpu is None else gpu)
         return float(np.median(times))
 
     def render(self, view: View, tau: float = DEFAULT_TAU, measure: bool = False, maps: bool = False) -> RenderResult:
@@ -135,14 +134,10 @@ class HybridRenderer:
                 self._resident(p.choice, p.key, pinned)
             target.clear()
             target.use()
-            self.ctx.finish()
-            t0 = time.perf_counter()
-            counters = self._draw(target, view, plans, pinned, tau)
-            self.ctx.finish()
-            draw = (time.perf_counter() - t0) * 1e3
+            counters, draw, gpu = timed(self.ctx, lambda: self._draw(target, view, plans, pinned, tau))
             by = self.cache.bytes_by_strategy()
             n_r = sum(p.choice == "raster" for p in plans)
-            stats = {"wall_ms": plan_ms + draw, "plan_ms": plan_ms, "draw_ms": draw, "tiles": len(plans), "tiles_raster": n_r, "tiles_raycast": len(plans) - n_r,
+            stats = {"wall_ms": plan_ms + draw, "plan_ms": plan_ms, "draw_ms": draw, "gpu_ms": gpu, "tiles": len(plans), "tiles_raster": n_r, "tiles_raycast": len(plans) - n_r,
                      "gpu_bytes": self.cache.bytes, "gpu_bytes_raster": by.get("raster", 0),
                      "gpu_bytes_raycast": by.get("raycast", 0), "uploads": self.cache.stats.uploads,
                      "evictions": self.cache.stats.evictions,

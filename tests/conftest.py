@@ -1,5 +1,4 @@
 """Shared fixtures: one GL context for the whole test session, small terrains and viewports."""
-import numpy as np
 import pytest
 
 from hybrid.datasets import get_dataset, puget

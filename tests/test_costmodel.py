@@ -1,5 +1,4 @@
 """The cost model: the fit recovers known coefficients; the choice follows the predicted costs; files round-trip."""
-import json
 
 import numpy as np
 import pytest

@@ -1,11 +1,10 @@
 """Loaders on the bundled data and on written files of every supported format, and their bad-input errors."""
-import warnings
 
 import numpy as np
 import pytest
 import tifffile
 
-from hybrid.datasets import NAMES, get_dataset, puget
+from hybrid.datasets import NAMES, get_dataset
 from hybrid.errors import TerrabenchError, TerrainLoadError
 from hybrid.heightfield import HeightField
 from hybrid.loaders import NoDataWarning, load_terrain, save_npz

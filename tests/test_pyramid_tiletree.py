@@ -83,7 +83,6 @@ def test_selection_restricted_and_complete(puget_full, pyr):
         assert len(set(keys)) == len(keys)
         for a in keys:                                       # no overlaps
             assert not any(_covers(a, b) for b in keys if b != a)
-        by_key = {s.key: s for s in sel}
         for s in sel:                                        # restricted: edge neighbours within one level
             k = s.key
             for bit, dx, dy in ((EDGE_W, -1, 0), (EDGE_E, 1, 0), (EDGE_S, 0, -1), (EDGE_N, 0, 1)):

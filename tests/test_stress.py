@@ -1,10 +1,9 @@
 """Stability where methods fail: on every stress view, no NaN, no hang, no hole, few capped rays, and no
 precision loss far from the origin, for stitched raster, ray-cast and hybrid frames."""
-import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.stress import SCENES, VIEWS, failure_chart, run_stress, stress_reading, write_stress_report
+from experiments.stress import SCENES, VIEWS, run_stress, stress_reading, write_stress_report
 
 METHODS = ("raster", "raycast/triangles", "raycast/planes", "hybrid")
 

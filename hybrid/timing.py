@@ -1,0 +1,40 @@
+"""Timing a draw: wall clock around ctx.finish() everywhere, and a GL timer query on real GPUs.
+
+On Mesa's CPU rasterizers GL timer queries are wrong (they see only part of the work), so there the wall
+clock is the only measure; on a GPU the timer query gives the GPU's own elapsed time as well.
+"""
+from __future__ import annotations
+
+import time
+
+from .glcontext import gl_info
+
+
+def timer_queries_valid(ctx) -> bool:
+    """True where GL timer queries can be trusted (not llvmpipe/softpipe); cached on the context."""
+    extra = getattr(ctx, "extra", None)
+    if not isinstance(extra, dict):
+        extra = {}
+        ctx.extra = extra
+    if "timer_queries" not in extra:
+        extra["timer_queries"] = not gl_info(ctx).is_software
+    return extra["timer_queries"]
+
+
+def timed(ctx, fn):
+    """(fn(), wall ms, GPU ms or None): fn runs between two ctx.finish(); GPU ms from a timer query on GPUs."""
+    query = ctx.query(time=True) if timer_queries_valid(ctx) else None
+    ctx.finish()
+    t0 = time.perf_counter()
+    if query is not None:
+        with query:
+            out = fn()
+    else:
+        out = fn()
+    ctx.finish()
+    wall = (time.perf_counter() - t0) * 1e3
+    gpu = None
+    if query is not None:
+        gpu = query.elapsed / 1e6
+        query.release()
+    return out, wall, gpu
