@@ -43,8 +43,8 @@ class ReferenceRenderer:
     def __init__(self, ctx, hf: HeightField):
         self.ctx, self.hf = ctx, hf
         self.prog = ctx.program(
-            vertex_shader=load_source("hybrid", "reference.vert"),
-            fragment_shader=load_source("hybrid", "reference.frag").replace(
+            vertex_shader=load_source("hybrid", "reference.vert.glsl"),
+            fragment_shader=load_source("hybrid", "reference.frag.glsl").replace(
                 "//#include shading.glsl", load_source("hybrid", "shading.glsl")),
         )
         self.heights = ctx.texture((hf.cols, hf.rows), 1, hf.heights.tobytes(), dtype="f4")
