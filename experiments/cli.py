@@ -35,11 +35,8 @@ def _vec(text: str, name: str) -> np.ndarray:
 
 
 def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(s) for s in text.lower().split("x"))
-    except ValueError:
-        raise TerrabenchError(f"--size must be WIDTHxHEIGHT in pixels (e.g. 640x360), got {text!r}") from None
-    return w, h
+    from hybrid.view import parse_size
+    return parse_size(text, "--size")
 
 
 def check_tile_size(n) -> int:
@@ -169,7 +166,7 @@ def render_method(ctx, hf, view, method: str, args):
     if method in ("hybrid", "heuristic", "oracle"):
         from hybrid.hybrid_frame import HybridRenderer
         r = HybridRenderer(ctx, hf, method, tile_size=args.tile_size, reconstruction=args.reconstruction,
-                           prepass=not args.no_prepass)
+                           prepass=not args.no_prepass, mode=opts.get("mode"))
         try:
             return r.render(view, args.tau, maps=args.show_strategy)
         finally:
@@ -248,17 +245,12 @@ def cmd_run(args) -> int:
         writable_folder(Path(args.reports), "--reports")
     from .spec import StressSpec
     if isinstance(spec, StressSpec):
-        from hybrid.glcontext import shared_context
-        from .runner import Progress
-        from .stress import run_stress, write_stress_report
+        from .stress import write_stress_report
         folder = writable_folder(Path(args.runs) / spec.name, "run folder")
         import json
         (folder / "spec.json").write_text(json.dumps(spec.to_dict(), indent=1))
-        w, h = _size(spec.size)
-        bar = Progress(len(spec.scenes) * len(spec.views) * len(spec.methods), 0, not args.quiet)
-        df = run_stress(shared_context(args.device), spec.scenes, spec.views, spec.methods, spec.size_samples, w, h,
-                        spec.tile_size, progress=bar.step)
-        bar.close()
+        df = _stress_table(args, spec.scenes, spec.views, spec.methods, spec.size_samples, _size(spec.size),
+                           spec.tile_size)
         df.to_parquet(folder / "stress.parquet", index=False)
         print(f"run folder: {folder}")
         if args.report:
@@ -306,8 +298,6 @@ def cmd_calibrate(args) -> int:
         writable_folder(Path(args.save).parent if str(Path(args.save).parent) else Path("."), "--save folder")
     hf = load_terrain_arg(args)
     w, h = _size(args.size)
-    from hybrid.view import View
-    View([0, 0, 1], [1, 0, 0], 60, w, h)                     # checks the viewport size
     views = []
     for name in args.flights.split(","):
         views += get_flight(name.strip(), hf, frames=args.frames, width=w, height=h).views()
@@ -329,24 +319,29 @@ def _names(text: str, allowed, what: str) -> list[str]:
     return names
 
 
-def cmd_stress(args) -> int:
-    """Run the stress scenes and views with every method; write the table, chart and report section."""
+def _stress_table(args, scenes, views, methods, size_samples, size, tile_size):
+    """Run the stress cases with a progress bar (unless --quiet); the table of failure measures."""
     from hybrid.glcontext import shared_context
     from .runner import Progress
-    from .stress import METHODS, SCENES, VIEWS, run_stress, write_stress_report
+    from .stress import run_stress
+    bar = Progress(len(scenes) * len(views) * len(methods), 0, not args.quiet)
+    df = run_stress(shared_context(args.device), scenes, views, methods, size_samples, *size, tile_size,
+                    progress=bar.step)
+    bar.close()
+    return df
+
+
+def cmd_stress(args) -> int:
+    """Run the stress scenes and views with every method; write the table, chart and report section."""
+    from .stress import METHODS, SCENES, VIEWS, write_stress_report
     scenes = _names(args.scenes, SCENES, "scenes")
     views = _names(args.views, VIEWS, "views")
     methods = _names(args.methods, METHODS, "methods")
-    w, h = _size(args.size)
+    size = _size(args.size)
     if not (17 <= args.size_samples <= 4097):
         raise TerrabenchError(f"--size-samples must lie in [17, 4097], got {args.size_samples}")
     out = writable_folder(Path(args.out), "--out")
-    from hybrid.view import View
-    View([0, 0, 1], [1, 0, 0], 60, w, h)                     # checks the viewport size
-    bar = Progress(len(scenes) * len(views) * len(methods), 0, not args.quiet)
-    df = run_stress(shared_context(args.device), scenes, views, methods, args.size_samples, w, h, args.tile_size,
-                    progress=bar.step)
-    bar.close()
+    df = _stress_table(args, scenes, views, methods, args.size_samples, size, args.tile_size)
     print(f"wrote {write_stress_report(df, out)}")
     return 0
 

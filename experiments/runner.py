@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from hybrid.errors import TerrabenchError
+from hybrid.view import parse_size
 
 from .metrics import frame_accuracy, temporal_errors
 
@@ -151,11 +152,6 @@ def _load_dataset(name: str, size: int, seed: int):
     return load_terrain(name)
 
 
-def _size(s: str) -> tuple[int, int]:
-    w, h = (int(x) for x in s.lower().split("x"))
-    return w, h
-
-
 def _save_image(folder: Path, stem: str, result, full: bool = True) -> None:
     from PIL import Image
     Image.fromarray(result.colour).save(folder / f"{stem}.png")
@@ -196,7 +192,7 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
     for (ds, seed, fl, size), group in groups.items():
         if all((c["config"], k) in done for c in group for k in range(spec.frames)):
             continue
-        w, h = _size(size)
+        w, h = parse_size(size)
         try:
             hf = _load_dataset(ds, spec.dataset_size, seed)
             views = get_flight(fl, hf, frames=spec.frames, width=w, height=h).views()

@@ -25,6 +25,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from hybrid.errors import TerrabenchError
+from hybrid.view import parse_size
 
 POLICIES = ("reference", "raster", "raycast", "hybrid", "heuristic", "oracle", "fullres", "tin")
 RECONSTRUCTIONS = ("planes", "linear", "triangles", "bilinear")
@@ -120,11 +121,7 @@ def parse_stress_spec(d: dict, source: str) -> StressSpec:
             raise TerrabenchError(f"{source}: 'size_samples' must be an integer in [17, 4097], got {v!r}")
         kw["size_samples"] = v
     if "size" in d:
-        try:
-            w, h = (int(x) for x in str(d["size"]).lower().split("x"))
-            assert 1 <= w <= 16384 and 1 <= h <= 16384
-        except (ValueError, AssertionError):
-            raise TerrabenchError(f"{source}: size must be WIDTHxHEIGHT in [1, 16384], got {d['size']!r}") from None
+        parse_size(d["size"], f"{source}: size")
         kw["size"] = str(d["size"])
     if "tile_size" in d:
         v = d["tile_size"]
@@ -163,12 +160,7 @@ def parse_spec(text: str, source: str = "spec"):
             raise TerrabenchError(f"{source}: tau must lie in (0, 1000) pixels, got {t!r}")
 
     def size_ok(s):
-        try:
-            w, h = (int(x) for x in s.lower().split("x"))
-        except ValueError:
-            raise TerrabenchError(f"{source}: size must be WIDTHxHEIGHT, got {s!r}") from None
-        if not (1 <= w <= 16384 and 1 <= h <= 16384):
-            raise TerrabenchError(f"{source}: size {s!r} must have width and height in [1, 16384]")
+        parse_size(s, f"{source}: size")
 
     kw = {"name": d.get("name", Path(source).stem)}
     if not isinstance(kw["name"], str) or not kw["name"] or any(c in kw["name"] for c in "/\\ "):

@@ -32,11 +32,13 @@ class HybridRenderer:
     def __init__(self, ctx, hf: HeightField, policy: str = "hybrid", tile_size: int = 256,
                  reconstruction: str = "triangles", cost_model: CostModel | None = None,
                  budget_bytes: int | None = None, threshold: float = 1.0, prepass: bool = True,
-                 pyramid: TilePyramid | None = None, oracle_repeats: int = 3):
+                 pyramid: TilePyramid | None = None, oracle_repeats: int = 3, mode: str | None = None):
         self.ctx, self.hf, self.policy = ctx, hf, policy
         self.pyramid = pyramid or TilePyramid(hf, tile_size)
         self.strategies = {"raster": make_strategy("raster", ctx, hf), "raycast": make_strategy("raycast", ctx, hf)}
-        self.options = {"raster": {"count_culled": False}, "raycast": {"reconstruction": reconstruction, "prepass": prepass}}
+        shading = {} if mode is None else {"mode": mode}      # one shading mode for both strategies
+        self.options = {"raster": {"count_culled": False, **shading},
+                        "raycast": {"reconstruction": reconstruction, "prepass": prepass, **shading}}
         self.model = cost_model or load_cost_model(gl_info(ctx).renderer)
         self.cache = ResidencyCache(budget_bytes)
         self.threshold = threshold

@@ -17,6 +17,18 @@ from .errors import TerrabenchError, check_positive, check_range
 MAX_VIEWPORT = 16384
 
 
+def parse_size(text, what: str = "size") -> tuple[int, int]:
+    """(width, height) in pixels from 'WIDTHxHEIGHT', each in [1, MAX_VIEWPORT], else an error naming ``what``."""
+    try:
+        w, h = (int(x) for x in str(text).lower().split("x"))
+    except ValueError:
+        w = h = 0
+    if not (1 <= w <= MAX_VIEWPORT and 1 <= h <= MAX_VIEWPORT):
+        raise TerrabenchError(f"{what} must be WIDTHxHEIGHT in pixels with width and height in [1, {MAX_VIEWPORT}], "
+                              f"got {text!r}")
+    return w, h
+
+
 def _vec3(name, v) -> np.ndarray:
     try:
         a = np.asarray(v, dtype=np.float64).reshape(3)

@@ -145,3 +145,19 @@ def test_policies_follow_their_rules(ctx, puget257):
     for row in res.stats["tile_rows"]:
         assert row["strategy"] == min(("raster", "raycast"), key=lambda s: row[f"meas_{s}_ms"])
     o.release()
+
+
+def test_shading_mode_reaches_both_strategies(ctx, puget_full):
+    v = _views(puget_full)[0]                               # a view the split model draws both ways
+    frames = {}
+    for mode in (None, "height"):
+        h = HybridRenderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT, mode=mode)
+        frames[mode] = h.render(v, maps=True)
+        h.release()
+    tex, height = frames[None], frames["height"]
+    smap = height.maps["strategy"]
+    assert (smap == 1).any() and (smap == 2).any()
+    assert np.array_equal(tex.mask, height.mask)
+    for code in (1, 2):                                     # both raster and ray-cast pixels changed colour
+        sel = smap == code
+        assert np.abs(tex.colour[sel].astype(int) - height.colour[sel]).mean() > 5
