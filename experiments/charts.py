@@ -34,7 +34,8 @@ def label_columns(frames: pd.DataFrame) -> pd.DataFrame:
     return f
 
 
-def _save(fig, folder: Path, name: str) -> list[Path]:
+def save_figure(fig, folder: Path, name: str) -> list[Path]:
+    """Write a figure as folder/name.png and .svg, close it; returns both paths."""
     out = []
     for ext in ("png", "svg"):
         p = folder / f"{name}.{ext}"
@@ -58,7 +59,7 @@ def _per_scene(f: pd.DataFrame, folder: Path, name: str, ycol: str, ylabel: str,
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, ncol=3)
     fig.text(0.01, 0.0, CREDIT, fontsize=6, alpha=0.6)
-    return _save(fig, folder, name)
+    return save_figure(fig, folder, name)
 
 
 def frame_time_chart(f, folder) -> list[Path]:
@@ -115,7 +116,7 @@ def speed_accuracy_chart(f, folder) -> list[Path]:
         ax.set_title(sc, fontsize=10)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
-    return _save(fig, folder, "speed_vs_accuracy")
+    return save_figure(fig, folder, "speed_vs_accuracy")
 
 
 def strategy_mix_chart(f, folder) -> list[Path]:
@@ -133,7 +134,7 @@ def strategy_mix_chart(f, folder) -> list[Path]:
         ax.set_xlabel("frame")
         ax.set_ylabel("tiles")
         ax.legend(fontsize=8)
-    return _save(fig, folder, "strategy_mix")
+    return save_figure(fig, folder, "strategy_mix")
 
 
 def image_panels(run: Path, f: pd.DataFrame, folder: Path, frames: list[int]) -> list[Path]:
@@ -181,7 +182,7 @@ def image_panels(run: Path, f: pd.DataFrame, folder: Path, frames: list[int]) ->
                     axes[i, j].set_title({"strategy": "strategy (blue raster, orange ray cast)"}.get(name, name), fontsize=8)
             fig.colorbar(h, ax=axes[1:, 1].tolist(), shrink=0.6)
             safe = scene.replace(" / ", "_").replace(" ", "")
-            out += _save(fig, folder, f"images_{safe}_f{k}")
+            out += save_figure(fig, folder, f"images_{safe}_f{k}")
     return out
 
 

@@ -198,13 +198,8 @@ def failure_chart(df: pd.DataFrame, folder: Path) -> list[Path]:
         ax.set_yticks(range(len(cases)), cases if ax is axes[0] else [""] * len(cases), fontsize=6)
         ax.set_title(title, fontsize=9)
         fig.colorbar(im, ax=ax, shrink=0.5)
-    out = []
-    for ext in ("png", "svg"):
-        p = folder / f"stress_failures.{ext}"
-        fig.savefig(p, dpi=110, bbox_inches="tight")
-        out.append(p)
-    plt.close(fig)
-    return out
+    from .charts import save_figure
+    return save_figure(fig, folder, "stress_failures")
 
 
 def stress_reading(df: pd.DataFrame) -> list[str]:
