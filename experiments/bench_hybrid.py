@@ -18,7 +18,7 @@ POLICIES = ("raster", "raycast", "heuristic", "hybrid", "oracle")
 
 def run_benchmark(ctx, hf, flights: dict, tau: float = 2 / 3, repeats: int = 3, tile_size: int = 256) -> tuple:
     """(frames table, per-tile table): wall ms per policy and frame; predicted vs measured per tile."""
-    from hybrid.frame import make_renderer
+    from hybrid.renderer import make_renderer
     rows, tiles = [], []
     for fname, views in flights.items():
         for pol in POLICIES:
@@ -29,8 +29,8 @@ def run_benchmark(ctx, hf, flights: dict, tau: float = 2 / 3, repeats: int = 3, 
                     res = [r.render(v, tau) for _ in range(repeats)]
                     st = res[-1].stats
                     rows.append({"flight": fname, "policy": pol, "frame": k,
-                                 "wall_ms": float(np.median([x.stats["wall_ms"] for x in res])),
-                                 "tiles": st.get("tiles"), "tiles_raster": st.get("tiles_raster", st.get("tiles") if pol == "raster" else 0),
+                                 "wall_ms": float(np.median([x.stats.wall_ms for x in res])),
+                                 "tiles": st.tiles, "tiles_raster": st.tiles_raster,
                                  "tiles_raycast": st.get("tiles_raycast", st.get("tiles") if pol == "raycast" else 0),
                                  "pred_ms": st.get("pred_ms", np.nan)})
                     if pol == "oracle":
@@ -67,10 +67,10 @@ def summarize(frames: pd.DataFrame, tiles: pd.DataFrame, model) -> str:
 
 def main(argv=None) -> int:
     """Run the hybrid benchmark on Puget and print its tables."""
-    from hybrid.costmodel import load_cost_model
-    from hybrid.datasets import puget
-    from hybrid.flight import preset
-    from hybrid.glcontext import gl_info, shared_context
+    from hybrid.cost.model import load_cost_model
+    from hybrid.terrain.datasets import puget
+    from hybrid.camera.flight import preset
+    from hybrid.gl.context import gl_info, shared_context
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=8)
     ap.add_argument("--size", default="640x360")

@@ -38,8 +38,8 @@ def _table(title, header, rows):
 
 def puget_tiles(count=4):
     """A few 257² full-resolution tiles of the bundled Puget Sound model (tile size 256)."""
-    from hybrid.datasets import puget
-    from hybrid.pyramid import TilePyramid
+    from hybrid.terrain.datasets import puget
+    from hybrid.tiles.pyramid import TilePyramid
     hf = puget(with_texture=False)
     pyr = TilePyramid(hf, 256)
     keys = pyr.keys(0)
@@ -122,17 +122,15 @@ def leaf_timing(tiles, tolerances=(0.0, 10.0, 40.0, 160.0)):
 
 def memory_rows(ctx, hf, tiles):
     """Rows (representation, bytes per tile, triangles, bytes per triangle)."""
-    from hybrid.frame import shading_source
     from raster.tilelets import TileletStrategy
     from raster.tin import TinStrategy
     from raster.trianglelist import TriangleListStrategy
-    src = shading_source()
     rows = []
     tile = tiles[0]
     full_tris = 2 * tile.n * tile.n
     for name, cls, kw in (("tilelets (GS)", TileletStrategy, {}), ("fullres list", TriangleListStrategy, {}),
                           ("tin 90% reduced", TinStrategy, {"reduction": 0.9})):
-        s = cls(ctx, hf, src, **kw)
+        s = cls(ctx, hf, **kw)
         g = s.upload(tile)
         tris = getattr(g, "triangles", full_tris)
         rows.append((name, g.nbytes, tris, f"{g.nbytes / tris:.1f}"))
@@ -143,7 +141,7 @@ def memory_rows(ctx, hf, tiles):
 
 
 def _top_view(hf, width=320, height=180):
-    from hybrid.view import View
+    from hybrid.camera.view import View
     w, d = hf.extent
     ox, oy, oz = hf.origin
     c = np.array([ox + w / 2, oy + d / 2, oz])
@@ -152,19 +150,18 @@ def _top_view(hf, width=320, height=180):
 
 def throughput_rows(ctx, repeats=5):
     """Rows comparing the GS tilelet path with an indexed list of the same triangles (Mtri/s)."""
-    from hybrid.datasets import puget
-    from hybrid.frame import shading_source
-    from hybrid.pyramid import TilePyramid
-    from hybrid.target import FrameTarget
-    from hybrid.tiletree import SelectedTile
+    from hybrid.terrain.datasets import puget
+    from hybrid.tiles.pyramid import TilePyramid
+    from hybrid.gl.target import FrameTarget
+    from hybrid.tiles.tiletree import SelectedTile
     from raster.meshes import MeshStrategyBase, MeshTile
     from raster.tilelets import TileletStrategy
     from raster.trianglelist import grid_vertices, tilelet_faces
     hf = puget(with_texture=False, size=513)
     pyr = TilePyramid(hf, 256)
     view = _top_view(hf)
-    strat = TileletStrategy(ctx, hf, shading_source())
-    mesh = MeshStrategyBase(ctx, hf, shading_source())
+    strat = TileletStrategy(ctx, hf)
+    mesh = MeshStrategyBase(ctx, hf)
     target = FrameTarget(ctx, view.width, view.height)
     rows = []
     try:
@@ -207,15 +204,15 @@ def throughput_rows(ctx, repeats=5):
 
 def culling_rows(ctx, repeats=5):
     """Rows (culling, tilelets drawn, culled, triangles, ms) on a low view with much of each tile outside."""
-    from hybrid.datasets import puget
-    from hybrid.frame import SingleStrategyRenderer
-    from hybrid.view import View
+    from hybrid.terrain.datasets import puget
+    from hybrid.renderer import Renderer
+    from hybrid.camera.view import View
     hf = puget(with_texture=False, size=513)
     w, d = hf.extent
     ox, oy, oz = hf.origin
     eye = np.array([ox + 0.3 * w, oy + 0.3 * d, hf.ground_height(ox + 0.3 * w, oy + 0.3 * d) + 60.0])
     view = View(eye, eye + np.array([3000.0, 1000.0, -600.0]), 40, 320, 180, near=1.0, far=10 * w)
-    r = SingleStrategyRenderer(ctx, hf, "raster", tile_size=128)
+    r = Renderer(ctx, hf, "raster", tile_size=128)
     rows = []
     try:
         r.render(view, mode="shaded")
@@ -223,8 +220,8 @@ def culling_rows(ctx, repeats=5):
         for cull in (False, True):
             res = [r.render(view, mode="shaded", culling=cull, count_culled=False) for _ in range(repeats)]
             counted = r.render(view, mode="shaded", culling=cull)
-            ms = float(np.median([x.stats["wall_ms"] - x.stats["lod_ms"] for x in res]))
-            s = counted.stats
+            ms = float(np.median([x.stats.wall_ms - x.stats.counters["lod_ms"] for x in res]))
+            s = counted.stats.counters
             base[cull] = ms
             rows.append(("on" if cull else "off", s["tilelets"] - s["tilelets_culled"], s["tilelets_culled"],
                          s["triangles"], f"{ms:.1f}"))
@@ -236,7 +233,7 @@ def culling_rows(ctx, repeats=5):
 
 def main() -> None:
     """Run every benchmark and print its table."""
-    from hybrid.glcontext import gl_info, shared_context
+    from hybrid.gl.context import gl_info, shared_context
     ctx = shared_context()
     info = gl_info(ctx)
     print(f"terrabench raster benchmark on {info.renderer} ({info.version})")

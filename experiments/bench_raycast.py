@@ -1,6 +1,6 @@
 """Ray-caster benchmark (issue 3, section 9): naive stepping vs max mipmap vs max mipmap + tile-ID pre-pass.
 
-Renders the frames of a flight with hybrid.frame.SingleStrategyRenderer('raycast') and reports, per
+Renders the frames of a flight with hybrid.renderer.Renderer('raycast') and reports, per
 configuration, rays/s, mean steps per ray and ms/frame. Times are wall clock around ctx.finish() of the
 draw calls plus tile selection (uploads and read-back excluded), from a pass with statistics off; ray
 and step counts come from a second pass with statistics on (exact). On llvmpipe timings are noisy.
@@ -23,10 +23,10 @@ CONFIGS = {
 def run_benchmark(ctx, hf, views, configs: dict | None = None, tau: float = 2.0 / 3.0, mode: str = "shaded",
                   tile_size: int = 256) -> pd.DataFrame:
     """One row per (configuration, frame): wall ms, rays started, hits, steps, capped, tiles; for the views."""
-    from hybrid.frame import SingleStrategyRenderer
+    from hybrid.renderer import Renderer
     configs = configs or CONFIGS
     rows = []
-    r = SingleStrategyRenderer(ctx, hf, "raycast", tile_size=tile_size)
+    r = Renderer(ctx, hf, "raycast", tile_size=tile_size)
     try:
         for name, opts in configs.items():
             r.render(views[0], tau, mode=mode, stats=False, **opts)      # warm-up: compile, upload
@@ -34,8 +34,8 @@ def run_benchmark(ctx, hf, views, configs: dict | None = None, tau: float = 2.0 
             for k, view in enumerate(views):
                 timed = r.render(view, tau, mode=mode, stats=False, **opts)
                 counted = r.render(view, tau, mode=mode, stats=True, **opts)
-                s = counted.stats
-                rows.append({"config": name, "frame": k, "wall_ms": timed.stats["wall_ms"],
+                s = counted.stats.row()
+                rows.append({"config": name, "frame": k, "wall_ms": timed.stats.wall_ms,
                              "wall_ms_stats": s["wall_ms"], "tiles": s["tiles"], "rays": s["rays"], "hits": s["hits"],
                              "steps": s["steps"], "max_steps": s["max_steps"], "capped": s["capped"],
                              "pixels": view.width * view.height, "coverage": float(counted.mask.mean())})
@@ -67,9 +67,9 @@ def summarize(df: pd.DataFrame) -> pd.DataFrame:
 
 def main(argv=None) -> int:
     """Run the benchmark on a dataset's flyover flight and print the table."""
-    from hybrid.datasets import get_dataset
-    from hybrid.flight import preset
-    from hybrid.glcontext import gl_info, shared_context
+    from hybrid.terrain.datasets import get_dataset
+    from hybrid.camera.flight import preset
+    from hybrid.gl.context import gl_info, shared_context
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--dataset", default="puget")
     p.add_argument("--flight", default="flyover")

@@ -35,7 +35,7 @@ def _vec(text: str, name: str) -> np.ndarray:
 
 
 def _size(text: str) -> tuple[int, int]:
-    from hybrid.view import parse_size
+    from hybrid.camera.view import parse_size
     return parse_size(text, "--size")
 
 
@@ -73,8 +73,8 @@ def add_terrain_args(p: argparse.ArgumentParser) -> None:
 
 def load_terrain_arg(args):
     """The HeightField named by --dataset (and friends)."""
-    from hybrid.datasets import NAMES, get_dataset
-    from hybrid.loaders import load_terrain
+    from hybrid.terrain.datasets import NAMES, get_dataset
+    from hybrid.terrain.loaders import load_terrain
     name = args.dataset
     if name in NAMES:
         hf = get_dataset(name, size=args.size_samples, seed=args.seed)
@@ -109,8 +109,8 @@ def add_view_args(p: argparse.ArgumentParser) -> None:
 
 def view_from_args(args, hf):
     """The View named by the view options."""
-    from hybrid.flight import get_flight
-    from hybrid.view import View, default_view
+    from hybrid.camera.flight import get_flight
+    from hybrid.camera.view import View, default_view
     w, h = _size(args.size)
     if args.flight:
         if args.eye or args.target:
@@ -133,13 +133,13 @@ def view_from_args(args, hf):
 
 def cmd_info(args) -> int:
     """Print the GL context (and the terrain when a file or dataset is named)."""
-    from hybrid.glcontext import gl_info, shared_context
+    from hybrid.gl.context import gl_info, shared_context
     if args.file or args.dataset_given:
         if args.file:
             args.dataset = args.file
         hf = load_terrain_arg(args)
         print(hf.summary())
-        from hybrid.pyramid import TilePyramid
+        from hybrid.tiles.pyramid import TilePyramid
         pyr = TilePyramid(hf, args.tile_size)
         print(f"tiles:       {args.tile_size} cells, levels 0..{pyr.max_level}, "
               f"{sum(len(pyr.keys(l)) for l in range(pyr.max_level + 1))} tiles")
@@ -153,29 +153,14 @@ def render_method(ctx, hf, view, method: str, args):
     """Render one view with a method; returns a RenderResult."""
     if method == "reference":
         from hybrid.reference import ReferenceRenderer
-        r = ReferenceRenderer(ctx, hf)
-        try:
-            return r.render(view, args.shading, args.supersample)
-        finally:
-            r.release()
-    from hybrid.frame import SingleStrategyRenderer, STRATEGIES
-    if method not in STRATEGIES and method not in ("hybrid", "heuristic", "oracle"):
-        raise TerrabenchError(f"method {method!r} is not available in this build; available: "
-                              f"reference, {', '.join(sorted(STRATEGIES))}")
+        with ReferenceRenderer(ctx, hf) as r:
+            return r.render(view, mode=args.shading, supersample=args.supersample)
+    from hybrid.renderer import Renderer
     opts = draw_options(args, method)
     if method in ("hybrid", "heuristic", "oracle"):
-        from hybrid.hybrid_frame import HybridRenderer
-        r = HybridRenderer(ctx, hf, method, tile_size=args.tile_size, reconstruction=args.reconstruction,
-                           prepass=not args.no_prepass, mode=opts.get("mode"))
-        try:
-            return r.render(view, args.tau, maps=args.show_strategy)
-        finally:
-            r.release()
-    r = SingleStrategyRenderer(ctx, hf, method, tile_size=args.tile_size)
-    try:
-        return r.render(view, args.tau, **opts)
-    finally:
-        r.release()
+        opts.update(reconstruction=args.reconstruction, prepass=not args.no_prepass)
+    with Renderer(ctx, hf, method, args.tile_size, **opts) as r:
+        return r.render(view, args.tau, maps=args.show_strategy)
 
 
 def draw_options(args, method: str) -> dict:
@@ -203,7 +188,7 @@ def draw_options(args, method: str) -> dict:
 def cmd_render(args) -> int:
     """Render one view with a method; write PATH.png and PATH.depth.npy."""
     from hybrid.errors import check_positive
-    from hybrid.glcontext import shared_context
+    from hybrid.gl.context import shared_context
     out = Path(args.out)
     if out.suffix.lower() != ".png":
         raise TerrabenchError(f"--out must end in .png, got {args.out!r}")
@@ -226,7 +211,7 @@ def cmd_render(args) -> int:
         print(f"strategy map: {smap} (blue raster, orange ray cast)")
     cover = float(result.mask.mean()) * 100
     print(f"{args.method}: wrote {png} and {depth} ({view.width}x{view.height}, terrain on {cover:.1f} % of pixels)")
-    for k, v in result.stats.items():
+    for k, v in result.stats.row().items():
         if isinstance(v, (list, dict)):
             continue
         print(f"  {k}: {v:.4g}" if isinstance(v, float) else f"  {k}: {v}")
@@ -284,10 +269,10 @@ def cmd_report(args) -> int:
 def cmd_calibrate(args) -> int:
     """Time tiles both ways on this device, fit the cost model, report held-out error, save it."""
     from hybrid.calibrate import calibrate
-    from hybrid.costmodel import save_cost_model
+    from hybrid.cost.model import save_cost_model
     from hybrid.errors import check_positive
-    from hybrid.flight import get_flight
-    from hybrid.glcontext import shared_context
+    from hybrid.camera.flight import get_flight
+    from hybrid.gl.context import shared_context
     check_positive("--tau (pixels)", args.tau)
     if not (1 <= args.frames <= 1000):
         raise TerrabenchError(f"--frames must lie in [1, 1000], got {args.frames}")
@@ -321,7 +306,7 @@ def _names(text: str, allowed, what: str) -> list[str]:
 
 def _stress_table(args, scenes, views, methods, size_samples, size, tile_size):
     """Run the stress cases with a progress bar (unless --quiet); the table of failure measures."""
-    from hybrid.glcontext import shared_context
+    from hybrid.gl.context import shared_context
     from .runner import Progress
     from .stress import run_stress
     bar = Progress(len(scenes) * len(views) * len(methods), 0, not args.quiet)
@@ -353,7 +338,7 @@ def cmd_bench(args) -> int:
     """Run the raster, ray-cast and hybrid benchmarks in one process and print (and save) their tables."""
     import contextlib
     import io
-    from hybrid.glcontext import gl_info, shared_context
+    from hybrid.gl.context import gl_info, shared_context
     which = _names(args.which, BENCHES, "which")
     info = gl_info(shared_context(args.device))
     out = Path(args.out) if args.out else None
@@ -495,7 +480,7 @@ def main(argv=None) -> int:
         with warnings.catch_warnings():
             warnings.simplefilter("default")
             return int(args.func(args) or 0)
-    except (TerrabenchError, ValueError) as exc:   # the API's bad-input errors are ValueErrors
+    except TerrabenchError as exc:
         print(f"terrabench: error: {exc}", file=sys.stderr)
         return 2
 

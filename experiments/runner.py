@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 
 from hybrid.errors import TerrabenchError
-from hybrid.view import parse_size
+from hybrid.camera.view import parse_size
 
 from .metrics import frame_accuracy, temporal_errors
 
@@ -36,7 +36,7 @@ from .spec import Spec
 def environment(ctx) -> dict:
     """GL renderer, CPU and package versions of this machine."""
     from importlib import metadata
-    from hybrid.glcontext import gl_info
+    from hybrid.gl.context import gl_info
     info = gl_info(ctx)
     cpu = platform.processor() or ""
     try:
@@ -145,8 +145,8 @@ class Progress:
 
 
 def _load_dataset(name: str, size: int, seed: int):
-    from hybrid.datasets import NAMES, get_dataset
-    from hybrid.loaders import load_terrain
+    from hybrid.terrain.datasets import NAMES, get_dataset
+    from hybrid.terrain.loaders import load_terrain
     if name in NAMES:
         return get_dataset(name, size=size or None, seed=seed)
     return load_terrain(name)
@@ -163,9 +163,9 @@ def _save_image(folder: Path, stem: str, result, full: bool = True) -> None:
 
 def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: bool = False) -> Path:
     """Run (or resume) every configuration of spec into runs_dir/<name>; returns the run folder."""
-    from hybrid.flight import get_flight
-    from hybrid.frame import make_renderer
-    from hybrid.glcontext import shared_context
+    from hybrid.camera.flight import get_flight
+    from hybrid.renderer import make_renderer
+    from hybrid.gl.context import shared_context
     from hybrid.reference import ReferenceRenderer
 
     runs_dir = Path(runs_dir)
@@ -228,12 +228,12 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
                                                c["policy"] in ("hybrid", "heuristic", "oracle")) else {}
                     results = [renderer.render(views[k], c["tau"]) for _ in range(spec.repeats - 1)]
                     results.append(renderer.render(views[k], c["tau"], **extra))
-                    timed[k] = (results[-1], [r.stats.get("wall_ms", np.nan) for r in results])
+                    timed[k] = (results[-1], [r.stats.wall_ms for r in results])
                     bar.step(f"{c['config']} frame {k}")
                 # 2. then accuracy against the references, and the journal
                 for k in todo:
                     res, walls = timed[k]
-                    stats = {kk: v for kk, v in res.stats.items() if not isinstance(v, (list, dict))}
+                    stats = res.stats.row()
                     row = {**c, "frame": k, **stats, "wall_ms": float(np.median(walls)),
                            "wall_ms_min": float(np.min(walls)), **frame_accuracy(res, ref(k), flip=spec.flip)}
                     if k > 0:
@@ -241,7 +241,7 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
                         row.update(temporal_errors(prev, res, ref(k - 1), ref(k)))
                     journal.append("frames", [row])
                     journal.append("tiles", [{"config": c["config"], "frame": k, "policy": c["policy"], **t}
-                                             for t in res.stats.get("tile_rows", [])])
+                                             for t in res.stats.tile_rows])
                     if k in spec.image_frames or spec.video:
                         _save_image(folder / "images", f"{c['config']}-f{k}", res, k in spec.image_frames)
             except Exception as exc:  # a failed configuration is recorded; the rest goes on

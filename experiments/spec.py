@@ -25,7 +25,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from hybrid.errors import TerrabenchError
-from hybrid.view import parse_size
+from hybrid.camera.view import parse_size
 
 POLICIES = ("reference", "raster", "raycast", "hybrid", "heuristic", "oracle", "fullres", "tin")
 RECONSTRUCTIONS = ("planes", "linear", "triangles", "bilinear")

@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from hybrid.datasets import get_dataset, puget
+from hybrid.terrain.datasets import get_dataset, puget
 from hybrid.errors import TerrabenchError
-from hybrid.heightfield import HeightField
-from hybrid.view import View
+from hybrid.terrain.heightfield import HeightField
+from hybrid.camera.view import View
 
 SCENES = ("spike", "cliff", "staircase", "ridges", "flat", "puget", "puget_x100")
 VIEWS = ("grazing", "down", "inside_aabb", "below", "axis_x", "axis_y", "origin", "offset_1e6", "offset_1e7",
@@ -96,7 +96,7 @@ def stress_view(hf: HeightField, kind: str, width: int = 320, height: int = 180,
 
 
 def _renderer(ctx, hf, method: str, tile_size: int):
-    from hybrid.frame import make_renderer
+    from hybrid.renderer import make_renderer
     policy, _, rec = method.partition("/")
     return make_renderer(ctx, hf, policy, tile_size=tile_size, reconstruction=rec or "triangles")
 
@@ -118,7 +118,7 @@ def measure(result, ref) -> dict:
     both = m & r
     rel = np.abs(result.distance[both].astype(np.float64) - ref.distance[both]) / ref.distance[both] if both.any() \
         else np.array([0.0])
-    s = result.stats
+    s = result.stats.counters
     rays = float(s.get("rays", 0) or 0)
     # the reference's outline: terrain pixels next to sky; a level of detail within tau pixels may move it
     sky = ~r

@@ -1,7 +1,11 @@
-"""Error types raised for bad input anywhere in the toolkit (the CLI turns them into exit code 2)."""
+"""Error types raised for bad input anywhere in the toolkit (the CLI turns them into exit code 2).
+
+TerrabenchError is not a ValueError on purpose: the CLI prints it as one line, while any other exception
+is a bug and keeps its traceback.
+"""
 
 
-class TerrabenchError(ValueError):
+class TerrabenchError(Exception):
     """A user-facing error: the message names the argument or file, the value and the accepted range."""
 
 

@@ -6,7 +6,7 @@ uniform int mode;              // 0 texture, 1 shaded, 2 height
 uniform sampler2D tex;
 uniform vec2 hrange;
 out vec4 frag;
-//#include shading.glsl
+#include "shading"
 void main() {
     vec3 n = cross(dFdx(v_rel), dFdy(v_rel));
     if (n.z < 0.0) n = -n;

@@ -9,11 +9,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import TerrabenchError
-from .heightfield import HeightField
-from .shaders import load_source
-from .target import FrameTarget, RenderResult
-from .view import View
+from hybrid.errors import TerrabenchError
+from hybrid.terrain.heightfield import HeightField
+from hybrid.contract import FrameStats
+from hybrid.gl.context import gl_bytes
+from hybrid.gl.programs import program
+from hybrid.gl.timing import timed
+from hybrid.tiles.tiletree import DEFAULT_TAU
+from hybrid.gl.shading import resolve_mode
+from hybrid.gl.textures import terrain_texture
+from hybrid.gl.target import FrameTarget, RenderResult
+from hybrid.camera.view import View
 
 MODES = {"texture": 0, "shaded": 1, "height": 2}
 
@@ -26,55 +32,29 @@ def grid_indices(rows: int, cols: int) -> np.ndarray:
     return np.stack([a, b, c, a, c, d], axis=1).ravel()
 
 
-def resolve_mode(hf: HeightField, mode: str | None) -> str:
-    """The shading mode to use: 'texture' when the terrain has one, else 'shaded', unless given."""
-    if mode is None:
-        return "texture" if hf.texture is not None else "shaded"
-    if mode not in MODES:
-        raise TerrabenchError(f"unknown shading mode {mode!r}; choose one of {', '.join(MODES)}")
-    if mode == "texture" and hf.texture is None:
-        raise TerrabenchError(f"terrain {hf.name!r} has no texture; use shading 'shaded' or 'height'")
-    return mode
-
-
 class ReferenceRenderer:
     """GPU state of the reference surface of one height field (height texture, index buffer, texture)."""
 
     def __init__(self, ctx, hf: HeightField):
         self.ctx, self.hf = ctx, hf
-        self.prog = ctx.program(
-            vertex_shader=load_source("hybrid", "reference.vert.glsl"),
-            fragment_shader=load_source("hybrid", "reference.frag.glsl").replace(
-                "//#include shading.glsl", load_source("hybrid", "shading.glsl")),
-        )
+        self.prog = program(ctx, "hybrid", "reference.vert.glsl", "reference.frag.glsl")
         self.heights = ctx.texture((hf.cols, hf.rows), 1, hf.heights.tobytes(), dtype="f4")
         self.heights.filter = (ctx.NEAREST, ctx.NEAREST)
         self.ibo = ctx.buffer(grid_indices(hf.rows, hf.cols).tobytes())
         self.vao = ctx.vertex_array(self.prog, [], index_buffer=self.ibo, index_element_size=4)
-        self.texture = None
-        if hf.texture is not None:
-            self.texture = ctx.texture((hf.cols - 1, hf.rows - 1), 3, np.ascontiguousarray(hf.texture).tobytes())
-            self.texture.build_mipmaps()
-            self.texture.anisotropy = 16.0
-            self.texture.repeat_x = self.texture.repeat_y = False
+        self.texture = terrain_texture(ctx, hf)
         self.triangles = 2 * (hf.rows - 1) * (hf.cols - 1)
 
     @property
     def nbytes(self) -> int:
-        """GPU bytes of the height texture, index buffer and colour texture (with its mipmaps)."""
-        n = self.heights.width * self.heights.height * 4 + self.ibo.size
-        if self.texture is not None:
-            w, h = self.texture.size
-            while True:
-                n += w * h * 3
-                if w == 1 and h == 1:
-                    break
-                w, h = max(w // 2, 1), max(h // 2, 1)
-        return n
+        """GPU bytes of the height texture, index buffer and colour texture, as the driver reports them."""
+        return gl_bytes(self.heights, self.ibo, self.texture)
 
     def draw(self, target: FrameTarget, view: View, mode: str | None = None) -> None:
         """Draw the whole surface into target (which must match the view's size) for the view."""
-        mode = resolve_mode(self.hf, mode)
+        if self.vao is None:
+            raise TerrabenchError("this reference renderer was released; make a new one")
+        mode = resolve_mode(self.hf, mode, MODES)
         hf = self.hf
         self.prog["grid"].value = (hf.cols, hf.rows)
         self.prog["origin_rel"].value = tuple((np.array(hf.origin) - view.eye).astype(np.float32))
@@ -90,8 +70,13 @@ class ReferenceRenderer:
         target.use()
         self.vao.render(self.ctx.TRIANGLES)
 
-    def render(self, view: View, mode: str | None = None, supersample: int = 1) -> RenderResult:
-        """Colour (box-filtered over supersample² samples), hit distance and coverage for a view."""
+    def render(self, view: View, tau: float = DEFAULT_TAU, *, mode: str | None = None, supersample: int = 1,
+               maps: bool = False) -> RenderResult:
+        """Colour (box-filtered over supersample² samples), hit distance and coverage for a view.
+
+        Same signature as ``hybrid.renderer.Renderer.render``; tau and maps do not apply (no level of
+        detail, one strategy). The draw is timed like any method's (counters: triangles, supersample).
+        """
         if isinstance(supersample, bool) or not isinstance(supersample, (int, np.integer)) or not (1 <= supersample <= 8):
             raise TerrabenchError(f"supersample must be an integer in [1, 8], got {supersample!r}")
         if view.width * supersample > 16384 or view.height * supersample > 16384:
@@ -99,8 +84,11 @@ class ReferenceRenderer:
         target = FrameTarget(self.ctx, view.width, view.height)
         try:
             target.clear()
-            self.draw(target, view, mode)
-            result = target.read(view, {"triangles": self.triangles})
+            _, wall, gpu = timed(self.ctx, lambda: self.draw(target, view, mode))
+            stats = FrameStats(wall_ms=wall, plan_ms=0.0, draw_ms=wall, gpu_ms=gpu, tiles=1, gpu_bytes=self.nbytes,
+                               shared_bytes=self.nbytes,
+                               counters={"triangles": self.triangles, "supersample": supersample})
+            result = target.read(view, stats)
         finally:
             target.release()
         if supersample > 1:
@@ -114,11 +102,19 @@ class ReferenceRenderer:
                 big.release()
             c = c.reshape(view.height, supersample, view.width, supersample, 3).mean(axis=(1, 3))
             result.colour = np.clip(np.rint(c), 0, 255).astype(np.uint8)
-        result.stats["supersample"] = supersample
         return result
 
+    def __enter__(self) -> "ReferenceRenderer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
     def release(self) -> None:
-        """Free the GPU objects."""
+        """Free the GPU objects; the renderer cannot draw afterwards."""
+        if self.vao is None:
+            return
         for o in (self.vao, self.ibo, self.heights, self.texture, self.prog):
             if o is not None:
                 o.release()
+        self.vao = None

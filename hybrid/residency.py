@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections import OrderedDict
 from dataclasses import dataclass
 
-from .errors import TerrabenchError
+from hybrid.errors import TerrabenchError
 
 
 @dataclass

@@ -1,34 +1,65 @@
-"""Registration of the tile strategies of raster/ and raycast/ in hybrid.frame.STRATEGIES."""
+"""The registry of tile strategies: name -> how to make it, what kind it is, and its CPU triangle estimate.
+
+This module sits above ``raster`` and ``raycast`` (it imports them) and below the cost model and the
+renderer (which find strategies only through it).
+"""
 from __future__ import annotations
 
-from .frame import register_strategy
+from dataclasses import dataclass
+from typing import Callable
+
+from hybrid.contract import Kind, TileStrategy, TriangleEstimator
+from hybrid.errors import TerrabenchError
+from hybrid.terrain.heightfield import HeightField
+from hybrid.tiles.pyramid import TilePyramid
+from raster.estimate import TileletTriangleEstimator
+from raster.tilelets import TileletStrategy
+from raster.tin import TinStrategy
+from raster.trianglelist import TriangleListStrategy
+from raycast import RaycastStrategy
 
 
-@register_strategy("raycast")
-def _raycast(ctx, hf, shading_source, **options):
-    """The max-mipmap ray caster (raycast.RaycastStrategy)."""
-    from raycast import RaycastStrategy
-    return RaycastStrategy(ctx, hf, shading_source, **options)
+@dataclass(frozen=True)
+class StrategyEntry:
+    """One registered strategy: its GPU class, its kind and, for raster strategies, a CPU triangle estimate."""
+
+    name: str
+    kind: Kind
+    cls: type
+    description: str
+    triangle_estimator: Callable[[TilePyramid], TriangleEstimator] | None = None
+
+    @property
+    def draw_options(self) -> frozenset[str]:
+        """Names of the options its draw_tiles takes."""
+        return self.cls.draw_options
 
 
-# --- raster (issue 4) ------------------------------------------------------------------------------
-@register_strategy("raster")
-def _raster(ctx, hf, shading_source, **options):
-    """Restricted-quadtree tilelets through the geometry shader, stitched and geomorphed."""
-    from raster.tilelets import TileletStrategy
-    return TileletStrategy(ctx, hf, shading_source, **options)
+STRATEGIES: dict[str, StrategyEntry] = {e.name: e for e in (
+    StrategyEntry("raster", "raster", TileletStrategy,
+                  "restricted-quadtree tilelets through the geometry shader, stitched and geomorphed",
+                  TileletTriangleEstimator),
+    StrategyEntry("raycast", "raycast", RaycastStrategy, "maximum-mipmap ray casting (Dick et al.)"),
+    StrategyEntry("fullres", "raster", TriangleListStrategy, "full-resolution indexed triangle list per tile"),
+    StrategyEntry("tin", "raster", TinStrategy, "decimated TIN per tile (may crack at tile borders)"),
+)}
 
 
-@register_strategy("fullres")
-def _fullres(ctx, hf, shading_source, **options):
-    """Full-resolution indexed triangle list per tile."""
-    from raster.trianglelist import TriangleListStrategy
-    return TriangleListStrategy(ctx, hf, shading_source, **options)
+def strategy_entry(name: str) -> StrategyEntry:
+    """The registry entry of a strategy name; unknown names raise TerrabenchError listing the known ones."""
+    if name not in STRATEGIES:
+        raise TerrabenchError(f"unknown strategy {name!r}; available: {', '.join(STRATEGIES)}")
+    return STRATEGIES[name]
 
 
-@register_strategy("tin")
-def _tin(ctx, hf, shading_source, **options):
-    """Decimated TIN per tile (fast-simplification), may crack at tile borders."""
-    from raster.tin import TinStrategy
-    return TinStrategy(ctx, hf, shading_source, **options)
-# --- end raster ------------------------------------------------------------------------------------
+def make_strategy(name: str, ctx, hf: HeightField, **options) -> TileStrategy:
+    """A strategy instance by registered name (options go to its constructor)."""
+    return strategy_entry(name).cls(ctx, hf, **options)
+
+
+def triangle_estimator(pyramid: TilePyramid, name: str = "raster") -> TriangleEstimator:
+    """The CPU triangle estimate of a raster strategy over a pyramid (no GL context needed)."""
+    entry = strategy_entry(name)
+    if entry.triangle_estimator is None:
+        raise TerrabenchError(f"strategy {name!r} has no CPU triangle estimate")
+    return entry.triangle_estimator(pyramid)

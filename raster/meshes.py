@@ -5,9 +5,15 @@ Bytes per triangle of an indexed list: 12 bytes of indices (the paper's 96 bits)
 """
 from __future__ import annotations
 
+from hybrid.errors import TerrabenchError
 import numpy as np
 
-from .shading import MODES, load_glsl, resolve_mode, terrain_texture, texture_nbytes
+from hybrid.gl.programs import program
+from hybrid.gl.shading import resolve_mode
+from hybrid.gl.context import gl_bytes
+from hybrid.gl.textures import terrain_texture
+
+from .shading import MODES
 
 GL_CLIP_DISTANCE0 = 0x3000
 
@@ -19,9 +25,9 @@ class MeshTile:
         v = np.ascontiguousarray(vertices, dtype=np.float32)
         f = np.ascontiguousarray(faces, dtype=np.uint32)
         if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3:
-            raise ValueError(f"mesh needs vertices (v, 3) and faces (f, 3), got {v.shape} and {f.shape}")
+            raise TerrabenchError(f"mesh needs vertices (v, 3) and faces (f, 3), got {v.shape} and {f.shape}")
         if f.size and int(f.max()) >= len(v):
-            raise ValueError(f"face index {int(f.max())} out of range for {len(v)} vertices")
+            raise TerrabenchError(f"face index {int(f.max())} out of range for {len(v)} vertices")
         self.key = key
         self.vbo = ctx.buffer(v.tobytes())
         self.ibo = ctx.buffer(f.tobytes())
@@ -42,16 +48,18 @@ class MeshTile:
 class MeshStrategyBase:
     """Shared drawing of per-tile indexed meshes; subclasses build the mesh of a tile in ``mesh_of``."""
 
-    def __init__(self, ctx, hf, shading_source: str):
+    kind = "raster"
+    draw_options = frozenset({"mode", "wireframe"})
+
+    def __init__(self, ctx, hf):
         self.ctx, self.hf = ctx, hf
-        self.prog = ctx.program(vertex_shader=load_glsl("mesh.vert.glsl", shading_source),
-                                fragment_shader=load_glsl("tilelet.frag.glsl", shading_source))
+        self.prog = program(ctx, "raster", "mesh.vert.glsl", "tilelet.frag.glsl")
         self.texture = terrain_texture(ctx, hf)
 
     @property
     def shared_nbytes(self) -> int:
-        """GPU bytes shared by all tiles (the terrain colour texture with mipmaps)."""
-        return texture_nbytes(self.hf)
+        """GPU bytes shared by all tiles as the driver reports them (the colour texture with mipmaps)."""
+        return gl_bytes(self.texture)
 
     def mesh_of(self, tile) -> tuple[np.ndarray, np.ndarray]:
         """(vertices, faces) of a tile, tile-local metres."""
@@ -62,9 +70,10 @@ class MeshStrategyBase:
         v, f = self.mesh_of(tile)
         return MeshTile(self.ctx, self.prog, tile.key, v, f)
 
-    def draw_tiles(self, target, view, items, mode: str | None = None, wireframe: bool = False, **_ignored) -> dict:
+    def draw_tiles(self, target, view, items, tau: float | None = None, mode: str | None = None,
+                   wireframe: bool = False) -> dict:
         """Draw (mesh_tile, tile, selected) items into target; counters: triangles (GL query and CPU sum)."""
-        mode = resolve_mode(self.hf, mode)
+        mode = resolve_mode(self.hf, mode, MODES)
         ctx, prog = self.ctx, self.prog
         prog["view_proj_rel"].write(view.view_proj_rel.T.astype(np.float32).tobytes())
         prog["mode"].value = MODES[mode]

@@ -21,6 +21,7 @@ unit, from neighbouring tiles) force extra splits.
 """
 from __future__ import annotations
 
+from hybrid.errors import TerrabenchError
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,7 +31,7 @@ DEFAULT_BETA = 0.7
 
 def _check_tile_size(n) -> int:
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 2 or n & (n - 1):
-        raise ValueError(f"tile cells per side must be a power of two >= 2, got {n!r}")
+        raise TerrabenchError(f"tile cells per side must be a power of two >= 2, got {n!r}")
     return int(n)
 
 
@@ -81,7 +82,7 @@ def fan_surfaces(heights: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
     k = 1 << m
     s = 2 * k
     if s > n:
-        raise ValueError(f"tilelet level m must lie in [0, {int(np.log2(n)) - 1}] for a {n}-cell tile, got {m}")
+        raise TerrabenchError(f"tilelet level m must lie in [0, {int(np.log2(n)) - 1}] for a {n}-cell tile, got {m}")
     idx = np.arange(n + 1)
     # full fan: quads of the post grid, diagonal SW-NE where (I + J) is even, NW-SE where odd
     I = np.minimum(idx // k, n // k - 1)
@@ -142,10 +143,10 @@ def error_pyramid(heights: np.ndarray, beta: float = DEFAULT_BETA) -> ErrorPyram
     """Error pyramid (metres) of a tile's (n+1)² heights; beta in (0, 1) sets the morph-safe error growth."""
     h = np.asarray(heights)
     if h.ndim != 2 or h.shape[0] != h.shape[1]:
-        raise ValueError(f"tile heights must be a square (n+1)x(n+1) array, got shape {h.shape}")
+        raise TerrabenchError(f"tile heights must be a square (n+1)x(n+1) array, got shape {h.shape}")
     n = _check_tile_size(h.shape[0] - 1)
     if not (0.0 < float(beta) < 1.0):
-        raise ValueError(f"beta must lie in (0, 1), got {beta!r}")
+        raise TerrabenchError(f"beta must lie in (0, 1), got {beta!r}")
     h = h.astype(np.float64)
     top = int(np.log2(n)) - 1
     cmax = np.maximum(np.maximum(h[:-1, :-1], h[:-1, 1:]), np.maximum(h[1:, :-1], h[1:, 1:]))
@@ -174,7 +175,7 @@ def leaf_levels(pyr: ErrorPyramid, tolerance: float, cap: np.ndarray | None = No
     """Map (n/2)² of leaf local levels: split while error > tolerance (metres), restricted, level <= cap."""
     tol = float(tolerance)
     if not (tol >= 0.0) or tol == np.inf:
-        raise ValueError(f"tolerance must be finite and >= 0 metres, got {tolerance!r}")
+        raise TerrabenchError(f"tolerance must be finite and >= 0 metres, got {tolerance!r}")
     E = pyr.effective if use_effective else pyr.errors
     top, U = pyr.top, pyr.units
     if cap is None:
@@ -182,9 +183,9 @@ def leaf_levels(pyr: ErrorPyramid, tolerance: float, cap: np.ndarray | None = No
     else:
         cap = np.asarray(cap, dtype=np.int16)
         if cap.shape != (U, U):
-            raise ValueError(f"cap must have shape {(U, U)}, got {cap.shape}")
+            raise TerrabenchError(f"cap must have shape {(U, U)}, got {cap.shape}")
         if cap.min() < 0:
-            raise ValueError(f"cap levels must be >= 0, got minimum {int(cap.min())} (tiles not restricted?)")
+            raise TerrabenchError(f"cap levels must be >= 0, got minimum {int(cap.min())} (tiles not restricted?)")
     need = [e > tol for e in E]
     while True:
         levels = np.full((U, U), top, dtype=np.int16)

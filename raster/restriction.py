@@ -12,6 +12,7 @@ hybrid's tile tree guarantees; otherwise a ValueError says so.
 """
 from __future__ import annotations
 
+from hybrid.errors import TerrabenchError
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,12 +80,12 @@ class _Frame:
         self.tiles = {}
         ns = {t.pyramid.n for t in tiles}
         if len(ns) > 1:
-            raise ValueError(f"all tiles of a frame must have the same cells per side, got {sorted(ns)}")
+            raise TerrabenchError(f"all tiles of a frame must have the same cells per side, got {sorted(ns)}")
         self.n = ns.pop() if ns else 0
         for t in tiles:
             k = _key(t.key)
             if k in self.tiles:
-                raise ValueError(f"tile key {k} given twice")
+                raise TerrabenchError(f"tile key {k} given twice")
             self.tiles[k] = t
         self.use_effective = use_effective
         self.levels = {}
@@ -144,7 +145,7 @@ class _Frame:
             big = np.where(nb < 0, 1 << 20, nb).reshape(U, 2 << l).min(axis=1)
             local = np.where(big >= 1 << 20, 1 << 14, big + 1 - l)
             if local.min() < 0:
-                raise ValueError(f"tile {key} borders a tile two or more levels finer on edge {'WESN'[edge]}; "
+                raise TerrabenchError(f"tile {key} borders a tile two or more levels finer on edge {'WESN'[edge]}; "
                                  "the tiles of a frame must be restricted")
             idx = (np.s_[:, 0], np.s_[:, -1], np.s_[0, :], np.s_[-1, :])[edge]
             new = np.minimum(cap[idx], local.astype(np.int16))

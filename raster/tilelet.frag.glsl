@@ -11,7 +11,7 @@ uniform float spacing;         // metres between tile samples
 uniform vec2 uv_origin;        // texture coordinate of tile sample [0, 0]
 uniform vec2 uv_per_cell;      // texture coordinate step per tile cell
 out vec4 frag;
-//#include shading.glsl
+#include "shading"
 
 vec3 level_colour(int l) {
     const vec3 pal[8] = vec3[8](vec3(0.90, 0.25, 0.20), vec3(0.95, 0.60, 0.15), vec3(0.95, 0.90, 0.25),

@@ -10,6 +10,7 @@ edges whose neighbour is coarser. Everything is eye-relative float32; drawing is
 """
 from __future__ import annotations
 
+from hybrid.errors import TerrabenchError
 import time
 
 import numpy as np
@@ -17,7 +18,12 @@ import numpy as np
 from .culling import cull_tilelets
 from .quadtree import DEFAULT_BETA, error_pyramid, estimate_triangles, split_errors
 from .restriction import TileLod, restrict_frame
-from .shading import MODES, load_glsl, resolve_mode, terrain_texture, texture_nbytes
+from hybrid.gl.programs import program
+from hybrid.gl.shading import resolve_mode
+from hybrid.gl.context import gl_bytes
+from hybrid.gl.textures import terrain_texture
+
+from .shading import MODES
 
 DEFAULT_TAU = 2.0 / 3.0
 POINT_FORMAT = "4i 4f 1f"
@@ -51,7 +57,7 @@ class TileletTile:
         ctx = strategy.ctx
         h = np.ascontiguousarray(tile.heights, dtype=np.float32)
         if h.ndim != 2 or h.shape[0] != h.shape[1] or (h.shape[0] - 1) & (h.shape[0] - 2) or h.shape[0] < 3:
-            raise ValueError(f"tile heights must be (n+1)² with n a power of two >= 2, got shape {h.shape}")
+            raise TerrabenchError(f"tile heights must be (n+1)² with n a power of two >= 2, got shape {h.shape}")
         self.n = h.shape[0] - 1
         self.key = tile.key
         self.pyramid = error_pyramid(h, strategy.beta)
@@ -76,18 +82,18 @@ class TileletTile:
 class TileletStrategy:
     """Draws tiles as restricted-quadtree tilelets through the geometry shader, stitched and geomorphed."""
 
-    def __init__(self, ctx, hf, shading_source: str, tau: float = DEFAULT_TAU, beta: float = DEFAULT_BETA):
+    kind = "raster"
+    draw_options = frozenset({"mode", "wireframe", "stitching", "morph", "culling", "leaf_tau", "record_culling",
+                              "count_culled", "skirts"})
+
+    def __init__(self, ctx, hf, tau: float = DEFAULT_TAU, beta: float = DEFAULT_BETA):
         if not (np.isfinite(tau) and tau > 0):
-            raise ValueError(f"tau must be finite and > 0 pixels, got {tau!r}")
+            raise TerrabenchError(f"tau must be finite and > 0 pixels, got {tau!r}")
         if not (0.0 < beta < 1.0):
-            raise ValueError(f"beta must lie in (0, 1), got {beta!r}")
+            raise TerrabenchError(f"beta must lie in (0, 1), got {beta!r}")
         self.ctx, self.hf = ctx, hf
         self.tau, self.beta = float(tau), float(beta)
-        self.prog = ctx.program(
-            vertex_shader=load_glsl("tilelet.vert.glsl", shading_source),
-            geometry_shader=load_glsl("tilelet.geom.glsl", shading_source),
-            fragment_shader=load_glsl("tilelet.frag.glsl", shading_source),
-        )
+        self.prog = program(ctx, "raster", "tilelet.vert.glsl", "tilelet.frag.glsl", "tilelet.geom.glsl")
         self.texture = terrain_texture(ctx, hf)
         self.flags = None
         self.last_sets = {}
@@ -97,8 +103,8 @@ class TileletStrategy:
 
     @property
     def shared_nbytes(self) -> int:
-        """GPU bytes shared by all tiles: the terrain colour texture with mipmaps (+ the debug cull buffer)."""
-        return texture_nbytes(self.hf) + (self.flags.size if self.flags is not None else 0)
+        """GPU bytes shared by all tiles as the driver reports them: colour texture (+ the debug cull buffer)."""
+        return gl_bytes(self.texture, self.flags)
 
     def upload(self, tile) -> TileletTile:
         """Put one tile on the GPU (heights texture + point buffer) and compute its error pyramid."""
@@ -128,16 +134,18 @@ class TileletStrategy:
         """Restricted tilelet sets of a frame's items for a view: {key tuple: TileletSet}."""
         tau = self.tau if tau is None else float(tau)
         if not (np.isfinite(tau) and tau > 0):
-            raise ValueError(f"leaf_tau must be finite and > 0 pixels, got {tau!r}")
+            raise TerrabenchError(f"leaf_tau must be finite and > 0 pixels, got {tau!r}")
         K = view.pixels_per_radian
         lods = [TileLod(_key(s.key), g.pyramid, tau * float(s.distance) / K) for g, _, s in items]
         return restrict_frame(lods, morph=morph)
 
-    def draw_tiles(self, target, view, items, mode: str | None = None, wireframe: bool = False,
-                   stitching: bool = True, morph: bool = True, culling: bool = True,
+    def draw_tiles(self, target, view, items, tau: float | None = None, mode: str | None = None,
+                   wireframe: bool = False, stitching: bool = True, morph: bool = True, culling: bool = True,
                    leaf_tau: float | None = None, record_culling: bool = False, count_culled: bool = True,
-                   skirts: dict | None = None, **_ignored) -> dict:
+                   skirts: dict | None = None) -> dict:
         """Draw (gpu_tile, tile, selected) items front to back into target; returns counters.
+
+        Leaves are split to the screen-space bound ``leaf_tau`` when given, else the frame's ``tau`` (px).
 
         Counters: triangles (GL_PRIMITIVES_GENERATED), triangles_cpu (same count from the leaf sets and the
         CPU mirror of the culling test), tilelets, tilelets_culled, lod_ms (CPU leaf selection time).
@@ -146,10 +154,10 @@ class TileletStrategy:
         below the tile's lowest point (the hybrid frame asks for them where a raster tile meets a ray-cast
         tile, whose edge may lie lower); skirt triangles are counted in ``triangles`` (the GL query) only.
         """
-        mode = resolve_mode(self.hf, mode)
+        mode = resolve_mode(self.hf, mode, MODES)
         ctx, prog = self.ctx, self.prog
         t0 = time.perf_counter()
-        sets = self.leaf_sets(view, items, leaf_tau, morph)
+        sets = self.leaf_sets(view, items, tau if leaf_tau is None else leaf_tau, morph)
         lod_ms = (time.perf_counter() - t0) * 1e3
         self.last_sets = sets
         self.last_culled = {}

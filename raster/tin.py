@@ -7,6 +7,7 @@ vertices (no cracks between same-level tiles, more triangles).
 """
 from __future__ import annotations
 
+from hybrid.errors import TerrabenchError
 from dataclasses import dataclass
 
 import numpy as np
@@ -98,20 +99,20 @@ def build_tin(heights: np.ndarray, spacing: float, target_count: int | None = No
     import fast_simplification
     h = np.asarray(heights)
     if h.ndim != 2 or min(h.shape) < 2:
-        raise ValueError(f"heights must be a 2-D grid of at least 2x2 samples, got shape {h.shape}")
+        raise TerrabenchError(f"heights must be a 2-D grid of at least 2x2 samples, got shape {h.shape}")
     if (target_count is None) == (max_error is None):
-        raise ValueError("give exactly one of target_count (triangles) and max_error (metres)")
+        raise TerrabenchError("give exactly one of target_count (triangles) and max_error (metres)")
     pts = grid_vertices(h, spacing).astype(np.float64)
     faces = grid_faces(h.shape[0], h.shape[1]).astype(np.int32)
     full = len(faces)
     if target_count is not None:
         if isinstance(target_count, bool) or not isinstance(target_count, (int, np.integer)) or not (2 <= target_count <= full):
-            raise ValueError(f"target_count must be an integer in [2, {full}] triangles, got {target_count!r}")
+            raise TerrabenchError(f"target_count must be an integer in [2, {full}] triangles, got {target_count!r}")
         v, f = fast_simplification.simplify(pts, faces, target_count=int(target_count), agg=agg,
                                             preserve_border=preserve_border)
         return TinMesh(v, f.astype(np.int64))
     if not (np.isfinite(max_error) and max_error >= 0):
-        raise ValueError(f"max_error must be finite and >= 0 metres, got {max_error!r}")
+        raise TerrabenchError(f"max_error must be finite and >= 0 metres, got {max_error!r}")
     best = TinMesh(pts, faces.astype(np.int64))
     lo, hi = 0.0, 1.0 - 2.0 / full
     for _ in range(8):
@@ -136,7 +137,7 @@ def export_tin(mesh: TinMesh, path, origin=(0.0, 0.0, 0.0)) -> None:
     from pathlib import Path
     p = Path(path)
     if p.suffix.lower() not in (".obj", ".ply"):
-        raise ValueError(f"TIN export path must end in .obj or .ply, got {str(path)!r}")
+        raise TerrabenchError(f"TIN export path must end in .obj or .ply, got {str(path)!r}")
     to_trimesh(mesh, origin).export(p)
 
 
@@ -168,11 +169,11 @@ class TinStrategy(MeshStrategyBase):
     """Draws each tile as a decimated TIN (built at upload): ``reduction`` of the triangles removed, or to
     ``max_error`` metres when given."""
 
-    def __init__(self, ctx, hf, shading_source: str, reduction: float = 0.9, max_error: float | None = None,
+    def __init__(self, ctx, hf, reduction: float = 0.9, max_error: float | None = None,
                  preserve_border: bool = False):
         if not (0.0 <= reduction < 1.0):
-            raise ValueError(f"reduction must lie in [0, 1), got {reduction!r}")
-        super().__init__(ctx, hf, shading_source)
+            raise TerrabenchError(f"reduction must lie in [0, 1), got {reduction!r}")
+        super().__init__(ctx, hf)
         self.reduction, self.max_error, self.preserve_border = float(reduction), max_error, bool(preserve_border)
         self.meshes = {}
 

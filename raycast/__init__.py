@@ -1,4 +1,8 @@
-"""Ray-cast strategy: per-tile GPU ray casting over a maximum mipmap (Dick et al.)."""
+"""Ray-cast strategy: per-tile GPU ray casting over a maximum mipmap (Dick et al.).
+
+It satisfies ``hybrid.contract.TileStrategy``, imports ``hybrid``'s lower layers and never ``raster``, the cost
+model or the renderer.
+"""
 from .caster import GpuTile, RaycastStrategy
 from .maxmip import maxmip_levels, maxmip_nbytes
 from .options import CastOptions, MODES, RECONSTRUCTIONS, TRAVERSALS

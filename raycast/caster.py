@@ -9,11 +9,15 @@ gl_FragDepth = clip.z / clip.w with the view's reversed-Z ``view_proj_rel``. Mis
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from hybrid.errors import TerrabenchError
+from dataclasses import dataclass, fields
 
 import numpy as np
 
-from .glsl import load_glsl
+from hybrid.gl.context import gl_bytes
+from hybrid.gl.programs import program, register_include
+from hybrid.gl.shading import resolve_mode
+from hybrid.gl.textures import terrain_texture
 from .maxmip import MaxMipBuilder, level_count, maxmip_nbytes
 from .options import MODES, RECONSTRUCTIONS, CastOptions, default_max_steps
 
@@ -91,24 +95,20 @@ def _write(prog, name, data: bytes):
 class RaycastStrategy:
     """GPU ray caster of height-field tiles over maximum mipmaps (Dick et al. 2009) with Qu's reconstructions."""
 
-    def __init__(self, ctx, hf, shading_source: str, **options):
+    kind = "raycast"
+    draw_options = frozenset(f.name for f in fields(CastOptions))
+
+    def __init__(self, ctx, hf, **options):
         self.ctx, self.hf = ctx, hf
-        self.shading_source = shading_source
+        register_include(ctx, "raycast/traverse", "raycast", "traverse.glsl")
         self.options = CastOptions().updated(**options)
         self._check_mode(self.options)
         self.builder = MaxMipBuilder(ctx)
         self.cube = ctx.buffer(_cube_back_face_triangles().tobytes())
-        self.prepass_prog = ctx.program(vertex_shader=load_glsl("box.vert.glsl"),
-                                        fragment_shader=load_glsl("prepass.frag.glsl"))
+        self.prepass_prog = program(ctx, "raycast", "box.vert.glsl", "prepass.frag.glsl")
         self.prepass_vao = ctx.vertex_array(self.prepass_prog, [(self.cube, "3f", "corner")])
         self.programs: dict = {}
-        self.texture = None
-        if hf.texture is not None:
-            t = np.ascontiguousarray(hf.texture)
-            self.texture = ctx.texture((t.shape[1], t.shape[0]), 3, t.tobytes())
-            self.texture.build_mipmaps()
-            self.texture.anisotropy = 1.0   # anisotropy is done in the shader (aniso_texture)
-            self.texture.repeat_x = self.texture.repeat_y = False
+        self.texture = terrain_texture(ctx, hf, anisotropy=1.0)   # anisotropy is done in the shader (aniso_texture)
         self.stats_buf = ctx.buffer(reserve=STAT_SLOTS * STAT_STRIDE)
         self.ids = None
         self._next_id = 1
@@ -117,11 +117,7 @@ class RaycastStrategy:
 
     # --- options and programs ---------------------------------------------------------------------
     def _check_mode(self, opts: CastOptions) -> str:
-        mode = opts.mode or ("texture" if self.hf.texture is not None else "shaded")
-        if mode in ("texture", "texture_plain") and self.hf.texture is None:
-            raise ValueError(f"mode {mode!r} needs a terrain texture; {getattr(self.hf, 'name', 'this terrain')!r} "
-                             "has none (use 'shaded', 'height', ...)")
-        return mode
+        return resolve_mode(self.hf, opts.mode, MODES)
 
     def _program(self, opts: CastOptions, mode: str):
         key = (opts.reconstruction, opts.traversal, opts.lod is not None, opts.prepass, opts.stats, opts.shadows, mode)
@@ -129,11 +125,17 @@ class RaycastStrategy:
             defines = {"RECON": RECONSTRUCTIONS.index(opts.reconstruction), "NAIVE": int(opts.traversal == "naive"),
                        "LOD": int(opts.lod is not None), "PREPASS": int(opts.prepass), "STATS": int(opts.stats),
                        "SHADOWS": int(opts.shadows), "MODE": MODES.index(mode)}
-            frag = load_glsl("raycast.frag.glsl", defines).replace("//@shading", self.shading_source)
-            prog = self.ctx.program(vertex_shader=load_glsl("box.vert.glsl"), fragment_shader=frag)
+            prog = program(self.ctx, "raycast", "box.vert.glsl", "raycast.frag.glsl", defines=defines)
             vao = self.ctx.vertex_array(prog, [(self.cube, "3f", "corner")])
             self.programs[key] = (prog, vao)
         return self.programs[key]
+
+    @property
+    def shared_nbytes(self) -> int:
+        """GPU bytes held for all tiles as the driver reports them: colour texture, box, counters, tile IDs,
+        shadow grid."""
+        grid = (self.grid.heights, self.grid.maxmip) if self.grid is not None else ()
+        return gl_bytes(self.texture, self.cube, self.stats_buf, self.ids, *grid)
 
     # --- tiles ------------------------------------------------------------------------------------
     def upload(self, tile) -> GpuTile:
@@ -141,7 +143,7 @@ class RaycastStrategy:
         h = np.ascontiguousarray(tile.heights, dtype=np.float32)
         n = h.shape[0] - 1
         if h.ndim != 2 or h.shape[1] != h.shape[0] or n < 2 or n & (n - 1):
-            raise ValueError(f"tile heights must be (N+1, N+1) with N a power of two >= 2, got {h.shape}")
+            raise TerrabenchError(f"tile heights must be (N+1, N+1) with N a power of two >= 2, got {h.shape}")
         ht = self.ctx.texture((n + 1, n + 1), 1, h.tobytes(), dtype="f4")
         ht.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
         mm = self.builder.build(ht, n)
@@ -178,8 +180,11 @@ class RaycastStrategy:
         return self.ids
 
     # --- drawing ----------------------------------------------------------------------------------
-    def draw_tiles(self, target, view, items, **options) -> dict:
-        """Ray cast the (gpu_tile, tile, selected) items, front to back, into the bound target for the view."""
+    def draw_tiles(self, target, view, items, tau: float | None = None, **options) -> dict:
+        """Ray cast the (gpu_tile, tile, selected) items, front to back, into the bound target for the view.
+
+        ``tau`` (px) is the frame's bound; the caster refines to it only when the ``lod`` option asks.
+        """
         opts = self.options.updated(**options)
         mode = self._check_mode(opts)
         prog, vao = self._program(opts, mode)
@@ -187,7 +192,7 @@ class RaycastStrategy:
         eye = np.asarray(view.eye, dtype=np.float64)
         W, H = int(view.width), int(view.height)
         if tuple(target.size) != (W, H):
-            raise ValueError(f"target size {tuple(target.size)} does not match the view's {W}x{H} pixels")
+            raise TerrabenchError(f"target size {tuple(target.size)} does not match the view's {W}x{H} pixels")
         vp = np.asarray(view.view_proj_rel, dtype=np.float64)
         _write(prog, "view_proj_rel", vp.T.astype(np.float32).tobytes())
         self.prepass_prog["view_proj_rel"].write(vp.T.astype(np.float32).tobytes())

@@ -8,6 +8,7 @@ coordinate exactly to the texel edge, descends the max mipmap on a possible hit 
 """
 from __future__ import annotations
 
+from hybrid.errors import TerrabenchError
 from dataclasses import dataclass
 
 import numpy as np
@@ -94,7 +95,7 @@ def cell_hit(recon: str, A, B, c0, S, hc, H) -> np.ndarray:
             u_q = np.where(u <= 1, u, np.where(dend <= 0, 1.0, -1.0))
             u_q = np.where(disc < 0, -1.0, u_q)
             return np.where(c0 <= 0, 0.0, np.where(lin, u_lin, u_q))
-    raise ValueError(f"reconstruction must be one of {', '.join(RECONSTRUCTIONS)}, got {recon!r}")
+    raise TerrabenchError(f"reconstruction must be one of {', '.join(RECONSTRUCTIONS)}, got {recon!r}")
 
 
 def _lod_final(l, ij, H, Om, zlo, spacing, lod_k):
@@ -112,9 +113,9 @@ def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="
     x, y and zr in z; first hits with t >= tmin. lod_k = spacing * K / tau turns on the LOD stop (maxmip only);
     outer is the mask (W 1, E 2, S 4, N 8) of grid sides on the terrain's boundary."""
     if reconstruction not in RECONSTRUCTIONS:
-        raise ValueError(f"reconstruction must be one of {', '.join(RECONSTRUCTIONS)}, got {reconstruction!r}")
+        raise TerrabenchError(f"reconstruction must be one of {', '.join(RECONSTRUCTIONS)}, got {reconstruction!r}")
     if traversal not in TRAVERSALS:
-        raise ValueError(f"traversal must be one of {', '.join(TRAVERSALS)}, got {traversal!r}")
+        raise TerrabenchError(f"traversal must be one of {', '.join(TRAVERSALS)}, got {traversal!r}")
     h32 = np.asarray(heights, dtype=np.float32)
     levels = maxmip_levels(h32)
     h = h32.astype(np.float64)

@@ -9,25 +9,26 @@ terrain's origin z), rows south to north. The GPU builder (compute shaders) give
 """
 from __future__ import annotations
 
+from hybrid.errors import TerrabenchError
 import numpy as np
 
-from .glsl import load_glsl
+from hybrid.gl.programs import compute_shader
 
 
 def _check_heights(heights) -> np.ndarray:
     h = np.asarray(heights)
     if h.ndim != 2 or h.shape[0] != h.shape[1] or h.shape[0] < 3:
-        raise ValueError(f"heights must be a square (N+1, N+1) array with N >= 2, got shape {h.shape}")
+        raise TerrabenchError(f"heights must be a square (N+1, N+1) array with N >= 2, got shape {h.shape}")
     n = h.shape[0] - 1
     if n & (n - 1):
-        raise ValueError(f"heights must have N+1 samples a side with N a power of two, got N = {n}")
+        raise TerrabenchError(f"heights must have N+1 samples a side with N a power of two, got N = {n}")
     return h.astype(np.float32, copy=False)
 
 
 def level_count(n: int) -> int:
     """Number of max-mip levels of a tile of n cells a side (n a power of two): log2(n) + 1."""
     if isinstance(n, bool) or int(n) != n or n < 1 or int(n) & (int(n) - 1):
-        raise ValueError(f"cells per side must be a power of two >= 1, got {n!r}")
+        raise TerrabenchError(f"cells per side must be a power of two >= 1, got {n!r}")
     return int(n).bit_length()
 
 
@@ -53,8 +54,8 @@ class MaxMipBuilder:
 
     def __init__(self, ctx):
         self.ctx = ctx
-        self.base = ctx.compute_shader(load_glsl("maxmip_base.comp.glsl"))
-        self.reduce = ctx.compute_shader(load_glsl("maxmip_reduce.comp.glsl"))
+        self.base = compute_shader(ctx, "raycast", "maxmip_base.comp.glsl")
+        self.reduce = compute_shader(ctx, "raycast", "maxmip_reduce.comp.glsl")
 
     def allocate(self, n: int):
         """An R32F n x n texture with all log2(n)+1 mip levels allocated (contents undefined)."""

@@ -1,6 +1,7 @@
 """Options of the ray caster (reconstruction, traversal, pre-pass, LOD, shading mode, shadows, caps), checked."""
 from __future__ import annotations
 
+from hybrid.errors import TerrabenchError
 from dataclasses import dataclass, fields, replace
 
 RECONSTRUCTIONS = ("planes", "linear", "triangles", "bilinear")
@@ -37,31 +38,31 @@ class CastOptions:
 
     def __post_init__(self):
         if self.reconstruction not in RECONSTRUCTIONS:
-            raise ValueError(f"reconstruction must be one of {', '.join(RECONSTRUCTIONS)}, got {self.reconstruction!r}")
+            raise TerrabenchError(f"reconstruction must be one of {', '.join(RECONSTRUCTIONS)}, got {self.reconstruction!r}")
         if self.traversal not in TRAVERSALS:
-            raise ValueError(f"traversal must be one of {', '.join(TRAVERSALS)}, got {self.traversal!r}")
+            raise TerrabenchError(f"traversal must be one of {', '.join(TRAVERSALS)}, got {self.traversal!r}")
         if self.mode is not None and self.mode not in MODES:
-            raise ValueError(f"mode must be one of {', '.join(MODES)} (or None), got {self.mode!r}")
+            raise TerrabenchError(f"mode must be one of {', '.join(MODES)} (or None), got {self.mode!r}")
         for name in ("prepass", "shadows", "stats"):
             if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
+                raise TerrabenchError(f"{name} must be True or False, got {getattr(self, name)!r}")
         if self.lod is not None:
             if isinstance(self.lod, bool) or not isinstance(self.lod, (int, float)) or not (0 < float(self.lod) < 1e6):
-                raise ValueError(f"lod must be None or a tau in pixels in (0, 1e6), got {self.lod!r}")
+                raise TerrabenchError(f"lod must be None or a tau in pixels in (0, 1e6), got {self.lod!r}")
             if self.traversal == "naive":
-                raise ValueError("lod needs traversal='maxmip' (naive stepping stays at level 0)")
+                raise TerrabenchError("lod needs traversal='maxmip' (naive stepping stays at level 0)")
         if self.max_steps is not None and (isinstance(self.max_steps, bool) or not isinstance(self.max_steps, int)
                                            or not (1 <= self.max_steps <= 1_000_000)):
-            raise ValueError(f"max_steps must be None or an integer in [1, 1000000], got {self.max_steps!r}")
+            raise TerrabenchError(f"max_steps must be None or an integer in [1, 1000000], got {self.max_steps!r}")
         if isinstance(self.heat_max, bool) or not isinstance(self.heat_max, (int, float)) or not self.heat_max > 0:
-            raise ValueError(f"heat_max must be a number of steps > 0, got {self.heat_max!r}")
+            raise TerrabenchError(f"heat_max must be a number of steps > 0, got {self.heat_max!r}")
 
     def updated(self, **changes) -> "CastOptions":
         """A copy with some options changed; unknown names raise ValueError."""
         known = {f.name for f in fields(self)}
         bad = sorted(set(changes) - known)
         if bad:
-            raise ValueError(f"unknown ray-cast option(s) {', '.join(bad)}; known: {', '.join(sorted(known))}")
+            raise TerrabenchError(f"unknown ray-cast option(s) {', '.join(bad)}; known: {', '.join(sorted(known))}")
         return replace(self, **changes)
 
 

@@ -8,7 +8,7 @@
 #extension GL_ARB_gpu_shader_int64 : enable
 #extension GL_ARB_ES3_1_compatibility : enable
 #endif
-//#include traverse.glsl
+#include "raycast/traverse"
 
 // --- view ---
 uniform mat4 view_proj_rel;    // (world - eye) -> clip, reversed Z
@@ -103,7 +103,7 @@ void stats_add(int i_ray, int i_f0, bool flag0, int i_f1, bool flag1, int i_sum,
 layout(location = 0) out vec4 frag;
 layout(location = 1) out vec4 aux;   // (hit x, hit y in tile texels, hit z in metres, steps) for tests
 
-//@shading
+#include "shading"
 
 vec3 heat(float x) {
     x = clamp(x, 0.0, 1.0);

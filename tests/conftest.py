@@ -1,7 +1,7 @@
 """Shared fixtures: one GL context for the whole test session, small terrains and viewports."""
 import pytest
 
-from hybrid.datasets import get_dataset, puget
+from hybrid.terrain.datasets import get_dataset, puget
 
 SMALL = (320, 180)
 
@@ -9,7 +9,7 @@ SMALL = (320, 180)
 @pytest.fixture(scope="session")
 def ctx():
     """The one headless GL context of the test session (reversed-Z clip control set)."""
-    from hybrid.glcontext import shared_context
+    from hybrid.gl.context import shared_context
     return shared_context()
 
 

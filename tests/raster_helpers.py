@@ -1,7 +1,7 @@
 """Helpers shared by the raster tests: views along tile borders and across level transitions, hole counts."""
 import numpy as np
 
-from hybrid.view import View
+from hybrid.camera.view import View
 
 
 def border_views(hf, width=320, height=180):

@@ -50,22 +50,26 @@ def test_cli_bad_input(tmp_path, capsys, ctx, argv, match):
 
 
 def test_api_bad_input(ctx, puget257):
-    from hybrid.frame import make_renderer
-    from hybrid.hybrid_frame import HybridRenderer
-    from hybrid.pyramid import TilePyramid
-    from hybrid.tiletree import select_tiles
-    from hybrid.view import View, default_view
-    with pytest.raises(TerrabenchError, match="unknown strategy"):
+    from hybrid.renderer import make_renderer
+    from hybrid.renderer import Renderer
+    from hybrid.tiles.pyramid import TilePyramid
+    from hybrid.tiles.tiletree import select_tiles
+    from hybrid.camera.view import View, default_view
+    with pytest.raises(TerrabenchError, match="unknown policy 'magic'"):
         make_renderer(ctx, puget257, "magic")
-    with pytest.raises(ValueError, match="tau"):
+    with pytest.raises(TerrabenchError, match="unknown draw option.*colour_depth"):
+        make_renderer(ctx, puget257, "raycast", colour_depth=8)
+    with pytest.raises(TerrabenchError, match="tau"):
         select_tiles(TilePyramid(puget257, 64), default_view(puget257), tau=float("nan"))
     with pytest.raises(TerrabenchError, match="budget"):
-        HybridRenderer(ctx, puget257, "hybrid", budget_bytes=0)
+        Renderer(ctx, puget257, "hybrid", budget_bytes=0)
     with pytest.raises(TerrabenchError, match="unknown policy"):
-        HybridRenderer(ctx, puget257, "best").plan(default_view(puget257, 32, 18))
+        Renderer(ctx, puget257, "best")
     with pytest.raises(TerrabenchError, match="fov_y"):
         View([0, 0, 1], [1, 0, 0], float("nan"), 10, 10)
     r = make_renderer(ctx, puget257, "raycast", tile_size=64)
-    with pytest.raises(ValueError, match="tau"):
+    with pytest.raises(TerrabenchError, match="tau"):
         r.render(default_view(puget257, 32, 18), tau=-1.0)
     r.release()
+    with pytest.raises(TerrabenchError, match="released"):
+        r.render(default_view(puget257, 32, 18))

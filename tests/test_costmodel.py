@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from hybrid.costmodel import CostModel, fit_cost_model, load_cost_model, save_cost_model
+from hybrid.cost.model import CostModel, fit_cost_model, load_cost_model, save_cost_model
 from hybrid.errors import TerrabenchError
-from hybrid.features import TileFeatures, _hull_area_clipped, footprint_pixels
-from hybrid.planner import choose
+from hybrid.cost.features import TileFeatures, _hull_area_clipped, footprint_pixels
+from hybrid.cost.planner import choose
 from hybrid.residency import ResidencyCache
-from hybrid.view import View
+from hybrid.camera.view import View
 
 TRUE = CostModel("test", {"const": 0.3, "triangles": 5e-5, "visible_triangles": 1.5e-4, "pixels": 1e-5},
                  {"const": 0.5, "pixels": 2e-5, "surface_pixels": 1e-5, "pixel_steps": 1e-5})

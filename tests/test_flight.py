@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from hybrid.errors import TerrabenchError
-from hybrid.flight import PRESETS, Flight, preset
+from hybrid.camera.flight import PRESETS, Flight, preset
 
 
 def test_presets(puget257):

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from hybrid.errors import GLContextError
-from hybrid.glcontext import create_context, depth32f_texture, driver_texture_bytes, gl_info
+from hybrid.gl.context import create_context, depth32f_texture, driver_texture_bytes, gl_info
 
 
 def test_info_and_float_depth(ctx):

@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 
 from experiments.metrics import coverage_errors, hole_pixels_in_columns
-from hybrid.costmodel import CostModel
+from hybrid.cost.model import CostModel
 from hybrid.errors import TerrabenchError
-from hybrid.flight import preset
-from hybrid.frame import make_renderer
-from hybrid.glcontext import driver_buffer_bytes, driver_texture_bytes
-from hybrid.hybrid_frame import HybridRenderer
+from hybrid.camera.flight import preset
+from hybrid.renderer import make_renderer
+from hybrid.gl.context import driver_buffer_bytes, driver_texture_bytes
+from hybrid.renderer import Renderer
 from hybrid.reference import ReferenceRenderer
 
 SIZE = (320, 180)
@@ -29,7 +29,7 @@ def frames(ctx, puget_full):
     ref = ReferenceRenderer(ctx, puget_full)
     out = []
     rs = {p: make_renderer(ctx, puget_full, p, tile_size=128) for p in ("raster", "raycast")}
-    hy = HybridRenderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT)
+    hy = Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT)
     for v in _views(puget_full):
         out.append({"ref": ref.render(v), "hybrid": hy.render(v, maps=True),
                     **{p: r.render(v) for p, r in rs.items()}})
@@ -44,7 +44,7 @@ def test_hybrid_mixes_and_matches_pure_frames(frames):
         h = f["hybrid"]
         smap = h.maps["strategy"]
         mixed += int((smap == 1).any() and (smap == 2).any())
-        assert h.stats["tiles_raster"] > 0 and h.stats["tiles_raycast"] > 0
+        assert h.stats.tiles_raster > 0 and h.stats.tiles_raycast > 0
         for p in ("raster", "raycast"):
             same = (np.isfinite(h.distance) == np.isfinite(f[p].distance)).mean()
             assert same >= 0.995, (p, same)
@@ -89,18 +89,20 @@ def _gl_objects(obj):
 
 
 def test_memory_accounting_is_what_the_driver_allocated(ctx, puget257):
-    hy = HybridRenderer(ctx, puget257, "hybrid", tile_size=64, cost_model=SPLIT)
+    hy = Renderer(ctx, puget257, "hybrid", tile_size=64, cost_model=SPLIT)
     v = preset("flyover", puget257, 6, *SIZE).view(2)
     res = hy.render(v)
-    assert len(hy.cache.entries) == res.stats["tiles"] > 4
+    assert len(hy.cache.entries) == res.stats.tiles > 4
     total = 0
     for g in hy.cache.entries.values():
         driver = sum(driver_texture_bytes(o) if isinstance(o, moderngl.Texture) else driver_buffer_bytes(o)
                      for o in _gl_objects(g))
         assert driver == g.nbytes
         total += driver
-    assert res.stats["gpu_bytes"] == total == hy.cache.bytes
-    assert res.stats["gpu_bytes_raster"] + res.stats["gpu_bytes_raycast"] == total
+    shared = sum(driver_texture_bytes(o) if isinstance(o, moderngl.Texture) else driver_buffer_bytes(o)
+                 for s in hy.strategies.values() for o in _gl_objects(s))
+    assert shared > 0 and total == hy.cache.bytes
+    assert res.stats.gpu_bytes == total + shared == res.stats.gpu_bytes_raster + res.stats.gpu_bytes_raycast
     uploads = hy.cache.stats.uploads
     hy.render(v)
     assert hy.cache.stats.uploads == uploads               # resident tiles are not uploaded again
@@ -113,18 +115,19 @@ def test_eviction_keeps_the_budget(ctx, puget257):
     runs = [(fly.view(1), 0.5), (fly.view(2), 60.0), (fly.view(3), 0.5), (fly.view(4), 60.0)]
     need = []
     for v, tau in runs:
-        probe = HybridRenderer(ctx, puget257, "raycast", tile_size=64, cost_model=SPLIT)
-        need.append(probe.render(v, tau).stats["gpu_bytes"])
+        probe = Renderer(ctx, puget257, "raycast", tile_size=64, cost_model=SPLIT)
+        probe.render(v, tau)
+        need.append(probe.cache.bytes)
         probe.release()
     budget = int(max(need) * 1.1)
     assert sum(need) > budget
-    hy = HybridRenderer(ctx, puget257, "raycast", tile_size=64, cost_model=SPLIT, budget_bytes=budget)
+    hy = Renderer(ctx, puget257, "raycast", tile_size=64, cost_model=SPLIT, budget_bytes=budget)
     for v, tau in runs:
         res = hy.render(v, tau)
-        assert hy.cache.bytes <= budget and res.stats["gpu_bytes"] <= budget
+        assert hy.cache.bytes <= budget and res.stats.gpu_bytes - res.stats.shared_bytes <= budget
     assert hy.cache.stats.evictions > 0 and hy.cache.stats.peak_bytes <= budget
     hy.release()
-    tiny = HybridRenderer(ctx, puget257, "raycast", tile_size=64, cost_model=SPLIT, budget_bytes=1000)
+    tiny = Renderer(ctx, puget257, "raycast", tile_size=64, cost_model=SPLIT, budget_bytes=1000)
     with pytest.raises(TerrabenchError, match="budget"):
         tiny.render(fly.view(0))
     tiny.release()
@@ -133,16 +136,16 @@ def test_eviction_keeps_the_budget(ctx, puget257):
 def test_policies_follow_their_rules(ctx, puget257):
     v = preset("flyover", puget257, 6, *SIZE).view(2)
     for pol in ("raster", "raycast"):
-        r = HybridRenderer(ctx, puget257, pol, tile_size=64, cost_model=SPLIT)
+        r = Renderer(ctx, puget257, pol, tile_size=64, cost_model=SPLIT)
         assert {p.choice for p in r.plan(v)} == {pol}
         r.release()
-    h = HybridRenderer(ctx, puget257, "hybrid", tile_size=64, cost_model=SPLIT)
+    h = Renderer(ctx, puget257, "hybrid", tile_size=64, cost_model=SPLIT)
     for p in h.plan(v):
         assert p.choice == min(p.predicted, key=p.predicted.get)
     h.release()
-    o = HybridRenderer(ctx, puget257, "oracle", tile_size=64, cost_model=SPLIT, oracle_repeats=1)
+    o = Renderer(ctx, puget257, "oracle", tile_size=64, cost_model=SPLIT, oracle_repeats=1)
     res = o.render(v)
-    for row in res.stats["tile_rows"]:
+    for row in res.stats.tile_rows:
         assert row["strategy"] == min(("raster", "raycast"), key=lambda s: row[f"meas_{s}_ms"])
     o.release()
 
@@ -151,7 +154,7 @@ def test_shading_mode_reaches_both_strategies(ctx, puget_full):
     v = _views(puget_full)[0]                               # a view the split model draws both ways
     frames = {}
     for mode in (None, "height"):
-        h = HybridRenderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT, mode=mode)
+        h = Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT, mode=mode)
         frames[mode] = h.render(v, maps=True)
         h.release()
     tex, height = frames[None], frames["height"]

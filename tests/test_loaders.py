@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 import tifffile
 
-from hybrid.datasets import NAMES, get_dataset
+from hybrid.terrain.datasets import NAMES, get_dataset
 from hybrid.errors import TerrabenchError, TerrainLoadError
-from hybrid.heightfield import HeightField
-from hybrid.loaders import NoDataWarning, load_terrain, save_npz
+from hybrid.terrain.heightfield import HeightField
+from hybrid.terrain.loaders import NoDataWarning, load_terrain, save_npz
 
 
 def test_puget_bundled_values(puget_full):

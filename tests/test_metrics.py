@@ -2,7 +2,7 @@
 import numpy as np
 
 from experiments.metrics import coverage_errors, depth_errors, frame_accuracy, hole_pixels_in_columns, temporal_errors
-from hybrid.target import RenderResult
+from hybrid.gl.target import RenderResult
 
 
 def frame(h=40, w=60, dist=100.0, seed=0):

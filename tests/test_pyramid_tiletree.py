@@ -3,10 +3,10 @@ import numpy as np
 import pytest
 
 from hybrid.errors import TerrabenchError
-from hybrid.heightfield import HeightField
-from hybrid.pyramid import EDGE_E, EDGE_N, EDGE_S, EDGE_W, TileKey, TilePyramid
-from hybrid.tiletree import select_tiles
-from hybrid.view import View, default_view
+from hybrid.terrain.heightfield import HeightField
+from hybrid.tiles.pyramid import EDGE_E, EDGE_N, EDGE_S, EDGE_W, TileKey, TilePyramid
+from hybrid.tiles.tiletree import select_tiles
+from hybrid.camera.view import View, default_view
 
 
 @pytest.fixture(scope="module")

@@ -3,8 +3,10 @@ bound of the drawn (stitched) mesh, crack-free morphed vertices, input checks.""
 import numpy as np
 import pytest
 
-from hybrid.pyramid import TilePyramid
-from hybrid.tiletree import select_tiles
+from hybrid.errors import TerrabenchError
+
+from hybrid.tiles.pyramid import TilePyramid
+from hybrid.tiles.tiletree import select_tiles
 from raster.morph import morphed_posts
 from raster.quadtree import drawn_max_error, error_pyramid, fan_surfaces, leaf_levels, leaf_heights, leaves_from_levels
 from raster.restriction import TileLod, restrict_frame
@@ -113,20 +115,20 @@ def test_morph_off_gives_zero_alpha_and_bad_input(puget257):
     view = border_views(puget257)[0]
     _, _, sets = _frame(puget257, view, morph=False)
     assert all(np.all(ts.morph == 0) for ts in sets.values())
-    with pytest.raises(ValueError, match="tolerance"):
+    with pytest.raises(TerrabenchError, match="tolerance"):
         leaf_levels(error_pyramid(np.zeros((5, 5), np.float32)), -1.0)
-    with pytest.raises(ValueError, match="power of two"):
+    with pytest.raises(TerrabenchError, match="power of two"):
         error_pyramid(np.zeros((6, 6), np.float32))
-    with pytest.raises(ValueError, match="beta"):
+    with pytest.raises(TerrabenchError, match="beta"):
         error_pyramid(np.zeros((5, 5), np.float32), beta=1.5)
 
 
 def test_triangle_estimate_tracks_exact_count(ctx, puget_full):
     """The cost model's cheap triangle estimate stays within 10 % of the exact restricted, stitched count."""
-    from hybrid.flight import preset
-    from hybrid.frame import make_strategy
-    from hybrid.pyramid import TilePyramid
-    from hybrid.tiletree import select_tiles
+    from hybrid.camera.flight import preset
+    from hybrid.strategies import make_strategy
+    from hybrid.tiles.pyramid import TilePyramid
+    from hybrid.tiles.tiletree import select_tiles
     pyr = TilePyramid(puget_full, 256)
     r = make_strategy("raster", ctx, puget_full)
     ratios = []

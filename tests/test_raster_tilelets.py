@@ -3,9 +3,12 @@ from GL_PRIMITIVES_GENERATED, culling that only drops what is outside, morph con
 import numpy as np
 import pytest
 
-from hybrid.frame import SingleStrategyRenderer
+from hybrid.errors import TerrabenchError
+
+from hybrid.renderer import Renderer
 from hybrid.reference import ReferenceRenderer
-from hybrid.view import View
+from hybrid.camera.view import View
+from hybrid.tiles.pyramid import TileKey
 from raster_helpers import border_views, holes
 
 
@@ -14,7 +17,7 @@ def renderers(ctx, puget257, synthetic):
     out = {}
     for name in ("puget", "cliff", "spike", "staircase"):
         hf = puget257 if name == "puget" else synthetic(name)
-        out[name] = (hf, SingleStrategyRenderer(ctx, hf, "raster", tile_size=64), ReferenceRenderer(ctx, hf))
+        out[name] = (hf, Renderer(ctx, hf, "raster", tile_size=64), ReferenceRenderer(ctx, hf))
     yield out
     for _, r, ref in out.values():
         r.release()
@@ -26,12 +29,12 @@ def test_crack_free_and_unstitched_holes(renderers, name):
     hf, r, ref = renderers[name]
     unstitched = 0
     for view in border_views(hf):
-        rf = ref.render(view, "shaded")
+        rf = ref.render(view, mode="shaded")
         for morph in (True, False):
             res = r.render(view, mode="shaded", morph=morph, count_culled=True)
             assert holes(res, rf, view, hf) == 0, (name, morph)
-            assert res.stats["triangles"] == res.stats["triangles_cpu"]
-        levels = {int(g) for s in r.strategy.last_sets.values() for g in np.unique(s.global_level)}
+            assert res.stats.counters["triangles"] == res.stats.counters["triangles_cpu"]
+        levels = {int(g) for s in r.strategies["raster"].last_sets.values() for g in np.unique(s.global_level)}
         assert len(levels) >= 2                          # the view crosses level transitions
         bad = r.render(view, mode="shaded", stitching=False, morph=False)
         unstitched += holes(bad, rf, view, hf)
@@ -47,9 +50,9 @@ def test_triangle_count_and_culling_only_drops_outside(renderers):
     eye = np.array([ox + 0.3 * w, oy + 0.3 * d, oz + hi + 30])
     view = View(eye, eye + np.array([3000.0, 1000.0, -800.0]), 40, 320, 180, near=1.0, far=10 * w)
     on = r.render(view, mode="shaded", record_culling=True)
-    st = r.strategy
-    assert on.stats["tilelets_culled"] > 0.2 * on.stats["tilelets"]
-    assert on.stats["triangles"] == on.stats["triangles_cpu"]
+    st = r.strategies["raster"]
+    assert on.stats.counters["tilelets_culled"] > 0.2 * on.stats.counters["tilelets"]
+    assert on.stats.counters["triangles"] == on.stats.counters["triangles_cpu"]
     planes = view.frustum_planes_rel()
     from raster.culling import tilelet_boxes
     for key, flags in st.last_culled.items():
@@ -58,15 +61,15 @@ def test_triangle_count_and_culling_only_drops_outside(renderers):
         cpu, gpu = flags
         assert np.count_nonzero(cpu != gpu) <= max(1, len(cpu) // 1000)
         if gpu.any():
-            tile = r.resident[[k for k in r.resident if (k.level, k.tx, k.ty) == key][0]][1]
+            tile = r.tile(TileKey(*key))
             lo_b, hi_b = tilelet_boxes(tile.heights, st.last_sets[key].leaves, np.asarray(tile.origin) - view.eye, tile.spacing)
             n = planes[:, :3]
             pos = np.where(n[None] >= 0, hi_b[:, None], lo_b[:, None])
             dist = np.einsum("cpk,pk->cp", pos, n) + planes[None, :, 3]
             assert np.all(dist[gpu].min(axis=1) < 1e-2)     # really outside one plane (float32 margin)
     off = r.render(view, mode="shaded", culling=False, count_culled=True)
-    assert off.stats["tilelets_culled"] == 0 and off.stats["triangles"] > on.stats["triangles"]
-    assert off.stats["triangles"] == off.stats["triangles_cpu"]
+    assert off.stats.counters["tilelets_culled"] == 0 and off.stats.counters["triangles"] > on.stats.counters["triangles"]
+    assert off.stats.counters["triangles"] == off.stats.counters["triangles_cpu"]
     assert np.array_equal(on.colour, off.colour) and np.array_equal(on.mask, off.mask)
 
 
@@ -83,7 +86,7 @@ def test_morph_continuity_across_level_switch(renderers):
 
     def leaves(t, morph):
         r.render(view(t), mode="shaded", leaf_tau=leaf_tau, morph=morph)
-        return {k: (len(s.leaves), int(s.leaves.level.sum())) for k, s in r.strategy.last_sets.items()}
+        return {k: (len(s.leaves), int(s.leaves.level.sum())) for k, s in r.strategies["raster"].last_sets.items()}
 
     def colour_change(a, b):
         return float(np.abs(a.colour.astype(int) - b.colour.astype(int)).mean())
@@ -103,7 +106,7 @@ def test_morph_continuity_across_level_switch(renderers):
             mid = 0.5 * (lo_t + hi_t)
             lo_t, hi_t = (mid, hi_t) if leaves(mid, morph) == prev else (lo_t, mid)
         a, b = view(lo_t), view(hi_t)
-        ref_change = colour_change(ref.render(a, "shaded"), ref.render(b, "shaded"))
+        ref_change = colour_change(ref.render(a, mode="shaded"), ref.render(b, mode="shaded"))
         before = r.render(a, mode="shaded", leaf_tau=leaf_tau, morph=morph)
         after = r.render(b, mode="shaded", leaf_tau=leaf_tau, morph=morph)
         changes[morph] = (colour_change(before, after), ref_change)
@@ -118,22 +121,22 @@ def test_memory_modes_and_far_origin(ctx, renderers):
     hf, r, _ = renderers["spike"]
     view = border_views(hf)[3]
     res = r.render(view, mode="level", wireframe=True)
-    for (g, tile) in r.resident.values():
+    for g in r.cache.entries.values():
         assert g.nbytes == 65 * 65 * 4 + 32 * 32 * 36
-    assert res.stats["gpu_bytes"] == sum(g.nbytes for g, _ in r.resident.values())
+    assert res.stats.gpu_bytes == sum(g.nbytes for g in r.cache.entries.values()) + res.stats.shared_bytes
     colours = {tuple(c) for c in res.colour[res.mask].reshape(-1, 3)[::7]}
     assert len(colours) > 20
     base = r.render(view, mode="shaded")
     far_hf = hf.moved((5.0e6, -3.0e6, 1000.0))
-    far = SingleStrategyRenderer(ctx, far_hf, "raster", tile_size=64)
+    far = Renderer(ctx, far_hf, "raster", tile_size=64)
     try:
         moved = far.render(view.moved((5.0e6, -3.0e6, 1000.0)), mode="shaded")
     finally:
         far.release()
     assert np.mean(np.any(base.colour != moved.colour, axis=-1)) < 0.01
-    with pytest.raises(ValueError, match="mode"):
+    with pytest.raises(TerrabenchError, match="mode"):
         r.render(view, mode="bogus")
-    with pytest.raises(ValueError, match="leaf_tau"):
+    with pytest.raises(TerrabenchError, match="leaf_tau"):
         r.render(view, leaf_tau=0.0)
-    with pytest.raises(ValueError, match="no texture"):
+    with pytest.raises(TerrabenchError, match="no texture"):
         r.render(view, mode="texture")

@@ -1,19 +1,21 @@
-"""Whole-frame ray casting through hybrid.frame: reference agreement, hard terrains, shading, pre-pass, LOD."""
+"""Whole-frame ray casting through hybrid.renderer: reference agreement, hard terrains, shading, pre-pass, LOD."""
 import numpy as np
 import pytest
 
-from hybrid.flight import preset
-from hybrid.frame import STRATEGIES, SingleStrategyRenderer, shading_source
-from hybrid.pyramid import TilePyramid
+from hybrid.errors import TerrabenchError
+
+from hybrid.camera.flight import preset
+from hybrid.renderer import Renderer
+from hybrid.tiles.pyramid import TilePyramid
 from hybrid.reference import ReferenceRenderer
-from hybrid.view import View, default_view
+from hybrid.camera.view import View, default_view
 from raycast import MODES, RaycastStrategy
 from raycast.cpu import cast_rays
 
 
 @pytest.fixture(scope="module")
 def puget_rc(ctx, puget257):
-    r = SingleStrategyRenderer(ctx, puget257, "raycast")
+    r = Renderer(ctx, puget257, "raycast")
     yield r
     r.release()
 
@@ -27,14 +29,15 @@ def compare(ref, res):
 
 
 def test_registered():
+    from hybrid.strategies import STRATEGIES
     assert "raycast" in STRATEGIES
 
 
 def test_triangles_full_resolution_match_reference(ctx, puget257, puget_rc):
     view = default_view(puget257, 320, 180)
-    ref = ReferenceRenderer(ctx, puget257).render(view, "shaded")
+    ref = ReferenceRenderer(ctx, puget257).render(view, mode="shaded")
     res = puget_rc.render(view, mode="shaded", reconstruction="triangles")
-    assert res.stats["tiles"] == 1 and res.stats["capped"] == 0
+    assert res.stats.tiles == 1 and res.stats.counters["capped"] == 0
     cover, med = compare(ref, res)
     assert ref.mask.mean() > 0.3
     assert cover >= 0.999, cover
@@ -56,15 +59,15 @@ def test_hard_terrains(ctx, synthetic, name):
         sx, sy = hf.origin[0] + j * hf.spacing, hf.origin[1] + i * hf.spacing
         base = float(np.median(hf.heights))
         views.append(View([sx - 2500, sy - 1800, base + 1500], [sx, sy, base + 1500], 50, 320, 180, near=1.0, far=1e5))
-    r = SingleStrategyRenderer(ctx, hf, "raycast")
+    r = Renderer(ctx, hf, "raycast")
     ref = ReferenceRenderer(ctx, hf)
     try:
         for view in views:
             res = r.render(view, mode="shaded")
             assert not np.isnan(res.distance).any()
             assert np.isfinite(res.distance[res.mask]).all()
-            assert res.stats["capped"] == 0 and res.stats["rays"] > 0
-            rr = ref.render(view, "shaded")
+            assert res.stats.counters["capped"] == 0 and res.stats.counters["rays"] > 0
+            rr = ref.render(view, mode="shaded")
             cover, med = compare(rr, res)
             assert cover >= 0.995 and med <= 1e-3, (name, cover, med)
         if name == "spike":
@@ -72,7 +75,7 @@ def test_hard_terrains(ctx, synthetic, name):
             view = views[1]
             p = np.array([sx, sy, hf.origin[2] + float(hf.heights[i, j]) * 0.5 + base * 0.5])
             col, row, _ = view.project(p[None])[0]
-            rr = ref.render(view, "shaded")
+            rr = ref.render(view, mode="shaded")
             res = r.render(view, mode="shaded")
             rc, cc = int(row), int(col)
             assert rr.mask[rc, cc] and res.mask[rc, cc]
@@ -84,7 +87,7 @@ def test_hard_terrains(ctx, synthetic, name):
 
 def test_texture_grad_closer_to_supersampled_than_plain(ctx, puget257, puget_rc):
     view = preset("flyover", puget257, frames=3, width=320, height=180).view(1)
-    ss = ReferenceRenderer(ctx, puget257).render(view, "texture", supersample=4)
+    ss = ReferenceRenderer(ctx, puget257).render(view, mode="texture", supersample=4)
     grad = puget_rc.render(view, mode="texture")
     plain = puget_rc.render(view, mode="texture_plain")
     m = ss.mask & grad.mask & plain.mask
@@ -115,14 +118,14 @@ LIGHT_DIR = np.array([-0.4851, 0.4851, 0.7276])
 def test_shadow_rays_match_cpu(ctx, synthetic):
     hf = synthetic("ridges")
     view = default_view(hf, 160, 90)
-    r = SingleStrategyRenderer(ctx, hf, "raycast")
+    r = Renderer(ctx, hf, "raycast")
     try:
         lit = r.render(view, mode="shaded")
         sh = r.render(view, mode="shaded", shadows=True)
     finally:
         r.release()
     assert np.array_equal(sh.mask, lit.mask)
-    assert sh.stats["shadow_rays"] > 0 and sh.stats["shadow_capped"] == 0
+    assert sh.stats.counters["shadow_rays"] > 0 and sh.stats.counters["shadow_capped"] == 0
     assert not (sh.colour.astype(int).sum(axis=2) > lit.colour.astype(int).sum(axis=2) + 1).any()
     darker = (sh.colour.astype(int).sum(axis=2) < lit.colour.astype(int).sum(axis=2) - 2) & lit.mask
     frac = darker.sum() / lit.mask.sum()
@@ -155,58 +158,58 @@ def test_shadow_rays_match_cpu(ctx, synthetic):
 
 def test_prepass_same_image_fewer_rays(ctx, puget_full):
     view = preset("flyover", puget_full, frames=5, width=320, height=180).view(2)
-    r = SingleStrategyRenderer(ctx, puget_full, "raycast")
+    r = Renderer(ctx, puget_full, "raycast")
     try:
         a = r.render(view, mode="shaded", prepass=False)
         b = r.render(view, mode="shaded", prepass=True)
     finally:
         r.release()
-    assert a.stats["tiles"] > 4
+    assert a.stats.tiles > 4
     assert np.array_equal(a.mask, b.mask)
     assert np.mean(np.all(a.colour == b.colour, axis=2)) > 0.999
     assert np.allclose(a.distance[a.mask], b.distance[b.mask], rtol=1e-6)
-    assert b.stats["rays"] < a.stats["rays"]
-    assert b.stats["hits"] == a.mask.sum()
+    assert b.stats.counters["rays"] < a.stats.counters["rays"]
+    assert b.stats.counters["hits"] == a.mask.sum()
 
 
 def test_lod_fewer_steps_close_image(ctx, puget_full):
     view = default_view(puget_full, 320, 180)
-    r = SingleStrategyRenderer(ctx, puget_full, "raycast")
+    r = Renderer(ctx, puget_full, "raycast")
     ref = ReferenceRenderer(ctx, puget_full)
     try:
         full = r.render(view, tau=0.05, mode="level")
         lod = r.render(view, tau=0.05, mode="level", lod=1.0)
-        rr = ref.render(view, "shaded")
+        rr = ref.render(view, mode="shaded")
     finally:
         r.release()
         ref.release()
-    assert lod.stats["mean_steps"] < full.stats["mean_steps"]
+    assert lod.stats.counters["mean_steps"] < full.stats.counters["mean_steps"]
     assert not np.array_equal(full.colour, lod.colour)          # coarser levels are used inside tiles
     cover, med = compare(rr, lod)
     assert cover >= 0.99 and med <= 2e-3, (cover, med)
 
 
 def test_bad_options(ctx, puget257, synthetic):
-    s = RaycastStrategy(ctx, puget257, shading_source())
+    s = RaycastStrategy(ctx, puget257)
     try:
         for kw, word in [({"reconstruction": "voxels"}, "reconstruction"), ({"traversal": "fast"}, "traversal"),
                          ({"mode": "fancy"}, "mode"), ({"lod": 1.0, "traversal": "naive"}, "lod"),
                          ({"lod": -1.0}, "lod"), ({"max_steps": 0}, "max_steps"), ({"shadows": 1}, "shadows"),
                          ({"colour": "red"}, "unknown")]:
-            with pytest.raises(ValueError, match=word):
+            with pytest.raises(TerrabenchError, match=word):
                 s.draw_tiles(None, default_view(puget257, 32, 18), [], **kw)
     finally:
         s.release()
-    with pytest.raises(ValueError, match="texture"):
-        RaycastStrategy(ctx, synthetic("flat"), shading_source(), mode="texture")
+    with pytest.raises(TerrabenchError, match="texture"):
+        RaycastStrategy(ctx, synthetic("flat"), mode="texture")
 
 
 def test_step_cap_counts_capped_rays(ctx, puget257):
-    s = RaycastStrategy(ctx, puget257, shading_source())
+    s = RaycastStrategy(ctx, puget257)
     pyr = TilePyramid(puget257, 256)
     tile = pyr.tile(pyr.root())
     g = s.upload(tile)
-    from hybrid.target import FrameTarget
+    from hybrid.gl.target import FrameTarget
     view = default_view(puget257, 160, 90)
     t = FrameTarget(ctx, 160, 90)
     try:

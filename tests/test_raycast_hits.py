@@ -2,10 +2,9 @@
 import numpy as np
 import pytest
 
-from hybrid.frame import shading_source
-from hybrid.glcontext import depth32f_texture
-from hybrid.pyramid import TilePyramid
-from hybrid.view import View, default_view
+from hybrid.gl.context import depth32f_texture
+from hybrid.tiles.pyramid import TilePyramid
+from hybrid.camera.view import View, default_view
 from raycast import RaycastStrategy
 from raycast.caster import outer_faces
 from raycast.cpu import cast_tile_rays
@@ -45,7 +44,7 @@ class HitTarget:
 def setup(ctx, puget257):
     pyr = TilePyramid(puget257, 256)
     tile = pyr.tile(pyr.root())
-    s = RaycastStrategy(ctx, puget257, shading_source())
+    s = RaycastStrategy(ctx, puget257)
     g = s.upload(tile)
     yield puget257, tile, s, g
     g.release()

@@ -2,8 +2,9 @@
 import numpy as np
 import pytest
 
-from hybrid.frame import shading_source
-from hybrid.pyramid import TilePyramid
+from hybrid.errors import TerrabenchError
+
+from hybrid.tiles.pyramid import TilePyramid
 from raycast import RaycastStrategy
 from raycast.maxmip import MaxMipBuilder, level_count, maxmip_levels, maxmip_nbytes, read_maxmip
 
@@ -47,7 +48,7 @@ def test_byte_counts(ctx, puget257):
     assert maxmip_nbytes(256) == 4 * sum((256 >> l) ** 2 for l in range(9))
     # the coarser levels add a third of level 0 (minus the 1x1 remainder)
     assert maxmip_nbytes(256) - 4 * 256 ** 2 == pytest.approx(4 * 256 ** 2 / 3, rel=1e-4)
-    s = RaycastStrategy(ctx, puget257, shading_source())
+    s = RaycastStrategy(ctx, puget257)
     try:
         pyr = TilePyramid(puget257, 128)
         tile = pyr.tile(pyr.keys(0)[0])
@@ -62,5 +63,5 @@ def test_byte_counts(ctx, puget257):
 
 @pytest.mark.parametrize("shape", [(16, 16), (17, 16), (13, 13), (1, 1)])
 def test_bad_heights_raise(shape):
-    with pytest.raises(ValueError, match="heights"):
+    with pytest.raises(TerrabenchError, match="heights"):
         maxmip_levels(np.zeros(shape, np.float32))

@@ -4,7 +4,7 @@ import pytest
 
 from hybrid.errors import TerrabenchError
 from hybrid.reference import ReferenceRenderer, grid_indices
-from hybrid.view import View, default_view
+from hybrid.camera.view import View, default_view
 
 SIZE = (320, 180)
 
@@ -47,7 +47,7 @@ def test_reference_matches_cpu_intersection(ctx, puget257):
     ref = ReferenceRenderer(ctx, puget257)
     rng = np.random.default_rng(7)
     for view in _views(puget257):
-        res = ref.render(view, "shaded")
+        res = ref.render(view, mode="shaded")
         rows = rng.integers(0, view.height, 150)
         cols = rng.integers(0, view.width, 150)
         dirs = view.pixel_rays(rows, cols)

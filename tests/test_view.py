@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from hybrid.errors import TerrabenchError
-from hybrid.view import View
+from hybrid.camera.view import View
 
 
 def make():

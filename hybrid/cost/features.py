@@ -1,13 +1,13 @@
 """Per-tile features known before drawing, for the cost model: footprint, triangles, ray-step proxy, level, distance."""
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
-from .pyramid import TilePyramid
-from .tiletree import SelectedTile
-from .view import View
+from hybrid.tiles.pyramid import TilePyramid
+from hybrid.tiles.tiletree import SelectedTile
+from hybrid.camera.view import View
 
 
 @dataclass(frozen=True)
@@ -37,6 +37,11 @@ class TileFeatures:
     def as_dict(self) -> dict:
         """Plain dict of the features."""
         return asdict(self)
+
+    @classmethod
+    def from_row(cls, row: dict) -> "TileFeatures":
+        """The features of a tiles-table row (``TilePlan.row``: ``level`` and ``f_<name>`` columns)."""
+        return cls(**{f.name: row["level"] if f.name == "level" else row[f"f_{f.name}"] for f in fields(cls)})
 
 
 def _hull_area_clipped(pts: np.ndarray, w: float, h: float) -> float:

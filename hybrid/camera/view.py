@@ -1,7 +1,7 @@
 """Views: camera placement, float64 view/projection matrices, frusta, pixel rays and depth-to-distance.
 
 Camera frame: right-handed, looking down -z of eye space, +y up on screen. Projection: reversed Z with
-clip depth in [0, 1] (near plane -> 1, far plane -> 0; see hybrid.glcontext). What goes to the GPU is
+clip depth in [0, 1] (near plane -> 1, far plane -> 0; see hybrid.gl.context). What goes to the GPU is
 relative to the eye: ``view_proj_rel`` maps (world - eye) to clip space, so terrain far from the world
 origin loses no float32 precision. Images are stored top row first; pixel (r, c) has its centre at
 (c + 0.5, r + 0.5) from the top-left corner.
@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import TerrabenchError, check_positive, check_range
+from hybrid.errors import TerrabenchError, check_positive, check_range
 
 MAX_VIEWPORT = 16384
 

@@ -2,24 +2,28 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 from pathlib import Path
 
 import numpy as np
 
-from .errors import TerrabenchError
-from .glcontext import depth32f_texture
-from .view import View
+from hybrid.errors import TerrabenchError
+from hybrid.gl.context import depth32f_texture
+from hybrid.camera.view import View
 
 SKY = (0.62, 0.74, 0.88, 0.0)
 
 
 @dataclass
 class RenderResult:
-    """One rendered frame: colour (H, W, 3 uint8, top row first), hit distance in metres (inf = no terrain)."""
+    """One rendered frame: colour (H, W, 3 uint8, top row first), hit distance in metres (inf = no terrain).
+
+    ``stats`` is the renderer's ``hybrid.contract.FrameStats``; ``maps`` holds optional per-pixel maps.
+    """
 
     colour: np.ndarray
     distance: np.ndarray
-    stats: dict = field(default_factory=dict)
+    stats: Any = None
     maps: dict = field(default_factory=dict)
 
     @property
@@ -80,10 +84,10 @@ class FrameTarget:
         c = np.frombuffer(self.fbo.read(components=4, alignment=1), dtype=np.uint8)
         return c.reshape(self.size[1], self.size[0], 4)[::-1, :, :3].copy()
 
-    def read(self, view: View, stats: dict | None = None) -> RenderResult:
+    def read(self, view: View, stats=None) -> RenderResult:
         """Colour and per-pixel hit distance (metres, inf where empty) for the view that was drawn."""
         dist = view.distance_from_depth(self.read_depth())
-        return RenderResult(self.read_colour(), dist, dict(stats or {}))
+        return RenderResult(self.read_colour(), dist, stats)
 
     def release(self) -> None:
         """Free the GPU attachments."""

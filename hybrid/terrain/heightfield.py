@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import TerrabenchError
+from hybrid.errors import TerrabenchError
 
 
 @dataclass
@@ -45,7 +45,7 @@ class HeightField:
         if not np.all(np.isfinite(h)):
             bad = int(np.count_nonzero(~np.isfinite(h)))
             raise TerrabenchError(
-                f"heights of {self.name!r} hold {bad} NaN/inf samples; load through hybrid.loaders "
+                f"heights of {self.name!r} hold {bad} NaN/inf samples; load through hybrid.terrain.loaders "
                 "(which fills no-data) or fill them first"
             )
         self.heights = np.ascontiguousarray(h)

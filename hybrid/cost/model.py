@@ -27,9 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import TerrabenchError
-from .features import TileFeatures
-from .nnls import nnls
+from hybrid.errors import TerrabenchError
+from hybrid.cost.features import TileFeatures
+from hybrid.cost.nnls import nnls
 
 TERMS = {"raster": ("const", "triangles", "visible_triangles", "pixels"),
          "raycast": ("const", "pixels", "surface_pixels", "pixel_steps")}
@@ -194,7 +194,7 @@ def load_cost_model(renderer: str, path: Path | None = None) -> CostModel:
             raise TerrabenchError(f"{path}: costs file is not valid JSON") from None
         if renderer in data:
             return _from_dict(data[renderer], str(path))
-    shipped = json.loads((resources.files("hybrid") / "costs_default.json").read_text())
+    shipped = json.loads((resources.files("hybrid.cost") / "costs_default.json").read_text())
     low = renderer.lower()
     for key, d in shipped.items():
         if key != "fallback" and key in low:

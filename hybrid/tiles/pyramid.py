@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import TerrabenchError
-from .heightfield import HeightField
+from hybrid.errors import TerrabenchError
+from hybrid.terrain.heightfield import HeightField
 
 EDGE_W, EDGE_E, EDGE_S, EDGE_N = 1, 2, 4, 8
 

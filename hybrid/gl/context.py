@@ -12,7 +12,8 @@ import ctypes.util
 import os
 from dataclasses import dataclass
 
-from .errors import GLContextError
+from hybrid.errors import GLContextError
+from hybrid.gl.programs import register_shared_includes
 
 GL_LOWER_LEFT = 0x8CA1
 GL_ZERO_TO_ONE = 0x935F
@@ -94,6 +95,7 @@ def create_context(device: int | None = None, require: int = 430):
         ctx.release()
         raise GLContextError(f"OpenGL {require // 100}.{require % 100 // 10} or newer is needed, the driver gives {ver}")
     _set_clip_control()
+    register_shared_includes(ctx)
     ctx.extra = {"device_index": device}
     return ctx
 
@@ -172,6 +174,16 @@ def driver_texture_bytes(tex) -> int:
             raise GLContextError(f"unknown texture internal format 0x{f.value:x}")
         total += w.value * h.value * _BYTES_PER_TEXEL[f.value]
         level += 1
+    return total
+
+
+def gl_bytes(*objects) -> int:
+    """Bytes of moderngl textures and buffers as the driver reports them (None entries count 0)."""
+    total = 0
+    for o in objects:
+        if o is None:
+            continue
+        total += driver_buffer_bytes(o) if hasattr(o, "bind_to_storage_buffer") else driver_texture_bytes(o)
     return total
 
 

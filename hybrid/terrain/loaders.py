@@ -1,7 +1,7 @@
 """Height-field loaders: 16-bit PNG, GeoTIFF, .npy/.npz, SRTM .hgt and raw grids, with no-data filling.
 
 Image-like files (PNG, GeoTIFF, HGT, raw) are north-up: their first row is the north edge. They are
-flipped on reading so that row 0 is the south edge (see hybrid.heightfield). ``.npy``/``.npz`` arrays are
+flipped on reading so that row 0 is the south edge (see hybrid.terrain.heightfield). ``.npy``/``.npz`` arrays are
 taken as already in the project's south-up order (what ``save_npz`` writes).
 
 No-data (the file's GDAL no-data tag, SRTM's -32768, NaN/inf, or a value given by the caller) is filled
@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import TerrainLoadError, TerrabenchError
-from .heightfield import HeightField
+from hybrid.errors import TerrainLoadError, TerrabenchError
+from hybrid.terrain.heightfield import HeightField
 
 SRTM_NODATA = -32768
 SUFFIXES = {".png": "png", ".tif": "tiff", ".tiff": "tiff", ".npy": "npy", ".npz": "npz", ".hgt": "hgt",

@@ -5,8 +5,8 @@ from importlib import resources
 
 import numpy as np
 
-from .errors import TerrabenchError
-from .heightfield import HeightField
+from hybrid.errors import TerrabenchError
+from hybrid.terrain.heightfield import HeightField
 
 PUGET_SPACING = 160.0     # metres between samples
 PUGET_SCALE = 0.1         # metres per 16-bit unit
@@ -15,7 +15,7 @@ PUGET_CREDIT = ("Puget Sound terrain: USGS data, made available by the Universit
 
 
 def _data_path(name: str):
-    return resources.files("hybrid") / "data" / name
+    return resources.files("hybrid.terrain") / "data" / name
 
 
 def puget(with_texture: bool = True, size: int | None = None) -> HeightField:
@@ -23,7 +23,7 @@ def puget(with_texture: bool = True, size: int | None = None) -> HeightField:
 
     ``size`` (at most 1025) crops a size x size window around Mount Rainier at full resolution, for tests.
     """
-    from .loaders import load_png16
+    from hybrid.terrain.loaders import load_png16
     with resources.as_file(_data_path("ps_height_1k.png")) as hp, resources.as_file(_data_path("ps_texture_1k.png")) as tp:
         hf = load_png16(hp, vertical_scale=PUGET_SCALE, spacing=PUGET_SPACING,
                         texture_path=tp if with_texture else None, name="puget")

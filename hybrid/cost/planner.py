@@ -13,14 +13,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .costmodel import CostModel
-from .errors import TerrabenchError
-from .features import TileFeatures, tile_features
-from .pyramid import TileKey, TilePyramid
-from .tiletree import DEFAULT_TAU, SelectedTile, select_tiles
-from .view import View
+from hybrid.contract import POLICIES, PURE_POLICIES, TriangleEstimator
+from hybrid.cost.model import CostModel
+from hybrid.errors import TerrabenchError
+from hybrid.cost.features import TileFeatures, tile_features
+from hybrid.tiles.pyramid import TileKey, TilePyramid
+from hybrid.tiles.tiletree import DEFAULT_TAU, SelectedTile, select_tiles
+from hybrid.camera.view import View
+from hybrid.strategies import triangle_estimator
 
-POLICIES = ("raster", "raycast", "hybrid", "heuristic", "oracle")
 
 
 @dataclass
@@ -28,7 +29,7 @@ class TilePlan:
     """One tile of a frame: where it is, what it costs (predicted, and measured where measured), how it is drawn."""
 
     selected: SelectedTile
-    features: TileFeatures
+    features: TileFeatures | None
     predicted: dict
     choice: str
     measured: dict = field(default_factory=dict)
@@ -41,15 +42,16 @@ class TilePlan:
     def row(self) -> dict:
         """A flat dict for the tiles table."""
         k = self.selected.key
+        features = self.features.as_dict() if self.features is not None else {}
         return {"level": k.level, "tx": k.tx, "ty": k.ty, "strategy": self.choice,
-                **{f"f_{n}": v for n, v in self.features.as_dict().items() if n != "level"},
+                **{f"f_{n}": v for n, v in features.items() if n != "level"},
                 "pred_raster_ms": self.predicted.get("raster"), "pred_raycast_ms": self.predicted.get("raycast"),
                 "meas_raster_ms": self.measured.get("raster"), "meas_raycast_ms": self.measured.get("raycast")}
 
 
 def choose(policy: str, features: TileFeatures, predicted: dict, threshold: float = 1.0) -> str:
     """The strategy a policy picks for one tile (oracle: 'raster' until measured)."""
-    if policy in ("raster", "raycast"):
+    if policy in PURE_POLICIES:
         return policy
     if policy == "hybrid":
         return "raster" if predicted["raster"] <= predicted["raycast"] else "raycast"
@@ -60,39 +62,25 @@ def choose(policy: str, features: TileFeatures, predicted: dict, threshold: floa
     raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
 
 
-class RasterTriangleEstimator:
-    """Triangles the raster strategy draws for a tile at a view, from its quadtree node errors (CPU only).
+def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
+               triangles_fn: TriangleEstimator | None = None, policy: str = "hybrid", tau: float = DEFAULT_TAU,
+               threshold: float = 1.0) -> list[TilePlan]:
+    """Selected tiles front to back with the policy's choice of strategy for each.
 
-    Per tile, the error pyramid is built once (raster.quadtree) and its node errors sorted, so each query
-    is one binary search; the estimate is within 10 % of the exact restricted, stitched count (tested).
-    """
-
-    def __init__(self, pyramid: TilePyramid, beta: float | None = None):
-        from raster.quadtree import DEFAULT_BETA
-        self.pyramid = pyramid
-        self.beta = DEFAULT_BETA if beta is None else beta
-        self._errors: dict = {}
-
-    def __call__(self, key: TileKey, selected: SelectedTile, view: View, tau: float) -> int:
-        """Estimated triangles of tile ``key`` at ``view`` for the error bound tau (pixels)."""
-        from raster.quadtree import error_pyramid, estimate_triangles, split_errors
-        if key not in self._errors:
-            self._errors[key] = split_errors(error_pyramid(self.pyramid.tile(key).heights, self.beta))
-        return estimate_triangles(self._errors[key], tau * selected.distance / view.pixels_per_radian)
-
-
-def plan_frame(pyramid: TilePyramid, view: View, model: CostModel, triangles_fn=None, policy: str = "hybrid",
-               tau: float = DEFAULT_TAU, threshold: float = 1.0) -> list[TilePlan]:
-    """Selected tiles front to back with features, predicted ms of both strategies and the policy's choice.
-
-    ``triangles_fn(key, selected, view, tau)`` gives the raster mesh's triangle count for a tile at this
-    view; by default a RasterTriangleEstimator of the pyramid (CPU only, no GL needed).
+    A pure policy (one strategy for every tile) needs no features: its plans carry none. A mixed policy gets
+    features, the model's predicted ms of both candidates and its choice; ``triangles_fn`` gives the raster
+    mesh's triangle count for a tile (default: the raster strategy's CPU estimate from the registry).
     """
     if policy not in POLICIES:
         raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
-    triangles_fn = triangles_fn or RasterTriangleEstimator(pyramid)
+    selected = select_tiles(pyramid, view, tau)
+    if policy in PURE_POLICIES:
+        return [TilePlan(s, None, {}, policy) for s in selected]
+    if model is None:
+        raise TerrabenchError(f"policy {policy!r} needs a cost model (hybrid.cost.model.load_cost_model)")
+    triangles_fn = triangles_fn or triangle_estimator(pyramid)
     plans = []
-    for s in select_tiles(pyramid, view, tau):
+    for s in selected:
         f = tile_features(pyramid, view, s, triangles_fn(s.key, s, view, tau))
         p = model.predict(f)
         plans.append(TilePlan(s, f, p, choose(policy, f, p, threshold)))

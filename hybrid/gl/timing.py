@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import time
 
-from .glcontext import gl_info
+from hybrid.gl.context import gl_info
 
 
 def timer_queries_valid(ctx) -> bool:

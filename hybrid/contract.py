@@ -1,0 +1,113 @@
+"""The contract between the renderer and the tile strategies, and the one shape of a frame's statistics.
+
+A strategy (``raster.*``, ``raycast``) is a GPU class that satisfies ``TileStrategy`` structurally; it
+imports nothing above ``hybrid.gl``. The renderer hands it ``TileItem``s front to back and a bound
+``FrameTarget``; every renderer returns ``FrameStats`` with the same fields whatever the method.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any, Literal, NamedTuple, Protocol, Sequence, runtime_checkable
+
+from hybrid.camera.view import View
+from hybrid.gl.target import FrameTarget
+from hybrid.tiles.pyramid import Tile, TileKey
+from hybrid.tiles.tiletree import SelectedTile
+
+StrategyName = Literal["raster", "raycast", "fullres", "tin"]
+"""Registered tile strategies: tilelets (raster), the max-mipmap ray caster, and two raster baselines."""
+Kind = Literal["raster", "raycast"]
+"""How a strategy makes pixels: triangles through the rasterizer, or rays in the fragment shader."""
+Policy = Literal["raster", "raycast", "fullres", "tin", "hybrid", "heuristic", "oracle"]
+"""How a renderer chooses each tile's strategy: one strategy for all, or a per-tile choice."""
+Method = Literal["reference", "raster", "raycast", "fullres", "tin", "hybrid", "heuristic", "oracle"]
+"""Anything that renders a view: the full-resolution reference or a policy."""
+
+PURE_POLICIES: tuple[str, ...] = ("raster", "raycast", "fullres", "tin")
+MIXED_POLICIES: tuple[str, ...] = ("hybrid", "heuristic", "oracle")
+POLICIES: tuple[str, ...] = PURE_POLICIES + MIXED_POLICIES
+METHODS: tuple[str, ...] = ("reference",) + POLICIES
+CANDIDATES: tuple[str, ...] = ("raster", "raycast")
+"""The strategies a mixed policy chooses between."""
+
+
+@runtime_checkable
+class GpuTile(Protocol):
+    """One tile uploaded by one strategy: its GPU bytes and how to free them."""
+
+    nbytes: int
+
+    def release(self) -> None:
+        """Free every GPU object of the tile."""
+
+
+class TileItem(NamedTuple):
+    """One tile of a frame as a strategy draws it: GPU copy, CPU tile and its selection for the view."""
+
+    gpu: Any
+    tile: Tile
+    selected: SelectedTile
+
+
+@runtime_checkable
+class TileStrategy(Protocol):
+    """A way to draw tiles into the shared colour + reversed-Z depth target."""
+
+    kind: Kind
+    draw_options: frozenset[str]
+
+    def upload(self, tile: Tile) -> GpuTile:
+        """Put one tile on the GPU."""
+
+    def draw_tiles(self, target: FrameTarget, view: View, items: Sequence[TileItem], tau: float,
+                   **options) -> dict[str, float]:
+        """Draw items (front to back) into the bound target at screen-space error tau px; counters back."""
+
+    @property
+    def shared_nbytes(self) -> int:
+        """GPU bytes the strategy holds for all tiles (terrain texture, buffers), not counting tiles."""
+
+    def release(self) -> None:
+        """Free the strategy's own GPU objects (tiles are freed through their GpuTile)."""
+
+
+class TriangleEstimator(Protocol):
+    """Triangles a raster strategy would draw for one tile at a view, computed on the CPU without GL."""
+
+    def __call__(self, key: TileKey, selected: SelectedTile, view: View, tau: float) -> int:
+        """Estimated triangle count of tile ``key`` at ``view`` for the bound tau (pixels)."""
+
+
+@dataclass
+class FrameStats:
+    """What one frame cost and drew; the same fields from every renderer (milliseconds, bytes, counts).
+
+    wall_ms is what a user waits for: planning plus drawing, wall clock around ctx.finish(); gpu_ms is the
+    GL timer query on GPUs and None on software rasterizers. gpu_bytes counts resident tiles plus what the
+    strategies hold for all tiles (shared_bytes); uploads and evictions are those of this frame.
+    """
+
+    wall_ms: float
+    plan_ms: float
+    draw_ms: float
+    gpu_ms: float | None = None
+    tiles: int = 0
+    tiles_raster: int = 0
+    tiles_raycast: int = 0
+    gpu_bytes: int = 0
+    gpu_bytes_raster: int = 0
+    gpu_bytes_raycast: int = 0
+    shared_bytes: int = 0
+    uploads: int = 0
+    evictions: int = 0
+    pred_ms: float | None = None
+    counters: dict[str, float] = field(default_factory=dict)
+    together_ms: dict[str, float] = field(default_factory=dict)
+    tile_rows: list[dict] = field(default_factory=list)
+
+    def row(self) -> dict[str, Any]:
+        """One flat table row: every scalar field, the counters and ``together_<strategy>_ms``."""
+        d = asdict(self)
+        counters, together = d.pop("counters"), d.pop("together_ms")
+        d.pop("tile_rows")
+        return {**d, **counters, **{f"together_{k}_ms": v for k, v in together.items()}}

@@ -1,0 +1,271 @@
+"""The renderer: every policy draws a view tile by tile into one colour + reversed-Z depth buffer.
+
+A pure policy (raster, raycast, fullres, tin) is the per-tile choice with a single answer; the mixed policies
+(hybrid, heuristic, oracle) choose per tile between the raster and ray-cast strategies (hybrid.cost.planner).
+Within a frame the raster tiles are drawn first (front to back), then the ray-cast tiles front to back with
+the tile-ID pre-pass, so no ray is cast where a nearer raster tile already covers the pixel. Every strategy
+writes depth from the same reversed-Z projection, so a world point has one depth whichever draws it.
+
+Frame time (``wall_ms``) is what a user waits for a frame: the CPU planning (tile selection, and for the
+mixed policies the features and choices) plus the drawing, wall clock with ctx.finish() on both sides.
+Tiles not yet resident are uploaded before the timed draw and counted apart (``uploads``).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from hybrid.camera.view import View
+from hybrid.contract import CANDIDATES, MIXED_POLICIES, POLICIES, FrameStats, TileItem
+from hybrid.cost.model import CostModel, load_cost_model
+from hybrid.cost.planner import TilePlan, plan_frame
+from hybrid.errors import TerrabenchError
+from hybrid.gl.context import gl_info
+from hybrid.gl.target import FrameTarget, RenderResult
+from hybrid.gl.timing import timed
+from hybrid.reference import ReferenceRenderer
+from hybrid.residency import ResidencyCache
+from hybrid.strategies import STRATEGIES, make_strategy, triangle_estimator
+from hybrid.terrain.heightfield import HeightField
+from hybrid.tiles.pyramid import EDGE_E, EDGE_N, EDGE_S, EDGE_W, TilePyramid
+from hybrid.tiles.tiletree import DEFAULT_TAU, edge_neighbours
+
+STRATEGY_CODES = {"raster": 1, "raycast": 2}
+"""Per-pixel codes of the strategy map, by strategy kind (0 = no terrain)."""
+DEFAULT_OPTIONS = {"raster": {"count_culled": False}}
+"""Draw options a renderer starts from: the CPU mirror of tilelet culling is a check, never timed."""
+
+
+def route_options(strategies: dict, options: dict) -> dict[str, dict]:
+    """Draw options split per strategy by the names each accepts; a name no strategy knows is an error."""
+    known = set().union(*(e.draw_options for e in STRATEGIES.values()))
+    bad = sorted(set(options) - known)
+    if bad:
+        raise TerrabenchError(f"unknown draw option(s) {', '.join(bad)}; known: {', '.join(sorted(known))}")
+    return {n: {k: v for k, v in options.items() if k in s.draw_options} for n, s in strategies.items()}
+
+
+class Renderer:
+    """Whole views drawn tile by tile with a policy's choice of strategy; resident tiles within a byte budget.
+
+    ``options`` are draw options of the strategies (``mode``, ``reconstruction``, ``prepass``, ``wireframe``,
+    ...), each given to the strategies that take it. A renderer is a context manager; it cannot be used
+    after ``release()``.
+    """
+
+    def __init__(self, ctx, hf: HeightField, policy: str = "hybrid", tile_size: int = 256, *,
+                 cost_model: CostModel | None = None, budget_bytes: int | None = None, threshold: float = 1.0,
+                 oracle_repeats: int = 3, pyramid: TilePyramid | None = None, **options):
+        if policy not in POLICIES:
+            raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
+        self.ctx, self.hf, self.policy = ctx, hf, policy
+        self.mixed = policy in MIXED_POLICIES
+        self.pyramid = pyramid or TilePyramid(hf, tile_size)
+        self.cache = ResidencyCache(budget_bytes)
+        self.strategies = {n: make_strategy(n, ctx, hf) for n in (CANDIDATES if self.mixed else (policy,))}
+        routed = route_options(self.strategies, options)
+        self.options = {n: {**DEFAULT_OPTIONS.get(n, {}), **o} for n, o in routed.items()}
+        self.model = cost_model or (load_cost_model(gl_info(ctx).renderer) if self.mixed else None)
+        self.triangles = triangle_estimator(self.pyramid) if self.mixed else None
+        self.threshold = threshold
+        self.oracle_repeats = int(oracle_repeats)
+        self._tiles: dict = {}
+        self._released = False
+
+    def __enter__(self) -> "Renderer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+    def _check_live(self) -> None:
+        if self._released:
+            raise TerrabenchError(f"this {self.policy} renderer was released; make a new one")
+
+    def kind(self, name: str) -> str:
+        """'raster' or 'raycast': how strategy ``name`` makes pixels."""
+        return STRATEGIES[name].kind
+
+    # --- planning (CPU) ---------------------------------------------------------------------------
+    def tile(self, key):
+        """The pyramid tile (CPU copy, cached)."""
+        if key not in self._tiles:
+            self._tiles[key] = self.pyramid.tile(key)
+        return self._tiles[key]
+
+    def plan(self, view: View, tau: float = DEFAULT_TAU) -> list[TilePlan]:
+        """The frame's tiles front to back with the policy's choices (and, when mixed, features and costs)."""
+        self._check_live()
+        return plan_frame(self.pyramid, view, self.model, self.triangles, self.policy, tau, self.threshold)
+
+    def skirts(self, plans: list[TilePlan]) -> dict:
+        """Edge bits of every raster tile that touches a ray-cast tile: skirts close the seam there."""
+        kind = {p.key: self.kind(p.choice) for p in plans}
+        if len(set(kind.values())) < 2:
+            return {}
+        keys = set(kind)
+        out = {}
+        for p in plans:
+            if kind[p.key] != "raster":
+                continue
+            bits = 0
+            for bit, dx, dy in ((EDGE_W, -1, 0), (EDGE_E, 1, 0), (EDGE_S, 0, -1), (EDGE_N, 0, 1)):
+                if any(kind[k] == "raycast" for k in edge_neighbours(keys, p.key, dx, dy, self.pyramid.max_level)):
+                    bits |= bit
+            if bits:
+                out[p.key] = bits
+        return out
+
+    # --- drawing ----------------------------------------------------------------------------------
+    def _resident(self, name, key, pinned):
+        return self.cache.get(name, self.strategies[name], key, lambda: self.tile(key), pinned)
+
+    def _items(self, name: str, plans: list[TilePlan], pinned) -> list[TileItem]:
+        return [TileItem(self._resident(name, p.key, pinned), self.tile(p.key), p.selected) for p in plans]
+
+    def _order(self) -> list[str]:
+        """Strategy names in drawing order: raster kinds first, ray casting last."""
+        return sorted(self.strategies, key=lambda n: self.kind(n) == "raycast")
+
+    def _draw(self, target, view, plans: list[TilePlan], pinned, tau: float, options: dict) -> dict:
+        counters: dict = {}
+        skirts = self.skirts(plans)
+        for name in self._order():
+            sub = [p for p in plans if p.choice == name]
+            if not sub:
+                continue
+            opts = options[name]
+            if skirts and "skirts" in self.strategies[name].draw_options:
+                opts = {**opts, "skirts": skirts}
+            c = self.strategies[name].draw_tiles(target, view, self._items(name, sub, pinned), tau, **opts) or {}
+            for k, v in c.items():
+                if isinstance(v, (int, float, np.integer, np.floating)):
+                    counters[k] = counters.get(k, 0) + v
+        return counters
+
+    def time_draw(self, view: View, plans: list[TilePlan], name: str, target: FrameTarget, pinned=frozenset(),
+                  tau: float = DEFAULT_TAU) -> float:
+        """Median ms of drawing the plans' tiles with one strategy in one call: the GL timer query on real
+        GPUs, the wall clock around ctx.finish() on CPU rasterizers (where timer queries are wrong)."""
+        self._check_live()
+        items = self._items(name, plans, pinned)
+        times = []
+        for _ in range(self.oracle_repeats):
+            target.clear()
+            target.use()
+            _, wall, gpu = timed(self.ctx, lambda: self.strategies[name].draw_tiles(target, view, items, tau,
+                                                                                    **self.options[name]))
+            times.append(wall if gpu is None else gpu)
+        return float(np.median(times))
+
+    def _measure(self, view, plans, target, pinned, tau, together: bool) -> dict:
+        """Time every tile alone both ways (the oracle keeps the faster) and, with ``together``, all at once."""
+        pinned |= {(n, p.key) for p in plans for n in CANDIDATES}
+        for p in plans:
+            p.measured = {n: self.time_draw(view, [p], n, target, pinned, tau) for n in CANDIDATES}
+            if self.policy == "oracle":
+                p.choice = min(p.measured, key=p.measured.get)
+        if not (together and plans):
+            return {}
+        return {n: self.time_draw(view, plans, n, target, pinned, tau) for n in CANDIDATES}
+
+    def render(self, view: View, tau: float = DEFAULT_TAU, *, measure: bool = False, maps: bool = False,
+               **options) -> RenderResult:
+        """Draw the view and read it back: colour, distance (m) and FrameStats.
+
+        With ``measure`` (always for the oracle; mixed policies only) every tile is also timed alone both
+        ways; with ``maps`` the result carries the per-pixel strategy map (extra untimed renders). Per-call
+        ``options`` override the renderer's draw options.
+        """
+        self._check_live()
+        if measure and not self.mixed:
+            raise TerrabenchError(f"measure=True needs a mixed policy ({', '.join(MIXED_POLICIES)}), not {self.policy!r}")
+        opts = {n: {**self.options[n], **o} for n, o in route_options(self.strategies, options).items()}
+        t_plan = time.perf_counter()
+        plans = self.plan(view, tau)
+        plan_ms = (time.perf_counter() - t_plan) * 1e3
+        pinned = {(p.choice, p.key) for p in plans}
+        uploads0, evictions0 = self.cache.stats.uploads, self.cache.stats.evictions
+        target = FrameTarget(self.ctx, view.width, view.height)
+        try:
+            together = {}
+            if measure or self.policy == "oracle":
+                together = self._measure(view, plans, target, pinned, tau, together=measure)
+            for p in plans:                    # upload first: the timed frame measures drawing only
+                self._resident(p.choice, p.key, pinned)
+            target.clear()
+            target.use()
+            counters, draw, gpu = timed(self.ctx, lambda: self._draw(target, view, plans, pinned, tau, opts))
+            stats = self._stats(plans, plan_ms, draw, gpu, counters, together)
+            stats.uploads = self.cache.stats.uploads - uploads0
+            stats.evictions = self.cache.stats.evictions - evictions0
+            result = target.read(view, stats)
+            if maps:
+                result.maps = {"strategy": self.strategy_map(view, plans, tau, opts)}
+            return result
+        finally:
+            target.release()
+
+    def _stats(self, plans, plan_ms, draw, gpu, counters, together) -> FrameStats:
+        by_kind = {"raster": 0, "raycast": 0}
+        for (name, _), g in self.cache.entries.items():
+            by_kind[self.kind(name)] += int(g.nbytes)
+        shared = 0
+        for name, s in self.strategies.items():
+            b = int(s.shared_nbytes)
+            by_kind[self.kind(name)] += b
+            shared += b
+        n_raster = sum(self.kind(p.choice) == "raster" for p in plans)
+        pred = None
+        if self.mixed and plans:
+            pred = self.model.frame_ms([p.predicted[p.choice] for p in plans], {p.choice for p in plans})
+        return FrameStats(wall_ms=plan_ms + draw, plan_ms=plan_ms, draw_ms=draw, gpu_ms=gpu, tiles=len(plans),
+                          tiles_raster=n_raster, tiles_raycast=len(plans) - n_raster,
+                          gpu_bytes=by_kind["raster"] + by_kind["raycast"], gpu_bytes_raster=by_kind["raster"],
+                          gpu_bytes_raycast=by_kind["raycast"], shared_bytes=shared, pred_ms=pred,
+                          counters=counters, together_ms=together,
+                          tile_rows=[p.row() for p in plans] if self.mixed else [])
+
+    def strategy_map(self, view: View, plans: list[TilePlan], tau: float = DEFAULT_TAU,
+                     options: dict | None = None) -> np.ndarray:
+        """Per pixel: 0 no terrain, 1 drawn by a raster tile, 2 by a ray-cast tile (compares depth per kind)."""
+        self._check_live()
+        options = options or self.options
+        depths = {}
+        for name in self.strategies:
+            sub = [p for p in plans if p.choice == name]
+            t = FrameTarget(self.ctx, view.width, view.height)
+            try:
+                t.clear()
+                t.use()
+                if sub:
+                    opts = {**options[name], **({"prepass": False} if "prepass" in options[name] else {})}
+                    self.strategies[name].draw_tiles(t, view, self._items(name, sub, set()), tau, **opts)
+                depths[name] = t.read_depth()
+            finally:
+                t.release()
+        out = np.zeros((view.height, view.width), np.uint8)
+        best = np.zeros((view.height, view.width), np.float32)
+        for name in self._order():             # raster kinds first: they win ties, as in the frame
+            d = depths[name]
+            win = (d > 0) & (d > best) if self.kind(name) == "raycast" else (d > 0) & (d >= best)
+            out[win] = STRATEGY_CODES[self.kind(name)]
+            best = np.where(win, d, best)
+        return out
+
+    def release(self) -> None:
+        """Free resident tiles and strategies; the renderer cannot draw afterwards."""
+        if self._released:
+            return
+        self.cache.clear()
+        for s in self.strategies.values():
+            s.release()
+        self._released = True
+
+
+def make_renderer(ctx, hf: HeightField, method: str, tile_size: int = 256, **options):
+    """A renderer for a method: the full-resolution reference (options do not apply) or a policy's Renderer."""
+    if method == "reference":
+        return ReferenceRenderer(ctx, hf)
+    return Renderer(ctx, hf, method, tile_size, **options)
