@@ -7,7 +7,7 @@ imports nothing above ``hybrid.gl``. The renderer hands it ``TileItem``s front t
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
-from typing import Any, Literal, NamedTuple, Protocol, Sequence, runtime_checkable
+from typing import Any, Literal, NamedTuple, Protocol, Sequence, get_args, runtime_checkable
 
 from hybrid.camera.view import View
 from hybrid.gl.target import FrameTarget
@@ -23,11 +23,11 @@ Policy = Literal["raster", "raycast", "fullres", "tin", "hybrid", "heuristic", "
 Method = Literal["reference", "raster", "raycast", "fullres", "tin", "hybrid", "heuristic", "oracle"]
 """Anything that renders a view: the full-resolution reference or a policy."""
 
-PURE_POLICIES: tuple[str, ...] = ("raster", "raycast", "fullres", "tin")
+PURE_POLICIES: tuple[str, ...] = get_args(StrategyName)
 MIXED_POLICIES: tuple[str, ...] = ("hybrid", "heuristic", "oracle")
-POLICIES: tuple[str, ...] = PURE_POLICIES + MIXED_POLICIES
-METHODS: tuple[str, ...] = ("reference",) + POLICIES
-CANDIDATES: tuple[str, ...] = ("raster", "raycast")
+POLICIES: tuple[str, ...] = get_args(Policy)
+METHODS: tuple[str, ...] = get_args(Method)
+CANDIDATES: tuple[str, ...] = get_args(Kind)
 """The strategies a mixed policy chooses between."""
 
 

@@ -7,6 +7,8 @@ from one sample at each pixel centre so they compare one to one with any other m
 """
 from __future__ import annotations
 
+from typing import Literal, get_args
+
 import numpy as np
 
 from hybrid.errors import TerrabenchError
@@ -21,7 +23,8 @@ from hybrid.gl.textures import terrain_texture
 from hybrid.gl.target import FrameTarget, RenderResult
 from hybrid.camera.view import View
 
-MODES = {"texture": 0, "shaded": 1, "height": 2}
+ReferenceMode = Literal["texture", "shaded", "height"]
+MODES = {m: i for i, m in enumerate(get_args(ReferenceMode))}
 
 
 def grid_indices(rows: int, cols: int) -> np.ndarray:

@@ -3,10 +3,14 @@ from __future__ import annotations
 
 from hybrid.errors import TerrabenchError
 from dataclasses import dataclass, fields, replace
+from typing import Literal, get_args
 
-RECONSTRUCTIONS = ("planes", "linear", "triangles", "bilinear")
-TRAVERSALS = ("maxmip", "naive")
-MODES = ("texture", "texture_plain", "shaded", "height", "normal", "depth", "level", "steps")
+Reconstruction = Literal["planes", "linear", "triangles", "bilinear"]
+Traversal = Literal["maxmip", "naive"]
+CastMode = Literal["texture", "texture_plain", "shaded", "height", "normal", "depth", "level", "steps"]
+RECONSTRUCTIONS: tuple[str, ...] = get_args(Reconstruction)
+TRAVERSALS: tuple[str, ...] = get_args(Traversal)
+MODES: tuple[str, ...] = get_args(CastMode)
 
 
 @dataclass(frozen=True)
@@ -26,11 +30,11 @@ class CastOptions:
     heat_max: steps mapped to the top of the 'steps' heat map.
     """
 
-    reconstruction: str = "triangles"
-    traversal: str = "maxmip"
+    reconstruction: Reconstruction = "triangles"
+    traversal: Traversal = "maxmip"
     prepass: bool = True
     lod: float | None = None
-    mode: str | None = None
+    mode: CastMode | None = None
     shadows: bool = False
     max_steps: int | None = None
     stats: bool = True
