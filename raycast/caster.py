@@ -1,7 +1,7 @@
 """The ray-cast tile strategy on the GPU: per-tile height + max-mip textures, one box pass per tile.
 
-Satisfies the tile-strategy contract of hybrid.frame (duck-typed; nothing from hybrid is imported):
-``upload(tile) -> GpuTile``, ``draw_tiles(target, view, items, **options) -> dict``, ``release()``.
+Satisfies ``hybrid.contract.TileStrategy``: ``upload(tile) -> GpuTile``, ``draw_tiles(target, view, items,
+tau, **options) -> dict``, ``shared_nbytes``, ``release()``.
 Each tile pass rasterizes the back faces of the tile's clipped bounding box; the fragment shader casts the
 pixel-centre ray (from the camera basis, as View.pixel_dirs_eye), traverses the max mipmap in the tile's
 texel space (mirrored so Dir_x, Dir_y >= 0), intersects the chosen reconstruction, shades the hit and writes
