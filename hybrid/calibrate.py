@@ -10,7 +10,8 @@ import numpy as np
 
 from hybrid.contract import CANDIDATES
 from hybrid.renderer import Renderer
-from hybrid.cost.model import CostModel, estimate_overhead, fit_cost_model
+from hybrid.cost.fit import estimate_overhead, fit_cost_model
+from hybrid.cost.model import CostModel
 from hybrid.cost.features import TileFeatures
 from hybrid.gl.context import gl_info
 from hybrid.terrain.heightfield import HeightField

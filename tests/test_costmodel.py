@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from hybrid.cost.model import CostModel, fit_cost_model, load_cost_model, save_cost_model
+from hybrid.cost.fit import fit_cost_model
+from hybrid.cost.model import CostModel, load_cost_model, save_cost_model
 from hybrid.errors import TerrabenchError
 from hybrid.cost.features import TileFeatures, _hull_area_clipped, footprint_pixels
 from hybrid.cost.planner import choose

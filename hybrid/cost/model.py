@@ -10,11 +10,9 @@ restriction, the ray caster's pre-pass target and counters) paid once when any t
 
     frame_ms = overhead_raster * [any raster tile] + overhead_raycast * [any ray-cast tile] + sum of tiles
 
-``terrabench calibrate`` times tiles one by one on this device, fits the coefficients by non-negative
-least squares on relative error (rows weighted by 1 / measured time, so small tiles count as much as big
-ones), reports the median absolute relative error on held-out tiles, and saves the model keyed by the GL
-renderer string. ``load_cost_model`` finds it again: the user's file ($TERRABENCH_COSTS or
-~/.config/terrabench/costs.json), then the defaults shipped in hybrid/costs_default.json (matched by a
+``terrabench calibrate`` times tiles on this device and fits the coefficients (``hybrid.cost.fit``), then
+saves the model keyed by the GL renderer string. ``load_cost_model`` finds it again: the user's file ($TERRABENCH_COSTS or
+~/.config/terrabench/costs.json), then the defaults shipped in hybrid/cost/costs_default.json (matched by a
 key contained in the renderer string, e.g. 'llvmpipe').
 """
 from __future__ import annotations
@@ -29,7 +27,6 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 from hybrid.cost.features import TileFeatures
-from hybrid.cost.nnls import nnls
 
 TERMS = {"raster": ("const", "triangles", "visible_triangles", "pixels"),
          "raycast": ("const", "pixels", "surface_pixels", "pixel_steps")}
@@ -86,63 +83,6 @@ class CostModel:
     def to_dict(self) -> dict:
         """JSON-ready form."""
         return asdict(self)
-
-
-def fit_strategy(features: list[TileFeatures], ms: np.ndarray, strategy: str, overhead: float = 0.0) -> dict:
-    """Non-negative per-tile coefficients of one strategy, fitted on the relative error of single-tile times.
-
-    ``ms`` are times of drawing each tile alone (one call), so each includes the strategy's per-frame
-    ``overhead``, which is taken off before fitting.
-    """
-    ms = np.asarray(ms, dtype=np.float64)
-    if len(features) != len(ms) or len(ms) < len(TERMS[strategy]):
-        raise TerrabenchError(f"need at least {len(TERMS[strategy])} timed tiles with matching features to fit "
-                              f"{strategy}, got {len(ms)}")
-    if not np.all(np.isfinite(ms)) or np.any(ms <= 0):
-        raise TerrabenchError("measured times must be finite and > 0 ms")
-    A = np.array([term_values(f, strategy) for f in features])
-    scale = np.maximum(A.max(axis=0), 1e-12)                 # condition the columns
-    w = 1.0 / ms
-    x = nnls(A / scale * w[:, None], (ms - overhead) * w) / scale
-    return dict(zip(TERMS[strategy], map(float, x)))
-
-
-def median_rel_error(model: CostModel, features: list[TileFeatures], ms: np.ndarray, strategy: str) -> float:
-    """Median |predicted - measured| / measured over single-tile times (overhead included on both sides)."""
-    pred = np.array([model.predict(f)[strategy] for f in features]) + model.overhead.get(strategy, 0.0)
-    ms = np.asarray(ms, dtype=np.float64)
-    return float(np.median(np.abs(pred - ms) / ms))
-
-
-def estimate_overhead(single_ms: list[np.ndarray], together_ms: list[float]) -> float:
-    """Per-frame overhead from frames timed tile by tile and all at once: (sum singles - together) / (k - 1)."""
-    est = [(float(np.sum(s)) - t) / (len(s) - 1) for s, t in zip(single_ms, together_ms) if len(s) >= 2]
-    return float(max(np.median(est), 0.0)) if est else 0.0
-
-
-def fit_cost_model(features: list[TileFeatures], raster_ms, raycast_ms, renderer: str,
-                   holdout: float = 0.3, seed: int = 0, overhead: dict | None = None) -> CostModel:
-    """Fit both strategies on a random (1 - holdout) share of tiles; report errors on the rest.
-
-    ``overhead`` (ms per frame and strategy, see estimate_overhead) is taken off the single-tile times.
-    """
-    n = len(features)
-    raster_ms, raycast_ms = np.asarray(raster_ms, float), np.asarray(raycast_ms, float)
-    if not (0.0 <= holdout < 1.0):
-        raise TerrabenchError(f"holdout must lie in [0, 1), got {holdout}")
-    idx = np.random.default_rng(seed).permutation(n)
-    n_test = int(round(holdout * n))
-    test, train = idx[:n_test], idx[n_test:]
-    ftrain = [features[i] for i in train]
-    overhead = {"raster": 0.0, "raycast": 0.0, **(overhead or {})}
-    model = CostModel(renderer, fit_strategy(ftrain, raster_ms[train], "raster", overhead["raster"]),
-                      fit_strategy(ftrain, raycast_ms[train], "raycast", overhead["raycast"]), tiles=n,
-                      overhead=overhead)
-    if n_test:
-        ftest = [features[i] for i in test]
-        model.fit_error = {"raster": median_rel_error(model, ftest, raster_ms[test], "raster"),
-                           "raycast": median_rel_error(model, ftest, raycast_ms[test], "raycast")}
-    return model
 
 
 def user_costs_path() -> Path:
