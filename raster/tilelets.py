@@ -18,7 +18,7 @@ import numpy as np
 from .culling import cull_tilelets
 from .quadtree import DEFAULT_BETA, error_pyramid, estimate_triangles, split_errors
 from .restriction import TileLod, restrict_frame
-from hybrid.gl.programs import program
+from hybrid.gl.programs import program, set_uniform
 from hybrid.gl.shading import resolve_mode
 from hybrid.gl.context import gl_bytes
 from hybrid.gl.textures import terrain_texture
@@ -42,12 +42,6 @@ def point_records(tset, stitching: bool = True) -> np.ndarray:
     rec["morph"] = tset.morph[:, :4]
     rec["morph_c"] = tset.morph[:, 4]
     return rec
-
-
-def _set_uniform(prog, name: str, value) -> None:
-    """Set a uniform if the linked program kept it (the compiler drops unused ones)."""
-    if name in prog:
-        prog[name].value = value
 
 
 class TileletTile:
@@ -205,9 +199,9 @@ class TileletStrategy:
                     prog["uv_origin"].value = tuple(((np.asarray(tile.origin[:2]) - hf_origin[:2]) / extent).astype(np.float32))
                     prog["uv_per_cell"].value = tuple((float(tile.spacing) / extent).astype(np.float32))
                     prog["tile_level"].value = int(key[0])
-                    _set_uniform(prog, "n_cells", int(g.n))
-                    _set_uniform(prog, "skirt_edges", int((skirts or {}).get(sel.key, 0)))
-                    _set_uniform(prog, "skirt_bottom", float(tile.zmin - view.eye[2] - 1.0 - 0.01 * tile.spacing))
+                    set_uniform(prog, "n_cells", int(g.n))
+                    set_uniform(prog, "skirt_edges", int((skirts or {}).get(sel.key, 0)))
+                    set_uniform(prog, "skirt_bottom", float(tile.zmin - view.eye[2] - 1.0 - 0.01 * tile.spacing))
                     g.heights.use(0)
                     g.vao.render(ctx.POINTS, vertices=g.count)
                     if do_cull and not count_culled and not record_culling:

@@ -15,7 +15,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from hybrid.gl.context import gl_bytes
-from hybrid.gl.programs import program, register_include
+from hybrid.gl.programs import program, register_include, set_uniform, write_uniform
 from hybrid.gl.shading import resolve_mode
 from hybrid.gl.textures import terrain_texture
 from .maxmip import MaxMipBuilder, level_count, maxmip_nbytes
@@ -75,21 +75,6 @@ def outer_faces(clip, hf) -> int:
     tol = 1e-6 * float(hf.spacing)
     return ((abs(x0 - ox) <= tol) * 1 | (abs(x1 - (ox + w)) <= tol) * 2
             | (abs(y0 - oy) <= tol) * 4 | (abs(y1 - (oy + d)) <= tol) * 8)
-
-
-def _set(prog, name, value):
-    """Set a uniform if the compiled program still has it (unused ones are optimised away)."""
-    try:
-        prog[name].value = value
-    except KeyError:
-        pass
-
-
-def _write(prog, name, data: bytes):
-    try:
-        prog[name].write(data)
-    except KeyError:
-        pass
 
 
 class RaycastStrategy:
@@ -194,39 +179,39 @@ class RaycastStrategy:
         if tuple(target.size) != (W, H):
             raise TerrabenchError(f"target size {tuple(target.size)} does not match the view's {W}x{H} pixels")
         vp = np.asarray(view.view_proj_rel, dtype=np.float64)
-        _write(prog, "view_proj_rel", vp.T.astype(np.float32).tobytes())
+        write_uniform(prog, "view_proj_rel", vp.T.astype(np.float32).tobytes())
         self.prepass_prog["view_proj_rel"].write(vp.T.astype(np.float32).tobytes())
-        _write(prog, "cam_to_world", np.asarray(view.rotation(), np.float64).astype(np.float32).tobytes())
+        write_uniform(prog, "cam_to_world", np.asarray(view.rotation(), np.float64).astype(np.float32).tobytes())
         t = float(view.tan_half_fov)
-        _set(prog, "ndc_scale", (t * W / H, t))
-        _set(prog, "viewport", (float(W), float(H)))
-        _set(prog, "near_plane", float(view.near))
-        _set(prog, "far_plane", float(view.far))
+        set_uniform(prog, "ndc_scale", (t * W / H, t))
+        set_uniform(prog, "viewport", (float(W), float(H)))
+        set_uniform(prog, "near_plane", float(view.near))
+        set_uniform(prog, "far_plane", float(view.far))
         lo, hi = hf.height_range
-        _set(prog, "hrange", (lo, hi))
-        _set(prog, "heat_max", float(opts.heat_max))
+        set_uniform(prog, "hrange", (lo, hi))
+        set_uniform(prog, "heat_max", float(opts.heat_max))
         K = float(view.height) / (2.0 * t)
         ext_w, ext_d = hf.extent
         if self.texture is not None:
             self.texture.use(2)
-            _set(prog, "tex", 2)
-        _set(prog, "hmap", 0)
-        _set(prog, "mmap", 1)
+            set_uniform(prog, "tex", 2)
+        set_uniform(prog, "hmap", 0)
+        set_uniform(prog, "mmap", 1)
         grid = None
         if opts.shadows:
             grid = self._shadow_grid()
             grid.heights.use(3)
             grid.maxmip.use(5)
-            _set(prog, "g_hmap", 3)
-            _set(prog, "g_mmap", 5)
-            _set(prog, "g_cells", grid.n)
-            _set(prog, "g_levels", level_count(grid.n) - 1)
-            _set(prog, "g_ext", grid.ext)
-            _set(prog, "g_zr", grid.zr)
-            _set(prog, "g_spacing", float(hf.spacing))
-            _set(prog, "g_max_steps", opts.max_steps or default_max_steps(grid.n))
+            set_uniform(prog, "g_hmap", 3)
+            set_uniform(prog, "g_mmap", 5)
+            set_uniform(prog, "g_cells", grid.n)
+            set_uniform(prog, "g_levels", level_count(grid.n) - 1)
+            set_uniform(prog, "g_ext", grid.ext)
+            set_uniform(prog, "g_zr", grid.zr)
+            set_uniform(prog, "g_spacing", float(hf.spacing))
+            set_uniform(prog, "g_max_steps", opts.max_steps or default_max_steps(grid.n))
         n_items = len(items)
-        _set(prog, "stat_bins_x", (W + 63) // 64)
+        set_uniform(prog, "stat_bins_x", (W + 63) // 64)
         need = STAT_SLOTS * STAT_STRIDE * max(n_items, 1)
         if self.stats_buf.size < need:
             self.stats_buf.release()
@@ -240,7 +225,7 @@ class RaycastStrategy:
                 ids.write(np.zeros(W * H, np.uint32).tobytes())
                 self._next_id = 1
             ids.use(4)
-            _set(prog, "ids", 4)
+            set_uniform(prog, "ids", 4)
             id_fbo = ctx.framebuffer(color_attachments=[ids], depth_attachment=target.depth)
             id_fbo.depth_mask = False
         ctx.enable(ctx.CULL_FACE)
@@ -255,31 +240,31 @@ class RaycastStrategy:
                 box_lo = np.array([x0 - pad, y0 - pad, tile.zmin - pad]) - eye
                 box_hi = np.array([x1 + pad, y1 + pad, tile.zmax + pad]) - eye
                 for p in (prog, self.prepass_prog):
-                    _set(p, "box_lo", tuple(box_lo.astype(np.float32)))
-                    _set(p, "box_hi", tuple(box_hi.astype(np.float32)))
+                    set_uniform(p, "box_lo", tuple(box_lo.astype(np.float32)))
+                    set_uniform(p, "box_hi", tuple(box_hi.astype(np.float32)))
                 level = int(tile.key.level) if hasattr(tile, "key") else 0
-                _set(prog, "n_cells", g.n)
-                _set(prog, "n_levels", level_count(g.n) - 1)
-                _set(prog, "ext", ((x1 - x0) / sp, (y1 - y0) / sp))
-                _set(prog, "zr", (tile.zmin - org[2], tile.zmax - org[2]))
+                set_uniform(prog, "n_cells", g.n)
+                set_uniform(prog, "n_levels", level_count(g.n) - 1)
+                set_uniform(prog, "ext", ((x1 - x0) / sp, (y1 - y0) / sp))
+                set_uniform(prog, "zr", (tile.zmin - org[2], tile.zmax - org[2]))
                 e = eye - org
-                _set(prog, "eye_tex", (e[0] / sp, e[1] / sp, e[2]))
-                _set(prog, "origin_rel", tuple((org - eye).astype(np.float32)))
-                _set(prog, "spacing", sp)
-                _set(prog, "tile_level", level)
-                _set(prog, "uv_off", ((org[0] - hf.origin[0]) / ext_w, (org[1] - hf.origin[1]) / ext_d))
-                _set(prog, "uv_scale", (sp / ext_w, sp / ext_d))
-                _set(prog, "lod_k", sp * K / float(opts.lod) if opts.lod else 0.0)
-                _set(prog, "max_steps", opts.max_steps or default_max_steps(g.n))
-                _set(prog, "tile_index", k)
-                _set(prog, "outer", outer_faces(tile.clip, hf))
+                set_uniform(prog, "eye_tex", (e[0] / sp, e[1] / sp, e[2]))
+                set_uniform(prog, "origin_rel", tuple((org - eye).astype(np.float32)))
+                set_uniform(prog, "spacing", sp)
+                set_uniform(prog, "tile_level", level)
+                set_uniform(prog, "uv_off", ((org[0] - hf.origin[0]) / ext_w, (org[1] - hf.origin[1]) / ext_d))
+                set_uniform(prog, "uv_scale", (sp / ext_w, sp / ext_d))
+                set_uniform(prog, "lod_k", sp * K / float(opts.lod) if opts.lod else 0.0)
+                set_uniform(prog, "max_steps", opts.max_steps or default_max_steps(g.n))
+                set_uniform(prog, "tile_index", k)
+                set_uniform(prog, "outer", outer_faces(tile.clip, hf))
                 if grid is not None:
-                    _set(prog, "g_tile_off", ((org[0] - hf.origin[0]) / hf.spacing, (org[1] - hf.origin[1]) / hf.spacing))
+                    set_uniform(prog, "g_tile_off", ((org[0] - hf.origin[0]) / hf.spacing, (org[1] - hf.origin[1]) / hf.spacing))
                 if id_fbo is not None:
                     tid = self._next_id
                     self._next_id += 1
                     self.prepass_prog["tile_id"].value = tid
-                    _set(prog, "tile_id", tid)
+                    set_uniform(prog, "tile_id", tid)
                     id_fbo.use()
                     ctx.depth_func = ">"
                     self.prepass_vao.render()

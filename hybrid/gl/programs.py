@@ -48,3 +48,15 @@ def program(ctx, package: str, vertex: str, fragment: str | None = None, geometr
 def compute_shader(ctx, package: str, name: str, defines: dict | None = None):
     """A compute shader from the GLSL file NAME of PACKAGE."""
     return ctx.compute_shader(glsl_source(package, name, defines))
+
+
+def set_uniform(prog, name: str, value) -> None:
+    """Set a uniform if the linked program kept it (compilers drop unused uniforms)."""
+    if name in prog:
+        prog[name].value = value
+
+
+def write_uniform(prog, name: str, data: bytes) -> None:
+    """Write a uniform's raw bytes (matrices) if the linked program kept it."""
+    if name in prog:
+        prog[name].write(data)

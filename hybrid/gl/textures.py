@@ -14,16 +14,3 @@ def terrain_texture(ctx, hf, anisotropy: float = 16.0):
     tex.anisotropy = float(anisotropy)
     tex.repeat_x = tex.repeat_y = False
     return tex
-
-
-def texture_nbytes(hf) -> int:
-    """Bytes of hf's colour texture with its full mip chain as uploaded (RGB8, 3 bytes a texel)."""
-    if getattr(hf, "texture", None) is None:
-        return 0
-    h, w = hf.texture.shape[:2]
-    total = 0
-    while True:
-        total += w * h * 3
-        if w == 1 and h == 1:
-            return total
-        w, h = max(1, w // 2), max(1, h // 2)
