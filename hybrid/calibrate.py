@@ -8,15 +8,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hybrid.camera.view import View
 from hybrid.contract import CANDIDATES
-from hybrid.renderer import Renderer
+from hybrid.cost.features import TileFeatures
 from hybrid.cost.fit import estimate_overhead, fit_cost_model
 from hybrid.cost.model import CostModel
-from hybrid.cost.features import TileFeatures
 from hybrid.gl.context import gl_info
+from hybrid.renderer import Renderer
 from hybrid.terrain.heightfield import HeightField
 from hybrid.tiles.tiletree import DEFAULT_TAU
-from hybrid.camera.view import View
 
 
 @dataclass

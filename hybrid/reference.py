@@ -11,17 +11,17 @@ from typing import Literal, get_args
 
 import numpy as np
 
-from hybrid.errors import TerrabenchError
-from hybrid.terrain.heightfield import HeightField
+from hybrid.camera.view import View
 from hybrid.contract import FrameStats
+from hybrid.errors import TerrabenchError
 from hybrid.gl.context import gl_bytes
 from hybrid.gl.programs import program
-from hybrid.gl.timing import timed
-from hybrid.tiles.tiletree import DEFAULT_TAU
 from hybrid.gl.shading import resolve_mode
-from hybrid.gl.textures import terrain_texture
 from hybrid.gl.target import FrameTarget, RenderResult
-from hybrid.camera.view import View
+from hybrid.gl.textures import terrain_texture
+from hybrid.gl.timing import timed
+from hybrid.terrain.heightfield import HeightField
+from hybrid.tiles.tiletree import DEFAULT_TAU
 
 ReferenceMode = Literal["texture", "shaded", "height"]
 MODES = {m: i for i, m in enumerate(get_args(ReferenceMode))}

@@ -5,12 +5,12 @@ Bytes per triangle of an indexed list: 12 bytes of indices (the paper's 96 bits)
 """
 from __future__ import annotations
 
-from hybrid.errors import TerrabenchError
 import numpy as np
 
+from hybrid.errors import TerrabenchError
+from hybrid.gl.context import gl_bytes
 from hybrid.gl.programs import program
 from hybrid.gl.shading import resolve_mode
-from hybrid.gl.context import gl_bytes
 from hybrid.gl.textures import terrain_texture
 
 from .shading import MODES

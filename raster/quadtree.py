@@ -21,10 +21,11 @@ unit, from neighbouring tiles) force extra splits.
 """
 from __future__ import annotations
 
-from hybrid.errors import TerrabenchError
 from dataclasses import dataclass
 
 import numpy as np
+
+from hybrid.errors import TerrabenchError
 
 DEFAULT_BETA = 0.7
 

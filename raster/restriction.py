@@ -12,10 +12,11 @@ hybrid's tile tree guarantees; otherwise a ValueError says so.
 """
 from __future__ import annotations
 
-from hybrid.errors import TerrabenchError
 from dataclasses import dataclass
 
 import numpy as np
+
+from hybrid.errors import TerrabenchError
 
 from .morph import morph_factor
 from .quadtree import ErrorPyramid, Leaves, leaf_levels, leaves_from_levels

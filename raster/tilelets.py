@@ -10,19 +10,19 @@ edges whose neighbour is coarser. Everything is eye-relative float32; drawing is
 """
 from __future__ import annotations
 
-from hybrid.errors import TerrabenchError
 import time
 
 import numpy as np
 
+from hybrid.errors import TerrabenchError
+from hybrid.gl.context import gl_bytes
+from hybrid.gl.programs import program, set_uniform
+from hybrid.gl.shading import resolve_mode
+from hybrid.gl.textures import terrain_texture
+
 from .culling import cull_tilelets
 from .quadtree import DEFAULT_BETA, error_pyramid, estimate_triangles, split_errors
 from .restriction import TileLod, restrict_frame
-from hybrid.gl.programs import program, set_uniform
-from hybrid.gl.shading import resolve_mode
-from hybrid.gl.context import gl_bytes
-from hybrid.gl.textures import terrain_texture
-
 from .shading import MODES
 
 DEFAULT_TAU = 2.0 / 3.0

@@ -7,10 +7,11 @@ vertices (no cracks between same-level tiles, more triangles).
 """
 from __future__ import annotations
 
-from hybrid.errors import TerrabenchError
 from dataclasses import dataclass
 
 import numpy as np
+
+from hybrid.errors import TerrabenchError
 
 from .meshes import MeshStrategyBase
 from .trianglelist import grid_faces, grid_vertices

@@ -5,7 +5,7 @@ model or the renderer.
 """
 from .caster import GpuTile, RaycastStrategy
 from .maxmip import maxmip_levels, maxmip_nbytes
-from .options import CastOptions, MODES, RECONSTRUCTIONS, TRAVERSALS
+from .options import MODES, RECONSTRUCTIONS, TRAVERSALS, CastOptions
 
 __all__ = ["RaycastStrategy", "GpuTile", "CastOptions", "maxmip_levels", "maxmip_nbytes", "MODES",
            "RECONSTRUCTIONS", "TRAVERSALS"]

@@ -9,15 +9,16 @@ gl_FragDepth = clip.z / clip.w with the view's reversed-Z ``view_proj_rel``. Mis
 """
 from __future__ import annotations
 
-from hybrid.errors import TerrabenchError
 from dataclasses import dataclass, fields
 
 import numpy as np
 
+from hybrid.errors import TerrabenchError
 from hybrid.gl.context import gl_bytes
 from hybrid.gl.programs import program, register_include, set_uniform, write_uniform
 from hybrid.gl.shading import resolve_mode
 from hybrid.gl.textures import terrain_texture
+
 from .maxmip import MaxMipBuilder, level_count, maxmip_nbytes
 from .options import MODES, RECONSTRUCTIONS, CastOptions, default_max_steps
 

@@ -8,10 +8,11 @@ coordinate exactly to the texel edge, descends the max mipmap on a possible hit 
 """
 from __future__ import annotations
 
-from hybrid.errors import TerrabenchError
 from dataclasses import dataclass
 
 import numpy as np
+
+from hybrid.errors import TerrabenchError
 
 from .maxmip import level_count, maxmip_levels
 from .options import RECONSTRUCTIONS, TRAVERSALS, default_max_steps

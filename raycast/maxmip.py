@@ -9,9 +9,9 @@ terrain's origin z), rows south to north. The GPU builder (compute shaders) give
 """
 from __future__ import annotations
 
-from hybrid.errors import TerrabenchError
 import numpy as np
 
+from hybrid.errors import TerrabenchError
 from hybrid.gl.programs import compute_shader
 
 

@@ -1,9 +1,10 @@
 """Options of the ray caster (reconstruction, traversal, pre-pass, LOD, shading mode, shadows, caps), checked."""
 from __future__ import annotations
 
-from hybrid.errors import TerrabenchError
 from dataclasses import dataclass, fields, replace
 from typing import Literal, get_args
+
+from hybrid.errors import TerrabenchError
 
 Reconstruction = Literal["planes", "linear", "triangles", "bilinear"]
 Traversal = Literal["maxmip", "naive"]

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
+from hybrid.camera.view import View
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.heightfield import HeightField
-from hybrid.camera.view import View
 
 PRESETS = ("orbit", "flyover", "grazing", "lookdown")
 

@@ -5,9 +5,9 @@ from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
+from hybrid.camera.view import View
 from hybrid.tiles.pyramid import TilePyramid
 from hybrid.tiles.tiletree import SelectedTile
-from hybrid.camera.view import View
 
 
 @dataclass(frozen=True)

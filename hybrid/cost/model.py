@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hybrid.errors import TerrabenchError
 from hybrid.cost.features import TileFeatures
+from hybrid.errors import TerrabenchError
 
 TERMS = {"raster": ("const", "triangles", "visible_triangles", "pixels"),
          "raycast": ("const", "pixels", "surface_pixels", "pixel_steps")}

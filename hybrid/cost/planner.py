@@ -13,15 +13,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from hybrid.camera.view import View
 from hybrid.contract import POLICIES, PURE_POLICIES, TriangleEstimator
+from hybrid.cost.features import TileFeatures, tile_features
 from hybrid.cost.model import CostModel
 from hybrid.errors import TerrabenchError
-from hybrid.cost.features import TileFeatures, tile_features
+from hybrid.strategies import triangle_estimator
 from hybrid.tiles.pyramid import TileKey, TilePyramid
 from hybrid.tiles.tiletree import DEFAULT_TAU, SelectedTile, select_tiles
-from hybrid.camera.view import View
-from hybrid.strategies import triangle_estimator
-
 
 
 @dataclass

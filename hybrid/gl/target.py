@@ -2,14 +2,14 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from hybrid.camera.view import View
 from hybrid.errors import TerrabenchError
 from hybrid.gl.context import depth32f_texture
-from hybrid.camera.view import View
 
 SKY = (0.62, 0.74, 0.88, 0.0)
 

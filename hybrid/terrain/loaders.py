@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hybrid.errors import TerrainLoadError, TerrabenchError
+from hybrid.errors import TerrabenchError, TerrainLoadError
 from hybrid.terrain.heightfield import HeightField
 
 SRTM_NODATA = -32768

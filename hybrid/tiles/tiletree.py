@@ -13,9 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hybrid.camera.view import View
 from hybrid.errors import check_positive
 from hybrid.tiles.pyramid import EDGE_E, EDGE_N, EDGE_S, EDGE_W, TileKey, TilePyramid
-from hybrid.camera.view import View
 
 DEFAULT_TAU = 2.0 / 3.0
 _EDGES = ((EDGE_W, -1, 0), (EDGE_E, 1, 0), (EDGE_S, 0, -1), (EDGE_N, 0, 1))
