@@ -30,11 +30,10 @@ def run_benchmark(ctx, hf, flights: dict, tau: float = 2 / 3, repeats: int = 3, 
                     st = res[-1].stats
                     rows.append({"flight": fname, "policy": pol, "frame": k,
                                  "wall_ms": float(np.median([x.stats.wall_ms for x in res])),
-                                 "tiles": st.tiles, "tiles_raster": st.tiles_raster,
-                                 "tiles_raycast": st.get("tiles_raycast", st.get("tiles") if pol == "raycast" else 0),
-                                 "pred_ms": st.get("pred_ms", np.nan)})
+                                 "tiles": st.tiles, "tiles_raster": st.tiles_raster, "tiles_raycast": st.tiles_raycast,
+                                 "pred_ms": np.nan if st.pred_ms is None else st.pred_ms})
                     if pol == "oracle":
-                        for t in st.get("tile_rows", []):
+                        for t in st.tile_rows:
                             tiles.append({"flight": fname, "frame": k, **t})
             finally:
                 r.release()
