@@ -1,4 +1,4 @@
-"""Benchmark of the raster strategies (issue 4 §7): prints tables; run `python -m experiments.bench_raster`.
+"""Benchmark of the raster strategies: tables as DataFrames; `python -m experiments.bench_raster` prints them.
 
 1. Triangles against max vertical error on Puget tiles: restricted quadtree (plain and morph-safe errors)
    vs pymartini (RTIN), pydelatin and fast-simplification, every max error measured the same way.
@@ -13,6 +13,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import pandas as pd
 
 
 def _median_ms(fn, repeats=5, ctx=None):
@@ -26,14 +27,6 @@ def _median_ms(fn, repeats=5, ctx=None):
             ctx.finish()
         times.append((time.perf_counter() - t0) * 1e3)
     return float(np.median(times))
-
-
-def _table(title, header, rows):
-    print(f"\n{title}")
-    widths = [max(len(str(h)), *(len(str(r[i])) for r in rows)) for i, h in enumerate(header)]
-    print("  ".join(str(h).rjust(w) for h, w in zip(header, widths)))
-    for r in rows:
-        print("  ".join(str(v).rjust(w) for v, w in zip(r, widths)))
 
 
 def puget_tiles(count=4):
@@ -231,21 +224,31 @@ def culling_rows(ctx, repeats=5):
     return rows
 
 
+def run(ctx) -> dict[str, pd.DataFrame]:
+    """Every raster benchmark table keyed by its title (times in ms, errors in metres, memory in bytes)."""
+    hf, tiles = puget_tiles()
+    tables = (
+        ("1. triangles vs max vertical error, 4 Puget tiles of 257² (160 m spacing); error in metres",
+         ["target", "method", "triangles", "max err", "x delatin", "x martini"], triangles_vs_error(tiles)),
+        ("2. per-view leaf set + restriction of one 257² tile", ["tolerance m", "leaves", "ms"], leaf_timing(tiles)),
+        ("3. GPU bytes per 257² tile", ["representation", "bytes", "triangles", "bytes/tri"],
+         memory_rows(ctx, hf, tiles)),
+        ("4. GS tilelets vs indexed list of the same triangles (4 tiles, top view, 320x180)",
+         ["leaf tau", "triangles", "GS ms", "GS Mtri/s", "list ms", "list Mtri/s", "GS/list"], throughput_rows(ctx)),
+        ("5. tilelet culling on a low view (Puget 513², tiles of 128)",
+         ["culling", "tilelets drawn", "culled", "triangles", "draw ms"], culling_rows(ctx)),
+    )
+    return {title: pd.DataFrame(rows, columns=header) for title, header, rows in tables}
+
+
 def main() -> None:
     """Run every benchmark and print its table."""
     from hybrid.gl.context import gl_info, shared_context
+    from .tables import text_tables
     ctx = shared_context()
     info = gl_info(ctx)
-    print(f"terrabench raster benchmark on {info.renderer} ({info.version})")
-    hf, tiles = puget_tiles()
-    _table("1. triangles vs max vertical error, 4 Puget tiles of 257² (160 m spacing); error in metres",
-           ["target", "method", "triangles", "max err", "x delatin", "x martini"], triangles_vs_error(tiles))
-    _table("2. per-view leaf set + restriction of one 257² tile", ["tolerance m", "leaves", "ms"], leaf_timing(tiles))
-    _table("3. GPU bytes per 257² tile", ["representation", "bytes", "triangles", "bytes/tri"], memory_rows(ctx, hf, tiles))
-    _table("4. GS tilelets vs indexed list of the same triangles (4 tiles, top view, 320x180)",
-           ["leaf tau", "triangles", "GS ms", "GS Mtri/s", "list ms", "list Mtri/s", "GS/list"], throughput_rows(ctx))
-    _table("5. tilelet culling on a low view (Puget 513², tiles of 128)",
-           ["culling", "tilelets drawn", "culled", "triangles", "draw ms"], culling_rows(ctx))
+    print(f"terrabench raster benchmark on {info.renderer} ({info.version})\n")
+    print(text_tables(run(ctx)))
 
 
 if __name__ == "__main__":

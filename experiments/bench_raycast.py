@@ -1,4 +1,4 @@
-"""Ray-caster benchmark (issue 3, section 9): naive stepping vs max mipmap vs max mipmap + tile-ID pre-pass.
+"""Ray-caster benchmark: naive stepping vs max mipmap vs max mipmap + tile-ID pre-pass.
 
 Renders the frames of a flight with hybrid.renderer.Renderer('raycast') and reports, per
 configuration, rays/s, mean steps per ray and ms/frame. Times are wall clock around ctx.finish() of the
@@ -65,11 +65,28 @@ def summarize(df: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
-def main(argv=None) -> int:
-    """Run the benchmark on a dataset's flyover flight and print the table."""
-    from hybrid.terrain.datasets import get_dataset
+def measure(ctx, frames: int = 8, dataset: str = "puget", flight: str = "flyover", width: int = 640,
+            height: int = 360, tau: float = 2.0 / 3.0) -> tuple[str, pd.DataFrame]:
+    """(title, per-frame rows) of the benchmark on a dataset's flight; tau in pixels, sizes in pixels."""
     from hybrid.camera.flight import preset
+    from hybrid.terrain.datasets import get_dataset
+    hf = get_dataset(dataset)
+    views = preset(flight, hf, frames=frames, width=width, height=height).views()
+    title = (f"ray caster on {hf.name} {hf.cols}x{hf.rows}, {flight} flight, {frames} frames at {width}x{height}, "
+             f"tau {tau:.3g} px")
+    return title, run_benchmark(ctx, hf, views, tau=tau)
+
+
+def run(ctx, frames: int = 8, **options) -> dict[str, pd.DataFrame]:
+    """The summary table per configuration, keyed by its title; options as for measure()."""
+    title, df = measure(ctx, frames, **options)
+    return {title: summarize(df).reset_index()}
+
+
+def main(argv=None) -> int:
+    """Run the benchmark on a dataset's flight and print the table."""
     from hybrid.gl.context import gl_info, shared_context
+    from .tables import text_tables
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--dataset", default="puget")
     p.add_argument("--flight", default="flyover")
@@ -79,17 +96,12 @@ def main(argv=None) -> int:
     p.add_argument("--tau", type=float, default=2.0 / 3.0)
     p.add_argument("--csv", default=None, help="also write the per-frame rows to this CSV file")
     a = p.parse_args(argv)
-    hf = get_dataset(a.dataset)
-    views = preset(a.flight, hf, frames=a.frames, width=a.width, height=a.height).views()
     ctx = shared_context()
-    df = run_benchmark(ctx, hf, views, tau=a.tau)
+    title, df = measure(ctx, a.frames, a.dataset, a.flight, a.width, a.height, a.tau)
     if a.csv:
         df.to_csv(a.csv, index=False)
-    info = gl_info(ctx)
-    print(f"ray caster on {hf.name} {hf.cols}x{hf.rows}, {a.flight} flight, {a.frames} frames at {a.width}x{a.height}, "
-          f"tau {a.tau:.3g} px, GL {info.renderer}")
-    with pd.option_context("display.width", 200, "display.max_columns", 20, "display.float_format", "{:.3g}".format):
-        print(summarize(df))
+    print(f"GL {gl_info(ctx).renderer}")
+    print(text_tables({title: summarize(df).reset_index()}))
     return 0
 
 

@@ -141,3 +141,17 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
     h.append(f"<hr><p>{html.escape(CREDIT)}.</p></body></html>")
     (out / "report.html").write_text("\n".join(h))
     return out / "report.md"
+
+
+def write_run_report(run, reports_dir=Path("reports"), name: str | None = None, video: bool = False) -> Path:
+    """The report of any run folder into reports_dir/<name>/: stress.md for a stress run, else report.md + .html."""
+    from .runner import writable_folder
+    run = Path(run)
+    stress = run / "stress.parquet"
+    if not stress.exists() and not (run / "frames.parquet").exists():
+        raise TerrabenchError(f"{run}: not a run folder with results (no frames.parquet); run `terrabench run SPEC` first")
+    writable_folder(Path(reports_dir), "reports folder")
+    if stress.exists():
+        from .stress import write_stress_report
+        return write_stress_report(pd.read_parquet(stress), Path(reports_dir) / (name or run.name))
+    return write_report(run, reports_dir, name, video)

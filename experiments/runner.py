@@ -144,6 +144,19 @@ class Progress:
             sys.stderr.write("\n")
 
 
+def writable_folder(path, what: str) -> Path:
+    """Create the folder if needed and prove it writable with a probe file; else a TerrabenchError naming it."""
+    import tempfile
+    path = Path(path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path, prefix=".terrabench-probe-"):
+            pass
+    except OSError as exc:
+        raise TerrabenchError(f"{what} {path} is not a writable folder ({exc.strerror or exc})") from None
+    return path
+
+
 def _load_dataset(name: str, size: int, seed: int):
     from hybrid.terrain.datasets import NAMES, get_dataset
     from hybrid.terrain.loaders import load_terrain

@@ -169,6 +169,31 @@ def run_stress(ctx, scenes=SCENES, views=VIEWS, methods=METHODS, size: int = 257
     return pd.DataFrame(rows)
 
 
+def stress_table(ctx, scenes=SCENES, views=VIEWS, methods=METHODS, size: int = 257, viewport=(320, 180),
+                 tile_size: int = 64, progress: bool = True) -> pd.DataFrame:
+    """run_stress with a progress bar on stderr (none when progress is False); viewport is (width, height) px."""
+    from .runner import Progress
+    bar = Progress(len(scenes) * len(views) * len(methods), 0, progress)
+    try:
+        return run_stress(ctx, scenes, views, methods, size, *viewport, tile_size, progress=bar.step)
+    finally:
+        bar.close()
+
+
+def run_stress_spec(spec, runs_dir, ctx=None, progress: bool = True) -> Path:
+    """Run a StressSpec into runs_dir/<name> (spec.json, stress.parquet); returns the run folder."""
+    import json
+    from hybrid.camera.view import parse_size
+    from hybrid.gl.context import shared_context
+    from .runner import writable_folder
+    folder = writable_folder(Path(runs_dir) / spec.name, "run folder")
+    (folder / "spec.json").write_text(json.dumps(spec.to_dict(), indent=1))
+    df = stress_table(ctx or shared_context(), spec.scenes, spec.views, spec.methods, spec.size_samples,
+                      parse_size(spec.size, "spec size"), spec.tile_size, progress)
+    df.to_parquet(folder / "stress.parquet", index=False)
+    return folder
+
+
 def failure_chart(df: pd.DataFrame, folder: Path) -> list[Path]:
     """Heat maps (scene/view x method) of hole fraction, depth error, capped rays and steps per ray."""
     import matplotlib

@@ -8,7 +8,7 @@ cells of the finest terrain grid), so tiles of different levels line up.
 
 Inputs are plain: for each tile its key (level, tx, ty), cells per side n, its ErrorPyramid and tolerance
 (metres). Tiles are assumed restricted among themselves (edge neighbours differ by at most one level), as
-hybrid's tile tree guarantees; otherwise a ValueError says so.
+hybrid's tile tree guarantees; otherwise a TerrabenchError says so.
 """
 from __future__ import annotations
 

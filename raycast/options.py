@@ -63,7 +63,7 @@ class CastOptions:
             raise TerrabenchError(f"heat_max must be a number of steps > 0, got {self.heat_max!r}")
 
     def updated(self, **changes) -> "CastOptions":
-        """A copy with some options changed; unknown names raise ValueError."""
+        """A copy with some options changed; unknown names raise TerrabenchError."""
         known = {f.name for f in fields(self)}
         bad = sorted(set(changes) - known)
         if bad:

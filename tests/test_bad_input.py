@@ -1,5 +1,5 @@
 """Bad input everywhere a user can reach: one clear message naming the argument, exit code 2 for the CLI,
-a ValueError (TerrabenchError) for the API, and nothing partially written."""
+a TerrabenchError for the API, and nothing partially written."""
 import pytest
 
 from experiments.cli import main

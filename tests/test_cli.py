@@ -50,3 +50,48 @@ def test_unknown_method_is_argparse_error(capsys, tmp_path):
         main(["render", "--out", str(tmp_path / "a.png"), "--method", "magic"])
     assert ei.value.code == 2
     assert "invalid choice" in capsys.readouterr().err
+
+
+def test_terrabench_error_in_a_subcommand_is_one_line_and_exit_2(monkeypatch, capsys):
+    from experiments.cli import info
+    from hybrid.errors import TerrabenchError
+
+    def fail(*args, **kwargs):
+        raise TerrabenchError("--thing must be sane, got 'x'")
+    monkeypatch.setattr(info, "run", fail)
+    assert main(["info", "--no-gl"]) == 2
+    err = capsys.readouterr().err
+    assert err == "terrabench: error: --thing must be sane, got 'x'\n"
+
+
+def test_other_exceptions_in_a_subcommand_propagate(monkeypatch):
+    from experiments.cli import info
+
+    def bug(*args, **kwargs):
+        raise RuntimeError("a bug, not a user error")
+    monkeypatch.setattr(info, "run", bug)
+    with pytest.raises(RuntimeError, match="a bug"):
+        main(["info", "--no-gl"])
+
+
+def test_bad_option_value_is_one_line_naming_option_value_and_limit(capsys):
+    assert main(["bench", "--frames", "5000"]) == 2
+    err = capsys.readouterr().err
+    assert err == "terrabench: error: --frames must be an integer in [1, 1000], got '5000'\n"
+
+
+def test_render_callable_without_argparse(tmp_path, ctx, capsys):
+    from experiments.cli import render
+    from experiments.cli.options import TerrainOptions, ViewOptions
+    result = render.run(out=tmp_path / "r.png", method="raycast", terrain=TerrainOptions("fbm", size_samples=65),
+                        view=ViewOptions(size=(48, 32)), tile_size=32)
+    assert result.colour.shape == (32, 48, 3) and (tmp_path / "r.depth.npy").exists()
+    assert "raycast: wrote" in capsys.readouterr().out
+
+
+def test_bench_tables_are_dataframes(ctx):
+    from experiments.bench_raycast import run
+    tables = run(ctx, frames=1, dataset="fbm", width=48, height=32)
+    (title, df), = tables.items()
+    assert "ray caster on fbm" in title
+    assert list(df["config"]) == ["naive", "maxmip", "maxmip+prepass"] and (df["steps/ray"] > 0).all()

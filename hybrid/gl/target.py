@@ -14,6 +14,17 @@ from hybrid.gl.context import depth32f_texture
 SKY = (0.62, 0.74, 0.88, 0.0)
 
 
+def check_png_path(path, what: str = "output") -> Path:
+    """path as a Path if it ends in .png and its folder exists, else a TerrabenchError naming ``what``."""
+    path = Path(path)
+    if path.suffix.lower() != ".png":
+        raise TerrabenchError(f"{what} must end in .png, got {str(path)!r}")
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise TerrabenchError(f"{what} folder {folder} does not exist")
+    return path
+
+
 @dataclass
 class RenderResult:
     """One rendered frame: colour (H, W, 3 uint8, top row first), hit distance in metres (inf = no terrain).
@@ -34,12 +45,7 @@ class RenderResult:
     def save(self, path) -> tuple[Path, Path]:
         """Write PATH.png and PATH.depth.npy (float32 metres, inf where no terrain); returns both paths."""
         from PIL import Image
-        path = Path(path)
-        if path.suffix.lower() != ".png":
-            raise TerrabenchError(f"output must be a .png path, got {path}")
-        folder = path.parent if str(path.parent) else Path(".")
-        if not folder.is_dir():
-            raise TerrabenchError(f"output folder {folder} does not exist")
+        path = check_png_path(path)
         depth_path = path.parent / (path.stem + ".depth.npy")
         try:
             Image.fromarray(self.colour).save(path)

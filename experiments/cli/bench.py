@@ -1,0 +1,64 @@
+"""`terrabench bench`: the ray-cast, raster and hybrid benchmarks in one process, tables printed and saved."""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+from pathlib import Path
+
+import pandas as pd
+
+from ..runner import writable_folder
+from . import argtypes
+
+HELP = "the raster, ray-cast and hybrid benchmarks in one run, with the device named"
+BENCHES = ("raycast", "raster", "hybrid")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The bench options: which benchmarks, frames per flight, and a markdown file to write."""
+    p.add_argument("--which", type=argtypes.names("--which", BENCHES), default=",".join(BENCHES),
+                   help="comma-separated: " + ", ".join(BENCHES))
+    p.add_argument("--frames", type=argtypes.int_in("--frames", 1, 1000), default=8, help="frames of each flight")
+    p.add_argument("--out", default=None, help="also write the tables to this markdown file")
+
+
+def benchmark(ctx, name: str, frames: int = 8) -> dict[str, pd.DataFrame]:
+    """One benchmark's tables keyed by title; frames per flight (the raster benchmark has none)."""
+    if name == "raycast":
+        from ..bench_raycast import run
+        return run(ctx, frames=frames)
+    if name == "raster":
+        from ..bench_raster import run
+        return run(ctx)
+    from ..bench_hybrid import run
+    return run(ctx, frames=frames)
+
+
+def run(which=BENCHES, frames: int = 8, out=None, device: int | None = None) -> dict[str, dict[str, pd.DataFrame]]:
+    """Run the benchmarks, print their tables and write them as markdown to out; returns the tables by benchmark."""
+    from hybrid.gl.context import gl_info, shared_context
+    from ..tables import markdown_tables, text_tables
+    out = Path(out) if out else None
+    if out is not None:
+        writable_folder(out.parent if str(out.parent) else Path("."), "--out folder")
+    ctx = shared_context(device)
+    info = gl_info(ctx)
+    head = (f"# terrabench benchmarks\n\ndevice: {info.renderer} ({info.version}); CPU cores: {os.cpu_count()}; "
+            f"{platform.platform()}\n")
+    print(head)
+    md, results = [head], {}
+    for name in which:
+        results[name] = benchmark(ctx, name, frames)
+        print(f"## {name}\n\n{text_tables(results[name])}\n")
+        md.append(f"## {name}\n\n{markdown_tables(results[name])}\n")
+    if out is not None:
+        out.write_text("\n".join(md))
+        print(f"wrote {out}")
+    return results
+
+
+def run_from_args(args: argparse.Namespace) -> int:
+    """The bench command from parsed arguments; returns the exit code."""
+    run(args.which, args.frames, args.out, args.device)
+    return 0

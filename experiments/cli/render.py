@@ -1,0 +1,120 @@
+"""`terrabench render`: one view with one method to PATH.png and PATH.depth.npy (and PATH.strategy.png)."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from hybrid.errors import TerrabenchError
+
+from ..runner import writable_folder
+from . import argtypes
+from .options import TerrainOptions, ViewOptions, add_terrain_arguments, add_view_arguments, from_args
+
+HELP = "render one view with a method to PNG + depth (.depth.npy)"
+METHODS = ("reference", "raster", "raycast", "hybrid", "heuristic", "oracle", "fullres", "tin")
+MIXED = ("hybrid", "heuristic", "oracle")
+RASTER_METHODS = ("raster", "fullres", "tin")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The render options: terrain, view, method, output and the strategies' draw options."""
+    add_terrain_arguments(p)
+    add_view_arguments(p)
+    p.add_argument("--method", default="reference", choices=METHODS)
+    p.add_argument("--out", required=True, help="output PNG path; the depth goes to PATH.depth.npy")
+    p.add_argument("--shading", default=None, help="texture, shaded or height (default: texture if present)")
+    p.add_argument("--supersample", type=argtypes.int_in("--supersample", 1, 8), default=1,
+                   help="reference colour supersampling factor (1..8)")
+    p.add_argument("--tau", type=argtypes.positive_float("--tau", "pixels"), default=2 / 3,
+                   help="screen-space error bound in pixels (> 0)")
+    p.add_argument("--tile-size", type=argtypes.power_of_two("--tile-size"), default=256,
+                   help="cells per tile side (power of two)")
+    p.add_argument("--reconstruction", default="triangles", help="ray-cast surface: planes, linear, triangles, bilinear")
+    p.add_argument("--traversal", default="maxmip", help="ray-cast traversal: maxmip or naive (level-0 stepping)")
+    p.add_argument("--no-prepass", dest="prepass", action="store_false", help="ray casting without the tile-ID pre-pass")
+    p.add_argument("--lod", action="store_true", help="ray casting stops descending at tau pixels (LOD)")
+    p.add_argument("--shadows", action="store_true", help="ray-cast shadow rays toward the light")
+    p.add_argument("--wireframe", action="store_true", help="raster methods: draw edges only")
+    p.add_argument("--show-strategy", action="store_true", help="hybrid: also write PATH.strategy.png")
+
+
+def draw_options(method: str, tau: float, shading=None, reconstruction="triangles", traversal="maxmip",
+                 prepass=True, lod=False, shadows=False, wireframe=False) -> dict:
+    """Strategy draw options for a method (only those asked for, so the rest stay the strategy's defaults)."""
+    opts = {}
+    if shading:
+        opts["mode"] = shading
+    if method == "raycast":
+        opts.update(reconstruction=reconstruction, traversal=traversal, prepass=prepass)
+        if shadows:
+            opts["shadows"] = True
+        if lod:
+            opts["lod"] = tau
+    elif shadows or lod or not prepass or traversal != "maxmip":
+        raise TerrabenchError("--shadows, --lod, --no-prepass and --traversal apply to --method raycast only")
+    if method in MIXED:
+        opts.update(reconstruction=reconstruction, prepass=prepass)
+    if wireframe:
+        if method not in RASTER_METHODS:
+            raise TerrabenchError("--wireframe applies to the raster methods (raster, fullres, tin)")
+        opts["wireframe"] = True
+    return opts
+
+
+def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions(),
+        view: ViewOptions = ViewOptions(), shading: str | None = None, supersample: int = 1, tau: float = 2 / 3,
+        tile_size: int = 256, reconstruction: str = "triangles", traversal: str = "maxmip", prepass: bool = True,
+        lod: bool = False, shadows: bool = False, wireframe: bool = False, show_strategy: bool = False,
+        device: int | None = None):
+    """Render one view with a method; write out (.png) and its .depth.npy; returns the RenderResult."""
+    from hybrid.gl.context import shared_context
+    from hybrid.gl.target import check_png_path
+    out = check_png_path(out, "--out")
+    writable_folder(out.parent if str(out.parent) else Path("."), "--out folder")
+    if show_strategy and method not in MIXED:
+        raise TerrabenchError("--show-strategy needs a mixed policy: --method hybrid (or heuristic, oracle)")
+    hf = terrain.load()
+    v = view.view(hf)
+    ctx = shared_context(device)
+    if method == "reference":
+        from hybrid.reference import ReferenceRenderer
+        with ReferenceRenderer(ctx, hf) as r:
+            result = r.render(v, mode=shading, supersample=supersample)
+    else:
+        from hybrid.renderer import Renderer
+        opts = draw_options(method, tau, shading, reconstruction, traversal, prepass, lod, shadows, wireframe)
+        with Renderer(ctx, hf, method, tile_size, **opts) as r:
+            result = r.render(v, tau, maps=show_strategy)
+    png, depth = result.save(out)
+    if show_strategy:
+        smap = out.parent / (out.stem + ".strategy.png")
+        save_strategy_map(result, smap)
+        print(f"strategy map: {smap} (blue raster, orange ray cast)")
+    cover = float(result.mask.mean()) * 100
+    print(f"{method}: wrote {png} and {depth} ({v.width}x{v.height}, terrain on {cover:.1f} % of pixels)")
+    for k, val in result.stats.row().items():
+        if not isinstance(val, (list, dict)):
+            print(f"  {k}: {val:.4g}" if isinstance(val, float) else f"  {k}: {val}")
+    return result
+
+
+def run_from_args(args: argparse.Namespace) -> int:
+    """The render command from parsed arguments; returns the exit code."""
+    run(args.out, args.method, from_args(TerrainOptions, args), from_args(ViewOptions, args), args.shading,
+        args.supersample, args.tau, args.tile_size, args.reconstruction, args.traversal, args.prepass, args.lod,
+        args.shadows, args.wireframe, args.show_strategy, args.device)
+    return 0
+
+
+def save_strategy_map(result, path: Path) -> None:
+    """Write the per-pixel strategy map blended over the frame: blue = raster tile, orange = ray-cast tile."""
+    from PIL import Image
+    m = result.maps["strategy"]
+    col = result.colour.astype(np.float32)
+    tint = np.zeros_like(col)
+    tint[m == 1] = (40, 110, 255)
+    tint[m == 2] = (255, 140, 20)
+    mix = np.where((m > 0)[..., None], 0.45 * col + 0.55 * tint, col)
+    Image.fromarray(np.clip(mix, 0, 255).astype(np.uint8)).save(path)

@@ -1,0 +1,49 @@
+"""`terrabench run SPEC`: run (or resume) an experiment spec, paired flights or a stress spec."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..runner import writable_folder
+from .options import add_reports_argument
+
+HELP = "run an experiment spec (TOML): paired flights, tables, images"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The run options: the spec, where runs and reports go, and --quiet."""
+    p.add_argument("spec", help="experiment spec file (.toml) or a bundled one: default, tiny, stress")
+    p.add_argument("--runs", default="runs", help="folder that holds run folders")
+    p.add_argument("--name", default=None, help="run name (default: the spec's)")
+    p.add_argument("--report", action="store_true", help="write the report when done")
+    add_reports_argument(p)
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def run(spec, runs="runs", name: str | None = None, report: bool = False, reports="reports", quiet: bool = False,
+        device: int | None = None) -> Path:
+    """Run a spec (a path, a bundled name or a parsed spec) into runs/<name>; returns the run folder."""
+    from hybrid.gl.context import shared_context
+    from ..report import write_run_report
+    from ..runner import run_spec
+    from ..spec import StressSpec, load_spec
+    from ..stress import run_stress_spec
+    if isinstance(spec, (str, Path)):
+        spec = load_spec(spec)
+    if name:
+        spec.name = name
+    writable_folder(Path(runs), "--runs")
+    if report:
+        writable_folder(Path(reports), "--reports")
+    runner = run_stress_spec if isinstance(spec, StressSpec) else run_spec
+    folder = runner(spec, Path(runs), shared_context(device), progress=not quiet)
+    print(f"run folder: {folder}")
+    if report:
+        print(f"report: {write_run_report(folder, Path(reports), video=getattr(spec, 'video', False))}")
+    return folder
+
+
+def run_from_args(args: argparse.Namespace) -> int:
+    """The run command from parsed arguments; returns the exit code."""
+    run(args.spec, args.runs, args.name, args.report, args.reports, args.quiet, args.device)
+    return 0
