@@ -86,6 +86,7 @@ def run(ctx, frames: int = 8, size: str = "640x360", tau: float = 2 / 3, repeats
 def main(argv=None) -> int:
     """Run the hybrid benchmark on Puget and print its tables."""
     from hybrid.gl.context import gl_info, shared_context
+
     from .tables import text_tables
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=8)

@@ -44,6 +44,7 @@ def triangles_vs_error(tiles, errors=(5.0, 10.0, 20.0, 40.0, 80.0)):
     """Rows (target error, method, triangles summed over tiles, measured max error) for each method."""
     from pydelatin import Delatin
     from pymartini import Martini
+
     from raster.quadtree import drawn_max_error, error_pyramid
     from raster.restriction import TileLod, restrict_frame
     from raster.tin import TinMesh, build_tin, tin_max_error
@@ -143,9 +144,9 @@ def _top_view(hf, width=320, height=180):
 
 def throughput_rows(ctx, repeats=5):
     """Rows comparing the GS tilelet path with an indexed list of the same triangles (Mtri/s)."""
+    from hybrid.gl.target import FrameTarget
     from hybrid.terrain.datasets import puget
     from hybrid.tiles.pyramid import TilePyramid
-    from hybrid.gl.target import FrameTarget
     from hybrid.tiles.tiletree import SelectedTile
     from raster.meshes import MeshStrategyBase, MeshTile
     from raster.tilelets import TileletStrategy
@@ -197,9 +198,9 @@ def throughput_rows(ctx, repeats=5):
 
 def culling_rows(ctx, repeats=5):
     """Rows (culling, tilelets drawn, culled, triangles, ms) on a low view with much of each tile outside."""
-    from hybrid.terrain.datasets import puget
-    from hybrid.renderer import Renderer
     from hybrid.camera.view import View
+    from hybrid.renderer import Renderer
+    from hybrid.terrain.datasets import puget
     hf = puget(with_texture=False, size=513)
     w, d = hf.extent
     ox, oy, oz = hf.origin
@@ -244,6 +245,7 @@ def run(ctx) -> dict[str, pd.DataFrame]:
 def main() -> None:
     """Run every benchmark and print its table."""
     from hybrid.gl.context import gl_info, shared_context
+
     from .tables import text_tables
     ctx = shared_context()
     info = gl_info(ctx)

@@ -86,6 +86,7 @@ def run(ctx, frames: int = 8, **options) -> dict[str, pd.DataFrame]:
 def main(argv=None) -> int:
     """Run the benchmark on a dataset's flight and print the table."""
     from hybrid.gl.context import gl_info, shared_context
+
     from .tables import text_tables
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--dataset", default="puget")

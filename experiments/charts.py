@@ -9,7 +9,6 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
-
 from matplotlib.colors import ListedColormap  # noqa: E402
 
 STRATEGY_CMAP = ListedColormap(["#f2f2f2", "#2b6cff", "#ff8c14"])   # no terrain, raster, ray cast

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import html
 import json
-import math
 from pathlib import Path
 
 import numpy as np
@@ -16,19 +15,7 @@ import pandas as pd
 from hybrid.errors import TerrabenchError
 
 from .charts import CREDIT, all_charts, label_columns
-
-
-def md_table(df: pd.DataFrame, floatfmt: str = ".3g") -> str:
-    """A pandas frame as a GitHub markdown table."""
-    def fmt(v):
-        if isinstance(v, (float, np.floating)):
-            return "–" if not math.isfinite(v) else format(float(v), floatfmt)
-        return str(v)
-    cols = list(df.columns)
-    lines = ["| " + " | ".join(map(str, cols)) + " |", "|" + "---|" * len(cols)]
-    for _, r in df.iterrows():
-        lines.append("| " + " | ".join(fmt(r[c]) for c in cols) + " |")
-    return "\n".join(lines)
+from .tables import md_table
 
 
 def summary_table(frames: pd.DataFrame) -> pd.DataFrame:
@@ -145,7 +132,7 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
 
 def write_run_report(run, reports_dir=Path("reports"), name: str | None = None, video: bool = False) -> Path:
     """The report of any run folder into reports_dir/<name>/: stress.md for a stress run, else report.md + .html."""
-    from .runner import writable_folder
+    from .folders import writable_folder
     run = Path(run)
     stress = run / "stress.parquet"
     if not stress.exists() and not (run / "frames.parquet").exists():

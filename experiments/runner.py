@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import json
 import platform
-import sys
 import time
 import traceback
 from pathlib import Path
@@ -24,18 +23,20 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from hybrid.errors import TerrabenchError
 from hybrid.camera.view import parse_size
+from hybrid.errors import TerrabenchError
 
 from .metrics import frame_accuracy, temporal_errors
+from .progress import Progress
+from .spec import Spec
 
 SETTLE_S = 0.3   # seconds of idle before a configuration's timed frames
-from .spec import Spec
 
 
 def environment(ctx) -> dict:
     """GL renderer, CPU and package versions of this machine."""
     from importlib import metadata
+
     from hybrid.gl.context import gl_info
     info = gl_info(ctx)
     cpu = platform.processor() or ""
@@ -110,53 +111,6 @@ class Journal:
                 pd.DataFrame(rows).to_parquet(self.folder / f"{name}.parquet", index=False)
 
 
-class Progress:
-    """A one-line progress bar with the time left, on stderr."""
-
-    def __init__(self, total: int, done: int, enabled: bool = True):
-        self.total, self.done, self.enabled = total, done, enabled
-        self.start, self.start_done = time.perf_counter(), done
-        self.tty = sys.stderr.isatty()
-        self.last_decile = -1
-
-    def step(self, label: str) -> None:
-        """Count one unit of work finished and redraw."""
-        self.done += 1
-        if not self.enabled:
-            return
-        el = time.perf_counter() - self.start
-        rate = (self.done - self.start_done) / el if el > 0 else 0
-        left = (self.total - self.done) / rate if rate > 0 else float("nan")
-        frac = self.done / max(self.total, 1)
-        bar = "#" * int(30 * frac) + "-" * (30 - int(30 * frac))
-        eta = f"{int(left // 60)}m{int(left % 60):02d}s" if np.isfinite(left) else "?"
-        line = f"[{bar}] {self.done}/{self.total} {100 * frac:5.1f} % left {eta}  {label[:60]:60s}"
-        if self.tty:
-            sys.stderr.write("\r" + line)
-        elif int(10 * frac) != self.last_decile:      # a log file gets one line per 10 %
-            self.last_decile = int(10 * frac)
-            sys.stderr.write(line.rstrip() + "\n")
-        sys.stderr.flush()
-
-    def close(self) -> None:
-        """End the line."""
-        if self.enabled and self.tty:
-            sys.stderr.write("\n")
-
-
-def writable_folder(path, what: str) -> Path:
-    """Create the folder if needed and prove it writable with a probe file; else a TerrabenchError naming it."""
-    import tempfile
-    path = Path(path)
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path, prefix=".terrabench-probe-"):
-            pass
-    except OSError as exc:
-        raise TerrabenchError(f"{what} {path} is not a writable folder ({exc.strerror or exc})") from None
-    return path
-
-
 def _load_dataset(name: str, size: int, seed: int):
     from hybrid.terrain.datasets import NAMES, get_dataset
     from hybrid.terrain.loaders import load_terrain
@@ -177,9 +131,9 @@ def _save_image(folder: Path, stem: str, result, full: bool = True) -> None:
 def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: bool = False) -> Path:
     """Run (or resume) every configuration of spec into runs_dir/<name>; returns the run folder."""
     from hybrid.camera.flight import get_flight
-    from hybrid.renderer import make_renderer
     from hybrid.gl.context import shared_context
     from hybrid.reference import ReferenceRenderer
+    from hybrid.renderer import make_renderer
 
     runs_dir = Path(runs_dir)
     folder = runs_dir / spec.name

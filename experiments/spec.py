@@ -24,8 +24,8 @@ import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from hybrid.errors import TerrabenchError
 from hybrid.camera.view import parse_size
+from hybrid.errors import TerrabenchError
 
 POLICIES = ("reference", "raster", "raycast", "hybrid", "heuristic", "oracle", "fullres", "tin")
 RECONSTRUCTIONS = ("planes", "linear", "triangles", "bilinear")

@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from hybrid.terrain.datasets import get_dataset, puget
-from hybrid.errors import TerrabenchError
-from hybrid.terrain.heightfield import HeightField
 from hybrid.camera.view import View
+from hybrid.errors import TerrabenchError
+from hybrid.terrain.datasets import get_dataset, puget
+from hybrid.terrain.heightfield import HeightField
 
 SCENES = ("spike", "cliff", "staircase", "ridges", "flat", "puget", "puget_x100")
 VIEWS = ("grazing", "down", "inside_aabb", "below", "axis_x", "axis_y", "origin", "offset_1e6", "offset_1e7",
@@ -172,7 +172,7 @@ def run_stress(ctx, scenes=SCENES, views=VIEWS, methods=METHODS, size: int = 257
 def stress_table(ctx, scenes=SCENES, views=VIEWS, methods=METHODS, size: int = 257, viewport=(320, 180),
                  tile_size: int = 64, progress: bool = True) -> pd.DataFrame:
     """run_stress with a progress bar on stderr (none when progress is False); viewport is (width, height) px."""
-    from .runner import Progress
+    from .progress import Progress
     bar = Progress(len(scenes) * len(views) * len(methods), 0, progress)
     try:
         return run_stress(ctx, scenes, views, methods, size, *viewport, tile_size, progress=bar.step)
@@ -183,9 +183,11 @@ def stress_table(ctx, scenes=SCENES, views=VIEWS, methods=METHODS, size: int = 2
 def run_stress_spec(spec, runs_dir, ctx=None, progress: bool = True) -> Path:
     """Run a StressSpec into runs_dir/<name> (spec.json, stress.parquet); returns the run folder."""
     import json
+
     from hybrid.camera.view import parse_size
     from hybrid.gl.context import shared_context
-    from .runner import writable_folder
+
+    from .folders import writable_folder
     folder = writable_folder(Path(runs_dir) / spec.name, "run folder")
     (folder / "spec.json").write_text(json.dumps(spec.to_dict(), indent=1))
     df = stress_table(ctx or shared_context(), spec.scenes, spec.views, spec.methods, spec.size_samples,
@@ -270,7 +272,7 @@ def stress_reading(df: pd.DataFrame) -> list[str]:
 
 def write_stress_report(df: pd.DataFrame, folder: Path) -> Path:
     """stress.md (+ table as parquet/csv and the chart) into folder."""
-    from .report import md_table
+    from .tables import md_table
     folder.mkdir(parents=True, exist_ok=True)
     df.to_parquet(folder / "stress.parquet", index=False)
     df.to_csv(folder / "stress.csv", index=False)

@@ -6,7 +6,18 @@ import math
 import numpy as np
 import pandas as pd
 
-from .report import md_table
+
+def md_table(df: pd.DataFrame, floatfmt: str = ".3g") -> str:
+    """A pandas frame as a GitHub markdown table."""
+    def fmt(v):
+        if isinstance(v, (float, np.floating)):
+            return "–" if not math.isfinite(v) else format(float(v), floatfmt)
+        return str(v)
+    cols = list(df.columns)
+    lines = ["| " + " | ".join(map(str, cols)) + " |", "|" + "---|" * len(cols)]
+    for _, r in df.iterrows():
+        lines.append("| " + " | ".join(fmt(r[c]) for c in cols) + " |")
+    return "\n".join(lines)
 
 
 def format_number(v) -> str:

@@ -69,7 +69,8 @@ def imports(name: str, path: Path, known: set[str]) -> set[str]:
             mod = node.module or ""
             if node.level:
                 mod = ".".join(base[:len(base) - node.level + 1] + ([mod] if mod else []))
-            targets = [mod] + [f"{mod}.{a.name}" for a in node.names]
+            # "from pkg import mod" imports the module pkg.mod; "from mod import name" imports mod
+            targets = [f"{mod}.{a.name}" if f"{mod}.{a.name}" in known else mod for a in node.names]
         for t in targets:
             while t and t not in known:
                 t = t.rpartition(".")[0]

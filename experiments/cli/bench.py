@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from ..runner import writable_folder
+from ..folders import writable_folder
 from . import argtypes
 
 HELP = "the raster, ray-cast and hybrid benchmarks in one run, with the device named"
@@ -38,6 +38,7 @@ def benchmark(ctx, name: str, frames: int = 8) -> dict[str, pd.DataFrame]:
 def run(which=BENCHES, frames: int = 8, out=None, device: int | None = None) -> dict[str, dict[str, pd.DataFrame]]:
     """Run the benchmarks, print their tables and write them as markdown to out; returns the tables by benchmark."""
     from hybrid.gl.context import gl_info, shared_context
+
     from ..tables import markdown_tables, text_tables
     out = Path(out) if out else None
     if out is not None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..runner import writable_folder
+from ..folders import writable_folder
 from . import argtypes
 from .options import TerrainOptions, add_terrain_arguments, from_args
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 
-from ..runner import writable_folder
+from ..folders import writable_folder
 from . import argtypes
 from .options import TerrainOptions, ViewOptions, add_terrain_arguments, add_view_arguments, from_args
 

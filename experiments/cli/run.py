@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..runner import writable_folder
+from ..folders import writable_folder
 from .options import add_reports_argument
 
 HELP = "run an experiment spec (TOML): paired flights, tables, images"
@@ -24,6 +24,7 @@ def run(spec, runs="runs", name: str | None = None, report: bool = False, report
         device: int | None = None) -> Path:
     """Run a spec (a path, a bundled name or a parsed spec) into runs/<name>; returns the run folder."""
     from hybrid.gl.context import shared_context
+
     from ..report import write_run_report
     from ..runner import run_spec
     from ..spec import StressSpec, load_spec

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..runner import writable_folder
+from ..folders import writable_folder
 from ..stress import METHODS, SCENES, VIEWS
 from . import argtypes
 
@@ -28,6 +28,7 @@ def run(scenes=SCENES, views=VIEWS, methods=METHODS, size_samples: int = 257, si
         tile_size: int = 64, out="reports/stress", quiet: bool = False, device: int | None = None) -> Path:
     """Measure every (scene, view, method) and write stress.md, the chart and the table to out; returns stress.md."""
     from hybrid.gl.context import shared_context
+
     from ..stress import stress_table, write_stress_report
     folder = writable_folder(Path(out), "--out")
     df = stress_table(shared_context(device), scenes, views, methods, size_samples, size, tile_size, not quiet)
