@@ -15,6 +15,8 @@ import time
 import numpy as np
 import pandas as pd
 
+from hybrid.errors import TerrabenchError
+
 
 def _median_ms(fn, repeats=5, ctx=None):
     times = []
@@ -42,8 +44,12 @@ def puget_tiles(count=4):
 
 def triangles_vs_error(tiles, errors=(5.0, 10.0, 20.0, 40.0, 80.0)):
     """Rows (target error, method, triangles summed over tiles, measured max error) for each method."""
-    from pydelatin import Delatin
-    from pymartini import Martini
+    try:
+        from pydelatin import Delatin
+        from pymartini import Martini
+    except ImportError as exc:
+        raise TerrabenchError(f"the raster benchmark compares with pymartini and pydelatin ({exc.name} is missing): "
+                              "pip install 'terrabench[bench]'") from None
 
     from raster.quadtree import drawn_max_error, error_pyramid
     from raster.restriction import TileLod, restrict_frame
