@@ -36,6 +36,8 @@ class HitTarget:
         return aux, depth, colour, counters
 
     def release(self):
+        if self.ctx.fbo is self.fbo:                  # never leave a deleted framebuffer bound
+            self.ctx.detect_framebuffer(0).use()
         for o in (self.fbo, self.colour, self.aux, self.depth):
             o.release()
 
