@@ -1,5 +1,5 @@
-"""The hybrid frame: strategies share one colour + depth buffer without holes; choices, memory, budget."""
-import moderngl
+"""The hybrid frame: strategies share one colour + depth buffer without holes; choices, memory (every policy, against
+the buffers and textures each tile and strategy holds), budget."""
 import numpy as np
 import pytest
 
@@ -8,9 +8,10 @@ from hybrid.cost.model import CostModel
 from hybrid.errors import TerrabenchError
 from hybrid.camera.flight import preset
 from hybrid.renderer import make_renderer
-from hybrid.gl.context import driver_buffer_bytes, driver_texture_bytes
 from hybrid.renderer import Renderer
 from hybrid.reference import ReferenceRenderer
+from hybrid.strategies import STRATEGIES
+from gl_memory import allocated_bytes
 
 SIZE = (320, 180)
 # a model under which raster wins for tiles with few triangles and ray casting for the rest, so the
@@ -82,31 +83,32 @@ def test_depth_agrees_across_strategies(frames):
             assert np.median(rel) < 2e-3, p
 
 
-def _gl_objects(obj):
-    for v in vars(obj).values():
-        if isinstance(v, (moderngl.Texture, moderngl.Buffer)):
-            yield v
-
-
-def test_memory_accounting_is_what_the_driver_allocated(ctx, puget257):
-    hy = Renderer(ctx, puget257, "hybrid", tile_size=64, cost_model=SPLIT)
-    v = preset("flyover", puget257, 6, *SIZE).view(2)
-    res = hy.render(v)
-    assert len(hy.cache.entries) == res.stats.tiles > 4
-    total = 0
-    for g in hy.cache.entries.values():
-        driver = sum(driver_texture_bytes(o) if isinstance(o, moderngl.Texture) else driver_buffer_bytes(o)
-                     for o in _gl_objects(g))
-        assert driver == g.nbytes
-        total += driver
-    shared = sum(driver_texture_bytes(o) if isinstance(o, moderngl.Texture) else driver_buffer_bytes(o)
-                 for s in hy.strategies.values() for o in _gl_objects(s))
-    assert shared > 0 and total == hy.cache.bytes
-    assert res.stats.gpu_bytes == total + shared == res.stats.gpu_bytes_raster + res.stats.gpu_bytes_raycast
-    uploads = hy.cache.stats.uploads
-    hy.render(v)
-    assert hy.cache.stats.uploads == uploads               # resident tiles are not uploaded again
-    hy.release()
+@pytest.mark.parametrize("policy", ["fullres", "tin", "raster", "raycast", "hybrid"])
+def test_memory_accounting_is_what_was_allocated(ctx, puget257, policy):
+    r = Renderer(ctx, puget257, policy, tile_size=64, cost_model=SPLIT)
+    try:
+        v = preset("flyover", puget257, 6, *SIZE).view(2)
+        # record_culling makes the raster strategy hold its cull-flag buffer too, so it is counted as well
+        res = r.render(v, **({"record_culling": True} if "raster" in r.strategies else {}))
+        assert len(r.cache.entries) == res.stats.tiles > 4
+        by_kind = {"raster": 0, "raycast": 0}
+        for (name, _), g in r.cache.entries.items():
+            assert g.nbytes == allocated_bytes(g) > 0, name
+            by_kind[STRATEGIES[name].kind] += g.nbytes
+        shared = {n: allocated_bytes(s) for n, s in r.strategies.items()}
+        assert res.stats.shared_bytes == sum(shared.values()) > 0
+        for n, b in shared.items():
+            by_kind[STRATEGIES[n].kind] += b
+        assert r.cache.bytes == sum(g.nbytes for g in r.cache.entries.values())
+        assert res.stats.gpu_bytes == r.cache.bytes + res.stats.shared_bytes
+        assert (res.stats.gpu_bytes_raster, res.stats.gpu_bytes_raycast) == (by_kind["raster"], by_kind["raycast"])
+        if policy == "hybrid":
+            assert by_kind["raster"] > 0 and by_kind["raycast"] > 0
+        uploads = r.cache.stats.uploads
+        r.render(v)
+        assert r.cache.stats.uploads == uploads               # resident tiles are not uploaded again
+    finally:
+        r.release()
 
 
 def test_eviction_keeps_the_budget(ctx, puget257):
