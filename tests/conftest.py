@@ -6,6 +6,7 @@ error behind. Tests without the marker run without any GL context.
 """
 import pytest
 
+from gl_errors import gl_errors
 from hybrid.terrain.datasets import get_dataset, puget
 
 SMALL = (320, 180)
@@ -26,17 +27,6 @@ def ctx():
         return shared_context()
     except GLContextError as exc:
         pytest.skip(f"no EGL context: {exc}")
-
-
-def gl_errors(ctx, limit: int = 16) -> list[str]:
-    """Every pending GL error flag (moderngl's Context.error reads and clears one at a time)."""
-    out = []
-    while len(out) < limit:
-        e = ctx.error
-        if e == "GL_NO_ERROR":
-            break
-        out.append(e)
-    return out
 
 
 @pytest.fixture(autouse=True)

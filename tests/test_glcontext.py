@@ -1,9 +1,12 @@
 """The headless context: renderer reported, reversed-Z clip control set, bad device choices named."""
+import ctypes
+
 import numpy as np
 import pytest
 
 from hybrid.errors import GLContextError
-from hybrid.gl.context import create_context, depth32f_texture, driver_texture_bytes, gl_info
+from gl_errors import gl_errors
+from hybrid.gl.context import _gl_function, create_context, depth32f_texture, driver_texture_bytes, gl_info
 
 
 def test_info_and_float_depth(ctx):
@@ -35,3 +38,11 @@ def test_bad_device_environment(monkeypatch):
     monkeypatch.setenv("TERRABENCH_GL_DEVICE", "gpu0")
     with pytest.raises(GLContextError, match="TERRABENCH_GL_DEVICE"):
         create_context()
+
+
+def test_gl_errors_are_seen_and_cleared(ctx):
+    # binding a framebuffer name that was never generated is GL_INVALID_OPERATION in a core context
+    bind = _gl_function(b"glBindFramebuffer", ctypes.c_uint, ctypes.c_uint)
+    bind(0x8D40, 987654)                                   # GL_FRAMEBUFFER
+    assert gl_errors(ctx) == ["GL_INVALID_OPERATION"]
+    assert gl_errors(ctx) == []
