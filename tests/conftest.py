@@ -1,16 +1,50 @@
-"""Shared fixtures: one GL context for the whole test session, small terrains and viewports."""
+"""Shared fixtures: one GL context for the whole test session, small terrains and viewports.
+
+Every test that needs the GL context (through the ``ctx`` fixture, directly or through another fixture)
+is marked ``gl``: it is skipped where no headless EGL context can be made, and fails when it leaves a GL
+error behind. Tests without the marker run without any GL context.
+"""
 import pytest
+from gl_errors import gl_errors
 
 from hybrid.terrain.datasets import get_dataset, puget
 
 SMALL = (320, 180)
 
 
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if "ctx" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.gl)
+
+
 @pytest.fixture(scope="session")
 def ctx():
-    """The one headless GL context of the test session (reversed-Z clip control set)."""
+    """The one headless GL context of the test session (reversed-Z clip control set); skip without one."""
+    from hybrid.errors import GLContextError
     from hybrid.gl.context import shared_context
-    return shared_context()
+    try:
+        return shared_context()
+    except GLContextError as exc:
+        pytest.skip(f"no EGL context: {exc}")
+
+
+@pytest.fixture(autouse=True)
+def gl_error_check(request):
+    """For ``gl`` tests: no GL error pending before the test (else fixture setup or an earlier teardown
+    raised it, and this says so), and none raised by the test itself."""
+    if request.node.get_closest_marker("gl") is None:
+        yield
+        return
+    ctx = request.getfixturevalue("ctx")
+    stale = gl_errors(ctx)
+    if stale:
+        pytest.fail(f"GL error(s) {stale} pending before {request.node.nodeid}: raised by fixture setup or "
+                    f"by an earlier test's teardown", pytrace=False)
+    yield
+    raised = gl_errors(ctx)
+    if raised:
+        pytest.fail(f"{request.node.nodeid} left GL error(s) {raised} (glGetError after the test)", pytrace=False)
 
 
 @pytest.fixture(scope="session")

@@ -50,11 +50,10 @@ def test_cli_bad_input(tmp_path, capsys, ctx, argv, match):
 
 
 def test_api_bad_input(ctx, puget257):
-    from hybrid.renderer import make_renderer
-    from hybrid.renderer import Renderer
+    from hybrid.camera.view import View, default_view
+    from hybrid.renderer import Renderer, make_renderer
     from hybrid.tiles.pyramid import TilePyramid
     from hybrid.tiles.tiletree import select_tiles
-    from hybrid.camera.view import View, default_view
     with pytest.raises(TerrabenchError, match="unknown policy 'magic'"):
         make_renderer(ctx, puget257, "magic")
     with pytest.raises(TerrabenchError, match="unknown draw option.*colour_depth"):

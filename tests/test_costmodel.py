@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from hybrid.cost.fit import fit_cost_model
-from hybrid.cost.model import CostModel, load_cost_model, save_cost_model
-from hybrid.errors import TerrabenchError
-from hybrid.cost.features import TileFeatures, _hull_area_clipped, footprint_pixels
-from hybrid.cost.planner import choose
-from hybrid.residency import ResidencyCache
 from hybrid.camera.view import View
+from hybrid.cost.features import TileFeatures, _hull_area_clipped, footprint_pixels
+from hybrid.cost.fit import estimate_overhead, fit_cost_model, fit_strategy, median_rel_error
+from hybrid.cost.model import CostModel, load_cost_model, save_cost_model
+from hybrid.cost.planner import choose
+from hybrid.errors import TerrabenchError
+from hybrid.residency import ResidencyCache
 
 TRUE = CostModel("test", {"const": 0.3, "triangles": 5e-5, "visible_triangles": 1.5e-4, "pixels": 1e-5},
                  {"const": 0.5, "pixels": 2e-5, "surface_pixels": 1e-5, "pixel_steps": 1e-5})
@@ -34,6 +34,43 @@ def test_fit_recovers_known_coefficients():
             assert np.isclose(getattr(m, s)[t], v, rtol=0.1), (s, t)
         assert m.fit_error[s] < 0.03                          # held-out median relative error ~ the noise
     assert "raster   ms = " in m.explain()
+
+
+@pytest.mark.parametrize("strategy", ["raster", "raycast"])
+def test_fit_strategy_takes_the_overhead_off(strategy):
+    # single-tile times include the per-frame overhead once; the fit must return the per-tile coefficients
+    feats = synthetic_tiles(200, seed=2)
+    overhead = 1.7
+    noise = np.random.default_rng(3).normal(1, 0.01, len(feats))
+    ms = np.array([TRUE.predict(f)[strategy] for f in feats]) * noise + overhead
+    coef = fit_strategy(feats, ms, strategy, overhead)
+    want = getattr(TRUE, strategy)
+    assert coef.keys() == want.keys()
+    for t, v in want.items():
+        assert np.isclose(coef[t], v, rtol=0.1), (t, coef[t], v)
+    m = CostModel("t", TRUE.raster, TRUE.raycast, overhead={"raster": 0.0, "raycast": 0.0, strategy: overhead})
+    setattr(m, strategy, coef)
+    assert median_rel_error(m, feats, ms, strategy) < 0.01
+    # a model that forgets the overhead is off by it on every tile
+    m.overhead[strategy] = 0.0
+    assert median_rel_error(m, feats, ms, strategy) > 0.05
+
+
+def test_estimate_overhead_recovers_a_known_overhead():
+    # a frame of k tiles: each drawn alone costs c_i + O, all together sum(c_i) + O
+    rng = np.random.default_rng(4)
+    O = 2.5
+    singles, together = [], []
+    for k in (2, 3, 5, 8):
+        c = rng.uniform(0.1, 6.0, k)
+        singles.append(c + O)
+        together.append(float(c.sum()) + O)
+    assert np.isclose(estimate_overhead(singles, together), O)
+    # frames of one tile say nothing about the overhead; none at all gives 0
+    assert np.isclose(estimate_overhead(singles + [np.array([9.0])], together + [1.0]), O)
+    assert estimate_overhead([np.array([3.0])], [3.0]) == 0.0 and estimate_overhead([], []) == 0.0
+    # together slower than the singles' sum (no shared overhead): clamped at 0, never negative
+    assert estimate_overhead([np.array([1.0, 1.0])], [2.5]) == 0.0
 
 
 def test_choice_follows_predicted_costs():

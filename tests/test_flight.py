@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from hybrid.errors import TerrabenchError
 from hybrid.camera.flight import PRESETS, Flight, preset
+from hybrid.errors import TerrabenchError
 
 
 def test_presets(puget257):

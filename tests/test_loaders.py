@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import tifffile
 
-from hybrid.terrain.datasets import NAMES, get_dataset
 from hybrid.errors import TerrabenchError, TerrainLoadError
+from hybrid.terrain.datasets import NAMES, get_dataset
 from hybrid.terrain.heightfield import HeightField
 from hybrid.terrain.loaders import NoDataWarning, load_terrain, save_npz
 

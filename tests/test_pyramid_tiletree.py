@@ -2,11 +2,11 @@
 import numpy as np
 import pytest
 
+from hybrid.camera.view import View, default_view
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.heightfield import HeightField
 from hybrid.tiles.pyramid import EDGE_E, EDGE_N, EDGE_S, EDGE_W, TileKey, TilePyramid
 from hybrid.tiles.tiletree import select_tiles
-from hybrid.camera.view import View, default_view
 
 
 @pytest.fixture(scope="module")

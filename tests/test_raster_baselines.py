@@ -1,18 +1,17 @@
 """Baselines: the full-resolution triangle list matches the reference; the TIN is decimated, exports, and
-its border cracks are measured; exact GPU bytes; the indexed list of a tilelet set matches the GS count."""
+its border cracks are measured; the indexed list of a tilelet set matches the GS count."""
 import numpy as np
 import pytest
 
-from hybrid.errors import TerrabenchError
-
-from hybrid.renderer import Renderer
-from hybrid.reference import ReferenceRenderer
 from hybrid.camera.view import default_view
+from hybrid.errors import TerrabenchError
+from hybrid.reference import ReferenceRenderer
+from hybrid.renderer import Renderer
 from raster.tin import border_gaps, build_tin, export_tin, tin_max_error
 from raster.trianglelist import tilelet_faces
 
 
-def test_fullres_matches_reference_and_bytes(ctx, puget257):
+def test_fullres_matches_reference(ctx, puget257):
     view = default_view(puget257, 320, 180)
     r = Renderer(ctx, puget257, "fullres", tile_size=64)
     try:
@@ -21,8 +20,6 @@ def test_fullres_matches_reference_and_bytes(ctx, puget257):
         assert np.array_equal(res.mask, ref.mask)
         assert np.abs(res.colour.astype(int) - ref.colour).max() <= 2
         assert res.stats.counters["triangles"] == res.stats.counters["triangles_cpu"] == 2 * 256 * 256
-        for g in r.cache.entries.values():
-            assert g.nbytes == 65 * 65 * 12 + 2 * 64 * 64 * 12       # 12 bytes a vertex, 96 bits a triangle
     finally:
         r.release()
 

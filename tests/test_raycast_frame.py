@@ -2,13 +2,12 @@
 import numpy as np
 import pytest
 
-from hybrid.errors import TerrabenchError
-
 from hybrid.camera.flight import preset
+from hybrid.camera.view import View, default_view
+from hybrid.errors import TerrabenchError
+from hybrid.reference import ReferenceRenderer
 from hybrid.renderer import Renderer
 from hybrid.tiles.pyramid import TilePyramid
-from hybrid.reference import ReferenceRenderer
-from hybrid.camera.view import View, default_view
 from raycast import MODES, RaycastStrategy
 from raycast.cpu import cast_rays
 

@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
+from hybrid.camera.view import View, default_view
 from hybrid.gl.context import depth32f_texture
 from hybrid.tiles.pyramid import TilePyramid
-from hybrid.camera.view import View, default_view
 from raycast import RaycastStrategy
 from raycast.caster import outer_faces
 from raycast.cpu import cast_tile_rays
@@ -36,6 +36,8 @@ class HitTarget:
         return aux, depth, colour, counters
 
     def release(self):
+        if self.ctx.fbo is self.fbo:                  # never leave a deleted framebuffer bound
+            self.ctx.detect_framebuffer(0).use()
         for o in (self.fbo, self.colour, self.aux, self.depth):
             o.release()
 

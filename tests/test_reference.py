@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
+from hybrid.camera.view import View, default_view
 from hybrid.errors import TerrabenchError
 from hybrid.reference import ReferenceRenderer, grid_indices
-from hybrid.camera.view import View, default_view
 
 SIZE = (320, 180)
 

@@ -6,11 +6,12 @@ import pytest
 from experiments.stress import SCENES, VIEWS, run_stress, stress_reading, write_stress_report
 
 METHODS = ("raster", "raycast/triangles", "raycast/planes", "hybrid")
+WIDTH, HEIGHT = 160, 90
 
 
 @pytest.fixture(scope="module")
 def table(ctx):
-    return run_stress(ctx, SCENES, VIEWS, METHODS, size=129, width=160, height=90, tile_size=32)
+    return run_stress(ctx, SCENES, VIEWS, METHODS, size=129, width=WIDTH, height=HEIGHT, tile_size=32)
 
 
 def test_every_case_ran(table):
@@ -29,10 +30,22 @@ def test_no_hole_off_the_silhouette(table):
     # a method may move the terrain's outline by its LOD bound (< 1 px); anything else is a hole
     bad = table[(table["hole_px_strict"] > 0) & (table["method"] != "raycast/planes")]
     assert bad.empty, bad[["scene", "view", "method", "hole_px_strict"]].to_string()
-    # a see-through crack inside the terrain is a pixel where the reference has terrain and the frame has
-    # none, so the strict count covers it; column cracks (sky below terrain) are reported in the table,
-    # where LOD moves the terrain's far edge against the sky by up to a pixel
-    assert table["crack_px"].notna().all()
+    # column cracks: sky below terrain in an image column. The reference has its own where the view passes
+    # the terrain's edge; a stitched frame adds at most the shift of that outline by its LOD bound (under a
+    # pixel where a column crosses it), far less than a quarter of the columns. The piecewise-constant
+    # reconstruction's staircase silhouette is exempt, as above.
+    stitched = table[table["method"] != "raycast/planes"]
+    excess = stitched["crack_px"] - stitched["ref_crack_px"]
+    assert (excess <= WIDTH // 4).all(), stitched.loc[excess > WIDTH // 4, ["scene", "view", "method", "crack_px",
+                                                                              "ref_crack_px"]].to_string()
+
+
+def test_crack_count_sees_tin_cracks(ctx):
+    # the TIN decimates every tile on its own, so its tile borders crack: the same measure finds them
+    tin = run_stress(ctx, ("cliff",), ("down", "inside_aabb"), ("tin",), size=129, width=WIDTH, height=HEIGHT,
+                     tile_size=32)
+    assert (tin["error"] == "").all()
+    assert (tin["crack_px"] - tin["ref_crack_px"] > WIDTH // 4).all(), tin[["view", "crack_px", "ref_crack_px"]]
 
 
 def test_far_from_origin_is_as_precise(table):

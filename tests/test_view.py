@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from hybrid.errors import TerrabenchError
 from hybrid.camera.view import View
+from hybrid.errors import TerrabenchError
 
 
 def make():

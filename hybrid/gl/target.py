@@ -96,6 +96,9 @@ class FrameTarget:
         return RenderResult(self.read_colour(), dist, stats)
 
     def release(self) -> None:
-        """Free the GPU attachments."""
+        """Free the GPU attachments (binding the default framebuffer first if this one is bound: moderngl
+        rebinds its last bound framebuffer when it makes the next one, and a deleted name is an error)."""
+        if self.ctx.fbo is self.fbo:
+            self.ctx.detect_framebuffer(0).use()
         for o in (self.fbo, self.colour, self.depth):
             o.release()
