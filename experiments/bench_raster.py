@@ -105,18 +105,22 @@ def triangles_vs_error(tiles, errors=(5.0, 10.0, 20.0, 40.0, 80.0)):
     return rows
 
 
-def leaf_timing(tiles, tolerances=(0.0, 10.0, 40.0, 160.0)):
-    """Rows (tolerance, leaves, ms) of the per-view leaf set + restriction of one 257² tile."""
-    from raster.quadtree import error_pyramid
-    from raster.restriction import TileLod, restrict_frame
-    p = error_pyramid(tiles[0].heights)
+def selection_rows(ctx, repeats=5):
+    """Rows (strategy, tiles, selection ms, frame ms, triangles): GPU leaf selection alone and the whole frame."""
+    from hybrid.camera.flight import preset
+    from hybrid.renderer import Renderer
+    from hybrid.terrain.datasets import puget
+    hf = puget()
+    view = preset("flyover", hf, 8).view(3)
     rows = []
-    for tol in tolerances:
-        ms = _median_ms(lambda: restrict_frame([TileLod((0, 0, 0), p, tol)]), repeats=7)
-        rows.append((f"{tol:g}", len(restrict_frame([TileLod((0, 0, 0), p, tol)])[(0, 0, 0)].leaves), f"{ms:.2f}"))
-    t0 = time.perf_counter()
-    error_pyramid(tiles[0].heights)
-    rows.append(("(pyramid, once)", "", f"{(time.perf_counter() - t0) * 1e3:.2f}"))
+    for name in ("raster", "instanced"):
+        with Renderer(ctx, hf, name, tile_size=128) as r:
+            r.render(view)
+            items = r._items(name, r.plan(view), set())
+            sel = _median_ms(lambda: r.strategies[name].select_leaves(view, items, 2 / 3), repeats, ctx)
+            res = [r.render(view) for _ in range(repeats)]
+            rows.append((name, len(items), f"{sel:.1f}", f"{np.median([x.stats.wall_ms for x in res]):.1f}",
+                         res[-1].stats.counters["triangles"]))
     return rows
 
 
@@ -149,56 +153,22 @@ def _top_view(hf, width=320, height=180):
 
 
 def throughput_rows(ctx, repeats=5):
-    """Rows comparing the GS tilelet path with an indexed list of the same triangles (Mtri/s)."""
-    from hybrid.gl.target import FrameTarget
+    """Rows comparing the geometry-shader tilelets with the instanced template on the same leaves (Mtri/s)."""
+    from hybrid.renderer import Renderer
     from hybrid.terrain.datasets import puget
-    from hybrid.tiles.pyramid import TilePyramid
-    from hybrid.tiles.tiletree import SelectedTile
-    from raster.meshes import MeshStrategyBase, MeshTile
-    from raster.tilelets import TileletStrategy
-    from raster.trianglelist import grid_vertices, tilelet_faces
     hf = puget(with_texture=False, size=513)
-    pyr = TilePyramid(hf, 256)
     view = _top_view(hf)
-    strat = TileletStrategy(ctx, hf)
-    mesh = MeshStrategyBase(ctx, hf)
-    target = FrameTarget(ctx, view.width, view.height)
     rows = []
-    try:
-        keys = pyr.keys(0)
-        tiles = [pyr.tile(k) for k in keys]
-        gs = [strat.upload(t) for t in tiles]
+    with Renderer(ctx, hf, "raster", tile_size=256) as gs, Renderer(ctx, hf, "instanced", tile_size=256) as inst:
         for leaf_tau in (0.05, 2.0 / 3.0):
-            items = [(g, t, SelectedTile(t.key, 1000.0 * 0 + np.linalg.norm(view.eye[:2] - np.array(t.origin[:2])), 0.0, 0, True))
-                     for g, t in zip(gs, tiles)]
-            opts = dict(mode="shaded", morph=False, culling=False, leaf_tau=leaf_tau, count_culled=False)
-            target.clear()
-            target.use()
-            c = strat.draw_tiles(target, view, items, **opts)
-            sets = strat.last_sets
-            lists = [MeshTile(ctx, mesh.prog, t.key, grid_vertices(t.heights, t.spacing),
-                              tilelet_faces(sets[(t.key.level, t.key.tx, t.key.ty)], t.n)) for t in tiles]
-            litems = [(m, t, it[2]) for m, t, it in zip(lists, tiles, items)]
-            tris = c["triangles"]
-
-            def gs_draw():
-                strat.draw_tiles(target, view, items, **opts)
-
-            def list_draw():
-                mesh.draw_tiles(target, view, litems, mode="shaded")
-            # leaf selection is CPU work: time the GPU part by subtracting it (lod_ms) from the draw
-            gs_ms = _median_ms(gs_draw, repeats, ctx) - c["lod_ms"]
-            list_ms = _median_ms(list_draw, repeats, ctx)
-            rows.append((f"{leaf_tau:g}", tris, f"{gs_ms:.1f}", f"{tris / gs_ms / 1e3:.2f}", f"{list_ms:.1f}",
-                         f"{tris / list_ms / 1e3:.2f}", f"{list_ms / gs_ms:.2f}"))
-            for m in lists:
-                m.release()
-        for g in gs:
-            g.release()
-    finally:
-        target.release()
-        strat.release()
-        mesh.release()
+            ms = {}
+            for name, r in (("gs", gs), ("inst", inst)):
+                r.render(view, mode="shaded", leaf_tau=leaf_tau, culling=False)
+                res = [r.render(view, mode="shaded", leaf_tau=leaf_tau, culling=False) for _ in range(repeats)]
+                ms[name] = float(np.median([x.stats.draw_ms for x in res]))
+                tris = res[-1].stats.counters["triangles"]
+            rows.append((f"{leaf_tau:g}", tris, f"{ms['gs']:.1f}", f"{tris / ms['gs'] / 1e3:.2f}", f"{ms['inst']:.1f}",
+                         f"{tris / ms['inst'] / 1e3:.2f}", f"{ms['inst'] / ms['gs']:.2f}"))
     return rows
 
 
@@ -218,9 +188,9 @@ def culling_rows(ctx, repeats=5):
         r.render(view, mode="shaded")
         base = {}
         for cull in (False, True):
-            res = [r.render(view, mode="shaded", culling=cull, count_culled=False) for _ in range(repeats)]
-            counted = r.render(view, mode="shaded", culling=cull)
-            ms = float(np.median([x.stats.wall_ms - x.stats.counters["lod_ms"] for x in res]))
+            res = [r.render(view, mode="shaded", culling=cull) for _ in range(repeats)]
+            counted = res[-1]
+            ms = float(np.median([x.stats.draw_ms for x in res]))
             s = counted.stats.counters
             base[cull] = ms
             rows.append(("on" if cull else "off", s["tilelets"] - s["tilelets_culled"], s["tilelets_culled"],
@@ -237,11 +207,13 @@ def run(ctx) -> dict[str, pd.DataFrame]:
     tables = (
         ("1. triangles vs max vertical error, 4 Puget tiles of 257² (160 m spacing); error in metres",
          ["target", "method", "triangles", "max err", "x delatin", "x martini"], triangles_vs_error(tiles)),
-        ("2. per-view leaf set + restriction of one 257² tile", ["tolerance m", "leaves", "ms"], leaf_timing(tiles)),
+        ("2. GPU leaf selection alone and the whole frame (Puget flyover frame 3, tiles of 128, 640x360)",
+         ["strategy", "tiles", "selection ms", "frame ms", "triangles"], selection_rows(ctx)),
         ("3. GPU bytes per 257² tile", ["representation", "bytes", "triangles", "bytes/tri"],
          memory_rows(ctx, hf, tiles)),
-        ("4. GS tilelets vs indexed list of the same triangles (4 tiles, top view, 320x180)",
-         ["leaf tau", "triangles", "GS ms", "GS Mtri/s", "list ms", "list Mtri/s", "GS/list"], throughput_rows(ctx)),
+        ("4. geometry shader vs instanced template, same leaves (Puget 513², top view, 320x180)",
+         ["leaf tau", "triangles", "GS ms", "GS Mtri/s", "instanced ms", "instanced Mtri/s", "instanced/GS"],
+         throughput_rows(ctx)),
         ("5. tilelet culling on a low view (Puget 513², tiles of 128)",
          ["culling", "tilelets drawn", "culled", "triangles", "draw ms"], culling_rows(ctx)),
     )

@@ -33,7 +33,7 @@ from hybrid.tiles.tiletree import DEFAULT_TAU, edge_neighbours
 
 STRATEGY_CODES = {"raster": 1, "raycast": 2}
 """Per-pixel codes of the strategy map, by strategy kind (0 = no terrain)."""
-DEFAULT_OPTIONS = {"raster": {"count_culled": False}}
+DEFAULT_OPTIONS: dict[str, dict] = {}
 """Draw options a renderer starts from: the CPU mirror of tilelet culling is a check, never timed."""
 
 

@@ -85,10 +85,22 @@ void main() {
     vec3 NE = post(2, 2), N = post(1, 2), NW = post(0, 2), W = post(0, 1);
     // counter-clockwise seen from above; an edge's two triangles (C, a, m) and (C, m, b) go out as one
     // strip a, m, C, b (4 vertices instead of 6; the strip's odd triangle is (C, m, b) in GL's order)
-    if ((drop & 4) != 0) tri(C, SW, SE); else pair(SW, S, C, SE);
-    if ((drop & 2) != 0) tri(C, SE, NE); else pair(SE, E, C, NE);
-    if ((drop & 8) != 0) tri(C, NE, NW); else pair(NE, N, C, NW);
-    if ((drop & 1) != 0) tri(C, NW, SW); else pair(NW, W, C, SW);
+    if (gs_in[0].node.z == 0) {
+        // full resolution: the SE and NW cells (fan diagonal NW-SE) split SW-NE as the reference wherever
+        // their two outer edges keep their midpoints; the SW and NE cells' fan diagonal is SW-NE already
+        bool se = (drop & 6) == 0, nw = (drop & 9) == 0;
+        if ((drop & 4) != 0) tri(C, SW, SE); else { tri(C, SW, S); if (!se) tri(C, S, SE); }
+        if ((drop & 2) != 0) tri(C, SE, NE); else { if (!se) tri(C, SE, E); tri(C, E, NE); }
+        if ((drop & 8) != 0) tri(C, NE, NW); else { tri(C, NE, N); if (!nw) tri(C, N, NW); }
+        if ((drop & 1) != 0) tri(C, NW, SW); else { if (!nw) tri(C, NW, W); tri(C, W, SW); }
+        if (se) { tri(S, SE, E); tri(S, E, C); }
+        if (nw) { tri(W, C, N); tri(W, N, NW); }
+    } else {
+        if ((drop & 4) != 0) tri(C, SW, SE); else pair(SW, S, C, SE);
+        if ((drop & 2) != 0) tri(C, SE, NE); else pair(SE, E, C, NE);
+        if ((drop & 8) != 0) tri(C, NE, NW); else pair(NE, N, C, NW);
+        if ((drop & 1) != 0) tri(C, NW, SW); else pair(NW, W, C, SW);
+    }
     if (skirt_edges != 0) {
         int span = 2 << gs_in[0].node.z;
         ivec2 p0 = gs_in[0].node.xy;

@@ -8,7 +8,6 @@ from hybrid.errors import TerrabenchError
 from hybrid.reference import ReferenceRenderer
 from hybrid.renderer import Renderer
 from raster.tin import border_gaps, build_tin, export_tin, tin_max_error
-from raster.trianglelist import tilelet_faces
 
 
 def test_fullres_matches_reference(ctx, puget257):
@@ -46,14 +45,3 @@ def test_tin_decimates_exports_and_cracks_are_measured(ctx, puget257, tmp_path):
     assert err <= 40.0 and uncovered == 0 and m.triangles < 2 * 64 * 64
     with pytest.raises(TerrabenchError, match="exactly one"):
         build_tin(h, 1.0)
-
-
-def test_tilelet_indexed_list_matches_gs_count(ctx, puget257):
-    view = default_view(puget257, 320, 180)
-    r = Renderer(ctx, puget257, "raster", tile_size=64)
-    try:
-        res = r.render(view, mode="shaded", culling=False)
-        total = sum(len(tilelet_faces(s, 64)) for s in r.strategies["raster"].last_sets.values())
-        assert total == res.stats.counters["triangles"] == sum(s.triangles for s in r.strategies["raster"].last_sets.values())
-    finally:
-        r.release()

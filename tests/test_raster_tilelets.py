@@ -1,5 +1,6 @@
-"""GPU tests of the tilelet strategy: crack-free images (and holes when stitching is off), triangle counts
-from GL_PRIMITIVES_GENERATED, culling that only drops what is outside, morph continuity, modes."""
+"""GPU tests of the two tilelet strategies (geometry shader and instanced template), both selected on the GPU:
+crack-free images (and cracks when stitching is off), counts against the leaves read back, culling that
+changes no pixel, morph continuity, convergence to the reference as tau -> 0, modes."""
 import numpy as np
 import pytest
 from raster_helpers import border_views, holes
@@ -8,7 +9,9 @@ from hybrid.camera.view import View
 from hybrid.errors import TerrabenchError
 from hybrid.reference import ReferenceRenderer
 from hybrid.renderer import Renderer
-from hybrid.tiles.pyramid import TileKey
+from raster.tilelets import read_leaves
+
+STRATEGIES = ("raster", "instanced")
 
 
 @pytest.fixture(scope="module")
@@ -16,64 +19,88 @@ def renderers(ctx, puget257, synthetic):
     out = {}
     for name in ("puget", "cliff", "spike", "staircase"):
         hf = puget257 if name == "puget" else synthetic(name)
-        out[name] = (hf, Renderer(ctx, hf, "raster", tile_size=64), ReferenceRenderer(ctx, hf))
+        out[name] = (hf, {s: Renderer(ctx, hf, s, tile_size=64) for s in STRATEGIES}, ReferenceRenderer(ctx, hf))
     yield out
-    for _, r, ref in out.values():
-        r.release()
+    for _, rs, ref in out.values():
+        for r in rs.values():
+            r.release()
         ref.release()
 
 
+def leaf_sets(r, name, view):
+    """The leaves every tile of the view's frame drew: {(level, tx, ty): read_leaves dict}."""
+    keys = {p.key for p in r.plan(view)}
+    return {(k.level, k.tx, k.ty): read_leaves(g) for (s, k), g in r.cache.entries.items() if s == name and k in keys}
+
+
 @pytest.mark.parametrize("name", ["puget", "cliff", "spike", "staircase"])
-def test_crack_free_and_unstitched_holes(renderers, name):
-    hf, r, ref = renderers[name]
+@pytest.mark.parametrize("strategy", STRATEGIES)
+def test_crack_free_and_unstitched_holes(renderers, name, strategy):
+    hf, rs, ref = renderers[name]
+    r = rs[strategy]
     unstitched = 0
     for view in border_views(hf):
         rf = ref.render(view, mode="shaded")
         for morph in (True, False):
-            res = r.render(view, mode="shaded", morph=morph, count_culled=True)
+            res = r.render(view, mode="shaded", morph=morph, culling=False)
             assert holes(res, rf, view, hf) == 0, (name, morph)
-            assert res.stats.counters["triangles"] == res.stats.counters["triangles_cpu"]
-        levels = {int(g) for s in r.strategies["raster"].last_sets.values() for g in np.unique(s.global_level)}
+            sets = leaf_sets(r, strategy, view)
+            drawn = sum(int(np.sum(8 - np.unpackbits(s["drop"].astype(np.uint8)[:, None], axis=1).sum(axis=1)))
+                        for s in sets.values())
+            assert res.stats.counters["triangles"] == drawn
+            assert res.stats.counters["tilelets"] == sum(len(s["level"]) for s in sets.values())
+        levels = {k[0] + int(m) for k, s in sets.items() for m in np.unique(s["level"])}
         assert len(levels) >= 2                          # the view crosses level transitions
         bad = r.render(view, mode="shaded", stitching=False, morph=False)
         unstitched += holes(bad, rf, view, hf)
     assert unstitched >= 5, f"{name}: dropping the stitching should open cracks, found {unstitched} hole pixels"
 
 
-def test_triangle_count_and_culling_only_drops_outside(renderers):
-    hf, r, _ = renderers["puget"]
+@pytest.mark.parametrize("strategy", STRATEGIES)
+def test_culling_changes_no_pixel(renderers, strategy):
+    hf, rs, _ = renderers["puget"]
+    r = rs[strategy]
     w, d = hf.extent
     ox, oy, oz = hf.origin
     lo, hi = hf.height_range
-    # a low view with much of each tile outside the frustum
-    eye = np.array([ox + 0.3 * w, oy + 0.3 * d, oz + hi + 30])
+    eye = np.array([ox + 0.3 * w, oy + 0.3 * d, oz + hi + 30])     # a low view: much of each tile outside
     view = View(eye, eye + np.array([3000.0, 1000.0, -800.0]), 40, 320, 180, near=1.0, far=10 * w)
-    on = r.render(view, mode="shaded", record_culling=True)
-    st = r.strategies["raster"]
+    on = r.render(view, mode="shaded")
+    off = r.render(view, mode="shaded", culling=False)
     assert on.stats.counters["tilelets_culled"] > 0.2 * on.stats.counters["tilelets"]
-    assert on.stats.counters["triangles"] == on.stats.counters["triangles_cpu"]
-    planes = view.frustum_planes_rel()
-    from raster.culling import tilelet_boxes
-    for key, flags in st.last_culled.items():
-        if not isinstance(flags, tuple):
-            continue
-        cpu, gpu = flags
-        assert np.count_nonzero(cpu != gpu) <= max(1, len(cpu) // 1000)
-        if gpu.any():
-            tile = r.tile(TileKey(*key))
-            lo_b, hi_b = tilelet_boxes(tile.heights, st.last_sets[key].leaves, np.asarray(tile.origin) - view.eye, tile.spacing)
-            n = planes[:, :3]
-            pos = np.where(n[None] >= 0, hi_b[:, None], lo_b[:, None])
-            dist = np.einsum("cpk,pk->cp", pos, n) + planes[None, :, 3]
-            assert np.all(dist[gpu].min(axis=1) < 1e-2)     # really outside one plane (float32 margin)
-    off = r.render(view, mode="shaded", culling=False, count_culled=True)
     assert off.stats.counters["tilelets_culled"] == 0 and off.stats.counters["triangles"] > on.stats.counters["triangles"]
-    assert off.stats.counters["triangles"] == off.stats.counters["triangles_cpu"]
     assert np.array_equal(on.colour, off.colour) and np.array_equal(on.mask, off.mask)
 
 
+def test_both_strategies_draw_the_same_surface(renderers):
+    hf, rs, ref = renderers["spike"]
+    for view in border_views(hf)[:3]:
+        a, b = (rs[s].render(view, mode="shaded") for s in STRATEGIES)
+        assert a.stats.counters == b.stats.counters
+        both = a.mask & b.mask
+        assert (a.mask == b.mask).mean() > 0.9999
+        assert np.median(np.abs(a.distance[both] - b.distance[both]) / b.distance[both]) < 1e-6
+
+
+def test_converges_to_the_reference(renderers):
+    """At tau 0.05 px on Puget Sound the leaves are at full resolution with the reference's SW-NE diagonal.
+
+    (On the synthetic cliff and spike border views the p99 is 9e-4 and 3e-4: nodes with errors under the
+    0.05 px bound stay coarse, and at grazing angles that vertical bound allows more relative depth.)"""
+    name = "puget"
+    hf, rs, ref = renderers[name]
+    for view in border_views(hf)[:3]:
+        rf = ref.render(view, mode="shaded")
+        res = rs["instanced"].render(view, tau=0.05, mode="shaded")
+        both = res.mask & rf.mask
+        rel = np.abs(res.distance[both] - rf.distance[both]) / rf.distance[both]
+        assert (res.mask == rf.mask).mean() > 0.999
+        assert np.percentile(rel, 99) <= 1e-4, (name, np.percentile(rel, 99))
+
+
 def test_morph_continuity_across_level_switch(renderers):
-    hf, r, ref = renderers["puget"]
+    hf, rs, ref = renderers["puget"]
+    r = rs["instanced"]
     w, d = hf.extent
     ox, oy, oz = hf.origin
     hi = hf.height_range[1]
@@ -84,11 +111,11 @@ def test_morph_continuity_across_level_switch(renderers):
         return View(eye, eye + np.array([0, 10000, -4000]), 60, 320, 180, near=1.0, far=10 * w)
 
     def leaves(t, morph):
-        r.render(view(t), mode="shaded", leaf_tau=leaf_tau, morph=morph)
-        return {k: (len(s.leaves), int(s.leaves.level.sum())) for k, s in r.strategies["raster"].last_sets.items()}
+        r.render(view(t), mode="shaded", leaf_tau=leaf_tau, morph=morph, culling=False)
+        return {k: (len(s["level"]), int(s["level"].sum())) for k, s in leaf_sets(r, "instanced", view(t)).items()}
 
-    def colour_change(a, b):
-        return float(np.abs(a.colour.astype(int) - b.colour.astype(int)).mean())
+    def colour_change(a, b):                              # pixels whose colour changes by more than 8 levels
+        return int(np.count_nonzero(np.abs(a.colour.astype(int) - b.colour.astype(int)).max(axis=2) > 8))
 
     changes = {}
     for morph in (True, False):
@@ -109,30 +136,27 @@ def test_morph_continuity_across_level_switch(renderers):
         before = r.render(a, mode="shaded", leaf_tau=leaf_tau, morph=morph)
         after = r.render(b, mode="shaded", leaf_tau=leaf_tau, morph=morph)
         changes[morph] = (colour_change(before, after), ref_change)
-    margin = 0.02          # mean colour levels (0..255) over the image
     got, ref_change = changes[True]
-    assert got <= ref_change + margin, changes
+    assert got <= ref_change + 2, changes
     popped, ref_change = changes[False]
-    assert popped > 10 * (ref_change + margin), changes     # without morphing the same check fails
+    assert popped >= ref_change + 10, changes               # without morphing the same check fails
 
 
 def test_modes_and_far_origin(ctx, renderers):
-    hf, r, _ = renderers["spike"]
+    hf, rs, _ = renderers["spike"]
+    r = rs["raster"]
     view = border_views(hf)[3]
     res = r.render(view, mode="level", wireframe=True)
     colours = {tuple(c) for c in res.colour[res.mask].reshape(-1, 3)[::7]}
     assert len(colours) > 20
     base = r.render(view, mode="shaded")
     far_hf = hf.moved((5.0e6, -3.0e6, 1000.0))
-    far = Renderer(ctx, far_hf, "raster", tile_size=64)
-    try:
+    with Renderer(ctx, far_hf, "raster", tile_size=64) as far:
         moved = far.render(view.moved((5.0e6, -3.0e6, 1000.0)), mode="shaded")
-    finally:
-        far.release()
     assert np.mean(np.any(base.colour != moved.colour, axis=-1)) < 0.01
     with pytest.raises(TerrabenchError, match="mode"):
         r.render(view, mode="bogus")
-    with pytest.raises(TerrabenchError, match="leaf_tau"):
+    with pytest.raises(TerrabenchError, match="tau"):
         r.render(view, leaf_tau=0.0)
     with pytest.raises(TerrabenchError, match="no texture"):
         r.render(view, mode="texture")

@@ -18,6 +18,7 @@ from hybrid.errors import check_positive
 from hybrid.tiles.pyramid import EDGE_E, EDGE_N, EDGE_S, EDGE_W, TileKey, TilePyramid
 
 DEFAULT_TAU = 2.0 / 3.0
+NO_NEIGHBOUR = 9
 _EDGES = ((EDGE_W, -1, 0), (EDGE_E, 1, 0), (EDGE_S, 0, -1), (EDGE_N, 0, 1))
 
 
@@ -29,6 +30,8 @@ class SelectedTile:
     projected_error: the tile's geometric error in pixels at that distance.
     coarser_edges: bit mask of edges (EDGE_W/E/S/N) whose neighbour is one level coarser (stitch there).
     inside: True if the AABB lies wholly inside the frustum (no finer culling needed).
+    edge_deltas: per edge W, E, S, N, the level of the selected tile across it minus this tile's level
+      (-1, 0 or 1; NO_NEIGHBOUR where no selected tile touches that edge).
     """
 
     key: TileKey
@@ -36,6 +39,7 @@ class SelectedTile:
     projected_error: float
     coarser_edges: int
     inside: bool
+    edge_deltas: tuple = (9, 9, 9, 9)
 
     @property
     def level(self) -> int:
@@ -121,18 +125,25 @@ def select_tiles(pyramid: TilePyramid, view: View, tau: float = DEFAULT_TAU) -> 
                         selected[ch] = True
                     changed = True
 
-    # edges whose neighbour is one level coarser
-    result_edges = {}
+    # per edge: the selected neighbour's level minus this tile's (-1, 0, 1), NO_NEIGHBOUR where none is drawn
+    result_edges, deltas = {}, {}
     for key in selected:
         t = pyramid.tiles_per_side(key.level)
-        mask = 0
+        mask, d = 0, []
         for bit, dx, dy in _EDGES:
             nx, ny = key.tx + dx, key.ty + dy
+            delta = NO_NEIGHBOUR
             if 0 <= nx < t and 0 <= ny < t:
-                cov = _covering(selected, TileKey(key.level, nx, ny), pyramid.max_level)
-                if cov is not None and cov.level == key.level + 1:
-                    mask |= bit
-        result_edges[key] = mask
+                nb = TileKey(key.level, nx, ny)
+                cov = _covering(selected, nb, pyramid.max_level)
+                if cov is not None:
+                    delta = cov.level - key.level
+                elif key.level > 0 and any(c in selected for c in nb.children()):
+                    delta = -1
+            if delta == 1:
+                mask |= bit
+            d.append(delta)
+        result_edges[key], deltas[key] = mask, tuple(d)
 
     # front-to-back order by quadtree traversal
     needed = set()
@@ -161,7 +172,7 @@ def select_tiles(pyramid: TilePyramid, view: View, tau: float = DEFAULT_TAU) -> 
             visit(ch[qx + 2 * qy])
 
     visit(pyramid.root())
-    return [SelectedTile(k, info[k][0], info[k][1], result_edges[k], info[k][2] == 1) for k in order]
+    return [SelectedTile(k, info[k][0], info[k][1], result_edges[k], info[k][2] == 1, deltas[k]) for k in order]
 
 
 def edge_neighbours(keys: set, key: TileKey, dx: int, dy: int, max_level: int) -> list[TileKey]:

@@ -1,0 +1,155 @@
+#version 430
+// GPU leaf selection of one tile's tilelet quadtree (raster.nodes): one invocation per node of the tile.
+// A node is a leaf when its parent splits and it does not; its edge midpoint is dropped where the same-size
+// neighbour's parent does not split (that side is one level coarser). The leaf's nine post heights are
+// fetched and geomorphed here and appended, with its node, to the leaf buffer the draw reads.
+layout(local_size_x = 64) in;
+layout(std430, binding = 0) readonly buffer Nodes { vec4 node[]; };   // E, zlo, zhi, inside; one apron
+layout(std430, binding = 1) writeonly buffer Leaves { uint leaf[]; }; // 13 words a leaf: j0 i0 m drop, h[9]
+layout(std430, binding = 2) buffer Commands { uint cmd[]; };          // indirect draws, 5 words each
+layout(std430, binding = 3) writeonly buffer Skirts { float seg[]; };  // 6 words a skirt segment
+layout(std430, binding = 4) buffer Frame { uint frame_count[]; };     // triangles, leaves, culled, segments
+
+uniform sampler2D heights;      // R32F (n+1)^2 tile samples, metres relative to the terrain origin z
+uniform int n_cells;            // cells a tile side
+uniform int top;                // coarsest local level (log2(n) - 1): the tile's root
+uniform int offsets[13];        // start of each local level's node grid (with apron) in node[]
+uniform int starts[14];         // start of each local level in the invocation index (own nodes only)
+uniform int first_id;           // first node dispatched: finer levels cannot hold a leaf in this view
+uniform ivec4 nb_delta;         // W, E, S, N: neighbour tile level minus this tile's level; 9 = no neighbour
+uniform vec3 origin_rel;        // tile sample [0, 0] minus eye, metres (z: terrain origin z minus eye z)
+uniform float spacing;          // metres between tile samples
+uniform float k_tau;            // K / tau: a node splits when E * k_tau > distance to its box
+uniform float beta;             // morph-safe error growth (raster.quadtree)
+uniform bool stitch;            // drop midpoints toward coarser neighbours (off: cracks, for tests)
+uniform bool morph;             // geomorph the posts a split creates (off: they appear at their own height)
+uniform bool cull;              // drop leaves outside the frustum
+uniform vec4 planes[6];         // eye-relative frustum planes, inside where dot >= 0
+uniform int skirt_edges;        // tile edges W=1 E=2 S=4 N=8 that hang skirts (they face a ray-cast tile)
+uniform float skirt_bottom;     // eye-relative z of the skirts' lower edge
+
+int side_of(int m) { return n_cells >> (m + 1); }
+
+// owner tile of node (m, a, b) relative to this one: 0 own, else the edge neighbour's level difference
+int owner_delta(int m, int a, int b) {
+    int s = side_of(m);
+    if (b < 0) return nb_delta.x;
+    if (b >= s) return nb_delta.y;
+    if (a < 0) return nb_delta.z;
+    if (a >= s) return nb_delta.w;
+    return 0;
+}
+
+// 1 split, 0 not split, -1 split by the tile tree (forced), for any node of this tile or its apron
+int split_state(int m, int a, int b, out float E, out float d) {
+    E = 0.0; d = 0.0;
+    if (m > top) return -1;                      // above the tile's root: the tile tree refined it
+    int delta = owner_delta(m, a, b);
+    if (delta == 9) return -1;                   // beyond the terrain: nothing to match
+    int mb = m - delta;                          // the node's local level in its own tile
+    if (mb < 1) return 0;                        // that tile's finest nodes cannot split
+    if (mb >= top) return -1;                    // that tile's root (or above): always split
+    int s = side_of(m);
+    vec4 nd = node[offsets[m] + (a + 1) * (s + 2) + (b + 1)];
+    if (nd.w == 0.0) return -1;
+    float S = float(2 << m);
+    vec3 lo = origin_rel + vec3(vec2(float(b) - 1.0, float(a) - 1.0) * S * spacing, nd.y);
+    vec3 hi = origin_rel + vec3(vec2(float(b) + 2.0, float(a) + 2.0) * S * spacing, nd.z);
+    d = length(max(max(lo, -hi), vec3(0.0)));
+    E = nd.x;
+    return E * k_tau > d ? 1 : 0;
+}
+
+bool splits(int m, int a, int b) { float E, d; return split_state(m, a, b, E, d) != 0; }
+
+// morph factor of the posts a split node created: 1 on the coarser surface (just split), 0 own height
+float alpha(int m, int a, int b) {
+    float E, d;
+    int st = split_state(m, a, b, E, d);
+    if (st < 0 || !morph) return 0.0;
+    if (E <= 0.0) return 1.0;
+    return clamp((d / (E * k_tau) - beta) / (1.0 - beta), 0.0, 1.0);
+}
+
+float H(int i, int j) { return texelFetch(heights, ivec2(j, i), 0).r; }
+
+void put_segment(vec2 p, float hp, vec2 q, float hq) {
+    uint k = atomicAdd(cmd[11], 1u);
+    atomicAdd(frame_count[3], 1u);
+    seg[6 * k + 0] = p.x; seg[6 * k + 1] = p.y; seg[6 * k + 2] = hp;
+    seg[6 * k + 3] = q.x; seg[6 * k + 4] = q.y; seg[6 * k + 5] = hq;
+}
+
+void main() {
+    int id = first_id + int(gl_GlobalInvocationID.x);
+    if (id >= starts[top + 1]) return;
+    int m = 0;
+    while (m < top && id >= starts[m + 1]) ++m;          // at most 12 levels
+    int s = side_of(m);
+    int local = id - starts[m];
+    int a = local / s, b = local % s;
+    if (!splits(m + 1, a >> 1, b >> 1) || splits(m, a, b)) return;
+    int k = 1 << m;
+    int i0 = a * 2 * k, j0 = b * 2 * k;
+    if (cull) {                          // the node's grown box bounds its drawn surface and skirts
+        vec4 nd = node[offsets[m] + (a + 1) * (s + 2) + (b + 1)];
+        vec3 bmin = origin_rel + vec3(vec2(j0, i0) * spacing, min(nd.y, skirt_edges != 0 ? skirt_bottom : nd.y));
+        vec3 bmax = origin_rel + vec3(vec2(j0 + 2 * k, i0 + 2 * k) * spacing, nd.z);
+        for (int p = 0; p < 6; ++p) {
+            vec3 n = planes[p].xyz;
+            vec3 far_corner = vec3(n.x >= 0.0 ? bmax.x : bmin.x, n.y >= 0.0 ? bmax.y : bmin.y,
+                                   n.z >= 0.0 ? bmax.z : bmin.z);
+            if (dot(n, far_corner) + planes[p].w < 0.0) { atomicAdd(frame_count[2], 1u); return; }
+        }
+    }
+    // edges W, E, S, N: neighbour offsets and drop bits
+    const ivec2 nb[4] = ivec2[4](ivec2(0, -1), ivec2(0, 1), ivec2(-1, 0), ivec2(1, 0));
+    const int bit[4] = int[4](1, 2, 4, 8);
+    float ap = alpha(m + 1, a >> 1, b >> 1);
+    int drop = 0;
+    float am[4];
+    for (int e = 0; e < 4; ++e) {
+        int na = a + nb[e].x, nbb = b + nb[e].y;
+        am[e] = ap;
+        if ((na >> 1) == (a >> 1) && (nbb >> 1) == (b >> 1)) continue;    // a sibling: same parent
+        if (!splits(m + 1, na >> 1, nbb >> 1)) { if (stitch) drop |= bit[e]; }
+        else am[e] = max(ap, alpha(m + 1, na >> 1, nbb >> 1));
+    }
+    float h[9];
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c)
+            h[r * 3 + c] = H(i0 + r * k, j0 + c * k);
+    // morph targets: edge midpoints toward the mean of their corners, the centre toward the mean of the
+    // diagonal through the parent's centre (SW-NE in the parent's SW and NE quadrants, NW-SE otherwise)
+    h[3] = mix(h[3], 0.5 * (h[0] + h[6]), am[0]);
+    h[5] = mix(h[5], 0.5 * (h[2] + h[8]), am[1]);
+    h[1] = mix(h[1], 0.5 * (h[0] + h[2]), am[2]);
+    h[7] = mix(h[7], 0.5 * (h[6] + h[8]), am[3]);
+    float diag = ((b & 1) == (a & 1)) ? 0.5 * (h[0] + h[8]) : 0.5 * (h[2] + h[6]);
+    h[4] = mix(h[4], diag, ap);
+    int skirts = 0;
+    if (skirt_edges != 0) {
+        if (b == 0) skirts |= skirt_edges & 1;
+        if (b == s - 1) skirts |= skirt_edges & 2;
+        if (a == 0) skirts |= skirt_edges & 4;
+        if (a == s - 1) skirts |= skirt_edges & 8;
+    }
+    uint idx = atomicAdd(cmd[0], 1u);
+    atomicAdd(cmd[6], 1u);
+    atomicAdd(frame_count[0], uint(8 - bitCount(drop)));
+    atomicAdd(frame_count[1], 1u);
+    uint w = idx * 13u;
+    leaf[w + 0] = uint(j0); leaf[w + 1] = uint(i0); leaf[w + 2] = uint(m); leaf[w + 3] = uint(drop);
+    for (int q = 0; q < 9; ++q) leaf[w + 4u + uint(q)] = floatBitsToUint(h[q]);
+    // skirts below the tile edges that face ray-cast tiles, one segment per drawn edge piece
+    const ivec4 EDGE_POSTS[4] = ivec4[4](ivec4(0, 3, 6, 1), ivec4(2, 5, 8, 2), ivec4(0, 1, 2, 4), ivec4(6, 7, 8, 8));
+    for (int e = 0; e < 4; ++e) {
+        ivec4 ep = EDGE_POSTS[e];
+        if ((skirts & ep.w) == 0) continue;
+        vec2 pa = vec2(j0 + (ep.x % 3) * k, i0 + (ep.x / 3) * k);
+        vec2 pm = vec2(j0 + (ep.y % 3) * k, i0 + (ep.y / 3) * k);
+        vec2 pb = vec2(j0 + (ep.z % 3) * k, i0 + (ep.z / 3) * k);
+        if ((drop & ep.w) != 0) put_segment(pa, h[ep.x], pb, h[ep.z]);
+        else { put_segment(pa, h[ep.x], pm, h[ep.y]); put_segment(pm, h[ep.y], pb, h[ep.z]); }
+    }
+}

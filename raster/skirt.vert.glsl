@@ -1,0 +1,33 @@
+#version 430
+// Skirts of the instanced path: one quad per segment (raster/select.comp.glsl) hanging from a tile edge that
+// faces a ray-cast tile down to below the tile's lowest point; clipping is off across the skirt's own plane.
+layout(location = 0) in vec3 a_p;         // per instance: segment start (tile cells x, y; height in metres)
+layout(location = 1) in vec3 a_q;         // segment end
+uniform vec3 origin_rel;
+uniform float spacing;
+uniform mat4 view_proj_rel;
+uniform vec4 clip_rel;
+uniform int tile_level;
+uniform float skirt_bottom;               // eye-relative z of the skirt's lower edge
+out vec3 v_rel;
+flat out int v_level;
+noperspective out vec3 v_bary;
+out float gl_ClipDistance[4];
+
+void main() {
+    const int END[6] = int[6](0, 0, 1, 1, 0, 1);    // two triangles: (a, a', b), (b, a', b')
+    const int LOW[6] = int[6](0, 1, 0, 0, 1, 1);
+    int v = gl_VertexID;
+    vec3 s = END[v] == 0 ? a_p : a_q;
+    vec3 p = origin_rel + vec3(s.xy * spacing, s.z);
+    if (LOW[v] == 1) p.z = skirt_bottom;
+    int axis = a_p.x == a_q.x ? 0 : 1;              // 0: a west or east edge (x constant)
+    v_rel = p;
+    v_level = tile_level;
+    v_bary = vec3(1.0, 0.0, 0.0);
+    gl_ClipDistance[0] = axis == 0 ? 1.0 : p.x - clip_rel.x;
+    gl_ClipDistance[1] = axis == 1 ? 1.0 : p.y - clip_rel.y;
+    gl_ClipDistance[2] = axis == 0 ? 1.0 : clip_rel.z - p.x;
+    gl_ClipDistance[3] = axis == 1 ? 1.0 : clip_rel.w - p.y;
+    gl_Position = view_proj_rel * vec4(p, 1.0);
+}
