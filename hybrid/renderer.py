@@ -201,6 +201,8 @@ class Renderer:
             stats.uploads = self.cache.stats.uploads - uploads0
             stats.evictions = self.cache.stats.evictions - evictions0
             result = target.read(view, stats)
+            if "triangles" in counters:          # drawn triangles per pixel that shows terrain
+                counters["triangles_per_pixel"] = counters["triangles"] / max(int(result.mask.sum()), 1)
             if maps:
                 result.maps = {"strategy": self.strategy_map(view, plans, tau, opts)}
             return result

@@ -40,15 +40,15 @@ int owner_delta(int m, int a, int b) {
     return 0;
 }
 
-// 1 split, 0 not split, -1 split by the tile tree (forced), for any node of this tile or its apron
+// 1 split, 0 not split, -1 split by the tile tree (forced), for any node of this tile or its apron;
+// E and d (effective error, distance to the box) where the node has data, else d = -1
 int split_state(int m, int a, int b, out float E, out float d) {
-    E = 0.0; d = 0.0;
+    E = 0.0; d = -1.0;
     if (m > top) return -1;                      // above the tile's root: the tile tree refined it
     int delta = owner_delta(m, a, b);
     if (delta == 9) return -1;                   // beyond the terrain: nothing to match
     int mb = m - delta;                          // the node's local level in its own tile
     if (mb < 1) return 0;                        // that tile's finest nodes cannot split
-    if (mb >= top) return -1;                    // that tile's root (or above): always split
     int s = side_of(m);
     vec4 nd = node[offsets[m] + (a + 1) * (s + 2) + (b + 1)];
     if (nd.w == 0.0) return -1;
@@ -57,16 +57,19 @@ int split_state(int m, int a, int b, out float E, out float d) {
     vec3 hi = origin_rel + vec3(vec2(float(b) + 2.0, float(a) + 2.0) * S * spacing, nd.z);
     d = length(max(max(lo, -hi), vec3(0.0)));
     E = nd.x;
+    if (mb >= top) return -1;                    // that tile's root (or above): always split
     return E * k_tau > d ? 1 : 0;
 }
 
 bool splits(int m, int a, int b) { float E, d; return split_state(m, a, b, E, d) != 0; }
 
-// morph factor of the posts a split node created: 1 on the coarser surface (just split), 0 own height
+// morph factor of the posts a split node created: 1 on the coarser surface (just split), 0 own height. A
+// tile's root is split by force; its factor still follows its error, so a whole tile changing pyramid level
+// morphs as a node inside a tile does (1 where the node itself would not split yet)
 float alpha(int m, int a, int b) {
     float E, d;
     int st = split_state(m, a, b, E, d);
-    if (st < 0 || !morph) return 0.0;
+    if (st == 0 || d < 0.0 || !morph) return 0.0;
     if (E <= 0.0) return 1.0;
     return clamp((d / (E * k_tau) - beta) / (1.0 - beta), 0.0, 1.0);
 }
