@@ -23,11 +23,13 @@ import itertools
 import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import get_args
 
 from hybrid.camera.view import parse_size
+from hybrid.contract import Method
 from hybrid.errors import TerrabenchError
 
-POLICIES = ("reference", "raster", "raycast", "hybrid", "heuristic", "oracle", "fullres", "tin")
+POLICIES = get_args(Method)
 RECONSTRUCTIONS = ("planes", "linear", "triangles", "bilinear")
 
 
@@ -57,7 +59,7 @@ class Spec:
         out = []
         for ds, seed, fl, size, tau, rec, pol in itertools.product(self.datasets, self.seeds, self.flights, self.sizes,
                                                                    self.taus, self.reconstructions, self.policies):
-            if pol in ("raster", "fullres", "tin", "reference") and rec != self.reconstructions[0]:
+            if pol not in ("raycast", "hybrid", "heuristic", "oracle") and rec != self.reconstructions[0]:
                 continue                      # reconstruction only matters where rays are cast
             if pol == "reference" and tau != self.taus[0]:
                 continue

@@ -3,19 +3,22 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import get_args
 
 import numpy as np
 
+from hybrid.contract import Method
 from hybrid.errors import TerrabenchError
+from hybrid.strategies import STRATEGIES
 
 from ..folders import writable_folder
 from . import argtypes
 from .options import TerrainOptions, ViewOptions, add_terrain_arguments, add_view_arguments, from_args
 
 HELP = "render one view with a method to PNG + depth (.depth.npy)"
-METHODS = ("reference", "raster", "raycast", "hybrid", "heuristic", "oracle", "fullres", "tin")
+METHODS = get_args(Method)
 MIXED = ("hybrid", "heuristic", "oracle")
-RASTER_METHODS = ("raster", "fullres", "tin")
+RASTER_METHODS = tuple(n for n, e in STRATEGIES.items() if e.kind == "raster")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
