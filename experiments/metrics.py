@@ -86,12 +86,19 @@ def near_silhouettes(distance: np.ndarray) -> np.ndarray:
         else:
             edge[:-1, :] |= step
             edge[1:, :] |= step
-    grown = edge.copy()                           # grow by one pixel: silhouettes move by a pixel between methods
-    grown[1:] |= edge[:-1]
-    grown[:-1] |= edge[1:]
-    out = grown.copy()
-    out[:, 1:] |= grown[:, :-1]
-    out[:, :-1] |= grown[:, 1:]
+    return grow(edge, 1)                          # silhouettes move by a pixel between methods
+
+
+def grow(mask: np.ndarray, pixels: int) -> np.ndarray:
+    """A boolean image with every set pixel grown into the (2 * pixels + 1)² square around it."""
+    out = mask.copy()
+    for _ in range(pixels):
+        rows = out.copy()
+        rows[1:] |= out[:-1]
+        rows[:-1] |= out[1:]
+        out = rows.copy()
+        out[:, 1:] |= rows[:, :-1]
+        out[:, :-1] |= rows[:, 1:]
     return out
 
 
