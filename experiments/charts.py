@@ -1,4 +1,4 @@
-"""Charts of a run (matplotlib, PNG and SVG): frame time, memory, speed vs accuracy, strategy mix, images."""
+"""Charts of a run (matplotlib, PNG and SVG): frame time, memory, speed vs accuracy, strategy mix, popping, images."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -69,6 +69,14 @@ def frame_time_chart(f, folder) -> list[Path]:
 def memory_chart(f, folder) -> list[Path]:
     """Resident GPU memory over the flight per method."""
     return _per_scene(f, folder, "gpu_memory", "gpu_bytes", "GPU memory (MiB)", 1 / 2**20)
+
+
+def depth_jump_chart(f, folder) -> list[Path]:
+    """Popping over the flight per method: the largest change of a pixel's hit distance from the previous frame,
+    against the reference's own (1 = no more than the camera's motion)."""
+    if "depth_jump_ratio" not in f or not f["depth_jump_ratio"].notna().any():
+        return []
+    return _per_scene(f, folder, "depth_jump", "depth_jump_ratio", "largest depth jump / reference's")
 
 
 def pareto_front(points: np.ndarray) -> np.ndarray:
@@ -191,4 +199,5 @@ def all_charts(run: Path, frames: pd.DataFrame, folder: Path, image_frames: list
     f = label_columns(frames)
     return {"frame_time": frame_time_chart(f, folder), "gpu_memory": memory_chart(f, folder),
             "speed_vs_accuracy": speed_accuracy_chart(f, folder), "strategy_mix": strategy_mix_chart(f, folder),
+            "depth_jump": depth_jump_chart(f, folder),
             "images": image_panels(run, f, folder, image_frames)}

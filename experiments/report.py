@@ -106,6 +106,7 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
           "", "## Summary", "", md_table(table), ""]
     titles = {"frame_time": "Frame time over the flight", "gpu_memory": "GPU memory over the flight",
               "speed_vs_accuracy": "Speed against accuracy", "strategy_mix": "Strategy mix per frame",
+              "depth_jump": "Popping: largest depth jump from the previous frame, against the reference's",
               "images": "Images", "video": "Flight animation"}
     for key, files in charts.items():
         pngs = [p for p in files if p.suffix in (".png", ".gif")]

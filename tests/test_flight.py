@@ -50,3 +50,32 @@ def test_bad_flights(tmp_path, puget257):
         preset("orbit", puget257, frames=4).view(4)
     with pytest.raises(TerrabenchError, match="frames must be"):
         Flight("x", [[0, 0, 1]], [[0, 1, 0]], frames=0)
+
+
+def _ground_along_ray(hf, eye, direction, far):
+    """Distance (m) along a ray to the first point below the ground, marched in 1 m steps; inf if none."""
+    t = np.arange(1.0, far, 1.0)
+    p = eye + t[:, None] * direction
+    below = p[:, 2] <= hf.ground_height(p[:, 0], p[:, 1])
+    return float(t[np.argmax(below)]) if below.any() else np.inf
+
+
+def test_dolly_moves_slowly_and_steadily_above_the_terrain(puget257):
+    hf = puget257
+    f = preset("dolly", hf, frames=24)
+    views = f.views()
+    eyes = np.array([v.eye for v in views])
+    assert len(views) == 24
+    clearance = eyes[:, 2] - hf.ground_height(eyes[:, 0], eyes[:, 1])
+    # above the ground under the eye by the margin (30 m or a fifth of the local relief), at every frame
+    assert clearance.min() >= 30.0
+    step = np.linalg.norm(np.diff(eyes, axis=0), axis=1)
+    assert np.allclose(step, step[0], rtol=1e-6) and 2.0 <= step[0] <= 10.0       # a few metres, steadily
+    assert np.allclose(np.diff(eyes[:, 2]), 0.0)                                   # level
+    for v in views[::6]:
+        assert -0.2 < v.forward[2] < -0.05                                          # ahead and slightly down
+        hit = _ground_along_ray(hf, v.eye, v.forward, 60000.0)
+        assert np.isfinite(hit) and step[0] / hit < 0.01            # motion small against the distance in view
+    assert step[0] / clearance.min() < 0.2
+    again = preset("dolly", hf, frames=24).views()
+    assert all(np.array_equal(a.eye, b.eye) and np.array_equal(a.target, b.target) for a, b in zip(views, again))

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from gl_memory import allocated_bytes
 
-from experiments.metrics import coverage_errors, hole_pixels_in_columns
+from experiments.metrics import coverage_errors, grow, hole_pixels_in_columns, near_silhouettes
 from hybrid.camera.flight import preset
 from hybrid.cost.model import CostModel
 from hybrid.errors import TerrabenchError
@@ -73,6 +73,66 @@ def test_no_hole_at_strategy_borders(frames):
         seam = holes(h) & ~holes(f["raster"]) & ~holes(f["raycast"]) & ~hole_pixels_in_columns(ref)
         assert not (seam & near).any(), np.argwhere(seam & near)[:5]
         assert coverage_errors(h, ref)["hole_px"] <= coverage_errors(f["raster"], ref)["hole_px"] + 5
+
+
+# Strategy borders against the rest of the image: mean error in a band of 2 px either side of a raster / ray-cast
+# border over the mean error of pixels 8 px or more from any border, at the same distance. Measured (tile size
+# 128, the three views above; the flyover's borders are nearly all silhouettes, so the orbit view's 1471 band
+# pixels carry the measure): the pure raster and ray-cast frames over the same pixels reach 1.39 / 1.37 in
+# colour and 1.02 / 1.21 in depth (the band lies on rougher ground than the average); a seam shows as more.
+SEAM_BAND_PX, SEAM_AWAY_PX, SEAM_MAX_RATIO = 2, 8, 1.6
+
+
+def seam_ratios(frames, key: str) -> tuple[int, float, float]:
+    """(band pixels, colour error ratio, relative depth error ratio) of frame ``key`` against the reference,
+    band along the hybrid frames' strategy borders over pixels away from them, matched in distance.
+
+    Only pixels that both the frame and the reference cover and that lie away from silhouettes count (at a
+    silhouette a pixel's error is the silhouette's, whatever draws it). Away pixels are weighted to the band's
+    distribution over 8 quantile bins of the reference's log distance.
+    """
+    sums, n = np.zeros(4), 0
+    for f in frames:
+        frame, ref, smap = f[key], f["ref"], f["hybrid"].maps["strategy"]
+        a, b = smap == 1, smap == 2
+        border = (grow(a, 1) & b) | (grow(b, 1) & a)
+        ok = np.isfinite(frame.distance) & np.isfinite(ref.distance) & ~near_silhouettes(ref.distance) \
+            & ~near_silhouettes(frame.distance)
+        band = grow(border, SEAM_BAND_PX) & ok
+        away = ~grow(border, SEAM_AWAY_PX) & ok
+        if not band.any():
+            continue
+        rd = np.where(ok, ref.distance, 1.0).astype(np.float64)
+        colour = np.abs(frame.colour.astype(np.float64) - ref.colour).mean(axis=2)
+        depth = np.abs(np.where(ok, frame.distance, 1.0) - rd) / rd
+        logd = np.log(rd)
+        edges = np.quantile(logd[band], np.linspace(0, 1, 9))
+        bins = np.digitize(logd, edges[1:-1])
+        for k in range(8):
+            inside, outside = band & (bins == k), away & (bins == k) & (logd >= edges[0]) & (logd <= edges[-1])
+            if inside.any() and outside.sum() >= 20:
+                w = int(inside.sum())
+                sums += w * np.array([colour[inside].mean(), colour[outside].mean(), depth[inside].mean(),
+                                      depth[outside].mean()])
+                n += w
+    return n, sums[0] / sums[1], sums[2] / sums[3]
+
+
+def test_pure_frames_are_as_good_along_strategy_borders_as_elsewhere(frames):
+    """The control of the seam test: the measure stays below its bound where there is no seam."""
+    for key in ("raster", "raycast"):
+        n, colour, depth = seam_ratios(frames, key)
+        assert n >= 200 and colour <= SEAM_MAX_RATIO and depth <= SEAM_MAX_RATIO, (key, n, colour, depth)
+
+
+@pytest.mark.xfail(strict=True, reason="measured: colour error 2.45x and depth error 3.31x in the 2-px band; ray-cast "
+                   "pixels on the far side of a ray-cast tile next to raster tiles hit 2-6 % too far, in a flat "
+                   "bright colour (not the raster skirts: the strategy map marks them ray cast)")
+def test_no_seam_along_strategy_borders(frames):
+    n, colour, depth = seam_ratios(frames, "hybrid")
+    assert n >= 200
+    assert colour <= SEAM_MAX_RATIO, f"colour error along strategy borders {colour:.2f}x the rest"
+    assert depth <= SEAM_MAX_RATIO, f"depth error along strategy borders {depth:.2f}x the rest"
 
 
 def test_depth_agrees_across_strategies(frames):

@@ -40,6 +40,7 @@ def test_tables_have_expected_rows_and_columns(run):
         assert col in f, col
     assert f["wall_ms"].gt(0).all() and f["gpu_bytes"].gt(0).all()
     assert f.loc[f["frame"] > 0, "error_flicker"].notna().all()
+    assert f.loc[f["frame"] > 0, "depth_jump_ratio"].gt(0).all() and f.loc[f["frame"] == 0, "depth_jump_ratio"].isna().all()
     h = f[f["policy"] == "hybrid"]
     assert (h["tiles_raster"] + h["tiles_raycast"] == h["tiles"]).all()
     assert f.loc[f["policy"] == "raycast", "rays"].gt(0).all()
@@ -58,9 +59,11 @@ def test_report_and_charts(run, tmp_path):
     for part in ("## Environment", "GL renderer:", "## Reading", "## Summary", "frame_time.png", "speed_vs_accuracy.png",
                  "Puget Sound terrain: USGS"):
         assert part in text, part
-    for name in ("frame_time", "gpu_memory", "speed_vs_accuracy", "strategy_mix", "images_fbm_flyover_160x90_f1"):
+    for name in ("frame_time", "gpu_memory", "speed_vs_accuracy", "strategy_mix", "depth_jump",
+                 "images_fbm_flyover_160x90_f1"):
         assert (md.parent / f"{name}.png").stat().st_size > 5000 and (md.parent / f"{name}.svg").exists()
-    assert (md.parent / "report.html").read_text().count("<img") >= 5
+    assert (md.parent / "report.html").read_text().count("<img") >= 6
+    assert "depth_jump.png" in md.read_text()
 
 
 def test_interrupted_run_resumes_without_redoing(run, ctx):

@@ -1,4 +1,4 @@
-"""`terrabench bench`: the ray-cast, raster and hybrid benchmarks in one process, tables printed and saved."""
+"""`terrabench bench`: the ray-cast, raster, hybrid and planning benchmarks in one process, tables printed and saved."""
 from __future__ import annotations
 
 import argparse
@@ -11,8 +11,8 @@ import pandas as pd
 from ..folders import writable_folder
 from . import argtypes
 
-HELP = "the raster, ray-cast and hybrid benchmarks in one run, with the device named"
-BENCHES = ("raycast", "raster", "hybrid")
+HELP = "the raster, ray-cast, hybrid and planning benchmarks in one run, with the device named"
+BENCHES = ("raycast", "raster", "hybrid", "planning")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -31,6 +31,9 @@ def benchmark(ctx, name: str, frames: int = 8) -> dict[str, pd.DataFrame]:
     if name == "raster":
         from ..bench_raster import run
         return run(ctx)
+    if name == "planning":
+        from ..bench_planning import run
+        return run(ctx, frames=frames)
     from ..bench_hybrid import run
     return run(ctx, frames=frames)
 

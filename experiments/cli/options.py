@@ -110,7 +110,7 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--size", type=argtypes.size("--size"), default="640x360", help="viewport WIDTHxHEIGHT in pixels")
     p.add_argument("--near", type=float, default=None, help="near plane in metres")
     p.add_argument("--far", type=float, default=None, help="far plane in metres")
-    p.add_argument("--flight", default=None, help="preset (orbit, flyover, grazing, lookdown) or a .json/.csv flight")
+    p.add_argument("--flight", default=None, help="preset (orbit, flyover, grazing, lookdown, dolly) or a .json/.csv flight")
     p.add_argument("--frames", type=int, default=60, help="frames of a preset flight")
     p.add_argument("--frame", type=int, default=0, help="frame of the flight to render")
 

@@ -17,7 +17,7 @@ from hybrid.camera.view import View
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.heightfield import HeightField
 
-PRESETS = ("orbit", "flyover", "grazing", "lookdown")
+PRESETS = ("orbit", "flyover", "grazing", "lookdown", "dolly")
 
 
 @dataclass
@@ -125,18 +125,50 @@ class Flight:
             raise TerrabenchError(f"{path}: malformed flight file ({type(exc).__name__}: {exc})") from None
 
 
-def _clear_height(hf: HeightField, x: np.ndarray, y: np.ndarray, radius: float) -> np.ndarray:
-    """Highest ground (world z) within ``radius`` metres of each (x, y), sampled on a small stencil."""
-    best = hf.ground_height(x, y)
+def _stencil_heights(hf: HeightField, x: np.ndarray, y: np.ndarray, radius: float) -> np.ndarray:
+    """Ground (world z) at each (x, y) and at 16 points around it within ``radius`` metres: shape (17, len(x))."""
+    out = [hf.ground_height(x, y)]
     for ang in np.linspace(0, 2 * np.pi, 8, endpoint=False):
         for r in (0.5 * radius, radius):
-            best = np.maximum(best, hf.ground_height(x + r * np.cos(ang), y + r * np.sin(ang)))
-    return best
+            out.append(hf.ground_height(x + r * np.cos(ang), y + r * np.sin(ang)))
+    return np.array(out)
+
+
+def _clear_height(hf: HeightField, x: np.ndarray, y: np.ndarray, radius: float) -> np.ndarray:
+    """Highest ground (world z) within ``radius`` metres of each (x, y), sampled on a small stencil."""
+    return _stencil_heights(hf, x, y, radius).max(axis=0)
+
+
+DOLLY_PITCH_DEG = 8.0
+
+
+def _dolly(hf: HeightField, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eyes and targets (world metres) of the dolly at frame numbers k: a straight level line to the north-east.
+
+    The eye advances max(2 m, spacing / 40) a frame (4 m on Puget's 160 m grid), at one height for the whole
+    line: the highest ground within 2 % of the terrain's size of any point of it, plus max(30 m, 20 % of
+    that neighbourhood's relief); it looks along the line, DOLLY_PITCH_DEG below the horizon.
+    """
+    w, d = hf.extent
+    ox, oy, _ = hf.origin
+    size = max(w, d)
+    step = max(2.0, hf.spacing / 40.0)
+    heading = np.array([w, d]) / np.hypot(w, d)
+    x = ox + 0.3 * w + k * step * heading[0]
+    y = oy + 0.3 * d + k * step * heading[1]
+    ground = _stencil_heights(hf, x, y, 0.02 * size)
+    high, low = ground.max(), ground.min()
+    z = np.full(len(k), high + max(30.0, 0.2 * (high - low)))
+    eyes = np.stack([x, y, z], 1)
+    ahead = 0.1 * size
+    targets = eyes + [ahead * heading[0], ahead * heading[1], -ahead * np.tan(np.radians(DOLLY_PITCH_DEG))]
+    return eyes, targets
 
 
 def preset(name: str, hf: HeightField, frames: int = 60, width: int = 640, height: int = 360,
            fov_y: float = 60.0) -> Flight:
-    """A named flight over hf: orbit, flyover (low), grazing (eye 2 m above ground) or lookdown."""
+    """A named flight over hf: orbit, flyover (low), grazing (eye 2 m above ground), lookdown or dolly (slow,
+    straight and level, low over the terrain, looking ahead and slightly down)."""
     w, d = hf.extent
     ox, oy, oz = hf.origin
     lo, hi = hf.height_range
@@ -144,7 +176,7 @@ def preset(name: str, hf: HeightField, frames: int = 60, width: int = 640, heigh
     cx, cy = ox + w / 2, oy + d / 2
     far = size * 4 + (hi - lo) * 4
     # ground-following presets get one keyframe per frame, so every frame keeps its clearance exactly
-    n_key = max(int(frames), 2) if name in ("flyover", "grazing") else 8
+    n_key = max(int(frames), 2) if name in ("flyover", "grazing", "dolly") else 8
     s = np.linspace(0.0, 1.0, n_key)
     if name == "orbit":
         ang = np.radians(225.0) + s * np.pi * 2 * 0.75
@@ -176,6 +208,9 @@ def preset(name: str, hf: HeightField, frames: int = 60, width: int = 640, heigh
         eyes = np.stack([x, y, z], 1)
         targets = np.stack([x, y, np.full(n_key, oz + lo)], 1)
         near = max(0.5, size * 1e-5)
+    elif name == "dolly":
+        eyes, targets = _dolly(hf, s * (n_key - 1))
+        near = 1.0
     else:
         raise TerrabenchError(f"unknown flight {name!r}; choose one of {', '.join(PRESETS)} or give a .json/.csv file")
     return Flight(f"{name}", eyes, targets, frames, fov_y, width, height, near, far)

@@ -32,13 +32,17 @@ TERMS = {"raster": ("const", "triangles", "visible_triangles", "pixels"),
          "raycast": ("const", "pixels", "surface_pixels", "pixel_steps")}
 
 
-def term_values(f: TileFeatures, strategy: str) -> np.ndarray:
-    """The model's input terms for one tile and strategy."""
+def term_values(f, strategy: str) -> np.ndarray:
+    """The model's input terms for one tile (a ``TileFeatures``: shape (4,)) or many (a dict of (B,) feature
+    columns as from ``hybrid.cost.features.feature_columns``: shape (B, 4))."""
+    g = f if isinstance(f, dict) else vars(f)
     if strategy == "raster":
-        return np.array([1.0, f.triangles, f.triangles * f.visible, f.pixels])
-    if strategy == "raycast":
-        return np.array([1.0, f.pixels, f.surface_pixels, f.pixels * np.log2(1.0 + f.slab_cells)])
-    raise TerrabenchError(f"unknown strategy {strategy!r} for the cost model; choose raster or raycast")
+        terms = (1.0, g["triangles"], g["triangles"] * g["visible"], g["pixels"])
+    elif strategy == "raycast":
+        terms = (1.0, g["pixels"], g["surface_pixels"], g["pixels"] * np.log2(1.0 + g["slab_cells"]))
+    else:
+        raise TerrabenchError(f"unknown strategy {strategy!r} for the cost model; choose raster or raycast")
+    return np.stack(np.broadcast_arrays(*(np.asarray(t, dtype=np.float64) for t in terms)), axis=-1)
 
 
 @dataclass
@@ -59,11 +63,12 @@ class CostModel:
 
     def predict(self, f: TileFeatures) -> dict[str, float]:
         """Predicted milliseconds each strategy adds to a frame for one tile (overhead not included)."""
-        out = {}
-        for s in ("raster", "raycast"):
-            coef = np.array([getattr(self, s)[t] for t in TERMS[s]])
-            out[s] = float(term_values(f, s) @ coef)
-        return out
+        return {s: float(v) for s, v in self.predict_columns(f).items()}
+
+    def predict_columns(self, columns) -> dict[str, np.ndarray]:
+        """Predicted milliseconds of each strategy for many tiles at once, from feature columns ((B,) arrays)."""
+        return {s: term_values(columns, s) @ np.array([getattr(self, s)[t] for t in TERMS[s]])
+                for s in ("raster", "raycast")}
 
     def explain(self) -> str:
         """The two formulas with their coefficients, and the held-out error."""

@@ -11,11 +11,14 @@ Policies:
 """
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass, field
+
+import numpy as np
 
 from hybrid.camera.view import View
 from hybrid.contract import POLICIES, PURE_POLICIES, TriangleEstimator
-from hybrid.cost.features import TileFeatures, tile_features
+from hybrid.cost.features import TileFeatures, feature_columns, features_from_columns, tile_features
 from hybrid.cost.model import CostModel
 from hybrid.errors import TerrabenchError
 from hybrid.strategies import triangle_estimator
@@ -48,27 +51,47 @@ class TilePlan:
                 "meas_raster_ms": self.measured.get("raster"), "meas_raycast_ms": self.measured.get("raycast")}
 
 
+def choices(policy: str, columns: dict, predicted: dict, threshold: float = 1.0) -> list[str]:
+    """The strategy a policy picks for each of many tiles, from feature columns and predicted ms ((B,) arrays)."""
+    if policy in PURE_POLICIES:
+        return [policy] * len(columns["pixels"])
+    if policy == "hybrid":
+        raster = np.asarray(predicted["raster"]) <= np.asarray(predicted["raycast"])
+    elif policy == "heuristic":
+        raster = ~(np.asarray(columns["triangles"]) > threshold * np.maximum(columns["pixels"], 1.0))
+    elif policy == "oracle":
+        raster = np.ones(len(columns["pixels"]), dtype=bool)
+    else:
+        raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
+    return np.where(raster, "raster", "raycast").tolist()
+
+
 def choose(policy: str, features: TileFeatures, predicted: dict, threshold: float = 1.0) -> str:
     """The strategy a policy picks for one tile (oracle: 'raster' until measured)."""
-    if policy in PURE_POLICIES:
-        return policy
-    if policy == "hybrid":
-        return "raster" if predicted["raster"] <= predicted["raycast"] else "raycast"
-    if policy == "heuristic":
-        return "raycast" if features.triangles > threshold * max(features.pixels, 1.0) else "raster"
-    if policy == "oracle":
-        return "raster"
-    raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
+    columns = {n: np.array([v]) for n, v in vars(features).items()}
+    return choices(policy, columns, {s: np.array([v]) for s, v in predicted.items()}, threshold)[0]
+
+
+_ESTIMATORS: "weakref.WeakKeyDictionary[TilePyramid, TriangleEstimator]" = weakref.WeakKeyDictionary()
+
+
+def default_estimator(pyramid: TilePyramid) -> TriangleEstimator:
+    """The raster strategy's triangle estimate for a pyramid, made once per pyramid (it caches per-tile errors)."""
+    if pyramid not in _ESTIMATORS:
+        _ESTIMATORS[pyramid] = triangle_estimator(pyramid)
+    return _ESTIMATORS[pyramid]
 
 
 def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
                triangles_fn: TriangleEstimator | None = None, policy: str = "hybrid", tau: float = DEFAULT_TAU,
-               threshold: float = 1.0) -> list[TilePlan]:
+               threshold: float = 1.0, batch: bool = True) -> list[TilePlan]:
     """Selected tiles front to back with the policy's choice of strategy for each.
 
     A pure policy (one strategy for every tile) needs no features: its plans carry none. A mixed policy gets
     features, the model's predicted ms of both candidates and its choice; ``triangles_fn`` gives the raster
-    mesh's triangle count for a tile (default: the raster strategy's CPU estimate from the registry).
+    mesh's triangle count for a tile (default: the raster strategy's CPU estimate from the registry, one per
+    pyramid). Features and predictions of all tiles are computed as arrays; ``batch=False`` computes them
+    tile by tile instead (the reference path: the same plans, slower).
     """
     if policy not in POLICIES:
         raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
@@ -77,16 +100,24 @@ def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
         return [TilePlan(s, None, {}, policy) for s in selected]
     if model is None:
         raise TerrabenchError(f"policy {policy!r} needs a cost model (hybrid.cost.model.load_cost_model)")
-    triangles_fn = triangles_fn or triangle_estimator(pyramid)
-    plans = []
-    for s in selected:
-        f = tile_features(pyramid, view, s, triangles_fn(s.key, s, view, tau))
-        p = model.predict(f)
-        plans.append(TilePlan(s, f, p, choose(policy, f, p, threshold)))
-    if policy == "hybrid" and plans:
-        options = {"mixed": [p.choice for p in plans], "raster": ["raster"] * len(plans),
-                   "raycast": ["raycast"] * len(plans)}
-        cost = {k: model.frame_ms([p.predicted[c] for p, c in zip(plans, ch)], set(ch)) for k, ch in options.items()}
+    if not selected:
+        return []
+    triangles_fn = triangles_fn or default_estimator(pyramid)
+    triangles = [triangles_fn(s.key, s, view, tau) for s in selected]
+    if batch:
+        columns = feature_columns(pyramid, view, selected, triangles)
+        features = features_from_columns(columns)
+        pred = model.predict_columns(columns)
+        predicted = [dict(zip(pred, p)) for p in zip(*(v.tolist() for v in pred.values()))]
+        chosen = choices(policy, columns, pred, threshold)
+    else:
+        features = [tile_features(pyramid, view, s, t) for s, t in zip(selected, triangles)]
+        predicted = [model.predict(f) for f in features]
+        chosen = [choose(policy, f, p, threshold) for f, p in zip(features, predicted)]
+    plans = [TilePlan(s, f, p, c) for s, f, p, c in zip(selected, features, predicted, chosen)]
+    if policy == "hybrid":
+        options = {"mixed": chosen, "raster": ["raster"] * len(plans), "raycast": ["raycast"] * len(plans)}
+        cost = {k: model.frame_ms([p[c] for p, c in zip(predicted, ch)], set(ch)) for k, ch in options.items()}
         best = min(cost, key=cost.get)
         for p, c in zip(plans, options[best]):
             p.choice = c

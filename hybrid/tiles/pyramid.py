@@ -203,6 +203,25 @@ class TilePyramid:
         z0, z1 = self.zrange(key)
         return np.array([x0, y0, z0]), np.array([x1, y1, z1])
 
+    def aabbs(self, levels: np.ndarray, tx: np.ndarray, ty: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World-space (min, max) corners, (B, 3) float64 metres each, of tiles given as arrays of level, tx, ty.
+
+        The same values as ``aabb`` of each key, computed per level with array indexing.
+        """
+        levels, tx, ty = (np.asarray(a, dtype=np.int64).reshape(-1) for a in (levels, tx, ty))
+        hf = self.hf
+        ox, oy, oz = hf.origin
+        span = (self.n << levels) * hf.spacing
+        x0, y0 = ox + tx * span, oy + ty * span
+        x1 = np.minimum(x0 + span, ox + (hf.cols - 1) * hf.spacing)
+        y1 = np.minimum(y0 + span, oy + (hf.rows - 1) * hf.spacing)
+        z0, z1 = np.empty(len(levels)), np.empty(len(levels))
+        for level in np.unique(levels):
+            at = levels == level
+            z0[at] = oz + self._zmin[int(level)][ty[at], tx[at]].astype(np.float64)
+            z1[at] = oz + self._zmax[int(level)][ty[at], tx[at]].astype(np.float64)
+        return np.stack([x0, y0, z0], axis=1), np.stack([x1, y1, z1], axis=1)
+
     def tile(self, key: TileKey) -> Tile:
         """The tile's level-l samples and placement."""
         if not self.exists(key):

@@ -1,0 +1,91 @@
+"""Batched planning: features, predictions and choices of a whole frame equal the tile-by-tile reference."""
+import numpy as np
+import pytest
+
+from hybrid.camera.flight import preset
+from hybrid.camera.view import View
+from hybrid.cost.features import feature_columns, footprint_pixels, tile_features, tile_features_batch
+from hybrid.cost.footprint import box_corners, footprints, screen_points
+from hybrid.cost.model import load_cost_model
+from hybrid.cost.planner import plan_frame
+from hybrid.terrain.datasets import cliff, fbm, puget, ridged
+from hybrid.tiles.pyramid import TilePyramid
+from hybrid.tiles.tiletree import select_tiles
+
+MODEL = load_cost_model("llvmpipe (LLVM 15.0.6, 256 bits)")
+# A shoelace sum over pixel coordinates of a few hundred, of polygons with up to a dozen vertices, carries
+# about 1e-16 * 640 * 360 * 12 ~ 3e-10 px² of rounding whatever the order of the vertices: the two
+# computations of a footprint far below a pixel agree to that absolute amount (seen: 1.5e-9 px² on 0.045 px²),
+# not relatively.
+RTOL, ATOL = 1e-9, 1e-8
+
+
+def _views(hf, frames=6):
+    views = [v for name in ("flyover", "orbit", "grazing", "lookdown") for v in preset(name, hf, frames).views()]
+    # a low eye inside the terrain's boxes, so that near-plane cuts of tile boxes are covered too
+    x0, y0, z0 = hf.origin
+    w, d = hf.extent
+    lo, hi = hf.height_range
+    views.append(View([x0 + 0.5 * w, y0 + 0.3 * d, z0 + hi + 5], [x0 + 0.5 * w, y0 + 0.9 * d, z0 + lo], 70, 320, 200))
+    return views
+
+
+@pytest.mark.parametrize("hf,size", [(puget(), 256), (puget(), 64), (fbm(257, seed=3), 32), (ridged(257), 64),
+                                     (cliff(129), 16)])
+def test_batch_features_equal_per_tile(hf, size):
+    pyramid = TilePyramid(hf, size)
+    tiles = cut = 0
+    for view in _views(hf):
+        sel = select_tiles(pyramid, view, 2 / 3)
+        tri = np.arange(len(sel)) * 37.0
+        ref = [tile_features(pyramid, view, s, t) for s, t in zip(sel, tri)]
+        got = tile_features_batch(pyramid, view, sel, tri)
+        for a, b in zip(ref, got):
+            for name, value in a.as_dict().items():
+                assert np.isclose(getattr(b, name), value, rtol=RTOL, atol=ATOL), (name, value, getattr(b, name))
+        tiles += len(sel)
+        lo, hi = pyramid.aabbs(*np.array([(s.key.level, s.key.tx, s.key.ty) for s in sel]).T)
+        cut += int(np.sum(~screen_points(view, box_corners(lo, hi))[1][:, :8].all(axis=1)))
+    assert tiles > 50 and cut > 0          # many tiles, and some boxes reach behind the eye
+
+
+def test_aabbs_equal_per_key():
+    pyramid = TilePyramid(fbm(300, seed=1), 32)
+    keys = [k for level in range(pyramid.max_level + 1) for k in pyramid.keys(level)]
+    lo, hi = pyramid.aabbs(*np.array([(k.level, k.tx, k.ty) for k in keys]).T)
+    for k, a, b in zip(keys, lo, hi):
+        ra, rb = pyramid.aabb(k)
+        assert np.array_equal(a, ra) and np.array_equal(b, rb)
+
+
+def test_footprints_of_boxes_seen_from_every_side():
+    rng = np.random.default_rng(5)
+    view = View([0, 0, 0], [0, 100, 0], 70, 300, 200, near=0.5)
+    lo = rng.uniform(-60, 60, (400, 3)) + [0, 40, 0]
+    hi = lo + rng.uniform(0, 40, (400, 3)) * (rng.random((400, 3)) > 0.1)    # some flat boxes
+    area, visible = footprints(view, lo, hi)
+    for i in range(len(lo)):
+        a, v = footprint_pixels(view, lo[i], hi[i], with_visible=True)
+        assert np.isclose(area[i], a, rtol=RTOL, atol=ATOL) and np.isclose(visible[i], v, rtol=1e-6, atol=1e-9)
+    assert np.sum(area > 0) > 100 and np.sum((visible > 0) & (visible < 1)) > 20
+
+
+def test_batch_plans_equal_per_tile_plans():
+    hf = puget()
+    for size in (256, 128):
+        pyramid = TilePyramid(hf, size)
+        for view in _views(hf, 4):
+            for policy in ("hybrid", "heuristic", "oracle", "raycast"):
+                a = plan_frame(pyramid, view, MODEL, policy=policy)
+                b = plan_frame(pyramid, view, MODEL, policy=policy, batch=False)
+                assert [p.key for p in a] == [p.key for p in b] and [p.choice for p in a] == [p.choice for p in b]
+                for x, y in zip(a, b):
+                    assert x.predicted.keys() == y.predicted.keys()
+                    for s in x.predicted:
+                        assert np.isclose(x.predicted[s], y.predicted[s], rtol=RTOL, atol=1e-12)
+
+
+def test_feature_columns_of_no_tiles():
+    pyramid = TilePyramid(fbm(65), 16)
+    cols = feature_columns(pyramid, preset("orbit", pyramid.hf, 2).view(0), [], [])
+    assert all(len(v) == 0 for v in cols.values())
