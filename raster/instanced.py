@@ -1,19 +1,23 @@
-"""The raster strategy a user would pick today: GPU-selected tilelets drawn as an instanced template.
+"""The raster strategy a user would pick today: GPU-selected tilelets as plain indexed triangles.
 
-The same leaves as the paper's path (raster.selection), without a geometry shader: one instance of an
-8-triangle template per leaf, positions pulled from the leaf's record in the vertex shader, and the skirts as
-a second instanced draw of one quad per segment. Both draws take their counts from indirect commands.
+The same leaves as the paper's path (raster.selection), without a geometry shader: the selection writes every
+leaf's 9 vertices and 24 indices (its fan, stitched, with full-resolution cells split SW-NE), and each tile is
+one indexed draw whose count comes from an indirect command; skirts are a small instanced draw of one quad
+per segment. Per leaf this is the paper's 9-post template; drawn without instancing because a CPU rasterizer
+runs its vertex pipeline once per instance. Wireframe draws polygon edges.
 """
 from __future__ import annotations
 
 from hybrid.gl.programs import program
 
-from .selection import CMD_SKIRTS, CMD_TEMPLATE, LEAF_FORMAT, SelectedTileletTile
+from .selection import CMD_SKIRTS, CMD_TEMPLATE, SelectedTileletTile
 from .tilelets import TileletDrawing
 
 
 class InstancedTileletStrategy(TileletDrawing):
-    """Restricted-quadtree tilelets selected on the GPU and drawn as an instanced template (no geometry shader)."""
+    """Restricted-quadtree tilelets selected on the GPU, drawn as indexed triangles (no geometry shader)."""
+
+    writes = "mesh"
 
     def __init__(self, ctx, hf, **options):
         super().__init__(ctx, hf, **options)
@@ -21,17 +25,21 @@ class InstancedTileletStrategy(TileletDrawing):
         self.skirt_prog = program(ctx, "raster", "skirt.vert.glsl", "tilelet.frag.glsl")
 
     def programs(self) -> tuple:
-        """The template and skirt programs."""
+        """The mesh and skirt programs."""
         return (self.prog, self.skirt_prog)
 
     def tile_arrays(self, g: SelectedTileletTile) -> dict:
-        """Per-instance leaf records for the template, per-instance segments for the skirts."""
-        fmt = LEAF_FORMAT + "/i"
-        return {"template": self.ctx.vertex_array(self.prog, [(g.leaves, fmt, "a_node", "a_h0", "a_h1", "a_h8")]),
+        """The tile's leaf vertices with their index buffer, and per-instance skirt segments."""
+        return {"mesh": self.ctx.vertex_array(self.prog, [(g.mesh_vertices, "4f", "a_vertex")],
+                                              index_buffer=g.mesh_indices, index_element_size=4),
                 "skirts": self.ctx.vertex_array(self.skirt_prog, [(g.segments, "3f 3f/i", "a_p", "a_q")])}
 
-    def draw_tile(self, g: SelectedTileletTile, tile, view) -> None:
-        """The tile's leaves as template instances, then its skirt quads."""
+    def draw_tile(self, g: SelectedTileletTile, tile, view, wireframe: bool = False) -> None:
+        """The tile's leaves as indexed triangles, then its skirt quads."""
         ctx = self.ctx
-        g.vaos["template"].render_indirect(g.commands, mode=ctx.TRIANGLES, count=1, first=CMD_TEMPLATE)
+        ctx.wireframe = bool(wireframe)
+        try:
+            g.vaos["mesh"].render_indirect(g.commands, mode=ctx.TRIANGLES, count=1, first=CMD_TEMPLATE)
+        finally:
+            ctx.wireframe = False
         g.vaos["skirts"].render_indirect(g.commands, mode=ctx.TRIANGLES, count=1, first=CMD_SKIRTS)

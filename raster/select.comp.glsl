@@ -3,6 +3,8 @@
 // A node is a leaf when its parent splits and it does not; its edge midpoint is dropped where the same-size
 // neighbour's parent does not split (that side is one level coarser). The leaf's nine post heights are
 // fetched and geomorphed here and appended, with its node, to the leaf buffer the draw reads.
+#extension GL_ARB_shader_ballot : enable
+#extension GL_ARB_gpu_shader_int64 : enable
 layout(local_size_x = 64) in;
 layout(std430, binding = 0) readonly buffer Nodes { vec4 node[]; };   // E, zlo, zhi, inside; one apron
 layout(std430, binding = 1) writeonly buffer Leaves { uint leaf[]; }; // 13 words a leaf: j0 i0 m drop, h[9]
@@ -10,11 +12,15 @@ layout(std430, binding = 2) buffer Commands { uint cmd[]; };          // indirec
 layout(std430, binding = 3) writeonly buffer Skirts { float seg[]; };  // 6 words a skirt segment
 layout(std430, binding = 4) buffer Frame { uint frame_count[]; };     // triangles, leaves, culled, segments
 
-uniform sampler2D heights;      // R32F (n+1)^2 tile samples, metres relative to the terrain origin z
+layout(std430, binding = 7) writeonly buffer MeshVerts { vec4 mesh_vertex[]; }; // 9 a leaf: x y z level
+layout(std430, binding = 8) writeonly buffer MeshIndex { uint mesh_index[]; };  // 24 a leaf
+layout(std430, binding = 6) buffer Found { uint found[]; };          // groups x, 1, 1, leaves, leaves[]
+layout(std430, binding = 5) readonly buffer Heights { float height[]; };  // (n+1)^2 tile samples, row from
+                                                                         // south, metres from the origin z
 uniform int n_cells;            // cells a tile side
 uniform int top;                // coarsest local level (log2(n) - 1): the tile's root
 uniform int offsets[13];        // start of each local level's node grid (with apron) in node[]
-uniform int starts[14];         // start of each local level in the invocation index (own nodes only)
+uniform int starts[14];         // start of each local level >= 1 in the invocation index (own nodes only)
 uniform int first_id;           // first node dispatched: finer levels cannot hold a leaf in this view
 uniform ivec4 nb_delta;         // W, E, S, N: neighbour tile level minus this tile's level; 9 = no neighbour
 uniform vec3 origin_rel;        // tile sample [0, 0] minus eye, metres (z: terrain origin z minus eye z)
@@ -24,6 +30,8 @@ uniform float beta;             // morph-safe error growth (raster.quadtree)
 uniform bool stitch;            // drop midpoints toward coarser neighbours (off: cracks, for tests)
 uniform bool morph;             // geomorph the posts a split creates (off: they appear at their own height)
 uniform bool cull;              // drop leaves outside the frustum
+uniform bool write_records;     // leaf records for the geometry-shader path (raster.tilelets)
+uniform bool write_mesh;        // vertices and indices for the plain indexed draw (raster.instanced)
 uniform vec4 planes[6];         // eye-relative frustum planes, inside where dot >= 0
 uniform int skirt_edges;        // tile edges W=1 E=2 S=4 N=8 that hang skirts (they face a ray-cast tile)
 uniform float skirt_bottom;     // eye-relative z of the skirts' lower edge
@@ -63,60 +71,151 @@ int split_state(int m, int a, int b, out float E, out float d) {
 
 bool splits(int m, int a, int b) { float E, d; return split_state(m, a, b, E, d) != 0; }
 
-// morph factor of the posts a split node created: 1 on the coarser surface (just split), 0 own height. A
-// tile's root is split by force; its factor still follows its error, so a whole tile changing pyramid level
-// morphs as a node inside a tile does (1 where the node itself would not split yet)
-float alpha(int m, int a, int b) {
-    float E, d;
-    int st = split_state(m, a, b, E, d);
+// morph factor of the posts a split node created (its state, error and distance from split_state): 1 on
+// the coarser surface (just split), 0 own height. A tile's root is split by force; its factor still follows
+// its error, so a whole tile changing pyramid level morphs as a node inside a tile does
+float alpha_of(int st, float E, float d) {
     if (st == 0 || d < 0.0 || !morph) return 0.0;
     if (E <= 0.0) return 1.0;
     return clamp((d / (E * k_tau) - beta) / (1.0 - beta), 0.0, 1.0);
 }
 
-float H(int i, int j) { return texelFetch(heights, ivec2(j, i), 0).r; }
+#if defined(GL_ARB_shader_ballot) && defined(GL_ARB_gpu_shader_int64)
+// Appends of the invocations running together are counted once per subgroup: one atomic from the lowest
+// live invocation reserves room for all of them (each gets its rank among the live ones).
+uint live_count(uint64_t m) { uvec2 v = unpackUint2x32(m); return uint(bitCount(v.x) + bitCount(v.y)); }
+
+// A slot in counter cmd[word] for every live invocation; ``also`` (>= 0) gets 24 indices a slot added.
+uint reserve(int word, int also, int total) {
+    uint64_t live = ballotARB(true);
+    uint n = live_count(live);
+    uvec2 lv = unpackUint2x32(live);
+    uint first = lv.x != 0u ? uint(findLSB(lv.x)) : 32u + uint(findLSB(lv.y));
+    uint base = 0u;
+    if (gl_SubGroupInvocationARB == first) {
+        base = atomicAdd(cmd[word], n);
+        if (also >= 0) atomicAdd(cmd[also], 24u * n);     // the indexed draw: 24 indices a leaf
+        if (total >= 0) atomicAdd(frame_count[total], n);
+    }
+    return readFirstInvocationARB(base) + live_count(live & gl_SubGroupLtMaskARB);
+}
+
+// A slot in the leaf list for every live invocation; keeps the pass-1 work group count (x) up to date.
+uint reserve_found() {
+    uint64_t live = ballotARB(true);
+    uint n = live_count(live);
+    uvec2 lv = unpackUint2x32(live);
+    uint first = lv.x != 0u ? uint(findLSB(lv.x)) : 32u + uint(findLSB(lv.y));
+    uint base = 0u;
+    if (gl_SubGroupInvocationARB == first) {
+        base = atomicAdd(found[3], n);
+        atomicMax(found[0], (base + n + 63u) / 64u);
+    }
+    return readFirstInvocationARB(base) + live_count(live & gl_SubGroupLtMaskARB);
+}
+
+// Adds v of every live invocation to frame_count[word] with one atomic per subgroup.
+void add_total(int word, uint v) {
+    uint64_t live = ballotARB(true);
+    uvec2 lv = unpackUint2x32(live);
+    uint first = lv.x != 0u ? uint(findLSB(lv.x)) : 32u + uint(findLSB(lv.y));
+    uint sum = 0u;
+    for (uint i = 0u; i < gl_SubGroupSizeARB; i++) {
+        uint x = readInvocationARB(v, i);
+        if (((live >> i) & 1ul) != 0ul) sum += x;
+    }
+    if (gl_SubGroupInvocationARB == first) atomicAdd(frame_count[word], sum);
+}
+#else
+uint reserve(int word, int also, int total) {
+    if (also >= 0) atomicAdd(cmd[also], 24u);
+    if (total >= 0) atomicAdd(frame_count[total], 1u);
+    return atomicAdd(cmd[word], 1u);
+}
+
+void add_total(int word, uint v) { atomicAdd(frame_count[word], v); }
+
+uint reserve_found() {
+    uint base = atomicAdd(found[3], 1u);
+    atomicMax(found[0], (base + 64u) / 64u);
+    return base;
+}
+#endif
+
+float H(int i, int j) { return height[i * (n_cells + 1) + j]; }
 
 void put_segment(vec2 p, float hp, vec2 q, float hq) {
-    uint k = atomicAdd(cmd[11], 1u);
-    atomicAdd(frame_count[3], 1u);
+    uint k = reserve(11, -1, 3);
     seg[6 * k + 0] = p.x; seg[6 * k + 1] = p.y; seg[6 * k + 2] = hp;
     seg[6 * k + 3] = q.x; seg[6 * k + 4] = q.y; seg[6 * k + 5] = hq;
 }
 
-void main() {
-    int id = first_id + int(gl_GlobalInvocationID.x);
-    if (id >= starts[top + 1]) return;
-    int m = 0;
-    while (m < top && id >= starts[m + 1]) ++m;          // at most 12 levels
+// true if node (m, a, b)'s box (its square, the height range of its grown box, the skirts) is wholly
+// outside one frustum plane: its drawn surface and skirts are too
+bool outside(int m, int a, int b) {
     int s = side_of(m);
-    int local = id - starts[m];
-    int a = local / s, b = local % s;
-    if (!splits(m + 1, a >> 1, b >> 1) || splits(m, a, b)) return;
+    float S = float(2 << m);
+    vec4 nd = node[offsets[m] + (a + 1) * (s + 2) + (b + 1)];
+    vec3 bmin = origin_rel + vec3(vec2(float(b), float(a)) * S * spacing, min(nd.y, skirt_edges != 0 ? skirt_bottom : nd.y));
+    vec3 bmax = origin_rel + vec3(vec2(float(b) + 1.0, float(a) + 1.0) * S * spacing, nd.z);
+    for (int p = 0; p < 6; ++p) {
+        vec3 n = planes[p].xyz;
+        vec3 far_corner = vec3(n.x >= 0.0 ? bmax.x : bmin.x, n.y >= 0.0 ? bmax.y : bmin.y,
+                               n.z >= 0.0 ? bmax.z : bmin.z);
+        if (dot(n, far_corner) + planes[p].w < 0.0) return true;
+    }
+    return false;
+}
+
+#if PASS == 1
+// posts [row * 3 + col]; counter-clockwise seen from above
+const int FAN[24] = int[24](4, 0, 1, 4, 1, 2,  4, 2, 5, 4, 5, 8,  4, 8, 7, 4, 7, 6,  4, 6, 3, 4, 3, 0);
+const int SE_CELL[6] = int[6](1, 2, 5, 1, 5, 4);    // replaces fan triangles 1 and 2
+const int NW_CELL[6] = int[6](3, 4, 7, 3, 7, 6);    // replaces fan triangles 5 and 6
+const int EDGE_BIT[4] = int[4](4, 2, 8, 1);         // fan triangle pairs: S, E, N, W
+const int EDGE_END[4] = int[4](2, 8, 6, 0);         // each edge's second corner
+
+// The leaf as 9 vertices (tile-local metres, local level) and 24 indices: the fan around its centre, where
+// a dropped edge's two triangles become one and a degenerate one (stitching); in full-resolution leaves the
+// south-east and north-west cells (fan diagonal NW-SE) are split SW-NE as the reference wherever their two
+// outer edges keep their midpoints (the other two cells' fan diagonal is SW-NE already).
+void put_mesh(uint idx, int m, int j0, int i0, int k, int drop, float h[9]) {
+    uint vb = idx * 9u;
+    for (int q = 0; q < 9; ++q)
+        mesh_vertex[vb + uint(q)] = vec4(vec2(j0 + (q % 3) * k, i0 + (q / 3) * k) * spacing, h[q], float(m));
+    uint ib = idx * 24u;
+    for (int v = 0; v < 24; ++v) {
+        int t = v / 3, e = t / 2;
+        int post = FAN[v];
+        if (m == 0 && (t == 1 || t == 2) && (drop & 6) == 0) post = SE_CELL[v - 3];
+        else if (m == 0 && (t == 5 || t == 6) && (drop & 9) == 0) post = NW_CELL[v - 15];
+        else if ((drop & EDGE_BIT[e]) != 0) {
+            if ((t & 1) == 0 && (post & 1) == 1) post = EDGE_END[e];    // (C, a, m) -> (C, a, b)
+            else if ((t & 1) == 1) post = 4;                             // (C, m, b) -> degenerate
+        }
+        mesh_index[ib + uint(v)] = vb + uint(post);
+    }
+}
+
+// append leaf (m, a) of this tile, whose parent splits and which does not: stitch, morph, cull, store
+void emit_leaf(int m, int a, int b) {
+    int s = side_of(m);
     int k = 1 << m;
     int i0 = a * 2 * k, j0 = b * 2 * k;
-    if (cull) {                          // the node's grown box bounds its drawn surface and skirts
-        vec4 nd = node[offsets[m] + (a + 1) * (s + 2) + (b + 1)];
-        vec3 bmin = origin_rel + vec3(vec2(j0, i0) * spacing, min(nd.y, skirt_edges != 0 ? skirt_bottom : nd.y));
-        vec3 bmax = origin_rel + vec3(vec2(j0 + 2 * k, i0 + 2 * k) * spacing, nd.z);
-        for (int p = 0; p < 6; ++p) {
-            vec3 n = planes[p].xyz;
-            vec3 far_corner = vec3(n.x >= 0.0 ? bmax.x : bmin.x, n.y >= 0.0 ? bmax.y : bmin.y,
-                                   n.z >= 0.0 ? bmax.z : bmin.z);
-            if (dot(n, far_corner) + planes[p].w < 0.0) { atomicAdd(frame_count[2], 1u); return; }
-        }
-    }
     // edges W, E, S, N: neighbour offsets and drop bits
     const ivec2 nb[4] = ivec2[4](ivec2(0, -1), ivec2(0, 1), ivec2(-1, 0), ivec2(1, 0));
     const int bit[4] = int[4](1, 2, 4, 8);
-    float ap = alpha(m + 1, a >> 1, b >> 1);
+    float E, d;
+    float ap = alpha_of(split_state(m + 1, a >> 1, b >> 1, E, d), E, d);
     int drop = 0;
     float am[4];
     for (int e = 0; e < 4; ++e) {
         int na = a + nb[e].x, nbb = b + nb[e].y;
         am[e] = ap;
         if ((na >> 1) == (a >> 1) && (nbb >> 1) == (b >> 1)) continue;    // a sibling: same parent
-        if (!splits(m + 1, na >> 1, nbb >> 1)) { if (stitch) drop |= bit[e]; }
-        else am[e] = max(ap, alpha(m + 1, na >> 1, nbb >> 1));
+        int st = split_state(m + 1, na >> 1, nbb >> 1, E, d);
+        if (st == 0) { if (stitch) drop |= bit[e]; }
+        else am[e] = max(ap, alpha_of(st, E, d));
     }
     float h[9];
     for (int r = 0; r < 3; ++r)
@@ -137,13 +236,14 @@ void main() {
         if (a == 0) skirts |= skirt_edges & 4;
         if (a == s - 1) skirts |= skirt_edges & 8;
     }
-    uint idx = atomicAdd(cmd[0], 1u);
-    atomicAdd(cmd[6], 1u);
-    atomicAdd(frame_count[0], uint(8 - bitCount(drop)));
-    atomicAdd(frame_count[1], 1u);
-    uint w = idx * 13u;
-    leaf[w + 0] = uint(j0); leaf[w + 1] = uint(i0); leaf[w + 2] = uint(m); leaf[w + 3] = uint(drop);
-    for (int q = 0; q < 9; ++q) leaf[w + 4u + uint(q)] = floatBitsToUint(h[q]);
+    uint idx = reserve(0, 5, 1);
+    if (write_mesh) put_mesh(idx, m, j0, i0, k, drop, h);
+    add_total(0, uint(8 - bitCount(drop)));
+    if (write_records) {
+        uint w = idx * 13u;
+        leaf[w + 0] = uint(j0); leaf[w + 1] = uint(i0); leaf[w + 2] = uint(m); leaf[w + 3] = uint(drop);
+        for (int q = 0; q < 9; ++q) leaf[w + 4u + uint(q)] = floatBitsToUint(h[q]);
+    }
     // skirts below the tile edges that face ray-cast tiles, one segment per drawn edge piece
     const ivec4 EDGE_POSTS[4] = ivec4[4](ivec4(0, 3, 6, 1), ivec4(2, 5, 8, 2), ivec4(0, 1, 2, 4), ivec4(6, 7, 8, 8));
     for (int e = 0; e < 4; ++e) {
@@ -155,4 +255,30 @@ void main() {
         if ((drop & ep.w) != 0) put_segment(pa, h[ep.x], pb, h[ep.z]);
         else { put_segment(pa, h[ep.x], pm, h[ep.y]); put_segment(pm, h[ep.y], pb, h[ep.z]); }
     }
+}
+
+// Two programs (PASS 0 and 1), so that the costly part runs without idle lanes: pass 0 has one invocation
+// per node and lists the leaves (parent splits, node does not) with their count and the work groups of
+// pass 1; pass 1, dispatched from that count, has one invocation per leaf and emits it.
+#endif
+
+void main() {
+    uint gid = gl_GlobalInvocationID.x;
+#if PASS == 0
+    int id = first_id + int(gid);
+    if (id >= starts[top + 1]) return;
+    int m = 0;
+    while (m < top && id >= starts[m + 1]) ++m;          // at most 12 levels
+    int s = side_of(m);
+    int local = id - starts[m];
+    int a = local / s, b = local % s;
+    if (!splits(m + 1, a >> 1, b >> 1) || splits(m, a, b)) return;
+    if (cull && outside(m, a, b)) { add_total(2, 1u); return; }
+    uint i = reserve_found();
+    found[4u + i] = uint(m) | (uint(a) << 4) | (uint(b) << 18);
+#else
+    if (gid >= found[3]) return;
+    uint w = found[4u + gid];
+    emit_leaf(int(w & 15u), int((w >> 4) & 16383u), int(w >> 18));
+#endif
 }

@@ -1,6 +1,6 @@
 """GPU-resident tilelet quadtrees: what a tile keeps on the GPU, and the per-frame leaf selection (compute).
 
-At upload a tile gets its heights (R32F texture), its node errors and boxes with a one-node apron
+At upload a tile gets its heights (a float32 storage buffer), its node errors and boxes with a one-node apron
 (raster.nodes), a leaf buffer with room for every possible leaf, a skirt-segment buffer and its indirect draw
 commands. Per frame the CPU only sets uniforms: the compute shader (select.comp.glsl) picks the leaves for the
 view, drops midpoints toward coarser neighbours, geomorphs and culls, and fills the indirect commands; the
@@ -25,10 +25,13 @@ COMMAND_WORDS = 5               # moderngl's indirect command stride: count, ins
 CMD_POINTS, CMD_TEMPLATE, CMD_SKIRTS = 0, 1, 2
 FRAME_FIELDS = ("triangles", "tilelets", "tilelets_culled", "skirt_segments")
 _LOCAL = 64                     # compute work group size (select.comp.glsl)
+FOUND_BLANK = np.array([0, 1, 1, 0], np.uint32).tobytes()    # pass-1 dispatch (x, y, z) and leaf count
+COMMANDS_BLANK = np.array([0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 6, 0, 0, 0, 0], np.uint32).tobytes()
+"""Indirect draws before selection: leaf points, template vertices (24 a leaf), skirt quads (instances)"""
 
 
 def level_starts(n: int) -> np.ndarray:
-    """Index of the first node of each local level among a tile's own nodes (levels + 1 entries)."""
+    """Invocation index of the first node of each local level among a tile's own nodes (levels + 1 entries)."""
     counts = [(n >> (m + 1)) ** 2 for m in range(tile_levels(n))]
     return np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
 
@@ -83,25 +86,31 @@ class SelectedTileletTile:
         data, self.offsets = tile_node_block(nodes, int(tile.key.level), int(tile.key.tx), int(tile.key.ty), self.n)
         self.starts = level_starts(self.n)
         self.level_error, self.level_lo, self.level_hi = level_bounds(data, self.offsets, self.n, float(tile.spacing))
-        self.heights = ctx.texture((self.n + 1, self.n + 1), 1, h.tobytes(), dtype="f4")
-        self.heights.filter = (ctx.NEAREST, ctx.NEAREST)
+        self.heights = ctx.buffer(h.tobytes())
         self.nodes = ctx.buffer(data.tobytes())
         self.capacity = (self.n // 2) ** 2
-        self.leaves = ctx.buffer(reserve=self.capacity * LEAF_WORDS * 4)
         self.segments = ctx.buffer(reserve=max(4 * self.n, 8) * SEGMENT_WORDS * 4)
         self.commands = ctx.buffer(reserve=3 * COMMAND_WORDS * 4)
+        self.found = ctx.buffer(reserve=(4 + self.capacity) * 4)
+        self.writes = strategy.writes
+        mesh = self.writes == "mesh"            # each strategy allocates only the output its draw reads
+        self.leaves = ctx.buffer(reserve=(1 if mesh else self.capacity) * LEAF_WORDS * 4)
+        self.mesh_vertices = ctx.buffer(reserve=(self.capacity if mesh else 1) * 9 * 16)
+        self.mesh_indices = ctx.buffer(reserve=(self.capacity if mesh else 1) * 24 * 4)
         self.vaos = strategy.tile_arrays(self)
 
     @property
     def nbytes(self) -> int:
         """GPU bytes of the tile's textures and buffers, as the driver reports them."""
-        return gl_bytes(self.heights, self.nodes, self.leaves, self.segments, self.commands)
+        return gl_bytes(self.heights, self.nodes, self.leaves, self.segments, self.commands, self.found,
+                        self.mesh_vertices, self.mesh_indices)
 
     def release(self) -> None:
         """Free the GPU objects."""
         for v in self.vaos.values():
             v.release()
-        for o in (self.leaves, self.segments, self.commands, self.nodes, self.heights):
+        for o in (self.leaves, self.mesh_vertices, self.mesh_indices, self.segments, self.commands, self.found,
+                  self.nodes, self.heights):
             o.release()
 
 
@@ -109,12 +118,13 @@ class TileletSelection:
     """The part the two tilelet strategies share: terrain texture, the selection shader, per-tile GPU data."""
 
     kind = "raster"
+    writes = "records"          # what the selection writes for the draw: leaf records or a mesh
 
     def __init__(self, ctx, hf, beta: float = DEFAULT_BETA):
         if not (0.0 < beta < 1.0):
             raise TerrabenchError(f"beta must lie in (0, 1), got {beta!r}")
         self.ctx, self.hf, self.beta = ctx, hf, float(beta)
-        self.select = compute_shader(ctx, "raster", "select.comp.glsl")
+        self.passes = tuple(compute_shader(ctx, "raster", "select.comp.glsl", {"PASS": k}) for k in (0, 1))
         self.texture = terrain_texture(ctx, hf)
         self.frame = ctx.buffer(reserve=4 * len(FRAME_FIELDS))
 
@@ -131,43 +141,50 @@ class TileletSelection:
         """The vertex arrays a strategy draws a tile's leaves with (subclasses)."""
         raise NotImplementedError
 
+    def set_selection(self, name: str, value) -> None:
+        """Set a uniform of both selection passes (where the pass uses it)."""
+        for prog in self.passes:
+            set_uniform(prog, name, value)
+
     def select_leaves(self, view, items, tau: float, culling: bool = True, skirts: dict | None = None) -> None:
-        """Run the leaf selection of every item for the view at tau pixels; fills each tile's commands."""
+        """Run the leaf selection of every item for the view at tau pixels; fills each tile's commands.
+
+        Per tile: pass 0 over its nodes lists the leaves, pass 1 (dispatched from their count) emits them.
+        """
         if not (np.isfinite(tau) and tau > 0):
             raise TerrabenchError(f"tau must be finite and > 0 pixels, got {tau!r}")
-        prog = self.select
         k_tau = float(view.pixels_per_radian) / float(tau)
-        prog["planes"].write(view.frustum_planes_rel().astype(np.float32).tobytes())
-        set_uniform(prog, "k_tau", k_tau)
-        set_uniform(prog, "beta", self.beta)
-        set_uniform(prog, "heights", 0)
+        planes = view.frustum_planes_rel().astype(np.float32).tobytes()
+        for prog in self.passes:
+            if "planes" in prog:
+                prog["planes"].write(planes)
+        self.set_selection("k_tau", k_tau)
+        self.set_selection("write_records", self.writes == "records")
+        self.set_selection("write_mesh", self.writes == "mesh")
+        self.set_selection("beta", self.beta)
         self.frame.write(np.zeros(len(FRAME_FIELDS), np.uint32).tobytes())
         self.frame.bind_to_storage_buffer(4)
-        blank = np.zeros(3 * COMMAND_WORDS, np.uint32)
-        blank[[CMD_POINTS * COMMAND_WORDS + 1, CMD_TEMPLATE * COMMAND_WORDS, CMD_SKIRTS * COMMAND_WORDS]] = (1, 24, 6)
+        list_pass, emit_pass = self.passes
         for g, tile, sel in items:
-            top = tile_levels(g.n) - 1
             origin_rel = np.asarray(tile.origin, dtype=np.float64) - view.eye
-            g.commands.write(blank.tobytes())
-            set_uniform(prog, "n_cells", int(g.n))
-            set_uniform(prog, "top", top)
-            set_uniform(prog, "offsets", _padded(g.offsets[:-1], 13))
-            set_uniform(prog, "starts", _padded(g.starts, 14))
-            set_uniform(prog, "nb_delta", tuple(int(d) for d in sel.edge_deltas))
-            set_uniform(prog, "origin_rel", tuple(origin_rel.astype(np.float32)))
-            set_uniform(prog, "spacing", float(tile.spacing))
-            set_uniform(prog, "cull", bool(culling) and not bool(sel.inside))
-            set_uniform(prog, "skirt_edges", int((skirts or {}).get(sel.key, 0)))
-            set_uniform(prog, "skirt_bottom", skirt_bottom(tile, view))
-            g.heights.use(0)
-            g.nodes.bind_to_storage_buffer(0)
-            g.leaves.bind_to_storage_buffer(1)
-            g.commands.bind_to_storage_buffer(2)
-            g.segments.bind_to_storage_buffer(3)
             eye_local = view.eye - np.asarray(tile.origin, dtype=np.float64)
             first = int(g.starts[first_level(g, eye_local, k_tau)])
-            set_uniform(prog, "first_id", first)
-            prog.run(group_x=(int(g.starts[-1]) - first + _LOCAL - 1) // _LOCAL)
+            for name, value in (("n_cells", int(g.n)), ("top", tile_levels(g.n) - 1),
+                                ("offsets", _padded(g.offsets[:-1], 13)), ("starts", _padded(g.starts, 14)),
+                                ("nb_delta", tuple(int(d) for d in sel.edge_deltas)),
+                                ("origin_rel", tuple(origin_rel.astype(np.float32))), ("spacing", float(tile.spacing)),
+                                ("cull", bool(culling) and not bool(sel.inside)),
+                                ("skirt_edges", int((skirts or {}).get(sel.key, 0))),
+                                ("skirt_bottom", skirt_bottom(tile, view)), ("first_id", first)):
+                self.set_selection(name, value)
+            g.commands.write(COMMANDS_BLANK)
+            g.found.write(FOUND_BLANK)
+            for binding, buf in ((0, g.nodes), (1, g.leaves), (2, g.commands), (3, g.segments), (5, g.heights),
+                                 (6, g.found), (7, g.mesh_vertices), (8, g.mesh_indices)):
+                buf.bind_to_storage_buffer(binding)
+            list_pass.run(group_x=(int(g.starts[-1]) - first + _LOCAL - 1) // _LOCAL)
+            self.ctx.memory_barrier()
+            emit_pass.run_indirect(g.found)
         self.ctx.memory_barrier()
 
     def frame_counters(self) -> dict:
@@ -177,6 +194,6 @@ class TileletSelection:
 
     def release(self) -> None:
         """Free the selection shader, the texture and the counters."""
-        for o in (self.select, self.texture, self.frame):
+        for o in (*self.passes, self.texture, self.frame):
             if o is not None:
                 o.release()

@@ -19,12 +19,21 @@ GL_CLIP_DISTANCE0 = 0x3000
 
 
 def read_leaves(g: SelectedTileletTile) -> dict:
-    """The leaves the last selection chose for a tile (for tests): j0, i0, level, dropped bits, heights (k, 9)."""
+    """The leaves the last selection drew for a tile (for tests): level and triangles (non-degenerate) of each,
+    with j0, i0, dropped-edge bits and post heights where the selection wrote leaf records."""
     count = int(np.frombuffer(g.commands.read(size=4), dtype=np.uint32)[0])
+    if g.writes == "mesh":
+        v = np.frombuffer(g.mesh_vertices.read(size=max(count, 1) * 9 * 16), np.float32)[:count * 36]
+        i = np.frombuffer(g.mesh_indices.read(size=max(count, 1) * 24 * 4), np.uint32)[:count * 24]
+        tri = i.reshape(count, 8, 3)
+        solid = (tri[..., 0] != tri[..., 1]) & (tri[..., 1] != tri[..., 2]) & (tri[..., 0] != tri[..., 2])
+        return {"level": v.reshape(count, 9, 4)[:, 0, 3].astype(np.int32), "triangles": solid.sum(axis=1)}
     raw = np.frombuffer(g.leaves.read(size=max(count, 1) * LEAF_WORDS * 4), dtype=np.uint32)[:count * LEAF_WORDS]
     raw = raw.reshape(count, LEAF_WORDS)
+    drop = raw[:, 3].astype(np.int32)
     return {"j0": raw[:, 0].astype(np.int32), "i0": raw[:, 1].astype(np.int32), "level": raw[:, 2].astype(np.int32),
-            "drop": raw[:, 3].astype(np.int32), "heights": raw[:, 4:].view(np.float32).copy()}
+            "drop": drop, "heights": raw[:, 4:].view(np.float32).copy(),
+            "triangles": 8 - np.unpackbits(drop.astype(np.uint8)[:, None], axis=1).sum(axis=1)}
 
 
 class TileletDrawing(TileletSelection):
@@ -36,7 +45,7 @@ class TileletDrawing(TileletSelection):
         """Every program whose uniforms follow the frame (subclasses)."""
         raise NotImplementedError
 
-    def draw_tile(self, g: SelectedTileletTile, tile, view) -> None:
+    def draw_tile(self, g: SelectedTileletTile, tile, view, wireframe: bool = False) -> None:
         """Issue one tile's indirect draw(s) (subclasses)."""
         raise NotImplementedError
 
@@ -49,8 +58,8 @@ class TileletDrawing(TileletSelection):
         """
         mode = resolve_mode(self.hf, mode, MODES)
         tau = leaf_tau if leaf_tau is not None else tau
-        set_uniform(self.select, "morph", bool(morph))
-        set_uniform(self.select, "stitch", bool(stitching))
+        self.set_selection("morph", bool(morph))
+        self.set_selection("stitch", bool(stitching))
         self.select_leaves(view, items, tau, culling, skirts)
         ctx = self.ctx
         vp = view.view_proj_rel.T.astype(np.float32).tobytes()
@@ -83,7 +92,7 @@ class TileletDrawing(TileletSelection):
                     set_uniform(prog, "n_cells", int(g.n))
                     set_uniform(prog, "skirt_edges", int((skirts or {}).get(sel.key, 0)))
                     set_uniform(prog, "skirt_bottom", skirt_bottom(tile, view))
-                self.draw_tile(g, tile, view)
+                self.draw_tile(g, tile, view, wireframe)
         finally:
             for i in range(4):
                 ctx.disable_direct(GL_CLIP_DISTANCE0 + i)
@@ -111,7 +120,6 @@ class TileletStrategy(TileletDrawing):
         """One vertex array: the leaf buffer as points."""
         return {"points": self.ctx.vertex_array(self.prog, [(g.leaves, LEAF_FORMAT, "a_node", "a_h0", "a_h1", "a_h8")])}
 
-    def draw_tile(self, g: SelectedTileletTile, tile, view) -> None:
+    def draw_tile(self, g: SelectedTileletTile, tile, view, wireframe: bool = False) -> None:
         """The tile's leaves as points through the geometry shader (count from the selection)."""
-        g.heights.use(0)
         g.vaos["points"].render_indirect(g.commands, mode=self.ctx.POINTS, count=1, first=CMD_POINTS)

@@ -1,8 +1,8 @@
 """Accuracy metrics on constructed images: zero for identical frames, known holes and offsets recovered."""
 import numpy as np
 
-from experiments.metrics import (coverage_errors, depth_errors, depth_jump_ratio, frame_accuracy, hole_pixels_in_columns,
-                                 near_silhouettes, temporal_errors)
+from experiments.metrics import (coverage_errors, depth_errors, depth_jump_ratio, frame_accuracy,
+                                 hole_pixels_in_columns, near_silhouettes, temporal_errors)
 from hybrid.gl.target import RenderResult
 
 
