@@ -39,7 +39,7 @@ class InstancedTileletStrategy(TileletDrawing):
         ctx = self.ctx
         ctx.wireframe = bool(wireframe)
         try:
-            g.vaos["mesh"].render_indirect(g.commands, mode=ctx.TRIANGLES, count=1, first=CMD_TEMPLATE)
+            g.vaos["mesh"].render_indirect(g.control, mode=ctx.TRIANGLES, count=1, first=CMD_TEMPLATE)
         finally:
             ctx.wireframe = False
-        g.vaos["skirts"].render_indirect(g.commands, mode=ctx.TRIANGLES, count=1, first=CMD_SKIRTS)
+        g.vaos["skirts"].render_indirect(g.control, mode=ctx.TRIANGLES, count=1, first=CMD_SKIRTS)

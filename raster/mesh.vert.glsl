@@ -1,10 +1,8 @@
 #version 430
+#include "raster/tile_block"
 // Baseline meshes (full-resolution triangle list, decimated TIN): tile-local vertex positions in metres.
 in vec3 a_pos;                 // (x, y) metres from tile sample [0, 0], z metres above the terrain origin z
-uniform vec3 origin_rel;       // tile sample [0, 0] minus eye
 uniform mat4 view_proj_rel;
-uniform vec4 clip_rel;         // tile.clip minus eye: x0, y0, x1, y1
-uniform int tile_level;
 out vec3 v_rel;                // eye-relative position; the fragment shader derives height and uv from it
 flat out int v_level;
 noperspective out vec3 v_bary;

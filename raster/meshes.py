@@ -14,6 +14,7 @@ from hybrid.gl.shading import resolve_mode
 from hybrid.gl.textures import terrain_texture
 
 from .shading import MODES
+from .tileblock import TileBlocks, register_tile_block, tile_blocks
 
 GL_CLIP_DISTANCE0 = 0x3000
 
@@ -53,13 +54,15 @@ class MeshStrategyBase:
 
     def __init__(self, ctx, hf):
         self.ctx, self.hf = ctx, hf
+        register_tile_block(ctx)
+        self.blocks = TileBlocks(ctx)
         self.prog = program(ctx, "raster", "mesh.vert.glsl", "tilelet.frag.glsl")
         self.texture = terrain_texture(ctx, hf)
 
     @property
     def shared_nbytes(self) -> int:
         """GPU bytes shared by all tiles as the driver reports them (the colour texture with mipmaps)."""
-        return gl_bytes(self.texture)
+        return gl_bytes(self.texture, self.blocks.buffer)
 
     def mesh_of(self, tile) -> tuple[np.ndarray, np.ndarray]:
         """(vertices, faces) of a tile, tile-local metres."""
@@ -83,8 +86,7 @@ class MeshStrategyBase:
         if self.texture is not None:
             self.texture.use(1)
             prog["tex"].value = 1
-        hf_origin = np.asarray(self.hf.origin, dtype=np.float64)
-        extent = np.asarray(self.hf.extent, dtype=np.float64)
+        self.blocks.write(tile_blocks(self.hf, view, items, unit_spacing=True))   # positions are metres
         target.use()
         ctx.wireframe = bool(wireframe)
         for i in range(4):
@@ -93,16 +95,8 @@ class MeshStrategyBase:
         cpu = 0
         try:
             with query:
-                for g, tile, sel in items:
-                    origin_rel = np.asarray(tile.origin, dtype=np.float64) - view.eye
-                    x0, y0, x1, y1 = tile.clip
-                    prog["origin_rel"].value = tuple(origin_rel.astype(np.float32))
-                    prog["clip_rel"].value = (float(x0 - view.eye[0]), float(y0 - view.eye[1]),
-                                              float(x1 - view.eye[0]), float(y1 - view.eye[1]))
-                    prog["uv_origin"].value = tuple(((np.asarray(tile.origin[:2]) - hf_origin[:2]) / extent).astype(np.float32))
-                    prog["spacing"].value = 1.0          # mesh positions are in metres: one "cell" a metre
-                    prog["uv_per_cell"].value = tuple((1.0 / extent).astype(np.float32))
-                    prog["tile_level"].value = int(sel.key.level)
+                for i, (g, tile, sel) in enumerate(items):
+                    self.blocks.bind(i)
                     g.vao.render(ctx.TRIANGLES)
                     cpu += g.triangles
         finally:
@@ -112,7 +106,8 @@ class MeshStrategyBase:
         return {"triangles": int(query.primitives), "triangles_cpu": cpu}
 
     def release(self) -> None:
-        """Free the program and the terrain texture."""
+        """Free the program, the terrain texture and the tile blocks."""
+        self.blocks.release()
         for o in (self.prog, self.texture):
             if o is not None:
                 o.release()

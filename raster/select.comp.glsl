@@ -5,6 +5,7 @@
 // fetched and geomorphed here and appended, with its node, to the leaf buffer the draw reads.
 #extension GL_ARB_shader_ballot : enable
 #extension GL_ARB_gpu_shader_int64 : enable
+#include "raster/tile_block"
 layout(local_size_x = 64) in;
 layout(std430, binding = 0) readonly buffer Nodes { vec4 node[]; };   // E, zlo, zhi, inside; one apron
 layout(std430, binding = 1) writeonly buffer Leaves { uint leaf[]; }; // 13 words a leaf: j0 i0 m drop, h[9]
@@ -17,24 +18,13 @@ layout(std430, binding = 8) writeonly buffer MeshIndex { uint mesh_index[]; };  
 layout(std430, binding = 6) buffer Found { uint found[]; };          // groups x, 1, 1, leaves, leaves[]
 layout(std430, binding = 5) readonly buffer Heights { float height[]; };  // (n+1)^2 tile samples, row from
                                                                          // south, metres from the origin z
-uniform int n_cells;            // cells a tile side
-uniform int top;                // coarsest local level (log2(n) - 1): the tile's root
-uniform int offsets[13];        // start of each local level's node grid (with apron) in node[]
-uniform int starts[14];         // start of each local level >= 1 in the invocation index (own nodes only)
-uniform int first_id;           // first node dispatched: finer levels cannot hold a leaf in this view
-uniform ivec4 nb_delta;         // W, E, S, N: neighbour tile level minus this tile's level; 9 = no neighbour
-uniform vec3 origin_rel;        // tile sample [0, 0] minus eye, metres (z: terrain origin z minus eye z)
-uniform float spacing;          // metres between tile samples
 uniform float k_tau;            // K / tau: a node splits when E * k_tau > distance to its box
 uniform float beta;             // morph-safe error growth (raster.quadtree)
 uniform bool stitch;            // drop midpoints toward coarser neighbours (off: cracks, for tests)
 uniform bool morph;             // geomorph the posts a split creates (off: they appear at their own height)
-uniform bool cull;              // drop leaves outside the frustum
 uniform bool write_records;     // leaf records for the geometry-shader path (raster.tilelets)
 uniform bool write_mesh;        // vertices and indices for the plain indexed draw (raster.instanced)
 uniform vec4 planes[6];         // eye-relative frustum planes, inside where dot >= 0
-uniform int skirt_edges;        // tile edges W=1 E=2 S=4 N=8 that hang skirts (they face a ray-cast tile)
-uniform float skirt_bottom;     // eye-relative z of the skirts' lower edge
 
 int side_of(int m) { return n_cells >> (m + 1); }
 
@@ -58,7 +48,7 @@ int split_state(int m, int a, int b, out float E, out float d) {
     int mb = m - delta;                          // the node's local level in its own tile
     if (mb < 1) return 0;                        // that tile's finest nodes cannot split
     int s = side_of(m);
-    vec4 nd = node[offsets[m] + (a + 1) * (s + 2) + (b + 1)];
+    vec4 nd = node[offsets(m) + (a + 1) * (s + 2) + (b + 1)];
     if (nd.w == 0.0) return -1;
     float S = float(2 << m);
     vec3 lo = origin_rel + vec3(vec2(float(b) - 1.0, float(a) - 1.0) * S * spacing, nd.y);
@@ -155,7 +145,7 @@ void put_segment(vec2 p, float hp, vec2 q, float hq) {
 bool outside(int m, int a, int b) {
     int s = side_of(m);
     float S = float(2 << m);
-    vec4 nd = node[offsets[m] + (a + 1) * (s + 2) + (b + 1)];
+    vec4 nd = node[offsets(m) + (a + 1) * (s + 2) + (b + 1)];
     vec3 bmin = origin_rel + vec3(vec2(float(b), float(a)) * S * spacing, min(nd.y, skirt_edges != 0 ? skirt_bottom : nd.y));
     vec3 bmax = origin_rel + vec3(vec2(float(b) + 1.0, float(a) + 1.0) * S * spacing, nd.z);
     for (int p = 0; p < 6; ++p) {
@@ -266,11 +256,11 @@ void main() {
     uint gid = gl_GlobalInvocationID.x;
 #if PASS == 0
     int id = first_id + int(gid);
-    if (id >= starts[top + 1]) return;
+    if (id >= starts(top + 1)) return;
     int m = 0;
-    while (m < top && id >= starts[m + 1]) ++m;          // at most 12 levels
+    while (m < top && id >= starts(m + 1)) ++m;          // at most 12 levels
     int s = side_of(m);
-    int local = id - starts[m];
+    int local = id - starts(m);
     int a = local / s, b = local % s;
     if (!splits(m + 1, a >> 1, b >> 1) || splits(m, a, b)) return;
     if (cull && outside(m, a, b)) { add_total(2, 1u); return; }

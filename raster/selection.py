@@ -2,7 +2,7 @@
 
 At upload a tile gets its heights (a float32 storage buffer), its node errors and boxes with a one-node apron
 (raster.nodes), a leaf buffer with room for every possible leaf, a skirt-segment buffer and its indirect draw
-commands. Per frame the CPU only sets uniforms: the compute shader (select.comp.glsl) picks the leaves for the
+commands. Per frame the CPU writes one block of parameters per tile and issues the dispatches: the compute shader (select.comp.glsl) picks the leaves for the
 view, drops midpoints toward coarser neighbours, geomorphs and culls, and fills the indirect commands; the
 draw (geometry shader or instanced template, see raster.tilelets and raster.instanced) reads them.
 """
@@ -17,6 +17,7 @@ from hybrid.gl.textures import terrain_texture
 
 from .nodes import global_nodes, tile_levels, tile_node_block
 from .quadtree import DEFAULT_BETA
+from .tileblock import TileBlocks, register_tile_block, tile_blocks
 
 LEAF_WORDS = 13                 # j0, i0, level, dropped edges, nine post heights
 LEAF_FORMAT = "4i 4f 4f 1f"
@@ -25,9 +26,11 @@ COMMAND_WORDS = 5               # moderngl's indirect command stride: count, ins
 CMD_POINTS, CMD_TEMPLATE, CMD_SKIRTS = 0, 1, 2
 FRAME_FIELDS = ("triangles", "tilelets", "tilelets_culled", "skirt_segments")
 _LOCAL = 64                     # compute work group size (select.comp.glsl)
-FOUND_BLANK = np.array([0, 1, 1, 0], np.uint32).tobytes()    # pass-1 dispatch (x, y, z) and leaf count
-COMMANDS_BLANK = np.array([0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 6, 0, 0, 0, 0], np.uint32).tobytes()
-"""Indirect draws before selection: leaf points, template vertices (24 a leaf), skirt quads (instances)"""
+FOUND_OFFSET = 256              # bytes: where a tile's control buffer holds the pass-0 leaf list
+CONTROL_BLANK = np.concatenate([[0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 6, 0, 0, 0, 0], np.zeros(FOUND_OFFSET // 4 - 15),
+                                [0, 1, 1, 0]]).astype(np.uint32).tobytes()
+"""A control buffer before selection: indirect draws of leaf points, mesh indices (24 a leaf) and skirt quads,
+then pass 1's dispatch (x, y, z) and the leaf count"""
 
 
 def level_starts(n: int) -> np.ndarray:
@@ -61,19 +64,9 @@ def first_level(g, eye_local: np.ndarray, k_tau: float) -> int:
     return 0
 
 
-def skirt_bottom(tile, view) -> float:
-    """Eye-relative z (metres) of the lower edge of a tile's skirts: below its lowest point."""
-    return float(tile.zmin - view.eye[2] - 1.0 - 0.01 * tile.spacing)
-
-
-def _padded(values: np.ndarray, size: int) -> tuple:
-    out = np.zeros(size, np.int32)
-    out[:len(values)] = values
-    return tuple(int(v) for v in out)
-
-
 class SelectedTileletTile:
-    """GPU objects of one tile: heights, node data, leaf and skirt buffers, indirect commands."""
+    """GPU objects of one tile: heights, node data, leaf (or mesh) and skirt buffers, and a control buffer with
+    the indirect draw commands at its start and the pass-0 leaf list at FOUND_OFFSET."""
 
     def __init__(self, strategy, tile):
         ctx = strategy.ctx
@@ -90,8 +83,7 @@ class SelectedTileletTile:
         self.nodes = ctx.buffer(data.tobytes())
         self.capacity = (self.n // 2) ** 2
         self.segments = ctx.buffer(reserve=max(4 * self.n, 8) * SEGMENT_WORDS * 4)
-        self.commands = ctx.buffer(reserve=3 * COMMAND_WORDS * 4)
-        self.found = ctx.buffer(reserve=(4 + self.capacity) * 4)
+        self.control = ctx.buffer(reserve=FOUND_OFFSET + (4 + self.capacity) * 4)
         self.writes = strategy.writes
         mesh = self.writes == "mesh"            # each strategy allocates only the output its draw reads
         self.leaves = ctx.buffer(reserve=(1 if mesh else self.capacity) * LEAF_WORDS * 4)
@@ -102,15 +94,15 @@ class SelectedTileletTile:
     @property
     def nbytes(self) -> int:
         """GPU bytes of the tile's textures and buffers, as the driver reports them."""
-        return gl_bytes(self.heights, self.nodes, self.leaves, self.segments, self.commands, self.found,
-                        self.mesh_vertices, self.mesh_indices)
+        return gl_bytes(self.heights, self.nodes, self.leaves, self.segments, self.control, self.mesh_vertices,
+                        self.mesh_indices)
 
     def release(self) -> None:
         """Free the GPU objects."""
         for v in self.vaos.values():
             v.release()
-        for o in (self.leaves, self.mesh_vertices, self.mesh_indices, self.segments, self.commands, self.found,
-                  self.nodes, self.heights):
+        for o in (self.leaves, self.mesh_vertices, self.mesh_indices, self.segments, self.control, self.nodes,
+                  self.heights):
             o.release()
 
 
@@ -124,14 +116,16 @@ class TileletSelection:
         if not (0.0 < beta < 1.0):
             raise TerrabenchError(f"beta must lie in (0, 1), got {beta!r}")
         self.ctx, self.hf, self.beta = ctx, hf, float(beta)
+        register_tile_block(ctx)
         self.passes = tuple(compute_shader(ctx, "raster", "select.comp.glsl", {"PASS": k}) for k in (0, 1))
         self.texture = terrain_texture(ctx, hf)
         self.frame = ctx.buffer(reserve=4 * len(FRAME_FIELDS))
+        self.blocks = TileBlocks(ctx)
 
     @property
     def shared_nbytes(self) -> int:
         """GPU bytes shared by all tiles, as the driver reports them: colour texture, frame counters."""
-        return gl_bytes(self.texture, self.frame)
+        return gl_bytes(self.texture, self.frame, self.blocks.buffer)
 
     def upload(self, tile) -> SelectedTileletTile:
         """Put one tile on the GPU: heights, node errors and boxes, empty leaf buffers."""
@@ -146,45 +140,53 @@ class TileletSelection:
         for prog in self.passes:
             set_uniform(prog, name, value)
 
+    def frame_blocks(self, view, items, tau: float, culling: bool = True, skirts: dict | None = None):
+        """The frame's per-tile shader blocks (raster.tileblock) with the selection's fields, uploaded."""
+        k_tau = float(view.pixels_per_radian) / float(tau)
+
+        def selection_fields(i, g, tile, sel, b):
+            eye_local = view.eye - np.asarray(tile.origin, dtype=np.float64)
+            first = int(g.starts[first_level(g, eye_local, k_tau)])
+            b["shape"][:3] = (g.n, tile_levels(g.n) - 1, first)
+            b["offsets"][:len(g.offsets)] = g.offsets
+            b["starts"][:len(g.starts)] = g.starts
+
+        blocks = tile_blocks(self.hf, view, items, skirts, culling, per_tile=selection_fields)
+        self.blocks.write(blocks)
+        return blocks
+
     def select_leaves(self, view, items, tau: float, culling: bool = True, skirts: dict | None = None) -> None:
         """Run the leaf selection of every item for the view at tau pixels; fills each tile's commands.
 
         Per tile: pass 0 over its nodes lists the leaves, pass 1 (dispatched from their count) emits them.
+        The frame's tile blocks stay uploaded for the draw.
         """
         if not (np.isfinite(tau) and tau > 0):
             raise TerrabenchError(f"tau must be finite and > 0 pixels, got {tau!r}")
-        k_tau = float(view.pixels_per_radian) / float(tau)
+        blocks = self.frame_blocks(view, items, tau, culling, skirts)
         planes = view.frustum_planes_rel().astype(np.float32).tobytes()
         for prog in self.passes:
             if "planes" in prog:
                 prog["planes"].write(planes)
-        self.set_selection("k_tau", k_tau)
+        self.set_selection("k_tau", float(view.pixels_per_radian) / float(tau))
+        self.set_selection("beta", self.beta)
         self.set_selection("write_records", self.writes == "records")
         self.set_selection("write_mesh", self.writes == "mesh")
-        self.set_selection("beta", self.beta)
         self.frame.write(np.zeros(len(FRAME_FIELDS), np.uint32).tobytes())
         self.frame.bind_to_storage_buffer(4)
         list_pass, emit_pass = self.passes
-        for g, tile, sel in items:
-            origin_rel = np.asarray(tile.origin, dtype=np.float64) - view.eye
-            eye_local = view.eye - np.asarray(tile.origin, dtype=np.float64)
-            first = int(g.starts[first_level(g, eye_local, k_tau)])
-            for name, value in (("n_cells", int(g.n)), ("top", tile_levels(g.n) - 1),
-                                ("offsets", _padded(g.offsets[:-1], 13)), ("starts", _padded(g.starts, 14)),
-                                ("nb_delta", tuple(int(d) for d in sel.edge_deltas)),
-                                ("origin_rel", tuple(origin_rel.astype(np.float32))), ("spacing", float(tile.spacing)),
-                                ("cull", bool(culling) and not bool(sel.inside)),
-                                ("skirt_edges", int((skirts or {}).get(sel.key, 0))),
-                                ("skirt_bottom", skirt_bottom(tile, view)), ("first_id", first)):
-                self.set_selection(name, value)
-            g.commands.write(COMMANDS_BLANK)
-            g.found.write(FOUND_BLANK)
-            for binding, buf in ((0, g.nodes), (1, g.leaves), (2, g.commands), (3, g.segments), (5, g.heights),
-                                 (6, g.found), (7, g.mesh_vertices), (8, g.mesh_indices)):
+        for i, (g, tile, sel) in enumerate(items):
+            self.blocks.bind(i)
+            g.control.write(CONTROL_BLANK)
+            for binding, buf in ((0, g.nodes), (1, g.leaves), (3, g.segments), (5, g.heights), (7, g.mesh_vertices),
+                                 (8, g.mesh_indices)):
                 buf.bind_to_storage_buffer(binding)
+            g.control.bind_to_storage_buffer(2, size=FOUND_OFFSET)
+            g.control.bind_to_storage_buffer(6, offset=FOUND_OFFSET)
+            first = int(blocks[i]["shape"][2])
             list_pass.run(group_x=(int(g.starts[-1]) - first + _LOCAL - 1) // _LOCAL)
             self.ctx.memory_barrier()
-            emit_pass.run_indirect(g.found)
+            emit_pass.run_indirect(g.control, offset=FOUND_OFFSET)
         self.ctx.memory_barrier()
 
     def frame_counters(self) -> dict:
@@ -194,6 +196,7 @@ class TileletSelection:
 
     def release(self) -> None:
         """Free the selection shader, the texture and the counters."""
+        self.blocks.release()
         for o in (*self.passes, self.texture, self.frame):
             if o is not None:
                 o.release()

@@ -1,14 +1,10 @@
 #version 430
+#include "raster/tile_block"
 // Skirts of the instanced path: one quad per segment (raster/select.comp.glsl) hanging from a tile edge that
 // faces a ray-cast tile down to below the tile's lowest point; clipping is off across the skirt's own plane.
 layout(location = 0) in vec3 a_p;         // per instance: segment start (tile cells x, y; height in metres)
 layout(location = 1) in vec3 a_q;         // segment end
-uniform vec3 origin_rel;
-uniform float spacing;
 uniform mat4 view_proj_rel;
-uniform vec4 clip_rel;
-uniform int tile_level;
-uniform float skirt_bottom;               // eye-relative z of the skirt's lower edge
 out vec3 v_rel;
 flat out int v_level;
 noperspective out vec3 v_bary;

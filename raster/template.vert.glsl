@@ -1,11 +1,9 @@
 #version 430
+#include "raster/tile_block"
 // The path without a geometry shader: the leaves' vertices written by the selection (raster/select.comp.glsl),
 // tile-local metres and local level, drawn as one indexed draw per tile.
 layout(location = 0) in vec4 a_vertex;    // (x, y) metres from tile sample [0, 0], z metres above the origin z, level
-uniform vec3 origin_rel;                  // tile sample [0, 0] minus eye, metres
 uniform mat4 view_proj_rel;               // (world - eye) -> clip, reversed Z
-uniform vec4 clip_rel;                    // tile.clip minus eye: x0, y0, x1, y1
-uniform int tile_level;                   // pyramid level of the tile
 out vec3 v_rel;                           // eye-relative position; the fragment shader derives height and uv
 flat out int v_level;
 noperspective out vec3 v_bary;

@@ -1,4 +1,5 @@
 #version 430
+#include "raster/tile_block"
 in vec3 v_rel;                 // eye-relative position (metres)
 flat in int v_level;
 noperspective in vec3 v_bary;
@@ -6,10 +7,6 @@ uniform int mode;              // 0 texture, 1 shaded, 2 height, 3 level
 uniform bool wireframe;        // darken triangle edges
 uniform sampler2D tex;
 uniform vec2 hrange;
-uniform vec3 origin_rel;       // tile sample [0, 0] minus eye, metres
-uniform float spacing;         // metres between tile samples
-uniform vec2 uv_origin;        // texture coordinate of tile sample [0, 0]
-uniform vec2 uv_per_cell;      // texture coordinate step per tile cell
 out vec4 frag;
 #include "shading"
 

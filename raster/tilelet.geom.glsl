@@ -1,4 +1,5 @@
 #version 430
+#include "raster/tile_block"
 // Expand a tilelet point into its 8-triangle fan around the centre; on an edge whose neighbour is one
 // level coarser the midpoint is dropped and its two triangles become one (stitching, paper Fig. 5).
 layout(points) in;
@@ -8,16 +9,7 @@ in Tilelet {
     flat int culled;
     float h[9];
 } gs_in[];
-uniform vec3 origin_rel;       // tile sample [0, 0] minus eye, metres
-uniform float spacing;         // metres between tile samples
 uniform mat4 view_proj_rel;    // (world - eye) -> clip, reversed Z
-uniform vec4 clip_rel;         // tile.clip minus eye: x0, y0, x1, y1
-uniform vec2 uv_origin;        // texture coordinate of tile sample [0, 0]
-uniform vec2 uv_per_cell;      // texture coordinate step per tile cell
-uniform int tile_level;        // pyramid level of the tile
-uniform int n_cells;           // cells a tile side
-uniform int skirt_edges;       // tile edges (W=1, E=2, S=4, N=8) that hang a skirt (they face a ray-cast tile)
-uniform float skirt_bottom;    // z of the skirts' lower edge, eye-relative metres (below the tile's lowest point)
 out vec3 v_rel;                // eye-relative position; the fragment shader derives height and uv from it
 flat out int v_level;
 noperspective out vec3 v_bary;

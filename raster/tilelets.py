@@ -12,7 +12,7 @@ import numpy as np
 from hybrid.gl.programs import program, set_uniform
 from hybrid.gl.shading import resolve_mode
 
-from .selection import CMD_POINTS, LEAF_FORMAT, LEAF_WORDS, SelectedTileletTile, TileletSelection, skirt_bottom
+from .selection import CMD_POINTS, LEAF_FORMAT, LEAF_WORDS, SelectedTileletTile, TileletSelection
 from .shading import MODES
 
 GL_CLIP_DISTANCE0 = 0x3000
@@ -21,7 +21,7 @@ GL_CLIP_DISTANCE0 = 0x3000
 def read_leaves(g: SelectedTileletTile) -> dict:
     """The leaves the last selection drew for a tile (for tests): level and triangles (non-degenerate) of each,
     with j0, i0, dropped-edge bits and post heights where the selection wrote leaf records."""
-    count = int(np.frombuffer(g.commands.read(size=4), dtype=np.uint32)[0])
+    count = int(np.frombuffer(g.control.read(size=4), dtype=np.uint32)[0])
     if g.writes == "mesh":
         v = np.frombuffer(g.mesh_vertices.read(size=max(count, 1) * 9 * 16), np.float32)[:count * 36]
         i = np.frombuffer(g.mesh_indices.read(size=max(count, 1) * 24 * 4), np.uint32)[:count * 24]
@@ -63,8 +63,6 @@ class TileletDrawing(TileletSelection):
         self.select_leaves(view, items, tau, culling, skirts)
         ctx = self.ctx
         vp = view.view_proj_rel.T.astype(np.float32).tobytes()
-        hf_origin = np.asarray(self.hf.origin, dtype=np.float64)
-        extent = np.asarray(self.hf.extent, dtype=np.float64)
         for prog in self.programs():
             prog["view_proj_rel"].write(vp)
             set_uniform(prog, "mode", MODES[mode])
@@ -77,21 +75,8 @@ class TileletDrawing(TileletSelection):
         for i in range(4):
             ctx.enable_direct(GL_CLIP_DISTANCE0 + i)
         try:
-            for g, tile, sel in items:
-                origin_rel = np.asarray(tile.origin, dtype=np.float64) - view.eye
-                x0, y0, x1, y1 = tile.clip
-                for prog in self.programs():
-                    set_uniform(prog, "origin_rel", tuple(origin_rel.astype(np.float32)))
-                    set_uniform(prog, "spacing", float(tile.spacing))
-                    set_uniform(prog, "clip_rel", (float(x0 - view.eye[0]), float(y0 - view.eye[1]),
-                                                   float(x1 - view.eye[0]), float(y1 - view.eye[1])))
-                    set_uniform(prog, "uv_origin", tuple(((np.asarray(tile.origin[:2]) - hf_origin[:2]) / extent)
-                                                         .astype(np.float32)))
-                    set_uniform(prog, "uv_per_cell", tuple((float(tile.spacing) / extent).astype(np.float32)))
-                    set_uniform(prog, "tile_level", int(sel.key.level))
-                    set_uniform(prog, "n_cells", int(g.n))
-                    set_uniform(prog, "skirt_edges", int((skirts or {}).get(sel.key, 0)))
-                    set_uniform(prog, "skirt_bottom", skirt_bottom(tile, view))
+            for i, (g, tile, sel) in enumerate(items):
+                self.blocks.bind(i)
                 self.draw_tile(g, tile, view, wireframe)
         finally:
             for i in range(4):
@@ -122,4 +107,4 @@ class TileletStrategy(TileletDrawing):
 
     def draw_tile(self, g: SelectedTileletTile, tile, view, wireframe: bool = False) -> None:
         """The tile's leaves as points through the geometry shader (count from the selection)."""
-        g.vaos["points"].render_indirect(g.commands, mode=self.ctx.POINTS, count=1, first=CMD_POINTS)
+        g.vaos["points"].render_indirect(g.control, mode=self.ctx.POINTS, count=1, first=CMD_POINTS)

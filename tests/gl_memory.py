@@ -38,12 +38,16 @@ def object_bytes(o) -> int:
 
 
 def gl_objects(obj):
-    """The moderngl buffers and textures among an object's attributes (and those of dataclass attributes)."""
+    """The moderngl buffers and textures among an object's attributes (and those of the project's own objects
+    it holds, such as a dataclass of textures or a holder of a uniform buffer)."""
     for v in vars(obj).values():
         if isinstance(v, (moderngl.Buffer, moderngl.Texture)):
             yield v
-        elif dataclasses.is_dataclass(v) and not isinstance(v, type):
-            yield from gl_objects(v)
+        elif (dataclasses.is_dataclass(v) and not isinstance(v, type)) or \
+                type(v).__module__.split(".")[0] in ("raster", "raycast", "hybrid") and hasattr(v, "__dict__") \
+                and not callable(v) and not isinstance(v, type):
+            if v is not obj and not hasattr(v, "hf"):        # strategies hold the terrain, not its GPU copies
+                yield from gl_objects(v)
 
 
 def allocated_bytes(obj) -> int:
