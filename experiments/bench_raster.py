@@ -113,7 +113,7 @@ def selection_rows(ctx, repeats=5):
     hf = puget()
     view = preset("flyover", hf, 8).view(3)
     rows = []
-    for name in ("raster", "instanced"):
+    for name in ("raster", "raster_gs"):
         with Renderer(ctx, hf, name, tile_size=128) as r:
             r.render(view)
             items = r._items(name, r.plan(view), set())
@@ -153,13 +153,13 @@ def _top_view(hf, width=320, height=180):
 
 
 def throughput_rows(ctx, repeats=5):
-    """Rows comparing the geometry-shader tilelets with the instanced template on the same leaves (Mtri/s)."""
+    """Rows comparing the geometry-shader tilelets with the indexed triangles of the same leaves (Mtri/s)."""
     from hybrid.renderer import Renderer
     from hybrid.terrain.datasets import puget
     hf = puget(with_texture=False, size=513)
     view = _top_view(hf)
     rows = []
-    with Renderer(ctx, hf, "raster", tile_size=256) as gs, Renderer(ctx, hf, "instanced", tile_size=256) as inst:
+    with Renderer(ctx, hf, "raster_gs", tile_size=256) as gs, Renderer(ctx, hf, "raster", tile_size=256) as inst:
         for leaf_tau in (0.05, 2.0 / 3.0):
             ms = {}
             for name, r in (("gs", gs), ("inst", inst)):
@@ -211,8 +211,8 @@ def run(ctx) -> dict[str, pd.DataFrame]:
          ["strategy", "tiles", "selection ms", "frame ms", "triangles"], selection_rows(ctx)),
         ("3. GPU bytes per 257² tile", ["representation", "bytes", "triangles", "bytes/tri"],
          memory_rows(ctx, hf, tiles)),
-        ("4. geometry shader vs instanced template, same leaves (Puget 513², top view, 320x180)",
-         ["leaf tau", "triangles", "GS ms", "GS Mtri/s", "instanced ms", "instanced Mtri/s", "instanced/GS"],
+        ("4. geometry shader vs indexed triangles, same leaves (Puget 513², top view, 320x180)",
+         ["leaf tau", "triangles", "GS ms", "GS Mtri/s", "indexed ms", "indexed Mtri/s", "indexed/GS"],
          throughput_rows(ctx)),
         ("5. tilelet culling on a low view (Puget 513², tiles of 128)",
          ["culling", "tilelets drawn", "culled", "triangles", "draw ms"], culling_rows(ctx)),

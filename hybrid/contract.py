@@ -14,13 +14,14 @@ from hybrid.gl.target import FrameTarget
 from hybrid.tiles.pyramid import Tile, TileKey
 from hybrid.tiles.tiletree import SelectedTile
 
-StrategyName = Literal["raster", "instanced", "raycast", "fullres", "tin"]
-"""Registered tile strategies: tilelets (raster), the max-mipmap ray caster, and two raster baselines."""
+StrategyName = Literal["raster", "raster_gs", "raycast", "fullres", "tin"]
+"""Registered tile strategies: tilelets as indexed triangles (raster) and through the geometry shader
+(raster_gs), the max-mipmap ray caster, and two raster baselines."""
 Kind = Literal["raster", "raycast"]
 """How a strategy makes pixels: triangles through the rasterizer, or rays in the fragment shader."""
-Policy = Literal["raster", "instanced", "raycast", "fullres", "tin", "hybrid", "heuristic", "oracle"]
+Policy = Literal["raster", "raster_gs", "raycast", "fullres", "tin", "hybrid", "heuristic", "oracle"]
 """How a renderer chooses each tile's strategy: one strategy for all, or a per-tile choice."""
-Method = Literal["reference", "raster", "instanced", "raycast", "fullres", "tin", "hybrid", "heuristic", "oracle"]
+Method = Literal["reference", "raster", "raster_gs", "raycast", "fullres", "tin", "hybrid", "heuristic", "oracle"]
 """Anything that renders a view: the full-resolution reference or a policy."""
 
 PURE_POLICIES: tuple[str, ...] = get_args(StrategyName)

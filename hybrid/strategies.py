@@ -13,7 +13,7 @@ from hybrid.errors import TerrabenchError
 from hybrid.terrain.heightfield import HeightField
 from hybrid.tiles.pyramid import TilePyramid
 from raster.estimate import TileletTriangleEstimator
-from raster.instanced import InstancedTileletStrategy
+from raster.indexed import IndexedTileletStrategy
 from raster.tilelets import TileletStrategy
 from raster.tin import TinStrategy
 from raster.trianglelist import TriangleListStrategy
@@ -37,11 +37,11 @@ class StrategyEntry:
 
 
 STRATEGIES: dict[str, StrategyEntry] = {e.name: e for e in (
-    StrategyEntry("raster", "raster", TileletStrategy,
-                  "GPU-selected restricted-quadtree tilelets through the geometry shader (the paper's path)",
+    StrategyEntry("raster", "raster", IndexedTileletStrategy,
+                  "GPU-selected restricted-quadtree tilelets drawn as indexed triangles (no geometry shader)",
                   TileletTriangleEstimator),
-    StrategyEntry("instanced", "raster", InstancedTileletStrategy,
-                  "GPU-selected restricted-quadtree tilelets as an instanced template (no geometry shader)",
+    StrategyEntry("raster_gs", "raster", TileletStrategy,
+                  "GPU-selected restricted-quadtree tilelets through the geometry shader (the paper's path)",
                   TileletTriangleEstimator),
     StrategyEntry("raycast", "raycast", RaycastStrategy, "maximum-mipmap ray casting (Dick et al.)"),
     StrategyEntry("fullres", "raster", TriangleListStrategy, "full-resolution indexed triangle list per tile"),

@@ -23,7 +23,7 @@ uniform float beta;             // morph-safe error growth (raster.quadtree)
 uniform bool stitch;            // drop midpoints toward coarser neighbours (off: cracks, for tests)
 uniform bool morph;             // geomorph the posts a split creates (off: they appear at their own height)
 uniform bool write_records;     // leaf records for the geometry-shader path (raster.tilelets)
-uniform bool write_mesh;        // vertices and indices for the plain indexed draw (raster.instanced)
+uniform bool write_mesh;        // vertices and indices for the plain indexed draw (raster.indexed)
 uniform vec4 planes[6];         // eye-relative frustum planes, inside where dot >= 0
 
 int side_of(int m) { return n_cells >> (m + 1); }

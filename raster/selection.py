@@ -4,7 +4,7 @@ At upload a tile gets its heights (a float32 storage buffer), its node errors an
 (raster.nodes), a leaf buffer with room for every possible leaf, a skirt-segment buffer and its indirect draw
 commands. Per frame the CPU writes one block of parameters per tile and issues the dispatches: the compute shader (select.comp.glsl) picks the leaves for the
 view, drops midpoints toward coarser neighbours, geomorphs and culls, and fills the indirect commands; the
-draw (geometry shader or instanced template, see raster.tilelets and raster.instanced) reads them.
+draw (geometry shader or indexed triangles, see raster.tilelets and raster.indexed) reads them.
 """
 from __future__ import annotations
 

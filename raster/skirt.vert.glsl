@@ -1,6 +1,6 @@
 #version 430
 #include "raster/tile_block"
-// Skirts of the instanced path: one quad per segment (raster/select.comp.glsl) hanging from a tile edge that
+// Skirts of the indexed path (raster.indexed): one quad per segment (raster/select.comp.glsl) hanging from a tile edge that
 // faces a ray-cast tile down to below the tile's lowest point; clipping is off across the skirt's own plane.
 layout(location = 0) in vec3 a_p;         // per instance: segment start (tile cells x, y; height in metres)
 layout(location = 1) in vec3 a_q;         // segment end

@@ -1,4 +1,5 @@
-"""The paper's raster strategy: GPU-selected tilelets expanded by the geometry shader (Bhattacharjee et al.).
+"""The paper's raster strategy (``raster_gs``): GPU-selected tilelets expanded by the geometry shader
+(Bhattacharjee et al.).
 
 Leaves come from the GPU selection (raster.selection): one point per leaf, drawn with an indirect command,
 expanded by the geometry shader into its 8-triangle fan (stitched where the neighbour is coarser, four

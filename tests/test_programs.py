@@ -6,7 +6,7 @@ import pytest
 import hybrid.gl.programs as programs
 from hybrid.errors import TerrabenchError
 from hybrid.reference import ReferenceRenderer
-from raster.instanced import InstancedTileletStrategy
+from raster.indexed import IndexedTileletStrategy
 from raster.tilelets import TileletStrategy
 from raster.trianglelist import TriangleListStrategy
 from raycast import CastOptions, RaycastStrategy
@@ -26,7 +26,7 @@ def test_every_program_compiles_and_every_glsl_file_is_used(ctx, puget257, monke
 
     monkeypatch.setattr(programs, "glsl_source", recording)
     ctx.error                                              # clear any stale error
-    made = [ReferenceRenderer(ctx, puget257), TileletStrategy(ctx, puget257), InstancedTileletStrategy(ctx, puget257),
+    made = [ReferenceRenderer(ctx, puget257), TileletStrategy(ctx, puget257), IndexedTileletStrategy(ctx, puget257),
             TriangleListStrategy(ctx, puget257)]
     rc = RaycastStrategy(ctx, puget257)
     made.append(rc)

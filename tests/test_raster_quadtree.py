@@ -130,12 +130,12 @@ def test_triangle_estimate_bounds_the_drawn_count(ctx, puget_full):
     from raster.estimate import TileletTriangleEstimator
     from raster.tilelets import read_leaves
     ratios = []
-    with Renderer(ctx, puget_full, "instanced", 256) as r:
+    with Renderer(ctx, puget_full, "raster", 256) as r:
         est = TileletTriangleEstimator(r.pyramid)
         for v in (preset("flyover", puget_full, 6, 320, 180).view(2), preset("orbit", puget_full, 6, 320, 180).view(3)):
             r.render(v, culling=False)
             for p in r.plan(v):
-                leaves = read_leaves(r.cache.entries[("instanced", p.key)])
+                leaves = read_leaves(r.cache.entries[("raster", p.key)])
                 drawn = int(leaves["triangles"].sum())
                 ratios.append(est(p.key, p.selected, v, 2 / 3) / drawn)
     assert len(ratios) > 8

@@ -1,4 +1,4 @@
-"""GPU tests of the two tilelet strategies (geometry shader and instanced template), both selected on the GPU:
+"""GPU tests of the two tilelet strategies (indexed triangles and geometry shader), both selected on the GPU:
 crack-free images (and cracks when stitching is off), counts against the leaves read back, culling that
 changes no pixel, morph continuity, convergence to the reference as tau -> 0, modes."""
 import numpy as np
@@ -11,7 +11,7 @@ from hybrid.reference import ReferenceRenderer
 from hybrid.renderer import Renderer
 from raster.tilelets import read_leaves
 
-STRATEGIES = ("raster", "instanced")
+STRATEGIES = ("raster", "raster_gs")
 
 
 @pytest.fixture(scope="module")
@@ -90,7 +90,7 @@ def test_converges_to_the_reference(renderers):
     hf, rs, ref = renderers[name]
     for view in border_views(hf)[:3]:
         rf = ref.render(view, mode="shaded")
-        res = rs["instanced"].render(view, tau=0.05, mode="shaded")
+        res = rs["raster"].render(view, tau=0.05, mode="shaded")
         both = res.mask & rf.mask
         rel = np.abs(res.distance[both] - rf.distance[both]) / rf.distance[both]
         assert (res.mask == rf.mask).mean() > 0.999
@@ -99,7 +99,7 @@ def test_converges_to_the_reference(renderers):
 
 def test_morph_continuity_across_level_switch(renderers):
     hf, rs, ref = renderers["puget"]
-    r = rs["instanced"]
+    r = rs["raster"]
     w, d = hf.extent
     ox, oy, oz = hf.origin
     hi = hf.height_range[1]
@@ -111,7 +111,7 @@ def test_morph_continuity_across_level_switch(renderers):
 
     def leaves(t, morph):
         r.render(view(t), mode="shaded", leaf_tau=leaf_tau, morph=morph, culling=False)
-        return {k: (len(s["level"]), int(s["level"].sum())) for k, s in leaf_sets(r, "instanced", view(t)).items()}
+        return {k: (len(s["level"]), int(s["level"].sum())) for k, s in leaf_sets(r, "raster", view(t)).items()}
 
     def colour_change(a, b):                              # pixels whose colour changes by more than 8 levels
         return int(np.count_nonzero(np.abs(a.colour.astype(int) - b.colour.astype(int)).max(axis=2) > 8))
@@ -143,14 +143,14 @@ def test_morph_continuity_across_level_switch(renderers):
 
 def test_modes_and_far_origin(ctx, renderers):
     hf, rs, _ = renderers["spike"]
-    r = rs["raster"]
+    r = rs["raster_gs"]
     view = border_views(hf)[3]
     res = r.render(view, mode="level", wireframe=True)
     colours = {tuple(c) for c in res.colour[res.mask].reshape(-1, 3)[::7]}
     assert len(colours) > 20
     base = r.render(view, mode="shaded")
     far_hf = hf.moved((5.0e6, -3.0e6, 1000.0))
-    with Renderer(ctx, far_hf, "raster", tile_size=64) as far:
+    with Renderer(ctx, far_hf, "raster_gs", tile_size=64) as far:
         moved = far.render(view.moved((5.0e6, -3.0e6, 1000.0)), mode="shaded")
     assert np.mean(np.any(base.colour != moved.colour, axis=-1)) < 0.01
     with pytest.raises(TerrabenchError, match="mode"):

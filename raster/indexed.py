@@ -1,4 +1,4 @@
-"""The raster strategy a user would pick today: GPU-selected tilelets as plain indexed triangles.
+"""The raster strategy a user would pick today (``raster``): GPU-selected tilelets as plain indexed triangles.
 
 The same leaves as the paper's path (raster.selection), without a geometry shader: the selection writes every
 leaf's 9 vertices and 24 indices (its fan, stitched, with full-resolution cells split SW-NE), and each tile is
@@ -14,7 +14,7 @@ from .selection import CMD_SKIRTS, CMD_TEMPLATE, SelectedTileletTile
 from .tilelets import TileletDrawing
 
 
-class InstancedTileletStrategy(TileletDrawing):
+class IndexedTileletStrategy(TileletDrawing):
     """Restricted-quadtree tilelets selected on the GPU, drawn as indexed triangles (no geometry shader)."""
 
     writes = "mesh"
