@@ -72,6 +72,14 @@ class TileStrategy(Protocol):
         """Free the strategy's own GPU objects (tiles are freed through their GpuTile)."""
 
 
+class SkirtedStrategy(TileStrategy, Protocol):
+    """A raster strategy that hangs skirts (draw option ``skirts``) from tile edges facing ray-cast tiles; the
+    renderer draws them after every tile, so no skirt lies inside a ray-cast tile's box at its pre-pass."""
+
+    def draw_skirts(self, target: FrameTarget, view: View) -> None:
+        """Draw the skirts selected by the last draw_tiles call."""
+
+
 class TriangleEstimator(Protocol):
     """Triangles a raster strategy would draw for one tile at a view, computed on the CPU without GL."""
 

@@ -142,6 +142,10 @@ class Renderer:
             for k, v in c.items():
                 if isinstance(v, (int, float, np.integer, np.floating)):
                     counters[k] = counters.get(k, 0) + v
+        if skirts:          # last, so the ray caster's pre-pass sees no skirt inside a ray-cast tile's box
+            for name in self._order():
+                if "skirts" in self.strategies[name].draw_options and any(p.choice == name for p in plans):
+                    self.strategies[name].draw_skirts(target, view)
         return counters
 
     def time_draw(self, view: View, plans: list[TilePlan], name: str, target: FrameTarget, pinned=frozenset(),

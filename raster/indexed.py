@@ -23,6 +23,7 @@ class IndexedTileletStrategy(TileletDrawing):
         super().__init__(ctx, hf, **options)
         self.prog = program(ctx, "raster", "template.vert.glsl", "tilelet.frag.glsl")
         self.skirt_prog = program(ctx, "raster", "skirt.vert.glsl", "tilelet.frag.glsl")
+        self._skirted: list = []
 
     def programs(self) -> tuple:
         """The mesh and skirt programs."""
@@ -35,11 +36,14 @@ class IndexedTileletStrategy(TileletDrawing):
                 "skirts": self.ctx.vertex_array(self.skirt_prog, [(g.segments, "3f 3f/i", "a_p", "a_q")])}
 
     def draw_tile(self, g: SelectedTileletTile, tile, view, wireframe: bool = False) -> None:
-        """The tile's leaves as indexed triangles, then its skirt quads."""
+        """The tile's leaves as indexed triangles."""
         ctx = self.ctx
         ctx.wireframe = bool(wireframe)
         try:
             g.vaos["mesh"].render_indirect(g.control, mode=ctx.TRIANGLES, count=1, first=CMD_TEMPLATE)
         finally:
             ctx.wireframe = False
-        g.vaos["skirts"].render_indirect(g.control, mode=ctx.TRIANGLES, count=1, first=CMD_SKIRTS)
+
+    def draw_tile_skirts(self, g: SelectedTileletTile) -> None:
+        """The tile's skirt quads (one instance a segment)."""
+        g.vaos["skirts"].render_indirect(g.control, mode=self.ctx.TRIANGLES, count=1, first=CMD_SKIRTS)

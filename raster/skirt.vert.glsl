@@ -19,7 +19,7 @@ void main() {
     if (LOW[v] == 1) p.z = skirt_bottom;
     int axis = a_p.x == a_q.x ? 0 : 1;              // 0: a west or east edge (x constant)
     v_rel = p;
-    v_level = tile_level;
+    v_level = -1 - tile_level;                      // negative: a skirt (see tilelet.frag.glsl)
     v_bary = vec3(1.0, 0.0, 0.0);
     gl_ClipDistance[0] = axis == 0 ? 1.0 : p.x - clip_rel.x;
     gl_ClipDistance[1] = axis == 1 ? 1.0 : p.y - clip_rel.y;

@@ -22,11 +22,16 @@ void main() {
     float v_h = v_rel.z - origin_rel.z;
     vec3 n = cross(dFdx(v_rel), dFdy(v_rel));
     if (n.z < 0.0) n = -n;
+    // a skirt (negative level) fills the step to a neighbouring ray-cast tile's edge: shade it as the ground
+    // at that edge (upward normal), not as a vertical wall
+    bool skirt = v_level < 0;
+    int level = skirt ? -1 - v_level : v_level;
+    if (skirt) n = vec3(0.0, 0.0, 1.0);
     vec3 c;
     if (mode == 0) c = texture(tex, v_uv).rgb;
     else if (mode == 1) c = lambert(height_ramp(v_h, hrange), n);
     else if (mode == 2) c = height_ramp(v_h, hrange);
-    else c = lambert(level_colour(v_level), n);
+    else c = lambert(level_colour(level), n);
     if (wireframe) {
         vec3 d = fwidth(v_bary);
         vec3 a = smoothstep(vec3(0.0), 1.5 * d, v_bary);

@@ -10,6 +10,7 @@ in Tilelet {
     float h[9];
 } gs_in[];
 uniform mat4 view_proj_rel;    // (world - eye) -> clip, reversed Z
+uniform bool skirt_pass;        // emit only the skirts (a second pass, after the ray-cast tiles)
 out vec3 v_rel;                // eye-relative position; the fragment shader derives height and uv from it
 flat out int v_level;
 noperspective out vec3 v_bary;
@@ -37,7 +38,7 @@ void vert(vec3 p, vec3 bary) {
 // tile border, exactly on the clip rectangle's side).
 void skirt_vert(vec3 p, int axis) {
     v_rel = p;
-    v_level = tile_level + gs_in[0].node.z;
+    v_level = -1 - tile_level - gs_in[0].node.z;   // negative: a skirt (see tilelet.frag.glsl)
     v_bary = vec3(1.0, 0.0, 0.0);
     gl_ClipDistance[0] = axis == 0 ? 1.0 : p.x - clip_rel.x;
     gl_ClipDistance[1] = axis == 1 ? 1.0 : p.y - clip_rel.y;
@@ -75,6 +76,16 @@ void main() {
     vec3 C = post(1, 1);
     vec3 SW = post(0, 0), S = post(1, 0), SE = post(2, 0), E = post(2, 1);
     vec3 NE = post(2, 2), N = post(1, 2), NW = post(0, 2), W = post(0, 1);
+    if (skirt_pass) {                 // skirts only, drawn after the ray-cast tiles (raster.tilelets)
+        if (skirt_edges == 0) return;
+        int span = 2 << gs_in[0].node.z;
+        ivec2 p0 = gs_in[0].node.xy;
+        if ((skirt_edges & 1) != 0 && p0.x == 0) edge_skirt(SW, W, NW, (drop & 1) != 0, 0);
+        if ((skirt_edges & 2) != 0 && p0.x + span == n_cells) edge_skirt(SE, E, NE, (drop & 2) != 0, 0);
+        if ((skirt_edges & 4) != 0 && p0.y == 0) edge_skirt(SW, S, SE, (drop & 4) != 0, 1);
+        if ((skirt_edges & 8) != 0 && p0.y + span == n_cells) edge_skirt(NW, N, NE, (drop & 8) != 0, 1);
+        return;
+    }
     // counter-clockwise seen from above; an edge's two triangles (C, a, m) and (C, m, b) go out as one
     // strip a, m, C, b (4 vertices instead of 6; the strip's odd triangle is (C, m, b) in GL's order)
     if (gs_in[0].node.z == 0) {
@@ -92,13 +103,5 @@ void main() {
         if ((drop & 2) != 0) tri(C, SE, NE); else pair(SE, E, C, NE);
         if ((drop & 8) != 0) tri(C, NE, NW); else pair(NE, N, C, NW);
         if ((drop & 1) != 0) tri(C, NW, SW); else pair(NW, W, C, SW);
-    }
-    if (skirt_edges != 0) {
-        int span = 2 << gs_in[0].node.z;
-        ivec2 p0 = gs_in[0].node.xy;
-        if ((skirt_edges & 1) != 0 && p0.x == 0) edge_skirt(SW, W, NW, (drop & 1) != 0, 0);
-        if ((skirt_edges & 2) != 0 && p0.x + span == n_cells) edge_skirt(SE, E, NE, (drop & 2) != 0, 0);
-        if ((skirt_edges & 4) != 0 && p0.y == 0) edge_skirt(SW, S, SE, (drop & 4) != 0, 1);
-        if ((skirt_edges & 8) != 0 && p0.y + span == n_cells) edge_skirt(NW, N, NE, (drop & 8) != 0, 1);
     }
 }

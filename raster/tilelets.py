@@ -47,15 +47,39 @@ class TileletDrawing(TileletSelection):
         raise NotImplementedError
 
     def draw_tile(self, g: SelectedTileletTile, tile, view, wireframe: bool = False) -> None:
-        """Issue one tile's indirect draw(s) (subclasses)."""
+        """Issue one tile's indirect draw (subclasses)."""
         raise NotImplementedError
+
+    def draw_tile_skirts(self, g: SelectedTileletTile) -> None:
+        """Issue one tile's skirt draw (subclasses)."""
+        raise NotImplementedError
+
+    def draw_skirts(self, target, view) -> None:
+        """Draw the skirts of the last draw_tiles call (after the ray-cast tiles, so that the ray caster's
+        pre-pass never sees a skirt inside a ray-cast tile's box): they show only where nothing is nearer."""
+        items = self._skirted
+        if not items:
+            return
+        ctx = self.ctx
+        target.use()
+        for i in range(4):
+            ctx.enable_direct(GL_CLIP_DISTANCE0 + i)
+        try:
+            for i, g in items:
+                self.blocks.bind(i)
+                self.draw_tile_skirts(g)
+        finally:
+            for i in range(4):
+                ctx.disable_direct(GL_CLIP_DISTANCE0 + i)
 
     def draw_tiles(self, target, view, items, tau: float | None = None, mode: str | None = None,
                    wireframe: bool = False, morph: bool = True, stitching: bool = True, culling: bool = True,
                    leaf_tau: float | None = None, skirts: dict | None = None) -> dict:
         """Select and draw (gpu_tile, tile, selected) items into target at tau px (``leaf_tau`` overrides it).
 
-        Counters: triangles (drawn, stitched; skirts apart as skirt_segments), tilelets, tilelets_culled.
+        ``skirts`` {tile key: edge bits} are selected here and drawn by ``draw_skirts``, which the renderer
+        calls after the ray-cast tiles. Counters: triangles (drawn, stitched), tilelets, tilelets_culled,
+        skirt_segments.
         """
         mode = resolve_mode(self.hf, mode, MODES)
         tau = leaf_tau if leaf_tau is not None else tau
@@ -79,6 +103,7 @@ class TileletDrawing(TileletSelection):
             for i, (g, tile, sel) in enumerate(items):
                 self.blocks.bind(i)
                 self.draw_tile(g, tile, view, wireframe)
+            self._skirted = [(i, g) for i, (g, tile, sel) in enumerate(items) if (skirts or {}).get(sel.key, 0)]
         finally:
             for i in range(4):
                 ctx.disable_direct(GL_CLIP_DISTANCE0 + i)
@@ -97,6 +122,7 @@ class TileletStrategy(TileletDrawing):
     def __init__(self, ctx, hf, **options):
         super().__init__(ctx, hf, **options)
         self.prog = program(ctx, "raster", "leaf.vert.glsl", "tilelet.frag.glsl", "tilelet.geom.glsl")
+        self._skirted: list = []
 
     def programs(self) -> tuple:
         """The geometry-shader program."""
@@ -108,4 +134,11 @@ class TileletStrategy(TileletDrawing):
 
     def draw_tile(self, g: SelectedTileletTile, tile, view, wireframe: bool = False) -> None:
         """The tile's leaves as points through the geometry shader (count from the selection)."""
+        self.prog["skirt_pass"].value = False
         g.vaos["points"].render_indirect(g.control, mode=self.ctx.POINTS, count=1, first=CMD_POINTS)
+
+    def draw_tile_skirts(self, g: SelectedTileletTile) -> None:
+        """The tile's leaves again through the geometry shader, emitting only their skirts."""
+        self.prog["skirt_pass"].value = True
+        g.vaos["points"].render_indirect(g.control, mode=self.ctx.POINTS, count=1, first=CMD_POINTS)
+        self.prog["skirt_pass"].value = False
