@@ -144,6 +144,35 @@ def strategy_mix_chart(f, folder) -> list[Path]:
     return save_figure(fig, folder, "strategy_mix")
 
 
+def crossover_chart(tiles: pd.DataFrame, folder: Path) -> list[Path]:
+    """Per tile timed both ways (the oracle's measurements): ms per covered pixel of each strategy, and their
+    ratio, against triangles per pixel; where the ratio crosses 1 rasterizing starts to pay on this device."""
+    t = tiles.dropna(subset=["meas_raster_ms", "meas_raycast_ms"]) if len(tiles) else tiles
+    if t.empty or "f_triangles" not in t:
+        return []
+    px = np.maximum(t["f_pixels"].to_numpy(float), 1.0)
+    tpp = np.maximum(t["f_triangles"].to_numpy(float) / px, 1e-4)
+    ras, ray = t["meas_raster_ms"].to_numpy(float), t["meas_raycast_ms"].to_numpy(float)
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
+    axes[0].scatter(tpp, 1e3 * ras / px, s=8, alpha=0.5, label="raster (tile drawn alone)", color="C0")
+    axes[0].scatter(tpp, 1e3 * ray / px, s=8, alpha=0.5, label="ray cast (tile drawn alone)", color="C1")
+    axes[0].set_ylabel("µs per covered pixel")
+    axes[1].scatter(tpp, ras / ray, s=8, alpha=0.5, color="C2")
+    axes[1].axhline(1.0, color="k", lw=1)
+    edges = np.quantile(tpp, np.linspace(0, 1, 9))
+    mid = [np.median((ras / ray)[(tpp >= a) & (tpp <= b)]) for a, b in zip(edges[:-1], edges[1:])]
+    axes[1].plot(np.sqrt(edges[:-1] * edges[1:]), mid, "o-", color="C3", label="median per bin")
+    axes[1].set_ylabel("raster ms / ray-cast ms (below 1: raster is faster)")
+    for ax in axes:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("raster triangles per covered pixel (cost-model estimate / box footprint)")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    fig.suptitle(f"where each strategy pays, {len(t)} tiles", fontsize=10)
+    return save_figure(fig, folder, "crossover")
+
+
 def image_panels(run: Path, f: pd.DataFrame, folder: Path, frames: list[int]) -> list[Path]:
     """For chosen frames: each method's image, its error heat map against the reference, and its maps."""
     from PIL import Image
@@ -193,11 +222,13 @@ def image_panels(run: Path, f: pd.DataFrame, folder: Path, frames: list[int]) ->
     return out
 
 
-def all_charts(run: Path, frames: pd.DataFrame, folder: Path, image_frames: list[int]) -> dict[str, list[Path]]:
+def all_charts(run: Path, frames: pd.DataFrame, folder: Path, image_frames: list[int],
+               tiles: pd.DataFrame | None = None) -> dict[str, list[Path]]:
     """Every chart of a run into folder; returns name -> files."""
     folder.mkdir(parents=True, exist_ok=True)
     f = label_columns(frames)
     return {"frame_time": frame_time_chart(f, folder), "gpu_memory": memory_chart(f, folder),
             "speed_vs_accuracy": speed_accuracy_chart(f, folder), "strategy_mix": strategy_mix_chart(f, folder),
             "depth_jump": depth_jump_chart(f, folder),
+            "crossover": crossover_chart(tiles if tiles is not None else pd.DataFrame(), folder),
             "images": image_panels(run, f, folder, image_frames)}

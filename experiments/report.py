@@ -87,7 +87,8 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise TerrabenchError(f"cannot create report folder {out}: {exc.strerror or exc}") from None
-    charts = all_charts(run, frames, out, spec.get("image_frames", [0]))
+    tiles = pd.read_parquet(run / "tiles.parquet") if (run / "tiles.parquet").exists() else None
+    charts = all_charts(run, frames, out, spec.get("image_frames", [0]), tiles)
     if video:
         from .video import write_videos
         charts["video"] = write_videos(run, frames, out)
@@ -107,6 +108,7 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
     titles = {"frame_time": "Frame time over the flight", "gpu_memory": "GPU memory over the flight",
               "speed_vs_accuracy": "Speed against accuracy", "strategy_mix": "Strategy mix per frame",
               "depth_jump": "Popping: largest depth jump from the previous frame, against the reference's",
+              "crossover": "Where each strategy pays: cost per tile against triangles per pixel",
               "images": "Images", "video": "Flight animation"}
     for key, files in charts.items():
         pngs = [p for p in files if p.suffix in (".png", ".gif")]

@@ -5,7 +5,7 @@ from hybrid.camera.view import View
 from hybrid.tiles.pyramid import TileKey, TilePyramid
 from hybrid.tiles.tiletree import SelectedTile
 
-from .quadtree import DEFAULT_BETA, error_pyramid, estimate_triangles, split_errors
+from .quadtree import GPU_BETA, error_pyramid, estimate_triangles, split_errors
 
 
 class TileletTriangleEstimator:
@@ -15,7 +15,7 @@ class TileletTriangleEstimator:
     search; the estimate is within 10 % of the exact restricted, stitched count (tested).
     """
 
-    def __init__(self, pyramid: TilePyramid, beta: float = DEFAULT_BETA):
+    def __init__(self, pyramid: TilePyramid, beta: float = GPU_BETA):
         self.pyramid = pyramid
         self.beta = float(beta)
         self._errors: dict = {}

@@ -24,7 +24,7 @@ import numpy as np
 
 from hybrid.tiles.pyramid import TilePyramid
 
-from .quadtree import DEFAULT_BETA, error_pyramid
+from .quadtree import GPU_BETA, error_pyramid
 
 _CACHE: dict = {}
 
@@ -55,7 +55,7 @@ def _grow(a: np.ndarray, fn) -> np.ndarray:
     return out
 
 
-def global_nodes(hf, tile_size: int, beta: float = DEFAULT_BETA) -> GlobalNodes:
+def global_nodes(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
     """The whole grid's node errors and boxes, over the pyramid's padded grid (cached per height field,
     tile size and beta: about 2.5 s for 1025² samples)."""
     key = (id(hf), int(tile_size), float(beta))

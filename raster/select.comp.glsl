@@ -255,13 +255,24 @@ void emit_leaf(int m, int a, int b) {
 void main() {
     uint gid = gl_GlobalInvocationID.x;
 #if PASS == 0
+    // nodes of local level >= 1 (level 0 only in a 2-cell tile): a split level-1 node lists its four
+    // children itself, which keeps three quarters of the nodes out of this pass
     int id = first_id + int(gid);
     if (id >= starts(top + 1)) return;
-    int m = 0;
+    int m = min(1, top);
     while (m < top && id >= starts(m + 1)) ++m;          // at most 12 levels
     int s = side_of(m);
     int local = id - starts(m);
     int a = local / s, b = local % s;
+    if (m == 1 && splits(1, a, b)) {
+        for (int c = 0; c < 4; ++c) {
+            int ca = 2 * a + (c >> 1), cb = 2 * b + (c & 1);
+            if (cull && outside(0, ca, cb)) { add_total(2, 1u); continue; }
+            uint i = reserve_found();
+            found[4u + i] = uint(ca << 4) | (uint(cb) << 18);
+        }
+        return;
+    }
     if (!splits(m + 1, a >> 1, b >> 1) || splits(m, a, b)) return;
     if (cull && outside(m, a, b)) { add_total(2, 1u); return; }
     uint i = reserve_found();

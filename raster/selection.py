@@ -16,7 +16,7 @@ from hybrid.gl.programs import compute_shader, set_uniform
 from hybrid.gl.textures import terrain_texture
 
 from .nodes import global_nodes, tile_levels, tile_node_block
-from .quadtree import DEFAULT_BETA
+from .quadtree import GPU_BETA
 from .tileblock import TileBlocks, register_tile_block, tile_blocks
 
 LEAF_WORDS = 13                 # j0, i0, level, dropped edges, nine post heights
@@ -34,8 +34,10 @@ then pass 1's dispatch (x, y, z) and the leaf count"""
 
 
 def level_starts(n: int) -> np.ndarray:
-    """Invocation index of the first node of each local level among a tile's own nodes (levels + 1 entries)."""
-    counts = [(n >> (m + 1)) ** 2 for m in range(tile_levels(n))]
+    """Invocation index of the first node of each local level in the listing pass (levels + 1 entries): level 0
+    is listed by its split parents (levels 0 and 1 both start at 0), except in a 2-cell tile."""
+    levels = tile_levels(n)
+    counts = [0 if levels > 1 else 1] + [(n >> (m + 1)) ** 2 for m in range(1, levels)]
     return np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
 
 
@@ -112,7 +114,7 @@ class TileletSelection:
     kind = "raster"
     writes = "records"          # what the selection writes for the draw: leaf records or a mesh
 
-    def __init__(self, ctx, hf, beta: float = DEFAULT_BETA):
+    def __init__(self, ctx, hf, beta: float = GPU_BETA):
         if not (0.0 < beta < 1.0):
             raise TerrabenchError(f"beta must lie in (0, 1), got {beta!r}")
         self.ctx, self.hf, self.beta = ctx, hf, float(beta)

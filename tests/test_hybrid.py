@@ -16,8 +16,20 @@ from hybrid.strategies import STRATEGIES
 SIZE = (320, 180)
 # a model under which raster wins for tiles with few triangles and ray casting for the rest, so the
 # frames below really mix both strategies with shared borders
-SPLIT = CostModel("split", {"const": 0.0, "triangles": 1e-3, "visible_triangles": 0.0, "pixels": 0.0},
-                  {"const": 10.0, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0})
+def split_model(triangles: float) -> CostModel:
+    """A model under which raster wins for tiles of fewer than ``triangles`` and ray casting for the rest (1e-3 ms
+    a triangle against a constant a tile, no per-frame overheads), so frames really mix both strategies."""
+    return CostModel("split", {"const": 0.0, "triangles": 1e-3, "visible_triangles": 0.0, "pixels": 0.0},
+                     {"const": 1e-3 * triangles, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0})
+
+
+SPLIT = split_model(4000)
+
+
+def median_split(pyramid, view) -> CostModel:
+    """split_model at the median triangle estimate of the view's tiles: about half the tiles either way."""
+    from hybrid.cost.planner import plan_frame
+    return split_model(float(np.median([p.features.triangles for p in plan_frame(pyramid, view, SPLIT)])))
 
 
 def _views(hf):
@@ -32,6 +44,7 @@ def frames(ctx, puget_full):
     rs = {p: make_renderer(ctx, puget_full, p, tile_size=128) for p in ("raster", "raycast")}
     hy = Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT)
     for v in _views(puget_full):
+        hy.model = median_split(hy.pyramid, v)
         out.append({"ref": ref.render(v), "hybrid": hy.render(v, maps=True),
                     **{p: r.render(v) for p, r in rs.items()}})
     for r in list(rs.values()) + [hy, ref]:
@@ -76,11 +89,10 @@ def test_no_hole_at_strategy_borders(frames):
 
 
 # Strategy borders against the rest of the image: mean error in a band of 2 px either side of a raster / ray-cast
-# border over the mean error of pixels 8 px or more from any border, at the same distance. Measured (tile size
-# 128, the three views above; the flyover's borders are nearly all silhouettes, so the orbit view's 1471 band
-# pixels carry the measure): the pure raster and ray-cast frames over the same pixels reach 1.39 / 1.37 in
-# colour and 1.02 / 1.21 in depth (the band lies on rougher ground than the average); a seam shows as more.
-SEAM_BAND_PX, SEAM_AWAY_PX, SEAM_MAX_RATIO = 2, 8, 1.6
+# border over the mean error of pixels 8 px or more from any border, at the same distance. The pure raster and
+# ray-cast frames over the same pixels reach 1.0-1.75 (the band lies on rougher ground than the average); the
+# mixed frame may exceed the worse of them by SEAM_MARGIN at most.
+SEAM_BAND_PX, SEAM_AWAY_PX, SEAM_MARGIN = 2, 8, 1.2
 
 
 def seam_ratios(frames, key: str) -> tuple[int, float, float]:
@@ -118,20 +130,18 @@ def seam_ratios(frames, key: str) -> tuple[int, float, float]:
     return n, sums[0] / sums[1], sums[2] / sums[3]
 
 
-def test_pure_frames_are_as_good_along_strategy_borders_as_elsewhere(frames):
-    """The control of the seam test: the measure stays below its bound where there is no seam."""
-    for key in ("raster", "raycast"):
-        n, colour, depth = seam_ratios(frames, key)
-        assert n >= 200 and colour <= SEAM_MAX_RATIO and depth <= SEAM_MAX_RATIO, (key, n, colour, depth)
-
-
 def test_no_seam_along_strategy_borders(frames):
-    """Raster skirts drawn before the ray-cast tiles sat inside their boxes, so the ray caster's pre-pass
-    skipped pixels it should have cast (2.45x colour, 3.3x depth error in the band); they now go last."""
+    """The band along strategy borders is no worse in the mixed frame than in the pure frames over the same
+    pixels (the band lies on rougher ground than the average, so the pure frames' own ratio is the bound).
+
+    Raster skirts drawn before the ray-cast tiles sat inside their boxes, so the ray caster's pre-pass skipped
+    pixels it should have cast: 2.45x colour and 3.3x depth error in the band against 1.4x and 1.2x for the
+    pure frames. They now go last."""
     n, colour, depth = seam_ratios(frames, "hybrid")
-    assert n >= 200
-    assert colour <= SEAM_MAX_RATIO, f"colour error along strategy borders {colour:.2f}x the rest"
-    assert depth <= SEAM_MAX_RATIO, f"depth error along strategy borders {depth:.2f}x the rest"
+    pure = [seam_ratios(frames, key) for key in ("raster", "raycast")]
+    assert n >= 200 and all(p[0] >= 200 for p in pure)
+    assert colour <= SEAM_MARGIN * max(p[1] for p in pure), (colour, pure)
+    assert depth <= SEAM_MARGIN * max(p[2] for p in pure), (depth, pure)
 
 
 def test_depth_agrees_across_strategies(frames):
@@ -198,11 +208,13 @@ def test_pure_hybrid_and_heuristic_policies_follow_their_rules(ctx, puget_full):
     for pol in ("raster", "raycast"):
         with Renderer(ctx, puget_full, pol, tile_size=128) as r:
             assert {p.choice for p in r.plan(v)} == {pol}
-    # SPLIT predicts 1e-3 ms a triangle for raster and 10 ms a tile for ray casting, without per-frame
-    # overheads: ray casting wins exactly where a tile has more than 10,000 triangles
+    # split_model(n) predicts 1e-3 ms a triangle for raster and 1e-3 n ms a tile for ray casting, without
+    # per-frame overheads: ray casting wins exactly where a tile has more than n triangles
     with Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT) as h:
+        h.model = model = median_split(h.pyramid, v)
+        n = model.raycast["const"] / 1e-3
         plans = h.plan(v)
-    assert [p.choice for p in plans] == ["raycast" if p.features.triangles > 10_000 else "raster" for p in plans]
+    assert [p.choice for p in plans] == ["raycast" if p.features.triangles > n else "raster" for p in plans]
     assert {p.choice for p in plans} == {"raster", "raycast"}
     # Dick et al.'s rule: ray cast where the tile's triangles outnumber threshold x its pixels
     for threshold in (4.0, 10.0):                           # both split this view's tiles
@@ -245,6 +257,7 @@ def test_shading_mode_reaches_both_strategies(ctx, puget_full):
     frames = {}
     for mode in (None, "height"):
         h = Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT, mode=mode)
+        h.model = median_split(h.pyramid, v)
         frames[mode] = h.render(v, maps=True)
         h.release()
     tex, height = frames[None], frames["height"]
