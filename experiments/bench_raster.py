@@ -193,7 +193,7 @@ def culling_rows(ctx, repeats=5):
             ms = float(np.median([x.stats.draw_ms for x in res]))
             s = counted.stats.counters
             base[cull] = ms
-            rows.append(("on" if cull else "off", s["tilelets"] - s["tilelets_culled"], s["tilelets_culled"],
+            rows.append(("on" if cull else "off", s["tilelets"], s["tilelets_culled"],
                          s["triangles"], f"{ms:.1f}"))
         rows.append(("gain", "", "", "", f"{base[False] / base[True]:.2f}x"))
     finally:
