@@ -1,8 +1,9 @@
 #version 430
-// GPU leaf selection of one tile's tilelet quadtree (raster.nodes): one invocation per node of the tile.
+// GPU leaf selection of one tile's tilelet quadtree (raster.nodes), in two passes (PASS 0 lists, PASS 1 emits).
 // A node is a leaf when its parent splits and it does not; its edge midpoint is dropped where the same-size
 // neighbour's parent does not split (that side is one level coarser). The leaf's nine post heights are
-// fetched and geomorphed here and appended, with its node, to the leaf buffer the draw reads.
+// fetched and geomorphed, and it is appended as a record (geometry-shader path) or as 9 vertices and 24
+// indices (indexed path) for the tile's indirect draw, with skirt segments where asked.
 #extension GL_ARB_shader_ballot : enable
 #extension GL_ARB_gpu_shader_int64 : enable
 #include "raster/tile_block"
