@@ -33,8 +33,6 @@ from hybrid.tiles.tiletree import DEFAULT_TAU, edge_neighbours
 
 STRATEGY_CODES = {"raster": 1, "raycast": 2}
 """Per-pixel codes of the strategy map, by strategy kind (0 = no terrain)."""
-DEFAULT_OPTIONS: dict[str, dict] = {}
-"""Draw options a renderer starts from: the CPU mirror of tilelet culling is a check, never timed."""
 
 
 def route_options(strategies: dict, options: dict) -> dict[str, dict]:
@@ -64,8 +62,7 @@ class Renderer:
         self.pyramid = pyramid or TilePyramid(hf, tile_size)
         self.cache = ResidencyCache(budget_bytes)
         self.strategies = {n: make_strategy(n, ctx, hf) for n in (CANDIDATES if self.mixed else (policy,))}
-        routed = route_options(self.strategies, options)
-        self.options = {n: {**DEFAULT_OPTIONS.get(n, {}), **o} for n, o in routed.items()}
+        self.options = route_options(self.strategies, options)
         self.model = cost_model or (load_cost_model(gl_info(ctx).renderer) if self.mixed else None)
         self.triangles = triangle_estimator(self.pyramid) if self.mixed else None
         self.threshold = threshold

@@ -23,7 +23,6 @@ class IndexedTileletStrategy(TileletDrawing):
         super().__init__(ctx, hf, **options)
         self.prog = program(ctx, "raster", "template.vert.glsl", "tilelet.frag.glsl")
         self.skirt_prog = program(ctx, "raster", "skirt.vert.glsl", "tilelet.frag.glsl")
-        self._skirted: list = []
 
     def programs(self) -> tuple:
         """The mesh and skirt programs."""

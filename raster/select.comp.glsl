@@ -76,46 +76,47 @@ float alpha_of(int st, float E, float d) {
 // live invocation reserves room for all of them (each gets its rank among the live ones).
 uint live_count(uint64_t m) { uvec2 v = unpackUint2x32(m); return uint(bitCount(v.x) + bitCount(v.y)); }
 
+// True in the lowest live invocation of the subgroup, the one that makes the atomic for all of them.
+bool leads(uint64_t live) {
+    uvec2 lv = unpackUint2x32(live);
+    return gl_SubGroupInvocationARB == (lv.x != 0u ? uint(findLSB(lv.x)) : 32u + uint(findLSB(lv.y)));
+}
+
+// This invocation's slot from the base the leader reserved: its rank among the live invocations.
+uint slot(uint64_t live, uint base) { return readFirstInvocationARB(base) + live_count(live & gl_SubGroupLtMaskARB); }
+
 // A slot in counter cmd[word] for every live invocation; ``also`` (>= 0) gets 24 indices a slot added.
 uint reserve(int word, int also, int total) {
     uint64_t live = ballotARB(true);
-    uint n = live_count(live);
-    uvec2 lv = unpackUint2x32(live);
-    uint first = lv.x != 0u ? uint(findLSB(lv.x)) : 32u + uint(findLSB(lv.y));
-    uint base = 0u;
-    if (gl_SubGroupInvocationARB == first) {
+    uint n = live_count(live), base = 0u;
+    if (leads(live)) {
         base = atomicAdd(cmd[word], n);
         if (also >= 0) atomicAdd(cmd[also], 24u * n);     // the indexed draw: 24 indices a leaf
         if (total >= 0) atomicAdd(frame_count[total], n);
     }
-    return readFirstInvocationARB(base) + live_count(live & gl_SubGroupLtMaskARB);
+    return slot(live, base);
 }
 
 // A slot in the leaf list for every live invocation; keeps the pass-1 work group count (x) up to date.
 uint reserve_found() {
     uint64_t live = ballotARB(true);
-    uint n = live_count(live);
-    uvec2 lv = unpackUint2x32(live);
-    uint first = lv.x != 0u ? uint(findLSB(lv.x)) : 32u + uint(findLSB(lv.y));
-    uint base = 0u;
-    if (gl_SubGroupInvocationARB == first) {
+    uint n = live_count(live), base = 0u;
+    if (leads(live)) {
         base = atomicAdd(found[3], n);
         atomicMax(found[0], (base + n + 63u) / 64u);
     }
-    return readFirstInvocationARB(base) + live_count(live & gl_SubGroupLtMaskARB);
+    return slot(live, base);
 }
 
 // Adds v of every live invocation to frame_count[word] with one atomic per subgroup.
 void add_total(int word, uint v) {
     uint64_t live = ballotARB(true);
-    uvec2 lv = unpackUint2x32(live);
-    uint first = lv.x != 0u ? uint(findLSB(lv.x)) : 32u + uint(findLSB(lv.y));
     uint sum = 0u;
     for (uint i = 0u; i < gl_SubGroupSizeARB; i++) {
         uint x = readInvocationARB(v, i);
         if (((live >> i) & 1ul) != 0ul) sum += x;
     }
-    if (gl_SubGroupInvocationARB == first) atomicAdd(frame_count[word], sum);
+    if (leads(live)) atomicAdd(frame_count[word], sum);
 }
 #else
 uint reserve(int word, int also, int total) {

@@ -1,5 +1,6 @@
 #version 430
 #include "raster/tile_block"
+#include "raster/tile_clip"
 // Skirts of the indexed path (raster.indexed): one quad per segment (raster/select.comp.glsl) hanging from a tile edge that
 // faces a ray-cast tile down to below the tile's lowest point; clipping is off across the skirt's own plane.
 layout(location = 0) in vec3 a_p;         // per instance: segment start (tile cells x, y; height in metres)
@@ -8,7 +9,6 @@ uniform mat4 view_proj_rel;
 out vec3 v_rel;
 flat out int v_level;
 noperspective out vec3 v_bary;
-out float gl_ClipDistance[4];
 
 void main() {
     const int END[6] = int[6](0, 0, 1, 1, 0, 1);    // two triangles: (a, a', b), (b, a', b')
@@ -21,9 +21,6 @@ void main() {
     v_rel = p;
     v_level = -1 - tile_level;                      // negative: a skirt (see tilelet.frag.glsl)
     v_bary = vec3(1.0, 0.0, 0.0);
-    gl_ClipDistance[0] = axis == 0 ? 1.0 : p.x - clip_rel.x;
-    gl_ClipDistance[1] = axis == 1 ? 1.0 : p.y - clip_rel.y;
-    gl_ClipDistance[2] = axis == 0 ? 1.0 : clip_rel.z - p.x;
-    gl_ClipDistance[3] = axis == 1 ? 1.0 : clip_rel.w - p.y;
+    clip_to_tile(p, axis);
     gl_Position = view_proj_rel * vec4(p, 1.0);
 }

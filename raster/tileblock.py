@@ -16,8 +16,10 @@ BLOCK = np.dtype([("origin_spacing", "<f4", 4), ("clip_rel", "<f4", 4), ("uv", "
 
 
 def register_tile_block(ctx) -> None:
-    """Make ``#include "raster/tile_block"`` resolve on ctx (the raster strategies call it before compiling)."""
+    """Make ``#include "raster/tile_block"`` and ``"raster/tile_clip"`` resolve on ctx (the raster strategies
+    call it before compiling)."""
     register_include(ctx, "raster/tile_block", "raster", "tile_block.glsl")
+    register_include(ctx, "raster/tile_clip", "raster", "tile_clip.glsl")
 
 
 def skirt_bottom(tile, view) -> float:

@@ -1,5 +1,6 @@
 #version 430
 #include "raster/tile_block"
+#include "raster/tile_clip"
 // Expand a tilelet point into its 8-triangle fan around the centre; on an edge whose neighbour is one
 // level coarser the midpoint is dropped and its two triangles become one (stitching, paper Fig. 5).
 layout(points) in;
@@ -14,7 +15,6 @@ uniform bool skirt_pass;        // emit only the skirts (a second pass, after th
 out vec3 v_rel;                // eye-relative position; the fragment shader derives height and uv from it
 flat out int v_level;
 noperspective out vec3 v_bary;
-out float gl_ClipDistance[4];
 
 vec3 post(int c, int r) {
     int k = 1 << gs_in[0].node.z;
@@ -26,10 +26,7 @@ void vert(vec3 p, vec3 bary) {
     v_rel = p;
     v_level = tile_level + gs_in[0].node.z;
     v_bary = bary;
-    gl_ClipDistance[0] = p.x - clip_rel.x;
-    gl_ClipDistance[1] = p.y - clip_rel.y;
-    gl_ClipDistance[2] = clip_rel.z - p.x;
-    gl_ClipDistance[3] = clip_rel.w - p.y;
+    clip_to_tile(p, -1);
     gl_Position = view_proj_rel * vec4(p, 1.0);
     EmitVertex();
 }
@@ -40,10 +37,7 @@ void skirt_vert(vec3 p, int axis) {
     v_rel = p;
     v_level = -1 - tile_level - gs_in[0].node.z;   // negative: a skirt (see tilelet.frag.glsl)
     v_bary = vec3(1.0, 0.0, 0.0);
-    gl_ClipDistance[0] = axis == 0 ? 1.0 : p.x - clip_rel.x;
-    gl_ClipDistance[1] = axis == 1 ? 1.0 : p.y - clip_rel.y;
-    gl_ClipDistance[2] = axis == 0 ? 1.0 : clip_rel.z - p.x;
-    gl_ClipDistance[3] = axis == 1 ? 1.0 : clip_rel.w - p.y;
+    clip_to_tile(p, axis);
     gl_Position = view_proj_rel * vec4(p, 1.0);
     EmitVertex();
 }

@@ -42,6 +42,10 @@ class TileletDrawing(TileletSelection):
 
     draw_options = frozenset({"mode", "wireframe", "morph", "stitching", "culling", "leaf_tau", "skirts"})
 
+    def __init__(self, ctx, hf, **options):
+        super().__init__(ctx, hf, **options)
+        self._skirted: list = []          # (block index, tile) of the last draw_tiles call that hang skirts
+
     def programs(self) -> tuple:
         """Every program whose uniforms follow the frame (subclasses)."""
         raise NotImplementedError
@@ -122,7 +126,6 @@ class TileletStrategy(TileletDrawing):
     def __init__(self, ctx, hf, **options):
         super().__init__(ctx, hf, **options)
         self.prog = program(ctx, "raster", "leaf.vert.glsl", "tilelet.frag.glsl", "tilelet.geom.glsl")
-        self._skirted: list = []
 
     def programs(self) -> tuple:
         """The geometry-shader program."""
