@@ -27,10 +27,21 @@ CMD_POINTS, CMD_TEMPLATE, CMD_SKIRTS = 0, 1, 2
 FRAME_FIELDS = ("triangles", "tilelets", "tilelets_culled", "skirt_segments")
 _LOCAL = 64                     # compute work group size (select.comp.glsl)
 FOUND_OFFSET = 256              # bytes: where a tile's control buffer holds the pass-0 leaf list
-CONTROL_BLANK = np.concatenate([[0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 6, 0, 0, 0, 0], np.zeros(FOUND_OFFSET // 4 - 15),
-                                [0, 1, 1, 0]]).astype(np.uint32).tobytes()
-"""A control buffer before selection: indirect draws of leaf points, mesh indices (24 a leaf) and skirt quads,
-then pass 1's dispatch (x, y, z) and the leaf count"""
+
+
+def _control_blank() -> bytes:
+    """A control buffer before selection: the three indirect draws with the counts the selection fills in still
+    0, then pass 1's dispatch (x, y, z) and the leaf count."""
+    words = np.zeros(FOUND_OFFSET // 4 + 4, np.uint32)
+    cmd = words[:3 * COMMAND_WORDS].reshape(3, COMMAND_WORDS)
+    cmd[CMD_POINTS, 1] = 1          # leaf points: one instance of (leaf count) points
+    cmd[CMD_TEMPLATE, 1] = 1        # mesh: one instance of (24 x leaf count) indices
+    cmd[CMD_SKIRTS, 0] = 6          # skirts: (segment count) instances of a 6-vertex quad
+    words[FOUND_OFFSET // 4:] = (0, 1, 1, 0)
+    return words.tobytes()
+
+
+CONTROL_BLANK = _control_blank()
 
 
 def level_starts(n: int) -> np.ndarray:
