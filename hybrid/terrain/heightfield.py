@@ -4,7 +4,8 @@ Conventions (the README states them once for the whole project):
 - World frame: right-handed, x east, y north, z up, metres, float64 on the CPU.
 - ``heights[i, j]``: row i counts from the SOUTH edge, column j from the WEST edge. Loaders flip
   north-up files (PNG, GeoTIFF, SRTM) on reading, so row order matches OpenGL textures (row 0 at t = 0).
-- Sample (i, j) sits at world (origin_x + j*spacing, origin_y + i*spacing, origin_z + heights[i, j]).
+- Sample (i, j) sits at world (origin_x + j*spacing_x, origin_y + i*spacing_y, origin_z + heights[i, j]):
+  ground spacing may differ east-west (x) and north-south (y), as on geographic grids.
 - Texel space of the height grid: sample (i, j) is texel coordinate (u, v) = (j, i); a cell (i, j) is
   the square between samples (i, j) and (i+1, j+1). Cell diagonal: from (i, j) to (i+1, j+1)
   (south-west to north-east) for every triangulated surface.
@@ -20,18 +21,38 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 
 
+def _spacing_pair(spacing, name: str) -> tuple[float, float]:
+    """The (x, y) ground spacing in metres from one number or a pair; refuses anything else by name."""
+    try:
+        pair = (spacing, spacing) if np.ndim(spacing) == 0 else tuple(spacing)
+        sx, sy = (float(v) for v in pair)
+    except (TypeError, ValueError):
+        raise TerrabenchError(f"spacing of {name!r} must be a number or an (x, y) pair of metres, got {spacing!r}") from None
+    for axis, v in (("x", sx), ("y", sy)):
+        if not (np.isfinite(v) and v > 0):
+            raise TerrabenchError(f"spacing {axis} of {name!r} must be finite and > 0 metres, got {v!r}")
+    return sx, sy
+
+
 @dataclass
 class HeightField:
-    """Heights in metres (float32, rows south to north) with spacing, world origin, name and texture."""
+    """Heights in metres (float32, rows south to north), ground spacing, world origin, name and texture.
+
+    ``spacing`` is one number (square cells) or a pair ``(spacing_x, spacing_y)`` in metres; after
+    construction ``spacing_x``/``spacing_y`` hold the two, and ``spacing`` is the single number when they are
+    equal and the pair otherwise.
+    """
 
     heights: np.ndarray
-    spacing: float
+    spacing: float | tuple[float, float]
     origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
     name: str = "terrain"
     texture: np.ndarray | None = None
     nodata_filled: int = 0
     source: str = ""
     notes: list[str] = field(default_factory=list)
+    spacing_x: float = field(init=False, default=0.0)
+    spacing_y: float = field(init=False, default=0.0)
 
     def __post_init__(self):
         h = np.asarray(self.heights)
@@ -49,9 +70,8 @@ class HeightField:
                 "(which fills no-data) or fill them first"
             )
         self.heights = np.ascontiguousarray(h)
-        if not (np.isfinite(self.spacing) and self.spacing > 0):
-            raise TerrabenchError(f"spacing of {self.name!r} must be finite and > 0 metres, got {self.spacing!r}")
-        self.spacing = float(self.spacing)
+        self.spacing_x, self.spacing_y = _spacing_pair(self.spacing, self.name)
+        self.spacing = self.spacing_x if self.spacing_x == self.spacing_y else (self.spacing_x, self.spacing_y)
         o = tuple(float(v) for v in self.origin)
         if len(o) != 3 or not all(np.isfinite(o)):
             raise TerrabenchError(f"origin of {self.name!r} must be 3 finite numbers (x, y, z), got {self.origin!r}")
@@ -79,7 +99,7 @@ class HeightField:
     @property
     def extent(self) -> tuple[float, float]:
         """Width (x) and depth (y) of the terrain in metres."""
-        return ((self.cols - 1) * self.spacing, (self.rows - 1) * self.spacing)
+        return ((self.cols - 1) * self.spacing_x, (self.rows - 1) * self.spacing_y)
 
     @property
     def height_range(self) -> tuple[float, float]:
@@ -90,8 +110,8 @@ class HeightField:
         """World position(s) (float64, metres) of sample(s) at row i, column j (may be fractional)."""
         i = np.asarray(i, dtype=np.float64)
         j = np.asarray(j, dtype=np.float64)
-        x = self.origin[0] + j * self.spacing
-        y = self.origin[1] + i * self.spacing
+        x = self.origin[0] + j * self.spacing_x
+        y = self.origin[1] + i * self.spacing_y
         z = self.origin[2] + self.sample_bilinear(i, j)
         return np.stack([x, y, z], axis=-1)
 
@@ -123,8 +143,8 @@ class HeightField:
 
     def ground_height(self, x, y) -> np.ndarray:
         """World z (metres) of the drawn (triangulated) terrain below world (x, y), clamped to the edge."""
-        j = (np.asarray(x, dtype=np.float64) - self.origin[0]) / self.spacing
-        i = (np.asarray(y, dtype=np.float64) - self.origin[1]) / self.spacing
+        j = (np.asarray(x, dtype=np.float64) - self.origin[0]) / self.spacing_x
+        i = (np.asarray(y, dtype=np.float64) - self.origin[1]) / self.spacing_y
         return self.origin[2] + self.sample_triangles(i, j)
 
     def summary(self) -> str:
@@ -135,7 +155,7 @@ class HeightField:
             f"name:        {self.name}",
             f"source:      {self.source or '(in memory)'}",
             f"samples:     {self.cols} x {self.rows} (columns x rows)",
-            f"spacing:     {self.spacing:g} m",
+            f"spacing:     {self.spacing_x:g} m east-west x {self.spacing_y:g} m north-south",
             f"extent:      {w / 1000:.2f} km x {d / 1000:.2f} km",
             f"heights:     {lo:.1f} .. {hi:.1f} m (mean {float(self.heights.mean()):.1f} m)",
             f"origin:      ({self.origin[0]:g}, {self.origin[1]:g}, {self.origin[2]:g}) m",
