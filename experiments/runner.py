@@ -2,11 +2,16 @@
 
 Run folder layout (runs/<name>/):
     spec.json, env.json             what was asked and where it ran
-    frames.jsonl, tiles.jsonl       the journal: one finished row a line, flushed as it is written
+    .lock                           held while a run writes here (experiments.runlock): one run at a time
+    frames.jsonl                    the journal: one finished frame a line (its row with its tile rows, so
+                                    the two are never parted), flushed as it is written
     errors.jsonl                    configurations that failed, with their error; the rest goes on
     frames.parquet, tiles.parquet   the tables, rewritten from the journal after every configuration
     images/                         colour + depth of the spec's image_frames for every configuration
-An interrupted run resumes from the journal without redoing finished (configuration, frame) rows.
+An interrupted run resumes from the journal without redoing finished (configuration, frame) rows; a
+configuration resumed part-way first replays its earlier frames untimed, so that its GPU tile cache (and
+with it the memory and upload columns) is in the state an uninterrupted run would have. Every table and
+image is written under a temporary name and renamed (hybrid.atomic).
 
 Timing is kept apart from measuring: a configuration's frames are all drawn and timed first (results kept
 in memory), and only then compared with the references, so the metrics' own threads (FLIP) and the
@@ -23,11 +28,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from hybrid.atomic import save_npy, save_png, write_json, write_parquet
 from hybrid.camera.view import parse_size
 from hybrid.errors import TerrabenchError
 
 from .metrics import frame_accuracy, temporal_errors
 from .progress import Progress
+from .runlock import RunLock
 from .spec import Spec
 
 SETTLE_S = 0.3   # seconds of idle before a configuration's timed frames
@@ -103,12 +110,26 @@ class Journal:
                 f.write(json.dumps({k: _jsonable(v) for k, v in r.items()}) + "\n")
             f.flush()
 
+    def append_frame(self, row: dict, tiles: list[dict]) -> None:
+        """Append one frame's row together with its tile rows as one journal line."""
+        self.append("frames", [{**row, "tiles_rows": [{k: _jsonable(v) for k, v in t.items()} for t in tiles]}])
+
     def write_tables(self) -> None:
         """Rewrite frames.parquet and tiles.parquet from the journal."""
-        for name in ("frames", "tiles"):
-            rows = self.rows(name)
+        frames, tiles = [], []
+        for r in self.rows("frames"):
+            tiles += r.pop("tiles_rows", [])
+            frames.append(r)
+        for name, rows in (("frames", frames), ("tiles", tiles)):
             if rows:
-                pd.DataFrame(rows).to_parquet(self.folder / f"{name}.parquet", index=False)
+                write_parquet(self.folder / f"{name}.parquet", pd.DataFrame(rows))
+
+
+def failed_configs(folder) -> dict[str, str]:
+    """Configurations of a run folder that failed and have not finished since: name -> last error."""
+    journal = Journal(Path(folder))
+    finished = {r["config"] for r in journal.rows("frames")}
+    return {e["config"]: e["error"] for e in journal.rows("errors") if e["config"] not in finished}
 
 
 def _load_dataset(name: str, size: int, seed: int):
@@ -120,20 +141,16 @@ def _load_dataset(name: str, size: int, seed: int):
 
 
 def _save_image(folder: Path, stem: str, result, full: bool = True) -> None:
-    from PIL import Image
-    Image.fromarray(result.colour).save(folder / f"{stem}.png")
+    save_png(folder / f"{stem}.png", result.colour)
     if full:
-        np.save(folder / f"{stem}.depth.npy", result.distance)
+        save_npy(folder / f"{stem}.depth.npy", result.distance)
         for name, arr in getattr(result, "maps", {}).items():
-            np.save(folder / f"{stem}.{name}.npy", arr)
+            save_npy(folder / f"{stem}.{name}.npy", arr)
 
 
 def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: bool = False) -> Path:
     """Run (or resume) every configuration of spec into runs_dir/<name>; returns the run folder."""
-    from hybrid.camera.flight import get_flight
     from hybrid.gl.context import shared_context
-    from hybrid.reference import ReferenceRenderer
-    from hybrid.renderer import make_renderer
 
     runs_dir = Path(runs_dir)
     folder = runs_dir / spec.name
@@ -141,12 +158,23 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
         (folder / "images").mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise TerrabenchError(f"cannot create run folder {folder}: {exc.strerror or exc}") from None
-    ctx = ctx or shared_context()
-    old = folder / "spec.json"
-    if old.exists() and json.loads(old.read_text()) != json.loads(json.dumps(spec.to_dict())):
-        raise TerrabenchError(f"{folder} holds a run of a different spec; choose another name or folder")
-    old.write_text(json.dumps(spec.to_dict(), indent=1))
-    (folder / "env.json").write_text(json.dumps(environment(ctx), indent=1))
+    with RunLock(folder):
+        ctx = ctx or shared_context()
+        old = folder / "spec.json"
+        if old.exists() and json.loads(old.read_text()) != json.loads(json.dumps(spec.to_dict())):
+            raise TerrabenchError(f"{folder} holds a run of a different spec; choose another name or folder")
+        write_json(old, spec.to_dict())
+        write_json(folder / "env.json", environment(ctx))
+        _run_configs(spec, folder, ctx, progress, fail_fast)
+    return folder
+
+
+def _run_configs(spec: Spec, folder: Path, ctx, progress: bool, fail_fast: bool) -> None:
+    """The body of run_spec, under the folder's lock: every configuration not yet in the journal."""
+    from hybrid.camera.flight import get_flight
+    from hybrid.reference import ReferenceRenderer
+    from hybrid.renderer import make_renderer
+
     journal = Journal(folder)
     done = {(r["config"], r["frame"]) for r in journal.rows("frames")}
     configs = spec.configs()
@@ -189,6 +217,8 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
                                          reconstruction=c["reconstruction"])
                 # 1. time every frame first: metric code (FLIP's threads, references) never runs between
                 #    a frame's timed draws; a short settle lets threads of earlier work go idle
+                for k in range(todo[0]):       # a resumed configuration: its cache as an uninterrupted run's
+                    renderer.render(views[k], c["tau"])
                 time.sleep(SETTLE_S)
                 for k in todo:
                     extra = {"maps": True} if (k in spec.image_frames and
@@ -206,9 +236,8 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
                     if k > 0:
                         prev = timed[k - 1][0] if k - 1 in timed else renderer.render(views[k - 1], c["tau"])
                         row.update(temporal_errors(prev, res, ref(k - 1), ref(k)))
-                    journal.append("frames", [row])
-                    journal.append("tiles", [{"config": c["config"], "frame": k, "policy": c["policy"], **t}
-                                             for t in res.stats.tile_rows])
+                    journal.append_frame(row, [{"config": c["config"], "frame": k, "policy": c["policy"], **t}
+                                               for t in res.stats.tile_rows])
                     if k in spec.image_frames or spec.video:
                         _save_image(folder / "images", f"{c['config']}-f{k}", res, k in spec.image_frames)
             except Exception as exc:  # a failed configuration is recorded; the rest goes on
@@ -224,4 +253,3 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
         reference.release()
     bar.close()
     journal.write_tables()
-    return folder
