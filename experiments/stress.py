@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from hybrid.atomic import write_json, write_parquet, write_text
 from hybrid.camera.view import View
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.datasets import get_dataset, puget
@@ -182,17 +183,15 @@ def stress_table(ctx, scenes=SCENES, views=VIEWS, methods=METHODS, size: int = 2
 
 def run_stress_spec(spec, runs_dir, ctx=None, progress: bool = True) -> Path:
     """Run a StressSpec into runs_dir/<name> (spec.json, stress.parquet); returns the run folder."""
-    import json
-
     from hybrid.camera.view import parse_size
     from hybrid.gl.context import shared_context
 
     from .folders import writable_folder
     folder = writable_folder(Path(runs_dir) / spec.name, "run folder")
-    (folder / "spec.json").write_text(json.dumps(spec.to_dict(), indent=1))
+    write_json(folder / "spec.json", spec.to_dict())
     df = stress_table(ctx or shared_context(), spec.scenes, spec.views, spec.methods, spec.size_samples,
                       parse_size(spec.size, "spec size"), spec.tile_size, progress)
-    df.to_parquet(folder / "stress.parquet", index=False)
+    write_parquet(folder / "stress.parquet", df)
     return folder
 
 
@@ -274,8 +273,8 @@ def write_stress_report(df: pd.DataFrame, folder: Path) -> Path:
     """stress.md (+ table as parquet/csv and the chart) into folder."""
     from .tables import md_table
     folder.mkdir(parents=True, exist_ok=True)
-    df.to_parquet(folder / "stress.parquet", index=False)
-    df.to_csv(folder / "stress.csv", index=False)
+    write_parquet(folder / "stress.parquet", df)
+    write_text(folder / "stress.csv", df.to_csv(index=False))
     chart = failure_chart(df, folder)
     cols = [c for c in ("scene", "view", "method", "hole_px", "crack_px", "depth_rel_p99", "capped", "mean_steps",
                         "max_steps", "triangles", "wall_ms", "nan_px") if c in df]
@@ -285,6 +284,4 @@ def write_stress_report(df: pd.DataFrame, folder: Path) -> Path:
           "*cracks* are pixels without terrain with terrain above them in their image column.", "",
           "## Reading", ""] + [f"- {s}" for s in stress_reading(df)] + [
           "", f"![failures]({chart[0].name})", "", "## All cases", "", md_table(df[cols]), ""]
-    p = folder / "stress.md"
-    p.write_text("\n".join(md))
-    return p
+    return write_text(folder / "stress.md", "\n".join(md))

@@ -144,3 +144,20 @@ def test_lock_wait_is_not_a_hang(tmp_path):
         with pytest.raises(TerrabenchError):
             RunLock(tmp_path).acquire()
     assert time.perf_counter() - t < 2.0
+
+
+RENDER_FULL = """
+import resource, signal, sys
+from experiments.cli import main
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+resource.setrlimit(resource.RLIMIT_FSIZE, (20000, 20000))   # the PNG fits, the depth does not
+sys.exit(main(["render", "--dataset", "fbm", "--size-samples", "129", "--size", "160x90", "--method", "raycast", "--tile-size", "32", "--out", sys.argv[1]]))
+"""
+
+
+def test_render_on_a_full_disk_writes_neither_image_nor_depth(tmp_path):
+    out = subprocess.run([sys.executable, "-c", RENDER_FULL, str(tmp_path / "a.png")], capture_output=True,
+                         text=True, timeout=300)
+    assert out.returncode == 2, out.stderr
+    assert "cannot write" in out.stderr and "a.depth.npy" in out.stderr and "Traceback" not in out.stderr
+    assert list(tmp_path.iterdir()) == []

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hybrid.atomic import atomic_path, write_json
 from hybrid.camera.view import View
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.heightfield import HeightField
@@ -81,10 +82,10 @@ class Flight:
         """Write the flight as JSON (.json) or CSV (.csv: one keyframe a row; settings in a '#' header)."""
         path = Path(path)
         if path.suffix.lower() == ".json":
-            path.write_text(json.dumps(self.to_dict(), indent=1))
+            write_json(path, self.to_dict())
         elif path.suffix.lower() == ".csv":
             d = self.to_dict()
-            with path.open("w", newline="") as f:
+            with atomic_path(path) as tmp, tmp.open("w", newline="") as f:
                 f.write("# " + json.dumps({k: v for k, v in d.items() if k != "keyframes"}) + "\n")
                 w = csv.writer(f)
                 w.writerow(["eye_x", "eye_y", "eye_z", "target_x", "target_y", "target_z"])
