@@ -171,6 +171,7 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
 
 def _run_configs(spec: Spec, folder: Path, ctx, progress: bool, fail_fast: bool) -> None:
     """The body of run_spec, under the folder's lock: every configuration not yet in the journal."""
+    from hybrid.camera.clearance import check_eye_above
     from hybrid.camera.flight import get_flight
     from hybrid.reference import ReferenceRenderer
     from hybrid.renderer import make_renderer
@@ -191,6 +192,8 @@ def _run_configs(spec: Spec, folder: Path, ctx, progress: bool, fail_fast: bool)
         try:
             hf = _load_dataset(ds, spec.dataset_size, seed)
             views = get_flight(fl, hf, frames=spec.frames, width=w, height=h).views()
+            for k, v in enumerate(views):
+                check_eye_above(hf, v, f"flight {fl} frame {k}")
         except TerrabenchError as exc:
             journal.append("errors", [{**c, "error": str(exc)} for c in group])
             bar.done += len(group) * spec.frames

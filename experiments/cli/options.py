@@ -78,7 +78,15 @@ class ViewOptions:
     frame: int = 0                           # frame of the flight to render
 
     def view(self, hf):
-        """The View these options name on the terrain hf."""
+        """The View these options name on the terrain hf; refused when its eye is not above the terrain."""
+        from hybrid.camera.clearance import check_eye_above
+        v = self._view(hf)
+        what = (f"--flight {self.flight} frame {self.frame}" if self.flight else
+                "--eye" if self.eye is not None else "the default view")
+        check_eye_above(hf, v, what)
+        return v
+
+    def _view(self, hf):
         from hybrid.camera.flight import get_flight
         from hybrid.camera.view import View, default_view
         w, h = self.size

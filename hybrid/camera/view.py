@@ -15,6 +15,7 @@ import numpy as np
 from hybrid.errors import TerrabenchError, check_positive, check_range
 
 MAX_VIEWPORT = 16384
+MAX_COORDINATE = 1.0e9             # metres: |eye|, |target| and terrain origins stay within (float64 ~1e-7 m steps)
 DEPTH_CHUNK_PIXELS = 1 << 22        # pixels converted at a time from depth to distance (bounded temporaries)
 
 
@@ -57,6 +58,13 @@ class View:
         object.__setattr__(self, "eye", _vec3("eye", self.eye))
         object.__setattr__(self, "target", _vec3("target", self.target))
         object.__setattr__(self, "up", _vec3("up", self.up))
+        if np.linalg.norm(self.up) == 0.0:
+            raise TerrabenchError("up must be a non-zero vector, got (0, 0, 0)")
+        for name in ("eye", "target"):
+            far_off = float(np.abs(getattr(self, name)).max())
+            if far_off > MAX_COORDINATE:
+                raise TerrabenchError(f"{name} coordinate {far_off:g} m is beyond the world limit of "
+                                      f"±{MAX_COORDINATE:g} m (float64 keeps sub-millimetre steps only within it)")
         check_range("fov_y (degrees)", self.fov_y, 0.0, 180.0)
         for name in ("width", "height"):
             v = getattr(self, name)
