@@ -58,8 +58,10 @@ class View:
         object.__setattr__(self, "eye", _vec3("eye", self.eye))
         object.__setattr__(self, "target", _vec3("target", self.target))
         object.__setattr__(self, "up", _vec3("up", self.up))
-        if np.linalg.norm(self.up) == 0.0:
+        scale = float(np.abs(self.up).max())
+        if scale == 0.0:
             raise TerrabenchError("up must be a non-zero vector, got (0, 0, 0)")
+        object.__setattr__(self, "up", self.up / scale)          # only its direction matters; no overflow
         for name in ("eye", "target"):
             far_off = float(np.abs(getattr(self, name)).max())
             if far_off > MAX_COORDINATE:

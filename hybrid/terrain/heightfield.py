@@ -66,19 +66,18 @@ class HeightField:
             raise TerrabenchError(f"heights of {self.name!r} need at least 2x2 samples, got {h.shape[0]}x{h.shape[1]}")
         if not np.issubdtype(h.dtype, np.number) or np.issubdtype(h.dtype, np.complexfloating):
             raise TerrabenchError(f"heights of {self.name!r} must be real numbers, got dtype {h.dtype}")
-        h = h.astype(np.float32, copy=False)
         if not np.all(np.isfinite(h)):
             bad = int(np.count_nonzero(~np.isfinite(h)))
             raise TerrabenchError(
                 f"heights of {self.name!r} hold {bad} NaN/inf samples; load through hybrid.terrain.loaders "
                 "(which fills no-data) or fill them first"
             )
-        lo, hi = float(h.min()), float(h.max())
+        lo, hi = float(h.min()), float(h.max())          # checked before the float32 cast, which could overflow
         if max(-lo, hi) > MAX_ABS_HEIGHT:
             raise TerrabenchError(
                 f"heights of {self.name!r} span {lo:g} .. {hi:g} m, beyond ±{MAX_ABS_HEIGHT:g} m, where float32 "
                 "heights lose metre precision; check the vertical scale and units")
-        self.heights = np.ascontiguousarray(h)
+        self.heights = np.ascontiguousarray(h.astype(np.float32, copy=False))
         self.spacing_x, self.spacing_y = _spacing_pair(self.spacing, self.name)
         self.spacing = self.spacing_x if self.spacing_x == self.spacing_y else (self.spacing_x, self.spacing_y)
         o = tuple(float(v) for v in self.origin)
