@@ -122,6 +122,7 @@ class TilePyramid:
         self.size = self.n * (1 << self.max_level) + 1
         pad = ((0, self.size - hf.rows), (0, self.size - hf.cols))
         self.padded = np.pad(hf.heights, pad, mode="edge")
+        self._boxes: dict = {}
         self._build_bounds()
 
     # --- per-level arrays -------------------------------------------------------------------------
@@ -177,6 +178,28 @@ class TilePyramid:
         t = self.tiles_per_side(level)
         ex = self._exists[level]
         return [TileKey(level, x, y) for y in range(t) for x in range(t) if ex[y, x]]
+
+    def exists_at(self, level: int, tx: np.ndarray, ty: np.ndarray) -> np.ndarray:
+        """Boolean array: which of the level's tiles (tx, ty), given as integer arrays, exist."""
+        t = self.tiles_per_side(level)
+        tx, ty = np.asarray(tx, dtype=np.int64), np.asarray(ty, dtype=np.int64)
+        ok = (tx >= 0) & (tx < t) & (ty >= 0) & (ty < t)
+        out = np.zeros(tx.shape, bool)
+        out[ok] = self._exists[level][ty[ok], tx[ok]]
+        return out
+
+    def boxes_at(self, level: int, tx: np.ndarray, ty: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World-space (min, max) corners, (B, 3) float64 metres, of the level's existing tiles (tx, ty)."""
+        if level not in self._boxes:                    # every box of a level, made on first use
+            t = self.tiles_per_side(level)
+            ty_all, tx_all = np.divmod(np.arange(t * t), t)
+            self._boxes[level] = tuple(a.reshape(t, t, 3) for a in self.aabbs(np.full(t * t, level), tx_all, ty_all))
+        lo, hi = self._boxes[level]
+        return lo[ty, tx], hi[ty, tx]
+
+    def errors_at(self, level: int, tx: np.ndarray, ty: np.ndarray) -> np.ndarray:
+        """Geometric errors (metres, float64) of the level's existing tiles (tx, ty), given as integer arrays."""
+        return self._err[level][np.asarray(ty, dtype=np.int64), np.asarray(tx, dtype=np.int64)].astype(np.float64)
 
     def error(self, key: TileKey) -> float:
         """Geometric error (metres) of the tile's level-l surface against level 0."""
