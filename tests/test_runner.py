@@ -109,6 +109,9 @@ def test_other_spec_refuses_existing_folder(run, ctx):
     ('reconstructions = ["cubic"]', "unknown reconstruction"),
     ("image_frames = [99]", "outside"),
     ('name = "a/b"', "name must be"),
+    ("seeds = [-1]", "seeds must lie in"),
+    ('policies = ["raster", "raycast", "raster"]', "'policies' lists 'raster' more than once"),
+    ("taus = [2.0, 2.0]", "'taus' lists 2.0 more than once"),
 ])
 def test_bad_specs(text, match):
     with pytest.raises(TerrabenchError, match=match):
