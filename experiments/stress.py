@@ -144,6 +144,7 @@ def measure(result, ref) -> dict:
 def run_stress(ctx, scenes=SCENES, views=VIEWS, methods=METHODS, size: int = 257, width: int = 320,
                height: int = 180, tile_size: int = 64, progress=None) -> pd.DataFrame:
     """Every (scene, view, method): a row of failure measures; a method that raises is recorded, not fatal."""
+    from hybrid.camera.clearance import eye_clearance
     from hybrid.reference import ReferenceRenderer
     rows = []
     for sc in scenes:
@@ -154,7 +155,10 @@ def run_stress(ctx, scenes=SCENES, views=VIEWS, methods=METHODS, size: int = 257
             ref = ref_r.render(view)
             ref_r.release()
             for m in methods:
-                row = {"scene": sc, "view": vk, "method": m}
+                # views a user could not give (eye under the ground or within the near plane) are flagged
+                clear = eye_clearance(hf, view.eye)
+                row = {"scene": sc, "view": vk, "method": m, "eye_clearance_m": clear,
+                       "user_refused": bool(clear < view.near)}
                 try:
                     r = _renderer(ctx, hf, m, tile_size)
                     try:
@@ -255,6 +259,11 @@ def stress_reading(df: pd.DataFrame) -> list[str]:
                        f"path's (it sent the failing tiles to the ray caster), e.g. "
                        + ", ".join(f"{sc}/{v} {r['hybrid']:.2g} vs {r['raster']:.2g}"
                                    for (sc, v), r in better.head(3).iterrows()) + ".")
+    if "user_refused" in df and df["user_refused"].any():
+        flagged = sorted({f"{r['scene']}/{r['view']}" for _, r in df[df["user_refused"]].iterrows()})
+        out.append(f"{len(flagged)} cases put the eye under the ground or within the near plane of it "
+                   f"({', '.join(flagged[:6])}{', ...' if len(flagged) > 6 else ''}): `render` and runs refuse such "
+                   "views; here they show how each method fails, not a fair comparison with the reference.")
     if "error" in df:
         for _, r in df[df["error"] != ""].iterrows():
             out.append(f"{r['method']} failed on {r['scene']}/{r['view']}: {r['error']}.")

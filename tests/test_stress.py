@@ -70,3 +70,11 @@ def test_report_section(table, tmp_path):
     assert "## Reading" in text and "stress_failures.png" in text
     assert (tmp_path / "stress_failures.png").stat().st_size > 10000
     assert len(pd.read_parquet(tmp_path / "stress.parquet")) == len(table)
+
+
+def test_views_a_user_could_not_give_are_flagged(table):
+    below = table[table["view"] == "below"]
+    assert (below["eye_clearance_m"] < 0).all() and below["user_refused"].all()
+    fair = table[table["view"].isin(["down", "origin", "axis_x"])]
+    assert not fair["user_refused"].any() and (fair["eye_clearance_m"] > 0).all()
+    assert "refuse such views" in " ".join(stress_reading(table))
