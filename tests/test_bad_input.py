@@ -41,6 +41,8 @@ UNWRITABLE = "/proc/terrabench-out"          # not writable, even for root
     (["info", "--dataset", "fbm", "--size-samples", "99999", "--no-gl"], "dataset size"),
     (["render", "--out", "OUT/a.png", "--dataset", "HUGE", "--spacing", "30"], "beyond ±1e+07 m"),
     (["render", "--out", "OUT/a.png", "--offset", "1e20,0,0"], "beyond the world limit"),
+    (["info", "--dataset", "HUGE", "--spacing", "30", "--vertical-scale", "0", "--no-gl"], "--vertical-scale"),
+    (["info", "--dataset", "HUGE", "--spacing", "30", "--vertical-scale", "-1", "--no-gl"], "must be"),
     (["render", "--out", "OUT/a.png", "--dataset", "fbm", "--size-samples", "65", "--eye", "960,960,-500",
       "--target", "1500,1500,-500"], "below the terrain surface"),
     (["render", "--out", "OUT/a.png", "--dataset", "flat", "--size-samples", "65", "--eye", "960,960,0.5",
