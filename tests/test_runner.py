@@ -68,6 +68,8 @@ def test_report_and_charts(run, tmp_path):
     for name in ("frame_time", "gpu_memory", "speed_vs_accuracy", "strategy_mix", "images_fbm_flyover_160x90_f1"):
         assert (md.parent / f"{name}.png").stat().st_size > 5000 and (md.parent / f"{name}.svg").exists()
     assert (md.parent / "report.html").read_text().count("<img") >= 5
+    assert "after one untimed warm-up frame" in text and "cracks_px" in text and "noise_%" in text
+    assert not (md.parent / "popping.png").exists()          # nothing measured on a fast flight, no empty chart
 
 
 def test_interrupted_run_resumes_without_redoing(run, ctx):
