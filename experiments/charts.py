@@ -94,7 +94,8 @@ def method_colours(f: pd.DataFrame) -> dict:
     return {m: cmap(i % cmap.N) for i, m in enumerate(sorted(f["method"].unique()))}
 
 
-def _per_scene(f: pd.DataFrame, folder: Path, name: str, ycol: str, ylabel: str, scale=1.0, band=None) -> list[Path]:
+def _per_scene(f: pd.DataFrame, folder: Path, name: str, ycol: str, ylabel: str, scale=1.0, band=None,
+               counts: bool = False) -> list[Path]:
     scenes = sorted(f["scene"].unique())
     fig, axes = panel_grid(len(scenes))
     colours = method_colours(f)
@@ -109,6 +110,9 @@ def _per_scene(f: pd.DataFrame, folder: Path, name: str, ycol: str, ylabel: str,
                                 lw=0)
         panel_title(ax, sc, cols)
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        if counts:                               # pixel counts: whole numbers from 0
+            ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+            ax.set_ylim(0, max(1.0, ax.get_ylim()[1]))
         ax.set_xlabel("frame")
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
@@ -133,7 +137,8 @@ def popping_chart(f, folder) -> list[Path]:
     """Popping over the flight per method: pixels whose depth error steps in one frame (experiments.popping)."""
     if "pop_px" not in f or not f["pop_px"].notna().any():
         return []
-    return _per_scene(f, folder, "popping", "pop_px", "pixels popping around the frame")
+    measured = f.groupby("scene")["pop_px"].transform(lambda s: s.notna().any())    # slow flights only
+    return _per_scene(f[measured], folder, "popping", "pop_px", "pixels popping around the frame", counts=True)
 
 
 def pareto_front(points: np.ndarray) -> np.ndarray:
