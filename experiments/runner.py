@@ -201,7 +201,7 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
                     res = results[-1]
                     if k in spec.image_frames and c["policy"] in ("hybrid", "heuristic", "oracle"):
                         res = renderer.render(views[k], c["tau"], maps=True)     # untimed, for its maps
-                    timed[k] = (res, [r.stats.wall_ms for r in results])
+                    timed[k] = (res, [r.stats.wall_ms for r in results], results[-1].stats)
                     bar.step(f"{c['config']} frame {k}")
                 # 2. then accuracy against the references, and the journal; neighbours a resumed run did not
                 #    time are drawn now (untimed) for the temporal measures
@@ -213,8 +213,8 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
                     return drawn[j]
 
                 for k in todo:
-                    res, walls = timed[k]
-                    stats = res.stats.row()
+                    res, walls, timed_stats = timed[k]           # counters of a timed draw, not the maps draw
+                    stats = timed_stats.row()
                     row = {**c, "frame": k, **stats, "wall_ms": float(np.median(walls)),
                            "wall_ms_min": float(np.min(walls)), "wall_ms_max": float(np.max(walls)),
                            "wall_ms_repeats": [float(w) for w in walls],
@@ -226,7 +226,7 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
                                            views[k - 1:k + 2]))
                     journal.append("frames", [row])
                     journal.append("tiles", [{"config": c["config"], "frame": k, "policy": c["policy"], **t}
-                                             for t in res.stats.tile_rows])
+                                             for t in timed_stats.tile_rows])
                     if k in spec.image_frames or spec.video:
                         _save_image(folder / "images", f"{c['config']}-f{k}", res, k in spec.image_frames)
             except Exception as exc:  # a failed configuration is recorded; the rest goes on
