@@ -15,7 +15,10 @@ image is written under a temporary name and renamed (hybrid.atomic).
 
 Timing is kept apart from measuring: a configuration's frames are all drawn and timed first (results kept
 in memory), and only then compared with the references, so the metrics' own threads (FLIP) and the
-reference renders never run between timed draws.
+reference renders never run between timed draws. Each configuration first draws one untimed warm-up frame
+(shader compiles, first uploads: one-off costs that are not a frame's); then every frame is drawn ``repeats``
+times in a row, all kept in ``wall_ms_repeats`` and their median in ``wall_ms``. Maps for the report's images
+come from one more, untimed, draw.
 """
 from __future__ import annotations
 
@@ -32,7 +35,8 @@ from hybrid.atomic import save_npy, save_png, write_json, write_parquet
 from hybrid.camera.view import parse_size
 from hybrid.errors import TerrabenchError
 
-from .metrics import frame_accuracy, temporal_errors
+from .metrics import frame_accuracy
+from .popping import popping, temporal_errors
 from .progress import Progress
 from .runlock import RunLock
 from .spec import Spec
@@ -219,28 +223,42 @@ def _run_configs(spec: Spec, folder: Path, ctx, progress: bool, fail_fast: bool)
                 renderer = make_renderer(ctx, hf, c["policy"], tile_size=spec.tile_size,
                                          reconstruction=c["reconstruction"])
                 # 1. time every frame first: metric code (FLIP's threads, references) never runs between
-                #    a frame's timed draws; a short settle lets threads of earlier work go idle
+                #    a frame's timed draws; a short settle lets threads of earlier work go idle, and an untimed
+                #    warm-up draw takes the one-off costs (compiles, first uploads) out of the first frame
                 for k in range(todo[0]):       # a resumed configuration: its cache as an uninterrupted run's
                     renderer.render(views[k], c["tau"])
                 time.sleep(SETTLE_S)
+                renderer.render(views[todo[0]], c["tau"])
                 for k in todo:
-                    extra = {"maps": True} if (k in spec.image_frames and
-                                               c["policy"] in ("hybrid", "heuristic", "oracle")) else {}
-                    results = [renderer.render(views[k], c["tau"]) for _ in range(spec.repeats - 1)]
-                    results.append(renderer.render(views[k], c["tau"], **extra))
-                    timed[k] = (results[-1], [r.stats.wall_ms for r in results])
+                    results = [renderer.render(views[k], c["tau"]) for _ in range(spec.repeats)]
+                    res = results[-1]
+                    if k in spec.image_frames and c["policy"] in ("hybrid", "heuristic", "oracle"):
+                        res = renderer.render(views[k], c["tau"], maps=True)     # untimed, for its maps
+                    timed[k] = (res, [r.stats.wall_ms for r in results], results[-1].stats)
                     bar.step(f"{c['config']} frame {k}")
-                # 2. then accuracy against the references, and the journal
+                # 2. then accuracy against the references, and the journal; neighbours a resumed run did not
+                #    time are drawn now (untimed) for the temporal measures
+                drawn = {k: v[0] for k, v in timed.items()}
+
+                def frame(j):
+                    if j not in drawn:
+                        drawn[j] = renderer.render(views[j], c["tau"])
+                    return drawn[j]
+
                 for k in todo:
-                    res, walls = timed[k]
-                    stats = res.stats.row()
+                    res, walls, timed_stats = timed[k]           # counters of a timed draw, not the maps draw
+                    stats = timed_stats.row()
                     row = {**c, "frame": k, **stats, "wall_ms": float(np.median(walls)),
-                           "wall_ms_min": float(np.min(walls)), **frame_accuracy(res, ref(k), flip=spec.flip)}
+                           "wall_ms_min": float(np.min(walls)), "wall_ms_max": float(np.max(walls)),
+                           "wall_ms_repeats": [float(w) for w in walls],
+                           **frame_accuracy(res, ref(k), flip=spec.flip)}
                     if k > 0:
-                        prev = timed[k - 1][0] if k - 1 in timed else renderer.render(views[k - 1], c["tau"])
-                        row.update(temporal_errors(prev, res, ref(k - 1), ref(k)))
+                        row.update(temporal_errors(frame(k - 1), res, ref(k - 1), ref(k)))
+                    if 0 < k < spec.frames - 1:
+                        row.update(popping((frame(k - 1), res, frame(k + 1)), (ref(k - 1), ref(k), ref(k + 1)),
+                                           views[k - 1:k + 2]))
                     journal.append_frame(row, [{"config": c["config"], "frame": k, "policy": c["policy"], **t}
-                                               for t in res.stats.tile_rows])
+                                               for t in timed_stats.tile_rows])
                     if k in spec.image_frames or spec.video:
                         _save_image(folder / "images", f"{c['config']}-f{k}", res, k in spec.image_frames)
             except Exception as exc:  # a failed configuration is recorded; the rest goes on

@@ -9,7 +9,7 @@
     taus = [0.6667]
     sizes = ["640x360"]
     reconstructions = ["triangles"]   # ray-cast surface reconstructions
-    repeats = 3                       # timed repeats a frame (median kept)
+    repeats = 3                       # timed repeats a frame, at least 3 (median kept, spread = noise)
     seeds = [0]
     tile_size = 256
     supersample = 2                   # reference colour supersampling
@@ -181,7 +181,7 @@ def parse_spec(text: str, source: str = "spec"):
         v = _list(d, key, kind, check)
         if v is not None:
             kw[key] = [float(x) for x in v] if key == "taus" else v
-    for key, lo, hi in (("frames", 1, 100000), ("repeats", 1, 1000), ("tile_size", 2, 65536),
+    for key, lo, hi in (("frames", 1, 100000), ("repeats", 3, 1000), ("tile_size", 2, 65536),
                         ("supersample", 1, 8), ("dataset_size", 0, 16385)):
         if key in d:
             v = d[key]

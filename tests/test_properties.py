@@ -170,11 +170,11 @@ def test_info_arguments_exit_0_or_2_with_one_line(capsys, option, value):
 @pytest.mark.gl
 @GL
 @given(st.integers(0, 2**31), st.floats(0.05, 0.95), st.floats(0.05, 0.95), st.floats(5.0, 80.0),
-       st.floats(0.0, 2 * math.pi), st.floats(0.2, 6.0), st.sampled_from(["raster", "raycast", "hybrid"]))
+       st.floats(0.0, 2 * math.pi), st.floats(0.2, 2.0), st.sampled_from(["raster", "raycast", "hybrid"]))
 def test_a_terrain_point_at_the_centre_of_view_is_drawn(ctx, seed, fx, fy, elev_deg, azimuth, dist_km, policy):
     from hybrid.renderer import make_renderer
     from hybrid.terrain.datasets import fbm
-    hf = fbm(size=65, spacing=25.0, seed=seed % 1000, amplitude=400.0)
+    hf = fbm(size=65, spacing=60.0, seed=seed % 1000, amplitude=400.0)
     w, d = hf.extent
     tx, ty = fx * w, fy * d
     target = np.array([tx, ty, float(hf.ground_height(tx, ty))])
@@ -182,7 +182,8 @@ def test_a_terrain_point_at_the_centre_of_view_is_drawn(ctx, seed, fx, fy, elev_
     e = math.radians(elev_deg)
     eye = target + r * np.array([math.cos(e) * math.cos(azimuth), math.cos(e) * math.sin(azimuth), math.sin(e)])
     from hybrid.camera.clearance import eye_clearance
-    assume(eye_clearance(hf, eye) > 5.0)
+    clear = eye_clearance(hf, eye)
+    assume(np.isfinite(clear) and clear > 5.0)          # an eye over the terrain, above the ground
     view = View(eye, target, 40.0, 33, 33, 1.0, 1e6)
     from hybrid.reference import ReferenceRenderer
     with make_renderer(ctx, hf, policy, tile_size=16) as renderer:
