@@ -55,7 +55,7 @@ def test_hard_terrains(ctx, synthetic, name):
     views = [default_view(hf, 320, 180)]
     if name == "spike":
         i, j = int(257 * 0.55) | 1, int(257 * 0.45) | 1
-        sx, sy = hf.origin[0] + j * hf.spacing, hf.origin[1] + i * hf.spacing
+        sx, sy = hf.origin[0] + j * hf.spacing_x, hf.origin[1] + i * hf.spacing_y
         base = float(np.median(hf.heights))
         views.append(View([sx - 2500, sy - 1800, base + 1500], [sx, sy, base + 1500], 50, 320, 180, near=1.0, far=1e5))
     r = Renderer(ctx, hf, "raycast")
@@ -133,20 +133,20 @@ def test_shadow_rays_match_cpu(ctx, synthetic):
     rows, cols = np.nonzero(lit.mask)
     dirs = view.pixel_rays(rows, cols)
     pts = view.eye + dirs * lit.distance[rows, cols, None]
-    tex = np.stack([(pts[:, 0] - hf.origin[0]) / hf.spacing, (pts[:, 1] - hf.origin[1]) / hf.spacing,
+    tex = np.stack([(pts[:, 0] - hf.origin[0]) / hf.spacing_x, (pts[:, 1] - hf.origin[1]) / hf.spacing_y,
                     pts[:, 2] - hf.origin[2]], 1)
     h = hf.heights.astype(np.float64)
     i = np.clip(np.floor(tex[:, 1]).astype(int), 0, hf.rows - 2)
     j = np.clip(np.floor(tex[:, 0]).astype(int), 0, hf.cols - 2)
     fi, fj = tex[:, 1] - i, tex[:, 0] - j
     lower = fj >= fi
-    gx = np.where(lower, h[i, j + 1] - h[i, j], h[i + 1, j + 1] - h[i + 1, j]) / hf.spacing
-    gy = np.where(lower, h[i + 1, j + 1] - h[i, j + 1], h[i + 1, j] - h[i, j]) / hf.spacing
+    gx = np.where(lower, h[i, j + 1] - h[i, j], h[i + 1, j + 1] - h[i + 1, j]) / hf.spacing_x
+    gy = np.where(lower, h[i + 1, j + 1] - h[i, j + 1], h[i + 1, j] - h[i, j]) / hf.spacing_y
     n = np.stack([-gx, -gy, np.ones_like(gx)], 1)
     cosl = (n @ LIGHT_DIR) / np.linalg.norm(n, axis=1)
     clear = cosl > 0.1                      # lit side, away from the self-shadow terminator
-    o = tex[clear] + np.array([0, 0, 1e-3 * hf.spacing + 0.01])
-    L = np.array([LIGHT_DIR[0] / hf.spacing, LIGHT_DIR[1] / hf.spacing, LIGHT_DIR[2]])
+    o = tex[clear] + np.array([0, 0, 1e-3 * max(hf.spacing_x, hf.spacing_y) + 0.01])
+    L = np.array([LIGHT_DIR[0] / hf.spacing_x, LIGHT_DIR[1] / hf.spacing_y, LIGHT_DIR[2]])
     lo, hi = hf.height_range
     res = cast_rays(hf.heights, (hf.cols - 1, hf.rows - 1), (lo, hi), o, np.tile(L, (len(o), 1)), outer=15)
     cpu_shadow = res.status != 0

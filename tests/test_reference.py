@@ -12,7 +12,7 @@ SIZE = (320, 180)
 def cpu_hits(hf, origins, dirs):
     """Nearest hit distance of each ray with the full triangulated surface (brute force, float64)."""
     i, j = np.mgrid[0:hf.rows, 0:hf.cols]
-    verts = np.stack([hf.origin[0] + j * hf.spacing, hf.origin[1] + i * hf.spacing,
+    verts = np.stack([hf.origin[0] + j * hf.spacing_x, hf.origin[1] + i * hf.spacing_y,
                       hf.origin[2] + hf.heights.astype(np.float64)], -1).reshape(-1, 3)
     tri = grid_indices(hf.rows, hf.cols).reshape(-1, 3).astype(np.int64)
     v0, v1, v2 = verts[tri[:, 0]], verts[tri[:, 1]], verts[tri[:, 2]]

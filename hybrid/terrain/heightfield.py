@@ -21,7 +21,7 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 
 
-def _spacing_pair(spacing, name: str) -> tuple[float, float]:
+def spacing_pair(spacing, name: str = "terrain") -> tuple[float, float]:
     """The (x, y) ground spacing in metres from one number or a pair; refuses anything else by name."""
     try:
         pair = (spacing, spacing) if np.ndim(spacing) == 0 else tuple(spacing)
@@ -70,7 +70,7 @@ class HeightField:
                 "(which fills no-data) or fill them first"
             )
         self.heights = np.ascontiguousarray(h)
-        self.spacing_x, self.spacing_y = _spacing_pair(self.spacing, self.name)
+        self.spacing_x, self.spacing_y = spacing_pair(self.spacing, self.name)
         self.spacing = self.spacing_x if self.spacing_x == self.spacing_y else (self.spacing_x, self.spacing_y)
         o = tuple(float(v) for v in self.origin)
         if len(o) != 3 or not all(np.isfinite(o)):

@@ -163,9 +163,10 @@ def select_tiles(pyramid: TilePyramid, view: View, tau: float = DEFAULT_TAU) -> 
         if key not in needed:
             return
         x0, y0, x1, y1 = pyramid.clip(key)
-        span = (pyramid.n << key.level) * pyramid.hf.spacing
-        mx = pyramid.hf.origin[0] + key.tx * span + span / 2
-        my = pyramid.hf.origin[1] + key.ty * span + span / 2
+        cells = pyramid.n << key.level
+        span_x, span_y = cells * pyramid.hf.spacing_x, cells * pyramid.hf.spacing_y
+        mx = pyramid.hf.origin[0] + key.tx * span_x + span_x / 2
+        my = pyramid.hf.origin[1] + key.ty * span_y + span_y / 2
         sx, sy = int(eye[0] >= mx), int(eye[1] >= my)
         ch = key.children()  # SW, SE, NW, NE -> index = x + 2y
         for qx, qy in ((sx, sy), (1 - sx, sy), (sx, 1 - sy), (1 - sx, 1 - sy)):
