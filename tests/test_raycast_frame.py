@@ -7,6 +7,7 @@ from hybrid.camera.view import View, default_view
 from hybrid.errors import TerrabenchError
 from hybrid.reference import ReferenceRenderer
 from hybrid.renderer import Renderer
+from hybrid.terrain.heightfield import HeightField
 from hybrid.tiles.pyramid import TilePyramid
 from raycast import MODES, RaycastStrategy
 from raycast.cpu import cast_rays
@@ -114,13 +115,20 @@ def test_modes_and_shadows(ctx, puget257, puget_rc):
 LIGHT_DIR = np.array([-0.4851, 0.4851, 0.7276])
 
 
-def test_shadow_rays_match_cpu(ctx, synthetic):
+@pytest.mark.parametrize("spacing", [None, (30.0, 55.0), (55.0, 30.0)])
+def test_shadow_rays_match_cpu(ctx, synthetic, spacing):
+    """Shadows on the ridges terrain (30 m square cells) and, with non-square cells (x, y metres), on ridges as
+    steep along y as along x (the light falls across both)."""
     hf = synthetic("ridges")
+    if spacing is not None:
+        h = hf.heights.astype(np.float64)
+        hf = HeightField(2.0 * (h + h.T), spacing, name="ridges")
     view = default_view(hf, 160, 90)
-    r = Renderer(ctx, hf, "raycast")
+    # tiles of 64 cells, all at full resolution: each tile places its shadow rays' origins on the whole grid
+    r = Renderer(ctx, hf, "raycast", tile_size=64)
     try:
-        lit = r.render(view, mode="shaded")
-        sh = r.render(view, mode="shaded", shadows=True)
+        lit = r.render(view, tau=0.01, mode="shaded")
+        sh = r.render(view, tau=0.01, mode="shaded", shadows=True)
     finally:
         r.release()
     assert np.array_equal(sh.mask, lit.mask)
