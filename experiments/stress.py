@@ -33,7 +33,7 @@ def make_scene(name: str, size: int = 257) -> HeightField:
         return puget(size=size)
     if name == "puget_x100":
         p = puget(size=size)
-        return HeightField(p.heights * 100.0, p.spacing, p.origin, "puget_x100", p.texture)
+        return HeightField(p.heights * 100.0, (p.spacing_x, p.spacing_y), p.origin, "puget_x100", p.texture)
     if name in SCENES:
         return get_dataset(name, size=size)
     raise TerrabenchError(f"unknown stress scene {name!r}; choose from {', '.join(SCENES)}")
@@ -71,7 +71,7 @@ def stress_view(hf: HeightField, kind: str, width: int = 320, height: int = 180,
         i0, j0 = (hf.rows - 1 - n) // 2, (hf.cols - 1 - n) // 2
         block = hf.heights[i0:i0 + n + 1, j0:j0 + n + 1]
         i, j = np.unravel_index(np.argmin(block), block.shape)
-        x, y = ox + (j0 + j) * hf.spacing, oy + (i0 + i) * hf.spacing
+        x, y = ox + (j0 + j) * hf.spacing_x, oy + (i0 + i) * hf.spacing_y
         z = g(x, y) + max(0.5 * (float(block.max()) + oz - g(x, y)), 2.0)
         return hf, View([x, y, z], [x + 0.3 * w, y + 0.2 * d, g(x, y)], 70.0, width, height, 0.5, far)
     if kind == "below":

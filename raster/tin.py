@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hybrid.errors import TerrabenchError
+from hybrid.terrain.heightfield import spacing_pair
 
 from .meshes import MeshStrategyBase
 from .trianglelist import grid_faces, grid_vertices
@@ -81,18 +82,21 @@ def surface_at(vertices: np.ndarray, faces: np.ndarray, x: np.ndarray, y: np.nda
     return out, hits
 
 
-def tin_max_error(mesh: TinMesh, heights: np.ndarray, spacing: float) -> tuple[float, int]:
-    """(largest vertical distance in metres over covered grid samples, number of samples the TIN leaves uncovered)."""
+def tin_max_error(mesh: TinMesh, heights: np.ndarray, spacing) -> tuple[float, int]:
+    """(largest vertical distance in metres over covered grid samples, number of samples the TIN leaves uncovered);
+    spacing in metres, one number or an (x, y) pair."""
     h = np.asarray(heights, dtype=np.float64)
+    sx, sy = spacing_pair(spacing, "TIN grid")
     i, j = np.mgrid[0:h.shape[0], 0:h.shape[1]]
-    z, hits = surface_at(mesh.vertices, mesh.faces, j.ravel() * spacing, i.ravel() * spacing)
+    z, hits = surface_at(mesh.vertices, mesh.faces, j.ravel() * sx, i.ravel() * sy)
     cov = hits > 0
     return float(np.abs(z[cov] - h.ravel()[cov]).max(initial=0.0)), int(np.count_nonzero(~cov))
 
 
-def build_tin(heights: np.ndarray, spacing: float, target_count: int | None = None, max_error: float | None = None,
+def build_tin(heights: np.ndarray, spacing, target_count: int | None = None, max_error: float | None = None,
               preserve_border: bool = False, agg: float = 7.0) -> TinMesh:
-    """TIN of a tile's heights: simplify the full grid to ``target_count`` triangles or to <= ``max_error`` metres.
+    """TIN of a tile's heights: simplify the full grid to ``target_count`` triangles or to <= ``max_error`` metres;
+    spacing in metres, one number or an (x, y) pair.
 
     With max_error the reduction is bisected (8 steps) on the measured max vertical error over the samples
     the TIN still covers (without preserve_border, collapses pull the border in: those samples are cracks).
@@ -145,21 +149,24 @@ def export_tin(mesh: TinMesh, path, origin=(0.0, 0.0, 0.0)) -> None:
 def border_gaps(meshes: dict, n: int) -> dict:
     """Vertical mismatch (metres) along shared borders of same-level tiles: {(key_a, key_b): max gap}.
 
-    meshes: {(level, tx, ty): (TinMesh, spacing)}. Samples each border at every tile sample position.
+    meshes: {(level, tx, ty): (TinMesh, spacing)}, spacing one number or an (x, y) pair of metres. Samples each
+    border at every tile sample position.
     """
     out = {}
     for (l, tx, ty), (ma, sp) in meshes.items():
+        sx, sy = spacing_pair(sp, "TIN tile")
         for dx, dy in ((1, 0), (0, 1)):
             kb = (l, tx + dx, ty + dy)
             if kb not in meshes:
                 continue
             mb, _ = meshes[kb]
-            t = np.arange(n + 1) * sp
             if dx:
-                za, _ = surface_at(ma.vertices, ma.faces, np.full(n + 1, n * sp), t)
+                t = np.arange(n + 1) * sy
+                za, _ = surface_at(ma.vertices, ma.faces, np.full(n + 1, n * sx), t)
                 zb, _ = surface_at(mb.vertices, mb.faces, np.zeros(n + 1), t)
             else:
-                za, _ = surface_at(ma.vertices, ma.faces, t, np.full(n + 1, n * sp))
+                t = np.arange(n + 1) * sx
+                za, _ = surface_at(ma.vertices, ma.faces, t, np.full(n + 1, n * sy))
                 zb, _ = surface_at(mb.vertices, mb.faces, t, np.zeros(n + 1))
             gap = np.abs(za - zb)
             out[((l, tx, ty), kb)] = float(np.nanmax(gap)) if np.any(np.isfinite(gap)) else float("nan")
@@ -183,9 +190,9 @@ class TinStrategy(MeshStrategyBase):
         h = np.asarray(tile.heights)
         full = 2 * (h.shape[0] - 1) * (h.shape[1] - 1)
         if self.max_error is not None:
-            m = build_tin(h, float(tile.spacing), max_error=self.max_error, preserve_border=self.preserve_border)
+            m = build_tin(h, tile.spacing_xy, max_error=self.max_error, preserve_border=self.preserve_border)
         else:
-            m = build_tin(h, float(tile.spacing), target_count=max(2, int(round(full * (1 - self.reduction)))),
+            m = build_tin(h, tile.spacing_xy, target_count=max(2, int(round(full * (1 - self.reduction)))),
                           preserve_border=self.preserve_border)
-        self.meshes[(int(tile.key.level), int(tile.key.tx), int(tile.key.ty))] = (m, float(tile.spacing))
+        self.meshes[(int(tile.key.level), int(tile.key.tx), int(tile.key.ty))] = (m, tile.spacing_xy)
         return m.vertices, m.faces

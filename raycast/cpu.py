@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hybrid.errors import TerrabenchError
+from hybrid.terrain.heightfield import spacing_pair
 
 from .maxmip import level_count, maxmip_levels
 from .options import RECONSTRUCTIONS, TRAVERSALS, default_max_steps
@@ -111,12 +112,14 @@ def _lod_final(l, ij, H, Om, zlo, spacing, lod_k):
 def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="maxmip", tmin=0.0, lmin=0,
               spacing=1.0, lod_k=None, max_steps=None, outer=0) -> RayHits:
     """Cast rays O + t D (M x 3, texel space) through a grid of (N+1)² heights (metres) covering [0, ext] in
-    x, y and zr in z; first hits with t >= tmin. lod_k = spacing * K / tau turns on the LOD stop (maxmip only);
-    outer is the mask (W 1, E 2, S 4, N 8) of grid sides on the terrain's boundary."""
+    x, y and zr in z; first hits with t >= tmin. spacing: metres per texel, one number or an (x, y) pair;
+    lod_k = max(spacing) * K / tau turns on the LOD stop (maxmip only); outer is the mask (W 1, E 2, S 4, N 8)
+    of grid sides on the terrain's boundary."""
     if reconstruction not in RECONSTRUCTIONS:
         raise TerrabenchError(f"reconstruction must be one of {', '.join(RECONSTRUCTIONS)}, got {reconstruction!r}")
     if traversal not in TRAVERSALS:
         raise TerrabenchError(f"traversal must be one of {', '.join(TRAVERSALS)}, got {traversal!r}")
+    spacing = np.array(spacing_pair(spacing, "ray grid"))
     h32 = np.asarray(heights, dtype=np.float32)
     levels = maxmip_levels(h32)
     h = h32.astype(np.float64)
@@ -292,15 +295,18 @@ def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="
 
 
 def tile_frame(tile, eye, dirs):
-    """Ray origin and directions of world rays (eye + t dirs) in a tile's texel space, with its ext and zr."""
-    sp = float(tile.spacing)
+    """Ray origin and directions of world rays (eye + t dirs) in a tile's texel space, with its ext and zr.
+
+    x and y are divided by the tile's spacing_x and spacing_y (z stays metres), so t is the world ray parameter.
+    """
+    sx, sy = tile.spacing_xy
     org = np.asarray(tile.origin, dtype=np.float64)
     e = np.asarray(eye, dtype=np.float64) - org
-    O = np.array([e[0] / sp, e[1] / sp, e[2]])
+    O = np.array([e[0] / sx, e[1] / sy, e[2]])
     d = np.atleast_2d(np.asarray(dirs, dtype=np.float64))
-    D = np.stack([d[:, 0] / sp, d[:, 1] / sp, d[:, 2]], 1)
+    D = np.stack([d[:, 0] / sx, d[:, 1] / sy, d[:, 2]], 1)
     x0, y0, x1, y1 = (float(v) for v in tile.clip)
-    ext = ((x1 - x0) / sp, (y1 - y0) / sp)
+    ext = ((x1 - x0) / sx, (y1 - y0) / sy)
     zr = (float(tile.zmin) - org[2], float(tile.zmax) - org[2])
     return O, D, ext, zr
 
@@ -308,12 +314,12 @@ def tile_frame(tile, eye, dirs):
 def cast_tile_rays(tile, eye, dirs, *, near=0.0, outer=0, **options) -> RayHits:
     """Cast world rays (eye + t dirs, t >= near) against one tile; options as cast_rays. Points in tile texels."""
     O, D, ext, zr = tile_frame(tile, eye, dirs)
-    return cast_rays(tile.heights, ext, zr, O, D, tmin=near, spacing=float(tile.spacing), outer=outer, **options)
+    return cast_rays(tile.heights, ext, zr, O, D, tmin=near, spacing=tile.spacing_xy, outer=outer, **options)
 
 
 def texel_to_world(tile, point) -> np.ndarray:
     """World positions (metres, float64) of points in a tile's texel space (x, y texels; z metres)."""
     p = np.asarray(point, dtype=np.float64)
     org = np.asarray(tile.origin, dtype=np.float64)
-    sp = float(tile.spacing)
-    return np.stack([org[0] + p[..., 0] * sp, org[1] + p[..., 1] * sp, org[2] + p[..., 2]], -1)
+    sx, sy = tile.spacing_xy
+    return np.stack([org[0] + p[..., 0] * sx, org[1] + p[..., 1] * sy, org[2] + p[..., 2]], -1)

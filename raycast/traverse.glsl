@@ -2,7 +2,9 @@
 // and shadow rays. Texel space: x, y in texels of the grid (sample (i, j) at (j, i)), z in metres relative to
 // the terrain's origin z; a ray is P(t) = O + t * D. The grid has N cells a side (N a power of two), the real
 // terrain covers [0, ext.x] x [0, ext.y] of it and heights lie in [zr.x, zr.y]. Max-mip level l texel (i, j)
-// bounds the cells [i*2^l, (i+1)*2^l) x [j*2^l, (j+1)*2^l).
+// bounds the cells [i*2^l, (i+1)*2^l) x [j*2^l, (j+1)*2^l). Texel space scales world x and y separately (metres
+// per texel spacing.x east-west, spacing.y north-south): a world ray E + t d becomes O + t D with
+// D = (d.x / spacing.x, d.y / spacing.y, d.z), so t stays the world ray parameter and hit depths stay metres.
 //
 // Defines: RECON 0 planes (piecewise constant: a cell is a box of its max-mip height), 1 linear approximation
 // planes (Qu 3.1), 2 triangle mesh with the SW-NE diagonal (Qu 3.2), 3 bilinear patch (analytic);
@@ -84,8 +86,9 @@ float rc_cell_hit(vec3 A, vec3 B, vec2 c0, float S, vec4 hc, float H) {
 
 // Level-of-detail stop (coherent per patch): a level-l texel is final when a texel of its size, seen from
 // the eye at the nearest point of the texel's box, spans at most tau pixels: size_m * K <= tau * distance.
-// Om: eye in the mirrored texel space; lod_k = spacing * K / tau (metres); spacing in metres per texel.
-bool rc_lod_final(int l, vec2 ij, float H, vec3 Om, float zlo, float spacing, float lod_k) {
+// Om: eye in the mirrored texel space; spacing: metres per texel in x and y; lod_k = (the larger spacing) * K / tau
+// (metres), so a texel's size is its longer side.
+bool rc_lod_final(int l, vec2 ij, float H, vec3 Om, float zlo, vec2 spacing, float lod_k) {
     float s = float(1 << l);
     vec2 lo = ij * s, hi = lo + s;
     vec2 dxy = max(max(lo - Om.xy, Om.xy - hi), 0.0) * spacing;
@@ -97,7 +100,7 @@ bool rc_lod_final(int l, vec2 ij, float H, vec3 Om, float zlo, float spacing, fl
 // space), cell the hit texel (x, y) at level `level`, hc its corner heights. tmin: smallest ray parameter
 // (near plane); lmin: the finest level to descend to; steps: texels visited.
 int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 zr, vec3 O, vec3 D,
-                float tmin, int lmin, float spacing, float lod_k, int max_steps, int outer,
+                float tmin, int lmin, vec2 spacing, float lod_k, int max_steps, int outer,
                 out vec3 hit, out ivec2 cell, out int level, out vec4 hc, out int steps) {
     steps = 0; level = 0; cell = ivec2(0); hit = vec3(0.0); hc = vec4(0.0);
     // entry into the box; `face` is the box side the ray enters through (EDGE_W/E/S/N bits, 0 for the top,

@@ -112,7 +112,7 @@ def test_views_are_valid_or_refused(eye, target, up, fov, width, height, near, f
 @given(st.integers(2, 40), st.integers(2, 40), st.sampled_from([1, 2, 3, 4, 8, 16, 64, 100]), st.integers(0, 2**31))
 def test_pyramids_cover_the_grid_and_bound_its_heights(rows, cols, tile_size, seed):
     h = np.random.default_rng(seed).normal(0, 50, (rows, cols))
-    hf = HeightField(h, 7.0)
+    hf = HeightField(h, (7.0, 11.0))
     try:
         p = TilePyramid(hf, tile_size)
     except TerrabenchError:

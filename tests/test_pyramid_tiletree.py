@@ -28,7 +28,7 @@ def test_error_is_exact_deviation(puget_full, pyr):
     # brute-force the level-1 tile (1, 2, 3): triangulated coarse surface vs every level-0 sample in it
     k = TileKey(1, 2, 3)
     t = pyr.tile(k)
-    coarse = HeightField(t.heights, t.spacing)
+    coarse = HeightField(t.heights, t.spacing_xy)
     n0 = 128
     i, j = np.mgrid[0:n0 + 1, 0:n0 + 1]
     fine = puget_full.heights[3 * n0:4 * n0 + 1, 2 * n0:3 * n0 + 1]

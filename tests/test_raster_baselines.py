@@ -40,8 +40,9 @@ def test_tin_decimates_exports_and_cracks_are_measured(ctx, puget257, tmp_path):
     finally:
         r.release()
     h = puget257.heights[:65, :65]
-    m = build_tin(h, puget257.spacing, max_error=40.0, preserve_border=True)
-    err, uncovered = tin_max_error(m, h, puget257.spacing)
+    sp = (puget257.spacing_x, puget257.spacing_y)
+    m = build_tin(h, sp, max_error=40.0, preserve_border=True)
+    err, uncovered = tin_max_error(m, h, sp)
     assert err <= 40.0 and uncovered == 0 and m.triangles < 2 * 64 * 64
     with pytest.raises(TerrabenchError, match="exactly one"):
         build_tin(h, 1.0)

@@ -55,7 +55,7 @@ def add_terrain_arguments(p: argparse.ArgumentParser) -> None:
     """Options naming a terrain: bundled/synthetic name or a file, with scale and spacing overrides."""
     p.add_argument("--dataset", default="puget", help="bundled name (puget, fbm, ridged, spike, cliff, staircase, flat, ridges) or a file")
     p.add_argument("--size-samples", type=int, default=None, help="samples per side for synthetic data, or a crop of puget")
-    p.add_argument("--seed", type=int, default=0, help="seed for synthetic data")
+    p.add_argument("--seed", type=argtypes.int_in("--seed", 0, 2**32 - 1), default=0, help="seed for synthetic data")
     p.add_argument("--vertical-scale", type=argtypes.positive_float("--vertical-scale", "metres per stored unit"),
                    default=None, help="metres per stored unit (files), > 0")
     p.add_argument("--spacing", type=float, default=None, help="metres between samples (files)")

@@ -146,14 +146,15 @@ DOLLY_PITCH_DEG = 8.0
 def _dolly(hf: HeightField, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Eyes and targets (world metres) of the dolly at frame numbers k: a straight level line to the north-east.
 
-    The eye advances max(2 m, spacing / 40) a frame (4 m on Puget's 160 m grid), at one height for the whole
-    line: the highest ground within 2 % of the terrain's size of any point of it, plus max(30 m, 20 % of
-    that neighbourhood's relief); it looks along the line, DOLLY_PITCH_DEG below the horizon.
+    The eye advances max(2 m, s / 40) a frame, s the finer of spacing_x and spacing_y (4 m on Puget's 160 m
+    grid), at one height for the whole line: the highest ground within 2 % of the terrain's size of any point
+    of it, plus max(30 m, 20 % of that neighbourhood's relief); it looks along the line, DOLLY_PITCH_DEG below
+    the horizon.
     """
     w, d = hf.extent
     ox, oy, _ = hf.origin
     size = max(w, d)
-    step = max(2.0, hf.spacing / 40.0)
+    step = max(2.0, min(hf.spacing_x, hf.spacing_y) / 40.0)
     heading = np.array([w, d]) / np.hypot(w, d)
     x = ox + 0.3 * w + k * step * heading[0]
     y = oy + 0.3 * d + k * step * heading[1]

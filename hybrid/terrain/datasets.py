@@ -41,9 +41,9 @@ def crop(hf: HeightField, size: int, centre=(0.5, 0.5)) -> HeightField:
     i0 = int(np.clip(round(centre[0] * (hf.rows - 1) - size / 2), 0, hf.rows - size))
     j0 = int(np.clip(round(centre[1] * (hf.cols - 1) - size / 2), 0, hf.cols - size))
     tex = None if hf.texture is None else hf.texture[i0:i0 + size - 1, j0:j0 + size - 1]
-    o = (hf.origin[0] + j0 * hf.spacing, hf.origin[1] + i0 * hf.spacing, hf.origin[2])
-    return HeightField(hf.heights[i0:i0 + size, j0:j0 + size].copy(), hf.spacing, o, f"{hf.name}-{size}", tex,
-                       0, hf.source, list(hf.notes) + [f"window rows {i0}.. cols {j0}.. of {hf.rows}x{hf.cols}"])
+    o = (hf.origin[0] + j0 * hf.spacing_x, hf.origin[1] + i0 * hf.spacing_y, hf.origin[2])
+    return HeightField(hf.heights[i0:i0 + size, j0:j0 + size].copy(), (hf.spacing_x, hf.spacing_y), o,
+                       f"{hf.name}-{size}", tex, 0, hf.source, list(hf.notes) + [f"window rows {i0}.. cols {j0}.. of {hf.rows}x{hf.cols}"])
 
 
 def _value_noise(n: int, cells: int, rng: np.random.Generator) -> np.ndarray:

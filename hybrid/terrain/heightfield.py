@@ -25,7 +25,7 @@ MAX_ABS_HEIGHT = 1.0e7           # metres: float32 heights keep steps of 1 m or 
 MAX_ORIGIN = 1.0e9               # metres: a terrain's world origin (as the camera's coordinates)
 
 
-def _spacing_pair(spacing, name: str) -> tuple[float, float]:
+def spacing_pair(spacing, name: str = "terrain") -> tuple[float, float]:
     """The (x, y) ground spacing in metres from one number or a pair; refuses anything else by name."""
     try:
         pair = (spacing, spacing) if np.ndim(spacing) == 0 else tuple(spacing)
@@ -78,7 +78,7 @@ class HeightField:
                 f"heights of {self.name!r} span {lo:g} .. {hi:g} m, beyond ±{MAX_ABS_HEIGHT:g} m, where float32 "
                 "heights lose metre precision; check the vertical scale and units")
         self.heights = np.ascontiguousarray(h.astype(np.float32, copy=False))
-        self.spacing_x, self.spacing_y = _spacing_pair(self.spacing, self.name)
+        self.spacing_x, self.spacing_y = spacing_pair(self.spacing, self.name)
         self.spacing = self.spacing_x if self.spacing_x == self.spacing_y else (self.spacing_x, self.spacing_y)
         o = tuple(float(v) for v in self.origin)
         if len(o) != 3 or not all(np.isfinite(o)):

@@ -50,7 +50,7 @@ def fill_nodata(values: np.ndarray, missing: np.ndarray) -> np.ndarray:
     return h
 
 
-def _finish(path: str, raw: np.ndarray, *, scale: float, spacing: float, nodata=None, north_up=True,
+def _finish(path: str, raw: np.ndarray, *, scale: float, spacing, nodata=None, north_up=True,
             name=None, texture=None, origin=(0.0, 0.0, 0.0), notes=()) -> HeightField:
     """Turn a raw 2-D array into a HeightField: check, find and fill no-data, scale, flip to south-up."""
     if raw.ndim != 2:
@@ -153,7 +153,8 @@ def load_geotiff(path, *, vertical_scale=None, spacing=None, name=None) -> Heigh
 
 
 def load_npy(path, *, vertical_scale=None, spacing=None, name=None) -> HeightField:
-    """Load .npy (a 2-D array) or .npz (key 'heights', else the only array; optional 'spacing'), south-up."""
+    """Load .npy (a 2-D array) or .npz (key 'heights', else the only array; optional 'spacing': one number or
+    (x, y) metres), south-up."""
     try:
         data = np.load(path, allow_pickle=False)
     except Exception as exc:
@@ -168,11 +169,15 @@ def load_npy(path, *, vertical_scale=None, spacing=None, name=None) -> HeightFie
             else:
                 raise TerrainLoadError(f"{path}: .npz has arrays {keys}; name the heights 'heights'")
             if spacing is None and "spacing" in keys:
-                spacing = float(data["spacing"])
+                stored = np.asarray(data["spacing"])
+                if stored.shape not in ((), (1,), (2,)):
+                    raise TerrainLoadError(f"{path}: 'spacing' must hold one number or (x, y) metres, "
+                                           f"got shape {stored.shape}")
+                spacing = float(stored.reshape(-1)[0]) if stored.size == 1 else tuple(float(v) for v in stored)
     else:
         arr = data
     return _finish(path, np.asarray(arr), scale=1.0 if vertical_scale is None else float(vertical_scale),
-                   spacing=float(_need(path, "spacing", spacing)), north_up=False, name=name)
+                   spacing=_need(path, "spacing", spacing), north_up=False, name=name)
 
 
 def load_hgt(path, *, vertical_scale=None, spacing=None, name=None) -> HeightField:
@@ -231,5 +236,5 @@ def load_terrain(path, **options) -> HeightField:
 
 
 def save_npz(hf: HeightField, path) -> None:
-    """Write heights (south-up, metres) and spacing to an .npz that load_npy reads back."""
-    np.savez(path, heights=hf.heights, spacing=np.float64(hf.spacing))
+    """Write heights (south-up, metres) and spacing (x, y metres) to an .npz that load_npy reads back."""
+    np.savez(path, heights=hf.heights, spacing=np.array([hf.spacing_x, hf.spacing_y], dtype=np.float64))
