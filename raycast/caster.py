@@ -15,6 +15,7 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 from hybrid.gl.context import gl_bytes
+from hybrid.gl.edges import TerrainEdges
 from hybrid.gl.programs import program, register_include, set_uniform, write_uniform
 from hybrid.gl.shading import resolve_mode
 from hybrid.gl.textures import terrain_texture
@@ -96,6 +97,7 @@ class RaycastStrategy:
         self.programs: dict = {}
         self.texture = terrain_texture(ctx, hf, anisotropy=1.0)   # anisotropy is done in the shader (aniso_texture)
         self.stats_buf = ctx.buffer(reserve=STAT_SLOTS * STAT_STRIDE)
+        self.edges = TerrainEdges(ctx, hf)
         self.ids = None
         self._next_id = 1
         self.grid: _Grid | None = None
@@ -119,9 +121,9 @@ class RaycastStrategy:
     @property
     def shared_nbytes(self) -> int:
         """GPU bytes held for all tiles as the driver reports them: colour texture, box, counters, tile IDs,
-        shadow grid."""
+        terrain edges, shadow grid."""
         grid = (self.grid.heights, self.grid.maxmip) if self.grid is not None else ()
-        return gl_bytes(self.texture, self.cube, self.stats_buf, self.ids, *grid)
+        return gl_bytes(self.texture, self.cube, self.stats_buf, self.ids, *grid) + self.edges.nbytes
 
     # --- tiles ------------------------------------------------------------------------------------
     def upload(self, tile) -> GpuTile:
@@ -198,6 +200,7 @@ class RaycastStrategy:
             set_uniform(prog, "tex", 2)
         set_uniform(prog, "hmap", 0)
         set_uniform(prog, "mmap", 1)
+        self.edges.bind(prog, hf, view, 6)
         grid = None
         if opts.shadows:
             grid = self._shadow_grid()
@@ -307,7 +310,7 @@ class RaycastStrategy:
             vao.release()
             prog.release()
         self.programs.clear()
-        for o in (self.prepass_vao, self.prepass_prog, self.cube, self.stats_buf, self.texture, self.ids):
+        for o in (self.prepass_vao, self.prepass_prog, self.cube, self.stats_buf, self.texture, self.ids, self.edges):
             if o is not None:
                 o.release()
         if self.grid is not None:

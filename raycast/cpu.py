@@ -110,11 +110,12 @@ def _lod_final(l, ij, H, Om, zlo, spacing, lod_k):
 
 
 def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="maxmip", tmin=0.0, lmin=0,
-              spacing=1.0, lod_k=None, max_steps=None, outer=0) -> RayHits:
+              spacing=1.0, lod_k=None, max_steps=None, outer=0, under=False) -> RayHits:
     """Cast rays O + t D (M x 3, texel space) through a grid of (N+1)² heights (metres) covering [0, ext] in
     x, y and zr in z; first hits with t >= tmin. spacing: metres per texel, one number or an (x, y) pair;
     lod_k = max(spacing) * K / tau turns on the LOD stop (maxmip only); outer is the mask (W 1, E 2, S 4, N 8)
-    of grid sides on the terrain's boundary."""
+    of grid sides on the terrain's boundary; under (one bool or one a ray, raycast.boundary.starts_under) marks
+    rays starting under the sheet, which hit where they come up."""
     if reconstruction not in RECONSTRUCTIONS:
         raise TerrabenchError(f"reconstruction must be one of {', '.join(RECONSTRUCTIONS)}, got {reconstruction!r}")
     if traversal not in TRAVERSALS:
@@ -132,6 +133,7 @@ def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="
     D = np.atleast_2d(np.asarray(D, dtype=np.float64)).copy()
     M = len(D)
     O = np.broadcast_to(O, (M, 3)).copy()
+    under = np.broadcast_to(np.asarray(under, dtype=bool), (M,))
     ext = np.asarray(ext, dtype=np.float64)
     zr0, zr1 = float(zr[0]), float(zr[1])
     cap = int(max_steps or default_max_steps(n))
@@ -162,7 +164,9 @@ def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="
             t1 = np.where(nz, np.minimum(t1, tf), t1)
             dead |= ~nz & ((O[:, a] < lo) | (O[:, a] > hi))
     dead |= t0 > t1
-    outer_entry = (face & int(outer)) != 0
+    # a ray on the wrong side of the surface where it enters is no hit there through an outer side, nor
+    # (under) through the top or at tmin; through an interior side it is a wall (traverse.glsl)
+    no_entry_hit = ((face & int(outer)) != 0) | (under & (face == 0) & ~(zentry & (D[:, 2] > 0)))
     P = O + t0[:, None] * D
     # entered through the bottom or top face: exactly on it, so rounding cannot put it outside the slab
     P[:, 2] = np.where(zentry, np.where(D[:, 2] > 0, zr0, zr1), P[:, 2])
@@ -179,7 +183,8 @@ def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="
     P[:, :2] = np.clip(P[:, :2], lo_xy, hi_xy)
     P0 = P.copy()          # every exit is computed from the entry point: X = P0 + s D
     sP = np.zeros(M)
-    lvl = np.full(M, lmin if traversal == "naive" else ltop, np.int64)
+    # rays under the sheet step every lmin texel (no ascent, no LOD), as traverse.glsl
+    lvl = np.where(under | (traversal == "naive"), lmin, ltop).astype(np.int64)
     moved = np.zeros(M, bool)
     act = np.nonzero(~dead)[0]
 
@@ -200,7 +205,7 @@ def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="
         amx, amy = mx[act], my[act]
         if lod:
             while True:
-                can = la < ltop
+                can = (la < ltop) & ~under[act]
                 pij = np.floor(ij * 0.5)
                 pnl = nl >> 1
                 prx = np.where(amx, pnl - 1 - pij[:, 0], pij[:, 0]).astype(np.int64)
@@ -247,12 +252,18 @@ def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="
             S = (1 << la[ti]).astype(np.int64)
             cx0, cy0 = rx[ti] * S, ry[ti] * S
             hc = np.stack([h[cy0, cx0], h[cy0, cx0 + S], h[cy0 + S, cx0], h[cy0 + S, cx0 + S]], 1)
-            u = cell_hit(reconstruction, A, B, np.stack([cx0, cy0], 1).astype(np.float64), S.astype(np.float64), hc, H[ti])
+            # a ray under the sheet crosses it upward: the same test with heights and ray z mirrored
+            sg = np.where(under[act[ti]], -1.0, 1.0)
+            Am, Bm = A.copy(), B.copy()
+            Am[:, 2] *= sg
+            Bm[:, 2] *= sg
+            u = cell_hit(reconstruction, Am, Bm, np.stack([cx0, cy0], 1).astype(np.float64), S.astype(np.float64),
+                         hc * sg[:, None], H[ti] * sg)
             got = u >= 0
             gi = ti[got]
             ug = u[got]
             Q = A[got] + ug[:, None] * (B[got] - A[got])
-            outer_miss = (ug == 0) & outer_entry[act[gi]] & ~moved[act[gi]]
+            outer_miss = (ug == 0) & no_entry_hit[act[gi]] & ~moved[act[gi]]
             pad_miss = (Q[:, 0] > ext[0] + 1e-4) | (Q[:, 1] > ext[1] + 1e-4)
             Q[:, 0] = np.clip(Q[:, 0], 0, ext[0])
             Q[:, 1] = np.clip(Q[:, 1], 0, ext[1])
@@ -288,7 +299,7 @@ def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="
             upx = cx[ri] & (((ij[ri, 0].astype(np.int64) + 1) & 1) == 0)
             upy = cy[ri] & (((ij[ri, 1].astype(np.int64) + 1) & 1) == 0)
             la = la.copy()
-            la[ri] = np.where(upx | upy, np.minimum(la[ri] + 1, ltop), la[ri])
+            la[ri] = np.where((upx | upy) & ~under[act[ri]], np.minimum(la[ri] + 1, ltop), la[ri])
         lvl[act] = la
         act = act[~done_hit & ~done_miss]
     return RayHits(status, point, level, steps)
@@ -311,10 +322,11 @@ def tile_frame(tile, eye, dirs):
     return O, D, ext, zr
 
 
-def cast_tile_rays(tile, eye, dirs, *, near=0.0, outer=0, **options) -> RayHits:
+def cast_tile_rays(tile, eye, dirs, *, near=0.0, outer=0, under=False, **options) -> RayHits:
     """Cast world rays (eye + t dirs, t >= near) against one tile; options as cast_rays. Points in tile texels."""
     O, D, ext, zr = tile_frame(tile, eye, dirs)
-    return cast_rays(tile.heights, ext, zr, O, D, tmin=near, spacing=tile.spacing_xy, outer=outer, **options)
+    return cast_rays(tile.heights, ext, zr, O, D, tmin=near, spacing=tile.spacing_xy, outer=outer, under=under,
+                     **options)
 
 
 def texel_to_world(tile, point) -> np.ndarray:

@@ -9,6 +9,7 @@
 #extension GL_ARB_ES3_1_compatibility : enable
 #endif
 #include "raycast/traverse"
+#include "terrain_edges"
 
 // --- view ---
 uniform mat4 view_proj_rel;    // (world - eye) -> clip, reversed Z
@@ -172,9 +173,10 @@ void main() {
     vec3 dir_eye = vec3(ndc * ndc_scale, -1.0);
     vec3 d = cam_to_world * dir_eye;              // world direction, view depth 1 per unit of t
     vec3 D = vec3(d.xy / spacing, d.z);
+    bool under = ray_starts_under(d);
     vec3 Q; ivec2 cell; int lev; vec4 hc; int steps;
     int r = rc_traverse(hmap, mmap, n_cells, n_levels, ext, zr, eye_tex, D, near_plane, 0, spacing, lod_k,
-                        max_steps, outer, Q, cell, lev, hc, steps);
+                        max_steps, outer, under, Q, cell, lev, hc, steps);
 #if STATS
     ivec2 bin = ivec2(gl_FragCoord.xy) >> 6;
     int base = (tile_index * STAT_SLOTS + ((bin.x + bin.y * stat_bins_x) & (STAT_SLOTS - 1))) * 16;
@@ -199,7 +201,7 @@ void main() {
         vec3 Dg = vec3(L.xy / g_spacing, L.z);
         vec3 Qs; ivec2 cs; int ls; vec4 hs; int ssteps;
         int rs = rc_traverse(g_hmap, g_mmap, g_cells, g_levels, g_ext, g_zr, Og, Dg, 0.0, gl, g_spacing, 0.0,
-                             g_max_steps, 15, Qs, cs, ls, hs, ssteps);
+                             g_max_steps, 15, false, Qs, cs, ls, hs, ssteps);
         if (rs != RC_MISS) lit = 0.0;
 #if STATS
         stats_add(base + 5, base + 7, rs == RC_CAPPED, -1, false, base + 6, -1, uint(ssteps));

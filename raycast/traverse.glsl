@@ -98,14 +98,19 @@ bool rc_lod_final(int l, vec2 ij, float H, vec3 Om, float zlo, vec2 spacing, flo
 
 // Cast one ray through the grid: returns RC_MISS, RC_HIT or RC_CAPPED. On a hit, hit is the point (real texel
 // space), cell the hit texel (x, y) at level `level`, hc its corner heights. tmin: smallest ray parameter
-// (near plane); lmin: the finest level to descend to; steps: texels visited.
+// (near plane); lmin: the finest level to descend to; steps: texels visited. under: the ray starts under the
+// terrain sheet (hybrid/gl/edges.glsl): its hit is where it first comes up through the surface (the sheet's
+// underside, as the two-sided reference draws it), found by stepping every lmin texel (no LOD).
 int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 zr, vec3 O, vec3 D,
                 float tmin, int lmin, vec2 spacing, float lod_k, int max_steps, int outer,
-                out vec3 hit, out ivec2 cell, out int level, out vec4 hc, out int steps) {
+                bool under, out vec3 hit, out ivec2 cell, out int level, out vec4 hc, out int steps) {
     steps = 0; level = 0; cell = ivec2(0); hit = vec3(0.0); hc = vec4(0.0);
     // entry into the box; `face` is the box side the ray enters through (EDGE_W/E/S/N bits, 0 for the top,
-    // the bottom or a start inside at tmin). A ray entering below the surface through a side that is the
-    // terrain's outer boundary passes under the surface sheet: it is a miss, not a hit on a wall.
+    // the bottom or a start inside at tmin). The terrain is a sheet without side walls: a ray on the wrong
+    // side of the surface where it enters the box through the terrain's outer boundary, or (under) through
+    // the top or at tmin, is not a hit there. Entering through an interior side on the wrong side of this
+    // tile's surface is a hit (a wall): the ray met the neighbour's surface first (the nearer hit wins) or
+    // passed through a crack between tiles of different levels (the wall fills it).
     float t0 = tmin, t1 = RC_FAR;
     int face = 0;
     bool zentry = false;   // entered through the bottom or top face: put P exactly on it (no rounding above/below)
@@ -125,7 +130,7 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
         t1 = min(t1, max(ta, tb));
     } else if (O.z < zr.x || O.z > zr.y) return RC_MISS;
     if (t0 > t1) return RC_MISS;
-    bool outer_entry = (face & outer) != 0;
+    bool no_entry_hit = (face & outer) != 0 || (under && face == 0 && !(zentry && D.z > 0.0));
     bool moved = false;
     float Nf = float(N);
     bool mx = D.x < 0.0, my = D.y < 0.0;
@@ -145,7 +150,7 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
 #if NAIVE
     int l = lmin;
 #else
-    int l = ltop;
+    int l = under ? lmin : ltop;
 #endif
     // Two nested loops: the inner one only steps texels (cheap: one max-mip fetch a step) and stops at a
     // level-0 (final) texel whose box the ray enters; the outer one intersects that cell's surface. On a SIMD
@@ -167,7 +172,7 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
             int nl = N >> l;
 #if LOD
             // coherent LOD: a texel whose parent is already final belongs to the parent's level
-            while (l < ltop) {
+            while (!under && l < ltop) {
                 vec2 pij = floor(ij * 0.5);
                 ivec2 pri = ivec2(mx ? (nl >> 1) - 1 - int(pij.x) : int(pij.x), my ? (nl >> 1) - 1 - int(pij.y) : int(pij.y));
                 float PH = texelFetch(mmap, pri, l + 1).r;
@@ -207,7 +212,7 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
             moved = true;
 #if !NAIVE
             bool up = (cx && ((int(ij.x) + 1) & 1) == 0) || (cy && ((int(ij.y) + 1) & 1) == 0);
-            if (up) l = min(l + 1, ltop);
+            if (up && !under) l = min(l + 1, ltop);
 #endif
         }
         if (!cand) return RC_CAPPED;
@@ -219,9 +224,11 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
         int S = 1 << l;
         vec4 h4 = vec4(texelFetch(hmap, c0, 0).r, texelFetch(hmap, c0 + ivec2(S, 0), 0).r,
                        texelFetch(hmap, c0 + ivec2(0, S), 0).r, texelFetch(hmap, c0 + ivec2(S, S), 0).r);
-        float u = rc_cell_hit(A, B, vec2(c0), float(S), h4, H);
+        // a ray under the sheet crosses it upward: the same test with heights and ray z mirrored (z -> -z)
+        float sg = under ? -1.0 : 1.0;
+        float u = rc_cell_hit(vec3(A.xy, sg * A.z), vec3(B.xy, sg * B.z), vec2(c0), float(S), sg * h4, sg * H);
         if (u >= 0.0) {
-            if (u == 0.0 && outer_entry && !moved) return RC_MISS;
+            if (u == 0.0 && !moved && no_entry_hit) return RC_MISS;
             vec3 Q = mix(A, B, u);
             if (Q.x > ext.x + 1e-4 || Q.y > ext.y + 1e-4) return RC_MISS;   // first hit lies in the padding
             Q.xy = clamp(Q.xy, vec2(0.0), ext);
@@ -234,7 +241,7 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
         moved = true;
 #if !NAIVE
         bool up = (cx && ((int(ij.x) + 1) & 1) == 0) || (cy && ((int(ij.y) + 1) & 1) == 0);
-        if (up) l = min(l + 1, ltop);
+        if (up && !under) l = min(l + 1, ltop);
 #endif
     }
 }
