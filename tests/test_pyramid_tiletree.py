@@ -156,3 +156,21 @@ def test_vectorised_selection_equals_the_per_tile_traversal(name, size, tile):
                 checked += 1
                 splits += len({s.level for s in fast}) > 1
     assert checked == 54 and splits > 10             # mixed-level selections (restriction, stitching) were seen
+
+
+def test_a_thin_grid_costs_what_its_samples_do():
+    import tracemalloc
+    h = np.random.default_rng(0).normal(100.0, 10.0, (2, 20000)).astype(np.float32)
+    hf = HeightField(h, 30.0)
+    tracemalloc.start()
+    pyr = TilePyramid(hf, 256)
+    tiles = [pyr.tile(k) for k in pyr.keys(0)]
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 100 * 2**20                       # the addressing square (32769², 4 GiB) is never built
+    assert len(tiles) == 79 and pyr.max_level == 7 and len(pyr.keys(pyr.max_level)) == 1
+    assert sum(t.clip[2] - t.clip[0] for t in tiles) == pytest.approx(hf.extent[0])
+    np.testing.assert_array_equal(tiles[3].heights[0], h[0, 3 * 256:4 * 256 + 1])
+    np.testing.assert_array_equal(tiles[3].heights[5], h[1, 3 * 256:4 * 256 + 1])   # rows beyond repeat the edge
+    with pytest.raises(TerrabenchError, match="padded square of 32769² samples"):
+        pyr.padded

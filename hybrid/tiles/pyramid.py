@@ -6,9 +6,11 @@ real level-0 sample: tile borders of all levels lie exactly on the level-0 surfa
 below is a plain maximum deviation from measured heights, and a coarse tile never lifts or sinks the
 terrain as averaging does at peaks and cliffs (a summit keeps its height until its sample is dropped).
 
-The grid is padded by repeating its edge samples up to N*2^L + 1 samples a side so tiles are whole; the
-padding is never drawn: each tile carries ``clip`` (the world rectangle of real terrain it covers) and
-renderers clip to it. A tile's AABB spans the level-0 heights over its clipped region, so it bounds the
+Tiles are addressed as in a square of N*2^L + 1 samples a side, the grid repeated at its edges, but only
+the tiles over the grid's own rectangle exist, and that square is never built: a tile's samples are gathered
+with clamped indices, and every per-level array covers the rectangle only, so memory follows the data (a
+2 x 20000 grid costs what its samples do, not a 20000² square). The padding is never drawn: each tile
+carries ``clip`` (the world rectangle of real terrain it covers) and renderers clip to it. A tile's AABB spans the level-0 heights over its clipped region, so it bounds the
 surface of every level; ``error`` is the largest vertical distance (metres) between the tile's
 triangulated level-l surface and the level-0 samples it covers, made monotone (a parent's error is at
 least its children's).
@@ -88,30 +90,32 @@ class Tile:
         return int(self.heights.size * 4)
 
 
-def interpolate_level(h: np.ndarray, k: int) -> np.ndarray:
-    """Triangulated surface of the every-k-th-sample grid of h, evaluated at every sample of h (float64).
+def _block_reduce(a: np.ndarray, b: int, fn) -> np.ndarray:
+    """Reduce a 2-D array over b x b blocks with the ufunc fn (np.maximum, np.minimum); the last blocks of each
+    axis may be partial (ceil(shape / b) blocks a side)."""
+    rows, cols = np.arange(0, a.shape[0], b), np.arange(0, a.shape[1], b)
+    return fn.reduceat(fn.reduceat(a, rows, axis=0), cols, axis=1)
 
-    h has (m*k + 1)² samples; cells are split along the (i, j) -> (i+1, j+1) diagonal.
-    """
-    c = h[::k, ::k].astype(np.float64)
-    n = h.shape[0]
-    idx = np.arange(n)
-    I = np.minimum(idx // k, c.shape[0] - 2)
-    f = (idx - I * k) / k
-    fi, fj = f[:, None], f[None, :]
-    h00 = c[np.ix_(I, I)]
-    h01 = c[np.ix_(I, I + 1)]
-    h10 = c[np.ix_(I + 1, I)]
-    h11 = c[np.ix_(I + 1, I + 1)]
-    lower = h00 + fj * (h01 - h00) + fi * (h11 - h01)   # fj >= fi: triangle (i,j) (i,j+1) (i+1,j+1)
-    upper = h00 + fi * (h10 - h00) + fj * (h11 - h10)   # fi > fj: triangle (i,j) (i+1,j) (i+1,j+1)
+
+def interpolate_clamped(h: np.ndarray, k: int) -> np.ndarray:
+    """Triangulated surface of the every-k-th-sample grid of h, edge-repeated beyond h, at every sample of h
+    (float64); cells split along the (i, j) -> (i+1, j+1) diagonal (interpolate_level on any rectangle)."""
+    def axis(n):
+        idx = np.arange(n)
+        c = idx // k
+        return np.minimum(c * k, n - 1), np.minimum((c + 1) * k, n - 1), (idx - c * k) / k
+    r0, r1, fi = axis(h.shape[0])
+    c0, c1, fj = axis(h.shape[1])
+    h = h.astype(np.float64, copy=False)
+    fi, fj = fi[:, None], fj[None, :]
+    h00, h01 = h[np.ix_(r0, c0)], h[np.ix_(r0, c1)]
+    h10, h11 = h[np.ix_(r1, c0)], h[np.ix_(r1, c1)]
+    lower = h00 + fj * (h01 - h00) + fi * (h11 - h01)
+    upper = h00 + fi * (h10 - h00) + fj * (h11 - h10)
     return np.where(fj >= fi, lower, upper)
 
 
-def _block_reduce(a: np.ndarray, b: int, fn) -> np.ndarray:
-    """Reduce an (m*b, m*b) array over b x b blocks with fn (np.max or np.min)."""
-    m = a.shape[0] // b
-    return fn(a[:m * b, :m * b].reshape(m, b, m, b), axis=(1, 3))
+MAX_PADDED_SAMPLES = 1 << 27     # the square a few consumers still build (raster node errors): 128 M samples
 
 
 class TilePyramid:
@@ -126,55 +130,57 @@ class TilePyramid:
         cells = max(hf.rows, hf.cols) - 1
         tiles0 = -(-cells // self.n)
         self.max_level = int(np.ceil(np.log2(tiles0))) if tiles0 > 1 else 0
-        self.size = self.n * (1 << self.max_level) + 1
-        pad = ((0, self.size - hf.rows), (0, self.size - hf.cols))
-        self.padded = np.pad(hf.heights, pad, mode="edge")
+        self.size = self.n * (1 << self.max_level) + 1      # samples a side of the addressing square
         self._boxes: dict = {}
         self._build_bounds()
 
+    @property
+    def padded(self) -> np.ndarray:
+        """The addressing square itself (size² float32, edge-repeated), built on demand for consumers that need
+        a square grid; refused by name when it would exceed MAX_PADDED_SAMPLES."""
+        need = self.size * self.size
+        if need > MAX_PADDED_SAMPLES:
+            raise TerrabenchError(
+                f"{self.hf.name!r} ({self.hf.cols}x{self.hf.rows} samples, tiles of {self.n}) would need a padded "
+                f"square of {self.size}² samples ({need * 4 / 2**30:.1f} GiB as float32, several times that to process), "
+                f"beyond the limit of {MAX_PADDED_SAMPLES} samples; the raster strategies need it, the ray caster "
+                "does not")
+        hf = self.hf
+        return np.pad(hf.heights, ((0, self.size - hf.rows), (0, self.size - hf.cols)), mode="edge")
+
     # --- per-level arrays -------------------------------------------------------------------------
     def tiles_per_side(self, level: int) -> int:
-        """Number of tile columns (= rows) at a level, padding included."""
+        """Number of tile columns (= rows) of the addressing square at a level; only those over the grid exist."""
         return 1 << (self.max_level - level)
 
     def _build_bounds(self):
         n, L = self.n, self.max_level
-        hf = self.hf
-        valid = np.zeros((self.size - 1, self.size - 1), bool)
-        valid[:hf.rows - 1, :hf.cols - 1] = True
+        h = self.hf.heights
         # per level-0 cell: min/max of its four corners (bounds every reconstruction of the cell)
-        p = self.padded
-        cmax = np.maximum(np.maximum(p[:-1, :-1], p[:-1, 1:]), np.maximum(p[1:, :-1], p[1:, 1:]))
-        cmin = np.minimum(np.minimum(p[:-1, :-1], p[:-1, 1:]), np.minimum(p[1:, :-1], p[1:, 1:]))
-        cmax = np.where(valid, cmax, -np.inf)
-        cmin = np.where(valid, cmin, np.inf)
+        cmax = np.maximum(np.maximum(h[:-1, :-1], h[:-1, 1:]), np.maximum(h[1:, :-1], h[1:, 1:]))
+        cmin = np.minimum(np.minimum(h[:-1, :-1], h[:-1, 1:]), np.minimum(h[1:, :-1], h[1:, 1:]))
         self._zmax, self._zmin, self._err, self._exists = {}, {}, {}, {}
         for level in range(L + 1):
             b = n << level
-            self._zmax[level] = _block_reduce(cmax, b, np.max)
-            self._zmin[level] = _block_reduce(cmin, b, np.min)
-            self._exists[level] = _block_reduce(valid, b, np.max)
+            self._zmax[level] = _block_reduce(cmax, b, np.maximum)
+            self._zmin[level] = _block_reduce(cmin, b, np.minimum)
+            self._exists[level] = np.ones(self._zmax[level].shape, bool)     # every tile over the rectangle
             if level == 0:
-                err_cells = np.zeros_like(cmax)
-            else:
-                dev = np.abs(interpolate_level(p, 1 << level) - p)
-                # sample deviations onto cells: a cell's error is the max over its four corner samples
-                err_cells = np.maximum(np.maximum(dev[:-1, :-1], dev[:-1, 1:]), np.maximum(dev[1:, :-1], dev[1:, 1:]))
-                err_cells = np.where(valid, err_cells, 0.0)
-            e = _block_reduce(err_cells, b, np.max)
-            if level > 0:
-                prev = self._err[level - 1]
-                m = prev.shape[0] // 2
-                e = np.maximum(e, prev.reshape(m, 2, m, 2).max(axis=(1, 3)))
-            self._err[level] = e
+                self._err[level] = np.zeros(self._zmax[level].shape)
+                continue
+            dev = np.abs(interpolate_clamped(h, 1 << level) - h)
+            # sample deviations onto cells: a cell's error is the max over its four corner samples
+            err_cells = np.maximum(np.maximum(dev[:-1, :-1], dev[:-1, 1:]), np.maximum(dev[1:, :-1], dev[1:, 1:]))
+            e = _block_reduce(err_cells, b, np.maximum)
+            self._err[level] = np.maximum(e, _block_reduce(self._err[level - 1], 2, np.maximum))
 
     # --- tiles ------------------------------------------------------------------------------------
     def exists(self, key: TileKey) -> bool:
         """True if the tile covers any real (unpadded) terrain."""
         if not (0 <= key.level <= self.max_level):
             return False
-        t = self.tiles_per_side(key.level)
-        return 0 <= key.tx < t and 0 <= key.ty < t and bool(self._exists[key.level][key.ty, key.tx])
+        ty, tx = self._exists[key.level].shape
+        return 0 <= key.tx < tx and 0 <= key.ty < ty
 
     def root(self) -> TileKey:
         """The single tile of the coarsest level."""
@@ -182,25 +188,22 @@ class TilePyramid:
 
     def keys(self, level: int) -> list[TileKey]:
         """All existing tiles of a level, row by row from the south."""
-        t = self.tiles_per_side(level)
-        ex = self._exists[level]
-        return [TileKey(level, x, y) for y in range(t) for x in range(t) if ex[y, x]]
+        ty, tx = self._exists[level].shape
+        return [TileKey(level, x, y) for y in range(ty) for x in range(tx)]
 
     def exists_at(self, level: int, tx: np.ndarray, ty: np.ndarray) -> np.ndarray:
         """Boolean array: which of the level's tiles (tx, ty), given as integer arrays, exist."""
-        t = self.tiles_per_side(level)
+        rows, cols = self._exists[level].shape
         tx, ty = np.asarray(tx, dtype=np.int64), np.asarray(ty, dtype=np.int64)
-        ok = (tx >= 0) & (tx < t) & (ty >= 0) & (ty < t)
-        out = np.zeros(tx.shape, bool)
-        out[ok] = self._exists[level][ty[ok], tx[ok]]
-        return out
+        return (tx >= 0) & (tx < cols) & (ty >= 0) & (ty < rows)
 
     def boxes_at(self, level: int, tx: np.ndarray, ty: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World-space (min, max) corners, (B, 3) float64 metres, of the level's existing tiles (tx, ty)."""
         if level not in self._boxes:                    # every box of a level, made on first use
-            t = self.tiles_per_side(level)
-            ty_all, tx_all = np.divmod(np.arange(t * t), t)
-            self._boxes[level] = tuple(a.reshape(t, t, 3) for a in self.aabbs(np.full(t * t, level), tx_all, ty_all))
+            rows, cols = self._exists[level].shape
+            ty_all, tx_all = np.divmod(np.arange(rows * cols), cols)
+            self._boxes[level] = tuple(a.reshape(rows, cols, 3)
+                                       for a in self.aabbs(np.full(rows * cols, level), tx_all, ty_all))
         lo, hi = self._boxes[level]
         return lo[ty, tx], hi[ty, tx]
 
@@ -261,7 +264,8 @@ class TilePyramid:
                                   f"{self.tiles_per_side(key.level) if 0 <= key.level <= self.max_level else 0} tiles a side)")
         k = 1 << key.level
         i0, j0 = key.ty * self.n * k, key.tx * self.n * k
-        h = self.padded[i0:i0 + self.n * k + 1:k, j0:j0 + self.n * k + 1:k]
+        steps = np.arange(self.n + 1) * k
+        h = self.hf.heights[np.ix_(np.minimum(i0 + steps, self.hf.rows - 1), np.minimum(j0 + steps, self.hf.cols - 1))]
         hf = self.hf
         origin = (hf.origin[0] + j0 * hf.spacing_x, hf.origin[1] + i0 * hf.spacing_y, hf.origin[2])
         z0, z1 = self.zrange(key)
