@@ -35,7 +35,7 @@ UNWRITABLE = "/proc/terrabench-out"          # not writable, even for root
     (["stress", "--out", UNWRITABLE], "not a writable folder"),
     (["bench", "--which", "gpu"], "--which"),
     (["bench", "--frames", "0"], "--frames"),
-    (["info", "OUT/corrupt.tif", "--no-gl"], "not a readable TIFF"),
+    (["info", "OUT/corrupt.tif", "--no-gl"], "not a readable raster"),
     (["info", "--dataset", "fbm", "--size-samples", "99999", "--no-gl"], "dataset size"),
 ])
 def test_cli_bad_input(tmp_path, capsys, ctx, argv, match):
