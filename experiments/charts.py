@@ -12,7 +12,6 @@ import pandas as pd  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 
 STRATEGY_CMAP = ListedColormap(["#f2f2f2", "#2b6cff", "#ff8c14"])   # no terrain, raster, ray cast
-CREDIT = "Puget Sound terrain: USGS, via the Georgia Tech Large Geometric Models Archive"
 
 
 def label_columns(frames: pd.DataFrame) -> pd.DataFrame:
@@ -57,7 +56,6 @@ def _per_scene(f: pd.DataFrame, folder: Path, name: str, ycol: str, ylabel: str,
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, ncol=3)
-    fig.text(0.01, 0.0, CREDIT, fontsize=6, alpha=0.6)
     return save_figure(fig, folder, name)
 
 

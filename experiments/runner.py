@@ -111,12 +111,9 @@ class Journal:
                 pd.DataFrame(rows).to_parquet(self.folder / f"{name}.parquet", index=False)
 
 
-def _load_dataset(name: str, size: int, seed: int):
-    from hybrid.terrain.datasets import NAMES, get_dataset
-    from hybrid.terrain.loaders import load_terrain
-    if name in NAMES:
-        return get_dataset(name, size=size or None, seed=seed)
-    return load_terrain(name)
+def _load_dataset(spec: Spec, label: str, seed: int):
+    """The terrain of a spec's dataset label: its file with the entry's loader options, or a named dataset."""
+    return spec.source(label).load(size=spec.dataset_size or None, seed=seed)
 
 
 def _save_image(folder: Path, stem: str, result, full: bool = True) -> None:
@@ -161,7 +158,7 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
             continue
         w, h = parse_size(size)
         try:
-            hf = _load_dataset(ds, spec.dataset_size, seed)
+            hf = _load_dataset(spec, ds, seed)
             views = get_flight(fl, hf, frames=spec.frames, width=w, height=h).views()
         except TerrabenchError as exc:
             journal.append("errors", [{**c, "error": str(exc)} for c in group])

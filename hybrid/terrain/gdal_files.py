@@ -40,7 +40,8 @@ def _vertical(path, crs, band_unit: str, vertical_scale) -> tuple[float, list[st
     from_crs = vertical_metres(crs) if crs is not None else None
     if vertical_scale is not None:
         said = f" (the CRS says {from_crs[1]})" if from_crs else f" (the band says {band_unit})" if band_unit else ""
-        return float(vertical_scale), [f"heights x {float(vertical_scale):g} m per stored unit from --vertical-scale{said}"]
+        scale = float(vertical_scale)
+        return scale, [f"heights x {scale:g} m per stored unit from --vertical-scale{said}"]
     if from_crs is not None:
         metres, unit = from_crs
         return metres, ([] if metres == 1.0 else [f"converted: heights from {unit} (vertical CRS) to metres, "

@@ -140,7 +140,8 @@ def load_terrain(path, **options) -> HeightField:
     options = {k: v for k, v in options.items() if v is not None}
     reader = {"png": load_png16, "gdal": load_gdal, "npy": load_npy, "npz": load_npy, "raw": load_raw}[kind]
     if kind == "raw" and ("shape" not in options or "dtype" not in options):
-        raise TerrainLoadError(f"{path}: a raw grid needs an explicit shape (--raw-shape ROWSxCOLS) and dtype (--raw-dtype)")
+        raise TerrainLoadError(f"{path}: a raw grid needs an explicit shape (--raw-shape ROWSxCOLS) and dtype "
+                               "(--raw-dtype)")
     if "crs" in options and kind != "gdal":
         raise TerrainLoadError(f"{path}: --crs applies to GDAL formats ({', '.join(GDAL_SUFFIXES)}), not {p.suffix}; "
                                "give the ground spacing with --spacing")

@@ -37,7 +37,8 @@ class VoidFill:
                 f"range ({self.bounded} samples held to that range)")
 
 
-def rim_ranges(values: np.ndarray, missing: np.ndarray, labels: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+def rim_ranges(values: np.ndarray, missing: np.ndarray, labels: np.ndarray,
+               count: int) -> tuple[np.ndarray, np.ndarray]:
     """Per void label 1..count: min and max of the known samples 8-adjacent to it (index 0 unused)."""
     lo = np.full(count + 1, np.inf)
     hi = np.full(count + 1, -np.inf)
@@ -73,6 +74,7 @@ def fill_voids(values: np.ndarray, missing: np.ndarray) -> tuple[np.ndarray, Voi
     fill, low, high = filled[missing], lo[labels[missing]], hi[labels[missing]]
     # held by the rim's range: fills beyond it, or at its extreme where scikit-image's own clip to the grid's
     # known range put them (a summit inside a void); on a flat rim, only fills that differ from its height
-    held = np.where(high > low, (fill >= high) | (fill <= low), np.abs(fill - high) > 1e-9 * np.maximum(1.0, np.abs(high)))
+    off_flat = np.abs(fill - high) > 1e-9 * np.maximum(1.0, np.abs(high))
+    held = np.where(high > low, (fill >= high) | (fill <= low), off_flat)
     filled[missing] = np.clip(fill, low, high)
     return filled, VoidFill(int(missing.sum()), int(count), int(sizes.max()), int(np.count_nonzero(held)))
