@@ -205,3 +205,5 @@ def test_info_refuses_a_grid_without_crs_or_spacing_with_exit_2(tmp_path, capsys
     assert "spacing:     10 m east-west x 20 m north-south" in capsys.readouterr().out
     assert main(["info", str(p), "--no-gl", "--spacing", "10,x"]) == 2
     assert "--spacing (metres) must be a number" in capsys.readouterr().err
+    assert main(["info", str(p), "--no-gl", "--spacing", "10", "--size-samples", "5"]) == 2
+    assert "--crop" in capsys.readouterr().err                    # a file is cut with a window, not a size

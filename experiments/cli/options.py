@@ -42,6 +42,9 @@ class TerrainOptions:
         source = TerrainSource(self.dataset, spacing=self.spacing, vertical_scale=self.vertical_scale, crs=self.crs,
                                crop=self.crop, raw_shape=None if self.raw_shape is None else tuple(self.raw_shape),
                                raw_dtype=self.raw_dtype)
+        if source.is_file and self.size_samples is not None:
+            raise TerrabenchError("--size-samples applies to synthetic data and puget; for a file, give a window "
+                                  "with --crop ROW,COL,ROWS,COLS")
         hf = source.load(size=self.size_samples, seed=self.seed)
         return hf.moved(self.offset) if self.offset is not None else hf
 

@@ -7,6 +7,7 @@ one number or (x, y)), ``vertical_scale`` (metres per stored unit), ``crs`` (any
 """
 from __future__ import annotations
 
+import re
 import warnings
 from pathlib import Path
 
@@ -31,7 +32,11 @@ def _open(path: str):
     try:
         return rasterio.open(path)
     except RasterioIOError as exc:
-        hint = " (SRTM tiles must keep their tile name, e.g. N47W122.hgt)" if path.lower().endswith(".hgt") else ""
+        hint = ""
+        if path.lower().endswith(".hgt"):
+            named = re.fullmatch(r"[NS]\d{2}[EW]\d{3}\.hgt", Path(path).name, re.IGNORECASE)
+            hint = (" (an SRTM tile holds 1201x1201 or 3601x3601 big-endian int16 samples)" if named else
+                    " (SRTM tiles must keep their tile name, e.g. N47W122.hgt)")
         raise TerrainLoadError(f"{path}: not a readable raster (GDAL: {exc}){hint}") from None
 
 
