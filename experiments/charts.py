@@ -1,6 +1,11 @@
-"""Charts of a run (matplotlib, PNG and SVG): frame time, memory, speed vs accuracy, strategy mix, popping, images."""
+"""Charts of a run (matplotlib, PNG and SVG): frame time, memory, speed vs accuracy, strategy mix, popping, images.
+
+Charts with one panel per scene or method lay their panels out in rows of up to MAX_COLS (``panel_grid``) with
+one legend for the whole figure, so they stay readable from 1 to 20 panels."""
 from __future__ import annotations
 
+import math
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -10,8 +15,12 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
+
+from .noise import median_interval, repeat_matrix  # noqa: E402
 
 STRATEGY_CMAP = ListedColormap(["#f2f2f2", "#2b6cff", "#ff8c14"])   # no terrain, raster, ray cast
+MAX_COLS = 4             # panels a row
 
 
 def label_columns(frames: pd.DataFrame) -> pd.DataFrame:
@@ -43,25 +52,77 @@ def save_figure(fig, folder: Path, name: str) -> list[Path]:
     return out
 
 
-def _per_scene(f: pd.DataFrame, folder: Path, name: str, ycol: str, ylabel: str, scale=1.0) -> list[Path]:
+def grid_cols(n: int) -> int:
+    """Columns for n panels: one up to two panels, else about a square, at most MAX_COLS."""
+    return 1 if n <= 2 else min(MAX_COLS, math.ceil(math.sqrt(n)))
+
+
+def panel_grid(n: int, width: float = 4.6, height: float = 3.0, wide: float = 8.0):
+    """A figure of n panels in grid_cols(n) columns, panels width x height inches (wide when one column);
+    returns (figure, the n axes). Constrained layout keeps titles, labels and the figure legend apart."""
+    cols = grid_cols(n)
+    rows = math.ceil(n / cols)
+    w = wide if cols == 1 else width
+    fig, axes = plt.subplots(rows, cols, figsize=(w * cols, height * rows), squeeze=False, layout="constrained")
+    flat = list(axes.ravel())
+    for ax in flat[n:]:
+        ax.set_visible(False)
+    return fig, flat[:n]
+
+
+def panel_title(ax, text: str, cols: int) -> None:
+    """A panel title, each of its lines wrapped to the panel's width (small font)."""
+    width = 90 if cols == 1 else 44
+    ax.set_title("\n".join(w for line in text.split("\n") for w in textwrap.wrap(line, width)), fontsize=9)
+
+
+def figure_legend(fig, axes) -> None:
+    """One legend above all panels, with every label any panel drew (each once)."""
+    seen = {}
+    for ax in axes:
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            seen.setdefault(lab, h)
+    if seen:
+        fig.legend(list(seen.values()), list(seen), loc="outside upper center", fontsize=8,
+                   ncol=min(len(seen), 4), frameon=False)
+
+
+def method_colours(f: pd.DataFrame) -> dict:
+    """One colour per method, the same in every panel."""
+    cmap = plt.get_cmap("tab20" if f["method"].nunique() > 10 else "tab10")
+    return {m: cmap(i % cmap.N) for i, m in enumerate(sorted(f["method"].unique()))}
+
+
+def _per_scene(f: pd.DataFrame, folder: Path, name: str, ycol: str, ylabel: str, scale=1.0, band=None,
+               counts: bool = False) -> list[Path]:
     scenes = sorted(f["scene"].unique())
-    fig, axes = plt.subplots(len(scenes), 1, figsize=(8, 3.2 * len(scenes)), squeeze=False)
-    for ax, sc in zip(axes[:, 0], scenes):
+    fig, axes = panel_grid(len(scenes))
+    colours = method_colours(f)
+    cols = grid_cols(len(scenes))
+    for ax, sc in zip(axes, scenes):
         sub = f[f["scene"] == sc]
         for m, g in sub.groupby("method"):
             g = g.sort_values("frame")
-            ax.plot(g["frame"], g[ycol] * scale, marker=".", label=m)
-        ax.set_title(sc, fontsize=10)
+            ax.plot(g["frame"], g[ycol] * scale, marker=".", label=m, color=colours[m])
+            if band and all(c in g and g[c].notna().all() for c in band):
+                ax.fill_between(g["frame"], g[band[0]] * scale, g[band[1]] * scale, color=colours[m], alpha=0.15,
+                                lw=0)
+        panel_title(ax, sc, cols)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        if counts:                               # pixel counts: whole numbers from 0
+            ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+            ax.set_ylim(0, max(1.0, ax.get_ylim()[1]))
         ax.set_xlabel("frame")
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8, ncol=3)
+    figure_legend(fig, axes)
     return save_figure(fig, folder, name)
 
 
 def frame_time_chart(f, folder) -> list[Path]:
-    """Frame time over the flight per method (as Dick et al. Figs. 9/10)."""
-    return _per_scene(f, folder, "frame_time", "wall_ms", "frame time (ms, wall clock)")
+    """Frame time over the flight per method (as Dick et al. Figs. 9/10): median of repeats, shaded min to max."""
+    return _per_scene(f, folder, "frame_time", "wall_ms", "frame time (ms, wall clock)",
+                      band=("wall_ms_min", "wall_ms_max"))
 
 
 def memory_chart(f, folder) -> list[Path]:
@@ -69,12 +130,12 @@ def memory_chart(f, folder) -> list[Path]:
     return _per_scene(f, folder, "gpu_memory", "gpu_bytes", "GPU memory (MiB)", 1 / 2**20)
 
 
-def depth_jump_chart(f, folder) -> list[Path]:
-    """Popping over the flight per method: the largest change of a pixel's hit distance from the previous frame,
-    against the reference's own (1 = no more than the camera's motion)."""
-    if "depth_jump_ratio" not in f or not f["depth_jump_ratio"].notna().any():
+def popping_chart(f, folder) -> list[Path]:
+    """Popping over the flight per method: pixels whose depth error steps in one frame (experiments.popping)."""
+    if "pop_px" not in f or not f["pop_px"].notna().any():
         return []
-    return _per_scene(f, folder, "depth_jump", "depth_jump_ratio", "largest depth jump / reference's")
+    measured = f.groupby("scene")["pop_px"].transform(lambda s: s.notna().any())    # slow flights only
+    return _per_scene(f[measured], folder, "popping", "pop_px", "pixels popping around the frame", counts=True)
 
 
 def pareto_front(points: np.ndarray) -> np.ndarray:
@@ -89,26 +150,24 @@ def pareto_front(points: np.ndarray) -> np.ndarray:
 
 
 def speed_accuracy_chart(f, folder) -> list[Path]:
-    """Median frame time against mean image error per method and scene, Pareto front marked."""
+    """Median frame time (bar: its 95 % bootstrap interval over frames and repeats) against mean image error over
+    terrain pixels, per method (one colour each) and scene; Pareto front marked."""
     err_col = "flip" if "flip" in f and f["flip"].notna().any() else "ssim"
-    agg = f.groupby(["scene", "method"]).agg(ms=("wall_ms", "median"), err=(err_col, "mean")).reset_index()
-    if err_col == "ssim":
-        agg["err"] = 1 - agg["err"]
+    rows = []
+    for (sc, m), g in f.groupby(["scene", "method"]):
+        lo, hi = median_interval(repeat_matrix(g))
+        err = float(g[err_col].mean())
+        rows.append({"scene": sc, "method": m, "ms": float(g["wall_ms"].median()), "lo": lo, "hi": hi,
+                     "err": 1 - err if err_col == "ssim" else err})
+    agg = pd.DataFrame(rows)
     scenes = sorted(agg["scene"].unique())
-    fig, axes = plt.subplots(1, len(scenes), figsize=(6 * len(scenes), 4.5), squeeze=False)
-    for ax, sc in zip(axes[0], scenes):
+    fig, axes = panel_grid(len(scenes), width=5.0, height=3.8, wide=7.5)
+    colours = method_colours(agg)
+    for ax, sc in zip(axes, scenes):
         a = agg[agg["scene"] == sc].reset_index(drop=True)
-        ax.scatter(a["ms"], a["err"], zorder=3)
-        # methods that land on top of each other get their labels stacked instead of overprinted
-        order = a.sort_values(["err", "ms"]).reset_index(drop=True)
-        span_x = max(float(a["ms"].max() - a["ms"].min()), 1e-9)
-        span_y = max(float(a["err"].max() - a["err"].min()), 1e-12)
-        placed = []
-        for _, r in order.iterrows():
-            near = [k for (x, y, k) in placed if abs(x - r["ms"]) < 0.15 * span_x and abs(y - r["err"]) < 0.05 * span_y]
-            k = max(near) + 1 if near else 0
-            placed.append((r["ms"], r["err"], k))
-            ax.annotate(r["method"], (r["ms"], r["err"]), fontsize=8, xytext=(4, 3 + 10 * k), textcoords="offset points")
+        for _, r in a.iterrows():               # one colour per method, named in the figure's legend
+            ax.errorbar([r["ms"]], [r["err"]], xerr=[[r["ms"] - r["lo"]], [r["hi"] - r["ms"]]], fmt="o", ms=5,
+                        capsize=2, color=colours[r["method"]], label=r["method"], zorder=3)
         pts = a[["ms", "err"]].to_numpy()
         ok = np.all(np.isfinite(pts), axis=1)
         if ok.sum() >= 1:
@@ -116,29 +175,30 @@ def speed_accuracy_chart(f, folder) -> list[Path]:
             p = pts[ok][fr]
             ax.step(p[:, 0], p[:, 1], where="post", color="C3", alpha=0.7, label="Pareto front")
             ax.scatter(p[:, 0], p[:, 1], s=90, facecolors="none", edgecolors="C3", zorder=4)
-        ax.set_xlabel("median frame time (ms)")
-        ax.set_ylabel("mean FLIP vs reference" if err_col == "flip" else "1 - SSIM vs reference")
-        ax.set_title(sc, fontsize=10)
+        ax.set_xlabel("median frame time (ms; bars: 95 % interval)")
+        ax.set_ylabel("mean FLIP over terrain" if err_col == "flip" else "1 - SSIM over terrain")
+        panel_title(ax, sc, grid_cols(len(scenes)))
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+    figure_legend(fig, axes)
     return save_figure(fig, folder, "speed_vs_accuracy")
 
 
 def strategy_mix_chart(f, folder) -> list[Path]:
-    """Tiles per strategy per frame for the mixed policies."""
+    """Tiles per strategy per frame for the mixed policies, one panel per method and scene."""
     mixed = f[f["policy"].isin(["hybrid", "heuristic", "oracle"])]
     if mixed.empty or "tiles_raster" not in mixed:
         return []
     groups = list(mixed.groupby(["scene", "method"]))
-    fig, axes = plt.subplots(len(groups), 1, figsize=(8, 2.6 * len(groups)), squeeze=False)
-    for ax, ((sc, m), g) in zip(axes[:, 0], groups):
+    fig, axes = panel_grid(len(groups), width=4.2, height=2.6, wide=8.0)
+    for ax, ((sc, m), g) in zip(axes, groups):
         g = g.sort_values("frame")
         ax.bar(g["frame"], g["tiles_raster"], label="raster", color="C0")
         ax.bar(g["frame"], g["tiles_raycast"], bottom=g["tiles_raster"], label="ray cast", color="C1")
-        ax.set_title(f"{m} — {sc}", fontsize=10)
+        panel_title(ax, f"{m}\n{sc}", grid_cols(len(groups)))
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("frame")
         ax.set_ylabel("tiles")
-        ax.legend(fontsize=8)
+    figure_legend(fig, axes)
     return save_figure(fig, folder, "strategy_mix")
 
 
@@ -227,6 +287,6 @@ def all_charts(run: Path, frames: pd.DataFrame, folder: Path, image_frames: list
     f = label_columns(frames)
     return {"frame_time": frame_time_chart(f, folder), "gpu_memory": memory_chart(f, folder),
             "speed_vs_accuracy": speed_accuracy_chart(f, folder), "strategy_mix": strategy_mix_chart(f, folder),
-            "depth_jump": depth_jump_chart(f, folder),
+            "popping": popping_chart(f, folder),
             "crossover": crossover_chart(tiles if tiles is not None else pd.DataFrame(), folder),
             "images": image_panels(run, f, folder, image_frames)}

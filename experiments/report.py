@@ -15,62 +15,48 @@ import pandas as pd
 from hybrid.errors import TerrabenchError
 
 from .charts import all_charts, label_columns
+from .reading import reading
 from .spec_datasets import credit_lines
 from .tables import md_table
 
 
 def summary_table(frames: pd.DataFrame) -> pd.DataFrame:
-    """Per scene and method: median and p95 frame ms, mean and peak GPU MiB, accuracy means."""
+    """Per scene and method: median and p95 frame ms, the repeats' spread (noise, %), mean and peak GPU MiB,
+    accuracy over terrain pixels, cracks, silhouette differences, reference terrain drawn as sky, popping."""
+    from .noise import repeat_matrix, repeat_spread
     f = label_columns(frames)
     agg = {"frames": ("frame", "count"), "median_ms": ("wall_ms", "median"),
            "p95_ms": ("wall_ms", lambda s: float(np.percentile(s, 95))),
            "mean_MiB": ("gpu_bytes", lambda s: float(s.mean()) / 2**20),
            "peak_MiB": ("gpu_bytes", lambda s: float(s.max()) / 2**20)}
-    for col, name in (("psnr", "psnr_dB"), ("ssim", "ssim"), ("flip", "flip"), ("depth_rel_median", "depth_rel_med"),
-                      ("hole_px", "holes_px"), ("coverage_mismatch", "cover_mismatch"), ("error_flicker", "flicker")):
+    for col, name, fn in (("psnr", "psnr_dB", "mean"), ("ssim", "ssim", "mean"), ("flip", "flip", "mean"),
+                          ("depth_rel_median", "depth_rel_med", "mean"), ("crack_px", "cracks_px", "max"),
+                          ("silhouette_px", "silhouette_px", "mean"), ("terrain_as_sky", "sky_for_terrain_%", "mean"),
+                          ("pop_px", "pop_px", lambda s: s.sum(min_count=1)), ("error_flicker", "flicker", "mean")):
         if col in f:
-            fn = "max" if col == "hole_px" else "mean"
             agg[name] = (col, fn)
     t = f.groupby(["scene", "method"]).agg(**agg).reset_index()
+    if "sky_for_terrain_%" in t:
+        t["sky_for_terrain_%"] *= 100
+    noise = {k: 100 * repeat_spread(repeat_matrix(g)) for k, g in f.groupby(["scene", "method"])}
+    t.insert(4, "noise_%", [noise[(sc, m)] for sc, m in zip(t["scene"], t["method"])])
     return t.sort_values(["scene", "median_ms"])
 
 
-def reading(frames: pd.DataFrame, errors: list[dict]) -> list[str]:
-    """Sentences stating who won where and by how much, and where methods failed, from the numbers."""
-    f = label_columns(frames)
-    out = []
-    pure = {"raster", "raycast"}
-    for sc, g in f.groupby("scene"):
-        med = g.groupby("method")["wall_ms"].median().sort_values()
-        if len(med) >= 2:
-            a, b = med.index[0], med.index[1]
-            out.append(f"**{sc}**: fastest is {a} at {med.iloc[0]:.1f} ms median per frame, "
-                       f"{med.iloc[1] / med.iloc[0]:.2f}x faster than {b} ({med.iloc[1]:.1f} ms).")
-        pol = g.groupby("policy")["wall_ms"].median()
-        pures = [p for p in pure if p in pol]
-        if "hybrid" in pol and pures:
-            best = min(pures, key=lambda p: pol[p])
-            ratio = pol[best] / pol["hybrid"]
-            word = "faster" if ratio > 1 else "slower"
-            out.append(f"  The hybrid is {max(ratio, 1 / ratio):.2f}x {word} than the better pure method ({best}, "
-                       f"{pol[best]:.1f} ms vs {pol['hybrid']:.1f} ms)"
-                       + (f", and {pol['hybrid'] / pol['oracle']:.2f}x the oracle's time." if "oracle" in pol else "."))
-        if "flip" in g and g["flip"].notna().any():
-            acc = g.groupby("method")["flip"].mean().sort_values()
-            out.append(f"  Most accurate against the reference: {acc.index[0]} (mean FLIP {acc.iloc[0]:.4f}); "
-                       f"least: {acc.index[-1]} ({acc.iloc[-1]:.4f}).")
-        holes = g.groupby("method")["hole_px"].max()
-        bad = holes[holes > 0]
-        if len(bad):
-            out.append("  Coverage holes against the reference: " +
-                       ", ".join(f"{m} up to {int(v)} px" for m, v in bad.items()) + ".")
-        for col, what in (("capped_rays", "capped rays"), ("nan_px", "NaN pixels")):
-            if col in g and g[col].fillna(0).max() > 0:
-                s = g.groupby("method")[col].max()
-                out.append(f"  {what}: " + ", ".join(f"{m} {int(v)}" for m, v in s[s > 0].items()) + ".")
-    for e in errors:
-        out.append(f"Configuration {e.get('config')} failed: {e.get('error')}.")
-    return out
+MEASURES = [
+    "median_ms: median over frames of each frame's median of repeats; noise_%: the median spread (max - min) / "
+    "median of a frame's repeats, the noise the reading weighs differences against (with a bootstrap interval of "
+    "the ratio over frames and repeats).",
+    "psnr_dB, ssim, flip: over the pixels where the method or the reference shows terrain (identical sky left "
+    "out); depth_rel_med: relative hit-distance error over the pixels both cover.",
+    "cracks_px (most in a frame): sky enclosed by the method's own terrain (within 3 px both sides, across or "
+    "along) where the reference has terrain more than 2 px from its sky; silhouette_px (mean a frame): every other "
+    "pixel where method and reference disagree on terrain; sky_for_terrain_%: the reference's terrain pixels the "
+    "method draws as sky.",
+    "pop_px (sum over the flight): pixels whose relative depth error steps by more than 0.1 % in one frame "
+    "beyond the camera's steady motion (second difference over three frames, patches of 5 x 5 px); measured only "
+    "where the terrain moves at most 2 px a frame across the image (e.g. the dolly flight), else –.",
+]
 
 
 def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | None = None, video: bool = False) -> Path:
@@ -98,17 +84,18 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
     md = [f"# terrabench report: {spec['name']}", "",
           "Every method renders the same camera views (paired flights); accuracy is measured against the "
           f"full-resolution reference image (colour supersampled {spec.get('supersample', 1)}x). Frame time is "
-          f"the wall clock around `ctx.finish()`, median of {spec.get('repeats')} repeats.", "",
+          f"the wall clock around `ctx.finish()`, median of {spec.get('repeats')} repeats after one untimed warm-up "
+          "frame per configuration; the reading calls a difference within the noise of this run a tie.", "",
           "## Environment", "",
           f"- GL renderer: {env['gl_renderer']} ({env['gl_version']})",
           f"- CPU: {env['cpu']} ({env['cpu_count']} cores); Python {env['python']}; {env['platform']}",
           "- Packages: " + ", ".join(f"{k} {v}" for k, v in env["packages"].items()), "",
           "## Spec", "", "```json", json.dumps(spec, indent=1), "```", "",
           "## Reading", ""] + [f"- {l}" if not l.startswith("  ") else f"  - {l.strip()}" for l in lines] + [
-          "", "## Summary", "", md_table(table), ""]
+          "", "## Summary", "", md_table(table), ""] + [f"- {m}" for m in MEASURES] + [""]
     titles = {"frame_time": "Frame time over the flight", "gpu_memory": "GPU memory over the flight",
               "speed_vs_accuracy": "Speed against accuracy", "strategy_mix": "Strategy mix per frame",
-              "depth_jump": "Popping: largest depth jump from the previous frame, against the reference's",
+              "popping": "Popping: pixels whose depth error steps in one frame",
               "crossover": "Where each strategy pays: cost per tile against triangles per pixel",
               "images": "Images", "video": "Flight animation"}
     for key, files in charts.items():
@@ -126,7 +113,8 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
          f"<h1>terrabench report: {html.escape(spec['name'])}</h1>",
          "<h2>Environment</h2><ul>" + "".join(f"<li>{html.escape(str(k))}: {html.escape(str(v))}</li>" for k, v in env.items()) + "</ul>",
          "<h2>Reading</h2><ul>" + "".join(f"<li>{html.escape(l.strip()).replace('**', '')}</li>" for l in lines) + "</ul>",
-         "<h2>Summary</h2>", table.to_html(index=False, float_format=lambda v: f"{v:.3g}")]
+         "<h2>Summary</h2>", table.to_html(index=False, float_format=lambda v: f"{v:.3g}"),
+         "<ul>" + "".join(f"<li>{html.escape(m)}</li>" for m in MEASURES) + "</ul>"]
     for key, files in charts.items():
         pngs = [p for p in files if p.suffix in (".png", ".gif")]
         if pngs:

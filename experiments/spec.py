@@ -9,7 +9,7 @@
     taus = [0.6667]
     sizes = ["640x360"]
     reconstructions = ["triangles"]   # ray-cast surface reconstructions
-    repeats = 3                       # timed repeats a frame (median kept)
+    repeats = 3                       # timed repeats a frame, at least 3 (median kept, spread = noise)
     seeds = [0]
     tile_size = 256
     supersample = 2                   # reference colour supersampling
@@ -109,6 +109,10 @@ def _list(d, key, kind, check=None):
             raise TerrabenchError(f"spec: '{key}' entries must be {getattr(kind, '__name__', kind)}, got {x!r}")
         if check:
             check(x)
+    seen = [repr(x) for x in v]
+    twice = sorted({x for x in seen if seen.count(x) > 1})
+    if twice:
+        raise TerrabenchError(f"spec: '{key}' lists {', '.join(twice)} more than once; each entry once")
     return v
 
 
@@ -192,6 +196,10 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None):
     def size_ok(s):
         parse_size(s, f"{source}: size")
 
+    def seed_ok(s):
+        if not (0 <= s < 2**32):
+            raise TerrabenchError(f"{source}: seeds must lie in [0, 2^32), got {s!r}")
+
     kw = {"name": d.get("name", Path(source).stem)}
     if not isinstance(kw["name"], str) or not kw["name"] or any(c in kw["name"] for c in "/\\ "):
         raise TerrabenchError(f"{source}: name must be a non-empty word without slashes or spaces, got {kw['name']!r}")
@@ -206,11 +214,11 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None):
             raise TerrabenchError(f"{source}: datasets {twice} appear twice; give each a distinct 'name'")
     for key, kind, check in (("flights", str, None), ("policies", str, policy_ok),
                              ("taus", (int, float), tau_ok), ("sizes", str, size_ok),
-                             ("reconstructions", str, rec_ok), ("seeds", int, None), ("image_frames", int, None)):
+                             ("reconstructions", str, rec_ok), ("seeds", int, seed_ok), ("image_frames", int, None)):
         v = _list(d, key, kind, check)
         if v is not None:
             kw[key] = [float(x) for x in v] if key == "taus" else v
-    for key, lo, hi in (("frames", 1, 100000), ("repeats", 1, 1000), ("tile_size", 2, 65536),
+    for key, lo, hi in (("frames", 1, 100000), ("repeats", 3, 1000), ("tile_size", 2, 65536),
                         ("supersample", 1, 8), ("dataset_size", 0, 16385)):
         if key in d:
             v = d[key]

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from hybrid.atomic import write_json, write_parquet, write_text
 from hybrid.camera.view import View
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.datasets import PUGET_CREDIT, get_dataset, puget
@@ -32,7 +33,7 @@ def make_scene(name: str, size: int = 257) -> HeightField:
         return puget(size=size)
     if name == "puget_x100":
         p = puget(size=size)
-        return HeightField(p.heights * 100.0, p.spacing, p.origin, "puget_x100", p.texture)
+        return HeightField(p.heights * 100.0, (p.spacing_x, p.spacing_y), p.origin, "puget_x100", p.texture)
     if name in SCENES:
         return get_dataset(name, size=size)
     raise TerrabenchError(f"unknown stress scene {name!r}; choose from {', '.join(SCENES)}")
@@ -70,7 +71,7 @@ def stress_view(hf: HeightField, kind: str, width: int = 320, height: int = 180,
         i0, j0 = (hf.rows - 1 - n) // 2, (hf.cols - 1 - n) // 2
         block = hf.heights[i0:i0 + n + 1, j0:j0 + n + 1]
         i, j = np.unravel_index(np.argmin(block), block.shape)
-        x, y = ox + (j0 + j) * hf.spacing, oy + (i0 + i) * hf.spacing
+        x, y = ox + (j0 + j) * hf.spacing_x, oy + (i0 + i) * hf.spacing_y
         z = g(x, y) + max(0.5 * (float(block.max()) + oz - g(x, y)), 2.0)
         return hf, View([x, y, z], [x + 0.3 * w, y + 0.2 * d, g(x, y)], 70.0, width, height, 0.5, far)
     if kind == "below":
@@ -143,6 +144,7 @@ def measure(result, ref) -> dict:
 def run_stress(ctx, scenes=SCENES, views=VIEWS, methods=METHODS, size: int = 257, width: int = 320,
                height: int = 180, tile_size: int = 64, progress=None) -> pd.DataFrame:
     """Every (scene, view, method): a row of failure measures; a method that raises is recorded, not fatal."""
+    from hybrid.camera.clearance import eye_clearance
     from hybrid.reference import ReferenceRenderer
     rows = []
     for sc in scenes:
@@ -153,7 +155,10 @@ def run_stress(ctx, scenes=SCENES, views=VIEWS, methods=METHODS, size: int = 257
             ref = ref_r.render(view)
             ref_r.release()
             for m in methods:
-                row = {"scene": sc, "view": vk, "method": m}
+                # views a user could not give (eye under the ground or within the near plane) are flagged
+                clear = eye_clearance(hf, view.eye)
+                row = {"scene": sc, "view": vk, "method": m, "eye_clearance_m": clear,
+                       "user_refused": bool(clear < view.near)}
                 try:
                     r = _renderer(ctx, hf, m, tile_size)
                     try:
@@ -182,17 +187,15 @@ def stress_table(ctx, scenes=SCENES, views=VIEWS, methods=METHODS, size: int = 2
 
 def run_stress_spec(spec, runs_dir, ctx=None, progress: bool = True) -> Path:
     """Run a StressSpec into runs_dir/<name> (spec.json, stress.parquet); returns the run folder."""
-    import json
-
     from hybrid.camera.view import parse_size
     from hybrid.gl.context import shared_context
 
     from .folders import writable_folder
     folder = writable_folder(Path(runs_dir) / spec.name, "run folder")
-    (folder / "spec.json").write_text(json.dumps(spec.to_dict(), indent=1))
+    write_json(folder / "spec.json", spec.to_dict())
     df = stress_table(ctx or shared_context(), spec.scenes, spec.views, spec.methods, spec.size_samples,
                       parse_size(spec.size, "spec size"), spec.tile_size, progress)
-    df.to_parquet(folder / "stress.parquet", index=False)
+    write_parquet(folder / "stress.parquet", df)
     return folder
 
 
@@ -256,6 +259,11 @@ def stress_reading(df: pd.DataFrame) -> list[str]:
                        f"path's (it sent the failing tiles to the ray caster), e.g. "
                        + ", ".join(f"{sc}/{v} {r['hybrid']:.2g} vs {r['raster']:.2g}"
                                    for (sc, v), r in better.head(3).iterrows()) + ".")
+    if "user_refused" in df and df["user_refused"].any():
+        flagged = sorted({f"{r['scene']}/{r['view']}" for _, r in df[df["user_refused"]].iterrows()})
+        out.append(f"{len(flagged)} cases put the eye under the ground or within the near plane of it "
+                   f"({', '.join(flagged[:6])}{', ...' if len(flagged) > 6 else ''}): `render` and runs refuse such "
+                   "views; here they show how each method fails, not a fair comparison with the reference.")
     if "error" in df:
         for _, r in df[df["error"] != ""].iterrows():
             out.append(f"{r['method']} failed on {r['scene']}/{r['view']}: {r['error']}.")
@@ -274,8 +282,8 @@ def write_stress_report(df: pd.DataFrame, folder: Path) -> Path:
     """stress.md (+ table as parquet/csv and the chart) into folder."""
     from .tables import md_table
     folder.mkdir(parents=True, exist_ok=True)
-    df.to_parquet(folder / "stress.parquet", index=False)
-    df.to_csv(folder / "stress.csv", index=False)
+    write_parquet(folder / "stress.parquet", df)
+    write_text(folder / "stress.csv", df.to_csv(index=False))
     chart = failure_chart(df, folder)
     cols = [c for c in ("scene", "view", "method", "hole_px", "crack_px", "depth_rel_p99", "capped", "mean_steps",
                         "max_steps", "triangles", "wall_ms", "nan_px") if c in df]
@@ -287,6 +295,4 @@ def write_stress_report(df: pd.DataFrame, folder: Path) -> Path:
           "", f"![failures]({chart[0].name})", "", "## All cases", "", md_table(df[cols]), ""]
     if df["scene"].astype(str).str.startswith("puget").any():        # credit the bundled data when it was used
         md += ["---", f"- {PUGET_CREDIT}", ""]
-    p = folder / "stress.md"
-    p.write_text("\n".join(md))
-    return p
+    return write_text(folder / "stress.md", "\n".join(md))

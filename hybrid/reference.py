@@ -61,7 +61,7 @@ class ReferenceRenderer:
         hf = self.hf
         self.prog["grid"].value = (hf.cols, hf.rows)
         self.prog["origin_rel"].value = tuple((np.array(hf.origin) - view.eye).astype(np.float32))
-        self.prog["spacing"].value = hf.spacing
+        self.prog["spacing"].value = (hf.spacing_x, hf.spacing_y)
         self.prog["view_proj_rel"].write(view.view_proj_rel.T.astype(np.float32).tobytes())
         self.prog["mode"].value = MODES[mode]
         self.prog["hrange"].value = hf.height_range

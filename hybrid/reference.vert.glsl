@@ -3,7 +3,7 @@
 uniform sampler2D heights;     // R32F, (cols x rows), row 0 = south
 uniform ivec2 grid;            // (cols, rows)
 uniform vec3 origin_rel;       // terrain origin minus eye, metres
-uniform float spacing;         // metres
+uniform vec2 spacing;          // metres between columns (x, east-west) and rows (y, north-south)
 uniform mat4 view_proj_rel;    // (world - eye) -> clip, reversed Z
 out vec3 v_rel;
 out vec2 v_uv;
@@ -12,7 +12,7 @@ void main() {
     int i = gl_VertexID / grid.x;
     int j = gl_VertexID - i * grid.x;
     float h = texelFetch(heights, ivec2(j, i), 0).r;
-    vec3 p = origin_rel + vec3(float(j) * spacing, float(i) * spacing, h);
+    vec3 p = origin_rel + vec3(vec2(j, i) * spacing, h);
     v_rel = p;
     v_uv = vec2(j, i) / vec2(grid - 1);
     v_h = h;

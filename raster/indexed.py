@@ -22,7 +22,7 @@ class IndexedTileletStrategy(TileletDrawing):
     def __init__(self, ctx, hf, **options):
         super().__init__(ctx, hf, **options)
         self.prog = program(ctx, "raster", "template.vert.glsl", "tilelet.frag.glsl")
-        self.skirt_prog = program(ctx, "raster", "skirt.vert.glsl", "tilelet.frag.glsl")
+        self.skirt_prog = program(ctx, "raster", "skirt.vert.glsl", "tilelet.frag.glsl", defines={"SKIRT_PROGRAM": 1})
 
     def programs(self) -> tuple:
         """The mesh and skirt programs."""

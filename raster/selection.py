@@ -52,17 +52,19 @@ def level_starts(n: int) -> np.ndarray:
     return np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
 
 
-def level_bounds(data: np.ndarray, offsets: np.ndarray, n: int, spacing: float):
-    """Per local level of a tile: largest effective error (m) and the union of its own nodes' boxes (tile-local m)."""
+def level_bounds(data: np.ndarray, offsets: np.ndarray, n: int, spacing_xy: tuple[float, float]):
+    """Per local level of a tile: largest effective error (m) and the union of its own nodes' boxes (tile-local m);
+    ``spacing_xy`` is the tile's (x, y) sample spacing in metres."""
     levels = len(offsets) - 1
+    sp = np.asarray(spacing_xy, dtype=np.float64)
     err, lo, hi = np.zeros(levels), np.zeros((levels, 3)), np.zeros((levels, 3))
     for m in range(levels):
         side = n >> (m + 1)
         own = data[offsets[m]:offsets[m + 1]].reshape(side + 2, side + 2, 4)[1:-1, 1:-1]
-        grow = (2 << m) * spacing
+        grow = (2 << m) * sp
         err[m] = own[..., 0].max()
-        lo[m] = (-grow, -grow, own[..., 1].min())
-        hi[m] = (n * spacing + grow, n * spacing + grow, own[..., 2].max())
+        lo[m] = (*(-grow), own[..., 1].min())
+        hi[m] = (*(n * sp + grow), own[..., 2].max())
     return err, lo, hi
 
 
@@ -91,7 +93,7 @@ class SelectedTileletTile:
         nodes = global_nodes(strategy.hf, self.n, strategy.beta)
         data, self.offsets = tile_node_block(nodes, int(tile.key.level), int(tile.key.tx), int(tile.key.ty), self.n)
         self.starts = level_starts(self.n)
-        self.level_error, self.level_lo, self.level_hi = level_bounds(data, self.offsets, self.n, float(tile.spacing))
+        self.level_error, self.level_lo, self.level_hi = level_bounds(data, self.offsets, self.n, tile.spacing_xy)
         self.heights = ctx.buffer(h.tobytes())
         self.nodes = ctx.buffer(data.tobytes())
         self.capacity = (self.n // 2) ** 2

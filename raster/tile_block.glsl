@@ -1,7 +1,8 @@
 // Everything a raster shader needs to know about the tile it draws, one std140 block per tile written once a
 // frame for all tiles (raster.tileblock); eye-relative metres, tile-local cells.
 layout(std140, binding = 0) uniform TileBlock {
-    vec4 t_origin_spacing;    // tile sample [0, 0] minus eye (z: terrain origin z minus eye z); spacing
+    vec4 t_origin;            // tile sample [0, 0] minus eye (z: terrain origin z minus eye z); w unused
+    vec4 t_spacing;           // xy: metres per tile cell east-west and north-south (1, 1 for metre meshes)
     vec4 t_clip_rel;          // tile.clip minus eye: x0, y0, x1, y1
     vec4 t_uv;                // texture coordinate of tile sample [0, 0]; texture step per tile cell
     ivec4 t_shape;            // cells a side, coarsest local level, first node dispatched, pyramid level
@@ -11,8 +12,8 @@ layout(std140, binding = 0) uniform TileBlock {
     ivec4 t_offsets[4];       // start of each local level's node grid (with apron) in the node buffer
     ivec4 t_starts[4];        // index of each local level's first node among the tile's own nodes
 };
-#define origin_rel (t_origin_spacing.xyz)
-#define spacing (t_origin_spacing.w)
+#define origin_rel (t_origin.xyz)
+#define spacing (t_spacing.xy)
 #define clip_rel (t_clip_rel)
 #define uv_origin (t_uv.xy)
 #define uv_per_cell (t_uv.zw)

@@ -10,9 +10,10 @@ import numpy as np
 from hybrid.gl.programs import register_include
 
 BLOCK_BYTES = 256              # one block per tile, at a range offset every GL implementation accepts
-BLOCK = np.dtype([("origin_spacing", "<f4", 4), ("clip_rel", "<f4", 4), ("uv", "<f4", 4), ("shape", "<i4", 4),
-                  ("nb_delta", "<i4", 4), ("flags", "<i4", 4), ("skirt", "<f4", 4), ("offsets", "<i4", 16),
-                  ("starts", "<i4", 16), ("pad", "u1", BLOCK_BYTES - 240)])
+BLOCK = np.dtype([("origin", "<f4", 4), ("spacing", "<f4", 4), ("clip_rel", "<f4", 4), ("uv", "<f4", 4),
+                  ("shape", "<i4", 4), ("nb_delta", "<i4", 4), ("flags", "<i4", 4), ("skirt", "<f4", 4),
+                  ("offsets", "<i4", 16), ("starts", "<i4", 16)])
+assert BLOCK.itemsize == BLOCK_BYTES
 
 
 def register_tile_block(ctx) -> None:
@@ -24,7 +25,7 @@ def register_tile_block(ctx) -> None:
 
 def skirt_bottom(tile, view) -> float:
     """Eye-relative z (metres) of the lower edge of a tile's skirts: below its lowest point."""
-    return float(tile.zmin - view.eye[2] - 1.0 - 0.01 * tile.spacing)
+    return float(tile.zmin - view.eye[2] - 1.0 - 0.01 * max(tile.spacing_x, tile.spacing_y))
 
 
 def tile_blocks(hf, view, items, skirts: dict | None = None, culling: bool = True, unit_spacing: bool = False,
@@ -37,8 +38,9 @@ def tile_blocks(hf, view, items, skirts: dict | None = None, culling: bool = Tru
     extent = np.asarray(hf.extent, dtype=np.float64)
     for i, (g, tile, sel) in enumerate(items):
         b = out[i]
-        sp = 1.0 if unit_spacing else float(tile.spacing)
-        b["origin_spacing"] = (*(np.asarray(tile.origin, dtype=np.float64) - eye), sp)
+        sp = np.ones(2) if unit_spacing else np.array([tile.spacing_x, tile.spacing_y], dtype=np.float64)
+        b["origin"] = (*(np.asarray(tile.origin, dtype=np.float64) - eye), 0.0)
+        b["spacing"] = (sp[0], sp[1], 0.0, 0.0)
         x0, y0, x1, y1 = tile.clip
         b["clip_rel"] = (x0 - eye[0], y0 - eye[1], x1 - eye[0], y1 - eye[1])
         b["uv"] = (*((np.asarray(tile.origin[:2], dtype=np.float64) - hf_origin[:2]) / extent), *(sp / extent))

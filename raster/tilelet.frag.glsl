@@ -9,6 +9,9 @@ uniform sampler2D tex;
 uniform vec2 hrange;
 out vec4 frag;
 #include "shading"
+#ifdef SKIRT_PROGRAM
+#include "terrain_edges"
+#endif
 
 vec3 level_colour(int l) {
     const vec3 pal[8] = vec3[8](vec3(0.90, 0.25, 0.20), vec3(0.95, 0.60, 0.15), vec3(0.95, 0.90, 0.25),
@@ -18,6 +21,10 @@ vec3 level_colour(int l) {
 }
 
 void main() {
+#ifdef SKIRT_PROGRAM
+    // a skirt closes a crack for rays from above the sheet; to a ray from under it, it would be a wall
+    if (ray_starts_under(v_rel)) discard;
+#endif
     vec2 v_uv = uv_origin + (v_rel.xy - origin_rel.xy) / spacing * uv_per_cell;
     float v_h = v_rel.z - origin_rel.z;
     vec3 n = cross(dFdx(v_rel), dFdy(v_rel));

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from hybrid.gl.edges import TerrainEdges
 from hybrid.gl.programs import program, set_uniform
 from hybrid.gl.shading import resolve_mode
 
@@ -45,6 +46,13 @@ class TileletDrawing(TileletSelection):
     def __init__(self, ctx, hf, **options):
         super().__init__(ctx, hf, **options)
         self._skirted: list = []          # (block index, tile) of the last draw_tiles call that hang skirts
+        self.edges = TerrainEdges(ctx, hf)   # skirts are not drawn for rays from under the sheet
+        self.skirt_prog = None                # the program that draws skirts (subclasses)
+
+    @property
+    def shared_nbytes(self) -> int:
+        """GPU bytes shared by all tiles, as the driver reports them: colour texture, frame counters, edges."""
+        return super().shared_nbytes + self.edges.nbytes
 
     def programs(self) -> tuple:
         """Every program whose uniforms follow the frame (subclasses)."""
@@ -65,6 +73,7 @@ class TileletDrawing(TileletSelection):
         if not items:
             return
         ctx = self.ctx
+        self.edges.bind(self.skirt_prog, self.hf, view, 6)
         target.use()
         for i in range(4):
             ctx.enable_direct(GL_CLIP_DISTANCE0 + i)
@@ -117,6 +126,7 @@ class TileletDrawing(TileletSelection):
         """Free the programs, the selection shader, the texture and the counters."""
         for prog in self.programs():
             prog.release()
+        self.edges.release()
         super().release()
 
 
@@ -126,14 +136,19 @@ class TileletStrategy(TileletDrawing):
     def __init__(self, ctx, hf, **options):
         super().__init__(ctx, hf, **options)
         self.prog = program(ctx, "raster", "leaf.vert.glsl", "tilelet.frag.glsl", "tilelet.geom.glsl")
+        self.skirt_prog = program(ctx, "raster", "leaf.vert.glsl", "tilelet.frag.glsl", "tilelet.geom.glsl",
+                                  defines={"SKIRT_PROGRAM": 1})
+        self.skirt_prog["skirt_pass"].value = True
 
     def programs(self) -> tuple:
-        """The geometry-shader program."""
-        return (self.prog,)
+        """The geometry-shader program and its skirt-pass variant."""
+        return (self.prog, self.skirt_prog)
 
     def tile_arrays(self, g: SelectedTileletTile) -> dict:
-        """One vertex array: the leaf buffer as points."""
-        return {"points": self.ctx.vertex_array(self.prog, [(g.leaves, LEAF_FORMAT, "a_node", "a_h0", "a_h1", "a_h8")])}
+        """Two vertex arrays of the leaf buffer as points: for the mesh and for the skirt program."""
+        attrs = [(g.leaves, LEAF_FORMAT, "a_node", "a_h0", "a_h1", "a_h8")]
+        return {"points": self.ctx.vertex_array(self.prog, attrs),
+                "skirt_points": self.ctx.vertex_array(self.skirt_prog, attrs)}
 
     def draw_tile(self, g: SelectedTileletTile, tile, view, wireframe: bool = False) -> None:
         """The tile's leaves as points through the geometry shader (count from the selection)."""
@@ -141,7 +156,5 @@ class TileletStrategy(TileletDrawing):
         g.vaos["points"].render_indirect(g.control, mode=self.ctx.POINTS, count=1, first=CMD_POINTS)
 
     def draw_tile_skirts(self, g: SelectedTileletTile) -> None:
-        """The tile's leaves again through the geometry shader, emitting only their skirts."""
-        self.prog["skirt_pass"].value = True
-        g.vaos["points"].render_indirect(g.control, mode=self.ctx.POINTS, count=1, first=CMD_POINTS)
-        self.prog["skirt_pass"].value = False
+        """The tile's leaves again through the geometry shader's skirt program, emitting only their skirts."""
+        g.vaos["skirt_points"].render_indirect(g.control, mode=self.ctx.POINTS, count=1, first=CMD_POINTS)

@@ -3,7 +3,11 @@ collapse) to a target triangle count or a max vertical error, with trimesh as th
 
 Tiles are simplified independently, so their border vertices do not match: the TIN may crack at tile
 borders. ``border_gaps`` measures that (nothing hides it); ``preserve_border=True`` keeps the border
-vertices (no cracks between same-level tiles, more triangles).
+vertices (no cracks between same-level tiles, more triangles). Otherwise border vertices may slide along
+the tile's outline but not off it: a vertical wall hangs from each side during the simplification, so its
+plane enters the border vertices' quadrics (Garland and Heckbert's boundary constraint planes), and is cut
+off afterwards. Without it a collapse on flat ground costs nothing, and a flat region (a sea) at a tile's
+border is pulled in until most of it is gone.
 """
 from __future__ import annotations
 
@@ -12,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hybrid.errors import TerrabenchError
+from hybrid.terrain.heightfield import spacing_pair
 
 from .meshes import MeshStrategyBase
 from .trianglelist import grid_faces, grid_vertices
@@ -81,21 +86,48 @@ def surface_at(vertices: np.ndarray, faces: np.ndarray, x: np.ndarray, y: np.nda
     return out, hits
 
 
-def tin_max_error(mesh: TinMesh, heights: np.ndarray, spacing: float) -> tuple[float, int]:
-    """(largest vertical distance in metres over covered grid samples, number of samples the TIN leaves uncovered)."""
+def tin_max_error(mesh: TinMesh, heights: np.ndarray, spacing) -> tuple[float, int]:
+    """(largest vertical distance in metres over covered grid samples, number of samples the TIN leaves uncovered);
+    spacing in metres, one number or an (x, y) pair."""
     h = np.asarray(heights, dtype=np.float64)
+    sx, sy = spacing_pair(spacing, "TIN grid")
     i, j = np.mgrid[0:h.shape[0], 0:h.shape[1]]
-    z, hits = surface_at(mesh.vertices, mesh.faces, j.ravel() * spacing, i.ravel() * spacing)
+    z, hits = surface_at(mesh.vertices, mesh.faces, j.ravel() * sx, i.ravel() * sy)
     cov = hits > 0
     return float(np.abs(z[cov] - h.ravel()[cov]).max(initial=0.0)), int(np.count_nonzero(~cov))
 
 
-def build_tin(heights: np.ndarray, spacing: float, target_count: int | None = None, max_error: float | None = None,
-              preserve_border: bool = False, agg: float = 7.0) -> TinMesh:
-    """TIN of a tile's heights: simplify the full grid to ``target_count`` triangles or to <= ``max_error`` metres.
+def _walled(pts: np.ndarray, faces: np.ndarray, rows: int, cols: int, depth: float) -> tuple[np.ndarray, np.ndarray]:
+    """The grid mesh with a vertical wall ``depth`` metres deep hanging outward-facing from each side of its
+    outline; the walls' lower vertices follow the grid's vertices."""
+    idx = np.arange(rows * cols).reshape(rows, cols)
+    sides = (idx[0], idx[:, -1], idx[-1, ::-1], idx[::-1, 0])      # counter-clockwise around the tile from above
+    out_pts, out_faces, base = [pts], [faces], len(pts)
+    for top in sides:
+        bot = base + np.arange(len(top))
+        base += len(top)
+        out_pts.append(pts[top] - np.array([0.0, 0.0, depth]))
+        out_faces += [np.stack([top[:-1], bot[:-1], bot[1:]], 1), np.stack([top[:-1], bot[1:], top[1:]], 1)]
+    return np.concatenate(out_pts), np.concatenate(out_faces).astype(faces.dtype)
 
-    With max_error the reduction is bisected (8 steps) on the measured max vertical error over the samples
-    the TIN still covers (without preserve_border, collapses pull the border in: those samples are cracks).
+
+def _unwalled(v: np.ndarray, f: np.ndarray, floor: float) -> TinMesh:
+    """The simplified mesh without its walls: faces touching a vertex below ``floor`` (metres) removed, the
+    vertices still used renumbered."""
+    f = np.asarray(f, dtype=np.int64)
+    f = f[(v[f, 2] >= floor).all(axis=1)]
+    used, f = np.unique(f, return_inverse=True)
+    return TinMesh(np.asarray(v, dtype=np.float64)[used], f.reshape(-1, 3))
+
+
+def build_tin(heights: np.ndarray, spacing, target_count: int | None = None, max_error: float | None = None,
+              preserve_border: bool = False, agg: float = 7.0) -> TinMesh:
+    """TIN of a tile's heights: simplify the full grid to about ``target_count`` triangles or to <= ``max_error``
+    metres; spacing in metres, one number or an (x, y) pair.
+
+    Border vertices stay on the tile's outline (module docstring); with preserve_border they all stay. With
+    max_error the reduction is bisected (8 steps) on the measured max vertical error over the samples the TIN
+    covers (samples it leaves uncovered are cracks; ``tin_max_error`` counts them).
     """
     import fast_simplification
     h = np.asarray(heights)
@@ -106,20 +138,31 @@ def build_tin(heights: np.ndarray, spacing: float, target_count: int | None = No
     pts = grid_vertices(h, spacing).astype(np.float64)
     faces = grid_faces(h.shape[0], h.shape[1]).astype(np.int32)
     full = len(faces)
+    lo_z = float(np.min(h))
+    depth = 10.0 * (float(np.ptp(h)) + max(spacing_pair(spacing, "TIN grid"))) + 1.0          # far below anything a collapse can reach
+    grid = (pts, faces) if preserve_border else _walled(pts, faces, h.shape[0], h.shape[1], depth)
+    walls = len(grid[1]) - full
+
+    def simplify(**target) -> TinMesh:
+        v, f = fast_simplification.simplify(*grid, agg=agg, preserve_border=preserve_border, **target)
+        return _unwalled(v, f, lo_z - 0.5 * depth)
+
     if target_count is not None:
         if isinstance(target_count, bool) or not isinstance(target_count, (int, np.integer)) or not (2 <= target_count <= full):
             raise TerrabenchError(f"target_count must be an integer in [2, {full}] triangles, got {target_count!r}")
-        v, f = fast_simplification.simplify(pts, faces, target_count=int(target_count), agg=agg,
-                                            preserve_border=preserve_border)
-        return TinMesh(v, f.astype(np.int64))
+        if not walls:
+            return simplify(target_count=int(target_count))
+        # the walls are simplified too: a first pass measures how many of their triangles remain
+        m = simplify(target_count=int(target_count) + walls)
+        kept_walls = int(target_count) + walls - m.triangles
+        return simplify(target_count=min(int(target_count) + max(kept_walls, 0), full + walls))
     if not (np.isfinite(max_error) and max_error >= 0):
         raise TerrabenchError(f"max_error must be finite and >= 0 metres, got {max_error!r}")
     best = TinMesh(pts, faces.astype(np.int64))
-    lo, hi = 0.0, 1.0 - 2.0 / full
+    lo, hi = 0.0, 1.0 - 2.0 / (full + walls)
     for _ in range(8):
         mid = 0.5 * (lo + hi)
-        v, f = fast_simplification.simplify(pts, faces, target_reduction=mid, agg=agg, preserve_border=preserve_border)
-        m = TinMesh(v, f.astype(np.int64))
+        m = simplify(target_reduction=mid)
         if tin_max_error(m, h, spacing)[0] <= max_error:
             best, lo = m, mid
         else:
@@ -145,21 +188,24 @@ def export_tin(mesh: TinMesh, path, origin=(0.0, 0.0, 0.0)) -> None:
 def border_gaps(meshes: dict, n: int) -> dict:
     """Vertical mismatch (metres) along shared borders of same-level tiles: {(key_a, key_b): max gap}.
 
-    meshes: {(level, tx, ty): (TinMesh, spacing)}. Samples each border at every tile sample position.
+    meshes: {(level, tx, ty): (TinMesh, spacing)}, spacing one number or an (x, y) pair of metres. Samples each
+    border at every tile sample position.
     """
     out = {}
     for (l, tx, ty), (ma, sp) in meshes.items():
+        sx, sy = spacing_pair(sp, "TIN tile")
         for dx, dy in ((1, 0), (0, 1)):
             kb = (l, tx + dx, ty + dy)
             if kb not in meshes:
                 continue
             mb, _ = meshes[kb]
-            t = np.arange(n + 1) * sp
             if dx:
-                za, _ = surface_at(ma.vertices, ma.faces, np.full(n + 1, n * sp), t)
+                t = np.arange(n + 1) * sy
+                za, _ = surface_at(ma.vertices, ma.faces, np.full(n + 1, n * sx), t)
                 zb, _ = surface_at(mb.vertices, mb.faces, np.zeros(n + 1), t)
             else:
-                za, _ = surface_at(ma.vertices, ma.faces, t, np.full(n + 1, n * sp))
+                t = np.arange(n + 1) * sx
+                za, _ = surface_at(ma.vertices, ma.faces, t, np.full(n + 1, n * sy))
                 zb, _ = surface_at(mb.vertices, mb.faces, t, np.zeros(n + 1))
             gap = np.abs(za - zb)
             out[((l, tx, ty), kb)] = float(np.nanmax(gap)) if np.any(np.isfinite(gap)) else float("nan")
@@ -183,9 +229,9 @@ class TinStrategy(MeshStrategyBase):
         h = np.asarray(tile.heights)
         full = 2 * (h.shape[0] - 1) * (h.shape[1] - 1)
         if self.max_error is not None:
-            m = build_tin(h, float(tile.spacing), max_error=self.max_error, preserve_border=self.preserve_border)
+            m = build_tin(h, tile.spacing_xy, max_error=self.max_error, preserve_border=self.preserve_border)
         else:
-            m = build_tin(h, float(tile.spacing), target_count=max(2, int(round(full * (1 - self.reduction)))),
+            m = build_tin(h, tile.spacing_xy, target_count=max(2, int(round(full * (1 - self.reduction)))),
                           preserve_border=self.preserve_border)
-        self.meshes[(int(tile.key.level), int(tile.key.tx), int(tile.key.ty))] = (m, float(tile.spacing))
+        self.meshes[(int(tile.key.level), int(tile.key.tx), int(tile.key.ty))] = (m, tile.spacing_xy)
         return m.vertices, m.faces

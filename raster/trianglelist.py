@@ -7,14 +7,18 @@ from __future__ import annotations
 
 import numpy as np
 
+from hybrid.terrain.heightfield import spacing_pair
+
 from .meshes import MeshStrategyBase
 
 
-def grid_vertices(heights: np.ndarray, spacing: float) -> np.ndarray:
-    """(rows*cols, 3) float32 tile-local positions (x east, y north metres; z metres) of all samples."""
+def grid_vertices(heights: np.ndarray, spacing) -> np.ndarray:
+    """(rows*cols, 3) float32 tile-local positions (x east, y north metres; z metres) of all samples; spacing in
+    metres, one number or an (x, y) pair (columns x apart, rows y apart)."""
     h = np.asarray(heights)
+    sx, sy = spacing_pair(spacing, "grid")
     i, j = np.mgrid[0:h.shape[0], 0:h.shape[1]]
-    return np.stack([j.ravel() * spacing, i.ravel() * spacing, h.ravel()], axis=1).astype(np.float32)
+    return np.stack([j.ravel() * sx, i.ravel() * sy, h.ravel()], axis=1).astype(np.float32)
 
 
 def grid_faces(rows: int, cols: int) -> np.ndarray:
@@ -53,4 +57,4 @@ class TriangleListStrategy(MeshStrategyBase):
     def mesh_of(self, tile):
         """All samples and 2 triangles a cell of the tile."""
         h = np.asarray(tile.heights)
-        return grid_vertices(h, float(tile.spacing)), grid_faces(h.shape[0], h.shape[1])
+        return grid_vertices(h, tile.spacing_xy), grid_faces(h.shape[0], h.shape[1])

@@ -15,6 +15,7 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 from hybrid.gl.context import gl_bytes
+from hybrid.gl.edges import TerrainEdges
 from hybrid.gl.programs import program, register_include, set_uniform, write_uniform
 from hybrid.gl.shading import resolve_mode
 from hybrid.gl.textures import terrain_texture
@@ -73,7 +74,7 @@ def outer_faces(clip, hf) -> int:
     x0, y0, x1, y1 = (float(v) for v in clip)
     ox, oy = float(hf.origin[0]), float(hf.origin[1])
     w, d = hf.extent
-    tol = 1e-6 * float(hf.spacing)
+    tol = 1e-6 * min(hf.spacing_x, hf.spacing_y)
     return ((abs(x0 - ox) <= tol) * 1 | (abs(x1 - (ox + w)) <= tol) * 2
             | (abs(y0 - oy) <= tol) * 4 | (abs(y1 - (oy + d)) <= tol) * 8)
 
@@ -96,6 +97,7 @@ class RaycastStrategy:
         self.programs: dict = {}
         self.texture = terrain_texture(ctx, hf, anisotropy=1.0)   # anisotropy is done in the shader (aniso_texture)
         self.stats_buf = ctx.buffer(reserve=STAT_SLOTS * STAT_STRIDE)
+        self.edges = TerrainEdges(ctx, hf)
         self.ids = None
         self._next_id = 1
         self.grid: _Grid | None = None
@@ -119,9 +121,9 @@ class RaycastStrategy:
     @property
     def shared_nbytes(self) -> int:
         """GPU bytes held for all tiles as the driver reports them: colour texture, box, counters, tile IDs,
-        shadow grid."""
+        terrain edges, shadow grid."""
         grid = (self.grid.heights, self.grid.maxmip) if self.grid is not None else ()
-        return gl_bytes(self.texture, self.cube, self.stats_buf, self.ids, *grid)
+        return gl_bytes(self.texture, self.cube, self.stats_buf, self.ids, *grid) + self.edges.nbytes
 
     # --- tiles ------------------------------------------------------------------------------------
     def upload(self, tile) -> GpuTile:
@@ -198,6 +200,7 @@ class RaycastStrategy:
             set_uniform(prog, "tex", 2)
         set_uniform(prog, "hmap", 0)
         set_uniform(prog, "mmap", 1)
+        self.edges.bind(prog, hf, view, 6)
         grid = None
         if opts.shadows:
             grid = self._shadow_grid()
@@ -209,7 +212,7 @@ class RaycastStrategy:
             set_uniform(prog, "g_levels", level_count(grid.n) - 1)
             set_uniform(prog, "g_ext", grid.ext)
             set_uniform(prog, "g_zr", grid.zr)
-            set_uniform(prog, "g_spacing", float(hf.spacing))
+            set_uniform(prog, "g_spacing", (hf.spacing_x, hf.spacing_y))
             set_uniform(prog, "g_max_steps", opts.max_steps or default_max_steps(grid.n))
         n_items = len(items)
         set_uniform(prog, "stat_bins_x", (W + 63) // 64)
@@ -234,10 +237,10 @@ class RaycastStrategy:
         ctx.cull_face = "front"
         try:
             for k, (g, tile, _sel) in enumerate(items):
-                sp = float(tile.spacing)
+                sx, sy = tile.spacing_xy
                 org = np.asarray(tile.origin, dtype=np.float64)
                 x0, y0, x1, y1 = (float(v) for v in tile.clip)
-                pad = 1e-3 * sp + 0.01
+                pad = 1e-3 * max(sx, sy) + 0.01
                 box_lo = np.array([x0 - pad, y0 - pad, tile.zmin - pad]) - eye
                 box_hi = np.array([x1 + pad, y1 + pad, tile.zmax + pad]) - eye
                 for p in (prog, self.prepass_prog):
@@ -246,21 +249,22 @@ class RaycastStrategy:
                 level = int(tile.key.level) if hasattr(tile, "key") else 0
                 set_uniform(prog, "n_cells", g.n)
                 set_uniform(prog, "n_levels", level_count(g.n) - 1)
-                set_uniform(prog, "ext", ((x1 - x0) / sp, (y1 - y0) / sp))
+                set_uniform(prog, "ext", ((x1 - x0) / sx, (y1 - y0) / sy))
                 set_uniform(prog, "zr", (tile.zmin - org[2], tile.zmax - org[2]))
                 e = eye - org
-                set_uniform(prog, "eye_tex", (e[0] / sp, e[1] / sp, e[2]))
+                set_uniform(prog, "eye_tex", (e[0] / sx, e[1] / sy, e[2]))
                 set_uniform(prog, "origin_rel", tuple((org - eye).astype(np.float32)))
-                set_uniform(prog, "spacing", sp)
+                set_uniform(prog, "spacing", (sx, sy))
                 set_uniform(prog, "tile_level", level)
                 set_uniform(prog, "uv_off", ((org[0] - hf.origin[0]) / ext_w, (org[1] - hf.origin[1]) / ext_d))
-                set_uniform(prog, "uv_scale", (sp / ext_w, sp / ext_d))
-                set_uniform(prog, "lod_k", sp * K / float(opts.lod) if opts.lod else 0.0)
+                set_uniform(prog, "uv_scale", (sx / ext_w, sy / ext_d))
+                set_uniform(prog, "lod_k", max(sx, sy) * K / float(opts.lod) if opts.lod else 0.0)
                 set_uniform(prog, "max_steps", opts.max_steps or default_max_steps(g.n))
                 set_uniform(prog, "tile_index", k)
                 set_uniform(prog, "outer", outer_faces(tile.clip, hf))
                 if grid is not None:
-                    set_uniform(prog, "g_tile_off", ((org[0] - hf.origin[0]) / hf.spacing, (org[1] - hf.origin[1]) / hf.spacing))
+                    set_uniform(prog, "g_tile_off", ((org[0] - hf.origin[0]) / hf.spacing_x,
+                                                     (org[1] - hf.origin[1]) / hf.spacing_y))
                 if id_fbo is not None:
                     tid = self._next_id
                     self._next_id += 1
@@ -306,7 +310,7 @@ class RaycastStrategy:
             vao.release()
             prog.release()
         self.programs.clear()
-        for o in (self.prepass_vao, self.prepass_prog, self.cube, self.stats_buf, self.texture, self.ids):
+        for o in (self.prepass_vao, self.prepass_prog, self.cube, self.stats_buf, self.texture, self.ids, self.edges):
             if o is not None:
                 o.release()
         if self.grid is not None:

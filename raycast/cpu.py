@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hybrid.errors import TerrabenchError
+from hybrid.terrain.heightfield import spacing_pair
 
 from .maxmip import level_count, maxmip_levels
 from .options import RECONSTRUCTIONS, TRAVERSALS, default_max_steps
@@ -109,14 +110,17 @@ def _lod_final(l, ij, H, Om, zlo, spacing, lod_k):
 
 
 def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="maxmip", tmin=0.0, lmin=0,
-              spacing=1.0, lod_k=None, max_steps=None, outer=0) -> RayHits:
+              spacing=1.0, lod_k=None, max_steps=None, outer=0, under=False) -> RayHits:
     """Cast rays O + t D (M x 3, texel space) through a grid of (N+1)² heights (metres) covering [0, ext] in
-    x, y and zr in z; first hits with t >= tmin. lod_k = spacing * K / tau turns on the LOD stop (maxmip only);
-    outer is the mask (W 1, E 2, S 4, N 8) of grid sides on the terrain's boundary."""
+    x, y and zr in z; first hits with t >= tmin. spacing: metres per texel, one number or an (x, y) pair;
+    lod_k = max(spacing) * K / tau turns on the LOD stop (maxmip only); outer is the mask (W 1, E 2, S 4, N 8)
+    of grid sides on the terrain's boundary; under (one bool or one a ray, raycast.boundary.starts_under) marks
+    rays starting under the sheet, which hit where they come up."""
     if reconstruction not in RECONSTRUCTIONS:
         raise TerrabenchError(f"reconstruction must be one of {', '.join(RECONSTRUCTIONS)}, got {reconstruction!r}")
     if traversal not in TRAVERSALS:
         raise TerrabenchError(f"traversal must be one of {', '.join(TRAVERSALS)}, got {traversal!r}")
+    spacing = np.array(spacing_pair(spacing, "ray grid"))
     h32 = np.asarray(heights, dtype=np.float32)
     levels = maxmip_levels(h32)
     h = h32.astype(np.float64)
@@ -129,6 +133,7 @@ def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="
     D = np.atleast_2d(np.asarray(D, dtype=np.float64)).copy()
     M = len(D)
     O = np.broadcast_to(O, (M, 3)).copy()
+    under = np.broadcast_to(np.asarray(under, dtype=bool), (M,))
     ext = np.asarray(ext, dtype=np.float64)
     zr0, zr1 = float(zr[0]), float(zr[1])
     cap = int(max_steps or default_max_steps(n))
@@ -159,7 +164,9 @@ def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="
             t1 = np.where(nz, np.minimum(t1, tf), t1)
             dead |= ~nz & ((O[:, a] < lo) | (O[:, a] > hi))
     dead |= t0 > t1
-    outer_entry = (face & int(outer)) != 0
+    # a ray on the wrong side of the surface where it enters is no hit there through an outer side, nor
+    # (under) through the top or at tmin; through an interior side it is a wall (traverse.glsl)
+    no_entry_hit = ((face & int(outer)) != 0) | (under & (face == 0) & ~(zentry & (D[:, 2] > 0)))
     P = O + t0[:, None] * D
     # entered through the bottom or top face: exactly on it, so rounding cannot put it outside the slab
     P[:, 2] = np.where(zentry, np.where(D[:, 2] > 0, zr0, zr1), P[:, 2])
@@ -176,7 +183,8 @@ def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="
     P[:, :2] = np.clip(P[:, :2], lo_xy, hi_xy)
     P0 = P.copy()          # every exit is computed from the entry point: X = P0 + s D
     sP = np.zeros(M)
-    lvl = np.full(M, lmin if traversal == "naive" else ltop, np.int64)
+    # rays under the sheet step every lmin texel (no ascent, no LOD), as traverse.glsl
+    lvl = np.where(under | (traversal == "naive"), lmin, ltop).astype(np.int64)
     moved = np.zeros(M, bool)
     act = np.nonzero(~dead)[0]
 
@@ -197,7 +205,7 @@ def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="
         amx, amy = mx[act], my[act]
         if lod:
             while True:
-                can = la < ltop
+                can = (la < ltop) & ~under[act]
                 pij = np.floor(ij * 0.5)
                 pnl = nl >> 1
                 prx = np.where(amx, pnl - 1 - pij[:, 0], pij[:, 0]).astype(np.int64)
@@ -244,12 +252,18 @@ def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="
             S = (1 << la[ti]).astype(np.int64)
             cx0, cy0 = rx[ti] * S, ry[ti] * S
             hc = np.stack([h[cy0, cx0], h[cy0, cx0 + S], h[cy0 + S, cx0], h[cy0 + S, cx0 + S]], 1)
-            u = cell_hit(reconstruction, A, B, np.stack([cx0, cy0], 1).astype(np.float64), S.astype(np.float64), hc, H[ti])
+            # a ray under the sheet crosses it upward: the same test with heights and ray z mirrored
+            sg = np.where(under[act[ti]], -1.0, 1.0)
+            Am, Bm = A.copy(), B.copy()
+            Am[:, 2] *= sg
+            Bm[:, 2] *= sg
+            u = cell_hit(reconstruction, Am, Bm, np.stack([cx0, cy0], 1).astype(np.float64), S.astype(np.float64),
+                         hc * sg[:, None], H[ti] * sg)
             got = u >= 0
             gi = ti[got]
             ug = u[got]
             Q = A[got] + ug[:, None] * (B[got] - A[got])
-            outer_miss = (ug == 0) & outer_entry[act[gi]] & ~moved[act[gi]]
+            outer_miss = (ug == 0) & no_entry_hit[act[gi]] & ~moved[act[gi]]
             pad_miss = (Q[:, 0] > ext[0] + 1e-4) | (Q[:, 1] > ext[1] + 1e-4)
             Q[:, 0] = np.clip(Q[:, 0], 0, ext[0])
             Q[:, 1] = np.clip(Q[:, 1], 0, ext[1])
@@ -285,35 +299,39 @@ def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="
             upx = cx[ri] & (((ij[ri, 0].astype(np.int64) + 1) & 1) == 0)
             upy = cy[ri] & (((ij[ri, 1].astype(np.int64) + 1) & 1) == 0)
             la = la.copy()
-            la[ri] = np.where(upx | upy, np.minimum(la[ri] + 1, ltop), la[ri])
+            la[ri] = np.where((upx | upy) & ~under[act[ri]], np.minimum(la[ri] + 1, ltop), la[ri])
         lvl[act] = la
         act = act[~done_hit & ~done_miss]
     return RayHits(status, point, level, steps)
 
 
 def tile_frame(tile, eye, dirs):
-    """Ray origin and directions of world rays (eye + t dirs) in a tile's texel space, with its ext and zr."""
-    sp = float(tile.spacing)
+    """Ray origin and directions of world rays (eye + t dirs) in a tile's texel space, with its ext and zr.
+
+    x and y are divided by the tile's spacing_x and spacing_y (z stays metres), so t is the world ray parameter.
+    """
+    sx, sy = tile.spacing_xy
     org = np.asarray(tile.origin, dtype=np.float64)
     e = np.asarray(eye, dtype=np.float64) - org
-    O = np.array([e[0] / sp, e[1] / sp, e[2]])
+    O = np.array([e[0] / sx, e[1] / sy, e[2]])
     d = np.atleast_2d(np.asarray(dirs, dtype=np.float64))
-    D = np.stack([d[:, 0] / sp, d[:, 1] / sp, d[:, 2]], 1)
+    D = np.stack([d[:, 0] / sx, d[:, 1] / sy, d[:, 2]], 1)
     x0, y0, x1, y1 = (float(v) for v in tile.clip)
-    ext = ((x1 - x0) / sp, (y1 - y0) / sp)
+    ext = ((x1 - x0) / sx, (y1 - y0) / sy)
     zr = (float(tile.zmin) - org[2], float(tile.zmax) - org[2])
     return O, D, ext, zr
 
 
-def cast_tile_rays(tile, eye, dirs, *, near=0.0, outer=0, **options) -> RayHits:
+def cast_tile_rays(tile, eye, dirs, *, near=0.0, outer=0, under=False, **options) -> RayHits:
     """Cast world rays (eye + t dirs, t >= near) against one tile; options as cast_rays. Points in tile texels."""
     O, D, ext, zr = tile_frame(tile, eye, dirs)
-    return cast_rays(tile.heights, ext, zr, O, D, tmin=near, spacing=float(tile.spacing), outer=outer, **options)
+    return cast_rays(tile.heights, ext, zr, O, D, tmin=near, spacing=tile.spacing_xy, outer=outer, under=under,
+                     **options)
 
 
 def texel_to_world(tile, point) -> np.ndarray:
     """World positions (metres, float64) of points in a tile's texel space (x, y texels; z metres)."""
     p = np.asarray(point, dtype=np.float64)
     org = np.asarray(tile.origin, dtype=np.float64)
-    sp = float(tile.spacing)
-    return np.stack([org[0] + p[..., 0] * sp, org[1] + p[..., 1] * sp, org[2] + p[..., 2]], -1)
+    sx, sy = tile.spacing_xy
+    return np.stack([org[0] + p[..., 0] * sx, org[1] + p[..., 1] * sy, org[2] + p[..., 2]], -1)

@@ -9,6 +9,7 @@
 #extension GL_ARB_ES3_1_compatibility : enable
 #endif
 #include "raycast/traverse"
+#include "terrain_edges"
 
 // --- view ---
 uniform mat4 view_proj_rel;    // (world - eye) -> clip, reversed Z
@@ -26,11 +27,11 @@ uniform vec2 ext;              // clip rectangle size in texels
 uniform vec2 zr;               // tile z range, metres relative to terrain origin z
 uniform vec3 eye_tex;          // eye in tile texel space
 uniform vec3 origin_rel;       // tile origin (sample [0,0] at terrain origin z) minus eye, metres
-uniform float spacing;         // metres per tile texel
+uniform vec2 spacing;          // metres per tile texel east-west (x) and north-south (y)
 uniform int tile_level;        // pyramid level of the tile
 uniform vec2 uv_off;           // texture coordinate of the tile origin
 uniform vec2 uv_scale;         // texture coordinate per tile texel
-uniform float lod_k;           // spacing * K / tau (metres), for LOD
+uniform float lod_k;           // max(spacing.x, spacing.y) * K / tau (metres), for LOD
 uniform int max_steps;
 uniform int outer;             // tile box sides on the terrain's outer boundary (W 1, E 2, S 4, N 8)
 uniform int tile_index;        // index into the statistics array
@@ -49,7 +50,7 @@ uniform int g_levels;
 uniform vec2 g_ext;
 uniform vec2 g_zr;
 uniform vec2 g_tile_off;       // tile origin in level-0 terrain texels
-uniform float g_spacing;       // terrain spacing, metres
+uniform vec2 g_spacing;        // terrain spacing east-west and north-south, metres
 uniform int g_max_steps;
 
 #if STATS
@@ -172,9 +173,10 @@ void main() {
     vec3 dir_eye = vec3(ndc * ndc_scale, -1.0);
     vec3 d = cam_to_world * dir_eye;              // world direction, view depth 1 per unit of t
     vec3 D = vec3(d.xy / spacing, d.z);
+    bool under = ray_starts_under(d);
     vec3 Q; ivec2 cell; int lev; vec4 hc; int steps;
     int r = rc_traverse(hmap, mmap, n_cells, n_levels, ext, zr, eye_tex, D, near_plane, 0, spacing, lod_k,
-                        max_steps, outer, Q, cell, lev, hc, steps);
+                        max_steps, outer, under, Q, cell, lev, hc, steps);
 #if STATS
     ivec2 bin = ivec2(gl_FragCoord.xy) >> 6;
     int base = (tile_index * STAT_SLOTS + ((bin.x + bin.y * stat_bins_x) & (STAT_SLOTS - 1))) * 16;
@@ -195,11 +197,11 @@ void main() {
     } else {
         int gl = tile_level + lev;
         float k = float(1 << tile_level);
-        vec3 Og = vec3(g_tile_off + Q.xy * k, Q.z + 1e-3 * spacing * float(S) + 0.01);
+        vec3 Og = vec3(g_tile_off + Q.xy * k, Q.z + 1e-3 * max(spacing.x, spacing.y) * float(S) + 0.01);
         vec3 Dg = vec3(L.xy / g_spacing, L.z);
         vec3 Qs; ivec2 cs; int ls; vec4 hs; int ssteps;
         int rs = rc_traverse(g_hmap, g_mmap, g_cells, g_levels, g_ext, g_zr, Og, Dg, 0.0, gl, g_spacing, 0.0,
-                             g_max_steps, 15, Qs, cs, ls, hs, ssteps);
+                             g_max_steps, 15, false, Qs, cs, ls, hs, ssteps);
         if (rs != RC_MISS) lit = 0.0;
 #if STATS
         stats_add(base + 5, base + 7, rs == RC_CAPPED, -1, false, base + 6, -1, uint(ssteps));

@@ -2,7 +2,9 @@
 // and shadow rays. Texel space: x, y in texels of the grid (sample (i, j) at (j, i)), z in metres relative to
 // the terrain's origin z; a ray is P(t) = O + t * D. The grid has N cells a side (N a power of two), the real
 // terrain covers [0, ext.x] x [0, ext.y] of it and heights lie in [zr.x, zr.y]. Max-mip level l texel (i, j)
-// bounds the cells [i*2^l, (i+1)*2^l) x [j*2^l, (j+1)*2^l).
+// bounds the cells [i*2^l, (i+1)*2^l) x [j*2^l, (j+1)*2^l). Texel space scales world x and y separately (metres
+// per texel spacing.x east-west, spacing.y north-south): a world ray E + t d becomes O + t D with
+// D = (d.x / spacing.x, d.y / spacing.y, d.z), so t stays the world ray parameter and hit depths stay metres.
 //
 // Defines: RECON 0 planes (piecewise constant: a cell is a box of its max-mip height), 1 linear approximation
 // planes (Qu 3.1), 2 triangle mesh with the SW-NE diagonal (Qu 3.2), 3 bilinear patch (analytic);
@@ -84,8 +86,9 @@ float rc_cell_hit(vec3 A, vec3 B, vec2 c0, float S, vec4 hc, float H) {
 
 // Level-of-detail stop (coherent per patch): a level-l texel is final when a texel of its size, seen from
 // the eye at the nearest point of the texel's box, spans at most tau pixels: size_m * K <= tau * distance.
-// Om: eye in the mirrored texel space; lod_k = spacing * K / tau (metres); spacing in metres per texel.
-bool rc_lod_final(int l, vec2 ij, float H, vec3 Om, float zlo, float spacing, float lod_k) {
+// Om: eye in the mirrored texel space; spacing: metres per texel in x and y; lod_k = (the larger spacing) * K / tau
+// (metres), so a texel's size is its longer side.
+bool rc_lod_final(int l, vec2 ij, float H, vec3 Om, float zlo, vec2 spacing, float lod_k) {
     float s = float(1 << l);
     vec2 lo = ij * s, hi = lo + s;
     vec2 dxy = max(max(lo - Om.xy, Om.xy - hi), 0.0) * spacing;
@@ -95,14 +98,19 @@ bool rc_lod_final(int l, vec2 ij, float H, vec3 Om, float zlo, float spacing, fl
 
 // Cast one ray through the grid: returns RC_MISS, RC_HIT or RC_CAPPED. On a hit, hit is the point (real texel
 // space), cell the hit texel (x, y) at level `level`, hc its corner heights. tmin: smallest ray parameter
-// (near plane); lmin: the finest level to descend to; steps: texels visited.
+// (near plane); lmin: the finest level to descend to; steps: texels visited. under: the ray starts under the
+// terrain sheet (hybrid/gl/edges.glsl): its hit is where it first comes up through the surface (the sheet's
+// underside, as the two-sided reference draws it), found by stepping every lmin texel (no LOD).
 int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 zr, vec3 O, vec3 D,
-                float tmin, int lmin, float spacing, float lod_k, int max_steps, int outer,
-                out vec3 hit, out ivec2 cell, out int level, out vec4 hc, out int steps) {
+                float tmin, int lmin, vec2 spacing, float lod_k, int max_steps, int outer,
+                bool under, out vec3 hit, out ivec2 cell, out int level, out vec4 hc, out int steps) {
     steps = 0; level = 0; cell = ivec2(0); hit = vec3(0.0); hc = vec4(0.0);
     // entry into the box; `face` is the box side the ray enters through (EDGE_W/E/S/N bits, 0 for the top,
-    // the bottom or a start inside at tmin). A ray entering below the surface through a side that is the
-    // terrain's outer boundary passes under the surface sheet: it is a miss, not a hit on a wall.
+    // the bottom or a start inside at tmin). The terrain is a sheet without side walls: a ray on the wrong
+    // side of the surface where it enters the box through the terrain's outer boundary, or (under) through
+    // the top or at tmin, is not a hit there. Entering through an interior side on the wrong side of this
+    // tile's surface is a hit (a wall): the ray met the neighbour's surface first (the nearer hit wins) or
+    // passed through a crack between tiles of different levels (the wall fills it).
     float t0 = tmin, t1 = RC_FAR;
     int face = 0;
     bool zentry = false;   // entered through the bottom or top face: put P exactly on it (no rounding above/below)
@@ -122,7 +130,7 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
         t1 = min(t1, max(ta, tb));
     } else if (O.z < zr.x || O.z > zr.y) return RC_MISS;
     if (t0 > t1) return RC_MISS;
-    bool outer_entry = (face & outer) != 0;
+    bool no_entry_hit = (face & outer) != 0 || (under && face == 0 && !(zentry && D.z > 0.0));
     bool moved = false;
     float Nf = float(N);
     bool mx = D.x < 0.0, my = D.y < 0.0;
@@ -142,7 +150,7 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
 #if NAIVE
     int l = lmin;
 #else
-    int l = ltop;
+    int l = under ? lmin : ltop;
 #endif
     // Two nested loops: the inner one only steps texels (cheap: one max-mip fetch a step) and stops at a
     // level-0 (final) texel whose box the ray enters; the outer one intersects that cell's surface. On a SIMD
@@ -164,7 +172,7 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
             int nl = N >> l;
 #if LOD
             // coherent LOD: a texel whose parent is already final belongs to the parent's level
-            while (l < ltop) {
+            while (!under && l < ltop) {
                 vec2 pij = floor(ij * 0.5);
                 ivec2 pri = ivec2(mx ? (nl >> 1) - 1 - int(pij.x) : int(pij.x), my ? (nl >> 1) - 1 - int(pij.y) : int(pij.y));
                 float PH = texelFetch(mmap, pri, l + 1).r;
@@ -204,7 +212,7 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
             moved = true;
 #if !NAIVE
             bool up = (cx && ((int(ij.x) + 1) & 1) == 0) || (cy && ((int(ij.y) + 1) & 1) == 0);
-            if (up) l = min(l + 1, ltop);
+            if (up && !under) l = min(l + 1, ltop);
 #endif
         }
         if (!cand) return RC_CAPPED;
@@ -216,9 +224,11 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
         int S = 1 << l;
         vec4 h4 = vec4(texelFetch(hmap, c0, 0).r, texelFetch(hmap, c0 + ivec2(S, 0), 0).r,
                        texelFetch(hmap, c0 + ivec2(0, S), 0).r, texelFetch(hmap, c0 + ivec2(S, S), 0).r);
-        float u = rc_cell_hit(A, B, vec2(c0), float(S), h4, H);
+        // a ray under the sheet crosses it upward: the same test with heights and ray z mirrored (z -> -z)
+        float sg = under ? -1.0 : 1.0;
+        float u = rc_cell_hit(vec3(A.xy, sg * A.z), vec3(B.xy, sg * B.z), vec2(c0), float(S), sg * h4, sg * H);
         if (u >= 0.0) {
-            if (u == 0.0 && outer_entry && !moved) return RC_MISS;
+            if (u == 0.0 && !moved && no_entry_hit) return RC_MISS;
             vec3 Q = mix(A, B, u);
             if (Q.x > ext.x + 1e-4 || Q.y > ext.y + 1e-4) return RC_MISS;   // first hit lies in the padding
             Q.xy = clamp(Q.xy, vec2(0.0), ext);
@@ -231,7 +241,7 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
         moved = true;
 #if !NAIVE
         bool up = (cx && ((int(ij.x) + 1) & 1) == 0) || (cy && ((int(ij.y) + 1) & 1) == 0);
-        if (up) l = min(l + 1, ltop);
+        if (up && !under) l = min(l + 1, ltop);
 #endif
     }
 }

@@ -1,9 +1,11 @@
 """Bad input everywhere a user can reach: one clear message naming the argument, exit code 2 for the CLI,
 a TerrabenchError for the API, and nothing partially written."""
+import numpy as np
 import pytest
 
 from experiments.cli import main
 from hybrid.errors import TerrabenchError
+from hybrid.terrain.heightfield import HeightField
 
 UNWRITABLE = "/proc/terrabench-out"          # not writable, even for root
 
@@ -37,12 +39,22 @@ UNWRITABLE = "/proc/terrabench-out"          # not writable, even for root
     (["bench", "--frames", "0"], "--frames"),
     (["info", "OUT/corrupt.tif", "--no-gl"], "not a readable raster"),
     (["info", "--dataset", "fbm", "--size-samples", "99999", "--no-gl"], "dataset size"),
+    (["render", "--out", "OUT/a.png", "--dataset", "HUGE", "--spacing", "30"], "beyond ±1e+07 m"),
+    (["render", "--out", "OUT/a.png", "--offset", "1e20,0,0"], "beyond the world limit"),
+    (["info", "--dataset", "HUGE", "--spacing", "30", "--vertical-scale", "0", "--no-gl"], "--vertical-scale"),
+    (["info", "--dataset", "HUGE", "--spacing", "30", "--vertical-scale", "-1", "--no-gl"], "must be"),
+    (["render", "--out", "OUT/a.png", "--dataset", "fbm", "--size-samples", "65", "--eye", "960,960,-500",
+      "--target", "1500,1500,-500"], "below the terrain surface"),
+    (["render", "--out", "OUT/a.png", "--dataset", "flat", "--size-samples", "65", "--eye", "960,960,0.5",
+      "--target", "1500,1500,0", "--near", "2"], "within the near plane"),
 ])
 def test_cli_bad_input(tmp_path, capsys, ctx, argv, match):
     (tmp_path / "bad.toml").write_text("frames = [")
     (tmp_path / "corrupt.tif").write_bytes(b"II*\x00garbage")
+    np.save(tmp_path / "huge.npy", np.full((8, 8), 1e30))
     before = set(tmp_path.rglob("*"))
-    argv = [a.replace("OUT", str(tmp_path)).replace("BADSPEC", str(tmp_path / "bad.toml")) for a in argv]
+    argv = [a.replace("OUT", str(tmp_path)).replace("BADSPEC", str(tmp_path / "bad.toml"))
+            .replace("HUGE", str(tmp_path / "huge.npy")) for a in argv]
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert match in err and "Traceback" not in err, err
@@ -66,6 +78,12 @@ def test_api_bad_input(ctx, puget257):
         Renderer(ctx, puget257, "best")
     with pytest.raises(TerrabenchError, match="fov_y"):
         View([0, 0, 1], [1, 0, 0], float("nan"), 10, 10)
+    with pytest.raises(TerrabenchError, match="up must be a non-zero vector"):
+        View([0, 0, 1], [1, 0, 0], up=[0, 0, 0])
+    with pytest.raises(TerrabenchError, match="spacing of 'terrain' must be a number or an"):
+        HeightField(np.zeros((4, 4)), spacing=None)
+    with pytest.raises(TerrabenchError, match="beyond the world limit"):
+        HeightField(np.zeros((4, 4)), 30.0, origin=(1e20, 0, 0))
     r = make_renderer(ctx, puget257, "raycast", tile_size=64)
     with pytest.raises(TerrabenchError, match="tau"):
         r.render(default_view(puget257, 32, 18), tau=-1.0)

@@ -13,7 +13,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("hybrid", "raster", "raycast", "experiments")
 LAYERS = [
-    ("hybrid.errors",),
+    ("hybrid.errors", "hybrid.atomic"),
     ("hybrid.terrain",),
     ("hybrid.camera",),
     ("hybrid.tiles", "hybrid"),        # the package root: eager names of the layers up to here

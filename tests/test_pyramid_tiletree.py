@@ -28,7 +28,7 @@ def test_error_is_exact_deviation(puget_full, pyr):
     # brute-force the level-1 tile (1, 2, 3): triangulated coarse surface vs every level-0 sample in it
     k = TileKey(1, 2, 3)
     t = pyr.tile(k)
-    coarse = HeightField(t.heights, t.spacing)
+    coarse = HeightField(t.heights, t.spacing_xy)
     n0 = 128
     i, j = np.mgrid[0:n0 + 1, 0:n0 + 1]
     fine = puget_full.heights[3 * n0:4 * n0 + 1, 2 * n0:3 * n0 + 1]
@@ -137,3 +137,22 @@ def test_tau_drives_refinement(puget_full, pyr):
     assert np.mean([s.level for s in fine]) < np.mean([s.level for s in coarse])
     with pytest.raises(TerrabenchError, match="tau"):
         select_tiles(pyr, v, tau=0)
+
+
+@pytest.mark.parametrize("name, size, tile", [("puget", 257, 32), ("fbm", 257, 16), ("spike", 129, 8), ("cliff", 129, 4)])
+def test_vectorised_selection_equals_the_per_tile_traversal(name, size, tile):
+    from tiletree_reference import select_tiles_by_traversal
+
+    from hybrid.camera.flight import get_flight
+    from hybrid.terrain.datasets import get_dataset
+    hf = get_dataset(name, size=size)
+    pyr = TilePyramid(hf, tile)
+    checked = splits = 0
+    for flight in ("flyover", "orbit", "dolly"):
+        for view in get_flight(flight, hf, frames=6, width=240, height=135).views():
+            for tau in (0.25, 2 / 3, 4.0):
+                fast, slow = select_tiles(pyr, view, tau), select_tiles_by_traversal(pyr, view, tau)
+                assert fast == slow                  # the same tiles, order, distances, errors and edge levels
+                checked += 1
+                splits += len({s.level for s in fast}) > 1
+    assert checked == 54 and splits > 10             # mixed-level selections (restriction, stitching) were seen

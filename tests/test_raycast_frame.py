@@ -7,6 +7,7 @@ from hybrid.camera.view import View, default_view
 from hybrid.errors import TerrabenchError
 from hybrid.reference import ReferenceRenderer
 from hybrid.renderer import Renderer
+from hybrid.terrain.heightfield import HeightField
 from hybrid.tiles.pyramid import TilePyramid
 from raycast import MODES, RaycastStrategy
 from raycast.cpu import cast_rays
@@ -55,7 +56,7 @@ def test_hard_terrains(ctx, synthetic, name):
     views = [default_view(hf, 320, 180)]
     if name == "spike":
         i, j = int(257 * 0.55) | 1, int(257 * 0.45) | 1
-        sx, sy = hf.origin[0] + j * hf.spacing, hf.origin[1] + i * hf.spacing
+        sx, sy = hf.origin[0] + j * hf.spacing_x, hf.origin[1] + i * hf.spacing_y
         base = float(np.median(hf.heights))
         views.append(View([sx - 2500, sy - 1800, base + 1500], [sx, sy, base + 1500], 50, 320, 180, near=1.0, far=1e5))
     r = Renderer(ctx, hf, "raycast")
@@ -114,13 +115,20 @@ def test_modes_and_shadows(ctx, puget257, puget_rc):
 LIGHT_DIR = np.array([-0.4851, 0.4851, 0.7276])
 
 
-def test_shadow_rays_match_cpu(ctx, synthetic):
+@pytest.mark.parametrize("spacing", [None, (30.0, 55.0), (55.0, 30.0)])
+def test_shadow_rays_match_cpu(ctx, synthetic, spacing):
+    """Shadows on the ridges terrain (30 m square cells) and, with non-square cells (x, y metres), on ridges as
+    steep along y as along x (the light falls across both)."""
     hf = synthetic("ridges")
+    if spacing is not None:
+        h = hf.heights.astype(np.float64)
+        hf = HeightField(2.0 * (h + h.T), spacing, name="ridges")
     view = default_view(hf, 160, 90)
-    r = Renderer(ctx, hf, "raycast")
+    # tiles of 64 cells, all at full resolution: each tile places its shadow rays' origins on the whole grid
+    r = Renderer(ctx, hf, "raycast", tile_size=64)
     try:
-        lit = r.render(view, mode="shaded")
-        sh = r.render(view, mode="shaded", shadows=True)
+        lit = r.render(view, tau=0.01, mode="shaded")
+        sh = r.render(view, tau=0.01, mode="shaded", shadows=True)
     finally:
         r.release()
     assert np.array_equal(sh.mask, lit.mask)
@@ -133,20 +141,20 @@ def test_shadow_rays_match_cpu(ctx, synthetic):
     rows, cols = np.nonzero(lit.mask)
     dirs = view.pixel_rays(rows, cols)
     pts = view.eye + dirs * lit.distance[rows, cols, None]
-    tex = np.stack([(pts[:, 0] - hf.origin[0]) / hf.spacing, (pts[:, 1] - hf.origin[1]) / hf.spacing,
+    tex = np.stack([(pts[:, 0] - hf.origin[0]) / hf.spacing_x, (pts[:, 1] - hf.origin[1]) / hf.spacing_y,
                     pts[:, 2] - hf.origin[2]], 1)
     h = hf.heights.astype(np.float64)
     i = np.clip(np.floor(tex[:, 1]).astype(int), 0, hf.rows - 2)
     j = np.clip(np.floor(tex[:, 0]).astype(int), 0, hf.cols - 2)
     fi, fj = tex[:, 1] - i, tex[:, 0] - j
     lower = fj >= fi
-    gx = np.where(lower, h[i, j + 1] - h[i, j], h[i + 1, j + 1] - h[i + 1, j]) / hf.spacing
-    gy = np.where(lower, h[i + 1, j + 1] - h[i, j + 1], h[i + 1, j] - h[i, j]) / hf.spacing
+    gx = np.where(lower, h[i, j + 1] - h[i, j], h[i + 1, j + 1] - h[i + 1, j]) / hf.spacing_x
+    gy = np.where(lower, h[i + 1, j + 1] - h[i, j + 1], h[i + 1, j] - h[i, j]) / hf.spacing_y
     n = np.stack([-gx, -gy, np.ones_like(gx)], 1)
     cosl = (n @ LIGHT_DIR) / np.linalg.norm(n, axis=1)
     clear = cosl > 0.1                      # lit side, away from the self-shadow terminator
-    o = tex[clear] + np.array([0, 0, 1e-3 * hf.spacing + 0.01])
-    L = np.array([LIGHT_DIR[0] / hf.spacing, LIGHT_DIR[1] / hf.spacing, LIGHT_DIR[2]])
+    o = tex[clear] + np.array([0, 0, 1e-3 * max(hf.spacing_x, hf.spacing_y) + 0.01])
+    L = np.array([LIGHT_DIR[0] / hf.spacing_x, LIGHT_DIR[1] / hf.spacing_y, LIGHT_DIR[2]])
     lo, hi = hf.height_range
     res = cast_rays(hf.heights, (hf.cols - 1, hf.rows - 1), (lo, hi), o, np.tile(L, (len(o), 1)), outer=15)
     cpu_shadow = res.status != 0

@@ -4,10 +4,11 @@ import pytest
 
 from hybrid.camera.view import View, default_view
 from hybrid.gl.context import depth32f_texture
-from hybrid.tiles.pyramid import TilePyramid
+from hybrid.terrain.edges import starts_under
+from hybrid.tiles.pyramid import TileKey, TilePyramid
 from raycast import RaycastStrategy
 from raycast.caster import outer_faces
-from raycast.cpu import cast_tile_rays
+from raycast.cpu import cast_tile_rays, texel_to_world
 
 TOL = 1e-3      # texels (z compared in texels too: metres / spacing)
 
@@ -67,12 +68,15 @@ def gpu_and_cpu(ctx, setup, view, **options):
     finally:
         t.release()
     kw = {k: options[k] for k in ("reconstruction", "traversal") if k in options}
-    cpu = cast_tile_rays(tile, view.eye, pixel_dirs(view), near=view.near, outer=outer_faces(tile.clip, hf), **kw)
+    dirs = pixel_dirs(view)
+    cpu = cast_tile_rays(tile, view.eye, dirs, near=view.near, outer=outer_faces(tile.clip, hf),
+                         under=starts_under(hf, view.eye, dirs), **kw)
     return aux, depth, colour, counters, cpu
 
 
 def agreement(aux, cpu, spacing):
-    """Fraction of rays hit by either side on which both hit within TOL texels; and the per-ray agreement."""
+    """Fraction of rays hit by either side on which both hit within TOL texels (z over ``spacing`` metres a texel);
+    and the per-ray agreement."""
     gh = np.isfinite(aux[..., 0]).ravel()
     gp = aux[..., :3].reshape(-1, 3).astype(np.float64)
     ok = gh == cpu.hit
@@ -107,7 +111,7 @@ def test_gpu_hits_equal_cpu_hits_per_reconstruction(ctx, setup, recon):
     hf, tile = setup[0], setup[1]
     view = default_view(hf, 320, 180)
     aux, depth, colour, counters, cpu = gpu_and_cpu(ctx, setup, view, reconstruction=recon)
-    frac, _ = agreement(aux, cpu, tile.spacing)
+    frac, _ = agreement(aux, cpu, min(tile.spacing_xy))
     assert cpu.hit.sum() > 0.4 * view.width * view.height
     assert frac >= 0.999, f"{recon}: only {frac:.5f} of rays agree"
     assert counters["hits"] == int(np.isfinite(aux[..., 0]).sum())
@@ -137,7 +141,7 @@ def test_degenerate_rays(ctx, setup, name):
     if name in ("grazing_inside", "inside_above"):
         assert np.all(view.eye >= lo) and np.all(view.eye <= hi)
     aux, depth, colour, counters, cpu = gpu_and_cpu(ctx, setup, view)
-    frac, ok = agreement(aux, cpu, tile.spacing)
+    frac, ok = agreement(aux, cpu, min(tile.spacing_xy))
     assert frac >= 0.999, f"{name}: only {frac:.5f} of rays agree"
     assert ok.reshape(special.shape)[special].all(), f"{name}: the exactly axis-aligned rays disagree"
     if name == "vertical":
@@ -153,14 +157,19 @@ def test_eye_below_surface_is_defined(ctx, setup):
     gx, gy = ox + 0.5 * w, oy + 0.45 * d
     g = float(hf.ground_height(gx, gy))
     view = View([gx, gy, g - 50.0], [gx + w, gy + 0.3 * d, g - 50.0], 60, 160, 90, near=0.5, far=4e5)
+    assert starts_under(hf, view.eye, pixel_dirs(view)).all()
     aux, depth, colour, counters, cpu = gpu_and_cpu(ctx, setup, view)
-    frac, _ = agreement(aux, cpu, tile.spacing)
+    frac, _ = agreement(aux, cpu, min(tile.spacing_xy))
     assert frac >= 0.999
     assert np.all(np.isfinite(depth)) and np.all((depth >= 0) & (depth <= 1))
     hit = np.isfinite(aux[..., 0])
-    assert hit.all()                       # inside the solid: every ray hits at the near plane
+    # under the sheet: a ray hits where it comes up through the surface (its underside, as the reference
+    # draws it), not at the near plane; rays that stay under it miss
+    assert 0.1 < hit.mean() < 0.9
     dist = view.distance_from_depth(depth)
-    assert np.all(dist[hit] < 2.0)         # at the near plane (0.5 m), up to float32 rounding of the point
+    assert np.all(dist[hit] > 40.0)        # the surface is 50 m above the eye
+    p = texel_to_world(tile, cpu.point[cpu.hit])
+    assert np.abs(p[:, 2] - hf.ground_height(p[:, 0], p[:, 1])).max() < 1e-3 * min(tile.spacing_x, tile.spacing_y)
     assert counters["capped"] == 0
 
 
@@ -172,11 +181,42 @@ def test_maxmip_hits_exactly_what_naive_stepping_hits(ctx, setup, record_propert
     # same hits on the GPU (coverage identical, points within tolerance) and on the CPU
     hm, hn = np.isfinite(aux_m[..., 0]), np.isfinite(aux_n[..., 0])
     assert np.array_equal(hm, hn)
-    assert np.abs(aux_m[hm][:, :3] - aux_n[hm][:, :3]).max() <= TOL * tile.spacing
+    assert np.abs(aux_m[hm][:, :3] - aux_n[hm][:, :3]).max() <= TOL * min(tile.spacing_xy)
     assert np.array_equal(cpu_m.hit, cpu_n.hit)
-    assert np.abs(cpu_m.point[cpu_m.hit] - cpu_n.point[cpu_n.hit]).max() <= 1e-6 * tile.spacing
+    assert np.abs(cpu_m.point[cpu_m.hit] - cpu_n.point[cpu_n.hit]).max() <= 1e-6 * min(tile.spacing_xy)
     ratio = cn["steps"] / cm["steps"]
     record_property("naive_over_maxmip_steps", ratio)
     print(f"mean steps/ray: naive {cn['mean_steps']:.2f}, maxmip {cm['mean_steps']:.2f}, ratio {ratio:.2f}")
     assert ratio > 3.0
     assert cm["max_steps"] < cn["max_steps"]
+
+
+@pytest.mark.parametrize("name", ["outside_below_edge", "below_ground"])
+def test_rays_from_under_the_sheet_agree_with_cpu(ctx, setup, name):
+    # an interior, an edge and a corner tile of a 4 x 4 split: entry walls on interior sides, none on outer ones
+    hf, _, s, _ = setup
+    w, d = hf.extent
+    ox, oy, oz = hf.origin
+    if name == "outside_below_edge":
+        z = oz + float(np.median(hf.heights[0]))
+        view = View([ox + 0.5 * w, oy - 0.05 * d, z], [ox + 0.5 * w, oy + d, z + 0.1 * d], 60, 160, 90, near=0.5, far=4e5)
+    else:
+        gx, gy = ox + 0.4 * w, oy + 0.3 * d
+        z = float(hf.ground_height(gx, gy)) - 30.0
+        view = View([gx, gy, z], [gx + 0.3 * w, gy + d, z + 0.2 * d], 60, 160, 90, near=0.5, far=4e5)
+    under = starts_under(hf, view.eye, pixel_dirs(view))
+    assert 0.3 < under.mean() <= 1.0
+    pyr = TilePyramid(hf, 64)
+    hits_under = 0
+    for key in (TileKey(0, 1, 1), TileKey(0, 1, 0), TileKey(0, 0, 0)):
+        tile = pyr.tile(key)
+        g = s.upload(tile)
+        try:
+            aux, depth, colour, counters, cpu = gpu_and_cpu(ctx, (hf, tile, s, g), view)
+        finally:
+            g.release()
+        frac, _ = agreement(aux, cpu, min(tile.spacing_xy))
+        assert frac >= 0.999, (name, key, frac)
+        assert counters["capped"] == 0
+        hits_under += int((cpu.hit & under).sum())
+    assert hits_under > 100                  # the sheet's underside is seen through these tiles

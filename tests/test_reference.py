@@ -1,6 +1,7 @@
 """The reference image against an exact CPU ray/triangle intersection, and the far-from-origin case."""
 import numpy as np
 import pytest
+from spacing_helpers import NON_SQUARE, terrain
 
 from hybrid.camera.view import View, default_view
 from hybrid.errors import TerrabenchError
@@ -12,7 +13,7 @@ SIZE = (320, 180)
 def cpu_hits(hf, origins, dirs):
     """Nearest hit distance of each ray with the full triangulated surface (brute force, float64)."""
     i, j = np.mgrid[0:hf.rows, 0:hf.cols]
-    verts = np.stack([hf.origin[0] + j * hf.spacing, hf.origin[1] + i * hf.spacing,
+    verts = np.stack([hf.origin[0] + j * hf.spacing_x, hf.origin[1] + i * hf.spacing_y,
                       hf.origin[2] + hf.heights.astype(np.float64)], -1).reshape(-1, 3)
     tri = grid_indices(hf.rows, hf.cols).reshape(-1, 3).astype(np.int64)
     v0, v1, v2 = verts[tri[:, 0]], verts[tri[:, 1]], verts[tri[:, 2]]
@@ -43,15 +44,18 @@ def _views(hf):
     yield View([x, y, z], [ox + w, oy + d, z - 600.0], 60.0, *SIZE, near=1.0, far=1e6)
 
 
-def test_reference_matches_cpu_intersection(ctx, puget257):
-    ref = ReferenceRenderer(ctx, puget257)
+@pytest.mark.parametrize("spacing", [None, *NON_SQUARE])
+def test_reference_matches_cpu_intersection(ctx, puget257, spacing):
+    """Puget Sound (160 m square cells) and a synthetic terrain with non-square cells (x, y metres)."""
+    hf = puget257 if spacing is None else terrain(spacing)
+    ref = ReferenceRenderer(ctx, hf)
     rng = np.random.default_rng(7)
-    for view in _views(puget257):
+    for view in _views(hf):
         res = ref.render(view, mode="shaded")
         rows = rng.integers(0, view.height, 150)
         cols = rng.integers(0, view.width, 150)
         dirs = view.pixel_rays(rows, cols)
-        want = cpu_hits(puget257, np.repeat(view.eye[None], len(dirs), 0), dirs)
+        want = cpu_hits(hf, np.repeat(view.eye[None], len(dirs), 0), dirs)
         got = res.distance[rows, cols].astype(np.float64)
         hit_w, hit_g = np.isfinite(want), np.isfinite(got)
         # a pixel centre within a hair of a silhouette may flip; demand near-total agreement

@@ -58,3 +58,21 @@ def test_bad_views(kw, match):
     args.update(kw)
     with pytest.raises(TerrabenchError, match=match):
         View(**args)
+
+
+def test_depth_to_distance_in_bounded_memory_and_exact():
+    import tracemalloc
+    v = View(eye=(0.0, 0.0, 500.0), target=(1000.0, 700.0, 0.0), width=4096, height=4096)
+    depth = np.full((4096, 4096), 0.5, np.float32)
+    depth[:10] = 0.0                                          # sky
+    tracemalloc.start()
+    dist = v.distance_from_depth(depth)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert dist.dtype == np.float32 and np.isinf(dist[:10]).all() and np.isfinite(dist[10:]).all()
+    assert peak < 64 * 2**20 + 200 * 2**20          # the float32 result plus bounded chunks, not (H, W, 3) float64
+    rows, cols = np.array([10, 2000, 4095]), np.array([0, 3000, 4095])
+    ray = v.pixel_dirs_eye(rows, cols)                         # eye-space ray (x, y, -1): length scales z-distance
+    n, f = v.near, v.far
+    zdist = n * f / (f - n) / (n / (f - n) + 0.5)
+    np.testing.assert_allclose(dist[rows, cols], zdist * np.linalg.norm(ray, axis=-1), rtol=1e-6)

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from hybrid.atomic import write_text
+
 from ..folders import writable_folder
 from . import argtypes
 
@@ -57,7 +59,7 @@ def run(which=BENCHES, frames: int = 8, out=None, device: int | None = None) -> 
         print(f"## {name}\n\n{text_tables(results[name])}\n")
         md.append(f"## {name}\n\n{markdown_tables(results[name])}\n")
     if out is not None:
-        out.write_text("\n".join(md))
+        write_text(out, "\n".join(md))
         print(f"wrote {out}")
     return results
 

@@ -53,7 +53,7 @@ def add_terrain_arguments(p: argparse.ArgumentParser) -> None:
     """Options naming a terrain: bundled/synthetic name or a file, with scale and spacing overrides."""
     p.add_argument("--dataset", default="puget", help="bundled name (puget, fbm, ridged, spike, cliff, staircase, flat, ridges) or a file")
     p.add_argument("--size-samples", type=int, default=None, help="samples per side for synthetic data, or a crop of puget")
-    p.add_argument("--seed", type=int, default=0, help="seed for synthetic data")
+    p.add_argument("--seed", type=argtypes.int_in("--seed", 0, 2**32 - 1), default=0, help="seed for synthetic data")
     p.add_argument("--vertical-scale", type=argtypes.positive_float("--vertical-scale", "metres per stored unit"),
                    default=None, help="metres per stored unit (files; overrides the file's vertical unit)")
     p.add_argument("--spacing", type=argtypes.spacing("--spacing"), default=None,
@@ -83,7 +83,15 @@ class ViewOptions:
     frame: int = 0                           # frame of the flight to render
 
     def view(self, hf):
-        """The View these options name on the terrain hf."""
+        """The View these options name on the terrain hf; refused when its eye is not above the terrain."""
+        from hybrid.camera.clearance import check_eye_above
+        v = self._view(hf)
+        what = (f"--flight {self.flight} frame {self.frame}" if self.flight else
+                "--eye" if self.eye is not None else "the default view")
+        check_eye_above(hf, v, what)
+        return v
+
+    def _view(self, hf):
         from hybrid.camera.flight import get_flight
         from hybrid.camera.view import View, default_view
         w, h = self.size

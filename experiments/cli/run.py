@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from ..folders import writable_folder
@@ -45,6 +46,14 @@ def run(spec, runs="runs", name: str | None = None, report: bool = False, report
 
 
 def run_from_args(args: argparse.Namespace) -> int:
-    """The run command from parsed arguments; returns the exit code."""
-    run(args.spec, args.runs, args.name, args.report, args.reports, args.quiet, args.device)
+    """The run command from parsed arguments; returns the exit code: 1 when any configuration failed."""
+    from ..runner import failed_configs
+    folder = run(args.spec, args.runs, args.name, args.report, args.reports, args.quiet, args.device)
+    failed = failed_configs(folder) if (folder / "errors.jsonl").exists() else {}
+    if failed:
+        print(f"terrabench: {len(failed)} configuration(s) failed (details in {folder / 'errors.jsonl'}):",
+              file=sys.stderr)
+        for name, error in sorted(failed.items()):
+            print(f"  {name}: {error.splitlines()[0] if error else ''}", file=sys.stderr)
+        return 1
     return 0

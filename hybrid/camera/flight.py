@@ -2,7 +2,9 @@
 
 Interpolation is a centripetal-free uniform Catmull-Rom spline through the keyframes (end keyframes
 repeated), applied to eye and target separately; frame k of n sits at parameter k/(n-1) along the
-keyframes. Presets keep the eye above the ground (checked against the terrain along the path).
+keyframes. Presets keep the eye above the ground by a margin that grows with the local relief (from the
+height samples around every eye: hybrid.camera.clearance), and `grazing` stays low but high enough that the
+ground ahead rises at most GRAZING_RISE_DEG above its level view: sky above, terrain below.
 """
 from __future__ import annotations
 
@@ -13,11 +15,15 @@ from pathlib import Path
 
 import numpy as np
 
+from hybrid.atomic import atomic_path, write_json
+from hybrid.camera.clearance import clear_heights, horizon_heights
 from hybrid.camera.view import View
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.heightfield import HeightField
 
 PRESETS = ("orbit", "flyover", "grazing", "lookdown", "dolly")
+GRAZING_RISE_DEG = 10.0         # the ground ahead of a grazing eye rises at most this far above its level view
+GRAZING_RADIUS_CELLS = 4        # the grazing eye clears the samples within this many cells by a tenth of their relief
 
 
 @dataclass
@@ -81,10 +87,10 @@ class Flight:
         """Write the flight as JSON (.json) or CSV (.csv: one keyframe a row; settings in a '#' header)."""
         path = Path(path)
         if path.suffix.lower() == ".json":
-            path.write_text(json.dumps(self.to_dict(), indent=1))
+            write_json(path, self.to_dict())
         elif path.suffix.lower() == ".csv":
             d = self.to_dict()
-            with path.open("w", newline="") as f:
+            with atomic_path(path) as tmp, tmp.open("w", newline="") as f:
                 f.write("# " + json.dumps({k: v for k, v in d.items() if k != "keyframes"}) + "\n")
                 w = csv.writer(f)
                 w.writerow(["eye_x", "eye_y", "eye_z", "target_x", "target_y", "target_z"])
@@ -134,25 +140,21 @@ def _stencil_heights(hf: HeightField, x: np.ndarray, y: np.ndarray, radius: floa
     return np.array(out)
 
 
-def _clear_height(hf: HeightField, x: np.ndarray, y: np.ndarray, radius: float) -> np.ndarray:
-    """Highest ground (world z) within ``radius`` metres of each (x, y), sampled on a small stencil."""
-    return _stencil_heights(hf, x, y, radius).max(axis=0)
-
-
 DOLLY_PITCH_DEG = 8.0
 
 
 def _dolly(hf: HeightField, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Eyes and targets (world metres) of the dolly at frame numbers k: a straight level line to the north-east.
 
-    The eye advances max(2 m, spacing / 40) a frame (4 m on Puget's 160 m grid), at one height for the whole
-    line: the highest ground within 2 % of the terrain's size of any point of it, plus max(30 m, 20 % of
-    that neighbourhood's relief); it looks along the line, DOLLY_PITCH_DEG below the horizon.
+    The eye advances max(2 m, s / 40) a frame, s the finer of spacing_x and spacing_y (4 m on Puget's 160 m
+    grid), at one height for the whole line: the highest ground within 2 % of the terrain's size of any point
+    of it, plus max(30 m, 20 % of that neighbourhood's relief); it looks along the line, DOLLY_PITCH_DEG below
+    the horizon.
     """
     w, d = hf.extent
     ox, oy, _ = hf.origin
     size = max(w, d)
-    step = max(2.0, hf.spacing / 40.0)
+    step = max(2.0, min(hf.spacing_x, hf.spacing_y) / 40.0)
     heading = np.array([w, d]) / np.hypot(w, d)
     x = ox + 0.3 * w + k * step * heading[0]
     y = oy + 0.3 * d + k * step * heading[1]
@@ -167,8 +169,8 @@ def _dolly(hf: HeightField, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def preset(name: str, hf: HeightField, frames: int = 60, width: int = 640, height: int = 360,
            fov_y: float = 60.0) -> Flight:
-    """A named flight over hf: orbit, flyover (low), grazing (eye 2 m above ground), lookdown or dolly (slow,
-    straight and level, low over the terrain, looking ahead and slightly down)."""
+    """A named flight over hf: orbit, flyover (low), grazing (low, level, the horizon in view), lookdown or dolly
+    (slow, straight and level, low over the terrain, looking ahead and slightly down)."""
     w, d = hf.extent
     ox, oy, oz = hf.origin
     lo, hi = hf.height_range
@@ -187,8 +189,7 @@ def preset(name: str, hf: HeightField, frames: int = 60, width: int = 640, heigh
     elif name == "flyover":
         x = ox + w * (0.1 + 0.8 * s)
         y = oy + d * (0.15 + 0.7 * s) + d * 0.08 * np.sin(s * np.pi * 2)
-        clearance = max(30.0, 0.01 * size)
-        z = _clear_height(hf, x, y, 0.03 * size) + clearance
+        z = clear_heights(hf, x, y, 0.03 * size, floor=max(30.0, 0.01 * size), relief_frac=0.2)
         eyes = np.stack([x, y, z], 1)
         ahead = np.stack([x + 0.15 * w, y + 0.12 * d], 1)
         tz = hf.ground_height(ahead[:, 0], ahead[:, 1])
@@ -197,7 +198,11 @@ def preset(name: str, hf: HeightField, frames: int = 60, width: int = 640, heigh
     elif name == "grazing":
         x = ox + w * (0.2 + 0.3 * s)
         y = oy + d * (0.2 + 0.3 * s)
-        z = hf.ground_height(x, y) + 2.0
+        heading = np.array([w, 0.8 * d]) / np.hypot(w, 0.8 * d)
+        radius = GRAZING_RADIUS_CELLS * max(hf.spacing_x, hf.spacing_y)
+        half_width = np.arctan(np.tan(np.radians(fov_y) / 2) * width / height)
+        z = np.maximum(clear_heights(hf, x, y, radius, floor=2.0, relief_frac=0.1),
+                       horizon_heights(hf, x, y, heading, half_width, np.radians(GRAZING_RISE_DEG)))
         eyes = np.stack([x, y, z], 1)
         targets = np.stack([x + w, y + d * 0.8, z], 1)
         near = 0.25

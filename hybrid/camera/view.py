@@ -15,6 +15,8 @@ import numpy as np
 from hybrid.errors import TerrabenchError, check_positive, check_range
 
 MAX_VIEWPORT = 16384
+MAX_COORDINATE = 1.0e9             # metres: |eye|, |target| and terrain origins stay within (float64 ~1e-7 m steps)
+DEPTH_CHUNK_PIXELS = 1 << 22        # pixels converted at a time from depth to distance (bounded temporaries)
 
 
 def parse_size(text, what: str = "size") -> tuple[int, int]:
@@ -56,6 +58,15 @@ class View:
         object.__setattr__(self, "eye", _vec3("eye", self.eye))
         object.__setattr__(self, "target", _vec3("target", self.target))
         object.__setattr__(self, "up", _vec3("up", self.up))
+        scale = float(np.abs(self.up).max())
+        if scale == 0.0:
+            raise TerrabenchError("up must be a non-zero vector, got (0, 0, 0)")
+        object.__setattr__(self, "up", self.up / scale)          # only its direction matters; no overflow
+        for name in ("eye", "target"):
+            far_off = float(np.abs(getattr(self, name)).max())
+            if far_off > MAX_COORDINATE:
+                raise TerrabenchError(f"{name} coordinate {far_off:g} m is beyond the world limit of "
+                                      f"±{MAX_COORDINATE:g} m (float64 keeps sub-millimetre steps only within it)")
         check_range("fov_y (degrees)", self.fov_y, 0.0, 180.0)
         for name in ("width", "height"):
             v = getattr(self, name)
@@ -179,14 +190,24 @@ class View:
 
     def distance_from_depth(self, depth: np.ndarray) -> np.ndarray:
         """Eye-to-surface distance in metres from a reversed-Z depth image (top row first); inf where 0."""
-        depth = np.asarray(depth, dtype=np.float64)
+        depth = np.asarray(depth)
+        if depth.shape != (self.height, self.width):
+            raise TerrabenchError(f"depth image of shape {depth.shape} does not match the view's "
+                                  f"{self.height}x{self.width} pixels")
         n, f = self.near, self.far
         a, b = n / (f - n), n * f / (f - n)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            zdist = b / (a + depth)
-        norm = np.linalg.norm(self.pixel_dirs_eye(), axis=-1)
-        dist = zdist * norm
-        return np.where(depth > 0.0, dist, np.inf).astype(np.float32)
+        t = self.tan_half_fov
+        # the eye-space ray length through a pixel is separable in column and row: sqrt(1 + x² + y²)
+        x2 = (((np.arange(self.width) + 0.5) / self.width * 2.0 - 1.0) * t * self.aspect) ** 2
+        y2 = ((1.0 - (np.arange(self.height) + 0.5) / self.height * 2.0) * t) ** 2
+        out = np.empty(depth.shape, np.float32)
+        step = max(1, DEPTH_CHUNK_PIXELS // max(self.width, 1))
+        for r in range(0, self.height, step):                # bounded float64 temporaries on huge images
+            d = depth[r:r + step].astype(np.float64)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                dist = b / (a + d) * np.sqrt(1.0 + x2[None, :] + y2[r:r + step, None])
+            out[r:r + step] = np.where(d > 0.0, dist, np.inf)
+        return out
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """Screen position (col, row, depth) of world points (float64), rows from the top; depth reversed-Z."""

@@ -19,7 +19,8 @@ class TileFeatures:
       the box reaches behind the near plane) — an upper bound of the pixels either strategy shades.
     triangles: triangles the raster strategy would draw for this tile at this view.
     slab_cells: level-0-of-the-tile cells a ray crosses inside the tile's height slab at this view's
-      elevation angle, (zmax - zmin) / (spacing * tan(elevation)), at most the tile's diagonal; the
+      elevation angle, (zmax - zmin) / tan(elevation) metres counted in cells along the ray's heading (cells
+      spacing_x by spacing_y metres), at most the tile's diagonal; the
       maximum-mipmap traversal takes about log2(1 + slab_cells) steps more per ray as it grows.
     visible: share of the AABB's projection (cut at the near plane) inside the viewport, in [0, 1]; the raster
       path culls tilelets outside the frustum, so its cost follows ``triangles * visible``.
@@ -117,8 +118,8 @@ def footprint_pixels(view: View, lo: np.ndarray, hi: np.ndarray, with_visible: b
     return area, (min(area / whole, 1.0) if whole > 0 else 0.0)
 
 
-def slab_cells(view: View, lo: np.ndarray, hi: np.ndarray, spacing: float, n: int) -> float:
-    """Cells (at the tile's spacing) a ray to the tile's centre crosses inside the tile's height slab."""
+def slab_cells(view: View, lo: np.ndarray, hi: np.ndarray, spacing_xy, n: int) -> float:
+    """Cells (of the tile's (x, y) spacing in metres) a ray to the tile's centre crosses inside its height slab."""
     c = 0.5 * (lo + hi)
     d = c - view.eye
     horiz = float(np.hypot(d[0], d[1]))
@@ -129,13 +130,15 @@ def slab_cells(view: View, lo: np.ndarray, hi: np.ndarray, spacing: float, n: in
         return 0.0 if dz == 0.0 else 1.0
     if tan_el == 0.0:
         return float(diag)
-    return float(min(dz / (spacing * tan_el), diag))
+    cells_per_m = float(np.hypot(d[0] / spacing_xy[0], d[1] / spacing_xy[1])) / horiz   # along the ray's heading
+    return float(min(dz / tan_el * cells_per_m, diag))
 
 
 def tile_features(pyramid: TilePyramid, view: View, sel: SelectedTile, triangles: float) -> TileFeatures:
     """Features of one selected tile; ``triangles`` comes from the raster strategy's mesh for this view."""
     lo, hi = pyramid.aabb(sel.key)
-    spacing = pyramid.hf.spacing * (1 << sel.key.level)
+    k = 1 << sel.key.level
+    spacing = (pyramid.hf.spacing_x * k, pyramid.hf.spacing_y * k)
     area, visible = footprint_pixels(view, lo, hi, with_visible=True)
     mid = np.array([lo[0], lo[1], 0.5 * (lo[2] + hi[2])]), np.array([hi[0], hi[1], 0.5 * (lo[2] + hi[2])])
     return TileFeatures(area, float(triangles), slab_cells(view, lo, hi, spacing, pyramid.n), sel.key.level,
@@ -143,12 +146,13 @@ def tile_features(pyramid: TilePyramid, view: View, sel: SelectedTile, triangles
 
 
 def slab_cells_batch(view: View, lo: np.ndarray, hi: np.ndarray, spacing: np.ndarray, n: int) -> np.ndarray:
-    """``slab_cells`` of B tiles at once: (B, 3) box corners in metres, (B,) sample spacings in metres."""
+    """``slab_cells`` of B tiles at once: (B, 3) box corners in metres, (B, 2) (x, y) sample spacings in metres."""
     d = 0.5 * (lo + hi) - view.eye
     horiz = np.hypot(d[:, 0], d[:, 1])
     with np.errstate(divide="ignore", invalid="ignore"):
         tan_el = np.where(horiz > 0, np.abs(d[:, 2]) / np.where(horiz > 0, horiz, 1.0), np.inf)
-        cells = np.minimum((hi[:, 2] - lo[:, 2]) / (spacing * tan_el), n * np.sqrt(2.0))
+        cells_per_m = np.hypot(d[:, 0] / spacing[:, 0], d[:, 1] / spacing[:, 1]) / horiz
+        cells = np.minimum((hi[:, 2] - lo[:, 2]) / tan_el * cells_per_m, n * np.sqrt(2.0))
     dz = hi[:, 2] - lo[:, 2]
     steep = np.isinf(tan_el) | (dz == 0.0)
     return np.where(steep, np.where(dz == 0.0, 0.0, 1.0), np.where(tan_el == 0.0, n * np.sqrt(2.0), cells))
@@ -166,7 +170,8 @@ def feature_columns(pyramid: TilePyramid, view: View, selected: list[SelectedTil
     mid_lo[:, 2] = mid_hi[:, 2] = mid
     b = len(keys)
     area, visible = footprints(view, np.concatenate([lo, mid_lo]), np.concatenate([hi, mid_hi]))
-    spacing = pyramid.hf.spacing * (1 << keys[:, 0])
+    k = (1 << keys[:, 0]).astype(np.float64)
+    spacing = np.stack([pyramid.hf.spacing_x * k, pyramid.hf.spacing_y * k], axis=1)
     return {"pixels": area[:b], "triangles": np.asarray(triangles, dtype=np.float64).reshape(b),
             "slab_cells": slab_cells_batch(view, lo, hi, spacing, pyramid.n), "level": keys[:, 0],
             "distance": np.array([s.distance for s in selected], dtype=np.float64).reshape(b),

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hybrid.atomic import write_json
 from hybrid.cost.features import TileFeatures
 from hybrid.errors import TerrabenchError
 
@@ -110,9 +111,9 @@ def save_cost_model(model: CostModel, path: Path | None = None) -> Path:
     data[model.renderer] = d
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(data, indent=1))
     except OSError as exc:
         raise TerrabenchError(f"cannot write costs file {path}: {exc.strerror or exc}") from None
+    write_json(path, data)
     return path
 
 

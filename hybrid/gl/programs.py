@@ -10,7 +10,7 @@ from __future__ import annotations
 from importlib import resources
 
 # include name -> (package, file): the colour conventions every method shades with
-SHARED_INCLUDES = {"shading": ("hybrid.gl", "shading.glsl")}
+SHARED_INCLUDES = {"shading": ("hybrid.gl", "shading.glsl"), "terrain_edges": ("hybrid.gl", "edges.glsl")}
 
 
 def glsl_source(package: str, name: str, defines: dict | None = None) -> str:

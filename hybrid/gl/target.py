@@ -45,13 +45,14 @@ class RenderResult:
     def save(self, path) -> tuple[Path, Path]:
         """Write PATH.png and PATH.depth.npy (float32 metres, inf where no terrain); returns both paths."""
         from PIL import Image
+
+        from hybrid.atomic import atomic_path
         path = check_png_path(path)
         depth_path = path.parent / (path.stem + ".depth.npy")
-        try:
-            Image.fromarray(self.colour).save(path)
-            np.save(depth_path, self.distance.astype(np.float32))
-        except OSError as exc:
-            raise TerrabenchError(f"cannot write {path}: {exc.strerror or exc}") from None
+        with atomic_path(path) as png, atomic_path(depth_path) as npy:      # both land, or neither
+            Image.fromarray(self.colour).save(png, format="PNG")
+            with open(npy, "wb") as f:
+                np.save(f, self.distance.astype(np.float32))
         return path, depth_path
 
 

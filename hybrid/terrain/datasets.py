@@ -12,7 +12,6 @@ PUGET_SPACING = 160.0     # metres between samples
 PUGET_SCALE = 0.1         # metres per 16-bit unit
 PUGET_CREDIT = ("Puget Sound terrain: USGS data, made available by the University of Washington, "
                 "via the Georgia Tech Large Geometric Models Archive.")
-CREDITS = {"puget": PUGET_CREDIT}   # credit lines of bundled data (synthetic terrain is made here)
 
 
 def _data_path(name: str):
@@ -43,8 +42,8 @@ def crop(hf: HeightField, size: int, centre=(0.5, 0.5)) -> HeightField:
     j0 = int(np.clip(round(centre[1] * (hf.cols - 1) - size / 2), 0, hf.cols - size))
     tex = None if hf.texture is None else hf.texture[i0:i0 + size - 1, j0:j0 + size - 1]
     o = (hf.origin[0] + j0 * hf.spacing_x, hf.origin[1] + i0 * hf.spacing_y, hf.origin[2])
-    return HeightField(hf.heights[i0:i0 + size, j0:j0 + size].copy(), hf.spacing, o, f"{hf.name}-{size}", tex,
-                       0, hf.source, list(hf.notes) + [f"window rows {i0}.. cols {j0}.. of {hf.rows}x{hf.cols}"])
+    return HeightField(hf.heights[i0:i0 + size, j0:j0 + size].copy(), (hf.spacing_x, hf.spacing_y), o,
+                       f"{hf.name}-{size}", tex, 0, hf.source, list(hf.notes) + [f"window rows {i0}.. cols {j0}.. of {hf.rows}x{hf.cols}"])
 
 
 def _value_noise(n: int, cells: int, rng: np.random.Generator) -> np.ndarray:

@@ -20,8 +20,12 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 
+MAX_ABS_HEIGHT = 1.0e7           # metres: float32 heights keep steps of 1 m or finer within it (vertical
+                                 # exaggeration included); loaders apply Earth's physical bound to file data
+MAX_ORIGIN = 1.0e9               # metres: a terrain's world origin (as the camera's coordinates)
 
-def _spacing_pair(spacing, name: str) -> tuple[float, float]:
+
+def spacing_pair(spacing, name: str = "terrain") -> tuple[float, float]:
     """The (x, y) ground spacing in metres from one number or a pair; refuses anything else by name."""
     try:
         pair = (spacing, spacing) if np.ndim(spacing) == 0 else tuple(spacing)
@@ -62,19 +66,25 @@ class HeightField:
             raise TerrabenchError(f"heights of {self.name!r} need at least 2x2 samples, got {h.shape[0]}x{h.shape[1]}")
         if not np.issubdtype(h.dtype, np.number) or np.issubdtype(h.dtype, np.complexfloating):
             raise TerrabenchError(f"heights of {self.name!r} must be real numbers, got dtype {h.dtype}")
-        h = h.astype(np.float32, copy=False)
         if not np.all(np.isfinite(h)):
             bad = int(np.count_nonzero(~np.isfinite(h)))
             raise TerrabenchError(
                 f"heights of {self.name!r} hold {bad} NaN/inf samples; load through hybrid.terrain.loaders "
                 "(which fills no-data) or fill them first"
             )
-        self.heights = np.ascontiguousarray(h)
-        self.spacing_x, self.spacing_y = _spacing_pair(self.spacing, self.name)
+        lo, hi = float(h.min()), float(h.max())          # checked before the float32 cast, which could overflow
+        if max(-lo, hi) > MAX_ABS_HEIGHT:
+            raise TerrabenchError(
+                f"heights of {self.name!r} span {lo:g} .. {hi:g} m, beyond ±{MAX_ABS_HEIGHT:g} m, where float32 "
+                "heights lose metre precision; check the vertical scale and units")
+        self.heights = np.ascontiguousarray(h.astype(np.float32, copy=False))
+        self.spacing_x, self.spacing_y = spacing_pair(self.spacing, self.name)
         self.spacing = self.spacing_x if self.spacing_x == self.spacing_y else (self.spacing_x, self.spacing_y)
         o = tuple(float(v) for v in self.origin)
         if len(o) != 3 or not all(np.isfinite(o)):
             raise TerrabenchError(f"origin of {self.name!r} must be 3 finite numbers (x, y, z), got {self.origin!r}")
+        if max(abs(v) for v in o) > MAX_ORIGIN:
+            raise TerrabenchError(f"origin of {self.name!r} {o!r} lies beyond the world limit of ±{MAX_ORIGIN:g} m")
         self.origin = o
         if self.texture is not None:
             t = np.asarray(self.texture)

@@ -78,7 +78,8 @@ def load_texture(path, cells_shape) -> np.ndarray:
 
 
 def load_npy(path, *, vertical_scale=None, spacing=None, crop: Crop | None = None, name=None) -> HeightField:
-    """Load .npy (a 2-D array) or .npz (key 'heights', else the only array; optional 'spacing'), south-up."""
+    """Load .npy (a 2-D array) or .npz (key 'heights', else the only array; optional 'spacing': one number or
+    (x, y) metres), south-up."""
     try:
         data = np.load(path, allow_pickle=False)
     except Exception as exc:
@@ -93,7 +94,11 @@ def load_npy(path, *, vertical_scale=None, spacing=None, crop: Crop | None = Non
             else:
                 raise TerrainLoadError(f"{path}: .npz has arrays {keys}; name the heights 'heights'")
             if spacing is None and "spacing" in keys:
-                spacing = data["spacing"].tolist()
+                stored = np.asarray(data["spacing"])
+                if stored.shape not in ((), (1,), (2,)):
+                    raise TerrainLoadError(f"{path}: 'spacing' must hold one number or (x, y) metres, "
+                                           f"got shape {stored.shape}")
+                spacing = float(stored.reshape(-1)[0]) if stored.size == 1 else tuple(float(v) for v in stored)
     else:
         arr = data
     notes: list[str] = []
@@ -153,4 +158,4 @@ def load_terrain(path, **options) -> HeightField:
 
 def save_npz(hf: HeightField, path) -> None:
     """Write heights (south-up, metres) and ground spacing (x, y metres) to an .npz that load_npy reads back."""
-    np.savez(path, heights=hf.heights, spacing=np.array([hf.spacing_x, hf.spacing_y]))
+    np.savez(path, heights=hf.heights, spacing=np.array([hf.spacing_x, hf.spacing_y], dtype=np.float64))

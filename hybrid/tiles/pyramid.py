@@ -49,7 +49,8 @@ class Tile:
 
     heights: (N+1, N+1) float32 metres relative to the terrain's origin z, rows south to north.
     origin: world (x, y, z) of sample [0, 0] (z is the terrain's origin z), float64 metres.
-    spacing: metres between this tile's samples (terrain spacing * 2^level).
+    spacing_x, spacing_y: metres between this tile's samples east-west and north-south (the terrain's
+      spacing_x, spacing_y times 2^level).
     clip: world rectangle (x0, y0, x1, y1) of real terrain inside the tile; never draw outside it.
     zmin, zmax: world heights bounding the tile's surface at every level.
     error: geometric error in metres of this tile's level against level 0.
@@ -58,7 +59,8 @@ class Tile:
     key: TileKey
     heights: np.ndarray
     origin: tuple[float, float, float]
-    spacing: float
+    spacing_x: float
+    spacing_y: float
     clip: tuple[float, float, float, float]
     zmin: float
     zmax: float
@@ -68,6 +70,11 @@ class Tile:
     def n(self) -> int:
         """Cells per side."""
         return self.heights.shape[0] - 1
+
+    @property
+    def spacing_xy(self) -> tuple[float, float]:
+        """(spacing_x, spacing_y): metres between the tile's samples east-west and north-south."""
+        return (self.spacing_x, self.spacing_y)
 
     @property
     def aabb(self) -> tuple[np.ndarray, np.ndarray]:
@@ -122,6 +129,7 @@ class TilePyramid:
         self.size = self.n * (1 << self.max_level) + 1
         pad = ((0, self.size - hf.rows), (0, self.size - hf.cols))
         self.padded = np.pad(hf.heights, pad, mode="edge")
+        self._boxes: dict = {}
         self._build_bounds()
 
     # --- per-level arrays -------------------------------------------------------------------------
@@ -178,6 +186,28 @@ class TilePyramid:
         ex = self._exists[level]
         return [TileKey(level, x, y) for y in range(t) for x in range(t) if ex[y, x]]
 
+    def exists_at(self, level: int, tx: np.ndarray, ty: np.ndarray) -> np.ndarray:
+        """Boolean array: which of the level's tiles (tx, ty), given as integer arrays, exist."""
+        t = self.tiles_per_side(level)
+        tx, ty = np.asarray(tx, dtype=np.int64), np.asarray(ty, dtype=np.int64)
+        ok = (tx >= 0) & (tx < t) & (ty >= 0) & (ty < t)
+        out = np.zeros(tx.shape, bool)
+        out[ok] = self._exists[level][ty[ok], tx[ok]]
+        return out
+
+    def boxes_at(self, level: int, tx: np.ndarray, ty: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World-space (min, max) corners, (B, 3) float64 metres, of the level's existing tiles (tx, ty)."""
+        if level not in self._boxes:                    # every box of a level, made on first use
+            t = self.tiles_per_side(level)
+            ty_all, tx_all = np.divmod(np.arange(t * t), t)
+            self._boxes[level] = tuple(a.reshape(t, t, 3) for a in self.aabbs(np.full(t * t, level), tx_all, ty_all))
+        lo, hi = self._boxes[level]
+        return lo[ty, tx], hi[ty, tx]
+
+    def errors_at(self, level: int, tx: np.ndarray, ty: np.ndarray) -> np.ndarray:
+        """Geometric errors (metres, float64) of the level's existing tiles (tx, ty), given as integer arrays."""
+        return self._err[level][np.asarray(ty, dtype=np.int64), np.asarray(tx, dtype=np.int64)].astype(np.float64)
+
     def error(self, key: TileKey) -> float:
         """Geometric error (metres) of the tile's level-l surface against level 0."""
         return float(self._err[key.level][key.ty, key.tx])
@@ -190,11 +220,12 @@ class TilePyramid:
     def clip(self, key: TileKey) -> tuple[float, float, float, float]:
         """World rectangle (x0, y0, x1, y1) of real terrain inside the tile."""
         hf = self.hf
-        span = (self.n << key.level) * hf.spacing
+        cells = self.n << key.level
+        span_x, span_y = cells * hf.spacing_x, cells * hf.spacing_y
         ox, oy = hf.origin[0], hf.origin[1]
-        x0, y0 = ox + key.tx * span, oy + key.ty * span
-        x1 = min(x0 + span, ox + (hf.cols - 1) * hf.spacing)
-        y1 = min(y0 + span, oy + (hf.rows - 1) * hf.spacing)
+        x0, y0 = ox + key.tx * span_x, oy + key.ty * span_y
+        x1 = min(x0 + span_x, ox + (hf.cols - 1) * hf.spacing_x)
+        y1 = min(y0 + span_y, oy + (hf.rows - 1) * hf.spacing_y)
         return (x0, y0, x1, y1)
 
     def aabb(self, key: TileKey) -> tuple[np.ndarray, np.ndarray]:
@@ -211,10 +242,11 @@ class TilePyramid:
         levels, tx, ty = (np.asarray(a, dtype=np.int64).reshape(-1) for a in (levels, tx, ty))
         hf = self.hf
         ox, oy, oz = hf.origin
-        span = (self.n << levels) * hf.spacing
-        x0, y0 = ox + tx * span, oy + ty * span
-        x1 = np.minimum(x0 + span, ox + (hf.cols - 1) * hf.spacing)
-        y1 = np.minimum(y0 + span, oy + (hf.rows - 1) * hf.spacing)
+        cells = self.n << levels
+        span_x, span_y = cells * hf.spacing_x, cells * hf.spacing_y
+        x0, y0 = ox + tx * span_x, oy + ty * span_y
+        x1 = np.minimum(x0 + span_x, ox + (hf.cols - 1) * hf.spacing_x)
+        y1 = np.minimum(y0 + span_y, oy + (hf.rows - 1) * hf.spacing_y)
         z0, z1 = np.empty(len(levels)), np.empty(len(levels))
         for level in np.unique(levels):
             at = levels == level
@@ -231,10 +263,10 @@ class TilePyramid:
         i0, j0 = key.ty * self.n * k, key.tx * self.n * k
         h = self.padded[i0:i0 + self.n * k + 1:k, j0:j0 + self.n * k + 1:k]
         hf = self.hf
-        origin = (hf.origin[0] + j0 * hf.spacing, hf.origin[1] + i0 * hf.spacing, hf.origin[2])
+        origin = (hf.origin[0] + j0 * hf.spacing_x, hf.origin[1] + i0 * hf.spacing_y, hf.origin[2])
         z0, z1 = self.zrange(key)
-        return Tile(key, np.ascontiguousarray(h, dtype=np.float32), origin, hf.spacing * k, self.clip(key),
-                    z0, z1, self.error(key))
+        return Tile(key, np.ascontiguousarray(h, dtype=np.float32), origin, hf.spacing_x * k, hf.spacing_y * k,
+                    self.clip(key), z0, z1, self.error(key))
 
     def texture_rect(self, key: TileKey) -> tuple[int, int, int, int]:
         """Cell (texel) index range (j0, i0, j1, i1) of the terrain's texture that the tile covers."""

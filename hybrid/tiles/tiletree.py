@@ -76,103 +76,163 @@ def _covering(selected: dict, key: TileKey, max_level: int):
     return None
 
 
+def box_classes(planes: np.ndarray, lo_rel: np.ndarray, hi_rel: np.ndarray) -> np.ndarray:
+    """classify_aabb of (B, 3) eye-relative boxes at once: (B,) int8 of -1 outside, 1 inside, 0 crossing."""
+    n, off = planes[:, :3].T, planes[:, 3]
+    npos, nneg = np.maximum(n, 0.0), np.minimum(n, 0.0)
+    far = hi_rel @ npos + lo_rel @ nneg + off              # the corner farthest along each normal
+    near = lo_rel @ npos + hi_rel @ nneg + off
+    out = np.zeros(len(lo_rel), np.int8)
+    out[(near >= 0).all(axis=1)] = 1
+    out[(far < 0).any(axis=1)] = -1
+    return out
+
+
+def box_distances(eye: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """aabb_distance from a point to (B, 3) boxes at once (metres, 0 inside)."""
+    return np.linalg.norm(np.maximum(np.maximum(lo - eye, eye - hi), 0.0), axis=1)
+
+
+_SHIFT = 29                   # tile codes: level << 58 | ty << 29 | tx (tiles a side < 2^29)
+
+
+def _codes(level, tx, ty) -> np.ndarray:
+    """int64 codes of tiles given as (broadcastable) arrays of level, tx, ty."""
+    return (np.asarray(level, np.int64) << (2 * _SHIFT)) | (np.asarray(ty, np.int64) << _SHIFT) | np.asarray(tx, np.int64)
+
+
+class _Selection:
+    """The selected tiles of one view as parallel arrays, with what each needs (distance, projected error, class)."""
+
+    def __init__(self, pyramid: TilePyramid, view: View, tau: float):
+        self.pyramid, self.eye, self.tau = pyramid, np.asarray(view.eye, dtype=np.float64), tau
+        self.planes, self.K = view.frustum_planes_rel(), view.pixels_per_radian
+        self.parts = []                                   # (level, tx, ty, d, pe, c) arrays of selected tiles
+
+    def measure(self, level: int, tx: np.ndarray, ty: np.ndarray):
+        """Existing, not culled tiles of a level among (tx, ty), with distance, projected error and class."""
+        p = self.pyramid
+        ok = p.exists_at(level, tx, ty)
+        tx, ty = tx[ok], ty[ok]
+        lo, hi = p.boxes_at(level, tx, ty)
+        c = box_classes(self.planes, lo - self.eye, hi - self.eye)
+        keep = c >= 0
+        tx, ty, lo, hi, c = tx[keep], ty[keep], lo[keep], hi[keep], c[keep]
+        d = box_distances(self.eye, lo, hi)
+        err = p.errors_at(level, tx, ty)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pe = np.where(d > 0, err * self.K / d, np.where(err > 0, np.inf, 0.0))
+        return tx, ty, d, pe, c
+
+    def refine(self) -> None:
+        """Split from the root down, one level at a time, while the projected error exceeds tau."""
+        level = self.pyramid.max_level
+        tx, ty = np.zeros(1, np.int64), np.zeros(1, np.int64)
+        while level >= 0 and len(tx):
+            tx, ty, d, pe, c = self.measure(level, tx, ty)
+            split = (pe > self.tau) & (level > 0)
+            keep = ~split
+            self.parts.append((np.full(int(keep.sum()), level), tx[keep], ty[keep], d[keep], pe[keep], c[keep]))
+            tx, ty = _children(tx[split], ty[split])
+            level -= 1
+
+    def arrays(self):
+        """(level, tx, ty, d, pe, c) of every selected tile, concatenated."""
+        return tuple(np.concatenate([part[i] for part in self.parts]) if self.parts else np.zeros(0)
+                     for i in range(6))
+
+    def edge_levels(self, lv, tx, ty) -> np.ndarray:
+        """(4, N) per edge W, E, S, N: level of the selected tile at the tile's level or coarser that covers
+        the edge neighbour's place, -1 where none (off the pyramid, culled, or finer tiles there)."""
+        top = self.pyramid.max_level
+        codes = np.sort(_codes(lv, tx, ty))
+        t = (1 << (top - lv))[None, None, :]                              # tiles a side at each tile's level
+        d = np.array([(dx, dy) for _, dx, dy in _EDGES])
+        k = np.arange(top + 1)[None, :, None]                             # ancestor steps
+        nx, ny = tx[None, None, :] + d[:, 0, None, None], ty[None, None, :] + d[:, 1, None, None]
+        ok = (nx >= 0) & (nx < t) & (ny >= 0) & (ny < t) & (lv[None, None, :] + k <= top)
+        cand = _codes(lv[None, None, :] + k, np.maximum(nx, 0) >> k, np.maximum(ny, 0) >> k)
+        pos = np.minimum(np.searchsorted(codes, cand), max(len(codes) - 1, 0))
+        found = ok & (codes[pos] == cand) if len(codes) else np.zeros(cand.shape, bool)
+        first = np.argmax(found, axis=1)                                  # the finest covering level
+        return np.where(found.any(axis=1), lv[None, :] + first, -1)
+
+    def finer_neighbours(self, lv, tx, ty) -> np.ndarray:
+        """(4, N) per edge: True where a selected tile one level finer lies in the edge neighbour's place."""
+        codes = np.sort(_codes(lv, tx, ty))
+        d = np.array([(dx, dy) for _, dx, dy in _EDGES])
+        nx, ny = tx[None, :] + d[:, 0, None], ty[None, :] + d[:, 1, None]
+        hit = np.zeros((4, len(lv)), bool)
+        for ox, oy in ((0, 0), (1, 0), (0, 1), (1, 1)):
+            cand = _codes(np.maximum(lv - 1, 0)[None, :], 2 * np.maximum(nx, 0) + ox, 2 * np.maximum(ny, 0) + oy)
+            pos = np.minimum(np.searchsorted(codes, cand), len(codes) - 1)
+            hit |= (codes[pos] == cand) & (nx >= 0) & (ny >= 0) & (lv > 0)[None, :]
+        return hit
+
+    def restrict(self) -> np.ndarray:
+        """Split every selected tile with an edge neighbour two or more levels finer, until none is left;
+        returns the final tiles' edge_levels."""
+        while True:
+            lv, tx, ty = (a.astype(np.int64) for a in self.arrays()[:3])
+            cov = self.edge_levels(lv, tx, ty)
+            far = cov >= lv[None, :] + 2
+            if not far.any():
+                return cov
+            e, i = np.nonzero(far)
+            d = np.array([(dx, dy) for _, dx, dy in _EDGES])
+            k = cov[e, i] - lv[i]
+            split = np.unique(_codes(cov[e, i], (tx[i] + d[e, 0]) >> k, (ty[i] + d[e, 1]) >> k))
+            keep = ~np.isin(_codes(lv, tx, ty), split)
+            self.parts = [tuple(a[keep] for a in self.arrays())]
+            mask = (1 << _SHIFT) - 1
+            for level in np.unique(split >> (2 * _SHIFT)):
+                at = split[(split >> (2 * _SHIFT)) == level]
+                cx, cy = _children(at & mask, (at >> _SHIFT) & mask)
+                cx, cy, dist, pe, c = self.measure(int(level) - 1, cx, cy)
+                self.parts.append((np.full(len(cx), int(level) - 1), cx, cy, dist, pe, c))
+
+    def front_to_back(self, lv, tx, ty) -> np.ndarray:
+        """Order of the tiles by the quadtree traversal that visits the eye's child quadrant first."""
+        p, hf = self.pyramid, self.pyramid.hf
+        key = np.zeros(len(lv), np.int64)
+        for a in range(p.max_level, 0, -1):               # ancestor level a: one base-4 digit each
+            below = lv < a
+            up = np.maximum(a - lv, 1)                      # levels up to the ancestor (masked where not below)
+            ax, ay = tx >> up, ty >> up
+            qx, qy = (tx >> (up - 1)) & 1, (ty >> (up - 1)) & 1
+            span_x, span_y = (p.n << a) * hf.spacing_x, (p.n << a) * hf.spacing_y
+            sx = (self.eye[0] >= hf.origin[0] + (ax + 0.5) * span_x).astype(np.int64)
+            sy = (self.eye[1] >= hf.origin[1] + (ay + 0.5) * span_y).astype(np.int64)
+            rank = (qx != sx).astype(np.int64) + 2 * (qy != sy)
+            key |= np.where(below, rank << (2 * (a - 1)), 0)
+        return np.argsort(key, kind="stable")
+
+
+def _children(tx: np.ndarray, ty: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The four children (SW, SE, NW, NE) of each tile (tx, ty), as flat arrays of the next finer level."""
+    tx, ty = np.asarray(tx, np.int64), np.asarray(ty, np.int64)
+    return (np.concatenate([2 * tx, 2 * tx + 1, 2 * tx, 2 * tx + 1]),
+            np.concatenate([2 * ty, 2 * ty, 2 * ty + 1, 2 * ty + 1]))
+
+
 def select_tiles(pyramid: TilePyramid, view: View, tau: float = DEFAULT_TAU) -> list[SelectedTile]:
-    """Tiles to draw for a view with screen-space error <= tau pixels: restricted, culled, front to back."""
+    """Tiles to draw for a view with screen-space error <= tau pixels: restricted, culled, front to back.
+
+    Vectorised over the tiles of each level: refinement level by level, restriction and edge levels by
+    looking up ancestors' codes, the front-to-back order as one sort key per tile.
+    """
     tau = check_positive("tau (pixels)", tau)
-    planes = view.frustum_planes_rel()
-    eye = view.eye
-    K = view.pixels_per_radian
-    info: dict[TileKey, tuple[float, float, int]] = {}
-
-    def classify(key):
-        if key not in info:
-            lo, hi = pyramid.aabb(key)
-            c = classify_aabb(planes, lo - eye, hi - eye)
-            d = aabb_distance(eye, lo, hi)
-            pe = pyramid.error(key) * K / d if d > 0 else (np.inf if pyramid.error(key) > 0 else 0.0)
-            info[key] = (d, pe, c)
-        return info[key]
-
-    def live_children(key):
-        return [c for c in key.children() if pyramid.exists(c) and classify(c)[2] >= 0]
-
-    selected: dict[TileKey, bool] = {}
-    stack = [pyramid.root()] if classify(pyramid.root())[2] >= 0 else []
-    while stack:
-        key = stack.pop()
-        d, pe, c = classify(key)
-        if key.level > 0 and pe > tau:
-            stack.extend(live_children(key))
-        else:
-            selected[key] = True
-
-    # restriction: split any tile that has an edge neighbour two or more levels finer
-    changed = True
-    while changed:
-        changed = False
-        for key in list(selected):
-            if key not in selected:
-                continue
-            t = pyramid.tiles_per_side(key.level)
-            for _, dx, dy in _EDGES:
-                nx, ny = key.tx + dx, key.ty + dy
-                if not (0 <= nx < t and 0 <= ny < t):
-                    continue
-                cov = _covering(selected, TileKey(key.level, nx, ny), pyramid.max_level)
-                if cov is not None and cov.level >= key.level + 2:
-                    del selected[cov]
-                    for ch in live_children(cov):
-                        selected[ch] = True
-                    changed = True
-
-    # per edge: the selected neighbour's level minus this tile's (-1, 0, 1), NO_NEIGHBOUR where none is drawn
-    result_edges, deltas = {}, {}
-    for key in selected:
-        t = pyramid.tiles_per_side(key.level)
-        mask, d = 0, []
-        for bit, dx, dy in _EDGES:
-            nx, ny = key.tx + dx, key.ty + dy
-            delta = NO_NEIGHBOUR
-            if 0 <= nx < t and 0 <= ny < t:
-                nb = TileKey(key.level, nx, ny)
-                cov = _covering(selected, nb, pyramid.max_level)
-                if cov is not None:
-                    delta = cov.level - key.level
-                elif key.level > 0 and any(c in selected for c in nb.children()):
-                    delta = -1
-            if delta == 1:
-                mask |= bit
-            d.append(delta)
-        result_edges[key], deltas[key] = mask, tuple(d)
-
-    # front-to-back order by quadtree traversal
-    needed = set()
-    for key in selected:
-        k = key
-        while k.level < pyramid.max_level:
-            k = k.parent()
-            if k in needed:
-                break
-            needed.add(k)
-    order: list[TileKey] = []
-
-    def visit(key):
-        if key in selected:
-            order.append(key)
-            return
-        if key not in needed:
-            return
-        x0, y0, x1, y1 = pyramid.clip(key)
-        span = (pyramid.n << key.level) * pyramid.hf.spacing
-        mx = pyramid.hf.origin[0] + key.tx * span + span / 2
-        my = pyramid.hf.origin[1] + key.ty * span + span / 2
-        sx, sy = int(eye[0] >= mx), int(eye[1] >= my)
-        ch = key.children()  # SW, SE, NW, NE -> index = x + 2y
-        for qx, qy in ((sx, sy), (1 - sx, sy), (sx, 1 - sy), (1 - sx, 1 - sy)):
-            visit(ch[qx + 2 * qy])
-
-    visit(pyramid.root())
-    return [SelectedTile(k, info[k][0], info[k][1], result_edges[k], info[k][2] == 1, deltas[k]) for k in order]
+    sel = _Selection(pyramid, view, tau)
+    sel.refine()
+    cov = sel.restrict()
+    lv, tx, ty, d, pe, c = sel.arrays()
+    lv, tx, ty = lv.astype(np.int64), tx.astype(np.int64), ty.astype(np.int64)
+    deltas = np.where(cov >= 0, cov - lv[None, :], np.where(sel.finer_neighbours(lv, tx, ty), -1, NO_NEIGHBOUR)).T
+    bits = np.array([bit for bit, _, _ in _EDGES])
+    masks = ((deltas == 1) * bits).sum(axis=1)
+    return [SelectedTile(TileKey(int(lv[i]), int(tx[i]), int(ty[i])), float(d[i]), float(pe[i]), int(masks[i]),
+                         bool(c[i] == 1), tuple(int(v) for v in deltas[i]))
+            for i in sel.front_to_back(lv, tx, ty)]
 
 
 def edge_neighbours(keys: set, key: TileKey, dx: int, dy: int, max_level: int) -> list[TileKey]:

@@ -1,0 +1,79 @@
+"""Output files that land whole or not at all: written under a temporary name beside the target, then renamed.
+
+A failure while writing (disk full, a killed process, an exception in the writer) leaves the target as it was
+(absent or the previous version) and no partial file; a full disk or another OS error becomes one
+TerrabenchError naming the file.
+"""
+from __future__ import annotations
+
+import errno
+import json
+import os
+from contextlib import contextmanager
+from pathlib import Path
+
+from hybrid.errors import TerrabenchError
+
+
+@contextmanager
+def atomic_path(path, suffix: str | None = None):
+    """Yield a temporary path beside ``path`` (same suffix, for writers that choose a format by it); on success
+    it is renamed onto ``path``, on any failure removed. OS errors become a TerrabenchError naming ``path``."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp{suffix if suffix is not None else path.suffix}")
+    try:
+        yield tmp
+        with open(tmp, "rb+") as f:            # the bytes are on disk before the name points at them
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        _remove(tmp)
+        if exc.errno == errno.ENOSPC:
+            raise TerrabenchError(f"disk full while writing {path}; nothing was written there") from None
+        raise TerrabenchError(f"cannot write {path}: {exc.strerror or exc}") from None
+    except BaseException:
+        _remove(tmp)
+        raise
+
+
+def _remove(p: Path) -> None:
+    try:
+        p.unlink()
+    except FileNotFoundError:
+        pass
+
+
+def write_text(path, text: str) -> Path:
+    """Write a text file (UTF-8) atomically."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return Path(path)
+
+
+def write_json(path, data) -> Path:
+    """Write indented JSON atomically."""
+    return write_text(path, json.dumps(data, indent=1))
+
+
+def save_npy(path, array) -> Path:
+    """Write a NumPy array (.npy) atomically."""
+    import numpy as np
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as f:
+            np.save(f, array)
+    return Path(path)
+
+
+def save_png(path, image) -> Path:
+    """Write an 8-bit (H, W[, 3|4]) image as PNG atomically."""
+    from PIL import Image
+    with atomic_path(path) as tmp:
+        Image.fromarray(image).save(tmp, format="PNG")
+    return Path(path)
+
+
+def write_parquet(path, frame) -> Path:
+    """Write a pandas DataFrame as Parquet atomically."""
+    with atomic_path(path) as tmp:
+        frame.to_parquet(tmp, index=False)
+    return Path(path)

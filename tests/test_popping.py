@@ -1,0 +1,97 @@
+"""Popping: constructed depth sequences (steady sliding, a switched patch, a crease), the image-flow gate, and
+on a slow dolly flight the raster strategy without geomorphing against the same with it."""
+import numpy as np
+import pytest
+
+from experiments.popping import POP_MAX_FLOW_PX, image_flow, pop_pixels, popping, temporal_errors
+from hybrid.camera.view import View
+from hybrid.gl.target import RenderResult
+
+
+def result(distance):
+    return RenderResult(np.zeros(distance.shape + (3,), np.uint8), distance.astype(np.float32))
+
+
+def sequence(h=48, w=64):
+    """Three reference frames of a ground whose distance grows towards the top (sky on the top rows), the
+    camera moving 0.5 % closer each frame, and a method whose relative depth error slides steadily with it."""
+    rows = np.arange(h, dtype=np.float64)[:, None] * np.ones((1, w))
+    base = 1000.0 + 20.0 * (h - rows) + 0.3 * np.arange(w)[None, :]
+    base[:6] = np.inf
+    refs = [base * (1 - 0.005 * k) for k in range(3)]
+    error = 1e-3 * np.sin(rows / 4.0 + np.arange(w)[None, :] / 7.0)          # a smooth error field
+    frames = [r * (1 + error + 2e-4 * k) for k, r in enumerate(refs)]         # that drifts linearly in time
+    return frames, refs
+
+
+def test_steady_sliding_does_not_pop_and_a_switched_patch_does():
+    frames, refs = sequence()
+    f, r = [result(x) for x in frames], [result(x) for x in refs]
+    assert pop_pixels(*f, *r) == 0
+    popped = [x.copy() for x in frames]
+    popped[1][20:30, 20:32] *= 1.01                         # a 10 x 12 patch off by 1 % in the middle frame only
+    n = pop_pixels(*[result(x) for x in popped], *r)
+    assert 100 <= n <= 120
+    stepped = [x.copy() for x in frames]
+    stepped[2][20:30, 20:32] *= 1.01                        # or switched for good from the last frame on
+    assert 100 <= pop_pixels(*[result(x) for x in stepped], *r) <= 120
+    crease = [x.copy() for x in frames]
+    crease[1][:, 40] *= 1.01                                # a one-pixel line (a crease slid over) is no patch
+    assert pop_pixels(*[result(x) for x in crease], *r) == 0
+
+
+def test_image_flow_gates_popping():
+    v0 = View([0.0, 0.0, 100.0], [0.0, 1000.0, 0.0], 60.0, 160, 90)
+    rays = v0.pixel_rays()
+    t = np.where(rays[..., 2] < 0, -100.0 / np.minimum(rays[..., 2], -1e-12), np.inf)    # flat ground at z = 0
+    ground = result(t)
+    assert image_flow(ground, v0, v0) < 1e-9
+    slow, fast = v0.moved([0.0, 0.5, 0.0]), v0.moved([0.0, 40.0, 0.0])
+    assert 0 < image_flow(ground, slow, v0) < POP_MAX_FLOW_PX < image_flow(ground, fast, v0)
+    same = (ground, ground, ground)
+    still = popping(same, same, (v0, v0, v0))
+    assert still["flow_px"] < 1e-9 and still["pop_px"] == 0
+    assert np.isnan(popping(same, same, (v0, fast, fast.moved([0.0, 40.0, 0.0])))["pop_px"])
+
+
+def test_colour_flicker_against_the_reference():
+    rng = np.random.default_rng(1)
+    r0 = RenderResult(rng.integers(0, 256, (40, 60, 3), dtype=np.uint8), np.full((40, 60), 100.0, np.float32))
+    stable = temporal_errors(r0, r0, r0, r0)
+    assert stable["error_flicker"] == 0 and stable["change_ratio"] == 1.0
+    pop = RenderResult(r0.colour.copy(), r0.distance)
+    pop.colour[20:30, 20:30] = 255 - pop.colour[20:30, 20:30]
+    r1 = RenderResult(r0.colour.copy(), r0.distance)
+    r1.colour[0, 0] = 0 if r1.colour[0, 0, 0] else 1        # tiny reference motion
+    t = temporal_errors(r0, pop, r0, r1)
+    assert t["error_flicker"] > 1.0 and t["change_ratio"] > 10
+
+
+@pytest.fixture(scope="module")
+def dolly(ctx):
+    """A slow dolly over a 257² fbm terrain (2 m a frame), 16 frames at 320x180, and their references."""
+    from hybrid.camera.flight import preset
+    from hybrid.reference import ReferenceRenderer
+    from hybrid.terrain.datasets import get_dataset
+    hf = get_dataset("fbm", size=257)
+    views = preset("dolly", hf, frames=16, width=320, height=180).views()
+    ref = ReferenceRenderer(ctx, hf)
+    try:
+        refs = [ref.render(v) for v in views]
+    finally:
+        ref.release()
+    return hf, views, refs
+
+
+def test_raster_without_geomorphing_pops_on_a_slow_dolly(ctx, dolly):
+    from hybrid.renderer import Renderer
+    hf, views, refs = dolly
+    pops = {}
+    for morph in (True, False):
+        with Renderer(ctx, hf, "raster", tile_size=32, morph=morph) as r:
+            frames = [r.render(v, 2.0) for v in views]
+        rows = [popping(frames[k - 1:k + 2], refs[k - 1:k + 2], views[k - 1:k + 2]) for k in range(1, len(views) - 1)]
+        assert all(row["flow_px"] <= POP_MAX_FLOW_PX for row in rows)          # slow enough to measure
+        pops[morph] = sum(row["pop_px"] for row in rows)
+    assert pops[False] >= 100, pops                          # level switches move whole tilelets in one frame
+    assert pops[True] * 10 <= pops[False], pops              # geomorphing spreads them over many frames
