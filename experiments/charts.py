@@ -20,7 +20,6 @@ from matplotlib.ticker import MaxNLocator  # noqa: E402
 from .noise import median_interval, repeat_matrix  # noqa: E402
 
 STRATEGY_CMAP = ListedColormap(["#f2f2f2", "#2b6cff", "#ff8c14"])   # no terrain, raster, ray cast
-CREDIT = "Puget Sound terrain: USGS, via the Georgia Tech Large Geometric Models Archive"
 MAX_COLS = 4             # panels a row
 
 
@@ -117,8 +116,6 @@ def _per_scene(f: pd.DataFrame, folder: Path, name: str, ycol: str, ylabel: str,
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
     figure_legend(fig, axes)
-    fig.supxlabel(" ", fontsize=8)              # an empty line the layout keeps free for the one below
-    fig.text(0.01, 0.0, CREDIT, fontsize=6, alpha=0.6)
     return save_figure(fig, folder, name)
 
 

@@ -14,8 +14,9 @@ import pandas as pd
 
 from hybrid.errors import TerrabenchError
 
-from .charts import CREDIT, all_charts, label_columns
+from .charts import all_charts, label_columns
 from .reading import reading
+from .spec_datasets import credit_lines
 from .tables import md_table
 
 
@@ -102,7 +103,9 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
         if not pngs:
             continue
         md += [f"## {titles[key]}", ""] + [f"![{p.stem}]({p.name})" for p in pngs] + [""]
-    md += ["---", CREDIT + "."]
+    credits = credit_lines(spec.get("datasets", []), frames["dataset"].unique())   # the data of this run only
+    credits = credits or ["Terrain: synthetic only (seeded, made by terrabench); no data to credit."]
+    md += ["---"] + [f"- {c}" for c in credits]
     (out / "report.md").write_text("\n".join(md) + "\n")
     h = ["<!doctype html><html><head><meta charset='utf-8'><title>terrabench report</title>",
          "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;font-size:12px}"
@@ -116,7 +119,7 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
         pngs = [p for p in files if p.suffix in (".png", ".gif")]
         if pngs:
             h.append(f"<h2>{titles[key]}</h2>" + "".join(f"<p><img src='{p.name}'></p>" for p in pngs))
-    h.append(f"<hr><p>{html.escape(CREDIT)}.</p></body></html>")
+    h.append("<hr>" + "".join(f"<p>{html.escape(c)}</p>" for c in credits) + "</body></html>")
     (out / "report.html").write_text("\n".join(h))
     return out / "report.md"
 

@@ -136,12 +136,9 @@ def failed_configs(folder) -> dict[str, str]:
     return {e["config"]: e["error"] for e in journal.rows("errors") if e["config"] not in finished}
 
 
-def _load_dataset(name: str, size: int, seed: int):
-    from hybrid.terrain.datasets import NAMES, get_dataset
-    from hybrid.terrain.loaders import load_terrain
-    if name in NAMES:
-        return get_dataset(name, size=size or None, seed=seed)
-    return load_terrain(name)
+def _load_dataset(spec: Spec, label: str, seed: int):
+    """The terrain of a spec's dataset label: its file with the entry's loader options, or a named dataset."""
+    return spec.source(label).load(size=spec.dataset_size or None, seed=seed)
 
 
 def _save_image(folder: Path, stem: str, result, full: bool = True) -> None:
@@ -194,7 +191,7 @@ def _run_configs(spec: Spec, folder: Path, ctx, progress: bool, fail_fast: bool)
             continue
         w, h = parse_size(size)
         try:
-            hf = _load_dataset(ds, spec.dataset_size, seed)
+            hf = _load_dataset(spec, ds, seed)
             views = get_flight(fl, hf, frames=spec.frames, width=w, height=h).views()
             for k, v in enumerate(views):
                 check_eye_above(hf, v, f"flight {fl} frame {k}")

@@ -1,7 +1,7 @@
 """Experiment specs (TOML): which datasets, flights, policies, tau values, sizes and modes to pair.
 
     name = "puget-default"
-    datasets = ["puget"]              # bundled names or height-field files
+    datasets = ["puget"]              # bundled names, height-field files, or tables (below)
     dataset_size = 0                  # samples a side for synthetic data / crop of puget (0 = as is)
     flights = ["flyover", "orbit"]    # presets or .json/.csv flight files
     frames = 12
@@ -16,6 +16,20 @@
     flip = true                       # compute mean FLIP (slower)
     image_frames = [0]                # frames whose images are kept for the report
     video = false                     # keep every frame's image for `terrabench report --video`
+
+A dataset entry can be a table giving a file and how to load it (every key but ``path`` optional), inline
+(``datasets = ["puget", {path = "dem.tif", spacing = 30.0}]``, one line) or, after every other key, as
+
+    [[datasets]]
+    path = "dem.tif"
+    name = "rainier"                  # its label in runs and reports (default: the path)
+    spacing = [25.0, 30.0]            # ground metres: one number, or [east-west, north-south]
+    vertical_scale = 0.1              # metres per stored unit
+    crs = "EPSG:32610"                # overrides the file's CRS
+    crop = {row = 0, col = 0, rows = 513, cols = 513}   # samples, rows as stored in the file
+    credit = "USGS 3DEP 1/3 arc-second DEM"              # the report's line for these data
+
+Relative paths are relative to the spec file's folder.
 """
 from __future__ import annotations
 
@@ -28,6 +42,9 @@ from typing import get_args
 from hybrid.camera.view import parse_size
 from hybrid.contract import Method
 from hybrid.errors import TerrabenchError
+from hybrid.terrain.sources import TerrainSource
+
+from .spec_datasets import check_dataset_entry, dataset_label, terrain_source
 
 POLICIES = get_args(Method)
 RECONSTRUCTIONS = ("planes", "linear", "triangles", "bilinear")
@@ -57,7 +74,8 @@ class Spec:
     def configs(self) -> list[dict]:
         """Every combination, one dict each, with a stable id; frames of one (dataset, seed, flight, size) are paired."""
         out = []
-        for ds, seed, fl, size, tau, rec, pol in itertools.product(self.datasets, self.seeds, self.flights, self.sizes,
+        labels = [dataset_label(d) for d in self.datasets]
+        for ds, seed, fl, size, tau, rec, pol in itertools.product(labels, self.seeds, self.flights, self.sizes,
                                                                    self.taus, self.reconstructions, self.policies):
             if pol not in ("raycast", "hybrid", "heuristic", "oracle") and rec != self.reconstructions[0]:
                 continue                      # reconstruction only matters where rays are cast
@@ -67,6 +85,13 @@ class Spec:
             out.append({"config": cid, "dataset": ds, "seed": seed, "flight": fl, "size": size, "tau": tau,
                         "reconstruction": rec, "policy": pol})
         return out
+
+    def source(self, label: str) -> TerrainSource:
+        """The terrain a dataset label (as in configs()) names, with its loader options and credit."""
+        for entry in self.datasets:
+            if dataset_label(entry) == label:
+                return terrain_source(entry)
+        raise TerrabenchError(f"spec {self.name!r} has no dataset {label!r}")
 
     def to_dict(self) -> dict:
         """Plain form."""
@@ -137,8 +162,11 @@ def parse_stress_spec(d: dict, source: str) -> StressSpec:
     return StressSpec(**kw)
 
 
-def parse_spec(text: str, source: str = "spec"):
-    """Parse and check TOML text (a paired-flight Spec, or a StressSpec when kind = "stress")."""
+def parse_spec(text: str, source: str = "spec", base: Path | None = None):
+    """Parse and check TOML text (a paired-flight Spec, or a StressSpec when kind = "stress").
+
+    ``base`` is the folder relative dataset paths are taken from (the spec file's); None keeps them as given.
+    """
     try:
         d = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -175,7 +203,16 @@ def parse_spec(text: str, source: str = "spec"):
     kw = {"name": d.get("name", Path(source).stem)}
     if not isinstance(kw["name"], str) or not kw["name"] or any(c in kw["name"] for c in "/\\ "):
         raise TerrabenchError(f"{source}: name must be a non-empty word without slashes or spaces, got {kw['name']!r}")
-    for key, kind, check in (("datasets", str, None), ("flights", str, None), ("policies", str, policy_ok),
+    if "datasets" in d:
+        v = d["datasets"]
+        if not isinstance(v, list) or not v:
+            raise TerrabenchError(f"{source}: 'datasets' must be a non-empty list, got {v!r}")
+        kw["datasets"] = [check_dataset_entry(e, source, base) for e in v]
+        labels = [dataset_label(e) for e in kw["datasets"]]
+        twice = sorted({label for label in labels if labels.count(label) > 1})
+        if twice:
+            raise TerrabenchError(f"{source}: datasets {twice} appear twice; give each a distinct 'name'")
+    for key, kind, check in (("flights", str, None), ("policies", str, policy_ok),
                              ("taus", (int, float), tau_ok), ("sizes", str, size_ok),
                              ("reconstructions", str, rec_ok), ("seeds", int, seed_ok), ("image_frames", int, None)):
         v = _list(d, key, kind, check)
@@ -217,4 +254,4 @@ def load_spec(path) -> Spec:
         text = p.read_text()
     except (OSError, UnicodeDecodeError) as exc:
         raise TerrabenchError(f"{path}: cannot read spec ({exc})") from None
-    return parse_spec(text, str(p))
+    return parse_spec(text, str(p), p.resolve().parent)

@@ -17,7 +17,7 @@ import pandas as pd
 from hybrid.atomic import write_json, write_parquet, write_text
 from hybrid.camera.view import View
 from hybrid.errors import TerrabenchError
-from hybrid.terrain.datasets import get_dataset, puget
+from hybrid.terrain.datasets import PUGET_CREDIT, get_dataset, puget
 from hybrid.terrain.heightfield import HeightField
 
 SCENES = ("spike", "cliff", "staircase", "ridges", "flat", "puget", "puget_x100")
@@ -293,4 +293,6 @@ def write_stress_report(df: pd.DataFrame, folder: Path) -> Path:
           "*cracks* are pixels without terrain with terrain above them in their image column.", "",
           "## Reading", ""] + [f"- {s}" for s in stress_reading(df)] + [
           "", f"![failures]({chart[0].name})", "", "## All cases", "", md_table(df[cols]), ""]
+    if df["scene"].astype(str).str.startswith("puget").any():        # credit the bundled data when it was used
+        md += ["---", f"- {PUGET_CREDIT}", ""]
     return write_text(folder / "stress.md", "\n".join(md))

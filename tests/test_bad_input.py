@@ -37,7 +37,7 @@ UNWRITABLE = "/proc/terrabench-out"          # not writable, even for root
     (["stress", "--out", UNWRITABLE], "not a writable folder"),
     (["bench", "--which", "gpu"], "--which"),
     (["bench", "--frames", "0"], "--frames"),
-    (["info", "OUT/corrupt.tif", "--no-gl"], "not a readable TIFF"),
+    (["info", "OUT/corrupt.tif", "--no-gl"], "not a readable raster"),
     (["info", "--dataset", "fbm", "--size-samples", "99999", "--no-gl"], "dataset size"),
     (["render", "--out", "OUT/a.png", "--dataset", "HUGE", "--spacing", "30"], "beyond ±1e+07 m"),
     (["render", "--out", "OUT/a.png", "--offset", "1e20,0,0"], "beyond the world limit"),

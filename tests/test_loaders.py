@@ -2,7 +2,8 @@
 
 import numpy as np
 import pytest
-import tifffile
+import rasterio
+from rasterio.transform import from_origin
 
 from hybrid.errors import TerrabenchError, TerrainLoadError
 from hybrid.terrain.datasets import NAMES, get_dataset
@@ -37,18 +38,19 @@ def test_png_roundtrip_matches_bundled(tmp_path, puget_full):
     assert np.array_equal(hf.heights, puget_full.heights)
 
 
-def test_geotiff_nodata_and_pixel_scale(tmp_path):
+def test_geotiff_nodata_and_pixel_size(tmp_path):
     a = np.arange(40 * 30, dtype=np.float32).reshape(40, 30)
     a[5:8, 10:12] = -9999.0
     p = tmp_path / "dem.tif"
-    tifffile.imwrite(p, a, extratags=[(33550, "d", 3, (25.0, 25.0, 0.0)), (42113, "s", 0, "-9999", True)])
+    with rasterio.open(p, "w", driver="GTiff", width=30, height=40, count=1, dtype="float32", nodata=-9999.0,
+                       crs="EPSG:32610", transform=from_origin(500000 - 15 * 25.0, 5e6, 25.0, 25.0)) as dst:
+        dst.write(a, 1)
     with pytest.warns(NoDataWarning, match="6 no-data samples"):
         hf = load_terrain(p)
-    assert hf.spacing == 25.0
+    assert hf.spacing == pytest.approx(25.0 / 0.9996)             # UTM pixels on the central meridian
     assert hf.nodata_filled == 6
-    assert hf.heights.min() >= 0                       # filled from neighbours, not -9999
     filled = hf.heights[::-1][5:8, 10:12]
-    assert np.all((filled > a[4, 10] - 1) & (filled < a[8, 11] + 1))
+    assert np.allclose(filled, np.arange(40 * 30).reshape(40, 30)[5:8, 10:12], atol=1e-2)   # a ramp, continued
 
 
 def test_npy_npz_hgt_raw(tmp_path):
@@ -65,6 +67,9 @@ def test_npy_npz_hgt_raw(tmp_path):
     with pytest.warns(NoDataWarning):
         h = load_terrain(tmp_path / "N47W122.hgt")
     assert h.nodata_filled == 5 and np.all(h.heights == 100.0)
+    assert 62.6 < h.spacing_x < 62.9 and 92.5 < h.spacing_y < 92.8    # 3" at 47.5 N (GDAL reads it from the name)
+    save_npz(HeightField(a, (2.0, 3.5)), tmp_path / "pair.npz")
+    assert load_terrain(tmp_path / "pair.npz").spacing == (2.0, 3.5)
     a.astype("<f4").tofile(tmp_path / "a.raw")
     r = load_terrain(tmp_path / "a.raw", shape=(33, 17), dtype="<f4", spacing=1.0)
     assert np.array_equal(r.heights, a[::-1])           # raw grids are north-up
@@ -106,7 +111,7 @@ def test_bad_files(tmp_path):
     with pytest.raises(TerrainLoadError, match="spacing"):
         np.save(tmp_path / "s.npy", np.ones((4, 4)))
         load_terrain(tmp_path / "s.npy")
-    with pytest.raises(TerrainLoadError, match="not an SRTM tile"):
+    with pytest.raises(TerrainLoadError, match="SRTM tiles must keep their tile name"):
         (tmp_path / "b.hgt").write_bytes(b"\0" * 100)
         load_terrain(tmp_path / "b.hgt")
     with pytest.raises(TerrabenchError, match="unknown dataset"):

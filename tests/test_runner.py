@@ -63,8 +63,9 @@ def test_report_and_charts(run, tmp_path):
     md = write_report(folder, tmp_path)
     text = md.read_text()
     for part in ("## Environment", "GL renderer:", "## Reading", "## Summary", "frame_time.png", "speed_vs_accuracy.png",
-                 "Puget Sound terrain: USGS"):
+                 "Terrain: synthetic only"):
         assert part in text, part
+    assert "Puget Sound" not in text and "Puget Sound" not in (md.parent / "report.html").read_text()   # not used here
     for name in ("frame_time", "gpu_memory", "speed_vs_accuracy", "strategy_mix", "images_fbm_flyover_160x90_f1"):
         assert (md.parent / f"{name}.png").stat().st_size > 5000 and (md.parent / f"{name}.svg").exists()
     assert (md.parent / "report.html").read_text().count("<img") >= 5

@@ -78,6 +78,9 @@ def test_report_section(table, tmp_path):
     assert "## Reading" in text and "stress_failures.png" in text
     assert (tmp_path / "stress_failures.png").stat().st_size > 10000
     assert len(pd.read_parquet(tmp_path / "stress.parquet")) == len(table)
+    assert text.count("Puget Sound terrain: USGS") == 1                  # the scenes include Puget windows
+    synthetic = write_stress_report(table[~table["scene"].str.startswith("puget")], tmp_path / "synthetic")
+    assert "Puget Sound" not in synthetic.read_text()
 
 
 def test_views_a_user_could_not_give_are_flagged(table):

@@ -12,6 +12,7 @@ from typing import Callable, Iterable
 import numpy as np
 
 from hybrid.errors import TerrabenchError, check_positive
+from hybrid.terrain.window import Crop
 
 
 def positive_float(option: str, unit: str = "") -> Callable[[str], float]:
@@ -61,6 +62,22 @@ def rows_cols(option: str) -> Callable[[str], tuple[int, int]]:
             raise TerrabenchError(f"{option} must be ROWSxCOLS, got {text!r}") from None
         return rows, cols
     return check
+
+
+def spacing(option: str) -> Callable[[str], float | tuple[float, float]]:
+    """A check for a ground spacing in metres: one number, or X,Y (east-west, north-south), each finite and > 0."""
+    def check(text: str) -> float | tuple[float, float]:
+        parts = text.split(",")
+        if len(parts) not in (1, 2):
+            raise TerrabenchError(f"{option} must be one number or X,Y (metres east-west, north-south), got {text!r}")
+        values = [check_positive(f"{option} (metres)", p.strip()) for p in parts]
+        return values[0] if len(values) == 1 else (values[0], values[1])
+    return check
+
+
+def crop(option: str) -> Callable[[str], Crop]:
+    """A check for a crop window ROW,COL,ROWS,COLS in samples, rows as stored in the file, giving a Crop."""
+    return lambda text: Crop.parse(text, option)
 
 
 def vec3(option: str) -> Callable[[str], np.ndarray]:

@@ -7,11 +7,11 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import dataclass, fields
-from pathlib import Path
 
 import numpy as np
 
 from hybrid.errors import TerrabenchError
+from hybrid.terrain.window import Crop
 
 from . import argtypes
 
@@ -29,25 +29,23 @@ class TerrainOptions:
     size_samples: int | None = None          # samples a side for synthetic data, or a crop of puget
     seed: int = 0                            # seed for synthetic data
     vertical_scale: float | None = None      # metres per stored unit (files)
-    spacing: float | None = None             # metres between samples (files)
+    spacing: float | tuple[float, float] | None = None   # metres between samples, or (east-west, north-south)
+    crs: str | None = None                   # CRS override for GDAL formats (EPSG:XXXX, WKT, PROJ string)
+    crop: Crop | None = None                 # window of a file, rows as stored
     raw_shape: tuple[int, int] | None = None
     raw_dtype: str | None = None
     offset: np.ndarray | None = None         # world x, y, z of the terrain's origin in metres
 
     def load(self):
         """The HeightField these options name."""
-        from hybrid.terrain.datasets import NAMES, get_dataset
-        from hybrid.terrain.loaders import load_terrain
-        if self.dataset in NAMES:
-            hf = get_dataset(self.dataset, size=self.size_samples, seed=self.seed)
-        elif Path(self.dataset).suffix:
-            opts = {"vertical_scale": self.vertical_scale, "spacing": self.spacing}
-            if self.raw_shape:
-                opts.update(shape=tuple(self.raw_shape), dtype=self.raw_dtype)
-            hf = load_terrain(self.dataset, **opts)
-        else:
-            raise TerrabenchError(f"unknown dataset {self.dataset!r}; choose one of {', '.join(NAMES)} "
-                                  "or give a file path")
+        from hybrid.terrain.sources import TerrainSource
+        source = TerrainSource(self.dataset, spacing=self.spacing, vertical_scale=self.vertical_scale, crs=self.crs,
+                               crop=self.crop, raw_shape=None if self.raw_shape is None else tuple(self.raw_shape),
+                               raw_dtype=self.raw_dtype)
+        if source.is_file and self.size_samples is not None:
+            raise TerrabenchError("--size-samples applies to synthetic data and puget; for a file, give a window "
+                                  "with --crop ROW,COL,ROWS,COLS")
+        hf = source.load(size=self.size_samples, seed=self.seed)
         return hf.moved(self.offset) if self.offset is not None else hf
 
 
@@ -57,8 +55,14 @@ def add_terrain_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--size-samples", type=int, default=None, help="samples per side for synthetic data, or a crop of puget")
     p.add_argument("--seed", type=argtypes.int_in("--seed", 0, 2**32 - 1), default=0, help="seed for synthetic data")
     p.add_argument("--vertical-scale", type=argtypes.positive_float("--vertical-scale", "metres per stored unit"),
-                   default=None, help="metres per stored unit (files), > 0")
-    p.add_argument("--spacing", type=float, default=None, help="metres between samples (files)")
+                   default=None, help="metres per stored unit (files; overrides the file's vertical unit)")
+    p.add_argument("--spacing", type=argtypes.spacing("--spacing"), default=None,
+                   help="ground metres between samples, one number or X,Y east-west,north-south (files; overrides "
+                        "the CRS)")
+    p.add_argument("--crs", default=None, help="CRS of a GDAL-format file, overriding the file's (e.g. EPSG:32610)")
+    p.add_argument("--crop", type=argtypes.crop("--crop"), default=None,
+                   help="ROW,COL,ROWS,COLS window of a file in samples, rows as stored (row 0 = north edge of "
+                        "north-up files)")
     p.add_argument("--raw-shape", type=argtypes.rows_cols("--raw-shape"), default=None, help="ROWSxCOLS for raw files")
     p.add_argument("--raw-dtype", default=None, help="NumPy dtype for raw files, e.g. <u2, <f4")
     p.add_argument("--offset", type=argtypes.vec3("--offset"), default=None, help="place the terrain at world x,y,z metres")

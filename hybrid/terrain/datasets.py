@@ -12,6 +12,7 @@ PUGET_SPACING = 160.0     # metres between samples
 PUGET_SCALE = 0.1         # metres per 16-bit unit
 PUGET_CREDIT = ("Puget Sound terrain: USGS data, made available by the University of Washington, "
                 "via the Georgia Tech Large Geometric Models Archive.")
+CREDITS = {"puget": PUGET_CREDIT}   # credit lines of bundled data (synthetic terrain is made here)
 
 
 def _data_path(name: str):

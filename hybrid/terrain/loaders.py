@@ -1,88 +1,29 @@
-"""Height-field loaders: 16-bit PNG, GeoTIFF, .npy/.npz, SRTM .hgt and raw grids, with no-data filling.
+"""Height-field files: anything GDAL reads (through rasterio), 16-bit PNG, .npy/.npz and raw grids.
 
-Image-like files (PNG, GeoTIFF, HGT, raw) are north-up: their first row is the north edge. They are
-flipped on reading so that row 0 is the south edge (see hybrid.terrain.heightfield). ``.npy``/``.npz`` arrays are
-taken as already in the project's south-up order (what ``save_npz`` writes).
-
-No-data (the file's GDAL no-data tag, SRTM's -32768, NaN/inf, or a value given by the caller) is filled
-by iterated neighbour averaging: each pass gives every missing sample that touches known samples the
-mean of its known 4-neighbours, until none is missing. The count goes into ``HeightField.nodata_filled``
-and a warning names the file.
+GeoTIFF/COG, SRTM .hgt, Esri .asc, .vrt and the other GDAL formats go through hybrid.terrain.gdal_files,
+which takes CRS, transform, no-data and masks from the file. Image-like files (GDAL formats, PNG, raw) are
+north-up: their first stored row is the north edge, and they are flipped on reading so that row 0 is the
+south edge (see hybrid.terrain.heightfield). ``.npy``/``.npz`` arrays are taken as already south-up (what
+``save_npz`` writes). No-data is filled by hybrid.terrain.voids, counted in ``HeightField.nodata_filled``,
+and reported in a NoDataWarning and a note.
 """
 from __future__ import annotations
 
 import os
-import warnings
 from pathlib import Path
 
 import numpy as np
 
-from hybrid.errors import TerrabenchError, TerrainLoadError
+from hybrid.errors import TerrainLoadError
+from hybrid.terrain.assemble import NoDataWarning, assemble
 from hybrid.terrain.heightfield import HeightField
+from hybrid.terrain.window import Crop
 
-SRTM_NODATA = -32768
-SUFFIXES = {".png": "png", ".tif": "tiff", ".tiff": "tiff", ".npy": "npy", ".npz": "npz", ".hgt": "hgt",
-            ".raw": "raw", ".bin": "raw", ".r16": "raw", ".r32": "raw"}
+__all__ = ["NoDataWarning", "load_terrain", "load_png16", "load_npy", "load_raw", "load_texture", "save_npz"]
 
-
-class NoDataWarning(UserWarning):
-    """Some samples of a height field had no data and were filled."""
-
-
-def fill_nodata(values: np.ndarray, missing: np.ndarray) -> np.ndarray:
-    """Fill samples where ``missing`` is True by iterated 4-neighbour averaging of known samples (float64)."""
-    h = np.where(missing, 0.0, values).astype(np.float64)
-    known = ~missing
-    if not known.any():
-        raise TerrabenchError("every sample is no-data: nothing to fill from")
-    while not known.all():
-        s = np.zeros_like(h)
-        n = np.zeros(h.shape, dtype=np.int32)
-        kh = np.where(known, h, 0.0)
-        ki = known.astype(np.int32)
-        s[1:, :] += kh[:-1, :]; n[1:, :] += ki[:-1, :]
-        s[:-1, :] += kh[1:, :]; n[:-1, :] += ki[1:, :]
-        s[:, 1:] += kh[:, :-1]; n[:, 1:] += ki[:, :-1]
-        s[:, :-1] += kh[:, 1:]; n[:, :-1] += ki[:, 1:]
-        grow = (~known) & (n > 0)
-        h[grow] = s[grow] / n[grow]
-        known = known | grow
-    return h
-
-
-def _finish(path: str, raw: np.ndarray, *, scale: float, spacing, nodata=None, north_up=True,
-            name=None, texture=None, origin=(0.0, 0.0, 0.0), notes=()) -> HeightField:
-    """Turn a raw 2-D array into a HeightField: check, find and fill no-data, scale, flip to south-up."""
-    if raw.ndim != 2:
-        raise TerrainLoadError(f"{path}: expected a 2-D grid of heights, got shape {raw.shape}")
-    if raw.size == 0:
-        raise TerrainLoadError(f"{path}: the file holds an empty grid")
-    if raw.shape[0] < 2 or raw.shape[1] < 2:
-        raise TerrainLoadError(f"{path}: a terrain needs at least 2x2 samples, got {raw.shape[0]}x{raw.shape[1]}")
-    if not (np.issubdtype(raw.dtype, np.integer) or np.issubdtype(raw.dtype, np.floating)) or raw.dtype == np.bool_:
-        raise TerrainLoadError(f"{path}: heights must be integers or floats, got dtype {raw.dtype}")
-    vals = raw.astype(np.float64)
-    missing = ~np.isfinite(vals)
-    if nodata is not None and np.isfinite(nodata):
-        missing |= vals == float(nodata)
-    n_missing = int(missing.sum())
-    if n_missing == vals.size:
-        raise TerrainLoadError(f"{path}: all {vals.size} samples are no-data")
-    if n_missing:
-        vals = fill_nodata(vals, missing)
-        warnings.warn(f"{path}: {n_missing} no-data samples ({100 * n_missing / vals.size:.2f} %) filled by "
-                      "neighbour averaging", NoDataWarning, stacklevel=3)
-    heights = (vals * scale).astype(np.float32)
-    if north_up:
-        heights = heights[::-1]
-        if texture is not None:
-            texture = texture[::-1]
-    try:
-        hf = HeightField(np.ascontiguousarray(heights), spacing, origin, name or Path(path).stem,
-                         None if texture is None else np.ascontiguousarray(texture), n_missing, str(path), list(notes))
-    except TerrabenchError as exc:
-        raise TerrainLoadError(f"{path}: {exc}") from None
-    return hf
+GDAL_SUFFIXES = (".tif", ".tiff", ".hgt", ".asc", ".vrt", ".img", ".bil", ".dem")
+SUFFIXES = {".png": "png", ".npy": "npy", ".npz": "npz", ".raw": "raw", ".bin": "raw", ".r16": "raw", ".r32": "raw",
+            **{s: "gdal" for s in GDAL_SUFFIXES}}
 
 
 def _need(path, what, value):
@@ -91,7 +32,17 @@ def _need(path, what, value):
     return value
 
 
-def load_png16(path, *, vertical_scale=None, spacing=None, texture_path=None, name=None) -> HeightField:
+def _cropped(path, arr: np.ndarray, crop: Crop | None, notes: list) -> np.ndarray:
+    """The crop window of an array in file order (the whole array without one)."""
+    if crop is None:
+        return arr
+    crop.check(arr.shape[:2], path)
+    notes.append(f"window {crop.describe()} of {arr.shape[0]}x{arr.shape[1]}")
+    return arr[crop.slices()]
+
+
+def load_png16(path, *, vertical_scale=None, spacing=None, crop: Crop | None = None, texture_path=None,
+               name=None) -> HeightField:
     """Load a 16-bit (or 8-bit) greyscale PNG; height = value * vertical_scale metres, north-up file."""
     from PIL import Image, UnidentifiedImageError
     try:
@@ -104,8 +55,12 @@ def load_png16(path, *, vertical_scale=None, spacing=None, texture_path=None, na
     tex = None
     if texture_path is not None:
         tex = load_texture(texture_path, (arr.shape[0] - 1, arr.shape[1] - 1))
-    return _finish(path, arr, scale=float(_need(path, "vertical scale", vertical_scale)),
-                   spacing=float(_need(path, "spacing", spacing)), texture=tex, name=name)
+    notes: list[str] = []
+    arr = _cropped(path, arr, crop, notes)
+    if tex is not None and crop is not None:
+        tex = tex[crop.row:crop.row + crop.rows - 1, crop.col:crop.col + crop.cols - 1]
+    return assemble(path, arr, scale=float(_need(path, "vertical scale", vertical_scale)),
+                    spacing=_need(path, "spacing", spacing), texture=tex, name=name, notes=notes)
 
 
 def load_texture(path, cells_shape) -> np.ndarray:
@@ -122,37 +77,7 @@ def load_texture(path, cells_shape) -> np.ndarray:
     return tex
 
 
-def load_geotiff(path, *, vertical_scale=None, spacing=None, name=None) -> HeightField:
-    """Load a single-band GeoTIFF via tifffile, using GDAL_NODATA and ModelPixelScale when present."""
-    import tifffile
-    try:
-        with tifffile.TiffFile(path) as tif:
-            page = tif.pages[0]
-            arr = page.asarray()
-            tags = {t.name: t.value for t in page.tags.values()}
-    except Exception as exc:  # tifffile raises many types for corrupt files
-        raise TerrainLoadError(f"{path}: not a readable TIFF ({type(exc).__name__}: {exc})") from None
-    if arr.ndim == 3 and arr.shape[-1] == 1:
-        arr = arr[..., 0]
-    nodata = None
-    if "GDAL_NODATA" in tags:
-        try:
-            nodata = float(str(tags["GDAL_NODATA"]).strip().strip("\x00"))
-        except ValueError:
-            raise TerrainLoadError(f"{path}: GDAL_NODATA tag {tags['GDAL_NODATA']!r} is not a number") from None
-    notes = []
-    if spacing is None and "ModelPixelScaleTag" in tags:
-        sx, sy = float(tags["ModelPixelScaleTag"][0]), float(tags["ModelPixelScaleTag"][1])
-        if sx <= 0 or abs(sx - sy) > 1e-9 * max(sx, sy):
-            raise TerrainLoadError(f"{path}: pixel scale {sx} x {sy} is not square; pass --spacing")
-        spacing = sx
-        if sx < 0.01:
-            notes.append(f"pixel scale {sx} looks like degrees; pass --spacing in metres to override")
-    return _finish(path, arr, scale=1.0 if vertical_scale is None else float(vertical_scale),
-                   spacing=float(_need(path, "spacing", spacing)), nodata=nodata, name=name, notes=notes)
-
-
-def load_npy(path, *, vertical_scale=None, spacing=None, name=None) -> HeightField:
+def load_npy(path, *, vertical_scale=None, spacing=None, crop: Crop | None = None, name=None) -> HeightField:
     """Load .npy (a 2-D array) or .npz (key 'heights', else the only array; optional 'spacing': one number or
     (x, y) metres), south-up."""
     try:
@@ -176,27 +101,14 @@ def load_npy(path, *, vertical_scale=None, spacing=None, name=None) -> HeightFie
                 spacing = float(stored.reshape(-1)[0]) if stored.size == 1 else tuple(float(v) for v in stored)
     else:
         arr = data
-    return _finish(path, np.asarray(arr), scale=1.0 if vertical_scale is None else float(vertical_scale),
-                   spacing=_need(path, "spacing", spacing), north_up=False, name=name)
+    notes: list[str] = []
+    arr = _cropped(path, np.asarray(arr), crop, notes) if np.ndim(arr) == 2 else np.asarray(arr)
+    return assemble(path, arr, scale=1.0 if vertical_scale is None else float(vertical_scale),
+                    spacing=_need(path, "spacing", spacing), north_up=False, name=name, notes=notes)
 
 
-def load_hgt(path, *, vertical_scale=None, spacing=None, name=None) -> HeightField:
-    """Load an SRTM .hgt tile (1201² 3-arc-second or 3601² 1-arc-second big-endian int16, -32768 = no data)."""
-    size = os.path.getsize(path)
-    side = {1201 * 1201 * 2: 1201, 3601 * 3601 * 2: 3601}.get(size)
-    if side is None:
-        raise TerrainLoadError(f"{path}: {size} bytes is not an SRTM tile (1201² or 3601² int16 samples)")
-    arr = np.fromfile(path, dtype=">i2").reshape(side, side)
-    # one arc-second of latitude is about 30.87 m; longitude spacing shrinks with latitude (not corrected)
-    default = 92.6 if side == 1201 else 30.87
-    notes = [] if spacing is not None else [f"SRTM spacing taken as {default} m (arc-seconds at the equator)"]
-    return _finish(path, arr, scale=1.0 if vertical_scale is None else float(vertical_scale),
-                   spacing=float(spacing if spacing is not None else default), nodata=SRTM_NODATA, name=name,
-                   notes=notes)
-
-
-def load_raw(path, *, shape, dtype, vertical_scale=1.0, spacing=None, north_up=True, nodata=None,
-             name=None) -> HeightField:
+def load_raw(path, *, shape, dtype, vertical_scale=1.0, spacing=None, crop: Crop | None = None, north_up=True,
+             nodata=None, name=None) -> HeightField:
     """Load a headerless grid of the given (rows, cols) shape and NumPy dtype (e.g. '<u2', '<f4')."""
     try:
         dt = np.dtype(dtype)
@@ -207,13 +119,19 @@ def load_raw(path, *, shape, dtype, vertical_scale=1.0, spacing=None, north_up=T
     size = os.path.getsize(path)
     if size != need:
         raise TerrainLoadError(f"{path}: {size} bytes, but shape {rows}x{cols} of {dt} needs {need}")
-    arr = np.fromfile(path, dtype=dt).reshape(rows, cols)
-    return _finish(path, arr, scale=float(vertical_scale), spacing=float(_need(path, "spacing", spacing)),
-                   north_up=north_up, nodata=nodata, name=name)
+    notes: list[str] = []
+    arr = _cropped(path, np.fromfile(path, dtype=dt).reshape(rows, cols), crop, notes)
+    return assemble(path, arr, scale=float(vertical_scale), spacing=_need(path, "spacing", spacing),
+                    north_up=north_up, nodata=nodata, name=name, notes=notes)
 
 
 def load_terrain(path, **options) -> HeightField:
-    """Load any supported height-field file, choosing the reader by suffix; options go to that reader."""
+    """Load any supported height-field file, choosing the reader by suffix; options go to that reader.
+
+    Options: ``spacing`` (metres, one number or (x, y)), ``vertical_scale`` (metres per stored unit),
+    ``crop`` (a Crop window, rows as stored), ``crs`` (GDAL formats), ``shape``/``dtype`` (raw grids), ``name``.
+    """
+    from hybrid.terrain.gdal_files import load_gdal
     p = Path(path)
     if not p.exists():
         raise TerrainLoadError(f"{path}: no such file")
@@ -225,10 +143,13 @@ def load_terrain(path, **options) -> HeightField:
     if kind is None:
         raise TerrainLoadError(f"{path}: unknown suffix {p.suffix!r}; supported: {', '.join(sorted(SUFFIXES))}")
     options = {k: v for k, v in options.items() if v is not None}
-    reader = {"png": load_png16, "tiff": load_geotiff, "npy": load_npy, "npz": load_npy, "hgt": load_hgt,
-              "raw": load_raw}[kind]
+    reader = {"png": load_png16, "gdal": load_gdal, "npy": load_npy, "npz": load_npy, "raw": load_raw}[kind]
     if kind == "raw" and ("shape" not in options or "dtype" not in options):
-        raise TerrainLoadError(f"{path}: a raw grid needs an explicit shape (--raw-shape ROWSxCOLS) and dtype (--raw-dtype)")
+        raise TerrainLoadError(f"{path}: a raw grid needs an explicit shape (--raw-shape ROWSxCOLS) and dtype "
+                               "(--raw-dtype)")
+    if "crs" in options and kind != "gdal":
+        raise TerrainLoadError(f"{path}: --crs applies to GDAL formats ({', '.join(GDAL_SUFFIXES)}), not {p.suffix}; "
+                               "give the ground spacing with --spacing")
     try:
         return reader(str(p), **options)
     except TypeError as exc:
@@ -236,5 +157,5 @@ def load_terrain(path, **options) -> HeightField:
 
 
 def save_npz(hf: HeightField, path) -> None:
-    """Write heights (south-up, metres) and spacing (x, y metres) to an .npz that load_npy reads back."""
+    """Write heights (south-up, metres) and ground spacing (x, y metres) to an .npz that load_npy reads back."""
     np.savez(path, heights=hf.heights, spacing=np.array([hf.spacing_x, hf.spacing_y], dtype=np.float64))

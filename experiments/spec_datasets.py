@@ -1,0 +1,109 @@
+"""Dataset entries of a spec: a bundled or synthetic name, a file path, or a table of a file and its loader options.
+
+A table's keys: ``path`` (required), ``name`` (its label in runs and reports), ``spacing`` (ground metres: one
+number or [east-west, north-south]), ``vertical_scale`` (metres per stored unit), ``crs`` (overrides the file's),
+``crop`` ({row, col, rows, cols} in samples, rows as stored in the file) and ``credit`` (the report's line).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from hybrid.errors import TerrabenchError
+from hybrid.terrain.sources import TerrainSource
+from hybrid.terrain.window import Crop
+
+DATASET_KEYS = ("path", "name", "spacing", "vertical_scale", "crs", "crop", "credit")
+CROP_KEYS = ("row", "col", "rows", "cols")
+
+
+def dataset_label(entry) -> str:
+    """The label of a dataset entry in configs, tables and reports: its name, else its path or dataset name."""
+    return entry if isinstance(entry, str) else entry.get("name") or entry["path"]
+
+
+def terrain_source(entry) -> TerrainSource:
+    """The TerrainSource of a checked dataset entry (a name or path, or a table)."""
+    if isinstance(entry, str):
+        return TerrainSource(entry)
+    spacing = entry.get("spacing")
+    crop = entry.get("crop")
+    return TerrainSource(entry["path"], spacing=tuple(spacing) if isinstance(spacing, list) else spacing,
+                         vertical_scale=entry.get("vertical_scale"), crs=entry.get("crs"),
+                         crop=None if crop is None else Crop(**crop), credit=entry.get("credit"),
+                         name=entry.get("name"))
+
+
+def credit_lines(datasets: list, used) -> list[str]:
+    """The credit lines of the dataset entries whose labels are in ``used`` (each once, in spec order)."""
+    used = {str(u) for u in used}
+    out = []
+    for entry in datasets:
+        if dataset_label(entry) in used:
+            line = terrain_source(entry).credit_line()
+            if line and line not in out:
+                out.append(line)
+    return out
+
+
+def _positive(value, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (0 < value < float("inf")):
+        raise TerrabenchError(f"{what} must be a number > 0, got {value!r}")
+    return float(value)
+
+
+def check_dataset_entry(entry, source: str, base: Path | None):
+    """A checked dataset entry: a name or path (relative paths resolved against base), or a table of loader options."""
+    from hybrid.terrain.datasets import NAMES
+    from hybrid.terrain.georef import parse_crs
+
+    def resolve(path: str) -> str:
+        file = path not in NAMES and Path(path).suffix and not Path(path).is_absolute()
+        return str(base / path) if base is not None and file else path
+
+    if isinstance(entry, str):
+        if not entry:
+            raise TerrabenchError(f"{source}: a dataset entry is an empty string")
+        return resolve(entry)
+    if not isinstance(entry, dict):
+        raise TerrabenchError(f"{source}: 'datasets' entries must be names, paths or tables, got {entry!r}")
+    unknown = set(entry) - set(DATASET_KEYS)
+    if unknown:
+        raise TerrabenchError(f"{source}: dataset keys {sorted(unknown)} unknown; known: {', '.join(DATASET_KEYS)}")
+    path = entry.get("path")
+    if not isinstance(path, str) or not path:
+        raise TerrabenchError(f"{source}: a dataset table needs 'path' (a file or dataset name), got {entry!r}")
+    what = f"{source}: dataset {entry.get('name') or path!r}"
+    out = {"path": resolve(path)}
+    given = [k for k in ("spacing", "vertical_scale", "crs", "crop") if k in entry]
+    if path in NAMES and given:
+        raise TerrabenchError(f"{what}: {', '.join(given)} apply to files, not the bundled or synthetic {path!r}")
+    for key in ("name", "credit", "crs"):
+        if key in entry:
+            if not isinstance(entry[key], str) or not entry[key].strip():
+                raise TerrabenchError(f"{what}: '{key}' must be a non-empty string, got {entry[key]!r}")
+            out[key] = entry[key]
+    if "name" in out and any(c in out["name"] for c in "/\\ "):
+        raise TerrabenchError(f"{what}: 'name' must be a word without slashes or spaces, got {out['name']!r}")
+    if "crs" in out:
+        parse_crs(out["crs"], f"{what}: crs")
+    if "spacing" in entry:
+        v = entry["spacing"]
+        if isinstance(v, list):
+            if len(v) != 2:
+                raise TerrabenchError(f"{what}: 'spacing' must be one number or [east-west, north-south] metres, "
+                                      f"got {v!r}")
+            out["spacing"] = [_positive(x, f"{what}: 'spacing'") for x in v]
+        else:
+            out["spacing"] = _positive(v, f"{what}: 'spacing' (metres)")
+    if "vertical_scale" in entry:
+        out["vertical_scale"] = _positive(entry["vertical_scale"], f"{what}: 'vertical_scale' (metres per unit)")
+    if "crop" in entry:
+        c = entry["crop"]
+        if not isinstance(c, dict) or set(c) != set(CROP_KEYS):
+            raise TerrabenchError(f"{what}: 'crop' must be a table {{row, col, rows, cols}} in samples, got {c!r}")
+        try:
+            Crop(**c)
+        except TerrabenchError as exc:
+            raise TerrabenchError(f"{what}: {exc}") from None
+        out["crop"] = {k: c[k] for k in CROP_KEYS}
+    return out
