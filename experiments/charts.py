@@ -17,6 +17,8 @@ import pandas as pd  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
+from hybrid.atomic import atomic_path  # noqa: E402
+
 from .noise import median_interval, repeat_matrix  # noqa: E402
 
 STRATEGY_CMAP = ListedColormap(["#f2f2f2", "#2b6cff", "#ff8c14"])   # no terrain, raster, ray cast
@@ -46,7 +48,8 @@ def save_figure(fig, folder: Path, name: str) -> list[Path]:
     out = []
     for ext in ("png", "svg"):
         p = folder / f"{name}.{ext}"
-        fig.savefig(p, dpi=110, bbox_inches="tight")
+        with atomic_path(p) as tmp:
+            fig.savefig(tmp, dpi=110, bbox_inches="tight", format=ext)
         out.append(p)
     plt.close(fig)
     return out

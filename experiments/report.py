@@ -12,10 +12,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from hybrid.atomic import write_text
 from hybrid.errors import TerrabenchError
 
 from .charts import all_charts, label_columns
 from .reading import reading
+from .spec import Spec
 from .spec_datasets import credit_lines
 from .tables import md_table
 
@@ -59,6 +61,25 @@ MEASURES = [
 ]
 
 
+def missing_frames(spec: dict, frames: pd.DataFrame) -> str:
+    """What a run folder lacks of its spec's (configuration, frame) rows, in words; empty when complete."""
+    try:
+        expected = Spec(**{k: v for k, v in spec.items() if k in Spec.__dataclass_fields__}).configs()
+    except (TypeError, TerrabenchError):
+        return ""                                  # a spec of another form: nothing to compare with
+    have = set(zip(frames["config"], frames["frame"]))
+    n = int(spec.get("frames", 1))
+    gaps = {c["config"]: n - sum((c["config"], k) in have for k in range(n)) for c in expected}
+    gaps = {k: v for k, v in gaps.items() if v}
+    if not gaps:
+        return ""
+    total = len(expected) * n
+    named = ", ".join(f"{k} ({v} of {n} frames)" for k, v in list(gaps.items())[:5])
+    more = f" and {len(gaps) - 5} more" if len(gaps) > 5 else ""
+    return (f"{sum(gaps.values())} of {total} frames are missing, in {len(gaps)} of {len(expected)} configurations: "
+            f"{named}{more}. Resume with `terrabench run` on the same spec, or read this report as partial.")
+
+
 def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | None = None, video: bool = False) -> Path:
     """Charts, tables and reading of a run folder into reports_dir/<name>/; returns the report.md path."""
     run = Path(run)
@@ -81,7 +102,9 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
         charts["video"] = write_videos(run, frames, out)
     table = summary_table(frames)
     lines = reading(frames, errors)
-    md = [f"# terrabench report: {spec['name']}", "",
+    missing = missing_frames(spec, frames)
+    title = f"terrabench report: {spec['name']}" + (" (INCOMPLETE RUN)" if missing else "")
+    md = [f"# {title}", ""] + ([f"**Incomplete:** {missing}", ""] if missing else []) + [
           "Every method renders the same camera views (paired flights); accuracy is measured against the "
           f"full-resolution reference image (colour supersampled {spec.get('supersample', 1)}x). Frame time is "
           f"the wall clock around `ctx.finish()`, median of {spec.get('repeats')} repeats after one untimed warm-up "
@@ -106,11 +129,11 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
     credits = credit_lines(spec.get("datasets", []), frames["dataset"].unique())   # the data of this run only
     credits = credits or ["Terrain: synthetic only (seeded, made by terrabench); no data to credit."]
     md += ["---"] + [f"- {c}" for c in credits]
-    (out / "report.md").write_text("\n".join(md) + "\n")
+    write_text(out / "report.md", "\n".join(md) + "\n")
     h = ["<!doctype html><html><head><meta charset='utf-8'><title>terrabench report</title>",
          "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;font-size:12px}"
          "td,th{border:1px solid #ccc;padding:2px 6px}img{max-width:100%}</style></head><body>",
-         f"<h1>terrabench report: {html.escape(spec['name'])}</h1>",
+         f"<h1>{html.escape(title)}</h1>" + (f"<p><b>Incomplete:</b> {html.escape(missing)}</p>" if missing else ""),
          "<h2>Environment</h2><ul>" + "".join(f"<li>{html.escape(str(k))}: {html.escape(str(v))}</li>" for k, v in env.items()) + "</ul>",
          "<h2>Reading</h2><ul>" + "".join(f"<li>{html.escape(l.strip()).replace('**', '')}</li>" for l in lines) + "</ul>",
          "<h2>Summary</h2>", table.to_html(index=False, float_format=lambda v: f"{v:.3g}"),
@@ -120,7 +143,7 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
         if pngs:
             h.append(f"<h2>{titles[key]}</h2>" + "".join(f"<p><img src='{p.name}'></p>" for p in pngs))
     h.append("<hr>" + "".join(f"<p>{html.escape(c)}</p>" for c in credits) + "</body></html>")
-    (out / "report.html").write_text("\n".join(h))
+    write_text(out / "report.html", "\n".join(h))
     return out / "report.md"
 
 

@@ -161,3 +161,17 @@ def test_render_on_a_full_disk_writes_neither_image_nor_depth(tmp_path):
     assert out.returncode == 2, out.stderr
     assert "cannot write" in out.stderr and "a.depth.npy" in out.stderr and "Traceback" not in out.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_report_on_a_half_written_run_says_so(ctx, tmp_path):
+    from experiments.report import write_report
+    folder = run_spec(parse_spec(SMALL.replace("frames = 3", "frames = 2")), tmp_path / "runs", ctx, progress=False)
+    whole = write_report(folder, tmp_path / "whole").read_text()
+    assert "INCOMPLETE" not in whole and "Incomplete" not in whole
+    frames = pd.read_parquet(folder / "frames.parquet")
+    gone = frames["config"].iloc[-1]
+    frames[~((frames["config"] == gone) & (frames["frame"] == 1))].to_parquet(folder / "frames.parquet", index=False)
+    text = write_report(folder, tmp_path / "part").read_text()
+    assert text.startswith("# terrabench report: s (INCOMPLETE RUN)")
+    assert f"1 of 4 frames are missing, in 1 of 2 configurations: {gone} (1 of 2 frames)" in text
+    assert "INCOMPLETE RUN" in (tmp_path / "part" / "s" / "report.html").read_text()
