@@ -22,6 +22,7 @@ come from one more, untimed, draw.
 """
 from __future__ import annotations
 
+import errno
 import json
 import platform
 import time
@@ -79,6 +80,10 @@ def _jsonable(v):
     return v
 
 
+class JournalError(TerrabenchError):
+    """The run journal cannot be written (disk full, folder gone): the run stops, what was written stays."""
+
+
 class Journal:
     """Append-only JSON-lines files of a run folder."""
 
@@ -109,10 +114,15 @@ class Journal:
             if torn:
                 with path.open("a") as f:
                     f.write("\n")
-        with path.open("a") as f:
-            for r in rows:
-                f.write(json.dumps({k: _jsonable(v) for k, v in r.items()}) + "\n")
-            f.flush()
+        text = "".join(json.dumps({k: _jsonable(v) for k, v in r.items()}) + "\n" for r in rows)
+        try:
+            with path.open("a") as f:          # one write: a kill or a full disk tears at most the last line
+                f.write(text)
+                f.flush()
+        except OSError as exc:
+            what = "disk full" if exc.errno == errno.ENOSPC else (exc.strerror or str(exc))
+            raise JournalError(f"cannot append to the run journal {path} ({what}); the rows written so far "
+                                  "are kept and the run resumes from them") from None
 
     def append_frame(self, row: dict, tiles: list[dict]) -> None:
         """Append one frame's row together with its tile rows as one journal line."""
@@ -258,6 +268,8 @@ def _run_configs(spec: Spec, folder: Path, ctx, progress: bool, fail_fast: bool)
                                                for t in timed_stats.tile_rows])
                     if k in spec.image_frames or spec.video:
                         _save_image(folder / "images", f"{c['config']}-f{k}", res, k in spec.image_frames)
+            except JournalError:                 # nowhere to record anything: stop with the one message
+                raise
             except Exception as exc:  # a failed configuration is recorded; the rest goes on
                 if fail_fast:
                     raise

@@ -175,3 +175,26 @@ def test_a_report_on_a_half_written_run_says_so(ctx, tmp_path):
     assert text.startswith("# terrabench report: s (INCOMPLETE RUN)")
     assert f"1 of 4 frames are missing, in 1 of 2 configurations: {gone} (1 of 2 frames)" in text
     assert "INCOMPLETE RUN" in (tmp_path / "part" / "s" / "report.html").read_text()
+
+
+def test_a_full_disk_during_a_run_is_one_message_and_the_journal_stays_whole(ctx, tmp_path, monkeypatch, capsys):
+    import experiments.runner as runner
+    spec = tmp_path / "s.toml"
+    spec.write_text(SMALL)
+    real_open = runner.Path.open
+    calls = {"n": 0}
+
+    def full_after_two(self, mode="r", *a, **k):
+        if self.name == "frames.jsonl" and mode == "a":
+            calls["n"] += 1
+            if calls["n"] > 2:
+                raise OSError(errno.ENOSPC, "No space left on device")
+        return real_open(self, mode, *a, **k)
+
+    monkeypatch.setattr(runner.Path, "open", full_after_two)
+    rc = main(["run", str(spec), "--runs", str(tmp_path / "runs"), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.count("error:") == 1 and "Traceback" not in err
+    assert "disk full" in err and "frames.jsonl" in err
+    lines = (tmp_path / "runs" / "s" / "frames.jsonl").read_text().splitlines()
+    assert len(lines) == 2 and all("tiles_rows" in json.loads(line) for line in lines)   # whole lines
