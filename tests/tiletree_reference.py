@@ -5,6 +5,7 @@ import numpy as np
 from hybrid.errors import check_positive
 from hybrid.tiles.pyramid import EDGE_E, EDGE_N, EDGE_S, EDGE_W, TileKey
 from hybrid.tiles.tiletree import NO_NEIGHBOUR, SelectedTile
+from hybrid.tiles.tiletree import covering_tile as _covering
 
 _EDGES = ((EDGE_W, -1, 0), (EDGE_E, 1, 0), (EDGE_S, 0, -1), (EDGE_N, 0, 1))
 
@@ -25,17 +26,6 @@ def classify_aabb(planes: np.ndarray, lo_rel: np.ndarray, hi_rel: np.ndarray) ->
     if np.all(np.einsum("ij,ij->i", n, neg) + planes[:, 3] >= 0):
         return 1
     return 0
-
-
-def _covering(selected: dict, key: TileKey, max_level: int):
-    """The selected tile at key's level or coarser that contains key's area, or None."""
-    l, x, y = key.level, key.tx, key.ty
-    while l <= max_level:
-        k = TileKey(l, x, y)
-        if k in selected:
-            return k
-        l, x, y = l + 1, x // 2, y // 2
-    return None
 
 
 def select_tiles_by_traversal(pyramid, view, tau: float = 2 / 3) -> list[SelectedTile]:

@@ -47,25 +47,7 @@ class SelectedTile:
         return self.key.level
 
 
-def aabb_distance(eye: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
-    """Euclidean distance (metres) from a point to an axis-aligned box; 0 inside."""
-    d = np.maximum(np.maximum(lo - eye, eye - hi), 0.0)
-    return float(np.linalg.norm(d))
-
-
-def classify_aabb(planes: np.ndarray, lo_rel: np.ndarray, hi_rel: np.ndarray) -> int:
-    """-1 if the eye-relative box is outside the frustum, 1 if wholly inside, 0 if it crosses a plane."""
-    n = planes[:, :3]
-    pos = np.where(n >= 0, hi_rel, lo_rel)   # corner farthest along each normal
-    neg = np.where(n >= 0, lo_rel, hi_rel)
-    if np.any(np.einsum("ij,ij->i", n, pos) + planes[:, 3] < 0):
-        return -1
-    if np.all(np.einsum("ij,ij->i", n, neg) + planes[:, 3] >= 0):
-        return 1
-    return 0
-
-
-def _covering(selected: dict, key: TileKey, max_level: int):
+def covering_tile(selected, key: TileKey, max_level: int) -> TileKey | None:
     """The selected tile at key's level or coarser that contains key's area, or None."""
     l, x, y = key.level, key.tx, key.ty
     while l <= max_level:
@@ -77,7 +59,7 @@ def _covering(selected: dict, key: TileKey, max_level: int):
 
 
 def box_classes(planes: np.ndarray, lo_rel: np.ndarray, hi_rel: np.ndarray) -> np.ndarray:
-    """classify_aabb of (B, 3) eye-relative boxes at once: (B,) int8 of -1 outside, 1 inside, 0 crossing."""
+    """Frustum classes of (B, 3) eye-relative boxes: (B,) int8 of -1 outside, 1 wholly inside, 0 crossing a plane."""
     n, off = planes[:, :3].T, planes[:, 3]
     npos, nneg = np.maximum(n, 0.0), np.minimum(n, 0.0)
     far = hi_rel @ npos + lo_rel @ nneg + off              # the corner farthest along each normal
@@ -89,7 +71,7 @@ def box_classes(planes: np.ndarray, lo_rel: np.ndarray, hi_rel: np.ndarray) -> n
 
 
 def box_distances(eye: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """aabb_distance from a point to (B, 3) boxes at once (metres, 0 inside)."""
+    """Euclidean distances (metres) from a point to (B, 3) axis-aligned boxes; 0 inside."""
     return np.linalg.norm(np.maximum(np.maximum(lo - eye, eye - hi), 0.0), axis=1)
 
 
@@ -240,7 +222,7 @@ def edge_neighbours(keys: set, key: TileKey, dx: int, dy: int, max_level: int) -
     nx, ny = key.tx + dx, key.ty + dy
     if nx < 0 or ny < 0:
         return []
-    cov = _covering(keys, TileKey(key.level, nx, ny), max_level)
+    cov = covering_tile(keys, TileKey(key.level, nx, ny), max_level)
     if cov is not None:
         return [cov]
     out, frontier = [], [TileKey(key.level, nx, ny)]
