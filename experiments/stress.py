@@ -144,7 +144,7 @@ def measure(result, ref) -> dict:
 def run_stress(ctx, scenes=SCENES, views=VIEWS, methods=METHODS, size: int = 257, width: int = 320,
                height: int = 180, tile_size: int = 64, progress=None) -> pd.DataFrame:
     """Every (scene, view, method): a row of failure measures; a method that raises is recorded, not fatal."""
-    from hybrid.camera.clearance import eye_clearance
+    from hybrid.camera.clearance import eye_clearance, eye_too_low
     from hybrid.reference import ReferenceRenderer
     rows = []
     for sc in scenes:
@@ -158,7 +158,7 @@ def run_stress(ctx, scenes=SCENES, views=VIEWS, methods=METHODS, size: int = 257
                 # views a user could not give (eye under the ground or within the near plane) are flagged
                 clear = eye_clearance(hf, view.eye)
                 row = {"scene": sc, "view": vk, "method": m, "eye_clearance_m": clear,
-                       "user_refused": bool(clear < view.near)}
+                       "user_refused": eye_too_low(clear, view)}
                 try:
                     r = _renderer(ctx, hf, m, tile_size)
                     try:

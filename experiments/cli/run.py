@@ -49,7 +49,7 @@ def run_from_args(args: argparse.Namespace) -> int:
     """The run command from parsed arguments; returns the exit code: 1 when any configuration failed."""
     from ..runner import failed_configs
     folder = run(args.spec, args.runs, args.name, args.report, args.reports, args.quiet, args.device)
-    failed = failed_configs(folder) if (folder / "errors.jsonl").exists() else {}
+    failed = failed_configs(folder)
     if failed:
         print(f"terrabench: {len(failed)} configuration(s) failed (details in {folder / 'errors.jsonl'}):",
               file=sys.stderr)

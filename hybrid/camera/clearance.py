@@ -27,15 +27,21 @@ def eye_clearance(hf: HeightField, eye) -> float:
     return z - float(hf.ground_height(x, y))
 
 
+def eye_too_low(clearance: float, view: View) -> bool:
+    """True when an eye ``clearance`` metres above the ground is below it or within the view's near plane."""
+    return clearance < view.near
+
+
 def check_eye_above(hf: HeightField, view: View, what: str = "view") -> None:
     """Refuse a view whose eye is below the terrain surface or closer to it than the near plane (metres)."""
     c = eye_clearance(hf, view.eye)
-    if c < view.near:
+    if eye_too_low(c, view):
         where = "below the terrain surface" if c < 0 else f"within the near plane ({view.near:g} m) of the surface"
         raise TerrabenchError(
             f"{what}: the eye at ({view.eye[0]:.1f}, {view.eye[1]:.1f}, {view.eye[2]:.1f}) m is {abs(c):.2f} m "
             f"{'below' if c < 0 else 'above'} the ground, {where}; methods and the reference would not draw the "
             "same scene: raise the eye")
+
 
 _CHUNK = 1 << 22        # elements gathered at once (bounds the memory of long flights on large grids)
 

@@ -20,8 +20,8 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 
-MAX_ABS_HEIGHT = 1.0e7           # metres: float32 heights keep steps of 1 m or finer within it (vertical
-                                 # exaggeration included); loaders apply Earth's physical bound to file data
+MAX_ABS_HEIGHT = 1.0e7           # metres: float32 heights keep steps of 1 m or finer within it; a numerical
+                                 # bound, not Earth's (exaggerated and extraterrestrial terrain stays allowed)
 MAX_ORIGIN = 1.0e9               # metres: a terrain's world origin (as the camera's coordinates)
 
 

@@ -10,8 +10,8 @@ Tiles are addressed as in a square of N*2^L + 1 samples a side, the grid repeate
 the tiles over the grid's own rectangle exist, and that square is never built: a tile's samples are gathered
 with clamped indices, and every per-level array covers the rectangle only, so memory follows the data (a
 2 x 20000 grid costs what its samples do, not a 20000² square). The padding is never drawn: each tile
-carries ``clip`` (the world rectangle of real terrain it covers) and renderers clip to it. A tile's AABB spans the level-0 heights over its clipped region, so it bounds the
-surface of every level; ``error`` is the largest vertical distance (metres) between the tile's
+carries ``clip`` (the world rectangle of real terrain it covers) and renderers clip to it. A tile's AABB
+spans the level-0 heights over its clipped region, so it bounds the surface of every level; ``error`` is the largest vertical distance (metres) between the tile's
 triangulated level-l surface and the level-0 samples it covers, made monotone (a parent's error is at
 least its children's).
 """
@@ -99,7 +99,7 @@ def _block_reduce(a: np.ndarray, b: int, fn) -> np.ndarray:
 
 def interpolate_clamped(h: np.ndarray, k: int) -> np.ndarray:
     """Triangulated surface of the every-k-th-sample grid of h, edge-repeated beyond h, at every sample of h
-    (float64); cells split along the (i, j) -> (i+1, j+1) diagonal (interpolate_level on any rectangle)."""
+    (float64); cells split along the (i, j) -> (i+1, j+1) diagonal; h may be any rectangle."""
     def axis(n):
         idx = np.arange(n)
         c = idx // k
@@ -153,18 +153,21 @@ class TilePyramid:
         """Number of tile columns (= rows) of the addressing square at a level; only those over the grid exist."""
         return 1 << (self.max_level - level)
 
+    def tile_counts(self, level: int) -> tuple[int, int]:
+        """(rows, columns) of the level's existing tiles: those over the grid's own rectangle."""
+        return self._zmax[level].shape
+
     def _build_bounds(self):
         n, L = self.n, self.max_level
         h = self.hf.heights
         # per level-0 cell: min/max of its four corners (bounds every reconstruction of the cell)
         cmax = np.maximum(np.maximum(h[:-1, :-1], h[:-1, 1:]), np.maximum(h[1:, :-1], h[1:, 1:]))
         cmin = np.minimum(np.minimum(h[:-1, :-1], h[:-1, 1:]), np.minimum(h[1:, :-1], h[1:, 1:]))
-        self._zmax, self._zmin, self._err, self._exists = {}, {}, {}, {}
+        self._zmax, self._zmin, self._err = {}, {}, {}
         for level in range(L + 1):
             b = n << level
             self._zmax[level] = _block_reduce(cmax, b, np.maximum)
             self._zmin[level] = _block_reduce(cmin, b, np.minimum)
-            self._exists[level] = np.ones(self._zmax[level].shape, bool)     # every tile over the rectangle
             if level == 0:
                 self._err[level] = np.zeros(self._zmax[level].shape)
                 continue
@@ -179,7 +182,7 @@ class TilePyramid:
         """True if the tile covers any real (unpadded) terrain."""
         if not (0 <= key.level <= self.max_level):
             return False
-        ty, tx = self._exists[key.level].shape
+        ty, tx = self.tile_counts(key.level)
         return 0 <= key.tx < tx and 0 <= key.ty < ty
 
     def root(self) -> TileKey:
@@ -188,19 +191,19 @@ class TilePyramid:
 
     def keys(self, level: int) -> list[TileKey]:
         """All existing tiles of a level, row by row from the south."""
-        ty, tx = self._exists[level].shape
+        ty, tx = self.tile_counts(level)
         return [TileKey(level, x, y) for y in range(ty) for x in range(tx)]
 
     def exists_at(self, level: int, tx: np.ndarray, ty: np.ndarray) -> np.ndarray:
         """Boolean array: which of the level's tiles (tx, ty), given as integer arrays, exist."""
-        rows, cols = self._exists[level].shape
+        rows, cols = self.tile_counts(level)
         tx, ty = np.asarray(tx, dtype=np.int64), np.asarray(ty, dtype=np.int64)
         return (tx >= 0) & (tx < cols) & (ty >= 0) & (ty < rows)
 
     def boxes_at(self, level: int, tx: np.ndarray, ty: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World-space (min, max) corners, (B, 3) float64 metres, of the level's existing tiles (tx, ty)."""
         if level not in self._boxes:                    # every box of a level, made on first use
-            rows, cols = self._exists[level].shape
+            rows, cols = self.tile_counts(level)
             ty_all, tx_all = np.divmod(np.arange(rows * cols), cols)
             self._boxes[level] = tuple(a.reshape(rows, cols, 3)
                                        for a in self.aabbs(np.full(rows * cols, level), tx_all, ty_all))

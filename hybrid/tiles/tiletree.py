@@ -20,6 +20,7 @@ from hybrid.tiles.pyramid import EDGE_E, EDGE_N, EDGE_S, EDGE_W, TileKey, TilePy
 DEFAULT_TAU = 2.0 / 3.0
 NO_NEIGHBOUR = 9
 _EDGES = ((EDGE_W, -1, 0), (EDGE_E, 1, 0), (EDGE_S, 0, -1), (EDGE_N, 0, 1))
+_STEPS = np.array([(dx, dy) for _, dx, dy in _EDGES])      # (4, 2) tile steps to the W, E, S, N neighbours
 
 
 @dataclass(frozen=True)
@@ -83,6 +84,14 @@ def _codes(level, tx, ty) -> np.ndarray:
     return (np.asarray(level, np.int64) << (2 * _SHIFT)) | (np.asarray(ty, np.int64) << _SHIFT) | np.asarray(tx, np.int64)
 
 
+def _member(sorted_codes: np.ndarray, cand: np.ndarray) -> np.ndarray:
+    """Boolean array of cand's shape: which candidate codes are in the sorted code array."""
+    if not len(sorted_codes):
+        return np.zeros(cand.shape, bool)
+    pos = np.minimum(np.searchsorted(sorted_codes, cand), len(sorted_codes) - 1)
+    return sorted_codes[pos] == cand
+
+
 class _Selection:
     """The selected tiles of one view as parallel arrays, with what each needs (distance, projected error, class)."""
 
@@ -129,27 +138,22 @@ class _Selection:
         top = self.pyramid.max_level
         codes = np.sort(_codes(lv, tx, ty))
         t = (1 << (top - lv))[None, None, :]                              # tiles a side at each tile's level
-        d = np.array([(dx, dy) for _, dx, dy in _EDGES])
         k = np.arange(top + 1)[None, :, None]                             # ancestor steps
-        nx, ny = tx[None, None, :] + d[:, 0, None, None], ty[None, None, :] + d[:, 1, None, None]
+        nx, ny = tx[None, None, :] + _STEPS[:, 0, None, None], ty[None, None, :] + _STEPS[:, 1, None, None]
         ok = (nx >= 0) & (nx < t) & (ny >= 0) & (ny < t) & (lv[None, None, :] + k <= top)
-        cand = _codes(lv[None, None, :] + k, np.maximum(nx, 0) >> k, np.maximum(ny, 0) >> k)
-        pos = np.minimum(np.searchsorted(codes, cand), max(len(codes) - 1, 0))
-        found = ok & (codes[pos] == cand) if len(codes) else np.zeros(cand.shape, bool)
+        found = ok & _member(codes, _codes(lv[None, None, :] + k, np.maximum(nx, 0) >> k, np.maximum(ny, 0) >> k))
         first = np.argmax(found, axis=1)                                  # the finest covering level
         return np.where(found.any(axis=1), lv[None, :] + first, -1)
 
     def finer_neighbours(self, lv, tx, ty) -> np.ndarray:
         """(4, N) per edge: True where a selected tile one level finer lies in the edge neighbour's place."""
         codes = np.sort(_codes(lv, tx, ty))
-        d = np.array([(dx, dy) for _, dx, dy in _EDGES])
-        nx, ny = tx[None, :] + d[:, 0, None], ty[None, :] + d[:, 1, None]
+        nx, ny = tx[None, :] + _STEPS[:, 0, None], ty[None, :] + _STEPS[:, 1, None]
         hit = np.zeros((4, len(lv)), bool)
         for ox, oy in ((0, 0), (1, 0), (0, 1), (1, 1)):
             cand = _codes(np.maximum(lv - 1, 0)[None, :], 2 * np.maximum(nx, 0) + ox, 2 * np.maximum(ny, 0) + oy)
-            pos = np.minimum(np.searchsorted(codes, cand), len(codes) - 1)
-            hit |= (codes[pos] == cand) & (nx >= 0) & (ny >= 0) & (lv > 0)[None, :]
-        return hit
+            hit |= _member(codes, cand)
+        return hit & (nx >= 0) & (ny >= 0) & (lv > 0)[None, :]
 
     def restrict(self) -> np.ndarray:
         """Split every selected tile with an edge neighbour two or more levels finer, until none is left;
@@ -161,9 +165,8 @@ class _Selection:
             if not far.any():
                 return cov
             e, i = np.nonzero(far)
-            d = np.array([(dx, dy) for _, dx, dy in _EDGES])
             k = cov[e, i] - lv[i]
-            split = np.unique(_codes(cov[e, i], (tx[i] + d[e, 0]) >> k, (ty[i] + d[e, 1]) >> k))
+            split = np.unique(_codes(cov[e, i], (tx[i] + _STEPS[e, 0]) >> k, (ty[i] + _STEPS[e, 1]) >> k))
             keep = ~np.isin(_codes(lv, tx, ty), split)
             self.parts = [tuple(a[keep] for a in self.arrays())]
             mask = (1 << _SHIFT) - 1
