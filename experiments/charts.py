@@ -195,7 +195,9 @@ def strategy_mix_chart(f, folder) -> list[Path]:
     fig, axes = panel_grid(len(groups), width=4.2, height=2.6, wide=8.0)
     for ax, ((sc, m), g) in zip(axes, groups):
         g = g.sort_values("frame")
-        ax.bar(g["frame"], g["tiles_raster"], label="raster", color="C0")
+        gs = g["tiles_gs"].fillna(0) if "tiles_gs" in g else 0 * g["tiles_raster"]
+        ax.bar(g["frame"], g["tiles_raster"] - gs, label="raster", color="C0")
+        ax.bar(g["frame"], gs, bottom=g["tiles_raster"] - gs, label="raster_gs", color="C2")
         ax.bar(g["frame"], g["tiles_raycast"], bottom=g["tiles_raster"], label="ray cast", color="C1")
         panel_title(ax, f"{m}\n{sc}", grid_cols(len(groups)))
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
@@ -206,24 +208,30 @@ def strategy_mix_chart(f, folder) -> list[Path]:
 
 
 def crossover_chart(tiles: pd.DataFrame, folder: Path) -> list[Path]:
-    """Per tile timed both ways (the oracle's measurements): ms per covered pixel of each strategy, and their
-    ratio, against triangles per pixel; where the ratio crosses 1 rasterizing starts to pay on this device."""
-    t = tiles.dropna(subset=["meas_raster_ms", "meas_raycast_ms"]) if len(tiles) else tiles
+    """Per tile timed every candidate way inside frames (the oracle's measurements): ms per covered pixel of each
+    strategy, and the faster raster strategy's time over the ray caster's, against triangles per pixel; where
+    the ratio crosses 1 rasterizing starts to pay on this device."""
+    raster = [s for s in ("raster", "raster_gs") if f"meas_{s}_ms" in tiles]
+    t = tiles.dropna(subset=[f"meas_{s}_ms" for s in (*raster, "raycast")]) \
+        if len(tiles) and raster and "meas_raycast_ms" in tiles else tiles.iloc[:0]
     if t.empty or "f_triangles" not in t:
         return []
     px = np.maximum(t["f_pixels"].to_numpy(float), 1.0)
     tpp = np.maximum(t["f_triangles"].to_numpy(float) / px, 1e-4)
-    ras, ray = t["meas_raster_ms"].to_numpy(float), t["meas_raycast_ms"].to_numpy(float)
+    ms = {s: t[f"meas_{s}_ms"].to_numpy(float) for s in (*raster, "raycast")}
+    ras = np.min([ms[s] for s in raster], axis=0)
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
-    axes[0].scatter(tpp, 1e3 * ras / px, s=8, alpha=0.5, label="raster (tile drawn alone)", color="C0")
-    axes[0].scatter(tpp, 1e3 * ray / px, s=8, alpha=0.5, label="ray cast (tile drawn alone)", color="C1")
+    for s, colour in zip(ms, ("C0", "C2", "C1")):
+        c = "C1" if s == "raycast" else colour
+        axes[0].scatter(tpp, 1e3 * ms[s] / px, s=8, alpha=0.5, label=f"{s} (tile timed inside its frame)", color=c)
     axes[0].set_ylabel("µs per covered pixel")
-    axes[1].scatter(tpp, ras / ray, s=8, alpha=0.5, color="C2")
+    ratio = ras / ms["raycast"]
+    axes[1].scatter(tpp, ratio, s=8, alpha=0.5, color="C3")
     axes[1].axhline(1.0, color="k", lw=1)
     edges = np.quantile(tpp, np.linspace(0, 1, 9))
-    mid = [np.median((ras / ray)[(tpp >= a) & (tpp <= b)]) for a, b in zip(edges[:-1], edges[1:])]
-    axes[1].plot(np.sqrt(edges[:-1] * edges[1:]), mid, "o-", color="C3", label="median per bin")
-    axes[1].set_ylabel("raster ms / ray-cast ms (below 1: raster is faster)")
+    mid = [np.median(ratio[(tpp >= a) & (tpp <= b)]) for a, b in zip(edges[:-1], edges[1:])]
+    axes[1].plot(np.sqrt(edges[:-1] * edges[1:]), mid, "o-", color="C4", label="median per bin")
+    axes[1].set_ylabel("faster raster ms / ray-cast ms (below 1: raster pays)")
     for ax in axes:
         ax.set_xscale("log")
         ax.set_yscale("log")

@@ -41,12 +41,15 @@ def speed_sentence(scene: str, g: pd.DataFrame) -> str:
 
 
 def _same_choices(rows: pd.DataFrame) -> str | None:
-    """'raster' or 'raycast' when a mixed policy's rows chose that strategy for every tile of every frame."""
+    """'raster', 'raster_gs' or 'raycast' when a mixed policy's rows chose that strategy for every tile of every
+    frame."""
     if "tiles_raster" not in rows or rows["tiles"].sum() == 0:
         return None
+    gs = int(rows["tiles_gs"].sum()) if "tiles_gs" in rows else 0
+    raster = int(rows["tiles_raster"].sum())
     if rows["tiles_raycast"].sum() == 0:
-        return "raster"
-    if rows["tiles_raster"].sum() == 0:
+        return "raster_gs" if gs == raster else "raster" if gs == 0 else None
+    if raster == 0:
         return "raycast"
     return None
 
@@ -56,9 +59,10 @@ def mixed_sentences(g: pd.DataFrame) -> list[str]:
     theirs (and the oracle's), ties called within noise."""
     out = []
     for (tau, rec), sub in g.groupby(["tau", "reconstruction"]):
-        pure = {p: sub[sub["policy"] == p] for p in ("raster", "raycast")}
-        if pure["raster"].empty:                     # raster runs once, with the first reconstruction
-            pure["raster"] = g[(g["policy"] == "raster") & (g["tau"] == tau)]
+        pure = {p: sub[sub["policy"] == p] for p in ("raster", "raster_gs", "raycast")}
+        for p in ("raster", "raster_gs"):            # raster runs once, with the first reconstruction
+            if pure[p].empty:
+                pure[p] = g[(g["policy"] == p) & (g["tau"] == tau)]
         pure = {p: r for p, r in pure.items() if not r.empty}
         for pol in MIXED:
             rows = sub[sub["policy"] == pol]
@@ -77,10 +81,13 @@ def mixed_sentences(g: pd.DataFrame) -> list[str]:
                         s += f"; it plans each frame ({rows['plan_ms'].median():.2f} ms median)"
                 out.append(s + ".")
                 continue
-            share = rows["tiles_raster"].sum() / max(rows["tiles"].sum(), 1) if "tiles_raster" in rows else np.nan
+            n = max(rows["tiles"].sum(), 1)
+            share = rows["tiles_raster"].sum() / n if "tiles_raster" in rows else np.nan
+            gs = rows["tiles_gs"].sum() / n if "tiles_gs" in rows else 0.0
             best = min(pure, key=lambda p: pure[p]["wall_ms"].median())
             c = compare(name, rows, pure[best]["method"].iloc[0], pure[best])
-            s = (f"{name}: rasterizes {100 * share:.0f} % of its tiles; against the better pure method "
+            split = f" ({100 * gs:.0f} % through the geometry shader)" if gs > 0 else ""
+            s = (f"{name}: rasterizes {100 * share:.0f} % of its tiles{split}; against the best pure method "
                  f"({best}, {c.ms_b:.1f} ms) it takes {c.ms_a:.1f} ms, {c.words()}")
             oracle = sub[sub["policy"] == "oracle"]
             if pol != "oracle" and not oracle.empty:

@@ -1,4 +1,4 @@
-"""Calibration of the cost model on this device: time tiles one by one both ways, fit, hold out, save.
+"""Calibration of the cost model on this device: time tiles inside frames every candidate way, fit, hold out.
 
 It draws through the renderer, so it sits above it (hybrid.cost holds the model, features and fit).
 """
@@ -25,19 +25,19 @@ class Calibration:
 
     model: CostModel
     features: list[TileFeatures]
-    raster_ms: np.ndarray
-    raycast_ms: np.ndarray
+    times: dict
     frames: list
 
 
 def time_tiles(ctx, hf: HeightField, views: list[View], tau: float = DEFAULT_TAU, tile_size: int = 256,
                repeats: int = 3, reconstruction: str = "triangles"):
-    """Features and measured wall ms of every selected tile drawn alone both ways, and per-frame timings.
+    """Features and measured ms of every selected tile drawn inside frames each candidate way, and per-frame
+    records.
 
-    Each time is the median of ``repeats`` draws with ctx.finish() around it. The per-frame records hold the
-    tiles' single times and the time of drawing all of them in one call, per strategy (for the overheads).
+    Each time is the median of ``repeats`` frames (``Renderer.time_in_frame``). The per-frame records hold, per
+    candidate, the tiles' times and the time of drawing all of them in one call (for the overheads).
     """
-    feats, ras, ray, frames = [], [], [], []
+    feats, times, frames = [], {n: [] for n in CANDIDATES}, []
     with Renderer(ctx, hf, "hybrid", tile_size, oracle_repeats=repeats, reconstruction=reconstruction) as r:
         for v in views:
             res = r.render(v, tau, measure=True)
@@ -46,16 +46,16 @@ def time_tiles(ctx, hf: HeightField, views: list[View], tau: float = DEFAULT_TAU
                            for n in CANDIDATES})
             for row in rows:
                 feats.append(TileFeatures.from_row(row))
-                ras.append(row["meas_raster_ms"])
-                ray.append(row["meas_raycast_ms"])
-    return feats, np.array(ras), np.array(ray), frames
+                for n in CANDIDATES:
+                    times[n].append(row[f"meas_{n}_ms"])
+    return feats, {n: np.array(t) for n, t in times.items()}, frames
 
 
 def calibrate(ctx, hf: HeightField, views: list[View], tau: float = DEFAULT_TAU, tile_size: int = 256,
               repeats: int = 3, holdout: float = 0.3, seed: int = 0) -> Calibration:
     """Time the tiles of the views and fit the cost model for this context's GL renderer."""
-    feats, ras, ray, frames = time_tiles(ctx, hf, views, tau, tile_size, repeats)
+    feats, times, frames = time_tiles(ctx, hf, views, tau, tile_size, repeats)
     overhead = {n: estimate_overhead([f[n][0] for f in frames if f[n][1] is not None],
                                      [f[n][1] for f in frames if f[n][1] is not None]) for n in CANDIDATES}
-    model = fit_cost_model(feats, ras, ray, gl_info(ctx).renderer, holdout, seed, overhead)
-    return Calibration(model, feats, ras, ray, frames)
+    model = fit_cost_model(feats, times, gl_info(ctx).renderer, holdout, seed, overhead)
+    return Calibration(model, feats, times, frames)

@@ -28,8 +28,8 @@ PURE_POLICIES: tuple[str, ...] = get_args(StrategyName)
 MIXED_POLICIES: tuple[str, ...] = ("hybrid", "heuristic", "oracle")
 POLICIES: tuple[str, ...] = get_args(Policy)
 METHODS: tuple[str, ...] = get_args(Method)
-CANDIDATES: tuple[str, ...] = get_args(Kind)
-"""The strategies a mixed policy chooses between."""
+CANDIDATES: tuple[str, ...] = ("raster", "raster_gs", "raycast")
+"""The strategies a mixed policy chooses between: both restricted-quadtree raster paths and the ray caster."""
 
 
 @runtime_checkable
@@ -92,8 +92,10 @@ class FrameStats:
     """What one frame cost and drew; the same fields from every renderer (milliseconds, bytes, counts).
 
     wall_ms is what a user waits for: planning plus drawing, wall clock around ctx.finish(); gpu_ms is the
-    GL timer query on GPUs and None on software rasterizers. gpu_bytes counts resident tiles plus what the
-    strategies hold for all tiles (shared_bytes); uploads and evictions are those of this frame.
+    GL timer query on GPUs and None on software rasterizers. tiles_raster and tiles_raycast count tiles by kind
+    (raster kinds: raster, raster_gs, fullres, tin); tiles_gs counts those of them drawn by raster_gs.
+    gpu_bytes counts resident tiles plus what the strategies hold for all tiles (shared_bytes); uploads and
+    evictions are those of this frame.
     """
 
     wall_ms: float
@@ -103,6 +105,7 @@ class FrameStats:
     tiles: int = 0
     tiles_raster: int = 0
     tiles_raycast: int = 0
+    tiles_gs: int = 0
     gpu_bytes: int = 0
     gpu_bytes_raster: int = 0
     gpu_bytes_raycast: int = 0

@@ -1,7 +1,7 @@
 """The renderer: every policy draws a view tile by tile into one colour + reversed-Z depth buffer.
 
 A pure policy (raster, raycast, fullres, tin) is the per-tile choice with a single answer; the mixed policies
-(hybrid, heuristic, oracle) choose per tile between the raster and ray-cast strategies (hybrid.cost.planner).
+(hybrid, heuristic, oracle) choose per tile among the candidates raster, raster_gs and raycast (hybrid.cost.planner).
 Within a frame the raster tiles are drawn first (front to back), then the ray-cast tiles front to back with
 the tile-ID pre-pass, so no ray is cast where a nearer raster tile already covers the pixel. Every strategy
 writes depth from the same reversed-Z projection, so a world point has one depth whichever draws it.
@@ -18,6 +18,8 @@ import numpy as np
 
 from hybrid.camera.view import View
 from hybrid.contract import CANDIDATES, MIXED_POLICIES, POLICIES, FrameStats, TileItem
+from hybrid.cost.choice import best_assignment
+from hybrid.cost.fit import estimate_overhead
 from hybrid.cost.model import CostModel, load_cost_model
 from hybrid.cost.planner import TilePlan, plan_frame
 from hybrid.errors import TerrabenchError
@@ -160,23 +162,47 @@ class Renderer:
             times.append(wall if gpu is None else gpu)
         return float(np.median(times))
 
-    def _measure(self, view, plans, target, pinned, tau, together: bool) -> dict:
-        """Time every tile alone both ways (the oracle keeps the faster) and, with ``together``, all at once."""
+    def time_in_frame(self, view: View, plans: list[TilePlan], name: str, target: FrameTarget, pinned=frozenset(),
+                      tau: float = DEFAULT_TAU) -> tuple[np.ndarray, float]:
+        """(per-tile ms, whole-frame ms): every plan's tile drawn with one strategy inside a real frame, front to
+        back, each in its own call timed as in ``time_draw`` (so each meets the depth its nearer tiles left, as
+        in the frame), and the same frame drawn in one call; medians over ``oracle_repeats``."""
+        self._check_live()
+        items = self._items(name, plans, pinned)
+        strategy, opts = self.strategies[name], self.options[name]
+        per = np.empty((self.oracle_repeats, len(items)))
+        for r in range(self.oracle_repeats):
+            target.clear()
+            target.use()
+            for i, item in enumerate(items):
+                _, wall, gpu = timed(self.ctx, lambda: strategy.draw_tiles(target, view, [item], tau, **opts))
+                per[r, i] = wall if gpu is None else gpu
+        return np.median(per, axis=0), self.time_draw(view, plans, name, target, pinned, tau)
+
+    def _measure(self, view, plans, target, pinned, tau) -> dict:
+        """Time every tile inside frames each candidate way (tile rows' meas_<strategy>_ms) and each pure frame;
+        the oracle takes the cheapest assignment, with per-strategy overheads from the same frames."""
         pinned |= {(n, p.key) for p in plans for n in CANDIDATES}
-        for p in plans:
-            p.measured = {n: self.time_draw(view, [p], n, target, pinned, tau) for n in CANDIDATES}
-            if self.policy == "oracle":
-                p.choice = min(p.measured, key=p.measured.get)
-        if not (together and plans):
+        if not plans:
             return {}
-        return {n: self.time_draw(view, plans, n, target, pinned, tau) for n in CANDIDATES}
+        per, together = {}, {}
+        for n in CANDIDATES:
+            per[n], together[n] = self.time_in_frame(view, plans, n, target, pinned, tau)
+        for i, p in enumerate(plans):
+            p.measured = {n: float(per[n][i]) for n in CANDIDATES}
+        if self.policy == "oracle":
+            overhead = {n: estimate_overhead([per[n]], [together[n]]) for n in CANDIDATES}
+            best, _ = best_assignment({n: per[n] - overhead[n] for n in CANDIDATES}, overhead, together)
+            for p, c in zip(plans, best):
+                p.choice = c
+        return together
 
     def render(self, view: View, tau: float = DEFAULT_TAU, *, measure: bool = False, maps: bool = False,
                **options) -> RenderResult:
         """Draw the view and read it back: colour, distance (m) and FrameStats.
 
-        With ``measure`` (always for the oracle; mixed policies only) every tile is also timed alone both
-        ways; with ``maps`` the result carries the per-pixel strategy map (extra untimed renders). Per-call
+        With ``measure`` (always for the oracle; mixed policies only) every tile is also timed inside frames
+        every candidate way (``time_in_frame``); with ``maps`` the result carries the per-pixel strategy map (extra untimed renders). Per-call
         ``options`` override the renderer's draw options.
         """
         self._check_live()
@@ -192,7 +218,7 @@ class Renderer:
         try:
             together = {}
             if measure or self.policy == "oracle":
-                together = self._measure(view, plans, target, pinned, tau, together=measure)
+                together = self._measure(view, plans, target, pinned, tau)
             for p in plans:                    # upload first: the timed frame measures drawing only
                 self._resident(p.choice, p.key, pinned)
             target.clear()
@@ -221,10 +247,11 @@ class Renderer:
             shared += b
         n_raster = sum(self.kind(p.choice) == "raster" for p in plans)
         pred = None
-        if self.mixed and plans:
+        if self.mixed and plans and all(p.choice in p.predicted for p in plans):
             pred = self.model.frame_ms([p.predicted[p.choice] for p in plans], {p.choice for p in plans})
         return FrameStats(wall_ms=plan_ms + draw, plan_ms=plan_ms, draw_ms=draw, gpu_ms=gpu, tiles=len(plans),
                           tiles_raster=n_raster, tiles_raycast=len(plans) - n_raster,
+                          tiles_gs=sum(p.choice == "raster_gs" for p in plans),
                           gpu_bytes=by_kind["raster"] + by_kind["raycast"], gpu_bytes_raster=by_kind["raster"],
                           gpu_bytes_raycast=by_kind["raycast"], shared_bytes=shared, pred_ms=pred,
                           counters=counters, together_ms=together,

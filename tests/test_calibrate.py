@@ -32,13 +32,14 @@ def test_calibrate_fits_the_tiles_the_renderer_selects(ctx, fbm129, views):
     assert cal.features == [p.features for frame in plans for p in frame]
     n = len(cal.features)
     assert n >= 8
-    for ms in (cal.raster_ms, cal.raycast_ms):
+    assert set(cal.times) == set(CANDIDATES)
+    for ms in cal.times.values():
         assert ms.shape == (n,) and np.all(np.isfinite(ms)) and np.all(ms > 0)
     assert len(cal.frames) == len(views)
     for rec, frame in zip(cal.frames, plans):
         for name in CANDIDATES:
-            singles, together = rec[name]
-            assert len(singles) == len(frame) and together > 0
+            in_frame, together = rec[name]
+            assert len(in_frame) == len(frame) and together > 0
     m = cal.model
     assert m.tiles == n and m.renderer == gl_info(ctx).renderer
     for s in CANDIDATES:
@@ -69,6 +70,6 @@ def test_time_draw_positive_and_counters_grow_with_tiles(ctx, fbm129, views, nam
                 counters.append(r.strategies[name].draw_tiles(target, v, items, 2 / 3, **r.options[name]))
         finally:
             target.release()
-    work = "triangles" if name == "raster" else "rays"
+    work = "rays" if name == "raycast" else "triangles"
     counts = [c[work] for c in counters]
     assert counts[0] > 0 and counts == sorted(counts), counts      # front-to-back prefixes: never less work

@@ -12,7 +12,8 @@ from hybrid.errors import TerrabenchError
 from hybrid.residency import ResidencyCache
 
 TRUE = CostModel("test", {"const": 0.3, "triangles": 5e-5, "visible_triangles": 1.5e-4, "pixels": 1e-5},
-                 {"const": 0.5, "pixels": 2e-5, "surface_pixels": 1e-5, "pixel_steps": 1e-5})
+                 {"const": 0.5, "pixels": 2e-5, "surface_pixels": 1e-5, "pixel_steps": 1e-5},
+                 raster_gs={"const": 0.2, "triangles": 2e-4, "visible_triangles": 3e-4, "pixels": 1e-5})
 
 
 def synthetic_tiles(n=300, seed=0):
@@ -26,14 +27,17 @@ def synthetic_tiles(n=300, seed=0):
 def test_fit_recovers_known_coefficients():
     feats = synthetic_tiles()
     rng = np.random.default_rng(1)
-    ras = np.array([TRUE.predict(f)["raster"] for f in feats]) * rng.normal(1, 0.02, len(feats))
-    ray = np.array([TRUE.predict(f)["raycast"] for f in feats]) * rng.normal(1, 0.02, len(feats))
-    m = fit_cost_model(feats, ras, ray, "test")
-    for s in ("raster", "raycast"):
+    times = {s: np.array([TRUE.predict(f)[s] for f in feats]) * rng.normal(1, 0.02, len(feats))
+             for s in ("raster", "raster_gs", "raycast")}
+    m = fit_cost_model(feats, times, "test")
+    assert m.candidates == ("raster", "raster_gs", "raycast")
+    for s in ("raster", "raster_gs", "raycast"):
         for t, v in getattr(TRUE, s).items():
             assert np.isclose(getattr(m, s)[t], v, rtol=0.1), (s, t)
         assert m.fit_error[s] < 0.03                          # held-out median relative error ~ the noise
-    assert "raster   ms = " in m.explain()
+    assert "raster_gs ms = " in m.explain() and "never chosen" not in m.explain()
+    two = fit_cost_model(feats, {s: times[s] for s in ("raster", "raycast")}, "test")
+    assert two.candidates == ("raster", "raycast") and "raster_gs not calibrated: never chosen" in two.explain()
 
 
 @pytest.mark.parametrize("strategy", ["raster", "raycast"])
@@ -91,16 +95,20 @@ def test_choice_follows_predicted_costs():
 def test_fit_rejects_bad_timings():
     feats = synthetic_tiles(10)
     with pytest.raises(TerrabenchError, match="finite and > 0"):
-        fit_cost_model(feats, np.zeros(10), np.ones(10), "t")
+        fit_cost_model(feats, {"raster": np.zeros(10), "raycast": np.ones(10)}, "t")
     with pytest.raises(TerrabenchError, match="at least 4"):
-        fit_cost_model(feats[:2], np.ones(2), np.ones(2), "t", holdout=0.0)
+        fit_cost_model(feats[:2], {"raster": np.ones(2), "raycast": np.ones(2)}, "t", holdout=0.0)
+    with pytest.raises(TerrabenchError, match="without raycast times"):
+        fit_cost_model(feats, {"raster": np.ones(10)}, "t")
+    with pytest.raises(TerrabenchError, match="no cost terms for tin"):
+        fit_cost_model(feats, {"raster": np.ones(10), "raycast": np.ones(10), "tin": np.ones(10)}, "t")
 
 
 def test_save_load_by_renderer(tmp_path):
     p = tmp_path / "costs.json"
     save_cost_model(TRUE, p)
     got = load_cost_model("test", p)
-    assert got.raster == TRUE.raster and got.raycast == TRUE.raycast
+    assert got.raster == TRUE.raster and got.raycast == TRUE.raycast and got.raster_gs == TRUE.raster_gs
     shipped = load_cost_model("llvmpipe (LLVM 15.0.6, 256 bits)", p)
     assert "llvmpipe" in shipped.source
     other = load_cost_model("Some Unknown GPU", p)

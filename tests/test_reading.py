@@ -7,7 +7,7 @@ from experiments.noise import compare, repeat_matrix, repeat_spread
 from experiments.reading import reading
 
 
-def rows(policy, ms, spread, frames=8, seed=0, tiles_raster=0, tiles_raycast=10, tau=2.0):
+def rows(policy, ms, spread, frames=8, seed=0, tiles_raster=0, tiles_raycast=10, tau=2.0, tiles_gs=0):
     """Frame rows of one method: each frame's repeats spread +-spread/2 around ms (times a per-frame wobble)."""
     rng = np.random.default_rng(seed)
     out = []
@@ -17,7 +17,7 @@ def rows(policy, ms, spread, frames=8, seed=0, tiles_raster=0, tiles_raycast=10,
         out.append({"dataset": "fbm", "flight": "flyover", "size": "160x90", "tau": tau, "reconstruction": "triangles",
                     "policy": policy, "frame": k, "wall_ms": float(np.median(reps)), "wall_ms_repeats": reps,
                     "tiles": tiles_raster + tiles_raycast, "tiles_raster": tiles_raster, "tiles_raycast": tiles_raycast,
-                    "plan_ms": 0.5})
+                    "tiles_gs": tiles_gs, "plan_ms": 0.5})
     return out
 
 
@@ -55,13 +55,26 @@ def test_identical_choices_are_named_with_the_noise_verdict():
                  rows("raster", 30.0, 0.02, seed=1, tiles_raster=10, tiles_raycast=0))
     line = [l for l in reading(slow, []) if l.strip().startswith("hybrid")][0]
     assert "the same choices as raycast" in line and "yet 2.00x slower" in line and "plans each frame" in line
-    # mixed choices: compared with the better pure method at the same tau, no "same choices"
+    # mixed choices: compared with the best pure method at the same tau, no "same choices"
     mixed = table(rows("raycast", 20.0, 0.02, seed=2), rows("raster", 30.0, 0.02, seed=1, tiles_raster=10,
                                                             tiles_raycast=0),
                   rows("hybrid", 10.0, 0.02, seed=3, tiles_raster=4, tiles_raycast=6))
     line = [l for l in reading(mixed, []) if l.strip().startswith("hybrid")][0]
-    assert "same choices" not in line and "rasterizes 40 %" in line and "better pure method (raycast" in line
-    assert "2.00x faster" in line
+    assert "same choices" not in line and "rasterizes 40 %" in line and "best pure method (raycast" in line
+    assert "2.00x faster" in line and "geometry shader" not in line
+    # every tile through the geometry shader is the same choices as raster_gs, not as raster
+    gs = table(rows("raycast", 20.0, 0.02, seed=2), rows("raster_gs", 15.0, 0.3, seed=1, tiles_raster=10,
+                                                         tiles_raycast=0, tiles_gs=10),
+               rows("raster", 30.0, 0.02, seed=4, tiles_raster=10, tiles_raycast=0),
+               rows("hybrid", 15.5, 0.3, seed=3, tiles_raster=10, tiles_raycast=0, tiles_gs=10))
+    line = [l for l in reading(gs, []) if l.strip().startswith("hybrid")][0]
+    assert "the same choices as raster_gs in every frame" in line
+    # a three-way mix names the geometry-shader share
+    three = table(rows("raycast", 20.0, 0.02, seed=2), rows("raster_gs", 40.0, 0.02, seed=1, tiles_raster=10,
+                                                            tiles_raycast=0, tiles_gs=10),
+                  rows("hybrid", 10.0, 0.02, seed=3, tiles_raster=6, tiles_raycast=4, tiles_gs=2))
+    line = [l for l in reading(three, []) if l.strip().startswith("hybrid")][0]
+    assert "rasterizes 60 % of its tiles (20 % through the geometry shader)" in line
 
 
 def test_repeat_matrix_and_spread():

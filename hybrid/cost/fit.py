@@ -1,5 +1,7 @@
 """Fitting the cost model: non-negative least squares on relative error, per-frame overheads, held-out error.
 
+The per-tile times are taken inside frames (``Renderer.time_in_frame``), each tile's call paying the
+strategy's per-call overhead, which ``estimate_overhead`` recovers from the same frames drawn in one call.
 Rows are weighted by 1 / measured time, so small tiles count as much as big ones; the median absolute
 relative error is reported on tiles held out of the fit.
 """
@@ -14,9 +16,9 @@ from hybrid.errors import TerrabenchError
 
 
 def fit_strategy(features: list[TileFeatures], ms: np.ndarray, strategy: str, overhead: float = 0.0) -> dict:
-    """Non-negative per-tile coefficients of one strategy, fitted on the relative error of single-tile times.
+    """Non-negative per-tile coefficients of one strategy, fitted on the relative error of per-tile times.
 
-    ``ms`` are times of drawing each tile alone (one call), so each includes the strategy's per-frame
+    ``ms`` are times of drawing each tile in its own call, so each includes the strategy's per-frame
     ``overhead``, which is taken off before fitting.
     """
     ms = np.asarray(ms, dtype=np.float64)
@@ -33,38 +35,44 @@ def fit_strategy(features: list[TileFeatures], ms: np.ndarray, strategy: str, ov
 
 
 def median_rel_error(model: CostModel, features: list[TileFeatures], ms: np.ndarray, strategy: str) -> float:
-    """Median |predicted - measured| / measured over single-tile times (overhead included on both sides)."""
+    """Median |predicted - measured| / measured over per-tile times (overhead included on both sides)."""
     pred = np.array([model.predict(f)[strategy] for f in features]) + model.overhead.get(strategy, 0.0)
     ms = np.asarray(ms, dtype=np.float64)
     return float(np.median(np.abs(pred - ms) / ms))
 
 
 def estimate_overhead(single_ms: list[np.ndarray], together_ms: list[float]) -> float:
-    """Per-frame overhead from frames timed tile by tile and all at once: (sum singles - together) / (k - 1)."""
+    """Per-frame overhead (ms) from frames timed tile by tile and all at once: (sum of tiles - together) / (k - 1)."""
     est = [(float(np.sum(s)) - t) / (len(s) - 1) for s, t in zip(single_ms, together_ms) if len(s) >= 2]
     return float(max(np.median(est), 0.0)) if est else 0.0
 
 
-def fit_cost_model(features: list[TileFeatures], raster_ms, raycast_ms, renderer: str,
+def fit_cost_model(features: list[TileFeatures], times: dict[str, np.ndarray], renderer: str,
                    holdout: float = 0.3, seed: int = 0, overhead: dict | None = None) -> CostModel:
-    """Fit both strategies on a random (1 - holdout) share of tiles; report errors on the rest.
+    """Fit every strategy in ``times`` (per-tile ms, one array per candidate; raster and raycast needed) on a
+    random (1 - holdout) share of tiles; report errors on the rest.
 
-    ``overhead`` (ms per frame and strategy, see estimate_overhead) is taken off the single-tile times.
+    ``overhead`` (ms per frame and strategy, see estimate_overhead) is taken off the per-tile times.
     """
     n = len(features)
-    raster_ms, raycast_ms = np.asarray(raster_ms, float), np.asarray(raycast_ms, float)
+    times = {s: np.asarray(v, float) for s, v in times.items()}
+    for s in ("raster", "raycast"):
+        if s not in times:
+            raise TerrabenchError(f"cannot fit a cost model without {s} times")
+    unknown = sorted(set(times) - set(TERMS))
+    if unknown:
+        raise TerrabenchError(f"no cost terms for {', '.join(unknown)}; the model knows {', '.join(TERMS)}")
     if not (0.0 <= holdout < 1.0):
         raise TerrabenchError(f"holdout must lie in [0, 1), got {holdout}")
     idx = np.random.default_rng(seed).permutation(n)
     n_test = int(round(holdout * n))
     test, train = idx[:n_test], idx[n_test:]
     ftrain = [features[i] for i in train]
-    overhead = {"raster": 0.0, "raycast": 0.0, **(overhead or {})}
-    model = CostModel(renderer, fit_strategy(ftrain, raster_ms[train], "raster", overhead["raster"]),
-                      fit_strategy(ftrain, raycast_ms[train], "raycast", overhead["raycast"]), tiles=n,
-                      overhead=overhead)
+    overhead = {**{s: 0.0 for s in TERMS}, **(overhead or {})}
+    coef = {s: fit_strategy(ftrain, ms[train], s, overhead[s]) for s, ms in times.items()}
+    model = CostModel(renderer, coef["raster"], coef["raycast"], tiles=n, overhead=overhead,
+                      raster_gs=coef.get("raster_gs", {}))
     if n_test:
         ftest = [features[i] for i in test]
-        model.fit_error = {"raster": median_rel_error(model, ftest, raster_ms[test], "raster"),
-                           "raycast": median_rel_error(model, ftest, raycast_ms[test], "raycast")}
+        model.fit_error = {s: median_rel_error(model, ftest, ms[test], s) for s, ms in times.items()}
     return model

@@ -1,14 +1,15 @@
 """The per-tile cost model: predicted milliseconds of each strategy from features known before drawing.
 
-Two linear models with non-negative coefficients, simple enough to print and explain:
+One linear model with non-negative coefficients per candidate strategy, simple enough to print and explain:
 
-    raster_ms  = r0 + r_tri * triangles + r_vis * triangles * visible + r_px * pixels
-    raycast_ms = c0 + c_px * pixels + c_hit * surface_pixels + c_step * pixels * log2(1 + slab_cells)
+    raster_ms    = r0 + r_tri * triangles + r_vis * triangles * visible + r_px * pixels
+    raster_gs_ms = the same terms with their own coefficients (the geometry-shader path)
+    raycast_ms   = c0 + c_px * pixels + c_hit * surface_pixels + c_step * pixels * log2(1 + slab_cells)
 
-per tile, plus each strategy's per-frame overhead (state setup, the raster path's frame-level quadtree
-restriction, the ray caster's pre-pass target and counters) paid once when any tile uses it:
+per tile, plus each strategy's per-frame overhead (state setup, the raster paths' leaf-selection dispatches,
+the ray caster's pre-pass target and counters) paid once when any tile uses it:
 
-    frame_ms = overhead_raster * [any raster tile] + overhead_raycast * [any ray-cast tile] + sum of tiles
+    frame_ms = sum over strategies used of overhead_s + sum of tiles
 
 ``terrabench calibrate`` times tiles on this device and fits the coefficients (``hybrid.cost.fit``), then
 saves the model keyed by the GL renderer string. ``load_cost_model`` finds it again: the user's file ($TERRABENCH_COSTS or
@@ -29,26 +30,32 @@ from hybrid.atomic import write_json
 from hybrid.cost.features import TileFeatures
 from hybrid.errors import TerrabenchError
 
-TERMS = {"raster": ("const", "triangles", "visible_triangles", "pixels"),
+RASTER_TERMS = ("const", "triangles", "visible_triangles", "pixels")
+TERMS = {"raster": RASTER_TERMS, "raster_gs": RASTER_TERMS,
          "raycast": ("const", "pixels", "surface_pixels", "pixel_steps")}
+"""The model's terms per candidate strategy (hybrid.contract.CANDIDATES)."""
 
 
 def term_values(f, strategy: str) -> np.ndarray:
     """The model's input terms for one tile (a ``TileFeatures``: shape (4,)) or many (a dict of (B,) feature
     columns as from ``hybrid.cost.features.feature_columns``: shape (B, 4))."""
     g = f if isinstance(f, dict) else vars(f)
-    if strategy == "raster":
+    if strategy in ("raster", "raster_gs"):
         terms = (1.0, g["triangles"], g["triangles"] * g["visible"], g["pixels"])
     elif strategy == "raycast":
         terms = (1.0, g["pixels"], g["surface_pixels"], g["pixels"] * np.log2(1.0 + g["slab_cells"]))
     else:
-        raise TerrabenchError(f"unknown strategy {strategy!r} for the cost model; choose raster or raycast")
+        raise TerrabenchError(f"unknown strategy {strategy!r} for the cost model; choose one of {', '.join(TERMS)}")
     return np.stack(np.broadcast_arrays(*(np.asarray(t, dtype=np.float64) for t in terms)), axis=-1)
 
 
 @dataclass
 class CostModel:
-    """Coefficients (milliseconds per unit of each term) for raster and raycast, and how well they fit."""
+    """Coefficients (milliseconds per unit of each term) per candidate strategy, and how well they fit.
+
+    ``raster_gs`` is empty in a model calibrated before the geometry-shader path was a candidate: such a
+    model never chooses it.
+    """
 
     renderer: str
     raster: dict
@@ -56,7 +63,13 @@ class CostModel:
     fit_error: dict = field(default_factory=dict)
     tiles: int = 0
     source: str = ""
-    overhead: dict = field(default_factory=lambda: {"raster": 0.0, "raycast": 0.0})
+    overhead: dict = field(default_factory=lambda: {s: 0.0 for s in TERMS})
+    raster_gs: dict = field(default_factory=dict)
+
+    @property
+    def candidates(self) -> tuple[str, ...]:
+        """The strategies this model has coefficients for, in TERMS order."""
+        return tuple(s for s in TERMS if getattr(self, s))
 
     def frame_ms(self, tile_costs: list[float], strategies: set) -> float:
         """Predicted frame time: the tiles' costs plus the overhead of each strategy used."""
@@ -69,19 +82,20 @@ class CostModel:
     def predict_columns(self, columns) -> dict[str, np.ndarray]:
         """Predicted milliseconds of each strategy for many tiles at once, from feature columns ((B,) arrays)."""
         return {s: term_values(columns, s) @ np.array([getattr(self, s)[t] for t in TERMS[s]])
-                for s in ("raster", "raycast")}
+                for s in self.candidates}
 
     def explain(self) -> str:
-        """The two formulas with their coefficients, and the held-out error."""
+        """The formulas with their coefficients, and the held-out error."""
         def fmt(s):
             c = getattr(self, s)
             parts = [f"{c['const']:.4g}"] + [f"{c[t]:.4g}*{t}" for t in TERMS[s][1:]]
-            return f"{s:8s} ms = " + " + ".join(parts)
+            return f"{s:9s} ms = " + " + ".join(parts)
         lines = [f"cost model for {self.renderer} ({self.source or 'unsaved'}, {self.tiles} tiles)",
-                 fmt("raster"), fmt("raycast"),
+                 *(fmt(s) for s in self.candidates),
                  "  pixel_steps = pixels * log2(1 + slab_cells); visible_triangles = triangles * visible",
-                 f"  per-frame overhead: raster {self.overhead.get('raster', 0):.3g} ms, "
-                 f"raycast {self.overhead.get('raycast', 0):.3g} ms"]
+                 "  per-frame overhead: " + ", ".join(f"{s} {self.overhead.get(s, 0):.3g} ms" for s in self.candidates)]
+        if "raster_gs" not in self.candidates:
+            lines.append("  raster_gs not calibrated: never chosen")
         for s, e in self.fit_error.items():
             lines.append(f"  held-out median |relative error| {s}: {100 * e:.1f} %")
         return "\n".join(lines)
@@ -120,8 +134,9 @@ def save_cost_model(model: CostModel, path: Path | None = None) -> Path:
 def _from_dict(d: dict, source: str) -> CostModel:
     try:
         m = CostModel(d["renderer"], dict(d["raster"]), dict(d["raycast"]), dict(d.get("fit_error", {})),
-                      int(d.get("tiles", 0)), source, {"raster": 0.0, "raycast": 0.0, **d.get("overhead", {})})
-        for s in ("raster", "raycast"):
+                      int(d.get("tiles", 0)), source, {**{s: 0.0 for s in TERMS}, **d.get("overhead", {})},
+                      dict(d.get("raster_gs") or {}))
+        for s in m.candidates:
             for t in TERMS[s]:
                 getattr(m, s).setdefault(t, 0.0)     # a model saved before a term existed has it at 0
                 float(getattr(m, s)[t])

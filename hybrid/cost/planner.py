@@ -1,13 +1,14 @@
 """Per-frame plan without a GL context: selected tiles, their features, predicted costs and the choice.
 
 Policies:
-    raster, raycast   every tile the same way;
-    hybrid            the strategy the cost model predicts faster for each tile, unless drawing every tile
-                      one way is predicted faster once the per-frame overheads are counted;
-    heuristic         Dick et al.'s fixed rule: ray cast a tile when its triangles outnumber the pixels it
-                      covers by more than ``threshold`` (default 1), else rasterize;
-    oracle            each tile timed both ways and the faster kept (an evaluation bound: the choice is
-                      filled in by the renderer, which measures).
+    raster, raster_gs, raycast, ...   every tile the same way;
+    hybrid      the candidate (raster, raster_gs, raycast) the cost model predicts cheapest for each tile,
+                unless drawing every tile one way is predicted faster once the per-frame overheads are counted;
+    heuristic   Dick et al.'s fixed rule: ray cast a tile when its triangles outnumber the pixels it covers by
+                more than ``threshold`` (default 1), else rasterize (the raster path);
+    oracle      each tile timed inside frames every candidate way, the cheapest kept, and the frame compared
+                with the pure frames (an evaluation bound: the choice is filled in by the renderer, which
+                measures).
 """
 from __future__ import annotations
 
@@ -17,7 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hybrid.camera.view import View
-from hybrid.contract import POLICIES, PURE_POLICIES, TriangleEstimator
+from hybrid.contract import CANDIDATES, POLICIES, PURE_POLICIES, TriangleEstimator
+from hybrid.cost.choice import best_assignment
 from hybrid.cost.features import TileFeatures, feature_columns, features_from_columns, tile_features
 from hybrid.cost.model import CostModel
 from hybrid.errors import TerrabenchError
@@ -47,8 +49,8 @@ class TilePlan:
         features = self.features.as_dict() if self.features is not None else {}
         return {"level": k.level, "tx": k.tx, "ty": k.ty, "strategy": self.choice,
                 **{f"f_{n}": v for n, v in features.items() if n != "level"},
-                "pred_raster_ms": self.predicted.get("raster"), "pred_raycast_ms": self.predicted.get("raycast"),
-                "meas_raster_ms": self.measured.get("raster"), "meas_raycast_ms": self.measured.get("raycast")}
+                **{f"pred_{s}_ms": self.predicted.get(s) for s in CANDIDATES},
+                **{f"meas_{s}_ms": self.measured.get(s) for s in CANDIDATES}}
 
 
 def choices(policy: str, columns: dict, predicted: dict, threshold: float = 1.0) -> list[str]:
@@ -56,8 +58,10 @@ def choices(policy: str, columns: dict, predicted: dict, threshold: float = 1.0)
     if policy in PURE_POLICIES:
         return [policy] * len(columns["pixels"])
     if policy == "hybrid":
-        raster = np.asarray(predicted["raster"]) <= np.asarray(predicted["raycast"])
-    elif policy == "heuristic":
+        names = list(predicted)
+        costs = np.stack([np.asarray(predicted[n], dtype=np.float64) for n in names])
+        return [names[i] for i in np.argmin(costs, axis=0)]
+    if policy == "heuristic":
         raster = ~(np.asarray(columns["triangles"]) > threshold * np.maximum(columns["pixels"], 1.0))
     elif policy == "oracle":
         raster = np.ones(len(columns["pixels"]), dtype=bool)
@@ -88,7 +92,7 @@ def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
     """Selected tiles front to back with the policy's choice of strategy for each.
 
     A pure policy (one strategy for every tile) needs no features: its plans carry none. A mixed policy gets
-    features, the model's predicted ms of both candidates and its choice; ``triangles_fn`` gives the raster
+    features, the model's predicted ms of every candidate it knows and its choice; ``triangles_fn`` gives the raster
     mesh's triangle count for a tile (default: the raster strategy's CPU estimate from the registry, one per
     pyramid). Features and predictions of all tiles are computed as arrays; ``batch=False`` computes them
     tile by tile instead (the reference path: the same plans, slower).
@@ -116,9 +120,8 @@ def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
         chosen = [choose(policy, f, p, threshold) for f, p in zip(features, predicted)]
     plans = [TilePlan(s, f, p, c) for s, f, p, c in zip(selected, features, predicted, chosen)]
     if policy == "hybrid":
-        options = {"mixed": chosen, "raster": ["raster"] * len(plans), "raycast": ["raycast"] * len(plans)}
-        cost = {k: model.frame_ms([p[c] for p, c in zip(predicted, ch)], set(ch)) for k, ch in options.items()}
-        best = min(cost, key=cost.get)
-        for p, c in zip(plans, options[best]):
+        best, _ = best_assignment(pred if batch else {n: np.array([q[n] for q in predicted]) for n in predicted[0]},
+                                  model.overhead)
+        for p, c in zip(plans, best):
             p.choice = c
     return plans
