@@ -95,3 +95,18 @@ def test_raster_without_geomorphing_pops_on_a_slow_dolly(ctx, dolly):
         pops[morph] = sum(row["pop_px"] for row in rows)
     assert pops[False] >= 100, pops                          # level switches move whole tilelets in one frame
     assert pops[True] * 10 <= pops[False], pops              # geomorphing spreads them over many frames
+
+
+@pytest.mark.parametrize("size", [(320, 180), (640, 360)])
+def test_dolly_on_real_terrain_is_slow_enough_to_measure_popping(ctx, puget257, size):
+    """The dolly's step follows the viewport: at either size the image moves under the popping gate."""
+    from hybrid.camera.flight import preset
+    from hybrid.reference import ReferenceRenderer
+    views = preset("dolly", puget257, frames=4, width=size[0], height=size[1]).views()
+    ref = ReferenceRenderer(ctx, puget257)
+    try:
+        refs = [ref.render(v) for v in views]
+    finally:
+        ref.release()
+    flows = [image_flow(refs[k], views[k], views[k - 1]) for k in range(1, len(views))]
+    assert all(0.2 < f <= POP_MAX_FLOW_PX for f in flows), flows

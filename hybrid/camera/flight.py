@@ -143,18 +143,14 @@ def _stencil_heights(hf: HeightField, x: np.ndarray, y: np.ndarray, radius: floa
 DOLLY_PITCH_DEG = 8.0
 
 
-def _dolly(hf: HeightField, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Eyes and targets (world metres) of the dolly at frame numbers k: a straight level line to the north-east.
+DOLLY_FLOW_PX = 0.6             # the dolly's image motion a frame at the bottom of its view over flat ground (px)
 
-    The eye advances max(2 m, s / 40) a frame, s the finer of spacing_x and spacing_y (4 m on Puget's 160 m
-    grid), at one height for the whole line: the highest ground within 2 % of the terrain's size of any point
-    of it, plus max(30 m, 20 % of that neighbourhood's relief); it looks along the line, DOLLY_PITCH_DEG below
-    the horizon.
-    """
+
+def _dolly_line(hf: HeightField, k: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Eyes and targets of a dolly advancing ``step`` metres a frame (see ``_dolly``)."""
     w, d = hf.extent
     ox, oy, _ = hf.origin
     size = max(w, d)
-    step = max(2.0, min(hf.spacing_x, hf.spacing_y) / 40.0)
     heading = np.array([w, d]) / np.hypot(w, d)
     x = ox + 0.3 * w + k * step * heading[0]
     y = oy + 0.3 * d + k * step * heading[1]
@@ -165,6 +161,25 @@ def _dolly(hf: HeightField, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ahead = 0.1 * size
     targets = eyes + [ahead * heading[0], ahead * heading[1], -ahead * np.tan(np.radians(DOLLY_PITCH_DEG))]
     return eyes, targets
+
+
+def _dolly(hf: HeightField, k: np.ndarray, fov_y: float, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """Eyes and targets (world metres) of the dolly at frame numbers k: a straight level line to the north-east.
+
+    One height for the whole line: the highest ground within 2 % of the terrain's size of any point of it,
+    plus max(30 m, 20 % of that neighbourhood's relief); it looks along the line, DOLLY_PITCH_DEG below the
+    horizon. The eye advances at most max(2 m, s / 40) a frame (s the finer of spacing_x and spacing_y), and
+    less where that would move the ground at the bottom of the view by more than DOLLY_FLOW_PX pixels a frame:
+    a ground point seen at angle a below the horizon from height c moves step * sin²(a) / c radians a frame.
+    """
+    step = max(2.0, min(hf.spacing_x, hf.spacing_y) / 40.0)
+    px_per_rad = height / (2.0 * np.tan(np.radians(fov_y) / 2))
+    sin2 = np.sin(np.radians(DOLLY_PITCH_DEG + fov_y / 2)) ** 2
+    for _ in range(2):                  # the line's height depends on its length: settle the step twice
+        eyes, targets = _dolly_line(hf, k, step)
+        clearance = float(np.min(eyes[:, 2] - hf.ground_height(eyes[:, 0], eyes[:, 1])))
+        step = min(step, DOLLY_FLOW_PX * clearance / (sin2 * px_per_rad))
+    return _dolly_line(hf, k, step)
 
 
 def preset(name: str, hf: HeightField, frames: int = 60, width: int = 640, height: int = 360,
@@ -214,7 +229,7 @@ def preset(name: str, hf: HeightField, frames: int = 60, width: int = 640, heigh
         targets = np.stack([x, y, np.full(n_key, oz + lo)], 1)
         near = max(0.5, size * 1e-5)
     elif name == "dolly":
-        eyes, targets = _dolly(hf, s * (n_key - 1))
+        eyes, targets = _dolly(hf, s * (n_key - 1), fov_y, height)
         near = 1.0
     else:
         raise TerrabenchError(f"unknown flight {name!r}; choose one of {', '.join(PRESETS)} or give a .json/.csv file")
