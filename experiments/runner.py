@@ -228,7 +228,8 @@ def _run_configs(spec: Spec, folder: Path, ctx, progress: bool, fail_fast: bool)
             timed: dict = {}
             try:
                 renderer = make_renderer(ctx, hf, c["policy"], tile_size=spec.tile_size,
-                                         reconstruction=c["reconstruction"])
+                                         reconstruction=c["reconstruction"], budget_bytes=spec.gpu_budget_mib << 20,
+                                         upload_budget_ms=spec.upload_budget_ms)
                 # 1. time every frame first: metric code (FLIP's threads, references) never runs between
                 #    a frame's timed draws; a short settle lets threads of earlier work go idle, and an untimed
                 #    warm-up draw takes the one-off costs (compiles, first uploads) out of the first frame

@@ -70,6 +70,8 @@ class Spec:
     flip: bool = True
     image_frames: list = field(default_factory=lambda: [0])
     video: bool = False
+    gpu_budget_mib: int = 256
+    upload_budget_ms: float | None = None
 
     def configs(self) -> list[dict]:
         """Every combination, one dict each, with a stable id; frames of one (dataset, seed, flight, size) are paired."""
@@ -219,7 +221,7 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None):
         if v is not None:
             kw[key] = [float(x) for x in v] if key == "taus" else v
     for key, lo, hi in (("frames", 1, 100000), ("repeats", 3, 1000), ("tile_size", 2, 65536),
-                        ("supersample", 1, 8), ("dataset_size", 0, 16385)):
+                        ("supersample", 1, 8), ("dataset_size", 0, 16385), ("gpu_budget_mib", 1, 1 << 20)):
         if key in d:
             v = d[key]
             if isinstance(v, bool) or not isinstance(v, int) or not (lo <= v <= hi):
@@ -227,6 +229,11 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None):
             kw[key] = v
     if "tile_size" in kw and kw["tile_size"] & (kw["tile_size"] - 1):
         raise TerrabenchError(f"{source}: 'tile_size' must be a power of two, got {kw['tile_size']}")
+    if "upload_budget_ms" in d:
+        v = d["upload_budget_ms"]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0 <= v <= 1e4):
+            raise TerrabenchError(f"{source}: 'upload_budget_ms' must be a number of ms in [0, 10000], got {v!r}")
+        kw["upload_budget_ms"] = float(v)
     for key in ("flip", "video"):
         if key in d:
             if not isinstance(d[key], bool):

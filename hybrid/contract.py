@@ -95,7 +95,8 @@ class FrameStats:
     GL timer query on GPUs and None on software rasterizers. tiles_raster and tiles_raycast count tiles by kind
     (raster kinds: raster, raster_gs, fullres, tin); tiles_gs counts those of them drawn by raster_gs.
     gpu_bytes counts resident tiles plus what the strategies hold for all tiles (shared_bytes); uploads and
-    evictions are those of this frame.
+    evictions are those of this frame. With an upload budget, upload_ms is the uploads' share of wall_ms,
+    fallback_tiles the tiles drawn from a resident ancestor and pending_uploads the jobs left waiting.
     """
 
     wall_ms: float
@@ -112,6 +113,9 @@ class FrameStats:
     shared_bytes: int = 0
     uploads: int = 0
     evictions: int = 0
+    upload_ms: float = 0.0
+    fallback_tiles: int = 0
+    pending_uploads: int = 0
     pred_ms: float | None = None
     counters: dict[str, float] = field(default_factory=dict)
     together_ms: dict[str, float] = field(default_factory=dict)

@@ -8,7 +8,10 @@ writes depth from the same reversed-Z projection, so a world point has one depth
 
 Frame time (``wall_ms``) is what a user waits for a frame: the CPU planning (tile selection, and for the
 mixed policies the features and choices) plus the drawing, wall clock with ctx.finish() on both sides.
-Tiles not yet resident are uploaded before the timed draw and counted apart (``uploads``).
+Without an upload budget, tiles not yet resident are uploaded before the timed draw and counted apart
+(``uploads``); with ``upload_budget_ms`` uploads are jobs run inside the frame within that budget
+(``hybrid.uploads``), their time is part of ``wall_ms``, and tiles still waiting are drawn from a resident
+ancestor (``fallback_tiles``).
 """
 from __future__ import annotations
 
@@ -32,6 +35,7 @@ from hybrid.strategies import STRATEGIES, make_strategy, triangle_estimator
 from hybrid.terrain.heightfield import HeightField
 from hybrid.tiles.pyramid import EDGE_E, EDGE_N, EDGE_S, EDGE_W, TilePyramid
 from hybrid.tiles.tiletree import DEFAULT_TAU, edge_neighbours
+from hybrid.uploads import fallback_selection, fallback_tile, stream_uploads
 
 STRATEGY_CODES = {"raster": 1, "raycast": 2}
 """Per-pixel codes of the strategy map, by strategy kind (0 = no terrain)."""
@@ -56,7 +60,8 @@ class Renderer:
 
     def __init__(self, ctx, hf: HeightField, policy: str = "hybrid", tile_size: int = 256, *,
                  cost_model: CostModel | None = None, budget_bytes: int | None = None, threshold: float = 1.0,
-                 oracle_repeats: int = 3, pyramid: TilePyramid | None = None, **options):
+                 oracle_repeats: int = 3, pyramid: TilePyramid | None = None, upload_budget_ms: float | None = None,
+                 **options):
         if policy not in POLICIES:
             raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
         self.ctx, self.hf, self.policy = ctx, hf, policy
@@ -69,6 +74,10 @@ class Renderer:
         self.triangles = triangle_estimator(self.pyramid) if self.mixed else None
         self.threshold = threshold
         self.oracle_repeats = int(oracle_repeats)
+        if upload_budget_ms is not None and not (np.isfinite(upload_budget_ms) and upload_budget_ms >= 0):
+            raise TerrabenchError(f"upload budget must be a finite number of ms >= 0, got {upload_budget_ms!r}")
+        self.upload_budget_ms = upload_budget_ms
+        self._fallbacks: dict = {}
         self._tiles: dict = {}
         self._released = False
 
@@ -121,7 +130,15 @@ class Renderer:
         return self.cache.get(name, self.strategies[name], key, lambda: self.tile(key), pinned)
 
     def _items(self, name: str, plans: list[TilePlan], pinned) -> list[TileItem]:
-        return [TileItem(self._resident(name, p.key, pinned), self.tile(p.key), p.selected) for p in plans]
+        out = []
+        for p in plans:
+            anc = self._fallbacks.get(p.key)
+            if anc is None:
+                out.append(TileItem(self._resident(name, p.key, pinned), self.tile(p.key), p.selected))
+            else:                                   # drawn from its resident ancestor, clipped to its own area
+                out.append(TileItem(self._resident(name, anc, pinned), fallback_tile(self.tile(anc), self.pyramid.clip(p.key)),
+                                    fallback_selection(p.selected, anc)))
+        return out
 
     def _order(self) -> list[str]:
         """Strategy names in drawing order: raster kinds first, ray casting last."""
@@ -219,12 +236,26 @@ class Renderer:
             together = {}
             if measure or self.policy == "oracle":
                 together = self._measure(view, plans, target, pinned, tau)
-            for p in plans:                    # upload first: the timed frame measures drawing only
-                self._resident(p.choice, p.key, pinned)
+            self._fallbacks = {}
+            streamed = None
+            if self.upload_budget_ms is None:
+                for p in plans:                # upload first: the timed frame measures drawing only
+                    self._resident(p.choice, p.key, pinned)
+            else:                              # uploads within the frame's budget, the rest from ancestors
+                streamed = stream_uploads(self.cache, self.strategies, plans, pinned, self.tile, self.pyramid.max_level,
+                                          self.upload_budget_ms)
+                self._fallbacks = {plans[i].key: a for i, a in streamed.fallbacks.items()}
             target.clear()
             target.use()
-            counters, draw, gpu = timed(self.ctx, lambda: self._draw(target, view, plans, pinned, tau, opts))
+            try:
+                counters, draw, gpu = timed(self.ctx, lambda: self._draw(target, view, plans, pinned, tau, opts))
+            finally:
+                self._fallbacks = {}
             stats = self._stats(plans, plan_ms, draw, gpu, counters, together)
+            if streamed is not None:
+                stats.upload_ms, stats.fallback_tiles, stats.pending_uploads = \
+                    streamed.upload_ms, streamed.fallback_tiles, streamed.pending
+                stats.wall_ms += streamed.upload_ms
             stats.uploads = self.cache.stats.uploads - uploads0
             stats.evictions = self.cache.stats.evictions - evictions0
             result = target.read(view, stats)

@@ -12,6 +12,10 @@ from dataclasses import dataclass
 from hybrid.errors import TerrabenchError
 
 
+class BudgetExceeded(TerrabenchError):
+    """An upload that does not fit in the GPU byte budget beside the tiles the frame pins."""
+
+
 @dataclass
 class ResidencyStats:
     """Counters since the cache was made."""
@@ -51,7 +55,7 @@ class ResidencyCache:
                 self._evict(old)
             if self.bytes + size > self.budget:
                 gpu.release()
-                raise TerrabenchError(
+                raise BudgetExceeded(
                     f"GPU memory budget of {self.budget} bytes is too small for this frame: the tiles it needs "
                     f"take {self.bytes + size} bytes; raise the budget")
         self.entries[k] = gpu

@@ -249,7 +249,7 @@ class RaycastStrategy:
                 level = int(tile.key.level) if hasattr(tile, "key") else 0
                 set_uniform(prog, "n_cells", g.n)
                 set_uniform(prog, "n_levels", level_count(g.n) - 1)
-                set_uniform(prog, "ext", ((x1 - x0) / sx, (y1 - y0) / sy))
+                set_uniform(prog, "ext", ((x1 - org[0]) / sx, (y1 - org[1]) / sy))     # texels from the tile's origin
                 set_uniform(prog, "zr", (tile.zmin - org[2], tile.zmax - org[2]))
                 e = eye - org
                 set_uniform(prog, "eye_tex", (e[0] / sx, e[1] / sy, e[2]))

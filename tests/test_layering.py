@@ -22,7 +22,7 @@ LAYERS = [
     ("raster", "raycast"),
     ("hybrid.strategies",),
     ("hybrid.cost",),
-    ("hybrid.reference", "hybrid.residency", "hybrid.renderer"),
+    ("hybrid.reference", "hybrid.residency", "hybrid.uploads", "hybrid.renderer"),
     ("hybrid.calibrate",),
     ("experiments",),
 ]

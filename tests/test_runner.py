@@ -40,6 +40,7 @@ def test_tables_have_expected_rows_and_columns(run):
                 "change_ratio", "error_flicker", "flow_px", "tiles"):
         assert col in f, col
     assert f["wall_ms"].gt(0).all() and f["gpu_bytes"].gt(0).all()
+    assert (f["gpu_bytes"] - f["shared_bytes"]).le(256 << 20).all() and f["fallback_tiles"].eq(0).all()
     # every repeat kept, the median reported
     assert all(len(r) == 3 and min(r) <= m <= max(r) for r, m in zip(f["wall_ms_repeats"], f["wall_ms"]))
     assert (f["silhouette_px"] + f["crack_px"] == f["hole_px"] + f["extra_px"]).all()
@@ -53,7 +54,7 @@ def test_tables_have_expected_rows_and_columns(run):
     assert f.loc[f["policy"] == "raster", "triangles"].gt(0).all()
     t = pd.read_parquet(folder / "tiles.parquet")
     assert len(t) == int(h["tiles"].sum())                     # one row per hybrid tile and frame
-    assert set(t["strategy"]) <= {"raster", "raycast"} and t["pred_raycast_ms"].notna().all()
+    assert set(t["strategy"]) <= {"raster", "raster_gs", "raycast"} and t["pred_raycast_ms"].notna().all()
     assert (folder / "images" / "ref-fbm-s0-flyover-160x90-f1.png").exists()
     assert (folder / "images" / "fbm-s0-flyover-160x90-tau0.6667-triangles-hybrid-f1.strategy.npy").exists()
 
@@ -120,6 +121,9 @@ def test_other_spec_refuses_existing_folder(run, ctx):
     ("seeds = [-1]", "seeds must lie in"),
     ('policies = ["raster", "raycast", "raster"]', "'policies' lists 'raster' more than once"),
     ("taus = [2.0, 2.0]", "'taus' lists 2.0 more than once"),
+    ("gpu_budget_mib = 0", r"'gpu_budget_mib' must be an integer in \[1,"),
+    ("upload_budget_ms = -1", "'upload_budget_ms' must be a number of ms"),
+    ('upload_budget_ms = "fast"', "'upload_budget_ms' must be a number of ms"),
 ])
 def test_bad_specs(text, match):
     with pytest.raises(TerrabenchError, match=match):
@@ -129,6 +133,7 @@ def test_bad_specs(text, match):
 def test_bundled_specs_parse():
     for name in ("default", "tiny"):
         assert load_spec(name).configs()
+        assert load_spec(name).gpu_budget_mib == 256 and load_spec(name).upload_budget_ms is None
     with pytest.raises(TerrabenchError, match="no such spec"):
         load_spec("nowhere.toml")
 
@@ -168,3 +173,12 @@ def test_stress_spec_runs_through_the_runner(ctx, tmp_path, capsys):
     with pytest.raises(TerrabenchError, match="kind must be"):
         parse_spec('kind = "party"')
     assert load_spec("stress").methods
+
+
+def test_a_streaming_spec_reports_uploads_and_fallbacks_inside_its_budgets(ctx, tmp_path):
+    text = TINY.replace('policies = ["raster", "raycast", "hybrid"]', 'policies = ["raycast"]') \
+        + "gpu_budget_mib = 1\nupload_budget_ms = 0\n"
+    folder = run_spec(parse_spec(text), tmp_path, ctx, progress=False)
+    f = pd.read_parquet(folder / "frames.parquet")
+    assert (f["gpu_bytes"] - f["shared_bytes"]).le(1 << 20).all()
+    assert f["upload_ms"].ge(0).all() and f["fallback_tiles"].ge(0).all() and "pending_uploads" in f

@@ -1,0 +1,92 @@
+"""Uploads as jobs under a per-frame time budget, and fallback tiles drawn from a resident coarser ancestor.
+
+Bhattacharjee et al. (§4.3) keep a frame's GPU work bounded by queueing what a new view needs (uploads, max-mip
+builds, per-tile buffers) and running only as much of it as fits in the frame; a tile whose data is not yet on
+the GPU is drawn from its resident ancestor meanwhile, so the frame never shows a hole. Here one job is one
+``strategy.upload(tile)`` (which includes the strategy's per-tile GPU builds). Each frame runs jobs front to
+back until ``budget_ms`` of wall time is spent (at least one job a frame, so the queue always drains); a job
+whose CPU tile the ``ready`` callback says is not loaded yet waits. The coarsest tile (the root) of every
+strategy in use is made resident before anything else, whatever the budget, so every tile has an ancestor.
+
+A fallback draws the ancestor's GPU data clipped to the missing tile's rectangle, without stitching to its
+neighbours (a coarser surface for a few frames, never a hole).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+from hybrid.errors import TerrabenchError
+from hybrid.residency import BudgetExceeded
+from hybrid.tiles.pyramid import TileKey
+from hybrid.tiles.tiletree import NO_NEIGHBOUR
+
+
+@dataclass
+class UploadReport:
+    """One frame's streaming: jobs run, their wall ms, jobs left waiting, and tiles drawn from an ancestor."""
+
+    uploads: int = 0
+    upload_ms: float = 0.0
+    pending: int = 0
+    fallback_tiles: int = 0
+    fallbacks: dict = field(default_factory=dict)
+
+
+def ancestors(key: TileKey, max_level: int):
+    """The tiles containing ``key`` from its parent up to the root, finest first."""
+    k = key
+    while k.level < max_level:
+        k = k.parent()
+        yield k
+
+
+def fallback_selection(sel, key: TileKey):
+    """The selection record of a missing tile redirected to its ancestor ``key``: no neighbour to stitch to."""
+    return replace(sel, key=key, coarser_edges=0, edge_deltas=(NO_NEIGHBOUR,) * 4)
+
+
+def fallback_tile(ancestor_tile, clip):
+    """The ancestor's CPU tile restricted to the missing tile's world rectangle ``clip`` (x0, y0, x1, y1)."""
+    return replace(ancestor_tile, clip=tuple(float(c) for c in clip))
+
+
+def stream_uploads(cache, strategies: dict, plans, pinned: set, make_tile, max_level: int, budget_ms: float,
+                   ready=lambda key: True) -> UploadReport:
+    """Run a frame's upload jobs within ``budget_ms`` and pick an ancestor for every tile still missing.
+
+    ``plans`` (front to back) carry ``key`` and ``choice``; ``pinned`` gains every (strategy, key) the frame
+    draws, ancestors included. Returns the report; ``fallbacks`` maps a plan index to its ancestor's key.
+    """
+    if not (budget_ms >= 0):
+        raise TerrabenchError(f"upload budget must be >= 0 ms a frame, got {budget_ms!r}")
+    report = UploadReport()
+    root = TileKey(max_level, 0, 0)
+    t0 = time.perf_counter()
+    for name in sorted({p.choice for p in plans}):
+        if (name, root) not in cache.entries:           # every tile's last resort: always resident
+            cache.get(name, strategies[name], root, lambda: make_tile(root), pinned | {(name, root)})
+            report.uploads += 1
+        pinned.add((name, root))
+    missing = [i for i, p in enumerate(plans) if (p.choice, p.key) not in cache.entries]
+    for i in missing:
+        p = plans[i]
+        spent = (time.perf_counter() - t0) * 1e3
+        if (report.uploads and spent >= budget_ms) or not ready(p.key):
+            continue
+        try:
+            cache.get(p.choice, strategies[p.choice], p.key, lambda p=p: make_tile(p.key), pinned)
+            report.uploads += 1
+        except BudgetExceeded:
+            continue                                     # no room this frame: drawn from its ancestor
+    report.upload_ms = (time.perf_counter() - t0) * 1e3
+    for i in missing:
+        p = plans[i]
+        if (p.choice, p.key) in cache.entries:
+            continue
+        report.pending += 1
+        anc = next(a for a in ancestors(p.key, max_level) if (p.choice, a) in cache.entries)
+        pinned.add((p.choice, anc))
+        report.fallbacks[i] = anc
+    report.fallback_tiles = len(report.fallbacks)
+    return report
