@@ -68,15 +68,20 @@ def level_bounds(data: np.ndarray, offsets: np.ndarray, n: int, spacing_xy: tupl
     return err, lo, hi
 
 
-def first_level(g, eye_local: np.ndarray, k_tau: float) -> int:
-    """The finest local level that can hold a leaf in this view: below it no parent can split."""
-    d = np.linalg.norm(np.maximum(np.maximum(g.level_lo - eye_local, eye_local - g.level_hi), 0.0), axis=1)
-    can = g.level_error * k_tau > d
-    top = len(can) - 1
-    for m in range(top):
-        if m + 1 >= top or can[m + 1]:
-            return m
-    return 0
+def first_levels(gs, eye_local: np.ndarray, k_tau: float) -> np.ndarray:
+    """Per tile (all of one cell count), the finest local level that can hold a leaf in this view (below it no
+    parent can split); ``eye_local`` (B, 3) is the eye minus each tile's origin, metres."""
+    lo = np.stack([g.level_lo for g in gs])
+    hi = np.stack([g.level_hi for g in gs])
+    err = np.stack([g.level_error for g in gs])
+    d = np.linalg.norm(np.maximum(np.maximum(lo - eye_local[:, None], eye_local[:, None] - hi), 0.0), axis=2)
+    can = err * k_tau > d                                 # (B, levels): a parent at this level can split
+    top = can.shape[1] - 1
+    if top <= 0:
+        return np.zeros(len(gs), dtype=np.int64)
+    inner = can[:, 1:top]                                 # level m + 1 for m = 0 .. top - 2
+    hit = inner.any(axis=1)
+    return np.where(hit, np.argmax(inner, axis=1) if inner.shape[1] else 0, top - 1)
 
 
 class SelectedTileletTile:
@@ -159,14 +164,20 @@ class TileletSelection:
         """The frame's per-tile shader blocks (raster.tileblock) with the selection's fields, uploaded."""
         k_tau = float(view.pixels_per_radian) / float(tau)
 
-        def selection_fields(i, g, tile, sel, b):
-            eye_local = view.eye - np.asarray(tile.origin, dtype=np.float64)
-            first = int(g.starts[first_level(g, eye_local, k_tau)])
-            b["shape"][:3] = (g.n, tile_levels(g.n) - 1, first)
-            b["offsets"][:len(g.offsets)] = g.offsets
-            b["starts"][:len(g.starts)] = g.starts
+        def selection_fields(blocks):
+            gs = [g for g, _, _ in items]
+            for n in {g.n for g in gs}:                   # one cell count per frame in practice
+                at = np.array([g.n == n for g in gs])
+                sub = [g for g in gs if g.n == n]
+                eye_local = np.asarray(view.eye, dtype=np.float64) - np.array([t.origin for _, t, _ in items])[at]
+                first = sub[0].starts[first_levels(sub, eye_local, k_tau)]
+                b = blocks[at]
+                b["shape"][:, 0], b["shape"][:, 1], b["shape"][:, 2] = n, tile_levels(n) - 1, first
+                b["offsets"][:, :len(sub[0].offsets)] = sub[0].offsets
+                b["starts"][:, :len(sub[0].starts)] = sub[0].starts
+                blocks[at] = b
 
-        blocks = tile_blocks(self.hf, view, items, skirts, culling, per_tile=selection_fields)
+        blocks = tile_blocks(self.hf, view, items, skirts, culling, per_frame=selection_fields)
         self.blocks.write(blocks)
         return blocks
 

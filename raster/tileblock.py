@@ -23,33 +23,35 @@ def register_tile_block(ctx) -> None:
     register_include(ctx, "raster/tile_clip", "raster", "tile_clip.glsl")
 
 
-def skirt_bottom(tile, view) -> float:
-    """Eye-relative z (metres) of the lower edge of a tile's skirts: below its lowest point."""
-    return float(tile.zmin - view.eye[2] - 1.0 - 0.01 * max(tile.spacing_x, tile.spacing_y))
-
-
 def tile_blocks(hf, view, items, skirts: dict | None = None, culling: bool = True, unit_spacing: bool = False,
-                per_tile=None) -> np.ndarray:
-    """The blocks of a frame's (gpu, tile, selected) items; ``per_tile(i, gpu, tile, selected, block)`` fills in
-    selection fields (offsets, starts, first node); ``unit_spacing`` for meshes whose positions are metres."""
+                per_frame=None) -> np.ndarray:
+    """The blocks of a frame's (gpu, tile, selected) items, built as arrays over all items; ``per_frame(blocks)``
+    fills in selection fields (offsets, starts, first node); ``unit_spacing`` for meshes whose positions are
+    metres."""
     out = np.zeros(len(items), BLOCK)
+    if not len(items):
+        return out
     eye = np.asarray(view.eye, dtype=np.float64)
-    hf_origin = np.asarray(hf.origin, dtype=np.float64)
+    tiles = [t for _, t, _ in items]
+    sels = [s for _, _, s in items]
+    origin = np.array([t.origin for t in tiles], dtype=np.float64).reshape(-1, 3)
+    spacing = np.array([(t.spacing_x, t.spacing_y) for t in tiles], dtype=np.float64).reshape(-1, 2)
+    sp = np.ones_like(spacing) if unit_spacing else spacing
+    out["origin"][:, :3] = origin - eye
+    out["spacing"][:, :2] = sp
+    out["clip_rel"] = np.array([t.clip for t in tiles], dtype=np.float64).reshape(-1, 4) - np.tile(eye[:2], 2)
     extent = np.asarray(hf.extent, dtype=np.float64)
-    for i, (g, tile, sel) in enumerate(items):
-        b = out[i]
-        sp = np.ones(2) if unit_spacing else np.array([tile.spacing_x, tile.spacing_y], dtype=np.float64)
-        b["origin"] = (*(np.asarray(tile.origin, dtype=np.float64) - eye), 0.0)
-        b["spacing"] = (sp[0], sp[1], 0.0, 0.0)
-        x0, y0, x1, y1 = tile.clip
-        b["clip_rel"] = (x0 - eye[0], y0 - eye[1], x1 - eye[0], y1 - eye[1])
-        b["uv"] = (*((np.asarray(tile.origin[:2], dtype=np.float64) - hf_origin[:2]) / extent), *(sp / extent))
-        b["shape"] = (0, 0, 0, int(sel.key.level))
-        b["nb_delta"] = tuple(int(d) for d in getattr(sel, "edge_deltas", (9, 9, 9, 9)))
-        b["flags"] = (int((skirts or {}).get(sel.key, 0)), int(bool(culling) and not bool(sel.inside)), 0, 0)
-        b["skirt"] = (skirt_bottom(tile, view), 0.0, 0.0, 0.0)
-        if per_tile is not None:
-            per_tile(i, g, tile, sel, b)
+    out["uv"][:, :2] = (origin[:, :2] - np.asarray(hf.origin[:2], dtype=np.float64)) / extent
+    out["uv"][:, 2:] = sp / extent
+    out["shape"][:, 3] = [int(s.key.level) for s in sels]
+    out["nb_delta"] = [tuple(getattr(s, "edge_deltas", (9, 9, 9, 9))) for s in sels]
+    sk = skirts or {}
+    out["flags"][:, 0] = [int(sk.get(s.key, 0)) for s in sels]
+    out["flags"][:, 1] = [int(bool(culling) and not bool(s.inside)) for s in sels]
+    zmin = np.array([t.zmin for t in tiles], dtype=np.float64)
+    out["skirt"][:, 0] = zmin - eye[2] - 1.0 - 0.01 * spacing.max(axis=1)   # eye-relative skirt bottom: below zmin
+    if per_frame is not None:
+        per_frame(out)
     return out
 
 
