@@ -26,7 +26,9 @@ MAX_COLS = 4             # panels a row
 
 
 def label_columns(frames: pd.DataFrame) -> pd.DataFrame:
-    """Add 'method' (policy, plus tau / reconstruction where the run varies them) and 'scene' columns."""
+    """Add 'method' (policy, plus tau / reconstruction where the run varies them) and 'scene' columns; a run
+    timed on several devices (a cluster) gets the device in its scene, so no chart or sentence compares frame
+    times across devices."""
     f = frames.copy()
     many_tau = f["tau"].nunique() > 1
     many_rec = f["reconstruction"].nunique() > 1
@@ -40,6 +42,8 @@ def label_columns(frames: pd.DataFrame) -> pd.DataFrame:
     f["method"] = f.apply(method, axis=1)
     f["scene"] = f["dataset"].map(lambda d: Path(str(d)).stem) + " / " + f["flight"].map(lambda d: Path(str(d)).stem) \
         + " / " + f["size"]
+    if "device" in f and f["device"].nunique() > 1:
+        f["scene"] = f["scene"] + " / " + f["device"].fillna("unknown device").astype(str)
     return f
 
 

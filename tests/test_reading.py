@@ -84,3 +84,17 @@ def test_repeat_matrix_and_spread():
     assert 0 < repeat_spread(m) <= 0.2 * 1.1
     old = f.drop(columns="wall_ms_repeats")                 # runs from before repeats were kept: medians only
     assert repeat_matrix(old).shape == (4, 1) and repeat_spread(repeat_matrix(old)) == 0
+
+
+def test_frames_of_two_devices_are_never_compared():
+    a = table(rows("raster", 10.0, 0.02, seed=1, tiles_raster=10, tiles_raycast=0), rows("raycast", 20.0, 0.02, seed=2))
+    a["device"] = "GPU A"
+    b = a.copy()
+    b["device"] = "GPU B"
+    b["wall_ms"] *= 10
+    b["wall_ms_repeats"] = [[10 * x for x in r] for r in b["wall_ms_repeats"]]
+    text = reading(pd.concat([a, b]), [])
+    scenes = [line for line in text if line.startswith("**")]
+    assert len(scenes) == 2 and "GPU A" in scenes[0] and "GPU B" in scenes[1]
+    assert "the next, raycast (20.0 ms), is 2.00x slower" in scenes[0]
+    assert "the next, raycast (200.0 ms), is 2.00x slower" in scenes[1]

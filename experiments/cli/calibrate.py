@@ -28,32 +28,46 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--save", default="user", help="'user' (default costs file), a path, or '' for no save")
     p.add_argument("--key", default=None, help="save under this key instead of the full GL renderer string "
                    "(the shipped defaults use a substring such as 'llvmpipe')")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="calibrate every device of this Dask cluster (one worker per GL renderer)")
+    where.add_argument("--workers", default=None, metavar="local:N", help="calibrate on a local Dask cluster")
 
 
 def run(terrain: TerrainOptions = TerrainOptions(), flights=("flyover", "orbit"), frames: int = 6,
         size: tuple[int, int] = (640, 360), tau: float = 2 / 3, tile_size: int = 256, repeats: int = 3,
-        holdout: float = 0.3, save: str | None = "user", key: str | None = None, device: int | None = None):
-    """Calibrate the cost model on views of the flights (size in pixels, tau in pixels); returns the Calibration."""
-    from hybrid.calibrate import calibrate
-    from hybrid.camera.flight import get_flight
+        holdout: float = 0.3, save: str | None = "user", key: str | None = None, device: int | None = None,
+        scheduler: str | None = None, workers: str | None = None):
+    """Calibrate the cost model on views of the flights (size in pixels, tau in pixels); returns the fitted models
+    (one, or one per device of a cluster)."""
     from hybrid.cost.model import save_cost_model
     from hybrid.gl.context import shared_context
     if save and save != "user":
         writable_folder(Path(save).parent if str(Path(save).parent) else Path("."), "--save folder")
-    hf = terrain.load()
-    w, h = size
-    views = [v for name in flights for v in get_flight(name, hf, frames=frames, width=w, height=h).views()]
-    cal = calibrate(shared_context(device), hf, views, tau, tile_size, repeats, holdout)
-    print(cal.model.explain())
-    if save:
-        if key:
-            cal.model.renderer = key
-        print(f"saved to {save_cost_model(cal.model, Path(save) if save != 'user' else None)}")
-    return cal
+    args = (terrain, tuple(flights), frames, size, tau, tile_size, repeats, holdout)
+    if scheduler or workers:
+        from ..cluster import calibrate_on_cluster, connect
+        client, cluster = connect(scheduler, workers)
+        try:
+            models = calibrate_on_cluster(client, args)
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    else:
+        from ..calibration import calibrate_here
+        models = [calibrate_here(shared_context(device), *args).model]
+    for model in models:
+        print(model.explain())
+        if save:
+            if key and len(models) == 1:
+                model.renderer = key
+            print(f"saved to {save_cost_model(model, Path(save) if save != 'user' else None)}")
+    return models
 
 
 def run_from_args(args: argparse.Namespace) -> int:
     """The calibrate command from parsed arguments; returns the exit code."""
     run(from_args(TerrainOptions, args), args.flights, args.frames, args.size, args.tau, args.tile_size,
-        args.repeats, args.holdout, args.save, args.key, args.device)
+        args.repeats, args.holdout, args.save, args.key, args.device, args.scheduler, args.workers)
     return 0

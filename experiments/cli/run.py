@@ -19,11 +19,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--report", action="store_true", help="write the report when done")
     add_reports_argument(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="run the configurations as tasks on the Dask cluster of this scheduler "
+                            "(needs terrabench[cluster]); each worker uses the EGL device TERRABENCH_GL_DEVICE names")
+    where.add_argument("--workers", default=None, metavar="local:N",
+                       help="run the configurations on a local Dask cluster of N processes")
 
 
 def run(spec, runs="runs", name: str | None = None, report: bool = False, reports="reports", quiet: bool = False,
-        device: int | None = None) -> Path:
-    """Run a spec (a path, a bundled name or a parsed spec) into runs/<name>; returns the run folder."""
+        device: int | None = None, scheduler: str | None = None, workers: str | None = None) -> Path:
+    """Run a spec (a path, a bundled name or a parsed spec) into runs/<name>; returns the run folder. With a
+    ``scheduler`` address or ``workers`` 'local:N' its configurations run on a Dask cluster."""
+    from hybrid.errors import TerrabenchError
     from hybrid.gl.context import shared_context
 
     from ..report import write_run_report
@@ -37,8 +45,20 @@ def run(spec, runs="runs", name: str | None = None, report: bool = False, report
     writable_folder(Path(runs), "--runs")
     if report:
         writable_folder(Path(reports), "--reports")
-    runner = run_stress_spec if isinstance(spec, StressSpec) else run_spec
-    folder = runner(spec, Path(runs), shared_context(device), progress=not quiet)
+    if scheduler or workers:
+        if isinstance(spec, StressSpec):
+            raise TerrabenchError("stress specs run on one machine; drop --scheduler / --workers")
+        from ..cluster import connect
+        client, cluster = connect(scheduler, workers)
+        try:
+            folder = run_spec(spec, Path(runs), progress=not quiet, client=client)
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    else:
+        runner = run_stress_spec if isinstance(spec, StressSpec) else run_spec
+        folder = runner(spec, Path(runs), shared_context(device), progress=not quiet)
     print(f"run folder: {folder}")
     if report:
         print(f"report: {write_run_report(folder, Path(reports), video=getattr(spec, 'video', False))}")
@@ -47,8 +67,9 @@ def run(spec, runs="runs", name: str | None = None, report: bool = False, report
 
 def run_from_args(args: argparse.Namespace) -> int:
     """The run command from parsed arguments; returns the exit code: 1 when any configuration failed."""
-    from ..runner import failed_configs
-    folder = run(args.spec, args.runs, args.name, args.report, args.reports, args.quiet, args.device)
+    from ..journal import failed_configs
+    folder = run(args.spec, args.runs, args.name, args.report, args.reports, args.quiet, args.device, args.scheduler,
+                 args.workers)
     failed = failed_configs(folder)
     if failed:
         print(f"terrabench: {len(failed)} configuration(s) failed (details in {folder / 'errors.jsonl'}):",

@@ -131,7 +131,8 @@ def save_cost_model(model: CostModel, path: Path | None = None) -> Path:
     return path
 
 
-def _from_dict(d: dict, source: str) -> CostModel:
+def cost_model_from_dict(d: dict, source: str) -> CostModel:
+    """A CostModel from its saved form (as in a costs file); ``source`` names where it came from."""
     try:
         m = CostModel(d["renderer"], dict(d["raster"]), dict(d["raycast"]), dict(d.get("fit_error", {})),
                       int(d.get("tiles", 0)), source, {**{s: 0.0 for s in TERMS}, **d.get("overhead", {})},
@@ -154,10 +155,10 @@ def load_cost_model(renderer: str, path: Path | None = None) -> CostModel:
         except json.JSONDecodeError:
             raise TerrabenchError(f"{path}: costs file is not valid JSON") from None
         if renderer in data:
-            return _from_dict(data[renderer], str(path))
+            return cost_model_from_dict(data[renderer], str(path))
     shipped = json.loads((resources.files("hybrid.cost") / "costs_default.json").read_text())
     low = renderer.lower()
     for key, d in shipped.items():
         if key != "fallback" and key in low:
-            return _from_dict(d, f"shipped default '{key}'")
-    return _from_dict(shipped["fallback"], "shipped fallback (uncalibrated; run terrabench calibrate)")
+            return cost_model_from_dict(d, f"shipped default '{key}'")
+    return cost_model_from_dict(shipped["fallback"], "shipped fallback (uncalibrated; run terrabench calibrate)")
