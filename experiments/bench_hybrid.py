@@ -3,7 +3,7 @@
     python -m experiments.bench_hybrid [--frames 8] [--size 640x360] [--tau 0.6667] [--flights flyover,orbit]
 
 Prints, per flight, total and median per-frame wall time (ctx.finish() around each frame, median of
-repeats) of every policy with the noise of the same run (median spread of a frame's repeats), the ratios it
+repeats, the policies interleaved frame by frame) of every policy with the noise of the same run (median spread of a frame's repeats), the ratios it
 targets (faster raster strategy vs the ray caster, the hybrid's share of raster tiles, hybrid vs the better
 pure method and vs the oracle), and the cost model's per-tile error against the oracle's measurements.
 """
@@ -18,28 +18,40 @@ POLICIES = ("raster", "raster_gs", "raycast", "heuristic", "hybrid", "oracle")
 
 
 def run_benchmark(ctx, hf, flights: dict, tau: float = 2 / 3, repeats: int = 3, tile_size: int = 128) -> tuple:
-    """(frames table, per-tile table): wall ms per policy and frame; predicted vs measured per tile."""
+    """(frames table, per-tile table): wall ms per policy and frame; predicted vs measured per tile.
+
+    The policies of a flight are interleaved: every repeat draws each frame with every policy in turn, so a
+    slow spell of the machine falls on all of them alike instead of on whichever ran then.
+    """
     from hybrid.renderer import make_renderer
     rows, tiles = [], []
     for fname, views in flights.items():
-        for pol in POLICIES:
-            r = make_renderer(ctx, hf, pol, tile_size=tile_size)
-            try:
-                r.render(views[0], tau)                      # warm: uploads, shader compiles
+        renderers = {}
+        try:
+            for pol in POLICIES:
+                renderers[pol] = make_renderer(ctx, hf, pol, tile_size=tile_size)
+                renderers[pol].render(views[0], tau)             # warm: uploads, shader compiles
+            walls = {(pol, k): [] for pol in POLICIES for k in range(len(views))}
+            last = {}
+            for _ in range(repeats):
                 for k, v in enumerate(views):
-                    res = [r.render(v, tau) for _ in range(repeats)]
-                    st = res[-1].stats
-                    walls = [x.stats.wall_ms for x in res]
-                    rows.append({"flight": fname, "policy": pol, "frame": k,
-                                 "wall_ms": float(np.median(walls)),
-                                 "spread": float((max(walls) - min(walls)) / np.median(walls)),
+                    for pol, r in renderers.items():
+                        st = r.render(v, tau).stats
+                        walls[(pol, k)].append(st.wall_ms)
+                        last[(pol, k)] = st
+            for pol in POLICIES:
+                for k in range(len(views)):
+                    w, st = walls[(pol, k)], last[(pol, k)]
+                    rows.append({"flight": fname, "policy": pol, "frame": k, "wall_ms": float(np.median(w)),
+                                 "spread": float((max(w) - min(w)) / np.median(w)),
                                  "tiles": st.tiles, "tiles_raster": st.tiles_raster, "tiles_raycast": st.tiles_raycast,
                                  "tiles_gs": st.tiles_gs, "plan_ms": st.plan_ms,
                                  "pred_ms": np.nan if st.pred_ms is None else st.pred_ms})
                     if pol == "oracle":
                         for t in st.tile_rows:
                             tiles.append({"flight": fname, "frame": k, **t})
-            finally:
+        finally:
+            for r in renderers.values():
                 r.release()
     return pd.DataFrame(rows), pd.DataFrame(tiles)
 

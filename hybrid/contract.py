@@ -81,7 +81,10 @@ class SkirtedStrategy(TileStrategy, Protocol):
 
 
 class TriangleEstimator(Protocol):
-    """Triangles a raster strategy would draw for one tile at a view, computed on the CPU without GL."""
+    """Triangles a raster strategy would draw for one tile at a view, computed on the CPU without GL;
+    ``build_ms`` is the wall time it has spent on one-time per-tile preparation."""
+
+    build_ms: float
 
     def __call__(self, key: TileKey, selected: SelectedTile, view: View, tau: float) -> int:
         """Estimated triangle count of tile ``key`` at ``view`` for the bound tau (pixels)."""
@@ -95,8 +98,10 @@ class FrameStats:
     GL timer query on GPUs and None on software rasterizers. tiles_raster and tiles_raycast count tiles by kind
     (raster kinds: raster, raster_gs, fullres, tin); tiles_gs counts those of them drawn by raster_gs.
     gpu_bytes counts resident tiles plus what the strategies hold for all tiles (shared_bytes); uploads and
-    evictions are those of this frame. With an upload budget, upload_ms is the uploads' share of wall_ms,
-    fallback_tiles the tiles drawn from a resident ancestor and pending_uploads the jobs left waiting.
+    evictions are those of this frame. prep_ms is one-time CPU work for tiles seen for the first time (the
+    raster mesh's node errors behind the triangle estimate), apart from plan_ms and, like uploads, outside
+    wall_ms. With an upload budget, upload_ms and prep_ms are part of wall_ms, fallback_tiles counts the tiles
+    drawn from a resident ancestor and pending_uploads the jobs left waiting.
     """
 
     wall_ms: float
@@ -114,6 +119,7 @@ class FrameStats:
     uploads: int = 0
     evictions: int = 0
     upload_ms: float = 0.0
+    prep_ms: float = 0.0
     fallback_tiles: int = 0
     pending_uploads: int = 0
     pred_ms: float | None = None

@@ -226,9 +226,11 @@ class Renderer:
         if measure and not self.mixed:
             raise TerrabenchError(f"measure=True needs a mixed policy ({', '.join(MIXED_POLICIES)}), not {self.policy!r}")
         opts = {n: {**self.options[n], **o} for n, o in route_options(self.strategies, options).items()}
+        prep0 = self.triangles.build_ms if self.triangles is not None else 0.0
         t_plan = time.perf_counter()
         plans = self.plan(view, tau)
-        plan_ms = (time.perf_counter() - t_plan) * 1e3
+        prep_ms = (self.triangles.build_ms if self.triangles is not None else 0.0) - prep0
+        plan_ms = (time.perf_counter() - t_plan) * 1e3 - prep_ms      # first-seen tiles' one-time work apart
         pinned = {(p.choice, p.key) for p in plans}
         uploads0, evictions0 = self.cache.stats.uploads, self.cache.stats.evictions
         target = FrameTarget(self.ctx, view.width, view.height)
@@ -252,10 +254,11 @@ class Renderer:
             finally:
                 self._fallbacks = {}
             stats = self._stats(plans, plan_ms, draw, gpu, counters, together)
+            stats.prep_ms = prep_ms
             if streamed is not None:
                 stats.upload_ms, stats.fallback_tiles, stats.pending_uploads = \
                     streamed.upload_ms, streamed.fallback_tiles, streamed.pending
-                stats.wall_ms += streamed.upload_ms
+                stats.wall_ms += streamed.upload_ms + prep_ms
             stats.uploads = self.cache.stats.uploads - uploads0
             stats.evictions = self.cache.stats.evictions - evictions0
             result = target.read(view, stats)

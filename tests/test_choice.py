@@ -36,3 +36,20 @@ def test_matches_brute_force(n_tiles, n_strategies, seed):
     chosen, total = best_assignment(costs, overhead)
     recomputed = sum(costs[c][i] for i, c in enumerate(chosen)) + sum(overhead[c] for c in set(chosen))
     assert np.isclose(total, best) and np.isclose(recomputed, best)
+
+
+def test_hedged_choices_leave_the_base_only_beyond_the_model_error():
+    from hybrid.cost.model import CostModel
+    from hybrid.cost.planner import hedged_choices
+    zero = {"const": 0.0, "triangles": 0.0, "visible_triangles": 0.0, "pixels": 0.0}
+    m = CostModel("t", zero, {"const": 0.0, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0},
+                  fit_error={"raster": 0.15, "raycast": 0.10}, overhead={"raster": 0.0, "raycast": 0.0})
+    # ray casting is the cheaper pure frame (9 vs 10.5 ms): the base. Tile 0 is 17 % cheaper rasterized (inside
+    # 0.15 + 0.10 of error: stays), tile 1 is 60 % cheaper (leaves), tile 2 is cheaper ray cast anyway
+    pred = {"raster": np.array([2.5, 1.0, 7.0]), "raycast": np.array([3.0, 2.5, 3.5])}
+    assert hedged_choices(pred, m) == ["raycast", "raster", "raycast"]
+    pred["raster"][0] = 2.4 / 1.25                           # 36 % cheaper: beyond the error, it leaves too
+    assert hedged_choices(pred, m) == ["raster", "raster", "raycast"]
+    # without a measured error the plain cheapest assignment
+    m.fit_error = {}
+    assert hedged_choices(pred, m) == best_assignment(pred, m.overhead)[0] == ["raster", "raster", "raycast"]

@@ -76,6 +76,23 @@ def choose(policy: str, features: TileFeatures, predicted: dict, threshold: floa
     return choices(policy, columns, {s: np.array([v]) for s, v in predicted.items()}, threshold)[0]
 
 
+def hedged_choices(predicted: dict, model: CostModel) -> list[str]:
+    """The hybrid's strategy per tile: the cheapest assignment (``best_assignment``) after hedging against the
+    model's error. The frame's base is the strategy whose pure frame is predicted cheapest; a tile leaves it
+    only where another strategy is predicted cheaper by more than both models' held-out median relative errors
+    together (``model.fit_error``): a choice inside the model's error is a coin toss that costs the other
+    strategy's per-frame overhead and, on a CPU rasterizer, risks the rare tile that is many times slower than
+    predicted."""
+    names = list(predicted)
+    pure = {n: float(np.sum(predicted[n])) + model.overhead.get(n, 0.0) for n in names}
+    base = min(pure, key=pure.get)
+    err = {n: float(model.fit_error.get(n, 0.0)) for n in names}
+    order = [base] + [n for n in names if n != base]            # ties stay with the base
+    hedged = {n: np.asarray(predicted[n], dtype=np.float64) * (1.0 if n == base else 1.0 + err[n] + err[base])
+              for n in order}
+    return best_assignment(hedged, model.overhead)[0]
+
+
 _ESTIMATORS: "weakref.WeakKeyDictionary[TilePyramid, TriangleEstimator]" = weakref.WeakKeyDictionary()
 
 
@@ -120,8 +137,7 @@ def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
         chosen = [choose(policy, f, p, threshold) for f, p in zip(features, predicted)]
     plans = [TilePlan(s, f, p, c) for s, f, p, c in zip(selected, features, predicted, chosen)]
     if policy == "hybrid":
-        best, _ = best_assignment(pred if batch else {n: np.array([q[n] for q in predicted]) for n in predicted[0]},
-                                  model.overhead)
-        for p, c in zip(plans, best):
+        cols = pred if batch else {n: np.array([q[n] for q in predicted]) for n in predicted[0]}
+        for p, c in zip(plans, hedged_choices(cols, model)):
             p.choice = c
     return plans
