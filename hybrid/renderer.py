@@ -34,6 +34,7 @@ from hybrid.residency import ResidencyCache
 from hybrid.strategies import STRATEGIES, make_strategy, triangle_estimator
 from hybrid.terrain.heightfield import HeightField
 from hybrid.tiles.pyramid import EDGE_E, EDGE_N, EDGE_S, EDGE_W, TilePyramid
+from hybrid.tiles.store import pyramid_for
 from hybrid.tiles.tiletree import DEFAULT_TAU, edge_neighbours
 from hybrid.uploads import fallback_selection, fallback_tile, stream_uploads
 
@@ -66,7 +67,7 @@ class Renderer:
             raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
         self.ctx, self.hf, self.policy = ctx, hf, policy
         self.mixed = policy in MIXED_POLICIES
-        self.pyramid = pyramid or TilePyramid(hf, tile_size)
+        self.pyramid = pyramid or pyramid_for(hf, tile_size)
         self.cache = ResidencyCache(budget_bytes)
         self.strategies = {n: make_strategy(n, ctx, hf) for n in (CANDIDATES if self.mixed else (policy,))}
         self.options = route_options(self.strategies, options)

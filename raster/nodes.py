@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hybrid.terrain.stored import StoredTerrain
 from hybrid.tiles.pyramid import TilePyramid
 
 from .quadtree import GPU_BETA, error_pyramid
@@ -62,7 +63,8 @@ def global_nodes(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
     hit = _CACHE.get(key)
     if hit is not None and hit[0]() is hf:
         return hit[1]
-    pyramid = TilePyramid(hf, tile_size)
+    grid = hf.load() if isinstance(hf, StoredTerrain) else hf     # a tile store small enough to hold (else refused)
+    pyramid = TilePyramid(grid, tile_size)
     pyr = error_pyramid(pyramid.padded, beta)
     zlo = tuple(_grow(z, np.minimum).astype(np.float32) for z in pyr.zmin)
     zhi = tuple(_grow(z, np.maximum).astype(np.float32) for z in pyr.zmax)

@@ -12,10 +12,10 @@ import warnings
 
 from hybrid.errors import TerrabenchError
 
-from . import bench, calibrate, info, render, report, run, stress
+from . import bench, calibrate, info, prepare, render, report, run, stress
 
 COMMANDS = {"info": info, "render": render, "run": run, "report": report, "calibrate": calibrate,
-            "stress": stress, "bench": bench}
+            "stress": stress, "bench": bench, "prepare": prepare}
 """Subcommand name -> its module."""
 
 

@@ -18,9 +18,9 @@ from hybrid.terrain.heightfield import HeightField
 def edge_profiles(heights: np.ndarray) -> np.ndarray:
     """(4, L) float32 heights (metres) along the south, north, west and east edges, L = max(rows, cols), each
     padded with its last sample."""
-    h = np.asarray(heights, dtype=np.float32)
-    sides = (h[0], h[-1], h[:, 0], h[:, -1])
-    n = max(h.shape)
+    sides = tuple(np.asarray(heights[i], dtype=np.float32) for i in ((0, slice(None)), (-1, slice(None)),
+                                                                   (slice(None), 0), (slice(None), -1)))
+    n = max(heights.shape)                          # sliced first: a stored grid reads only its edges
     return np.stack([np.pad(s, (0, n - len(s)), mode="edge") for s in sides])
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import re
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 from hybrid.errors import TerrabenchError, TerrainLoadError
@@ -61,44 +62,49 @@ def _vertical(path, crs, band_unit: str, vertical_scale) -> tuple[float, list[st
     return 1.0, ["heights taken as metres: the file names no vertical unit (pass --vertical-scale to convert)"]
 
 
-def load_gdal(path, *, vertical_scale=None, spacing=None, crs=None, crop: Crop | None = None,
-              name=None) -> HeightField:
-    """Load the height band of a GDAL-readable grid: heights in metres, ground spacing from its CRS (or ``spacing``)."""
+@dataclass
+class GridHeader:
+    """What a GDAL grid says of itself, before its samples are read: band, shape, orientation, spacing (metres),
+    metres per stored unit with the band's scale and offset, and the notes saying where each came from."""
+
+    band: int
+    shape: tuple[int, int]
+    window: object
+    ground: object
+    scale: float
+    offset: float
+    north_up: bool
+    east_left: bool
+    notes: list
+    nodata: float | None
+
+
+def grid_header(path: str, src, *, vertical_scale=None, spacing=None, crs=None, crop: Crop | None = None) -> GridHeader:
+    """The header of an open rasterio dataset (refusals named as load_gdal's)."""
     from rasterio.enums import ColorInterp
-    from rasterio.errors import NotGeoreferencedWarning
     from rasterio.transform import Affine
     from rasterio.windows import Window
-    path = str(path)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", NotGeoreferencedWarning)      # said below, in terrabench's words
-        src = _open(path)
-    with src:
-        heights_bands = [i for i, c in enumerate(src.colorinterp, 1) if c != ColorInterp.alpha]
-        if len(heights_bands) != 1:
-            raise TerrainLoadError(f"{path}: {len(heights_bands)} bands; a height grid has one (plus an optional "
-                                   "alpha band)")
-        band = heights_bands[0]
-        shape = (src.height, src.width)
-        window = None
-        if crop is not None:
-            crop.check(shape, path)
-            window = Window(crop.col, crop.row, crop.cols, crop.rows)
-        try:
-            raw = src.read(band, window=window)
-            valid = src.read_masks(band, window=window)
-        except Exception as exc:  # GDAL raises several types for truncated or corrupt data
-            raise TerrainLoadError(f"{path}: GDAL cannot read the samples ({type(exc).__name__}: {exc})") from None
-        transform = src.transform if crop is None else src.transform @ Affine.translation(crop.col, crop.row)
-        file_crs = parse_crs(src.crs.to_wkt(), path) if src.crs is not None else None
-        georeferenced = not src.transform.is_identity        # GDAL's stand-in when a file has no geotransform
-        if src.gcps[0] and not georeferenced and spacing is None:
-            raise TerrainLoadError(f"{path}: georeferenced by ground control points, not an affine transform; warp "
-                                   "it first (e.g. gdalwarp) or pass --spacing")
-        driver = src.driver
-        band_scale = float(src.scales[band - 1] or 1.0)
-        band_offset = float(src.offsets[band - 1] or 0.0)
-        band_unit = (src.units[band - 1] or "").strip()
-    notes = [f"read by GDAL's {driver} driver"] + ([f"window {crop.describe()} of {shape[0]}x{shape[1]}"]
+    heights_bands = [i for i, c in enumerate(src.colorinterp, 1) if c != ColorInterp.alpha]
+    if len(heights_bands) != 1:
+        raise TerrainLoadError(f"{path}: {len(heights_bands)} bands; a height grid has one (plus an optional "
+                               "alpha band)")
+    band = heights_bands[0]
+    shape = (src.height, src.width)
+    window = None
+    if crop is not None:
+        crop.check(shape, path)
+        window = Window(crop.col, crop.row, crop.cols, crop.rows)
+        shape = (crop.rows, crop.cols)
+    transform = src.transform if crop is None else src.transform @ Affine.translation(crop.col, crop.row)
+    file_crs = parse_crs(src.crs.to_wkt(), path) if src.crs is not None else None
+    georeferenced = not src.transform.is_identity        # GDAL's stand-in when a file has no geotransform
+    if src.gcps[0] and not georeferenced and spacing is None:
+        raise TerrainLoadError(f"{path}: georeferenced by ground control points, not an affine transform; warp "
+                               "it first (e.g. gdalwarp) or pass --spacing")
+    band_scale = float(src.scales[band - 1] or 1.0)
+    band_offset = float(src.offsets[band - 1] or 0.0)
+    band_unit = (src.units[band - 1] or "").strip()
+    notes = [f"read by GDAL's {src.driver} driver"] + ([f"window {crop.describe()} of {src.height}x{src.width}"]
                                                        if crop is not None else [])
     use_crs = file_crs
     try:
@@ -118,7 +124,7 @@ def load_gdal(path, *, vertical_scale=None, spacing=None, crs=None, crop: Crop |
         elif use_crs is None:
             raise TerrainLoadError(f"{path}: {NO_CRS}")
         else:
-            g = ground_spacing(use_crs, transform, raw.shape[0], raw.shape[1])
+            g = ground_spacing(use_crs, transform, shape[0], shape[1])
             ground = (g.x, g.y)
             notes += list(g.notes)
         metres, vnotes = _vertical(path, use_crs, band_unit, vertical_scale)
@@ -129,6 +135,25 @@ def load_gdal(path, *, vertical_scale=None, spacing=None, crs=None, crop: Crop |
     notes += vnotes
     if band_scale != 1.0 or band_offset != 0.0:
         notes.append(f"band scale {band_scale:g} and offset {band_offset:g} applied")
-    return assemble(path, raw, spacing=ground, scale=band_scale * metres, offset=band_offset * metres,
-                    missing=valid == 0, north_up=not georeferenced or transform.e < 0,
-                    east_left=not georeferenced or transform.a > 0, name=name or Path(path).stem, notes=notes)
+    return GridHeader(band, shape, window, ground, band_scale * metres, band_offset * metres,
+                      not georeferenced or transform.e < 0, not georeferenced or transform.a > 0, notes,
+                      src.nodatavals[band - 1])
+
+
+def load_gdal(path, *, vertical_scale=None, spacing=None, crs=None, crop: Crop | None = None,
+              name=None) -> HeightField:
+    """Load the height band of a GDAL-readable grid: heights in metres, ground spacing from its CRS (or ``spacing``)."""
+    from rasterio.errors import NotGeoreferencedWarning
+    path = str(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)      # said below, in terrabench's words
+        src = _open(path)
+    with src:
+        h = grid_header(path, src, vertical_scale=vertical_scale, spacing=spacing, crs=crs, crop=crop)
+        try:
+            raw = src.read(h.band, window=h.window)
+            valid = src.read_masks(h.band, window=h.window)
+        except Exception as exc:  # GDAL raises several types for truncated or corrupt data
+            raise TerrainLoadError(f"{path}: GDAL cannot read the samples ({type(exc).__name__}: {exc})") from None
+    return assemble(path, raw, spacing=h.ground, scale=h.scale, offset=h.offset, missing=valid == 0,
+                    north_up=h.north_up, east_left=h.east_left, name=name or Path(path).stem, notes=h.notes)

@@ -54,9 +54,15 @@ class TerrainSource:
             if self.name is not None:
                 hf.name = self.name
             return hf
+        from hybrid.terrain.stored import is_store, open_store
+        if is_store(self.dataset):                       # a tile store from terrabench prepare: stays on disk
+            if given:
+                raise TerrabenchError(f"{self.dataset} is a tile store; {', '.join(given)} were applied when it was "
+                                      "prepared")
+            return open_store(self.dataset)
         if not Path(self.dataset).suffix:
-            raise TerrabenchError(f"unknown dataset {self.dataset!r}; choose one of {', '.join(NAMES)} or give a file "
-                                  "path")
+            raise TerrabenchError(f"unknown dataset {self.dataset!r}; choose one of {', '.join(NAMES)}, a file path or "
+                                  "a tile store (terrabench prepare)")
         opts = {"spacing": self.spacing, "vertical_scale": self.vertical_scale, "crs": self.crs, "crop": self.crop,
                 "name": self.name}
         if self.raw_shape is not None or self.raw_dtype is not None:

@@ -267,13 +267,19 @@ class TilePyramid:
                                   f"{self.tiles_per_side(key.level) if 0 <= key.level <= self.max_level else 0} tiles a side)")
         k = 1 << key.level
         i0, j0 = key.ty * self.n * k, key.tx * self.n * k
-        steps = np.arange(self.n + 1) * k
-        h = self.hf.heights[np.ix_(np.minimum(i0 + steps, self.hf.rows - 1), np.minimum(j0 + steps, self.hf.cols - 1))]
+        h = self.samples(key)
         hf = self.hf
         origin = (hf.origin[0] + j0 * hf.spacing_x, hf.origin[1] + i0 * hf.spacing_y, hf.origin[2])
         z0, z1 = self.zrange(key)
         return Tile(key, np.ascontiguousarray(h, dtype=np.float32), origin, hf.spacing_x * k, hf.spacing_y * k,
                     self.clip(key), z0, z1, self.error(key))
+
+    def samples(self, key: TileKey) -> np.ndarray:
+        """The tile's (N+1)² level-l samples (metres, rows south to north), gathered with clamped indices."""
+        k = 1 << key.level
+        i0, j0 = key.ty * self.n * k, key.tx * self.n * k
+        steps = np.arange(self.n + 1) * k
+        return self.hf.heights[np.ix_(np.minimum(i0 + steps, self.hf.rows - 1), np.minimum(j0 + steps, self.hf.cols - 1))]
 
     def texture_rect(self, key: TileKey) -> tuple[int, int, int, int]:
         """Cell (texel) index range (j0, i0, j1, i1) of the terrain's texture that the tile covers."""

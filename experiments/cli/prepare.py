@@ -1,0 +1,71 @@
+"""`terrabench prepare`: build a terrain's tile pyramid once, out of core, into a tile store (a Zarr folder)."""
+from __future__ import annotations
+
+import argparse
+import resource
+import sys
+import time
+from pathlib import Path
+
+from . import argtypes
+
+HELP = "build the tile pyramid of a file (or a synthetic terrain) out of core into a tile store"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The prepare options: input (a GDAL file, or --synthetic SIZE), --out, tile size and loader overrides."""
+    p.add_argument("input", nargs="?", default=None, help="a GDAL-readable height grid (GeoTIFF/COG, .hgt, ...)")
+    p.add_argument("--out", required=True, help="the tile store folder to write (resumed if interrupted)")
+    p.add_argument("--synthetic", type=argtypes.int_in("--synthetic", 2, 1_048_577), default=None, metavar="SIZE",
+                   help="instead of a file: a seeded fractal terrain of SIZE x SIZE samples (e.g. 16385)")
+    p.add_argument("--seed", type=argtypes.int_in("--seed", 0, 2**32 - 1), default=0, help="seed of --synthetic")
+    p.add_argument("--synthetic-spacing", type=argtypes.positive_float("--synthetic-spacing", "metres"), default=10.0,
+                   help="metres between samples of --synthetic")
+    p.add_argument("--tile-size", type=argtypes.power_of_two("--tile-size"), default=256,
+                   help="cells per tile side (power of two)")
+    p.add_argument("--vertical-scale", type=argtypes.positive_float("--vertical-scale", "metres per stored unit"),
+                   default=None, help="metres per stored unit (overrides the file's vertical unit)")
+    p.add_argument("--spacing", type=argtypes.spacing("--spacing"), default=None,
+                   help="ground metres between samples, one number or X,Y (overrides the CRS)")
+    p.add_argument("--crs", default=None, help="CRS of the file, overriding its own")
+    p.add_argument("--crop", type=argtypes.crop("--crop"), default=None, help="ROW,COL,ROWS,COLS window of the file")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _bar(done: int, total: int, what: str, seconds: float) -> None:
+    frac = done / max(total, 1)
+    left = seconds / done * (total - done) if done else float("nan")
+    line = f"[{'#' * int(30 * frac):30s}] {done}/{total} bands, {what}, {seconds:.0f} s, about {left:.0f} s left"
+    end = "\r" if sys.stderr.isatty() and done < total else "\n"
+    if sys.stderr.isatty() or done == total or done % max(total // 10, 1) == 0:
+        sys.stderr.write(line + end)
+        sys.stderr.flush()
+
+
+def run(input=None, out="store", synthetic=None, seed=0, synthetic_spacing=10.0, tile_size=256, vertical_scale=None,
+        spacing=None, crs=None, crop=None, quiet=False) -> Path:
+    """Build (or finish) the tile store of the input at ``out``; prints the time and the process's peak RSS."""
+    from hybrid.errors import TerrabenchError
+    from hybrid.terrain.grid_sources import FractalSource, GdalGridSource
+    from hybrid.tiles.store import prepare_store
+    if (input is None) == (synthetic is None):
+        raise TerrabenchError("give an input file or --synthetic SIZE (one of them)")
+    if synthetic is not None:
+        source = FractalSource(synthetic, seed, synthetic_spacing)
+    else:
+        if not Path(input).is_file():
+            raise TerrabenchError(f"{input}: no such file")
+        source = GdalGridSource(input, vertical_scale=vertical_scale, spacing=spacing, crs=crs, crop=crop)
+    t0 = time.perf_counter()
+    path = prepare_store(source, out, tile_size, None if quiet else _bar)
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
+    print(f"tile store {path}: {source.cols}x{source.rows} samples, tiles of {tile_size}; "
+          f"{time.perf_counter() - t0:.1f} s, peak RSS {rss:.2f} GiB")
+    return path
+
+
+def run_from_args(args: argparse.Namespace) -> int:
+    """The prepare command from parsed arguments; returns the exit code."""
+    run(args.input, args.out, args.synthetic, args.seed, args.synthetic_spacing, args.tile_size, args.vertical_scale,
+        args.spacing, args.crs, args.crop, args.quiet)
+    return 0

@@ -1,0 +1,139 @@
+"""A terrain whose samples stay on disk: a tile store written by ``terrabench prepare`` (hybrid.tiles.store).
+
+The store is a Zarr v3 group (a directory): ``levels/<l>`` holds the pyramid's level-l sample grid (every
+2^l-th level-0 sample, the last row and column kept, chunks of one tile's cells), ``zmin/<l>``, ``zmax/<l>``
+and ``error/<l>`` the per-tile bounds and geometric errors, and the group's attributes the header (format,
+version, name, spacing, origin, CRS, height range, tile size, how it was made, and whether it is complete).
+Zarr was chosen over a COG with overviews because every level is a plain chunked array with its own per-tile
+tables beside it in one self-describing directory, written and read a window at a time from Python with no
+GDAL driver in the loop, and resumable chunk by chunk.
+
+``StoredTerrain`` is a HeightField whose ``heights`` is a ``LazyGrid``: indexing it reads only the chunks the
+index touches, so camera presets, ground heights and edge profiles work without loading the grid; whatever
+would need the whole grid at once (the reference renderer, the raster strategies' node errors on big grids)
+refuses by name.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hybrid.errors import TerrabenchError
+from hybrid.terrain.heightfield import HeightField, spacing_pair
+
+STORE_FORMAT = "terrabench-tile-store"
+STORE_VERSION = 1
+MAX_LOAD_SAMPLES = 1 << 26          # a stored grid up to this many samples may be loaded whole (256 MiB)
+
+
+def _zarr():
+    try:
+        import zarr
+    except ImportError:  # pragma: no cover - a declared dependency
+        raise TerrabenchError("tile stores need zarr (pip install zarr)") from None
+    return zarr
+
+
+def is_store(path) -> bool:
+    """True if path is a directory holding a terrabench tile store (complete or not)."""
+    p = Path(path)
+    if not (p / "zarr.json").is_file():
+        return False
+    try:
+        import json
+        return json.loads((p / "zarr.json").read_text()).get("attributes", {}).get("format") == STORE_FORMAT
+    except (OSError, ValueError):
+        return False
+
+
+class LazyGrid:
+    """A read-only 2-D view of a stored sample grid (float32 metres, rows south to north) that reads only the
+    chunks an index touches; slices, integers and (broadcast) integer arrays as numpy does."""
+
+    def __init__(self, array, height_range: tuple[float, float], name: str):
+        self.array, self.range, self.name = array, height_range, name
+        self.shape = tuple(int(s) for s in array.shape)
+        self.dtype = np.dtype(np.float32)
+        self.ndim = 2
+
+    @property
+    def size(self) -> int:
+        """Number of samples."""
+        return self.shape[0] * self.shape[1]
+
+    def __getitem__(self, index):
+        if not isinstance(index, tuple):
+            index = (index, slice(None))
+        if any(isinstance(i, (np.ndarray, list)) for i in index):
+            i, j = np.broadcast_arrays(*(np.asarray(k, dtype=np.int64) if not isinstance(k, slice)
+                                         else np.arange(self.shape[d])[k] for d, k in enumerate(index)))
+            i = np.where(i < 0, i + self.shape[0], i)
+            j = np.where(j < 0, j + self.shape[1], j)
+            if i.size == 0:
+                return np.zeros(i.shape, np.float32)
+            flat = np.asarray(self.array.vindex[i.ravel(), j.ravel()], dtype=np.float32)
+            return flat.reshape(i.shape)
+        return np.asarray(self.array[index], dtype=np.float32)
+
+    def min(self) -> float:
+        """Lowest stored height (metres, from the store's header)."""
+        return self.range[0]
+
+    def max(self) -> float:
+        """Highest stored height (metres, from the store's header)."""
+        return self.range[1]
+
+    def mean(self) -> float:
+        """Midpoint of the height range (the mean would need every sample)."""
+        return 0.5 * (self.range[0] + self.range[1])
+
+    def __array__(self, dtype=None, copy=None):
+        if self.size > MAX_LOAD_SAMPLES:
+            raise TerrabenchError(
+                f"{self.name!r} is stored out of core ({self.shape[1]}x{self.shape[0]} samples); this step needs "
+                f"the whole grid in memory, allowed up to {MAX_LOAD_SAMPLES} samples")
+        a = np.asarray(self.array[:, :], dtype=np.float32)
+        return a if dtype is None else a.astype(dtype)
+
+
+@dataclass
+class StoredTerrain(HeightField):
+    """A HeightField over a tile store: ``heights`` is a LazyGrid of level 0; ``store`` is the opened group."""
+
+    store: object = None
+    path: str = ""
+
+    def __post_init__(self):
+        self.spacing_x, self.spacing_y = spacing_pair(self.spacing, self.name)
+        self.spacing = self.spacing_x if self.spacing_x == self.spacing_y else (self.spacing_x, self.spacing_y)
+        self.origin = tuple(float(v) for v in self.origin)
+
+    @property
+    def height_range(self) -> tuple[float, float]:
+        """Minimum and maximum height in metres (relative to origin z), from the store's header."""
+        return self.heights.range
+
+    def load(self) -> HeightField:
+        """The whole grid as an in-memory HeightField (refused beyond MAX_LOAD_SAMPLES)."""
+        return HeightField(np.asarray(self.heights), (self.spacing_x, self.spacing_y), self.origin, self.name,
+                           None, source=self.path, notes=list(self.notes))
+
+
+def open_store(path) -> StoredTerrain:
+    """Open a complete tile store (checked: format, version, completeness); refused by name otherwise."""
+    p = Path(path)
+    if not is_store(p):
+        raise TerrabenchError(f"{path}: not a terrabench tile store (make one with terrabench prepare)")
+    zarr = _zarr()
+    g = zarr.open_group(str(p), mode="r")
+    a = dict(g.attrs)
+    if a.get("version") != STORE_VERSION:
+        raise TerrabenchError(f"{path}: tile store version {a.get('version')!r}, this terrabench reads {STORE_VERSION}")
+    if not a.get("complete"):
+        raise TerrabenchError(f"{path}: tile store is incomplete (interrupted prepare); run the same prepare "
+                              "command again to finish it")
+    notes = [f"tile store {p.name}: {a.get('made_by', '')}"] + (["periodic extension"] if a.get("periodic") else [])
+    return StoredTerrain(LazyGrid(g["levels/0"], tuple(a["height_range"]), a["name"]), tuple(a["spacing"]),
+                         tuple(a["origin"]), a["name"], None, source=str(p), notes=notes, store=g, path=str(p))
