@@ -12,10 +12,10 @@ import warnings
 
 from hybrid.errors import TerrabenchError
 
-from . import bench, calibrate, info, prepare, render, report, run, stress
+from . import bench, calibrate, info, prepare, render, report, run, scale, stress
 
 COMMANDS = {"info": info, "render": render, "run": run, "report": report, "calibrate": calibrate,
-            "stress": stress, "bench": bench, "prepare": prepare}
+            "stress": stress, "bench": bench, "prepare": prepare, "scale": scale}
 """Subcommand name -> its module."""
 
 

@@ -1,0 +1,111 @@
+"""The scaling experiment of Dick et al. (Figs. 9-10): one camera path, scaled to each terrain's extent, over
+tile stores of growing size; per frame the wall time, uploads, fallback tiles, GPU bytes and host memory.
+
+    terrabench scale STORE [STORE ...] [--frames 48] [--methods raycast,raster,raster_gs,hybrid]
+
+Every method draws the flight once, streaming: uploads are jobs inside each frame within ``upload_budget_ms``
+(tiles still waiting are drawn from a resident ancestor), resident tiles within a GPU byte budget, tile
+samples read from disk on demand within a host byte budget. A frame is drawn once (a repeat would find the
+queue drained), so the per-frame times carry the machine's noise: the tables give medians and 99th
+percentiles over a flight, and the ray caster's size ratio is read against the spread of its own frames.
+Host memory is the process's resident set (``/proc/self/statm``) after each frame. A method that cannot draw a
+store (the raster strategies need the whole grid for their node errors) is recorded with the reason.
+"""
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+METHODS = ("raycast", "raster", "raster_gs", "hybrid")
+
+
+def rss_bytes() -> int:
+    """This process's resident set size in bytes (Linux), 0 where unknown."""
+    try:
+        return int(Path("/proc/self/statm").read_text().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return 0
+
+
+def run_scaling(ctx, stores, frames: int = 48, size=(640, 360), tau: float = 2 / 3, methods=METHODS,
+                gpu_budget_mib: int = 256, upload_budget_ms: float = 8.0, host_budget_mib: int = 512,
+                flight: str = "flyover") -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+    """(frames, refusals, setup) tables of every method over every store (paths), one streaming pass each; setup
+    is the one-off time before the first frame (the root tile of each strategy, with the raster strategies'
+    node errors over the whole grid)."""
+    from hybrid.camera.flight import preset
+    from hybrid.errors import TerrabenchError
+    from hybrid.renderer import Renderer
+    from hybrid.terrain.stored import open_store
+    from hybrid.tiles.store import StorePyramid
+    rows, refused, setup = [], [], []
+    for path in stores:
+        terrain = open_store(path)
+        samples = terrain.rows * terrain.cols
+        views = preset(flight, terrain, frames, *size).views()
+        n = int(terrain.store.attrs["tile_size"])
+        for method in methods:
+            pyramid = StorePyramid(terrain, host_bytes=host_budget_mib << 20)
+            try:
+                r = Renderer(ctx, terrain, method, n, pyramid=pyramid, budget_bytes=gpu_budget_mib << 20,
+                             upload_budget_ms=upload_budget_ms)
+            except TerrabenchError as exc:
+                refused.append({"store": terrain.name, "samples": samples, "method": method, "reason": str(exc)})
+                continue
+            try:
+                t0 = time.perf_counter()                  # one-off setup (the raster node errors): not a frame
+                for name in r.strategies:
+                    r.cache.get(name, r.strategies[name], pyramid.root(), lambda: pyramid.tile(pyramid.root()))
+                setup.append({"store": terrain.name, "samples": samples, "method": method,
+                              "setup_s": time.perf_counter() - t0})
+                for k, v in enumerate(views):
+                    t0 = time.perf_counter()
+                    st = r.render(v, tau).stats
+                    rows.append({"store": terrain.name, "samples": samples, "side": terrain.cols,
+                                 "periodic": bool(terrain.store.attrs.get("periodic")), "method": method, "frame": k,
+                                 "wall_ms": st.wall_ms, "draw_ms": st.draw_ms, "plan_ms": st.plan_ms,
+                                 "upload_ms": st.upload_ms, "uploads": st.uploads, "fallback_tiles": st.fallback_tiles,
+                                 "pending_uploads": st.pending_uploads, "tiles": st.tiles, "gpu_bytes": st.gpu_bytes,
+                                 "gpu_budget": gpu_budget_mib << 20, "host_cache_bytes": pyramid.cache_bytes,
+                                 "host_rss": rss_bytes(), "call_ms": (time.perf_counter() - t0) * 1e3})
+            except TerrabenchError as exc:
+                refused.append({"store": terrain.name, "samples": samples, "method": method, "reason": str(exc)})
+                rows[:] = [x for x in rows if not (x["store"] == terrain.name and x["method"] == method)]
+            finally:
+                r.release()
+    return (pd.DataFrame(rows), pd.DataFrame(refused, columns=["store", "samples", "method", "reason"]),
+            pd.DataFrame(setup, columns=["store", "samples", "method", "setup_s"]))
+
+
+def summary(frames: pd.DataFrame) -> pd.DataFrame:
+    """Per store and method: median and p99 frame time, their ratio, fallback frames, peak GPU and host bytes."""
+    g = frames.groupby(["side", "store", "method"], sort=True)
+    out = g.agg(frames=("wall_ms", "size"), median_ms=("wall_ms", "median"),
+                p99_ms=("wall_ms", lambda x: float(np.percentile(x, 99))),
+                spread_iqr_ms=("wall_ms", lambda x: float(np.percentile(x, 75) - np.percentile(x, 25))),
+                uploads=("uploads", "sum"), fallback_frames=("fallback_tiles", lambda x: int((x > 0).sum())),
+                peak_gpu_mib=("gpu_bytes", lambda x: x.max() / 2**20),
+                gpu_budget_mib=("gpu_budget", lambda x: x.max() / 2**20),
+                peak_host_rss_mib=("host_rss", lambda x: x.max() / 2**20),
+                peak_host_cache_mib=("host_cache_bytes", lambda x: x.max() / 2**20)).reset_index()
+    out["p99_over_median"] = out["p99_ms"] / out["median_ms"]
+    return out
+
+
+def size_ratio(frames: pd.DataFrame, method: str = "raycast") -> dict | None:
+    """The method's median frame time on the largest store over that on the smallest, with a bootstrap interval
+    over frames (the noise of the same run); None without two stores."""
+    f = frames[frames["method"] == method]
+    sides = sorted(f["side"].unique())
+    if len(sides) < 2:
+        return None
+    a = f[f["side"] == sides[-1]]["wall_ms"].to_numpy()
+    b = f[f["side"] == sides[0]]["wall_ms"].to_numpy()
+    rng = np.random.default_rng(0)
+    boot = [np.median(rng.choice(a, len(a))) / np.median(rng.choice(b, len(b))) for _ in range(2000)]
+    return {"large": int(sides[-1]), "small": int(sides[0]), "ratio": float(np.median(a) / np.median(b)),
+            "low": float(np.percentile(boot, 2.5)), "high": float(np.percentile(boot, 97.5))}

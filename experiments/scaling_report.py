@@ -1,0 +1,119 @@
+"""The scaling experiment's report: Dick et al.'s Figs. 9-10 (frame time and GPU memory over the flight, per
+method and store), median frame time and peak memory against data size, the tables, and a reading of them."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from hybrid.atomic import write_parquet, write_text  # noqa: E402
+
+from .charts import figure_legend, grid_cols, panel_grid, panel_title, save_figure  # noqa: E402
+from .scaling import size_ratio, summary  # noqa: E402
+from .tables import md_table  # noqa: E402
+
+COLOURS = {"raycast": "C1", "raster": "C0", "raster_gs": "C2", "hybrid": "C3"}
+
+
+def _label(g: pd.DataFrame) -> str:
+    side = int(g["side"].iloc[0])
+    return f"{g['store'].iloc[0]} ({side}², {'periodic' if g['periodic'].iloc[0] else 'real samples'})"
+
+
+def over_flight_chart(frames: pd.DataFrame, column: str, ylabel: str, folder: Path, name: str, scale=1.0,
+                      budget=None) -> list[Path]:
+    """One panel per store: ``column`` (times ``scale``) over the flight's frames, a line per method."""
+    stores = list(frames.groupby("side", sort=True))
+    fig, axes = panel_grid(len(stores))
+    for ax, (_, g) in zip(axes, stores):
+        for method, m in g.groupby("method", sort=False):
+            ax.plot(m["frame"], m[column] * scale, label=method, color=COLOURS.get(method), lw=1.2)
+        if budget is not None:
+            ax.axhline(budget, color="k", lw=0.8, ls="--", label="GPU budget")
+        panel_title(ax, _label(g), grid_cols(len(stores)))
+        ax.set_xlabel("frame")
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3)
+    figure_legend(fig, axes)
+    return save_figure(fig, folder, name)
+
+
+def size_chart(table: pd.DataFrame, folder: Path) -> list[Path]:
+    """Median frame time and peak GPU memory against data size (samples), a line per method."""
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    for method, m in table.groupby("method", sort=False):
+        m = m.sort_values("side")
+        samples = m["side"].astype(float) ** 2
+        axes[0].plot(samples, m["median_ms"], "o-", label=method, color=COLOURS.get(method))
+        axes[1].plot(samples, m["peak_gpu_mib"], "o-", label=method, color=COLOURS.get(method))
+    axes[0].set_ylabel("median frame time (ms)")
+    axes[1].set_ylabel("peak GPU memory (MiB, allocated buffers and textures)")
+    for ax in axes:
+        ax.set_xscale("log")
+        ax.set_xlabel("terrain samples")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    return save_figure(fig, folder, "scaling_size")
+
+
+def reading(frames: pd.DataFrame, table: pd.DataFrame, refused: pd.DataFrame) -> list[str]:
+    """Sentences on the scaling targets, each with the measured figures."""
+    out = []
+    r = size_ratio(frames, "raycast")
+    if r:
+        verdict = ("within the noise of this run: independent of the data size here" if r["low"] <= 1.0 <= r["high"]
+                   else "a difference beyond the noise of this run")
+        out.append(f"Ray casting's median frame time on the {r['large']}² store is {r['ratio']:.2f}x that on the "
+                   f"{r['small']}² store (95 % interval over frames {r['low']:.2f}-{r['high']:.2f}x): {verdict}; "
+                   f"target <= 1.3x {'met' if r['ratio'] <= 1.3 else 'missed'}.")
+    worst = table.loc[table["p99_over_median"].idxmax()]
+    out.append(f"Streaming: p99 frame time over the median is at most {worst['p99_over_median']:.2f}x "
+               f"({worst['method']} on {worst['store']}); target <= 2x "
+               f"{'met' if worst['p99_over_median'] <= 2 else 'missed'} in "
+               f"{int((table['p99_over_median'] <= 2).sum())} of {len(table)} flights.")
+    over = table[table["peak_gpu_mib"] > table["gpu_budget_mib"]]
+    out.append("GPU bytes stayed within the budget in every frame." if over.empty else
+               f"GPU bytes passed the budget in {len(over)} flights.")
+    out.append(f"Peak host RSS (the whole process, GL driver included): {table['peak_host_rss_mib'].max():.0f} MiB.")
+    out.append(f"Frames drawing some tile from a coarser ancestor while its upload waited: "
+               f"{int(table['fallback_frames'].sum())} of {int(table['frames'].sum())}; no tile is ever missing "
+               "(a tile without data is drawn from its ancestor).")
+    ras = table[table["method"].isin(["raster", "raster_gs"])]
+    ray = table[table["method"] == "raycast"].set_index("side")["peak_gpu_mib"]
+    for side, m in ras.groupby("side"):
+        if side in ray.index:
+            out.append(f"{int(side)}²: raster memory {', '.join(f'{x.method} {x.peak_gpu_mib:.0f} MiB' for x in m.itertuples())}"
+                       f" against the ray caster's {ray[side]:.0f} MiB.")
+    for x in refused.itertuples():
+        out.append(f"{x.method} on {x.store}: not drawn ({x.reason}).")
+    return out
+
+
+def write_scaling_report(frames: pd.DataFrame, refused: pd.DataFrame, setup: pd.DataFrame, folder: Path,
+                         device: str, notes: list[str]) -> Path:
+    """Write reports/<folder>/scaling.md with its charts and tables; returns the markdown path."""
+    folder.mkdir(parents=True, exist_ok=True)
+    write_parquet(folder / "scaling_frames.parquet", frames)
+    table = summary(frames)
+    budget = frames["gpu_budget"].max() / 2**20 if len(frames) else None
+    over_flight_chart(frames, "wall_ms", "frame time (ms)", folder, "scaling_frame_time")
+    over_flight_chart(frames, "gpu_bytes", "GPU memory (MiB)", folder, "scaling_gpu_memory", 1 / 2**20, budget)
+    size_chart(table, folder)
+    lines = ["# Scaling: frame time and memory against data size", "", f"Device: {device}.", ""]
+    lines += [f"- {n}" for n in notes] + [""]
+    lines += ["## Reading", ""] + [f"- {s}" for s in reading(frames, table, refused)] + [""]
+    lines += ["## Per store and method", "", md_table(table.round(3)), ""]
+    if len(refused):
+        lines += ["## Not drawn", "", md_table(refused), ""]
+    if len(setup):
+        lines += ["## One-off setup before the first frame (seconds)", "", md_table(setup), ""]
+    lines += ["## Charts", "", "![frame time over the flight](scaling_frame_time.png)", "",
+              "![GPU memory over the flight](scaling_gpu_memory.png)", "",
+              "![median frame time and peak memory against data size](scaling_size.png)", ""]
+    path = folder / "scaling.md"
+    write_text(path, "\n".join(lines))
+    return path
