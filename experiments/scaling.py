@@ -40,11 +40,11 @@ def run_scaling(ctx, stores, frames: int = 48, size=(640, 360), tau: float = 2 /
     from hybrid.camera.flight import preset
     from hybrid.errors import TerrabenchError
     from hybrid.renderer import Renderer
-    from hybrid.terrain.stored import open_store
+    from hybrid.tiles.periodic import open_any_store
     from hybrid.tiles.store import StorePyramid
     rows, refused, setup = [], [], []
     for path in stores:
-        terrain = open_store(path)
+        terrain = open_any_store(path)
         samples = terrain.rows * terrain.cols
         views = preset(flight, terrain, frames, *size).views()
         n = int(terrain.store.attrs["tile_size"])

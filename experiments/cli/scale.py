@@ -11,7 +11,8 @@ HELP = "frame time and memory of each method over tile stores of growing size (D
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The scale options: stores, frames, viewport, tau, methods, budgets and where the report goes."""
-    p.add_argument("stores", nargs="+", help="tile stores (terrabench prepare), smallest first or in any order")
+    p.add_argument("stores", nargs="+", help="tile stores (terrabench prepare), or STORE@periodicSIZE for a virtual "
+                   "periodic extension of one to SIZE x SIZE samples (SIZE = k x its cells + 1)")
     p.add_argument("--frames", type=argtypes.int_in("--frames", 2, 10000), default=48, help="frames of the flight")
     p.add_argument("--flight", default="flyover", help="preset flight, scaled to each store's extent")
     p.add_argument("--size", type=argtypes.size("--size"), default="640x360", help="viewport WIDTHxHEIGHT")

@@ -1,0 +1,153 @@
+"""A virtual periodic extension of a square tile store to a larger size, as Bhattacharjee et al. extended the
+16K Puget map: sample (i, j) of the extension is the source's sample (i mod P, j mod P), P the source's cells a
+side, and nothing is written to disk. Its name ends in ``-periodic-<size>`` and its store attributes carry
+``periodic``, so every table and report says so.
+
+Tiles that lie inside one period are the source's tiles with the source's bounds and errors. A tile whose last
+row or column falls on a seam (where sample P of the source gives way to its sample 0) differs from its source
+tile there: its bounds take in the source's first row or column over the same span, and its error is bounded
+by the source tile's error plus twice the largest seam step over its span (the extension's level-0 samples and
+its level-l surface each differ from the source's by at most that step). Coarser levels whose tiles span more
+than a period are bounded by the terrain's height range (their samples repeat the source's, subsampled).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from hybrid.errors import TerrabenchError
+from hybrid.terrain.stored import LazyGrid, StoredTerrain, open_store
+
+from .pyramid import _block_reduce
+from .store import _levels
+
+
+def _spans(profile: np.ndarray, span: int, fn) -> np.ndarray:
+    """fn over each tile's span of a (P + 1,) profile, both ends included: (P / span,)."""
+    blocks = _block_reduce(profile[None, :-1], span, fn)[0]
+    ends = profile[span::span]
+    return fn(blocks, ends)
+
+
+class _WrappedLevel:
+    """A level's sample grid of the extension: slices of it read the source's level grid, wrapped."""
+
+    def __init__(self, source, period: int, size: int, stride: int = 1):
+        self.source, self.period, self.stride = source, period, stride     # period in this level's samples;
+        self.shape = (size, size)                                          # stride: source samples per sample
+
+    def _index(self, s, n: int) -> np.ndarray:
+        if isinstance(s, slice):
+            return np.arange(*s.indices(n)) % self.period * self.stride
+        i = int(s)
+        return np.array([(i + n if i < 0 else i) % self.period * self.stride])
+
+    def __getitem__(self, index):
+        rows, cols = index
+        ri, ci = self._index(rows, self.shape[0]), self._index(cols, self.shape[1])
+        r0, r1, c0, c1 = ri.min(), ri.max() + 1, ci.min(), ci.max() + 1
+        win = np.asarray(self.source[r0:r1, c0:c1], dtype=np.float32)[np.ix_(ri - r0, ci - c0)]
+        if not isinstance(rows, slice):
+            win = win[0]
+        if not isinstance(cols, slice):
+            win = win[..., 0]
+        return win
+
+    @property
+    def vindex(self):
+        return _VIndex(self)
+
+
+class _VIndex:
+    def __init__(self, level):
+        self.level = level
+
+    def __getitem__(self, index):
+        i, j = index
+        p, k = self.level.period, self.level.stride
+        return self.level.source.vindex[np.asarray(i) % p * k, np.asarray(j) % p * k]
+
+
+class PeriodicStore:
+    """The store-like view of an extension: ``attrs`` and the per-level arrays StorePyramid reads."""
+
+    def __init__(self, terrain: StoredTerrain, size: int):
+        g = terrain.store
+        src_attrs = dict(g.attrs)
+        n, P = int(src_attrs["tile_size"]), terrain.cols - 1
+        if terrain.rows != terrain.cols:
+            raise TerrabenchError(f"{terrain.path}: a periodic extension needs a square store, got "
+                                  f"{terrain.cols}x{terrain.rows} samples")
+        if P & (P - 1) or P < n:
+            raise TerrabenchError(f"{terrain.path}: a periodic extension needs a period of a power of two cells "
+                                  f"of at least one tile ({n}), got {P}")
+        if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size <= terrain.cols or \
+                (size - 1) % P or size > (1 << 24) + 1:
+            raise TerrabenchError(f"periodic size must be k x {P} + 1 samples, larger than the store and at most "
+                                  f"{(1 << 24) + 1}, got {size!r}")
+        self.source, self.n, self.P, self.size = g, n, P, int(size)
+        L = _levels(size, size, n)
+        self.attrs = {**src_attrs, "max_level": L, "name": f"{src_attrs['name']}-periodic-{size}",
+                      "periodic": {"source": terrain.path, "period_cells": P, "size": int(size)}}
+        col_step = np.abs(np.asarray(terrain.heights[:, P]) - np.asarray(terrain.heights[:, 0]))   # seam steps
+        row_step = np.abs(np.asarray(terrain.heights[P, :]) - np.asarray(terrain.heights[0, :]))
+        col0, row0 = np.asarray(terrain.heights[:, 0]), np.asarray(terrain.heights[0, :])
+        lo, hi = terrain.height_range
+        self.arrays = {}
+        src_L = int(src_attrs["max_level"])
+        for level in range(L + 1):
+            span = n << level
+            tiles = (size - 1) // span
+            if span <= P and level <= src_L:
+                t = P // span
+                idx = np.arange(tiles) % t
+                seam = idx == t - 1
+                zmin = np.asarray(g[f"zmin/{level}"][:])[np.ix_(idx, idx)]
+                zmax = np.asarray(g[f"zmax/{level}"][:])[np.ix_(idx, idx)]
+                err = np.asarray(g[f"error/{level}"][:])[np.ix_(idx, idx)]
+                # per source tile row/column span: the seam's step and the first row/column's range
+                step_r = _spans(col_step, span, np.maximum)[idx]
+                step_c = _spans(row_step, span, np.maximum)[idx]
+                c_lo, c_hi = _spans(col0, span, np.minimum)[idx], _spans(col0, span, np.maximum)[idx]
+                r_lo, r_hi = _spans(row0, span, np.minimum)[idx], _spans(row0, span, np.maximum)[idx]
+                east, north = seam[None, :], seam[:, None]
+                zmin = np.where(east, np.minimum(zmin, c_lo[:, None]), zmin)
+                zmin = np.where(north, np.minimum(zmin, r_lo[None, :]), zmin)
+                zmax = np.where(east, np.maximum(zmax, c_hi[:, None]), zmax)
+                zmax = np.where(north, np.maximum(zmax, r_hi[None, :]), zmax)
+                extra = np.where(east, step_r[:, None], 0.0) + np.where(north, step_c[None, :], 0.0)
+                err = err + 2.0 * extra
+            else:                                          # tiles beyond a period: the whole range bounds them
+                zmin, zmax = np.full((tiles, tiles), lo), np.full((tiles, tiles), hi)
+                err = np.full((tiles, tiles), hi - lo)
+            if level == 0:
+                err = np.zeros_like(err)                   # level 0 is the extension's own samples
+            if level:                                      # monotone, as every pyramid's errors
+                err = np.maximum(err, _block_reduce(self.arrays[f"error/{level - 1}"], 2, np.maximum))
+            self.arrays[f"zmin/{level}"], self.arrays[f"zmax/{level}"] = zmin, zmax
+            self.arrays[f"error/{level}"] = err
+            src_level = min(level, src_L)                  # above the source's levels: its top grid, strided
+            self.arrays[f"levels/{level}"] = _WrappedLevel(g[f"levels/{src_level}"], max(P >> level, 1),
+                                                           ((size - 1) >> level) + 1, 1 << (level - src_level))
+
+    def __getitem__(self, name):
+        return self.arrays[name]
+
+
+def open_periodic(path, size: int) -> StoredTerrain:
+    """The periodic extension of the tile store at ``path`` to size x size samples (virtual; labelled periodic)."""
+    terrain = open_store(path)
+    view = PeriodicStore(terrain, size)
+    grid = LazyGrid(view["levels/0"], terrain.height_range, view.attrs["name"])
+    return StoredTerrain(grid, (terrain.spacing_x, terrain.spacing_y), terrain.origin, view.attrs["name"], None,
+                         source=terrain.path, notes=list(terrain.notes) + [
+                             f"periodic extension to {size}x{size} samples of {terrain.cols}x{terrain.rows} "
+                             f"(wrapped every {terrain.cols - 1} cells; virtual, nothing written)"],
+                         store=view, path=f"{terrain.path}@periodic{size}")
+
+
+def open_any_store(text: str) -> StoredTerrain:
+    """A tile store by path, or its periodic extension as 'PATH@periodicSIZE' (e.g. store@periodic262145)."""
+    path, sep, rest = str(text).rpartition("@periodic")
+    if sep and rest.isdigit():
+        return open_periodic(path, int(rest))
+    return open_store(text)

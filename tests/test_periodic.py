@@ -1,0 +1,35 @@
+"""A virtual periodic extension of a store: its tiles are those of the source wrapped (checked against the
+extension built in memory), its bounds and errors never below the exact ones, and it is labelled periodic."""
+import numpy as np
+import pytest
+
+from hybrid.errors import TerrabenchError
+from hybrid.terrain.grid_sources import FractalSource
+from hybrid.terrain.heightfield import HeightField
+from hybrid.tiles.periodic import open_any_store, open_periodic
+from hybrid.tiles.pyramid import TilePyramid
+from hybrid.tiles.store import StorePyramid, prepare_store
+
+
+def test_periodic_extension_wraps_the_source_and_bounds_hold(tmp_path):
+    src = FractalSource(257, seed=3)
+    prepare_store(src, tmp_path / "s", 32)
+    ext = open_periodic(tmp_path / "s", 1025)
+    h = src.read_rows(0, 257)
+    wrapped = np.pad(np.tile(h[:-1, :-1], (4, 4)), ((0, 1), (0, 1)), mode="wrap")     # sample (i, j) -> (i, j) mod 256
+    assert np.array_equal(np.asarray(ext.heights[:, :]), wrapped)
+    assert ext.name.endswith("-periodic-1025") and ext.store.attrs["periodic"]["period_cells"] == 256
+    stored, mem = StorePyramid(ext), TilePyramid(HeightField(wrapped, 10.0), 32)
+    assert stored.max_level == mem.max_level == 5
+    for level in range(mem.max_level + 1):
+        for key in mem.keys(level):
+            assert np.array_equal(stored.tile(key).heights, mem.tile(key).heights), key
+        assert (stored._zmin[level] <= mem._zmin[level] + 1e-4).all()
+        assert (stored._zmax[level] >= mem._zmax[level] - 1e-4).all()
+        assert (stored._err[level] >= mem._err[level] - 1e-4).all()
+    inside = np.s_[:7, :7]                                  # level-0 and -1 tiles off the seams: the source's own
+    assert np.allclose(stored._err[1][:3, :3], mem._err[1][:3, :3]) and np.all(stored._err[0][inside] == 0)
+    assert open_any_store(f"{tmp_path / 's'}@periodic1025").name == ext.name
+    for bad in (1000, 257, 2 ** 30):
+        with pytest.raises(TerrabenchError, match="periodic size"):
+            open_periodic(tmp_path / "s", bad)
