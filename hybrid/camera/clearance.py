@@ -55,12 +55,19 @@ def _chunks(n: int, per_item: int):
 
 def ground_extremes(hf: HeightField, x, y, radius: float) -> tuple[np.ndarray, np.ndarray]:
     """Lowest and highest height sample (world z, metres) within ``radius`` metres along x and y of each world
-    point (x, y), the corners of the cell holding the point included; points off the grid use its edge."""
+    point (x, y), the corners of the cell holding the point included; points off the grid use its edge. A stored
+    terrain answers windows too large to gather from its tiles' bounds (``window_extremes``): lower and upper
+    bounds that hold."""
     x = np.atleast_1d(np.asarray(x, dtype=np.float64))
     y = np.atleast_1d(np.asarray(y, dtype=np.float64))
     fi = np.floor((y - hf.origin[1]) / hf.spacing_y).astype(np.int64)
     fj = np.floor((x - hf.origin[0]) / hf.spacing_x).astype(np.int64)
     ki, kj = int(np.ceil(radius / hf.spacing_y)), int(np.ceil(radius / hf.spacing_x))
+    bounds = getattr(hf, "window_extremes", None)
+    if bounds is not None and (2 * ki + 3) * (2 * kj + 3) > _CHUNK:     # a stored terrain: its tiles' bounds
+        lo, hi = bounds(np.clip(fi - ki, 0, hf.rows - 1), np.clip(fi + ki + 1, 0, hf.rows - 1),
+                        np.clip(fj - kj, 0, hf.cols - 1), np.clip(fj + kj + 1, 0, hf.cols - 1))
+        return hf.origin[2] + lo, hf.origin[2] + hi
     di, dj = np.arange(-ki, ki + 2), np.arange(-kj, kj + 2)
     lo, hi = np.empty(len(x)), np.empty(len(x))
     for s in _chunks(len(x), len(di) * len(dj)):

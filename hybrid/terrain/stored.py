@@ -115,6 +115,23 @@ class StoredTerrain(HeightField):
         """Minimum and maximum height in metres (relative to origin z), from the store's header."""
         return self.heights.range
 
+    def window_extremes(self, r0, r1, c0, c1) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds (metres, relative to origin z) of the samples in each window rows r0..r1, cols c0..c1 (inclusive,
+        arrays): the min of zmin and max of zmax over the tiles of a level whose tiles are at least a quarter of
+        the window, so a few tiles answer each window."""
+        r0, r1, c0, c1 = (np.asarray(a, dtype=np.int64) for a in (r0, r1, c0, c1))
+        n, top = int(self.store.attrs["tile_size"]), int(self.store.attrs["max_level"])
+        span = int(max(np.max(r1 - r0, initial=1), np.max(c1 - c0, initial=1)))
+        level = min(top, max(0, int(np.ceil(np.log2(max(span / 4 / n, 1))))))
+        cells = n << level
+        zmin, zmax = np.asarray(self.store[f"zmin/{level}"][:]), np.asarray(self.store[f"zmax/{level}"][:])
+        lo, hi = np.empty(len(r0)), np.empty(len(r0))
+        for k in range(len(r0)):
+            rows = slice(int(r0[k]) // cells, min(int(r1[k]) // cells, zmin.shape[0] - 1) + 1)
+            cols = slice(int(c0[k]) // cells, min(int(c1[k]) // cells, zmin.shape[1] - 1) + 1)
+            lo[k], hi[k] = zmin[rows, cols].min(), zmax[rows, cols].max()
+        return lo, hi
+
     def load(self) -> HeightField:
         """The whole grid as an in-memory HeightField (refused beyond MAX_LOAD_SAMPLES)."""
         return HeightField(np.asarray(self.heights), (self.spacing_x, self.spacing_y), self.origin, self.name,
