@@ -32,9 +32,10 @@ def rss_bytes() -> int:
 
 
 def run_scaling(ctx, stores, frames: int = 48, size=(640, 360), tau: float = 2 / 3, methods=METHODS,
-                gpu_budget_mib: int = 256, upload_budget_ms: float = 8.0, host_budget_mib: int = 512,
+                gpu_budget_mib: int = 256, upload_budget_ms: float | None = 8.0, host_budget_mib: int = 512,
                 flight: str = "flyover") -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
-    """(frames, refusals, setup) tables of every method over every store (paths), one streaming pass each; setup
+    """(frames, refusals, setup) tables of every method over every store (paths), one pass each (streaming within
+    ``upload_budget_ms``, or with None each frame's tiles uploaded before it, untimed); setup
     is the one-off time before the first frame (the root tile of each strategy, with the raster strategies'
     node errors over the whole grid)."""
     from hybrid.camera.flight import preset

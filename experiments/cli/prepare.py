@@ -19,6 +19,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--synthetic", type=argtypes.int_in("--synthetic", 2, 1_048_577), default=None, metavar="SIZE",
                    help="instead of a file: a seeded fractal terrain of SIZE x SIZE samples (e.g. 16385)")
     p.add_argument("--seed", type=argtypes.int_in("--seed", 0, 2**32 - 1), default=0, help="seed of --synthetic")
+    p.add_argument("--synthetic-period", type=argtypes.int_in("--synthetic-period", 2, 1 << 20), default=None,
+                   help="make --synthetic repeat seamlessly every this many samples (a power of two >= 1024)")
     p.add_argument("--synthetic-spacing", type=argtypes.positive_float("--synthetic-spacing", "metres"), default=10.0,
                    help="metres between samples of --synthetic")
     p.add_argument("--tile-size", type=argtypes.power_of_two("--tile-size"), default=256,
@@ -43,7 +45,7 @@ def _bar(done: int, total: int, what: str, seconds: float) -> None:
 
 
 def run(input=None, out="store", synthetic=None, seed=0, synthetic_spacing=10.0, tile_size=256, vertical_scale=None,
-        spacing=None, crs=None, crop=None, quiet=False) -> Path:
+        spacing=None, crs=None, crop=None, quiet=False, synthetic_period=None) -> Path:
     """Build (or finish) the tile store of the input at ``out``; prints the time and the process's peak RSS."""
     from hybrid.errors import TerrabenchError
     from hybrid.terrain.grid_sources import FractalSource, GdalGridSource
@@ -51,7 +53,7 @@ def run(input=None, out="store", synthetic=None, seed=0, synthetic_spacing=10.0,
     if (input is None) == (synthetic is None):
         raise TerrabenchError("give an input file or --synthetic SIZE (one of them)")
     if synthetic is not None:
-        source = FractalSource(synthetic, seed, synthetic_spacing)
+        source = FractalSource(synthetic, seed, synthetic_spacing, period=synthetic_period)
     else:
         if not Path(input).is_file():
             raise TerrabenchError(f"{input}: no such file")
@@ -67,5 +69,5 @@ def run(input=None, out="store", synthetic=None, seed=0, synthetic_spacing=10.0,
 def run_from_args(args: argparse.Namespace) -> int:
     """The prepare command from parsed arguments; returns the exit code."""
     run(args.input, args.out, args.synthetic, args.seed, args.synthetic_spacing, args.tile_size, args.vertical_scale,
-        args.spacing, args.crs, args.crop, args.quiet)
+        args.spacing, args.crs, args.crop, args.quiet, args.synthetic_period)
     return 0

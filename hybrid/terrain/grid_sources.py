@@ -74,13 +74,17 @@ def _hash(seed: int, octave: int, ix: np.ndarray, iy: np.ndarray) -> np.ndarray:
     return (h >> np.uint64(11)).astype(np.float64) / float(1 << 52) - 1.0
 
 
-def _value_noise(seed: int, octave: int, y: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Smooth value noise at lattice-unit coordinates (y rows, x columns broadcast together)."""
+def _value_noise(seed: int, octave: int, y: np.ndarray, x: np.ndarray, wrap: int | None = None) -> np.ndarray:
+    """Smooth value noise at lattice-unit coordinates (y rows, x columns broadcast together); with ``wrap`` the
+    lattice repeats every ``wrap`` units (a seamless tile)."""
     iy, ix = np.floor(y).astype(np.int64), np.floor(x).astype(np.int64)
     fy, fx = y - iy, x - ix
     sy, sx = fy * fy * (3 - 2 * fy), fx * fx * (3 - 2 * fx)
-    a, b = _hash(seed, octave, ix, iy), _hash(seed, octave, ix + 1, iy)
-    c, d = _hash(seed, octave, ix, iy + 1), _hash(seed, octave, ix + 1, iy + 1)
+    iy1, ix1 = iy + 1, ix + 1
+    if wrap:
+        iy, ix, iy1, ix1 = iy % wrap, ix % wrap, iy1 % wrap, ix1 % wrap
+    a, b = _hash(seed, octave, ix, iy), _hash(seed, octave, ix1, iy)
+    c, d = _hash(seed, octave, ix, iy1), _hash(seed, octave, ix1, iy1)
     return (a + (b - a) * sx) * (1 - sy) + (c + (d - c) * sx) * sy
 
 
@@ -89,10 +93,13 @@ class FractalSource:
 
     Every sample depends only on its (row, column) and the seed, so reading it in any windows gives the same
     bytes; ``relief`` is the height scale in metres, ``feature_cells`` the largest features' size in samples.
+    With ``period`` (a power of two of at least 2 x feature_cells) the terrain repeats every ``period`` samples
+    both ways, seamlessly: sample (i, j) equals (i mod period, j mod period), so a store of period + 1 samples
+    extends periodically without a seam.
     """
 
     def __init__(self, size: int, seed: int = 0, spacing: float = 10.0, relief: float = 1500.0,
-                 feature_cells: int = 512, octaves: int = 10):
+                 feature_cells: int = 512, octaves: int = 10, period: int | None = None):
         if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or not 2 <= size <= 1_048_577:
             raise TerrabenchError(f"synthetic size must be an integer in [2, 1048577] samples, got {size!r}")
         if not (0 <= seed < 2**32):
@@ -100,7 +107,12 @@ class FractalSource:
         self.rows = self.cols = int(size)
         self.seed, self.spacing, self.relief = int(seed), float(spacing), float(relief)
         self.feature, self.octaves = float(feature_cells), int(octaves)
-        self.name = f"fractal-{size}-s{seed}"
+        if period is not None and (isinstance(period, bool) or int(period) != period or period & (period - 1)
+                                   or period < 2 * feature_cells):
+            raise TerrabenchError(f"period must be a power of two of at least {2 * feature_cells} samples, got "
+                                  f"{period!r}")
+        self.period = None if period is None else int(period)
+        self.name = f"fractal-{size}-s{seed}" + (f"-p{period}" if period else "")
         self.notes = [f"synthetic: fBm, ridges and flat basins, seed {seed}, {spacing:g} m spacing"]
 
     def read_rows(self, r0: int, r1: int) -> np.ndarray:
@@ -110,14 +122,17 @@ class FractalSource:
         base = np.zeros((r1 - r0, self.cols))
         ridge = np.zeros_like(base)
         amp, cell = 1.0, self.feature
+        def wrap(c):
+            return int(self.period // c) if self.period else None
         for o in range(self.octaves):
-            n = _value_noise(self.seed, o, y / cell, x / cell)
+            n = _value_noise(self.seed, o, y / cell, x / cell, wrap(cell))
             base += amp * n
             if o < 6:
-                ridge += amp * (1.0 - np.abs(_value_noise(self.seed + 1, o, y / cell, x / cell)))
+                ridge += amp * (1.0 - np.abs(_value_noise(self.seed + 1, o, y / cell, x / cell, wrap(cell))))
             amp *= 0.5
             cell = max(cell / 2.0, 1.0)
-        mask = np.clip(0.5 + 1.5 * _value_noise(self.seed + 2, 0, y / (2 * self.feature), x / (2 * self.feature)), 0, 1)
+        big = 2 * self.feature
+        mask = np.clip(0.5 + 1.5 * _value_noise(self.seed + 2, 0, y / big, x / big, wrap(big)), 0, 1)
         h = self.relief * (0.35 * base + 0.65 * mask * ridge ** 2)
         level = 0.7 * self.relief
         h = np.where(h < level, level + 0.05 * (h - level), h)           # flat basins below the level

@@ -8,7 +8,8 @@ row or column falls on a seam (where sample P of the source gives way to its sam
 tile there: its bounds take in the source's first row or column over the same span, and its error is bounded
 by the source tile's error plus twice the largest seam step over its span (the extension's level-0 samples and
 its level-l surface each differ from the source's by at most that step). Coarser levels whose tiles span more
-than a period are bounded by the terrain's height range (their samples repeat the source's, subsampled).
+than a period repeat the source's pattern: their errors are bounded along the chain of levels on one period of
+the source's top grid, wrapped, and their bounds are the terrain's height range.
 """
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.stored import LazyGrid, StoredTerrain, open_store
 
-from .pyramid import _block_reduce
+from .pyramid import _block_reduce, interpolate_clamped
 from .store import _levels
 
 
@@ -94,6 +95,7 @@ class PeriodicStore:
         lo, hi = terrain.height_range
         self.arrays = {}
         src_L = int(src_attrs["max_level"])
+        beyond: dict = {}
         for level in range(L + 1):
             span = n << level
             tiles = (size - 1) // span
@@ -116,9 +118,11 @@ class PeriodicStore:
                 zmax = np.where(north, np.maximum(zmax, r_hi[None, :]), zmax)
                 extra = np.where(east, step_r[:, None], 0.0) + np.where(north, step_c[None, :], 0.0)
                 err = err + 2.0 * extra
-            else:                                          # tiles beyond a period: the whole range bounds them
+            else:                                          # tiles of whole periods: the periodic chain bound
+                if not beyond:                             # from the top source level's errors, seams included
+                    beyond = _whole_period_errors(g, src_L, L, float(self.arrays[f"error/{src_L}"].max()))
                 zmin, zmax = np.full((tiles, tiles), lo), np.full((tiles, tiles), hi)
-                err = np.full((tiles, tiles), hi - lo)
+                err = np.full((tiles, tiles), beyond[level])
             if level == 0:
                 err = np.zeros_like(err)                   # level 0 is the extension's own samples
             if level:                                      # monotone, as every pyramid's errors
@@ -131,6 +135,27 @@ class PeriodicStore:
 
     def __getitem__(self, name):
         return self.arrays[name]
+
+
+def _whole_period_errors(g, src_L: int, L: int, base: float) -> dict:
+    """Errors (metres) of extension levels src_L+1..L, whose tiles cover whole periods: ``base``, the extension's
+    largest error at the source's top level src_L (seam tiles included), plus, level by level, the largest difference
+    between the wrapped surfaces of levels l and l-1 at level l-1's samples (the chain bound of
+    hybrid.tiles.store), computed on one period of the source's top grid."""
+    if L <= src_L:
+        return {}
+    top = np.asarray(g[f"levels/{src_L}"][:, :], dtype=np.float64)
+    period = top[:-1, :-1]                                   # one period; the wrap supplies the closing row/column
+    out, err, grid = {}, base, period
+    for level in range(src_L + 1, L + 1):
+        if grid.shape[0] < 2 or grid.shape[0] % 2:
+            out[level] = err + float(period.max() - period.min())
+            continue
+        closed = np.pad(grid, ((0, 1), (0, 1)), mode="wrap")
+        err += float(np.abs(interpolate_clamped(closed, 2) - closed).max())
+        out[level] = err
+        grid = grid[::2, ::2]
+    return out
 
 
 def open_periodic(path, size: int) -> StoredTerrain:
