@@ -116,7 +116,7 @@ def run_on_cluster(spec: Spec, folder: Path, client, progress: bool = True) -> N
     """Run every pending configuration of spec as a task on the client's cluster, journaling into folder."""
     from distributed import as_completed
 
-    from hybrid.cost.model import user_costs_path
+    from hybrid.cost.model import read_costs_file
 
     from .journal import Journal, pending, record
     from .progress import Progress
@@ -128,14 +128,7 @@ def run_on_cluster(spec: Spec, folder: Path, client, progress: bool = True) -> N
     if not good:
         raise TerrabenchError("no worker of the cluster could make a GL context: " +
                               "; ".join(f"{a}: {i['error']}" for a, i in info.items()))
-    path = user_costs_path()
-    costs = {}
-    if path.exists():
-        import json
-        try:
-            costs = json.loads(path.read_text())
-        except json.JSONDecodeError:
-            raise TerrabenchError(f"{path}: costs file is not valid JSON") from None
+    costs = read_costs_file()
     journal = Journal(folder)
     todo = pending(spec, journal)
     total = len(spec.configs()) * spec.frames

@@ -111,15 +111,21 @@ def user_costs_path() -> Path:
     return Path(env) if env else Path.home() / ".config" / "terrabench" / "costs.json"
 
 
+def read_costs_file(path: Path | None = None) -> dict:
+    """The saved models of a costs file (default the user's), keyed by renderer; {} when there is none."""
+    path = Path(path) if path else user_costs_path()
+    if not path.exists():
+        return {}
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError:
+        raise TerrabenchError(f"{path}: costs file is not valid JSON; fix or move it away") from None
+
+
 def save_cost_model(model: CostModel, path: Path | None = None) -> Path:
     """Add or replace the model (keyed by its renderer string) in the costs file; returns the path."""
     path = Path(path) if path else user_costs_path()
-    data = {}
-    if path.exists():
-        try:
-            data = json.loads(path.read_text())
-        except json.JSONDecodeError:
-            raise TerrabenchError(f"{path}: existing costs file is not valid JSON; move it away") from None
+    data = read_costs_file(path)
     d = model.to_dict()
     d.pop("source", None)
     data[model.renderer] = d
@@ -150,10 +156,7 @@ def load_cost_model(renderer: str, path: Path | None = None) -> CostModel:
     """The calibrated model for a GL renderer: the user's file first, then the shipped defaults."""
     path = Path(path) if path else user_costs_path()
     if path.exists():
-        try:
-            data = json.loads(path.read_text())
-        except json.JSONDecodeError:
-            raise TerrabenchError(f"{path}: costs file is not valid JSON") from None
+        data = read_costs_file(path)
         if renderer in data:
             return cost_model_from_dict(data[renderer], str(path))
     shipped = json.loads((resources.files("hybrid.cost") / "costs_default.json").read_text())
