@@ -71,6 +71,7 @@ def run_scaling(ctx, stores, frames: int = 48, size=(640, 360), tau: float = 2 /
                                  "wall_ms": st.wall_ms, "draw_ms": st.draw_ms, "plan_ms": st.plan_ms,
                                  "upload_ms": st.upload_ms, "uploads": st.uploads, "fallback_tiles": st.fallback_tiles,
                                  "pending_uploads": st.pending_uploads, "tiles": st.tiles, "gpu_bytes": st.gpu_bytes,
+                                 "resident_bytes": st.gpu_bytes - st.shared_bytes, "prep_ms": st.prep_ms,
                                  "gpu_budget": gpu_budget_mib << 20, "host_cache_bytes": pyramid.cache_bytes,
                                  "host_rss": rss_bytes(), "call_ms": (time.perf_counter() - t0) * 1e3})
             except TerrabenchError as exc:
@@ -83,13 +84,15 @@ def run_scaling(ctx, stores, frames: int = 48, size=(640, 360), tau: float = 2 /
 
 
 def summary(frames: pd.DataFrame) -> pd.DataFrame:
-    """Per store and method: median and p99 frame time, their ratio, fallback frames, peak GPU and host bytes."""
+    """Per store and method: median and p99 frame time, their ratio, fallback frames, peak GPU bytes (all, and the
+    resident tiles' that the budget bounds) and host bytes."""
     g = frames.groupby(["side", "store", "method"], sort=True)
     out = g.agg(frames=("wall_ms", "size"), median_ms=("wall_ms", "median"),
                 p99_ms=("wall_ms", lambda x: float(np.percentile(x, 99))),
                 spread_iqr_ms=("wall_ms", lambda x: float(np.percentile(x, 75) - np.percentile(x, 25))),
                 uploads=("uploads", "sum"), fallback_frames=("fallback_tiles", lambda x: int((x > 0).sum())),
                 peak_gpu_mib=("gpu_bytes", lambda x: x.max() / 2**20),
+                peak_resident_mib=("resident_bytes", lambda x: x.max() / 2**20),
                 gpu_budget_mib=("gpu_budget", lambda x: x.max() / 2**20),
                 peak_host_rss_mib=("host_rss", lambda x: x.max() / 2**20),
                 peak_host_cache_mib=("host_cache_bytes", lambda x: x.max() / 2**20)).reset_index()
