@@ -258,7 +258,7 @@ class Renderer:
             stats.prep_ms = prep_ms
             if streamed is not None:
                 stats.upload_ms, stats.fallback_tiles, stats.pending_uploads = \
-                    streamed.upload_ms, streamed.fallback_tiles, streamed.pending
+                    streamed.upload_ms, streamed.fallback_tiles, streamed.fallback_tiles
                 stats.wall_ms += streamed.upload_ms + prep_ms
             stats.uploads = self.cache.stats.uploads - uploads0
             stats.evictions = self.cache.stats.evictions - evictions0

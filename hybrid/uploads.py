@@ -28,9 +28,12 @@ class UploadReport:
 
     uploads: int = 0
     upload_ms: float = 0.0
-    pending: int = 0
-    fallback_tiles: int = 0
     fallbacks: dict = field(default_factory=dict)
+
+    @property
+    def fallback_tiles(self) -> int:
+        """Tiles drawn from an ancestor this frame: every job still waiting is one."""
+        return len(self.fallbacks)
 
 
 def ancestors(key: TileKey, max_level: int):
@@ -84,9 +87,7 @@ def stream_uploads(cache, strategies: dict, plans, pinned: set, make_tile, max_l
         p = plans[i]
         if (p.choice, p.key) in cache.entries:
             continue
-        report.pending += 1
         anc = next(a for a in ancestors(p.key, max_level) if (p.choice, a) in cache.entries)
         pinned.add((p.choice, anc))
         report.fallbacks[i] = anc
-    report.fallback_tiles = len(report.fallbacks)
     return report

@@ -130,14 +130,13 @@ def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
         features = features_from_columns(columns)
         pred = model.predict_columns(columns)
         predicted = [dict(zip(pred, p)) for p in zip(*(v.tolist() for v in pred.values()))]
-        chosen = choices(policy, columns, pred, threshold)
+        chosen = hedged_choices(pred, model) if policy == "hybrid" else choices(policy, columns, pred, threshold)
     else:
         features = [tile_features(pyramid, view, s, t) for s, t in zip(selected, triangles)]
         predicted = [model.predict(f) for f in features]
-        chosen = [choose(policy, f, p, threshold) for f, p in zip(features, predicted)]
+        if policy == "hybrid":
+            chosen = hedged_choices({n: np.array([q[n] for q in predicted]) for n in predicted[0]}, model)
+        else:
+            chosen = [choose(policy, f, p, threshold) for f, p in zip(features, predicted)]
     plans = [TilePlan(s, f, p, c) for s, f, p, c in zip(selected, features, predicted, chosen)]
-    if policy == "hybrid":
-        cols = pred if batch else {n: np.array([q[n] for q in predicted]) for n in predicted[0]}
-        for p, c in zip(plans, hedged_choices(cols, model)):
-            p.choice = c
     return plans
