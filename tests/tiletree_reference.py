@@ -1,5 +1,7 @@
 """The tile selection as a plain per-tile traversal (one Python step per tile): the independent reference that
 hybrid.tiles.tiletree's vectorised select_tiles is checked against in tests."""
+import math
+
 import numpy as np
 
 from hybrid.errors import check_positive
@@ -12,8 +14,8 @@ _EDGES = ((EDGE_W, -1, 0), (EDGE_E, 1, 0), (EDGE_S, 0, -1), (EDGE_N, 0, 1))
 
 def aabb_distance(eye: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
     """Euclidean distance (metres) from a point to an axis-aligned box; 0 inside."""
-    d = np.maximum(np.maximum(lo - eye, eye - hi), 0.0)
-    return float(np.linalg.norm(d))
+    d = [float(v) for v in np.maximum(np.maximum(lo - eye, eye - hi), 0.0)]
+    return math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
 
 
 def classify_aabb(planes: np.ndarray, lo_rel: np.ndarray, hi_rel: np.ndarray) -> int:

@@ -72,8 +72,12 @@ def box_classes(planes: np.ndarray, lo_rel: np.ndarray, hi_rel: np.ndarray) -> n
 
 
 def box_distances(eye: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Euclidean distances (metres) from a point to (B, 3) axis-aligned boxes; 0 inside."""
-    return np.linalg.norm(np.maximum(np.maximum(lo - eye, eye - hi), 0.0), axis=1)
+    """Euclidean distances (metres) from a point to (B, 3) axis-aligned boxes; 0 inside.
+
+    Summed x, y, z in that order (not ``np.linalg.norm``, whose summation differs between a vector and an
+    axis), so a box gets the same bits here as from the scalar formula."""
+    d = np.maximum(np.maximum(lo - eye, eye - hi), 0.0)
+    return np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
 
 
 _SHIFT = 29                   # tile codes: level << 58 | ty << 29 | tx (tiles a side < 2^29)
