@@ -1,8 +1,13 @@
-"""Screen footprints of many world boxes at once: near-plane cut, convex hull, viewport clip (pixels, numpy).
+"""Screen footprints of many world boxes at once: near-plane cut, viewport clip, area (pixels, numpy).
 
-The batched counterpart of ``hybrid.cost.features.footprint_pixels``: the same points (box corners in front
-of the near plane and box edges' crossings of it, projected and rounded to 1e-6 px), the same convex hull
-and the same Sutherland-Hodgman clip, with one row per box and padded slots instead of Python lists.
+The batched counterpart of ``hybrid.cost.features.footprint_pixels``, computed another way. A ray from the
+eye through a point of a convex body's projection leaves the body exactly once, through a face turned away
+from the eye: the projections of a box's back faces tile its projection. So the footprint clipped to the
+viewport is the sum of the back faces' projected quads clipped to the viewport, each a convex polygon, every
+face of every box in one pass: no convex hull, no silhouette, no sequential clip. Faces reaching behind the
+near plane are cut at it first (the cut box's back faces are the cut faces; its cap on the near plane faces
+the eye). Vertices are the reference's: the same corners and near-plane crossings of the box edges (from
+the lower corner index to the higher), projected the same way and rounded to 1e-6 px.
 """
 from __future__ import annotations
 
@@ -12,9 +17,12 @@ from hybrid.camera.view import View
 
 # box corner index = 4 * (x is hi) + 2 * (y is hi) + (z is hi), as in features.footprint_pixels
 _CORNER_BITS = np.array([[(c >> 2) & 1, (c >> 1) & 1, c & 1] for c in range(8)], dtype=bool)
-_EDGE_A, _EDGE_B = np.array([(a, b) for a in range(8) for b in range(a + 1, 8) if bin(a ^ b).count("1") == 1]).T
-# a point closer than this times the coordinate scale to a hull edge's line counts as on it (float noise)
-_COLLINEAR = 1e-12
+# the six faces as corner cycles: (axis, side) = (x, lo), (x, hi), (y, lo), (y, hi), (z, lo), (z, hi)
+_FACES = np.array([[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]])
+_FACE_AXIS = np.array([0, 0, 1, 1, 2, 2])
+_FACE_HI = np.array([False, True, False, True, False, True])
+_EDGE_LO = np.minimum(_FACES, np.roll(_FACES, -1, axis=1))         # each face edge from its lower corner index
+_EDGE_HI = np.maximum(_FACES, np.roll(_FACES, -1, axis=1))
 
 
 def box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -22,196 +30,153 @@ def box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return np.where(_CORNER_BITS[None], hi[:, None, :], lo[:, None, :])
 
 
-def screen_points(view: View, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Projected vertices of boxes cut at the near plane: (B, 20, 2) pixel positions and a (B, 20) validity mask.
-
-    Slots 0-7 are the corners in front of the near plane, slots 8-19 the crossings of the 12 box edges
-    with it; positions are rounded to 1e-6 px so that coincident corners merge.
-    """
+def _eye_space(view: View, corners: np.ndarray) -> np.ndarray:
+    """Corners (B, 8, 3) in eye space (metres, the camera looking down -z)."""
     b = corners.shape[0]
-    rel = ((corners - view.eye).reshape(-1, 3) @ view.rotation().T).reshape(b, 8, 3)   # eye space, looks down -z
-    depth = -rel[:, :, 2]
-    near = view.near * (1 + 1e-9)
-    da, db = depth[:, _EDGE_A], depth[:, _EDGE_B]
-    crossing = (da - near) * (db - near) < 0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(crossing, (near - da) / np.where(crossing, db - da, 1.0), 0.0)
-    ra, rb = rel[:, _EDGE_A], rel[:, _EDGE_B]
-    pts = np.concatenate([rel, ra + t[..., None] * (rb - ra)], axis=1)
-    valid = np.concatenate([depth >= near, crossing], axis=1)
-    pts = np.where(valid[..., None], pts, np.array([0.0, 0.0, -1.0]))     # a harmless point in unused slots
+    return ((corners - view.eye).reshape(-1, 3) @ view.rotation().T).reshape(b, 8, 3)
+
+
+def _near(view: View) -> float:
+    """The near plane's depth as the reference cuts at it: a hair in front, so points on it count as cut."""
+    return view.near * (1 + 1e-9)
+
+
+def near_cut(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(B,) whether each box (world metres) reaches behind the near plane."""
+    return np.any(-_eye_space(view, box_corners(lo, hi))[..., 2] < _near(view), axis=1)
+
+
+def _project(view: View, pts: np.ndarray) -> np.ndarray:
+    """Eye-space points (..., 3) in front of the near plane to pixels (..., 2), rounded to 1e-6 px."""
     tan = view.tan_half_fov
     x = (pts[..., 0] / -pts[..., 2]) / (tan * view.aspect)
     y = (pts[..., 1] / -pts[..., 2]) / tan
-    screen = np.stack([(x + 1) * 0.5 * view.width, (1 - y) * 0.5 * view.height], axis=-1)
-    return np.round(screen, 6), valid
+    return np.round(np.stack([(x + 1) * 0.5 * view.width, (1 - y) * 0.5 * view.height], axis=-1), 6)
 
 
-def _pack(pts: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Kept points moved to the front of each row in order, the rest filled with the row's last kept point.
+class _Next(dict):
+    """Index arrays i -> (i + 1) mod m, one per polygon width m, made once."""
 
-    Returns (B, m, 2) points (m = the largest count of any row, at least 1) and the (B,) counts; a repeated
-    last vertex adds only zero-length edges to a polygon, so padded rows keep their area.
+    def __missing__(self, m):
+        self[m] = np.roll(np.arange(m), -1)
+        return self[m]
+
+
+_NEXT = _Next()
+
+
+def signed_areas(poly: np.ndarray) -> np.ndarray:
+    """Shoelace signed areas (...) of padded polygons (..., m, 2): positive counter-clockwise in (x, y)."""
+    nxt = poly[..., _NEXT[poly.shape[-2]], :]
+    return 0.5 * np.sum(poly[..., 0] * nxt[..., 1] - nxt[..., 0] * poly[..., 1], axis=-1)
+
+
+def clipped_signed_areas(poly: np.ndarray, w: float, h: float) -> np.ndarray:
+    """Signed areas (B,) of convex padded polygons (B, m, 2) clipped to the rectangle [0, w] x [0, h] (pixels),
+    with the sign of each polygon's own orientation.
+
+    Green's theorem over the boundary of the intersection: the polygon's edges clipped to the rectangle
+    (Liang-Barsky) and the rectangle's sides clipped to the polygon (Cyrus-Beck, the polygon being convex), both
+    run the polygon's way round. Repeated vertices (padding) are edges of no length and add nothing; a polygon
+    of no area (a point, or a segment: a box face seen from a flat box's side) has none clipped either.
     """
-    order = np.argsort(~keep, axis=1, kind="stable")
-    count = keep.sum(axis=1)
-    m = max(int(count.max(initial=0)), 1)
-    slots = np.minimum(np.arange(m)[None, :], np.maximum(count - 1, 0)[:, None])
-    idx = np.take_along_axis(order, slots, axis=1)
-    return np.take_along_axis(pts, idx[..., None], axis=1), count
-
-
-def hull_polygons(pts: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Convex hulls of each row's valid points, counter-clockwise: (B, m, 2) padded vertices and (B,) counts.
-
-    Duplicates are merged; points on a hull edge between its ends are not vertices. A hull of fewer than 3
-    vertices (all points on one line) has no area.
-    """
-    pts, count = _pack(pts, valid)
-    k = pts.shape[1]
-    slot = np.arange(k)
-    live = slot[None, :] < count[:, None]
-    same = np.all(pts[:, :, None, :] == pts[:, None, :, :], axis=-1) & (slot[:, None] < slot[None, :])[None]
-    live &= ~np.any(same & live[:, :, None], axis=1)                 # keep the first of equal points
-    # edge i -> j is a hull edge when every other point lies left of it, or on it between i and j
-    e = pts[:, None, :, :] - pts[:, :, None, :]                      # (B, i, j, 2): j - i
-    f = pts[:, None, None, :, :] - pts[:, :, None, None, :]          # (B, i, 1, k, 2): k - i
-    cross = e[:, :, :, None, 0] * f[..., 1] - e[:, :, :, None, 1] * f[..., 0]
-    scale = np.maximum(np.abs(np.where(live[..., None], pts, 0.0)).max(axis=(1, 2)), 1.0)[:, None, None, None]
-    tol = _COLLINEAR * scale * (np.abs(e[:, :, :, None, :]).sum(-1) + np.abs(f).sum(-1))
-    along = e[:, :, :, None, 0] * f[..., 0] + e[:, :, :, None, 1] * f[..., 1]
-    length2 = (e[..., 0] ** 2 + e[..., 1] ** 2)[..., None]
-    ok = (cross > tol) | ((np.abs(cross) <= tol) & (along >= 0) & (along <= length2)) | ~live[:, None, None, :]
-    edge = np.all(ok, axis=-1) & live[:, :, None] & live[:, None, :] & (length2[..., 0] > 0)
-    vertex = np.any(edge, axis=2)
-    nv = vertex.sum(axis=1)
-    centre = np.where(vertex[..., None], pts, 0.0).sum(axis=1) / np.maximum(nv, 1)[:, None]
-    angle = np.arctan2(pts[..., 1] - centre[:, None, 1], pts[..., 0] - centre[:, None, 0])
-    order = np.argsort(np.where(vertex, angle, np.inf), axis=1, kind="stable")
-    poly = np.take_along_axis(pts, order[..., None], axis=1)
-    ordered = np.take_along_axis(vertex, order, axis=1)
-    poly, _ = _pack(poly, ordered)
-    return poly, np.where(nv >= 3, nv, 0)
-
-
-def _silhouettes() -> np.ndarray:
-    """(64, 6) corner indices of a box's outline in cyclic order, by the eye's region code (see ``region_codes``).
-
-    Seen from outside a box, its projection's outline is the cycle of edges between faces turned to the eye
-    and faces turned away, fixed by the eye's region (Schmalstieg and Tobler 1999): worked out here once from
-    one eye inside each region; 4-vertex outlines repeat their last corner. Code 0 (eye inside) has none.
-    """
-    table = np.zeros((64, 6), dtype=np.int64)
-    corners = _CORNER_BITS.astype(np.float64)
-    for sides in np.ndindex(3, 3, 3):
-        eye = np.array([(-2.0, 0.5, 3.0)[s] for s in sides])
-        code = int(region_codes(eye[None], np.zeros((1, 3)), np.ones((1, 3)))[0])
-        if code == 0:
-            continue
-        f = 0.5 - eye
-        f /= np.linalg.norm(f)
-        a = np.cross(f, [0.3, 0.5, 0.7])
-        a /= np.linalg.norm(a)
-        b = np.cross(f, a)
-        d = corners - eye
-        uv = np.stack([d @ a, d @ b], axis=1) / (d @ f)[:, None]      # a perspective picture of the corners
-        ang = np.arctan2(*(uv - uv.mean(axis=0)).T[::-1])
-        outline = [c for c in np.argsort(ang) if not _inside_others(uv, c)]
-        table[code] = (outline + outline[-1:] * 6)[:6]
-    return table
-
-
-def _inside_others(uv: np.ndarray, c: int) -> bool:
-    """Whether point c lies inside the convex hull of the other points (a strict test; points in general position)."""
-    others = np.delete(uv, c, axis=0)
-    ang = np.sort(np.arctan2(*(others - uv[c]).T[::-1]))
-    gaps = np.diff(np.concatenate([ang, ang[:1] + 2 * np.pi]))    # angular gaps between the others, seen from c
-    return bool(gaps.max() < np.pi)
-
-
-def region_codes(eye: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """(B,) 6-bit codes of where eyes (B, 3) lie against boxes: bits x<lo, x>hi, y<lo, y>hi, z<lo, z>hi."""
-    below, above = eye < lo, eye > hi
-    bits = np.stack([below[:, 0], above[:, 0], below[:, 1], above[:, 1], below[:, 2], above[:, 2]], axis=1)
-    return bits @ (1 << np.arange(6))
-
-
-def _clip(poly: np.ndarray, axis: int, bound: float, keep_less: bool) -> tuple[np.ndarray, np.ndarray]:
-    """One Sutherland-Hodgman step of padded polygons against x or y <= / >= bound: (polygons, counts).
-
-    Each vertex yields the edge's crossing (if the edge crosses) then itself (if kept); slots yielding
-    nothing repeat the previous kept point, so the output is padded the same way as the input.
-    """
-    prev = np.roll(poly, 1, axis=1)
-    cin = poly[..., axis] <= bound if keep_less else poly[..., axis] >= bound
-    cut = cin != np.roll(cin, 1, axis=1)
+    m = poly.shape[1]
+    sa = signed_areas(poly)
+    orient = np.where(sa < 0, -1.0, 1.0)
+    a, d = poly, poly[:, _NEXT[m]] - poly                                       # edges a -> a + d, (B, m, 2)
+    lim = np.array([w, h])
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(cut, (bound - prev[..., axis]) / np.where(cut, poly[..., axis] - prev[..., axis], 1.0), 0.0)
-    inter = prev + t[..., None] * (poly - prev)
-    out = np.stack([inter, poly], axis=2).reshape(poly.shape[0], -1, 2)
-    keep = np.stack([cut, cin], axis=2).reshape(poly.shape[0], -1)
-    slot = np.where(keep, np.arange(keep.shape[1]), -1)
-    last = np.maximum.accumulate(slot, axis=1)
-    last = np.where(last < 0, last[:, -1:], last)
-    return np.take_along_axis(out, np.maximum(last, 0)[..., None], axis=1), keep.sum(axis=1)
+        t_a, t_b = -a / d, (lim - a) / d
+    moving, within = d != 0, (a >= 0) & (a <= lim)
+    t_in = np.where(moving, np.minimum(t_a, t_b), np.where(within, -np.inf, np.inf)).max(axis=-1)
+    t_out = np.where(moving, np.maximum(t_a, t_b), np.where(within, np.inf, -np.inf)).min(axis=-1)
+    t0, t1 = np.clip(t_in, 0.0, 1.0), np.clip(t_out, 0.0, 1.0)
+    p0, p1 = a + t0[..., None] * d, a + t1[..., None] * d
+    own = np.where(t1 > t0, p0[..., 0] * p1[..., 1] - p1[..., 0] * p0[..., 1], 0.0).sum(axis=1)
+    # the rectangle's sides, counter-clockwise in (x, y) (reversed for clockwise polygons), clipped to the polygon
+    r0 = np.array([[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]])
+    r1 = r0[[1, 2, 3, 0]]
+    ccw = (orient > 0)[:, None, None]
+    q0 = np.where(ccw, r0, r1)[:, :, None, :]                                  # (B, 4, 1, 2)
+    dq = np.where(ccw, r1, r0)[:, :, None, :] - q0
+    ea, ed = a[:, None], d[:, None]                                            # (B, 1, m, 2)
+    s = orient[:, None, None]
+    fa = s * (ed[..., 0] * (q0[..., 1] - ea[..., 1]) - ed[..., 1] * (q0[..., 0] - ea[..., 0]))   # (B, 4, m)
+    fb = s * (ed[..., 0] * dq[..., 1] - ed[..., 1] * dq[..., 0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        root = -fa / fb
+    u0 = np.maximum(np.where(fb > 0, root, -np.inf).max(axis=-1), 0.0)
+    u1 = np.minimum(np.where(fb < 0, root, np.inf).min(axis=-1), 1.0)
+    # a side parallel to an edge is kept only strictly inside it, so a side along an edge counts once
+    real = (d[..., 0] != 0) | (d[..., 1] != 0)                                # (B, m): edges of some length
+    blocked = np.any((fb == 0) & (fa <= 0) & real[:, None], axis=-1)
+    g0, g1 = q0[:, :, 0] + u0[..., None] * dq[:, :, 0], q0[:, :, 0] + u1[..., None] * dq[:, :, 0]
+    side = np.where((u1 > u0) & ~blocked, g0[..., 0] * g1[..., 1] - g1[..., 0] * g0[..., 1], 0.0).sum(axis=1)
+    return np.where(sa == 0, 0.0, 0.5 * (own + side))           # a point or a segment bounds nothing
 
 
-def polygon_areas(poly: np.ndarray, count: np.ndarray) -> np.ndarray:
-    """Shoelace areas (B,) of padded polygons; rows with fewer than 3 vertices have 0."""
-    x, y = poly[..., 0], poly[..., 1]
-    a = 0.5 * np.abs(np.sum(x * np.roll(y, -1, axis=1), axis=1) - np.sum(y * np.roll(x, -1, axis=1), axis=1))
-    return np.where(count >= 3, a, 0.0)
+def _cut_faces(rel: np.ndarray, near: float) -> np.ndarray:
+    """Faces (B, 6, 4, 3) of boxes' eye-space corners cut at depth >= near: (B, 6, 8, 3) padded polygons.
 
-
-def clipped_areas(poly: np.ndarray, count: np.ndarray, w: float, h: float) -> np.ndarray:
-    """Areas (B,) of convex padded polygons clipped to the rectangle [0, w] x [0, h] (pixels).
-
-    Polygons wholly inside keep their area; only the others go through the clip.
+    One Sutherland-Hodgman step: each vertex yields the crossing of the edge into it (if the edge crosses),
+    then itself (if in front); empty slots repeat the previous point, so a face wholly behind collapses to a
+    point (no area). Crossings are computed along box edges from their lower corner index, as the reference.
     """
-    area = polygon_areas(poly, count)
-    lo, hi = poly.min(axis=1), poly.max(axis=1)
-    cut = (count >= 3) & ((lo[:, 0] < 0) | (lo[:, 1] < 0) | (hi[:, 0] > w) | (hi[:, 1] > h))
-    if np.any(cut):
-        sub, n = poly[cut], count[cut]
-        for axis, bound, keep_less in ((0, 0.0, False), (0, w, True), (1, 0.0, False), (1, h, True)):
-            out = sub[..., axis] > bound if keep_less else sub[..., axis] < bound
-            if not np.any(out):
-                continue                          # no polygon reaches past this side
-            sub, kept = _clip(sub, axis, bound, keep_less)
-            n = np.where(n >= 3, kept, 0)
-        area[cut] = polygon_areas(sub, n)
-    return area
+    face = rel[:, _FACES]                                                      # (B, 6, 4, 3)
+    depth = -face[..., 2]
+    keep = depth >= near
+    ra, rb = rel[:, _EDGE_LO], rel[:, _EDGE_HI]                                # edge k: corner k -> k + 1
+    da, db = -ra[..., 2], -rb[..., 2]
+    cross = (da - near) * (db - near) < 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(cross, (near - da) / np.where(cross, db - da, 1.0), 0.0)
+    hit = ra + t[..., None] * (rb - ra)
+    # the crossing of edge k (vertex k -> k + 1) comes before vertex k + 1
+    into = np.roll(hit, 1, axis=2)
+    into_ok = np.roll(cross, 1, axis=2)
+    pts = np.stack([into, face], axis=3).reshape(*face.shape[:2], 8, 3)
+    ok = np.stack([into_ok, keep], axis=3).reshape(*face.shape[:2], 8)
+    slot = np.where(ok, np.arange(8), -1)
+    last = np.maximum.accumulate(slot, axis=2)
+    last = np.where(last < 0, last[..., -1:], last)                           # leading gaps take the final point
+    out = np.take_along_axis(pts, np.maximum(last, 0)[..., None], axis=2)
+    empty = ~ok.any(axis=2)
+    return np.where(empty[..., None, None], np.array([0.0, 0.0, -1.0]), out)   # a harmless point, no area
 
 
 def footprints(view: View, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per box (B, 3 corners each, world metres): viewport area in pixels of its near-cut projection, and the
-    share of that projection inside the viewport in [0, 1] (0 when it has no area).
-
-    A box wholly in front of the near plane takes its outline from the silhouette table; a box cut by the
-    near plane takes the convex hull of its cut vertices.
-    """
+    share of that projection inside the viewport in [0, 1] (0 when it has no area)."""
     lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
-    pts, valid = screen_points(view, box_corners(lo, hi))
-    front = valid[:, :8].all(axis=1)
-    code = region_codes(np.broadcast_to(view.eye, lo.shape), lo, hi)
-    idx = _SILHOUETTE[code]
-    poly = np.take_along_axis(pts[:, :8], idx[..., None], axis=1)
-    same = np.all(poly[:, :, None] == poly[:, None, :], axis=-1) & np.tri(6, k=-1, dtype=bool)
-    distinct = 6 - np.any(same, axis=2).sum(axis=1)            # outline corners that coincide count once
-    count = np.where(front & (distinct >= 3), 6, 0)
-    if not np.all(front):
-        cut = ~front
-        part = valid[cut] & (valid[cut].sum(axis=1, keepdims=True) >= 3)
-        hull, n = hull_polygons(pts[cut], part)
-        width = max(hull.shape[1], poly.shape[1])
-        poly = np.concatenate([poly, np.repeat(poly[:, -1:], width - poly.shape[1], axis=1)], axis=1)
-        poly[cut] = np.concatenate([hull, np.repeat(hull[:, -1:], width - hull.shape[1], axis=1)], axis=1)
-        count[cut] = n
-    area = clipped_areas(poly, count, view.width, view.height)
-    whole = polygon_areas(poly, count)
+    b = lo.shape[0]
+    rel = _eye_space(view, box_corners(lo, hi))
+    near = _near(view)
+    eye = np.asarray(view.eye, dtype=np.float64)
+    e, l, u = eye[_FACE_AXIS][None], lo[:, _FACE_AXIS], hi[:, _FACE_AXIS]
+    back = np.where(_FACE_HI[None], e < u, e > l)                              # (B, 6): turned away from the eye
+    cut = np.any(-rel[..., 2] < near, axis=1)
+    m = 8 if cut.any() else 4
+    poly = np.empty((b, 6, m, 2))
+    front = ~cut
+    corners = _project(view, rel[front])                                       # (F, 8, 2)
+    poly[front] = corners[:, _FACES[:, [0, 1, 2, 3, 3, 3, 3, 3][:m]]]
+    if cut.any():
+        poly[cut] = _project(view, _cut_faces(rel[cut], near))
+    flat = poly.reshape(b * 6, poly.shape[2], 2)
+    on = back.reshape(-1)
+    face_area = np.zeros(b * 6)
+    face_area[on] = signed_areas(flat[on])
+    whole = np.abs(face_area.reshape(b, 6).sum(axis=1))
+    # only boxes whose projection reaches past the viewport need the clip; the others are wholly inside
+    w, h = float(view.width), float(view.height)
+    crosses = cut.copy()
+    crosses[front] = np.any((corners < 0) | (corners > np.array([w, h])), axis=(1, 2))
+    area = whole.copy()
+    if crosses.any():
+        clip = (on.reshape(b, 6) & crosses[:, None]).reshape(-1)
+        face_area[:] = 0.0
+        face_area[clip] = clipped_signed_areas(flat[clip], w, h)
+        area[crosses] = np.abs(face_area.reshape(b, 6).sum(axis=1))[crosses]
     with np.errstate(divide="ignore", invalid="ignore"):
         visible = np.where(whole > 0, np.minimum(area / np.where(whole > 0, whole, 1.0), 1.0), 0.0)
     return area, visible
-
-
-_SILHOUETTE = _silhouettes()
