@@ -7,32 +7,47 @@ strategy it is given. For a fixed S every tile takes its cheapest strategy in S,
 """
 from __future__ import annotations
 
+import functools
 import itertools
 
 import numpy as np
+
+
+@functools.lru_cache(maxsize=None)
+def _subsets(s: int) -> np.ndarray:
+    """(2^s - 1, s) masks of the non-empty subsets of s strategies, smaller sets first (itertools order)."""
+    rows = [np.isin(np.arange(s), c) for k in range(1, s + 1) for c in itertools.combinations(range(s), k)]
+    return np.array(rows, dtype=bool).reshape(-1, s)
 
 
 def best_assignment(costs: dict[str, np.ndarray], overhead: dict[str, float],
                     pure_ms: dict[str, float] | None = None) -> tuple[list[str], float]:
     """(strategy per tile, frame ms) of the cheapest assignment; ``costs`` are per-tile ms ((B,) arrays, overhead
     excluded), ``overhead`` ms per frame per strategy used, ``pure_ms`` a measured frame time that replaces the
-    sum for a one-strategy frame. Ties go to the earlier strategy in ``costs`` and to fewer strategies."""
+    sum for a one-strategy frame. Ties go to the earlier strategy in ``costs`` and to fewer strategies.
+
+    Every subset is priced at once: (subsets, strategies, tiles) costs with the strategies outside a subset
+    at infinity."""
     names = list(costs)
     table = np.stack([np.asarray(costs[n], dtype=np.float64) for n in names])       # (S, B)
     n_tiles = table.shape[1]
-    best: tuple[float, list[str]] | None = None
-    for size in range(1, len(names) + 1):
-        for subset in itertools.combinations(range(len(names)), size):
-            sub = table[list(subset)]
-            pick = np.argmin(sub, axis=0)
-            used = sorted({subset[i] for i in pick.tolist()}) if n_tiles else [subset[0]]
-            if len(used) < size:
-                continue                      # the same frame as a smaller set, already priced
-            if size == 1 and pure_ms and names[subset[0]] in pure_ms:
-                total = float(pure_ms[names[subset[0]]])
-            else:
-                total = float(sub[pick, np.arange(n_tiles)].sum()) + sum(overhead.get(names[i], 0.0) for i in used)
-            if best is None or total < best[0] - 1e-12:
-                best = (total, [names[subset[i]] for i in pick.tolist()] if n_tiles else [])
-    assert best is not None
-    return best[1], best[0]
+    masks = _subsets(len(names))                                                     # (K, S)
+    if n_tiles == 0:
+        pick = np.zeros((len(masks), 0), dtype=np.int64)
+        used = masks & (np.cumsum(masks, axis=1) == 1)                              # a frame of nothing: first only
+    else:
+        priced = np.where(masks[:, :, None], table[None], np.inf)                   # (K, S, B)
+        pick = np.argmin(priced, axis=1)                                             # (K, B), first on ties
+        used = np.zeros_like(masks)
+        np.put_along_axis(used, pick, True, axis=1)
+    fits = used.sum(axis=1) == masks.sum(axis=1)        # a subset some strategy of which is unused: priced smaller
+    tiles = np.take_along_axis(table, pick, axis=0).sum(axis=1) if n_tiles else np.zeros(len(masks))
+    total = tiles + used.astype(np.float64) @ np.array([overhead.get(n, 0.0) for n in names])
+    if pure_ms:
+        single = masks.sum(axis=1) == 1
+        for i, n in enumerate(names):
+            if n in pure_ms:
+                total[single & masks[:, i]] = float(pure_ms[n])
+    total = np.where(fits, total, np.inf)
+    k = int(np.argmax(total <= total.min() + 1e-12))                                 # the first of the cheapest
+    return [names[i] for i in pick[k].tolist()], float(total[k])
