@@ -21,6 +21,7 @@ _CORNER_BITS = np.array([[(c >> 2) & 1, (c >> 1) & 1, c & 1] for c in range(8)],
 _FACES = np.array([[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]])
 _FACE_AXIS = np.array([0, 0, 1, 1, 2, 2])
 _FACE_HI = np.array([False, True, False, True, False, True])
+_FACE_SPAN = np.array([[(a + 1) % 3, (a + 2) % 3] for a in _FACE_AXIS])  # the two axes each face spans
 _EDGE_LO = np.minimum(_FACES, np.roll(_FACES, -1, axis=1))         # each face edge from its lower corner index
 _EDGE_HI = np.maximum(_FACES, np.roll(_FACES, -1, axis=1))
 
@@ -154,6 +155,7 @@ def footprints(view: View, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, 
     eye = np.asarray(view.eye, dtype=np.float64)
     e, l, u = eye[_FACE_AXIS][None], lo[:, _FACE_AXIS], hi[:, _FACE_AXIS]
     back = np.where(_FACE_HI[None], e < u, e > l)                              # (B, 6): turned away from the eye
+    back &= np.all((hi - lo)[:, _FACE_SPAN] > 0, axis=2)                       # a face of no area adds none
     cut = np.any(-rel[..., 2] < near, axis=1)
     m = 8 if cut.any() else 4
     poly = np.empty((b, 6, m, 2))
