@@ -13,7 +13,7 @@ _EDGES = ((EDGE_W, -1, 0), (EDGE_E, 1, 0), (EDGE_S, 0, -1), (EDGE_N, 0, 1))
 def aabb_distance(eye: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
     """Euclidean distance (metres) from a point to an axis-aligned box; 0 inside."""
     d = np.maximum(np.maximum(lo - eye, eye - hi), 0.0)
-    return float(np.linalg.norm(d))
+    return float(np.sqrt(np.sum(d * d)))           # as box_distances rounds it (norm of one vector may not)
 
 
 def classify_aabb(planes: np.ndarray, lo_rel: np.ndarray, hi_rel: np.ndarray) -> int:
@@ -41,7 +41,8 @@ def select_tiles_by_traversal(pyramid, view, tau: float = 2 / 3) -> list[Selecte
             lo, hi = pyramid.aabb(key)
             c = classify_aabb(planes, lo - eye, hi - eye)
             d = aabb_distance(eye, lo, hi)
-            pe = pyramid.error(key) * K / d if d > 0 else (np.inf if pyramid.error(key) > 0 else 0.0)
+            err = pyramid.error(key) + pyramid.quantization_error(key)      # geometric + 16-bit heights
+            pe = err * K / d if d > 0 else (np.inf if err > 0 else 0.0)
             info[key] = (d, pe, c)
         return info[key]
 
