@@ -66,6 +66,12 @@ def quantize(heights, source_step: tuple[float, float] | None = None) -> Quantiz
     return Quantized(q, lo, step, 0, err)
 
 
+def quantized_heights(heights, source_step: tuple[float, float] | None = None) -> np.ndarray:
+    """Float32 heights (metres, relative to origin z) as the ray caster sees them: quantised and dequantised."""
+    z = quantize(heights, source_step)
+    return dequantize(z.q, z.offset, z.step, z.base)
+
+
 def error_bound(zmin, zmax, exact=False) -> np.ndarray:
     """Upper bound (metres) on ``quantize``'s error for tiles whose heights lie in [zmin, zmax] (metres, relative
     to origin z); ``exact`` marks tiles known to be on the source's step within 65535 steps (bound 0)."""
