@@ -33,7 +33,9 @@ def make_scene(name: str, size: int = 257) -> HeightField:
         return puget(size=size)
     if name == "puget_x100":
         p = puget(size=size)
-        return HeightField(p.heights * 100.0, (p.spacing_x, p.spacing_y), p.origin, "puget_x100", p.texture)
+        step = p.source_step[0] * 100.0               # the 16-bit source at 10 m a unit, as a loader would make it
+        h = (np.rint(p.heights / p.source_step[0]) * step).astype(np.float32)
+        return HeightField(h, (p.spacing_x, p.spacing_y), p.origin, "puget_x100", p.texture, source_step=(step, 0.0))
     if name in SCENES:
         return get_dataset(name, size=size)
     raise TerrabenchError(f"unknown stress scene {name!r}; choose from {', '.join(SCENES)}")

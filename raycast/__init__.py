@@ -4,8 +4,8 @@ It satisfies ``hybrid.contract.TileStrategy``, imports ``hybrid``'s lower layers
 model or the renderer.
 """
 from .caster import GpuTile, RaycastStrategy
-from .maxmip import maxmip_levels, maxmip_nbytes
+from .maxmip import bytes_per_sample, maxmip_levels, maxmip_nbytes
 from .options import MODES, RECONSTRUCTIONS, TRAVERSALS, CastOptions
 
-__all__ = ["RaycastStrategy", "GpuTile", "CastOptions", "maxmip_levels", "maxmip_nbytes", "MODES",
+__all__ = ["RaycastStrategy", "GpuTile", "CastOptions", "bytes_per_sample", "maxmip_levels", "maxmip_nbytes", "MODES",
            "RECONSTRUCTIONS", "TRAVERSALS"]

@@ -1,5 +1,10 @@
 """The ray-cast tile strategy on the GPU: per-tile height + max-mip textures, one box pass per tile.
 
+A tile is 16-bit height codes (hybrid.tiles.quantize: exact on a 16-bit source's step, else range/65535 with
+the error measured, reported per frame as ``quant_error_max_m``) in an R16UI (N+1)² texture, and its max
+mipmap of codes without level 0 in an R16UI (N/2)² texture (raycast.maxmip): 2.67 bytes a sample for large
+N, ``bytes_per_sample``. The shadow grid (the whole terrain for shadow rays) has the same form.
+
 Satisfies ``hybrid.contract.TileStrategy``: ``upload(tile) -> GpuTile``, ``draw_tiles(target, view, items,
 tau, **options) -> dict``, ``shared_nbytes``, ``release()``.
 Each tile pass rasterizes the back faces of the tile's clipped bounding box; the fragment shader casts the
@@ -20,7 +25,9 @@ from hybrid.gl.programs import program, register_include, set_uniform, write_uni
 from hybrid.gl.shading import resolve_mode
 from hybrid.gl.textures import terrain_texture
 
-from .maxmip import MaxMipBuilder, level_count, maxmip_nbytes
+from hybrid.tiles.quantize import quantize
+
+from .maxmip import MaxMipBuilder, bytes_per_sample, level_count, tile_nbytes
 from .options import MODES, RECONSTRUCTIONS, CastOptions, default_max_steps
 
 STAT_FIELDS = ("rays", "hits", "steps", "max_steps", "capped", "shadow_rays", "shadow_steps", "shadow_capped")
@@ -44,12 +51,22 @@ def _cube_back_face_triangles() -> np.ndarray:
 
 @dataclass
 class GpuTile:
-    """One tile on the GPU: R32F (N+1)² heights and R32F N² max mipmap with all levels; exact byte count."""
+    """One tile on the GPU: R16UI (N+1)² height codes and their R16UI (N/2)² max mipmap (levels 1..log2 N);
+    exact byte count; metres = offset + step * (code + base); quant_error: largest |height - dequantised| (m)."""
 
     heights: object
     maxmip: object
     n: int
     nbytes: int
+    offset: float = 0.0
+    step: float = 1.0
+    base: int = 0
+    quant_error: float = 0.0
+
+    @property
+    def bytes_per_sample(self) -> float:
+        """GPU bytes per height sample held, max mipmap included: nbytes / (N+1)²."""
+        return self.nbytes / (self.n + 1) ** 2
 
     def release(self) -> None:
         """Free both textures."""
@@ -61,8 +78,7 @@ class GpuTile:
 class _Grid:
     """The whole terrain as one power-of-two grid, for shadow rays (built on the first shadowed draw)."""
 
-    heights: object
-    maxmip: object
+    tex: GpuTile
     n: int
     ext: tuple
     zr: tuple
@@ -122,20 +138,18 @@ class RaycastStrategy:
     def shared_nbytes(self) -> int:
         """GPU bytes held for all tiles as the driver reports them: colour texture, box, counters, tile IDs,
         terrain edges, shadow grid."""
-        grid = (self.grid.heights, self.grid.maxmip) if self.grid is not None else ()
+        grid = (self.grid.tex.heights, self.grid.tex.maxmip) if self.grid is not None else ()
         return gl_bytes(self.texture, self.cube, self.stats_buf, self.ids, *grid) + self.edges.nbytes
 
     # --- tiles ------------------------------------------------------------------------------------
+    @staticmethod
+    def bytes_per_sample(n: int) -> float:
+        """GPU bytes per height sample of an n-cell tile, max mipmap included (the textures ``upload`` makes)."""
+        return bytes_per_sample(n)
+
     def upload(self, tile) -> GpuTile:
-        """Put a tile's (N+1)² float32 heights on the GPU and build its max mipmap there."""
-        h = np.ascontiguousarray(tile.heights, dtype=np.float32)
-        n = h.shape[0] - 1
-        if h.ndim != 2 or h.shape[1] != h.shape[0] or n < 2 or n & (n - 1):
-            raise TerrabenchError(f"tile heights must be (N+1, N+1) with N a power of two >= 2, got {h.shape}")
-        ht = self.ctx.texture((n + 1, n + 1), 1, h.tobytes(), dtype="f4")
-        ht.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
-        mm = self.builder.build(ht, n)
-        return GpuTile(ht, mm, n, h.nbytes + maxmip_nbytes(n))
+        """Put a tile's (N+1)² heights on the GPU as 16-bit codes and build their max mipmap there."""
+        return self.upload_grid(tile.heights, getattr(tile, "source_step", None))
 
     def _shadow_grid(self) -> _Grid:
         if self.grid is None:
@@ -144,18 +158,23 @@ class RaycastStrategy:
             cells = max(h.shape) - 1
             n = 1 << max(1, int(np.ceil(np.log2(max(cells, 2)))))
             pad = np.pad(h, ((0, n + 1 - h.shape[0]), (0, n + 1 - h.shape[1])), mode="edge")
-            g = self.upload_grid(pad)
+            g = self.upload_grid(pad, getattr(hf, "source_step", None))
             lo, hi = float(h.min()), float(h.max())
-            self.grid = _Grid(g.heights, g.maxmip, n, (float(h.shape[1] - 1), float(h.shape[0] - 1)), (lo, hi), g.nbytes)
+            self.grid = _Grid(g, n, (float(h.shape[1] - 1), float(h.shape[0] - 1)), (lo, hi), g.nbytes)
         return self.grid
 
-    def upload_grid(self, heights: np.ndarray) -> GpuTile:
-        """Heights (N+1)² (N a power of two) and their max mipmap on the GPU, as for a tile."""
-        h = np.ascontiguousarray(heights, dtype=np.float32)
+    def upload_grid(self, heights: np.ndarray, source_step=None) -> GpuTile:
+        """Heights (N+1)² (N a power of two >= 2; float32 metres relative to origin z) on the GPU as 16-bit codes
+        (exact on ``source_step``, hybrid.tiles.quantize), with their max mipmap built there."""
+        h = np.asarray(heights, dtype=np.float32)
         n = h.shape[0] - 1
-        ht = self.ctx.texture((n + 1, n + 1), 1, h.tobytes(), dtype="f4")
+        if h.ndim != 2 or h.shape[1] != h.shape[0] or n < 2 or n & (n - 1):
+            raise TerrabenchError(f"tile heights must be (N+1, N+1) with N a power of two >= 2, got {h.shape}")
+        qz = quantize(h, source_step)
+        ht = self.ctx.texture((n + 1, n + 1), 1, np.ascontiguousarray(qz.q).tobytes(), dtype="u2")
         ht.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
-        return GpuTile(ht, self.builder.build(ht, n), n, h.nbytes + maxmip_nbytes(n))
+        mm = self.builder.build(ht, n)
+        return GpuTile(ht, mm, n, tile_nbytes(n), qz.offset, qz.step, qz.base, qz.error)
 
     def _ids_texture(self, size):
         if self.ids is None or self.ids.size != tuple(size):
@@ -204,8 +223,10 @@ class RaycastStrategy:
         grid = None
         if opts.shadows:
             grid = self._shadow_grid()
-            grid.heights.use(3)
-            grid.maxmip.use(5)
+            grid.tex.heights.use(3)
+            grid.tex.maxmip.use(5)
+            set_uniform(prog, "g_dq", (grid.tex.offset, grid.tex.step))
+            set_uniform(prog, "g_dq_base", grid.tex.base)
             set_uniform(prog, "g_hmap", 3)
             set_uniform(prog, "g_mmap", 5)
             set_uniform(prog, "g_cells", grid.n)
@@ -248,6 +269,8 @@ class RaycastStrategy:
                     set_uniform(p, "box_hi", tuple(box_hi.astype(np.float32)))
                 level = int(tile.key.level) if hasattr(tile, "key") else 0
                 set_uniform(prog, "n_cells", g.n)
+                set_uniform(prog, "dq", (g.offset, g.step))
+                set_uniform(prog, "dq_base", g.base)
                 set_uniform(prog, "n_levels", level_count(g.n) - 1)
                 set_uniform(prog, "ext", ((x1 - org[0]) / sx, (y1 - org[1]) / sy))     # texels from the tile's origin
                 set_uniform(prog, "zr", (tile.zmin - org[2], tile.zmax - org[2]))
@@ -300,8 +323,10 @@ class RaycastStrategy:
                 for f in ("shadow_rays", "shadow_steps", "shadow_capped"):
                     counters.pop(f)
         counters["tiles_cast"] = n_items
+        counters["quant_error_max_m"] = max((float(g.quant_error) for g, _t, _s in items), default=0.0)
         if grid is not None:
             counters["shadow_grid_bytes"] = grid.nbytes
+            counters["shadow_quant_error_m"] = float(grid.tex.quant_error)
         return counters
 
     def release(self) -> None:
@@ -314,7 +339,6 @@ class RaycastStrategy:
             if o is not None:
                 o.release()
         if self.grid is not None:
-            self.grid.heights.release()
-            self.grid.maxmip.release()
+            self.grid.tex.release()
             self.grid = None
         self.builder.release()

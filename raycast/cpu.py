@@ -1,6 +1,7 @@
 """A numpy ray caster with the GPU caster's semantics (raycast/traverse.glsl), vectorized over rays, float64.
 
-Used by the tests to check GPU hits. Texel space of a grid of N cells (N a power of two, (N+1)² heights):
+Used by the tests to check GPU hits; ``cast_tile_rays`` casts against the tile's 16-bit heights as the GPU
+holds them (hybrid.tiles.quantize), ``cast_rays`` against the heights it is given. Texel space of a grid of N cells (N a power of two, (N+1)² heights):
 x, y in texels (sample (i, j) at (j, i)), z in metres relative to the terrain's origin z; a ray is
 P(t) = O + t D. The traversal mirrors the ray so D_x, D_y >= 0, steps texel to texel setting the crossed
 coordinate exactly to the texel edge, descends the max mipmap on a possible hit and ascends when it leaves a
@@ -14,6 +15,7 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.heightfield import spacing_pair
+from hybrid.tiles.quantize import quantized_heights
 
 from .maxmip import level_count, maxmip_levels
 from .options import RECONSTRUCTIONS, TRAVERSALS, default_max_steps
@@ -323,9 +325,11 @@ def tile_frame(tile, eye, dirs):
 
 
 def cast_tile_rays(tile, eye, dirs, *, near=0.0, outer=0, under=False, **options) -> RayHits:
-    """Cast world rays (eye + t dirs, t >= near) against one tile; options as cast_rays. Points in tile texels."""
+    """Cast world rays (eye + t dirs, t >= near) against one tile's heights as the GPU holds them (16-bit,
+    hybrid.tiles.quantize); options as cast_rays. Points in tile texels."""
     O, D, ext, zr = tile_frame(tile, eye, dirs)
-    return cast_rays(tile.heights, ext, zr, O, D, tmin=near, spacing=tile.spacing_xy, outer=outer, under=under,
+    h = quantized_heights(tile.heights, getattr(tile, "source_step", None))
+    return cast_rays(h, ext, zr, O, D, tmin=near, spacing=tile.spacing_xy, outer=outer, under=under,
                      **options)
 
 

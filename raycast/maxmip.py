@@ -3,15 +3,20 @@
 Texel space of a tile with N cells a side ((N+1)² height samples): level-0 texel (i, j) is cell (i, j), the
 square [j, j+1] x [i, i+1]; it holds the largest of the cell's four corner heights, so it bounds every
 reconstruction that interpolates those corners (planes, linear planes, triangles, bilinear). Level l texel
-(i, j) covers cells [i*2^l, (i+1)*2^l) x [j*2^l, (j+1)*2^l). Heights are float32 metres (relative to the
-terrain's origin z), rows south to north. The GPU builder (compute shaders) gives the same bits as
-``maxmip_levels`` because a maximum of float32 values is exact.
+(i, j) covers cells [i*2^l, (i+1)*2^l) x [j*2^l, (j+1)*2^l). Rows run south to north.
+
+On the GPU a tile is two R16UI textures of 16-bit height codes (hybrid.tiles.quantize): the (N+1)² heights
+and the max mipmap without level 0, an (N/2)² texture with log2(N) levels whose level k holds max-mip level
+k+1; the traversal takes level 0 from the four corner heights. Dequantisation is monotone, so the maximum
+of codes is the code of the maximum, and the GPU builder (compute shaders) gives exactly ``maxmip_levels``
+of the codes. Bytes: 2 (N+1)² + 2 (N²/4) 4/3, about 2.67 a sample.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from hybrid.errors import TerrabenchError
+from hybrid.gl.context import r16ui_mip_texture, read_r16ui_level
 from hybrid.gl.programs import compute_shader
 
 
@@ -22,7 +27,7 @@ def _check_heights(heights) -> np.ndarray:
     n = h.shape[0] - 1
     if n & (n - 1):
         raise TerrabenchError(f"heights must have N+1 samples a side with N a power of two, got N = {n}")
-    return h.astype(np.float32, copy=False)
+    return h if h.dtype == np.uint16 else h.astype(np.float32, copy=False)
 
 
 def level_count(n: int) -> int:
@@ -33,7 +38,8 @@ def level_count(n: int) -> int:
 
 
 def maxmip_levels(heights) -> list[np.ndarray]:
-    """Max-mip pyramid (float32, metres) of an (N+1)² tile: [N x N cell maxima, N/2 x N/2, ..., 1 x 1]."""
+    """Max-mip pyramid of (N+1)² heights: [N x N cell maxima, N/2 x N/2, ..., 1 x 1]; uint16 codes stay uint16,
+    anything else is float32 metres."""
     h = _check_heights(heights)
     base = np.maximum(np.maximum(h[:-1, :-1], h[:-1, 1:]), np.maximum(h[1:, :-1], h[1:, 1:]))
     levels = [np.ascontiguousarray(base)]
@@ -45,12 +51,27 @@ def maxmip_levels(heights) -> list[np.ndarray]:
 
 
 def maxmip_nbytes(n: int) -> int:
-    """Bytes of the float32 max-mip pyramid of an n-cell tile: 4 * (n² + n²/4 + ... + 1), about 4/3 of level 0."""
-    return sum(4 * (n >> l) ** 2 for l in range(level_count(n)))
+    """Bytes of the stored R16UI max mipmap of an n-cell tile (levels 1..log2 n): 2 (n²/4 + n²/16 + ... + 1)."""
+    return sum(2 * (n >> l) ** 2 for l in range(1, level_count(n)))
+
+
+def heights_nbytes(n: int) -> int:
+    """Bytes of an n-cell tile's R16UI height texture: 2 (n+1)²."""
+    return 2 * (int(n) + 1) ** 2
+
+
+def tile_nbytes(n: int) -> int:
+    """GPU bytes of one n-cell ray-cast tile: heights and max mipmap."""
+    return heights_nbytes(n) + maxmip_nbytes(n)
+
+
+def bytes_per_sample(n: int) -> float:
+    """GPU bytes a height sample of an n-cell tile, max mipmap included: tile_nbytes / (n+1)²."""
+    return tile_nbytes(n) / (int(n) + 1) ** 2
 
 
 class MaxMipBuilder:
-    """Compute-shader programs that fill a tile's max-mip texture from its height texture, level by level."""
+    """Compute-shader programs that fill a tile's max-mip texture from its height-code texture, level by level."""
 
     def __init__(self, ctx):
         self.ctx = ctx
@@ -58,26 +79,20 @@ class MaxMipBuilder:
         self.reduce = compute_shader(ctx, "raycast", "maxmip_reduce.comp.glsl")
 
     def allocate(self, n: int):
-        """An R32F n x n texture with all log2(n)+1 mip levels allocated (contents undefined)."""
-        levels = level_count(n)
-        tex = self.ctx.texture((n, n), 1, dtype="f4")
-        if levels > 1:
-            tex.build_mipmaps(0, levels - 1)  # allocates every level; the builder overwrites them
-        tex.filter = (self.ctx.NEAREST_MIPMAP_NEAREST, self.ctx.NEAREST)
-        tex.repeat_x = tex.repeat_y = False
-        return tex
+        """An R16UI (n/2)² texture with log2(n) mip levels allocated (contents undefined)."""
+        return r16ui_mip_texture(self.ctx, n // 2, level_count(n) - 1)
 
     def build(self, height_tex, n: int, out_tex=None):
-        """Fill (or allocate and fill) the max-mip texture of an R32F (n+1)² height texture; returns it."""
+        """Fill (or allocate and fill) the max-mip texture of an R16UI (n+1)² height texture; returns it."""
         tex = out_tex if out_tex is not None else self.allocate(n)
         height_tex.use(0)
         self.base["heights"].value = 0
-        self.base["size"].value = n
+        self.base["size"].value = n // 2
         tex.bind_to_image(1, read=False, write=True, level=0)
-        g = (n + 7) // 8
+        g = (n // 2 + 7) // 8
         self.base.run(g, g, 1)
-        for l in range(1, level_count(n)):
-            m = n >> l
+        for l in range(1, level_count(n) - 1):
+            m = n >> (l + 1)
             self.ctx.memory_barrier()
             tex.bind_to_image(0, read=True, write=False, level=l - 1)
             tex.bind_to_image(1, read=False, write=True, level=l)
@@ -94,9 +109,5 @@ class MaxMipBuilder:
 
 
 def read_maxmip(tex, n: int) -> list[np.ndarray]:
-    """Read every level of a GPU max-mip texture back as float32 arrays (rows south to north)."""
-    out = []
-    for l in range(level_count(n)):
-        m = n >> l
-        out.append(np.frombuffer(tex.read(level=l, alignment=4), dtype=np.float32).reshape(m, m).copy())
-    return out
+    """Read every stored level of a GPU max-mip texture back as uint16 codes: max-mip levels 1..log2 n."""
+    return [read_r16ui_level(tex, k) for k in range(level_count(n) - 1)]

@@ -1,15 +1,18 @@
 #version 430
-// Level 0 of a tile's max mipmap: texel (i, j) = max of the four corner heights of cell (i, j).
+// Max-mip level 1 of a tile (texture level 0): texel (i, j) = max of the 3x3 height codes of the 2x2 cells
+// (2i..2i+1, 2j..2j+1). Level 0 (one cell's four corners) is not stored: the traversal takes it from the
+// heights (rc_bound in traverse.glsl).
 layout(local_size_x = 8, local_size_y = 8) in;
-uniform sampler2D heights;                 // R32F (N+1)², row 0 = south
-uniform int size;                          // N
-layout(r32f, binding = 1) writeonly uniform image2D dst;
+uniform usampler2D heights;                // R16UI (N+1)², row 0 = south
+uniform int size;                          // N / 2
+layout(r16ui, binding = 1) writeonly uniform uimage2D dst;
 void main() {
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
     if (p.x >= size || p.y >= size) return;
-    float a = texelFetch(heights, p, 0).r;
-    float b = texelFetch(heights, p + ivec2(1, 0), 0).r;
-    float c = texelFetch(heights, p + ivec2(0, 1), 0).r;
-    float d = texelFetch(heights, p + ivec2(1, 1), 0).r;
-    imageStore(dst, p, vec4(max(max(a, b), max(c, d))));
+    ivec2 q = 2 * p;
+    uint m = 0u;
+    for (int dy = 0; dy <= 2; dy++)
+        for (int dx = 0; dx <= 2; dx++)
+            m = max(m, texelFetch(heights, q + ivec2(dx, dy), 0).r);
+    imageStore(dst, p, uvec4(m));
 }

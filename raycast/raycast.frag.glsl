@@ -19,8 +19,10 @@ uniform vec2 viewport;         // pixels
 uniform float near_plane;      // metres (view depth)
 uniform float far_plane;
 // --- tile ---
-uniform sampler2D hmap;        // R32F (N+1)², heights in metres relative to terrain origin z
-uniform sampler2D mmap;        // R32F N², max mip levels 0..log2 N
+uniform usampler2D hmap;       // R16UI (N+1)² height codes (metres = rc_height(code, dq, dq_base))
+uniform usampler2D mmap;       // R16UI (N/2)², max-mip levels 1..log2 N as texture levels 0..log2 N - 1
+uniform dvec2 dq;              // (offset, step) metres: height = offset + step * (code + dq_base)
+uniform int dq_base;
 uniform int n_cells;           // N
 uniform int n_levels;          // log2 N
 uniform vec2 ext;              // clip rectangle size in texels
@@ -43,8 +45,10 @@ uniform sampler2D tex;         // terrain colour, whole terrain, mipmapped
 uniform vec2 hrange;           // terrain height range (metres, relative)
 uniform float heat_max;        // steps at the top of the heat map
 // --- shadows: the whole terrain as one grid ---
-uniform sampler2D g_hmap;
-uniform sampler2D g_mmap;
+uniform usampler2D g_hmap;
+uniform usampler2D g_mmap;
+uniform dvec2 g_dq;
+uniform int g_dq_base;
 uniform int g_cells;
 uniform int g_levels;
 uniform vec2 g_ext;
@@ -138,7 +142,7 @@ vec3 aniso_texture(vec2 uv, vec2 gx, vec2 gy) {
     return acc / float(taps);
 }
 
-float hsample(ivec2 p) { return texelFetch(hmap, clamp(p, ivec2(0), ivec2(n_cells)), 0).r; }
+float hsample(ivec2 p) { return rc_height(texelFetch(hmap, clamp(p, ivec2(0), ivec2(n_cells)), 0).r, dq, dq_base); }
 
 // Height gradient (metres per texel) at sample p by central differences with stride S (one-sided at borders).
 vec2 central_grad(ivec2 p, int S) {
@@ -175,7 +179,7 @@ void main() {
     vec3 D = vec3(d.xy / spacing, d.z);
     bool under = ray_starts_under(d);
     vec3 Q; ivec2 cell; int lev; vec4 hc; int steps;
-    int r = rc_traverse(hmap, mmap, n_cells, n_levels, ext, zr, eye_tex, D, near_plane, 0, spacing, lod_k,
+    int r = rc_traverse(hmap, mmap, dq, dq_base, n_cells, n_levels, ext, zr, eye_tex, D, near_plane, 0, spacing, lod_k,
                         max_steps, outer, under, Q, cell, lev, hc, steps);
 #if STATS
     ivec2 bin = ivec2(gl_FragCoord.xy) >> 6;
@@ -200,7 +204,7 @@ void main() {
         vec3 Og = vec3(g_tile_off + Q.xy * k, Q.z + 1e-3 * max(spacing.x, spacing.y) * float(S) + 0.01);
         vec3 Dg = vec3(L.xy / g_spacing, L.z);
         vec3 Qs; ivec2 cs; int ls; vec4 hs; int ssteps;
-        int rs = rc_traverse(g_hmap, g_mmap, g_cells, g_levels, g_ext, g_zr, Og, Dg, 0.0, gl, g_spacing, 0.0,
+        int rs = rc_traverse(g_hmap, g_mmap, g_dq, g_dq_base, g_cells, g_levels, g_ext, g_zr, Og, Dg, 0.0, gl, g_spacing, 0.0,
                              g_max_steps, 15, false, Qs, cs, ls, hs, ssteps);
         if (rs != RC_MISS) lit = 0.0;
 #if STATS

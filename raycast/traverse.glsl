@@ -6,6 +6,10 @@
 // per texel spacing.x east-west, spacing.y north-south): a world ray E + t d becomes O + t D with
 // D = (d.x / spacing.x, d.y / spacing.y, d.z), so t stays the world ray parameter and hit depths stay metres.
 //
+// Heights are 16-bit codes (R16UI, hybrid/tiles/quantize.py): metres = float32(dq.x + dq.y * (q + dqb)). The
+// max mipmap texture holds levels 1..log2 N (its level k is max-mip level k + 1); level 0 is the largest of
+// a cell's four corner codes (rc_bound). Maxima are taken on codes: dequantisation is monotone.
+//
 // Defines: RECON 0 planes (piecewise constant: a cell is a box of its max-mip height), 1 linear approximation
 // planes (Qu 3.1), 2 triangle mesh with the SW-NE diagonal (Qu 3.2), 3 bilinear patch (analytic);
 // NAIVE 1 = step level-0 (or lmin) texels only; LOD 1 = stop descending where the projected texel is small.
@@ -14,6 +18,27 @@
 #define RC_HIT 1
 #define RC_CAPPED 2
 #define RC_FAR 1e30
+
+// Metres (relative to the terrain's origin z) of a height code: offset + step * (q + base) in double, rounded
+// once to float32 as the CPU does, so heights on a source's step (a 16-bit file) come back bit for bit
+// (float32 arithmetic would round k * step differently for about one k in five). `precise`: no fma.
+float rc_height(uint q, dvec2 dq, int dqb) {
+    precise double v = dq.x + dq.y * double(int(q) + dqb);
+    return float(v);
+}
+
+// Max-mip bound (metres) of texel ri at level l: level 0 from the cell's four corner codes, level l >= 1 from
+// level l - 1 of the max-mip texture. Used for every bound the traversal reads (steps and LOD parents).
+float rc_bound(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int l, ivec2 ri) {
+    uint m;
+    if (l == 0) {
+        m = max(max(texelFetch(hmap, ri, 0).r, texelFetch(hmap, ri + ivec2(1, 0), 0).r),
+                max(texelFetch(hmap, ri + ivec2(0, 1), 0).r, texelFetch(hmap, ri + ivec2(1, 1), 0).r));
+    } else {
+        m = texelFetch(mmap, ri, l - 1).r;
+    }
+    return rc_height(m, dq, dqb);
+}
 
 // Offset of the point at fraction f of a cell from the interpolating surface of its corners (bilinear).
 float rc_bilin(vec4 hc, vec2 f) {
@@ -96,12 +121,13 @@ bool rc_lod_final(int l, vec2 ij, float H, vec3 Om, float zlo, vec2 spacing, flo
     return s * lod_k <= length(vec3(dxy, dz));
 }
 
-// Cast one ray through the grid: returns RC_MISS, RC_HIT or RC_CAPPED. On a hit, hit is the point (real texel
+// Cast one ray through the grid (height codes hmap, max mipmap mmap, dequantised by dq, dqb): returns RC_MISS,
+// RC_HIT or RC_CAPPED. On a hit, hit is the point (real texel
 // space), cell the hit texel (x, y) at level `level`, hc its corner heights. tmin: smallest ray parameter
 // (near plane); lmin: the finest level to descend to; steps: texels visited. under: the ray starts under the
 // terrain sheet (hybrid/gl/edges.glsl): its hit is where it first comes up through the surface (the sheet's
 // underside, as the two-sided reference draws it), found by stepping every lmin texel (no LOD).
-int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 zr, vec3 O, vec3 D,
+int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int LMAX, vec2 ext, vec2 zr, vec3 O, vec3 D,
                 float tmin, int lmin, vec2 spacing, float lod_k, int max_steps, int outer,
                 bool under, out vec3 hit, out ivec2 cell, out int level, out vec4 hc, out int steps) {
     steps = 0; level = 0; cell = ivec2(0); hit = vec3(0.0); hc = vec4(0.0);
@@ -175,13 +201,13 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
             while (!under && l < ltop) {
                 vec2 pij = floor(ij * 0.5);
                 ivec2 pri = ivec2(mx ? (nl >> 1) - 1 - int(pij.x) : int(pij.x), my ? (nl >> 1) - 1 - int(pij.y) : int(pij.y));
-                float PH = texelFetch(mmap, pri, l + 1).r;
+                float PH = rc_bound(hmap, mmap, dq, dqb, l + 1, pri);
                 if (!rc_lod_final(l + 1, pij, PH, Om, zr.x, spacing, lod_k)) break;
                 l++; s *= 2.0; ij = pij; nl >>= 1;
             }
 #endif
             ri = ivec2(mx ? nl - 1 - int(ij.x) : int(ij.x), my ? nl - 1 - int(ij.y) : int(ij.y));
-            H = texelFetch(mmap, ri, l).r;
+            H = rc_bound(hmap, mmap, dq, dqb, l, ri);
             e = (ij + 1.0) * s;
             float dtx = D.x > 0.0 ? (e.x - P0.x) / D.x : RC_FAR;
             float dty = D.y > 0.0 ? (e.y - P0.y) / D.y : RC_FAR;
@@ -222,8 +248,9 @@ int rc_traverse(sampler2D hmap, sampler2D mmap, int N, int LMAX, vec2 ext, vec2 
         if (my) { A.y = Nf - A.y; B.y = Nf - B.y; }
         ivec2 c0 = ri * (1 << l);
         int S = 1 << l;
-        vec4 h4 = vec4(texelFetch(hmap, c0, 0).r, texelFetch(hmap, c0 + ivec2(S, 0), 0).r,
-                       texelFetch(hmap, c0 + ivec2(0, S), 0).r, texelFetch(hmap, c0 + ivec2(S, S), 0).r);
+        vec4 h4 = vec4(rc_height(texelFetch(hmap, c0, 0).r, dq, dqb), rc_height(texelFetch(hmap, c0 + ivec2(S, 0), 0).r, dq, dqb),
+                       rc_height(texelFetch(hmap, c0 + ivec2(0, S), 0).r, dq, dqb),
+                       rc_height(texelFetch(hmap, c0 + ivec2(S, S), 0).r, dq, dqb));
         // a ray under the sheet crosses it upward: the same test with heights and ray z mirrored (z -> -z)
         float sg = under ? -1.0 : 1.0;
         float u = rc_cell_hit(vec3(A.xy, sg * A.z), vec3(B.xy, sg * B.z), vec2(c0), float(S), sg * h4, sg * H);

@@ -1,4 +1,5 @@
-"""Max mipmaps: numpy reference against a brute-force definition, GPU builder bit for bit, byte counts."""
+"""Max mipmaps: numpy reference against a brute-force definition, GPU builder (16-bit codes) level for level,
+byte counts."""
 import numpy as np
 import pytest
 from gl_memory import allocated_bytes, level_texels, object_bytes
@@ -6,6 +7,8 @@ from gl_memory import allocated_bytes, level_texels, object_bytes
 from hybrid.errors import TerrabenchError
 from hybrid.tiles.pyramid import TilePyramid
 from raycast import RaycastStrategy
+from hybrid.terrain.datasets import fbm
+from hybrid.tiles.quantize import quantize
 from raycast.maxmip import MaxMipBuilder, level_count, maxmip_levels, maxmip_nbytes, read_maxmip
 
 
@@ -24,20 +27,30 @@ def test_numpy_levels_match_definition():
                 assert lv[l][i, j] == h[i * s:(i + 1) * s + 1, j * s:(j + 1) * s + 1].max()
 
 
-def test_gpu_builder_equals_numpy_bit_for_bit(ctx, puget257):
+def _codes_texture(ctx, q):
+    n = q.shape[0] - 1
+    ht = ctx.texture((n + 1, n + 1), 1, np.ascontiguousarray(q, dtype=np.uint16).tobytes(), dtype="u2")
+    ht.filter = (ctx.NEAREST, ctx.NEAREST)
+    return ht
+
+
+@pytest.mark.parametrize("n", [2, 4, 64])
+def test_gpu_builder_equals_numpy_every_level(ctx, puget257, n):
+    # the stored levels 1..log2 N read back equal the numpy max mip of the codes, level for level
     b = MaxMipBuilder(ctx)
-    rng = np.random.default_rng(0)
-    cases = [rng.normal(-50, 300, size=(65, 65)).astype(np.float32), puget257.heights[:257, :257]]
+    rng = np.random.default_rng(n)
+    cases = [quantize(rng.normal(-50, 300, size=(n + 1, n + 1)).astype(np.float32)).q,
+             quantize(puget257.heights[:n + 1, :n + 1], puget257.source_step).q,
+             rng.integers(0, 65536, size=(n + 1, n + 1)).astype(np.uint16)]
     try:
-        for h in cases:
-            n = h.shape[0] - 1
-            ht = ctx.texture((n + 1, n + 1), 1, np.ascontiguousarray(h).tobytes(), dtype="f4")
+        for q in cases:
+            ht = _codes_texture(ctx, q)
             tex = b.build(ht, n)
             got = read_maxmip(tex, n)
-            want = maxmip_levels(h)
-            assert len(got) == level_count(n) == len(want)
-            for g, w in zip(got, want):
-                assert g.dtype == np.float32 and np.array_equal(g.view(np.uint32), w.view(np.uint32))
+            want = maxmip_levels(q)
+            assert len(got) == level_count(n) - 1 == len(want) - 1 == len(level_texels(tex))
+            for g, w in zip(got, want[1:]):
+                assert g.dtype == np.uint16 and np.array_equal(g, w)
             ht.release()
             tex.release()
     finally:
@@ -45,16 +58,34 @@ def test_gpu_builder_equals_numpy_bit_for_bit(ctx, puget257):
 
 
 def test_byte_counts(ctx, puget257):
-    # the coarser levels add a third of level 0 (less the 1x1 remainder)
-    assert maxmip_nbytes(256) - 4 * 256 ** 2 == pytest.approx(4 * 256 ** 2 / 3, rel=1e-4)
+    # the stored levels 1.. add a third of a quarter of the cells (less the 1x1 remainder)
+    assert maxmip_nbytes(256) == pytest.approx(2 * 256 ** 2 / 4 * 4 / 3, rel=1e-4)
     s = RaycastStrategy(ctx, puget257)
     try:
         pyr = TilePyramid(puget257, 128)
         tile = pyr.tile(pyr.keys(0)[0])
         g = s.upload(tile)
-        assert len(level_texels(g.maxmip)) == level_count(128)         # every level allocated, no more
+        assert len(level_texels(g.maxmip)) == level_count(128) - 1         # levels 1..log2 N, no more
+        assert level_texels(g.maxmip)[0] == 64 * 64 and level_texels(g.heights) == [129 * 129]
         assert object_bytes(g.maxmip) == maxmip_nbytes(128)
         assert g.nbytes == allocated_bytes(g) == object_bytes(g.heights) + object_bytes(g.maxmip)
+        assert g.heights.dtype == g.maxmip.dtype == "u2"
+        g.release()
+    finally:
+        s.release()
+
+
+@pytest.mark.parametrize("n", [64, 128, 256])
+def test_bytes_per_sample_within_target(ctx, n):
+    # from the textures' allocated sizes: at most 2.7 bytes a held sample, max mipmap included
+    hf = fbm(n + 1, seed=1)
+    s = RaycastStrategy(ctx, hf)
+    try:
+        pyr = TilePyramid(hf, n)
+        g = s.upload(pyr.tile(pyr.keys(0)[0]))
+        measured = (object_bytes(g.heights) + object_bytes(g.maxmip)) / (n + 1) ** 2
+        assert measured == g.bytes_per_sample == s.bytes_per_sample(n) <= 2.7
+        assert 2.6 < measured
         g.release()
     finally:
         s.release()

@@ -43,7 +43,8 @@ def select_tiles_by_traversal(pyramid, view, tau: float = 2 / 3) -> list[Selecte
             lo, hi = pyramid.aabb(key)
             c = classify_aabb(planes, lo - eye, hi - eye)
             d = aabb_distance(eye, lo, hi)
-            pe = pyramid.error(key) * K / d if d > 0 else (np.inf if pyramid.error(key) > 0 else 0.0)
+            err = pyramid.error(key) + pyramid.quantization_error(key)      # geometric + 16-bit heights
+            pe = err * K / d if d > 0 else (np.inf if err > 0 else 0.0)
             info[key] = (d, pe, c)
         return info[key]
 

@@ -12,6 +12,8 @@ import ctypes.util
 import os
 from dataclasses import dataclass
 
+import numpy as np
+
 from hybrid.errors import GLContextError
 from hybrid.gl.programs import register_shared_includes
 
@@ -155,7 +157,46 @@ def depth32f_texture(ctx, size: tuple[int, int]):
 
 
 _BYTES_PER_TEXEL = {0x822E: 4, 0x8058: 4, 0x8051: 3, 0x8236: 4, 0x8CAC: 4, 0x81A6: 4, 0x8229: 1, 0x822D: 2,
-                    0x8814: 16, 0x8815: 12, 0x8230: 8}   # R32F RGBA8 RGB8 R32UI DEPTH32F DEPTH24 R8 R16F RGBA32F RGB32F RG32F
+                    0x8814: 16, 0x8815: 12, 0x8230: 8, 0x8234: 2}
+# R32F RGBA8 RGB8 R32UI DEPTH32F DEPTH24 R8 R16F RGBA32F RGB32F RG32F R16UI
+
+
+def r16ui_mip_texture(ctx, size: int, levels: int):
+    """A size x size R16UI texture with ``levels`` mip levels allocated (contents undefined), NEAREST filtered.
+
+    moderngl allocates only level 0 and cannot build mipmaps of integer textures (glGenerateMipmap refuses
+    them), so the coarser levels are specified through the driver directly.
+    """
+    tex = ctx.texture((int(size), int(size)), 1, dtype="u2")
+    u, i = ctypes.c_uint, ctypes.c_int
+    bind = _gl_function(b"glBindTexture", u, u)
+    image = _gl_function(b"glTexImage2D", u, i, i, i, i, i, u, u, ctypes.c_void_p)
+    param = _gl_function(b"glTexParameteri", u, u, i)
+    GL_TEXTURE_2D, GL_R16UI, GL_RED_INTEGER, GL_UNSIGNED_SHORT, GL_TEXTURE_MAX_LEVEL = 0x0DE1, 0x8234, 0x8D94, 0x1403, 0x813D
+    bind(GL_TEXTURE_2D, tex.glo)
+    for level in range(1, int(levels)):
+        m = max(int(size) >> level, 1)
+        image(GL_TEXTURE_2D, level, GL_R16UI, m, m, 0, GL_RED_INTEGER, GL_UNSIGNED_SHORT, None)
+    param(GL_TEXTURE_2D, GL_TEXTURE_MAX_LEVEL, int(levels) - 1)
+    bind(GL_TEXTURE_2D, 0)
+    tex.filter = (ctx.NEAREST_MIPMAP_NEAREST if levels > 1 else ctx.NEAREST, ctx.NEAREST)
+    tex.repeat_x = tex.repeat_y = False
+    return tex
+
+
+def read_r16ui_level(tex, level: int) -> np.ndarray:
+    """One mip level of an R16UI texture as a uint16 (height, width) array (moderngl reads only the levels it
+    allocated itself)."""
+    u, i = ctypes.c_uint, ctypes.c_int
+    get = _gl_function(b"glGetTextureLevelParameteriv", u, i, u, ctypes.POINTER(i))
+    w, h = i(), i()
+    get(tex.glo, int(level), 0x1000, ctypes.byref(w))
+    get(tex.glo, int(level), 0x1001, ctypes.byref(h))
+    out = np.zeros((h.value, w.value), np.uint16)
+    _gl_function(b"glPixelStorei", u, i)(0x0D05, 1)                     # GL_PACK_ALIGNMENT
+    image = _gl_function(b"glGetTextureImage", u, i, u, u, i, ctypes.c_void_p)
+    image(tex.glo, int(level), 0x8D94, 0x1403, out.nbytes, out.ctypes.data)   # GL_RED_INTEGER, GL_UNSIGNED_SHORT
+    return out
 
 
 def driver_texture_bytes(tex) -> int:

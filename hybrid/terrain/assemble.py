@@ -60,7 +60,9 @@ def assemble(path, raw: np.ndarray, *, spacing, scale: float = 1.0, offset: floa
         heights = heights[:, ::-1]
         texture = None if texture is None else texture[:, ::-1]
     try:
+        step = (float(scale), float(offset)) if np.issubdtype(raw.dtype, np.integer) and not n_missing else None
         return HeightField(np.ascontiguousarray(heights), spacing, origin, name or Path(path).stem,
-                           None if texture is None else np.ascontiguousarray(texture), n_missing, str(path), notes)
+                           None if texture is None else np.ascontiguousarray(texture), n_missing, str(path), notes,
+                           step)
     except TerrabenchError as exc:
         raise TerrainLoadError(f"{path}: {exc}") from None

@@ -44,7 +44,8 @@ def crop(hf: HeightField, size: int, centre=(0.5, 0.5)) -> HeightField:
     tex = None if hf.texture is None else hf.texture[i0:i0 + size - 1, j0:j0 + size - 1]
     o = (hf.origin[0] + j0 * hf.spacing_x, hf.origin[1] + i0 * hf.spacing_y, hf.origin[2])
     return HeightField(hf.heights[i0:i0 + size, j0:j0 + size].copy(), (hf.spacing_x, hf.spacing_y), o,
-                       f"{hf.name}-{size}", tex, 0, hf.source, list(hf.notes) + [f"window rows {i0}.. cols {j0}.. of {hf.rows}x{hf.cols}"])
+                       f"{hf.name}-{size}", tex, 0, hf.source, list(hf.notes) + [f"window rows {i0}.. cols {j0}.. of {hf.rows}x{hf.cols}"],
+                       hf.source_step)
 
 
 def _value_noise(n: int, cells: int, rng: np.random.Generator) -> np.ndarray:

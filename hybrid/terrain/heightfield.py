@@ -44,7 +44,9 @@ class HeightField:
 
     ``spacing`` is one number (square cells) or a pair ``(spacing_x, spacing_y)`` in metres; after
     construction ``spacing_x``/``spacing_y`` hold the two, and ``spacing`` is the single number when they are
-    equal and the pair otherwise.
+    equal and the pair otherwise. ``source_step`` is ``(step, offset)`` in metres when every height is
+    float32(offset + step * k) for an integer k (set by the loaders of integer files; lets the ray caster
+    store 16-bit heights exactly, hybrid.tiles.quantize), else None.
     """
 
     heights: np.ndarray
@@ -55,6 +57,7 @@ class HeightField:
     nodata_filled: int = 0
     source: str = ""
     notes: list[str] = field(default_factory=list)
+    source_step: tuple[float, float] | None = None
     spacing_x: float = field(init=False, default=0.0)
     spacing_y: float = field(init=False, default=0.0)
 
@@ -178,4 +181,4 @@ class HeightField:
     def moved(self, origin) -> "HeightField":
         """The same terrain placed at another world origin (x, y, z) in metres."""
         return HeightField(self.heights, self.spacing, tuple(origin), self.name, self.texture,
-                           self.nodata_filled, self.source, list(self.notes))
+                           self.nodata_filled, self.source, list(self.notes), self.source_step)

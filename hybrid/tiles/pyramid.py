@@ -23,6 +23,7 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.heightfield import HeightField
+from hybrid.tiles.quantize import Q_MAX, error_bound, on_step_cells
 
 EDGE_W, EDGE_E, EDGE_S, EDGE_N = 1, 2, 4, 8
 
@@ -56,6 +57,8 @@ class Tile:
     clip: world rectangle (x0, y0, x1, y1) of real terrain inside the tile; never draw outside it.
     zmin, zmax: world heights bounding the tile's surface at every level.
     error: geometric error in metres of this tile's level against level 0.
+    source_step: the terrain's (step, offset) in metres when its heights lie on an integer step (HeightField),
+      else None; the ray caster's 16-bit heights are exact there (hybrid.tiles.quantize).
     """
 
     key: TileKey
@@ -67,6 +70,7 @@ class Tile:
     zmin: float
     zmax: float
     error: float
+    source_step: tuple[float, float] | None = None
 
     @property
     def n(self) -> int:
@@ -214,6 +218,28 @@ class TilePyramid:
         """Geometric errors (metres, float64) of the level's existing tiles (tx, ty), given as integer arrays."""
         return self._err[level][np.asarray(ty, dtype=np.int64), np.asarray(tx, dtype=np.int64)].astype(np.float64)
 
+    def quantization_errors_at(self, level: int, tx: np.ndarray, ty: np.ndarray) -> np.ndarray:
+        """Bounds (metres, float64) on the 16-bit quantisation error of the level's tiles (tx, ty)
+        (hybrid.tiles.quantize): 0 where the tile's heights are on the terrain's source step, else
+        range / 131070 plus float32 rounding; tile selection adds them to the geometric errors."""
+        if not hasattr(self, "_qerr"):
+            self._qerr = {}
+        if level not in self._qerr:
+            lo, hi = self._zmin[level], self._zmax[level]
+            exact = False
+            step = getattr(self.hf, "source_step", None)
+            if step is not None and isinstance(self.hf, HeightField):
+                if not hasattr(self, "_on_step"):
+                    self._on_step = on_step_cells(self.hf.heights, step)
+                on = _block_reduce(self._on_step, self.n << level, np.minimum)
+                exact = on & ((hi.astype(np.float64) - lo) / float(step[0]) <= Q_MAX - 0.5)
+            self._qerr[level] = error_bound(lo, hi, exact)
+        return self._qerr[level][np.asarray(ty, dtype=np.int64), np.asarray(tx, dtype=np.int64)]
+
+    def quantization_error(self, key: TileKey) -> float:
+        """Bound (metres) on the tile's 16-bit quantisation error, as quantization_errors_at."""
+        return float(self.quantization_errors_at(key.level, np.array([key.tx]), np.array([key.ty]))[0])
+
     def error(self, key: TileKey) -> float:
         """Geometric error (metres) of the tile's level-l surface against level 0."""
         return float(self._err[key.level][key.ty, key.tx])
@@ -272,7 +298,7 @@ class TilePyramid:
         origin = (hf.origin[0] + j0 * hf.spacing_x, hf.origin[1] + i0 * hf.spacing_y, hf.origin[2])
         z0, z1 = self.zrange(key)
         return Tile(key, np.ascontiguousarray(h, dtype=np.float32), origin, hf.spacing_x * k, hf.spacing_y * k,
-                    self.clip(key), z0, z1, self.error(key))
+                    self.clip(key), z0, z1, self.error(key), getattr(self.hf, "source_step", None))
 
     def samples(self, key: TileKey) -> np.ndarray:
         """The tile's (N+1)² level-l samples (metres, rows south to north), gathered with clamped indices."""

@@ -1,7 +1,8 @@
 """Per-view tile selection: frustum culling, screen-space error refinement, restriction, front-to-back order.
 
 A tile is refined while its projected geometric error exceeds tau pixels (default 2/3, Dick et al. §4):
-``error_m * K / d`` with K = viewport height / (2 tan(fov/2)) and d the distance from the eye to the
+``error_m * K / d`` (error_m: the geometric error plus the bound on the 16-bit quantisation error of the ray
+caster's heights, hybrid.tiles.quantize, so the bound holds whichever strategy draws the tile) with K = viewport height / (2 tan(fov/2)) and d the distance from the eye to the
 nearest point of the tile's AABB. Selected tiles are then made restricted (edge neighbours differ by at
 most one level) by splitting coarse tiles, and listed front to back by a quadtree traversal that visits
 the child quadrant on the eye's side first and the opposite one last, which is a visibility order for
@@ -114,7 +115,7 @@ class _Selection:
         keep = c >= 0
         tx, ty, lo, hi, c = tx[keep], ty[keep], lo[keep], hi[keep], c[keep]
         d = box_distances(self.eye, lo, hi)
-        err = p.errors_at(level, tx, ty)
+        err = p.errors_at(level, tx, ty) + p.quantization_errors_at(level, tx, ty)   # ray-cast tiles' 16-bit heights
         with np.errstate(divide="ignore", invalid="ignore"):
             pe = np.where(d > 0, err * self.K / d, np.where(err > 0, np.inf, 0.0))
         return tx, ty, d, pe, c
