@@ -11,7 +11,8 @@ void main() {
     vec3 n = cross(dFdx(v_rel), dFdy(v_rel));
     if (n.z < 0.0) n = -n;
     vec3 c;
-    if (mode == 0) c = texture(tex, v_uv).rgb;
+    vec2 gx = dFdx(v_uv), gy = dFdy(v_uv);        // in uniform control flow, before the branch
+    if (mode == 0) c = aniso_texture(tex, v_uv, gx, gy);
     else if (mode == 1) c = lambert(height_ramp(v_h, hrange), n);
     else c = height_ramp(v_h, hrange);
     frag = vec4(c, 1.0);

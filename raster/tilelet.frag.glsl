@@ -35,7 +35,8 @@ void main() {
     int level = skirt ? -1 - v_level : v_level;
     if (skirt) n = vec3(0.0, 0.0, 1.0);
     vec3 c;
-    if (mode == 0) c = texture(tex, v_uv).rgb;
+    vec2 gx = dFdx(v_uv), gy = dFdy(v_uv);        // in uniform control flow, before the branch
+    if (mode == 0) c = aniso_texture(tex, v_uv, gx, gy);
     else if (mode == 1) c = lambert(height_ramp(v_h, hrange), n);
     else if (mode == 2) c = height_ramp(v_h, hrange);
     else c = lambert(level_colour(level), n);

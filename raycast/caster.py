@@ -111,7 +111,7 @@ class RaycastStrategy:
         self.prepass_prog = program(ctx, "raycast", "box.vert.glsl", "prepass.frag.glsl")
         self.prepass_vao = ctx.vertex_array(self.prepass_prog, [(self.cube, "3f", "corner")])
         self.programs: dict = {}
-        self.texture = terrain_texture(ctx, hf, anisotropy=1.0)   # anisotropy is done in the shader (aniso_texture)
+        self.texture = terrain_texture(ctx, hf)
         self.stats_buf = ctx.buffer(reserve=STAT_SLOTS * STAT_STRIDE)
         self.edges = TerrainEdges(ctx, hf)
         self.ids = None

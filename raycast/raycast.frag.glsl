@@ -122,26 +122,6 @@ vec3 level_colour(int l) {
     return pal[l & 7];
 }
 
-// Anisotropic filtering from explicit derivatives (uv per pixel along x and y): up to 16 textureGrad taps
-// along the footprint's major axis, each filtered isotropically at the minor axis' size. Done by hand because
-// the driver's anisotropic path may ignore textureGrad's derivatives (Mesa llvmpipe does); the texture
-// object therefore has anisotropy 1.
-vec3 aniso_texture(vec2 uv, vec2 gx, vec2 gy) {
-    vec2 ts = vec2(textureSize(tex, 0));
-    float lx = length(gx * ts), ly = length(gy * ts);
-    vec2 major = lx >= ly ? gx : gy;
-    float lmaj = max(lx, ly), lmin = min(lx, ly);
-    int taps = int(clamp(ceil(lmaj / max(lmin, 1e-8)), 1.0, 16.0));
-    float lm = max(lmin, lmaj / 16.0);
-    vec2 g = vec2(lm, 0.0) / ts;
-    vec3 acc = vec3(0.0);
-    for (int k = 0; k < taps; k++) {
-        vec2 off = major * ((float(k) + 0.5) / float(taps) - 0.5);
-        acc += textureGrad(tex, uv + off, g, g.yx).rgb;
-    }
-    return acc / float(taps);
-}
-
 float hsample(ivec2 p) { return rc_height(texelFetch(hmap, clamp(p, ivec2(0), ivec2(n_cells)), 0).r, dq, dq_base); }
 
 // Height gradient (metres per texel) at sample p by central differences with stride S (one-sided at borders).
@@ -227,7 +207,7 @@ void main() {
     vec2 uv_per_m = uv_scale / spacing;
     vec2 gx = px.xy * uv_per_m, gy = py.xy * uv_per_m;
     gx = gx * min(1.0, 1.0 / max(length(gx), 1e-30)); gy = gy * min(1.0, 1.0 / max(length(gy), 1e-30));
-    c = aniso_texture(uv, gx, gy);
+    c = aniso_texture(tex, uv, gx, gy);
 #elif MODE == 1
     c = texture(tex, uv).rgb;
 #elif MODE == 2
