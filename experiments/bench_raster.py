@@ -1,7 +1,8 @@
 """Benchmark of the raster strategies: tables as DataFrames; `python -m experiments.bench_raster` prints them.
 
-1. Triangles against max vertical error on Puget tiles: restricted quadtree (plain and morph-safe errors)
-   vs pymartini (RTIN), pydelatin and fast-simplification, every max error measured the same way.
+1. Triangles against max vertical error on Puget tiles: restricted quadtree (plain errors; morph-safe errors at
+   beta 0.7; at the GPU strategies' beta, what raster and raster_gs draw) vs pymartini (RTIN), pydelatin and
+   fast-simplification, every max error measured the same way.
 2. Per-view leaf selection + restriction time of a 257² tile.
 3. GPU bytes per tile and representation, next to the paper's 96 bits (12 bytes) per triangle.
 4. Geometry-shader tilelet throughput against an indexed triangle list of the same triangles.
@@ -51,22 +52,25 @@ def triangles_vs_error(tiles, errors=(5.0, 10.0, 20.0, 40.0, 80.0)):
         raise TerrabenchError(f"the raster benchmark compares with pymartini and pydelatin ({exc.name} is missing): "
                               "pip install 'terrabench[bench]'") from None
 
-    from raster.quadtree import drawn_max_error, error_pyramid
+    from raster.quadtree import GPU_BETA, drawn_max_error, error_pyramid
     from raster.restriction import TileLod, restrict_frame
     from raster.tin import TinMesh, build_tin, tin_max_error
     rows = []
-    pyrs = [error_pyramid(t.heights) for t in tiles]
+    pyrs = {"quadtree": [error_pyramid(t.heights) for t in tiles]}
+    pyrs["quadtree-morph"] = pyrs["quadtree"]
+    pyrs["quadtree-gpu"] = [error_pyramid(t.heights, GPU_BETA) for t in tiles]   # what raster, raster_gs draw
     n = tiles[0].n
     martini = Martini(n + 1)
     for e in errors:
         res = {}
-        for name in ("quadtree", "quadtree-morph", "martini", "delatin", "fast-simpl"):
+        for name in ("quadtree", "quadtree-morph", "quadtree-gpu", "martini", "delatin", "fast-simpl"):
             tri, err = 0, 0.0
-            for t, p in zip(tiles, pyrs):
+            for i, t in enumerate(tiles):
                 h = np.asarray(t.heights, dtype=np.float32)
                 if name.startswith("quadtree"):
-                    ts = restrict_frame([TileLod((0, 0, 0), p, e)], morph=name.endswith("morph"),
-                                        use_effective=name.endswith("morph"))[(0, 0, 0)]
+                    morph = name != "quadtree"
+                    ts = restrict_frame([TileLod((0, 0, 0), pyrs[name][i], e)], morph=morph,
+                                        use_effective=morph)[(0, 0, 0)]
                     tri += ts.triangles
                     err = max(err, float(drawn_max_error(h, ts.leaves, ts.coarser).max()))
                     continue
