@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hybrid.terrain.stored import StoredTerrain
+from hybrid.tiles.fans import grow3 as _grow
 from hybrid.tiles.pyramid import TilePyramid
 
 from .quadtree import GPU_BETA, error_pyramid
@@ -43,17 +44,6 @@ class GlobalNodes:
     effective: tuple
     zlo: tuple
     zhi: tuple
-
-
-def _grow(a: np.ndarray, fn) -> np.ndarray:
-    """fn (np.minimum, np.maximum) over each element's 3x3 neighbourhood (edges repeat)."""
-    p = np.pad(a, 1, mode="edge")
-    out = a.copy()
-    n0, n1 = a.shape
-    for dy in (0, 1, 2):
-        for dx in (0, 1, 2):
-            out = fn(out, p[dy:dy + n0, dx:dx + n1])
-    return out
 
 
 def global_nodes(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:

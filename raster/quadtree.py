@@ -27,6 +27,7 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 from hybrid.tiles.fans import GPU_BETA, fans_at  # noqa: F401  (GPU_BETA: the strategies' beta, defined with the fans)
+from hybrid.tiles.fans import dilate4 as _dilate4
 
 DEFAULT_BETA = 0.7
 
@@ -51,16 +52,6 @@ def _expand(a: np.ndarray, b: int) -> np.ndarray:
         return a
     m = a.shape[0]
     return np.broadcast_to(a[:, None, :, None], (m, b, m, b)).reshape(m * b, m * b)
-
-
-def _dilate4(a: np.ndarray) -> np.ndarray:
-    """Max of each element and its four edge neighbours (no wrap)."""
-    out = a.copy()
-    np.maximum(out[1:], a[:-1], out=out[1:])
-    np.maximum(out[:-1], a[1:], out=out[:-1])
-    np.maximum(out[:, 1:], a[:, :-1], out=out[:, 1:])
-    np.maximum(out[:, :-1], a[:, 1:], out=out[:, :-1])
-    return out
 
 
 def _erode4(a: np.ndarray, fill) -> np.ndarray:

@@ -76,3 +76,29 @@ def fan_deviation(h: np.ndarray, r0: int, c0: int, rows: np.ndarray, cols: np.nd
 def cell_max(dev: np.ndarray) -> np.ndarray:
     """Per cell: the max of a sample array over the cell's four corners ((r-1) x (c-1))."""
     return np.maximum(np.maximum(dev[:-1, :-1], dev[:-1, 1:]), np.maximum(dev[1:, :-1], dev[1:, 1:]))
+
+
+def block2(a: np.ndarray, fn) -> np.ndarray:
+    """fn (np.max, np.min) over 2 x 2 blocks of an array with even sides."""
+    return fn(a.reshape(a.shape[0] // 2, 2, a.shape[1] // 2, 2), axis=(1, 3))
+
+
+def dilate4(a: np.ndarray) -> np.ndarray:
+    """Max of each element and its four edge neighbours (no wrap)."""
+    out = a.copy()
+    np.maximum(out[1:], a[:-1], out=out[1:])
+    np.maximum(out[:-1], a[1:], out=out[:-1])
+    np.maximum(out[:, 1:], a[:, :-1], out=out[:, 1:])
+    np.maximum(out[:, :-1], a[:, 1:], out=out[:, :-1])
+    return out
+
+
+def grow3(a: np.ndarray, fn) -> np.ndarray:
+    """fn (np.minimum, np.maximum) over each element's 3x3 neighbourhood (edges repeat)."""
+    p = np.pad(a, 1, mode="edge")
+    out = a.copy()
+    n0, n1 = a.shape
+    for dy in (0, 1, 2):
+        for dx in (0, 1, 2):
+            out = fn(out, p[dy:dy + n0, dx:dx + n1])
+    return out

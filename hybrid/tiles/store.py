@@ -26,7 +26,9 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.stored import STORE_FORMAT, STORE_VERSION, StoredTerrain, _zarr, is_store, open_store
 
+from .fans import GPU_BETA
 from .pyramid import TilePyramid, _block_reduce, interpolate_clamped
+from .store_nodes import build_nodes, node_bands, node_square
 
 COL_BLOCK = 4096                # about this many columns per piece of a band when measuring errors (memory bound)
 EXACT_SPAN = 1024               # levels whose tiles span at most this many level-0 cells get exact errors
@@ -84,7 +86,7 @@ def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: in
         if dict(g.attrs).get("params") != params:
             raise TerrabenchError(f"{out}: holds a store of other input or settings ({dict(g.attrs).get('params')}); "
                                   "choose another folder or remove it")
-        if g.attrs.get("complete"):
+        if g.attrs.get("complete") and g.attrs.get("nodes"):
             return out
     else:
         g = zarr.open_group(str(out), mode="w")
@@ -94,18 +96,21 @@ def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: in
                         "made_by": f"terrabench prepare, tiles of {n}", "progress": {}, "height_range": None})
     L = int(g.attrs["max_level"])
     bands = sum(-(-(_level_shape(rows, cols, l)[0] - 1) // n) for l in range(L + 1))
-    prog = _Progress(report, bands)
+    prog = _Progress(report, bands + node_bands(node_square(rows, cols, n, L)[0]))
     stop = [stop_after]
 
-    def band_done(level: int, ty: int, extra: dict | None = None):
+    def mark(key: str, count: int, what: str, extra: dict | None = None):
         p = dict(g.attrs["progress"])
-        p[str(level)] = ty + 1
+        p[key] = count
         g.attrs.update({"progress": p, **(extra or {})})
-        prog.step(f"level {level} band {ty + 1}")
+        prog.step(what)
         if stop[0] is not None:
             stop[0] -= 1
             if stop[0] <= 0:
                 raise KeyboardInterrupt("stopped as asked (stop_after)")
+
+    def band_done(level: int, ty: int, extra: dict | None = None):
+        mark(str(level), ty + 1, f"level {level} band {ty + 1}", extra)
 
     for level in range(L + 1):
         R, C = _level_shape(rows, cols, level)
@@ -156,6 +161,7 @@ def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: in
         if level:                                          # bounds of a level: its children's, 2 x 2
             zmin[:, :] = _block_reduce(np.asarray(g[f"zmin/{level - 1}"][:]), 2, np.minimum)
             zmax[:, :] = _block_reduce(np.asarray(g[f"zmax/{level - 1}"][:]), 2, np.maximum)
+    build_nodes(g, rows, cols, n, L, GPU_BETA, mark)
     g.attrs.update({"complete": True})
     return out
 
