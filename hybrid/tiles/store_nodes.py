@@ -142,6 +142,8 @@ def build_nodes(g, rows: int, cols: int, n: int, max_level: int, beta: float, ma
         starts = list(range(0, total, hb))
         key = f"nodes:{lev}"
         done = progress(key)
+        if done >= 2 * len(starts):
+            continue
         arr = {k: _array(g, tmp(k, lev), total, "f4" if k.startswith("z") else "f8")
                for k in ("error", "eff", "zmin", "zmax")}
         below = {k: g[tmp(k, lev - 1)] for k in ("error", "eff", "zmin", "zmax")} if lev else None
