@@ -14,6 +14,11 @@ it must follow, and every node decides alone, on the GPU, with a crack-free (res
 
 Per tile the GPU holds, for each local level m (node side 2^(m+1) tile cells), a grid of the tile's nodes with
 a one-node apron on every side: (E, zlo, zhi, inside) float32, zlo/zhi relative to the terrain origin z.
+
+An in-memory height field gets its arrays from ``global_nodes``; a tile store has them on disk, written by
+prepare (``hybrid.tiles.store_nodes``: the same values for nodes up to 1024 cells, an upper bound of the
+effective error above), and ``nodes_for`` hands their Zarr arrays to ``tile_node_block``, which reads one window
+per level, so the grid is never loaded.
 """
 from __future__ import annotations
 
@@ -36,8 +41,9 @@ _CACHE: dict = {}
 class GlobalNodes:
     """Saturated effective errors and box height ranges of every node of the whole padded grid, by global level.
 
-    Global level g: nodes of 2^(g+1) level-0 cells; arrays (R >> (g+1))², row from the south. zlo/zhi span the
-    samples of the node's box (its square grown by its side on every side), relative to the terrain origin z.
+    Global level g: nodes of 2^(g+1) level-0 cells; arrays (R >> (g+1))², row from the south (numpy, or a tile
+    store's Zarr arrays). zlo/zhi span the samples of the node's box (its square grown by its side on every side),
+    relative to the terrain origin z; cells is R, the padded square's cells a side.
     """
 
     cells: int
@@ -54,7 +60,7 @@ def global_nodes(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
     hit = _CACHE.get(key)
     if hit is not None and hit[0]() is hf:
         return hit[1]
-    grid = hf.load() if isinstance(hf, StoredTerrain) else hf     # a tile store small enough to hold (else refused)
+    grid = hf.load() if isinstance(hf, StoredTerrain) else hf     # a store without usable node arrays, if it fits
     pyramid = TilePyramid(grid, tile_size)
     pyr = error_pyramid(pyramid.padded, beta)
     zlo = tuple(_grow(z, np.minimum).astype(np.float32) for z in pyr.zmin)

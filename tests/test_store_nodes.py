@@ -26,6 +26,12 @@ def _arrays(nodes, lev):
     return [np.asarray(a[lev][:, :]) for a in (nodes.effective, nodes.zlo, nodes.zhi)]
 
 
+def open_store_attrs(path):
+    """A store's attributes, complete or not."""
+    import zarr
+    return zarr.open_group(str(path), mode="r").attrs
+
+
 def _compare(store_path, hf, n, exact_span):
     """Assert the store's node arrays against global_nodes of hf: equal up to nodes of exact_span cells, the
     errors above never below the exact ones (ranges always equal); returns the largest bound / exact ratio."""
@@ -84,11 +90,6 @@ def test_an_interrupted_node_build_resumes_to_the_same_arrays(tmp_path, monkeypa
             assert np.array_equal(x, y), lev
     assert _compare(tmp_path / "s", HeightField(h, SP), 32, 64) >= 1.0
     assert not (tmp_path / "s" / "nodes" / "tmp").exists()
-
-
-def open_store_attrs(path):
-    import zarr
-    return zarr.open_group(str(path), mode="r").attrs
 
 
 def test_a_store_without_node_arrays_is_refused_by_path_until_prepared_again(tmp_path):

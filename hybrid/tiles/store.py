@@ -8,8 +8,10 @@ samples, read in pieces); above, a level's error is bounded without level 0 in m
 from level 0 by at most max |S_l - S_(l-1)| (taken at level l-1's samples: both surfaces split cells along the
 same diagonal, so S_(l-1)'s triangles refine S_l's and the largest difference sits at a vertex) plus the
 children's error. The bound is never below the exact error (tested), so the screen-space bound still holds;
-it may refine a little more than the exact error would. Progress is kept in the store's attributes after
-every band, so an interrupted prepare resumes where it stopped; the store is marked complete last.
+it may refine a little more than the exact error would. Then the raster strategies' node arrays are written
+(``store_nodes.build_nodes``; a complete store without them gets them when prepared again). Progress is kept in
+the store's attributes after every band, so an interrupted prepare resumes where it stopped; the store is marked
+complete last.
 
 ``StorePyramid`` is a TilePyramid over a store: per-level bounds and errors come from the store (small arrays
 read whole), a tile's samples are read from disk when asked for and kept in a host LRU cache bounded in bytes.
@@ -64,8 +66,8 @@ class _Progress:
 
 
 def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: int | None = None) -> Path:
-    """Build the tile store of a grid source into directory ``out`` (resuming an interrupted build of the same
-    source); ``report(done, total, what, seconds)`` is called after every band. ``stop_after`` bands (tests)
+    """Build the tile store of a grid source, node arrays included, into directory ``out`` (resuming an interrupted
+    build of the same source); ``report(done, total, what, seconds)`` is called after every band. ``stop_after`` bands (tests)
     raises KeyboardInterrupt, as an interruption would."""
     zarr = _zarr()
     n = int(tile_size)
@@ -96,7 +98,7 @@ def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: in
                         "made_by": f"terrabench prepare, tiles of {n}", "progress": {}, "height_range": None})
     L = int(g.attrs["max_level"])
     bands = sum(-(-(_level_shape(rows, cols, l)[0] - 1) // n) for l in range(L + 1))
-    prog = _Progress(report, bands + node_bands(node_square(rows, cols, n, L)[0]))
+    prog = _Progress(report, bands + node_bands(node_square(n, L)[0]))
     stop = [stop_after]
 
     def mark(key: str, count: int, what: str, extra: dict | None = None):
@@ -251,8 +253,8 @@ class StorePyramid(TilePyramid):
     @property
     def padded(self) -> np.ndarray:
         """Refused: a stored terrain is never gathered into one square."""
-        raise TerrabenchError(f"{self.hf.name!r} is a tile store; strategies that need the whole padded grid "
-                              "(the raster strategies' node errors) cannot draw it out of core; the ray caster can")
+        raise TerrabenchError(f"{self.hf.name!r} is a tile store: its padded grid is never built whole (the raster "
+                              "strategies read the store's node arrays instead)")
 
 
 def pyramid_for(hf, tile_size: int) -> TilePyramid:

@@ -15,7 +15,8 @@ How, band by band:
   and midlines, and P's fans are linear on each of them), so |F_P - F_C| peaks at C's 3x3 posts, where F_C is
   the samples: the bound is P's fan deviation at the level-(g-1) posts plus the child's error (exact or bound),
   plus 16 ulps of the largest height for float64 rounding, rounded up to float32. It is never below the exact
-  value (tested), so a node never splits later than it should; it may split earlier.
+  value (tested), so a node never splits later than it should; it may split earlier. These levels hold at most
+  (R / 2048)² nodes, so each is computed whole, from the posts of the stored level nearest below.
 - Then per level, from the level below: errors made monotone, effective errors saturated (``dilate4``, 1/beta),
   height ranges min/max of the children, boxes the 3x3 range (``grow3``), each band reading its rows plus one
   node of apron. Intermediate float64 arrays live in ``nodes/tmp`` until the last level is written.
@@ -35,8 +36,9 @@ NODE_BAND = 1 << 20             # nodes per band of a level's pass (memory bound
 CHUNK = 512                     # chunk side of the node arrays (nodes)
 
 
-def node_square(rows: int, cols: int, n: int, max_level: int) -> tuple[int, int]:
-    """(R, levels): cells a side of the padded square and the number of global node levels."""
+def node_square(n: int, max_level: int) -> tuple[int, int]:
+    """(R, levels): cells a side of the padded square of tiles of n cells up to max_level, and its global node
+    levels."""
     R = n << max_level
     return R, int(np.log2(R))
 
@@ -106,8 +108,9 @@ def _direct_band(lv0, rows, cols, R, B, gx, br) -> tuple[list, np.ndarray, np.nd
     return direct, zmin, zmax
 
 
-def _bound(g, levels_of, rows, cols, R, L, lev: int, kids_err: np.ndarray, margin: float) -> np.ndarray:
-    """Upper bound of level ``lev``'s monotone errors (metres, float64) from the level-(lev-1) posts."""
+def _bound(levels_of, R: int, L: int, lev: int, kids_err: np.ndarray, margin: float) -> np.ndarray:
+    """Upper bound of level ``lev``'s monotone errors (metres, float64) from the level-(lev-1) posts, read from
+    the stored level ``levels_of(l)`` nearest below (every 2^l-th sample, the last row and column kept)."""
     l = min(lev - 1, L)
     arr = np.asarray(levels_of(l)[:, :], dtype=np.float64)
     P = (R >> (lev - 1)) + 1
@@ -121,7 +124,7 @@ def _bound(g, levels_of, rows, cols, R, L, lev: int, kids_err: np.ndarray, margi
 def build_nodes(g, rows: int, cols: int, n: int, max_level: int, beta: float, mark) -> None:
     """Write the node arrays of a store group ``g`` whose levels are written; ``mark(key, count, what)`` records
     a band's progress (and may raise KeyboardInterrupt)."""
-    R, levels = node_square(rows, cols, n, max_level)
+    R, levels = node_square(n, max_level)
     B, gx = _plan(R)
     progress = lambda key: int(dict(g.attrs["progress"]).get(key, 0))  # noqa: E731
     lv0 = g["levels/0"]
@@ -159,7 +162,7 @@ def build_nodes(g, rows: int, cols: int, n: int, max_level: int, beta: float, ma
                 if exact:
                     e = np.maximum(np.asarray(g[tmp("direct", lev)][a0:a1, :]), block2(kids, np.max))
                 else:
-                    e = _bound(g, lambda l: g[f"levels/{l}"], rows, cols, R, max_level, lev, kids, margin)
+                    e = _bound(lambda l: g[f"levels/{l}"], R, max_level, lev, kids, margin)
                 lo, hi = max(2 * a0 - 1, 0), min(2 * a1 + 1, 2 * total)
                 d = dilate4(np.asarray(below["eff"][lo:hi, :]))[2 * a0 - lo:2 * a1 - lo]
                 eff = np.maximum(e, block2(d, np.max) / beta)
