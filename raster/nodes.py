@@ -14,6 +14,11 @@ it must follow, and every node decides alone, on the GPU, with a crack-free (res
 
 Per tile the GPU holds, for each local level m (node side 2^(m+1) tile cells), a grid of the tile's nodes with
 a one-node apron on every side: (E, zlo, zhi, inside) float32, zlo/zhi relative to the terrain origin z.
+
+An in-memory height field gets its arrays from ``global_nodes``; a tile store has them on disk, written by
+prepare (``hybrid.tiles.store_nodes``: the same values for nodes up to 1024 cells, an upper bound of the
+effective error above), and ``nodes_for`` hands their Zarr arrays to ``tile_node_block``, which reads one window
+per level, so the grid is never loaded.
 """
 from __future__ import annotations
 
@@ -22,7 +27,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hybrid.terrain.stored import StoredTerrain
+from hybrid.errors import TerrabenchError
+from hybrid.terrain.stored import MAX_LOAD_SAMPLES, StoredTerrain
+from hybrid.tiles.fans import grow3 as _grow
 from hybrid.tiles.pyramid import TilePyramid
 
 from .quadtree import GPU_BETA, error_pyramid
@@ -34,8 +41,9 @@ _CACHE: dict = {}
 class GlobalNodes:
     """Saturated effective errors and box height ranges of every node of the whole padded grid, by global level.
 
-    Global level g: nodes of 2^(g+1) level-0 cells; arrays (R >> (g+1))², row from the south. zlo/zhi span the
-    samples of the node's box (its square grown by its side on every side), relative to the terrain origin z.
+    Global level g: nodes of 2^(g+1) level-0 cells; arrays (R >> (g+1))², row from the south (numpy, or a tile
+    store's Zarr arrays). zlo/zhi span the samples of the node's box (its square grown by its side on every side),
+    relative to the terrain origin z; cells is R, the padded square's cells a side.
     """
 
     cells: int
@@ -45,17 +53,6 @@ class GlobalNodes:
     zhi: tuple
 
 
-def _grow(a: np.ndarray, fn) -> np.ndarray:
-    """fn (np.minimum, np.maximum) over each element's 3x3 neighbourhood (edges repeat)."""
-    p = np.pad(a, 1, mode="edge")
-    out = a.copy()
-    n0, n1 = a.shape
-    for dy in (0, 1, 2):
-        for dx in (0, 1, 2):
-            out = fn(out, p[dy:dy + n0, dx:dx + n1])
-    return out
-
-
 def global_nodes(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
     """The whole grid's node errors and boxes, over the pyramid's padded grid (cached per height field,
     tile size and beta: about 2.5 s for 1025² samples)."""
@@ -63,7 +60,7 @@ def global_nodes(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
     hit = _CACHE.get(key)
     if hit is not None and hit[0]() is hf:
         return hit[1]
-    grid = hf.load() if isinstance(hf, StoredTerrain) else hf     # a tile store small enough to hold (else refused)
+    grid = hf.load() if isinstance(hf, StoredTerrain) else hf     # a store without usable node arrays, if it fits
     pyramid = TilePyramid(grid, tile_size)
     pyr = error_pyramid(pyramid.padded, beta)
     zlo = tuple(_grow(z, np.minimum).astype(np.float32) for z in pyr.zmin)
@@ -74,6 +71,34 @@ def global_nodes(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
     return nodes
 
 
+def nodes_for(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
+    """The nodes the tiles of hf read: a tile store's node arrays (Zarr, read a tile's window at a time) when it
+    has them for this tile size and beta, else ``global_nodes`` (a store prepared without them is refused)."""
+    if not isinstance(hf, StoredTerrain) or hf.store.attrs.get("periodic"):
+        return global_nodes(hf, tile_size, beta)
+    info = hf.store.attrs.get("nodes")
+    if not info:
+        raise TerrabenchError(
+            f"{hf.path}: this tile store was prepared without the raster strategies' node arrays; run terrabench "
+            f"prepare again on the same input with --out {hf.path} to add them (the ray caster draws it as it is)")
+    if int(tile_size) != int(hf.store.attrs["tile_size"]) or float(beta) != float(info["beta"]):
+        if hf.size > MAX_LOAD_SAMPLES:
+            raise TerrabenchError(f"{hf.path}: node arrays were prepared for tiles of {hf.store.attrs['tile_size']} "
+                                  f"and beta {info['beta']}, not {tile_size} and {beta}; the grid is too large to "
+                                  "build them in memory")
+        return global_nodes(hf, tile_size, beta)
+    key = (id(hf), int(tile_size), float(beta))
+    hit = _CACHE.get(key)
+    if hit is not None and hit[0]() is hf:
+        return hit[1]
+    levels = range(int(info["levels"]))
+    g = hf.store
+    nodes = GlobalNodes(int(info["square"]), float(beta), *(tuple(g[f"nodes/{k}/{lev}"] for lev in levels)
+                                                             for k in ("effective", "zlo", "zhi")))
+    _CACHE[key] = (weakref.ref(hf, lambda _r, k=key: _CACHE.pop(k, None)), nodes)
+    return nodes
+
+
 def tile_levels(n: int) -> int:
     """Local levels of an n-cell tile's quadtree (0 .. log2(n) - 1)."""
     return int(np.log2(n))
@@ -81,20 +106,21 @@ def tile_levels(n: int) -> int:
 
 def tile_node_block(nodes: GlobalNodes, level: int, tx: int, ty: int, n: int) -> tuple[np.ndarray, np.ndarray]:
     """(data (count, 4) float32, offsets (levels + 1,) int32): the tile's nodes with a one-node apron, per local
-    level m row by row from the south; columns E, zlo, zhi, inside (0 outside the grid)."""
+    level m row by row from the south; columns E, zlo, zhi, inside (0 outside the grid). Reads one window of
+    each level (numpy or Zarr arrays alike)."""
     blocks, offsets = [], [0]
     for m in range(tile_levels(n)):
         g = level + m
         side = n >> (m + 1)
-        E, lo, hi = nodes.effective[g], nodes.zlo[g], nodes.zhi[g]
-        total = E.shape[0]
-        rows = ty * side + np.arange(-1, side + 1)
-        cols = tx * side + np.arange(-1, side + 1)
-        inside = ((rows >= 0) & (rows < total))[:, None] & ((cols >= 0) & (cols < total))[None, :]
-        r = np.clip(rows, 0, total - 1)[:, None]
-        c = np.clip(cols, 0, total - 1)[None, :]
-        block = np.stack([E[r, c], lo[r, c], hi[r, c], inside.astype(np.float32)], axis=-1)
-        block[~inside] = (0.0, 0.0, 0.0, 0.0)
+        total = nodes.effective[g].shape[0]
+        r0, c0 = ty * side - 1, tx * side - 1
+        ra, rb = max(r0, 0), min(r0 + side + 2, total)
+        ca, cb = max(c0, 0), min(c0 + side + 2, total)
+        block = np.zeros((side + 2, side + 2, 4), np.float32)
+        win = (slice(ra - r0, rb - r0), slice(ca - c0, cb - c0))
+        for k, arr in enumerate((nodes.effective[g], nodes.zlo[g], nodes.zhi[g])):
+            block[win + (k,)] = np.asarray(arr[ra:rb, ca:cb])
+        block[win + (3,)] = 1.0
         blocks.append(block.reshape(-1, 4))
         offsets.append(offsets[-1] + (side + 2) ** 2)
     return np.ascontiguousarray(np.concatenate(blocks), dtype=np.float32), np.array(offsets, np.int32)

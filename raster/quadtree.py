@@ -26,11 +26,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from hybrid.errors import TerrabenchError
+from hybrid.tiles.fans import GPU_BETA, fans_at  # noqa: F401  (GPU_BETA: the strategies' beta, defined with the fans)
+from hybrid.tiles.fans import dilate4 as _dilate4
 
 DEFAULT_BETA = 0.7
-GPU_BETA = 0.9
-"""beta of the GPU-selected strategies: a node's effective error grows by 1/beta a level, so 0.9 models fewer
-triangles than 0.7 (23 % on the Puget flyover) over a shorter morph (the tolerance falls 10 % during it)."""
 
 
 def _check_tile_size(n) -> int:
@@ -55,16 +54,6 @@ def _expand(a: np.ndarray, b: int) -> np.ndarray:
     return np.broadcast_to(a[:, None, :, None], (m, b, m, b)).reshape(m * b, m * b)
 
 
-def _dilate4(a: np.ndarray) -> np.ndarray:
-    """Max of each element and its four edge neighbours (no wrap)."""
-    out = a.copy()
-    np.maximum(out[1:], a[:-1], out=out[1:])
-    np.maximum(out[:-1], a[1:], out=out[:-1])
-    np.maximum(out[:, 1:], a[:, :-1], out=out[:, 1:])
-    np.maximum(out[:, :-1], a[:, 1:], out=out[:, :-1])
-    return out
-
-
 def _erode4(a: np.ndarray, fill) -> np.ndarray:
     """Min over the four edge neighbours of each element (not the element itself); ``fill`` outside."""
     out = np.full_like(a, fill)
@@ -79,42 +68,14 @@ def fan_surfaces(heights: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
     """Heights (metres, float64) of the level-m tilelet fans at every tile sample: (full fan, stitched fan).
 
     The full fan splits each of a tilelet's four quadrants along the diagonal through the centre post; the
-    stitched fan is the four triangles centre-corner-corner (every edge midpoint dropped).
+    stitched fan is the four triangles centre-corner-corner (every edge midpoint dropped); see hybrid.tiles.fans.
     """
     h = np.asarray(heights, dtype=np.float64)
     n = _check_tile_size(h.shape[0] - 1)
-    k = 1 << m
-    s = 2 * k
-    if s > n:
+    if (2 << m) > n:
         raise TerrabenchError(f"tilelet level m must lie in [0, {int(np.log2(n)) - 1}] for a {n}-cell tile, got {m}")
     idx = np.arange(n + 1)
-    # full fan: quads of the post grid, diagonal SW-NE where (I + J) is even, NW-SE where odd
-    I = np.minimum(idx // k, n // k - 1)
-    f = (idx - I * k) / k
-    fi, fj = f[:, None], f[None, :]
-    p = h[::k, ::k]
-    h00, h01 = p[np.ix_(I, I)], p[np.ix_(I, I + 1)]
-    h10, h11 = p[np.ix_(I + 1, I)], p[np.ix_(I + 1, I + 1)]
-    main = np.where(fj >= fi, h00 + fj * (h01 - h00) + fi * (h11 - h01), h00 + fi * (h10 - h00) + fj * (h11 - h10))
-    anti = np.where(fi + fj <= 1.0, h00 + fj * (h01 - h00) + fi * (h10 - h00),
-                    h11 + (1.0 - fj) * (h10 - h11) + (1.0 - fi) * (h01 - h11))
-    odd = ((I[:, None] + I[None, :]) & 1).astype(bool)
-    full = np.where(odd, anti, main)
-    # stitched fan: four triangles around the centre, local coordinates u (east), v (north) in [0, 2]
-    A = np.minimum(idx // s, n // s - 1)
-    t = (idx - A * s) / k
-    v, u = t[:, None], t[None, :]
-    sw, se = h[np.ix_(A * s, A * s)], h[np.ix_(A * s, A * s + s)]
-    nw, ne = h[np.ix_(A * s + s, A * s)], h[np.ix_(A * s + s, A * s + s)]
-    c = h[np.ix_(A * s + k, A * s + k)]
-    bottom = sw + 0.5 * u * (se - sw) + v * (c - 0.5 * (sw + se))
-    right = se + 0.5 * v * (ne - se) + (2.0 - u) * (c - 0.5 * (se + ne))
-    top = nw + 0.5 * u * (ne - nw) + (2.0 - v) * (c - 0.5 * (nw + ne))
-    left = sw + 0.5 * v * (nw - sw) + u * (c - 0.5 * (sw + nw))
-    below_main = v <= u            # below the SW-NE diagonal
-    below_anti = v <= 2.0 - u      # below the NW-SE diagonal
-    stitched = np.where(below_main, np.where(below_anti, bottom, right), np.where(below_anti, left, top))
-    return full, stitched
+    return fans_at(h, 0, 0, idx, idx, m, n)
 
 
 @dataclass(frozen=True)

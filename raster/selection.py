@@ -15,7 +15,7 @@ from hybrid.gl.context import gl_bytes
 from hybrid.gl.programs import compute_shader, set_uniform
 from hybrid.gl.textures import terrain_texture
 
-from .nodes import global_nodes, tile_levels, tile_node_block
+from .nodes import nodes_for, tile_levels, tile_node_block
 from .quadtree import GPU_BETA
 from .tileblock import TileBlocks, register_tile_block, tile_blocks
 
@@ -95,7 +95,7 @@ class SelectedTileletTile:
             raise TerrabenchError(f"tile heights must be (n+1)² with n a power of two >= 2, got shape {h.shape}")
         self.n = h.shape[0] - 1
         self.key = tile.key
-        nodes = global_nodes(strategy.hf, self.n, strategy.beta)
+        nodes = nodes_for(strategy.hf, self.n, strategy.beta)
         data, self.offsets = tile_node_block(nodes, int(tile.key.level), int(tile.key.tx), int(tile.key.ty), self.n)
         self.starts = level_starts(self.n)
         self.level_error, self.level_lo, self.level_hi = level_bounds(data, self.offsets, self.n, tile.spacing_xy)

@@ -2,16 +2,18 @@
 
 The store is a Zarr v3 group (a directory): ``levels/<l>`` holds the pyramid's level-l sample grid (every
 2^l-th level-0 sample, the last row and column kept, chunks of one tile's cells), ``zmin/<l>``, ``zmax/<l>``
-and ``error/<l>`` the per-tile bounds and geometric errors, and the group's attributes the header (format,
-version, name, spacing, origin, CRS, height range, tile size, how it was made, and whether it is complete).
+and ``error/<l>`` the per-tile bounds and geometric errors, ``nodes/effective|zlo|zhi/<g>`` the raster
+strategies' node arrays (hybrid.tiles.store_nodes), and the group's attributes the header (format, version, name,
+spacing, origin, CRS, height range, tile size, how it was made, the node arrays' parameters under ``nodes``, and
+whether it is complete).
 Zarr was chosen over a COG with overviews because every level is a plain chunked array with its own per-tile
 tables beside it in one self-describing directory, written and read a window at a time from Python with no
 GDAL driver in the loop, and resumable chunk by chunk.
 
 ``StoredTerrain`` is a HeightField whose ``heights`` is a ``LazyGrid``: indexing it reads only the chunks the
 index touches, so camera presets, ground heights and edge profiles work without loading the grid; whatever
-would need the whole grid at once (the reference renderer, the raster strategies' node errors on big grids)
-refuses by name.
+would need the whole grid at once (the reference renderer, ``load``) refuses by name beyond MAX_LOAD_SAMPLES; the
+raster strategies read their node arrays from the store a tile at a time.
 """
 from __future__ import annotations
 

@@ -8,8 +8,10 @@ samples, read in pieces); above, a level's error is bounded without level 0 in m
 from level 0 by at most max |S_l - S_(l-1)| (taken at level l-1's samples: both surfaces split cells along the
 same diagonal, so S_(l-1)'s triangles refine S_l's and the largest difference sits at a vertex) plus the
 children's error. The bound is never below the exact error (tested), so the screen-space bound still holds;
-it may refine a little more than the exact error would. Progress is kept in the store's attributes after
-every band, so an interrupted prepare resumes where it stopped; the store is marked complete last.
+it may refine a little more than the exact error would. Then the raster strategies' node arrays are written
+(``store_nodes.build_nodes``; a complete store without them gets them when prepared again). Progress is kept in
+the store's attributes after every band, so an interrupted prepare resumes where it stopped; the store is marked
+complete last.
 
 ``StorePyramid`` is a TilePyramid over a store: per-level bounds and errors come from the store (small arrays
 read whole), a tile's samples are read from disk when asked for and kept in a host LRU cache bounded in bytes.
@@ -26,7 +28,9 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.stored import STORE_FORMAT, STORE_VERSION, StoredTerrain, _zarr, is_store, open_store
 
+from .fans import GPU_BETA
 from .pyramid import TilePyramid, _block_reduce, interpolate_clamped
+from .store_nodes import build_nodes, node_bands, node_square
 
 COL_BLOCK = 4096                # about this many columns per piece of a band when measuring errors (memory bound)
 EXACT_SPAN = 1024               # levels whose tiles span at most this many level-0 cells get exact errors
@@ -62,8 +66,8 @@ class _Progress:
 
 
 def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: int | None = None) -> Path:
-    """Build the tile store of a grid source into directory ``out`` (resuming an interrupted build of the same
-    source); ``report(done, total, what, seconds)`` is called after every band. ``stop_after`` bands (tests)
+    """Build the tile store of a grid source, node arrays included, into directory ``out`` (resuming an interrupted
+    build of the same source); ``report(done, total, what, seconds)`` is called after every band. ``stop_after`` bands (tests)
     raises KeyboardInterrupt, as an interruption would."""
     zarr = _zarr()
     n = int(tile_size)
@@ -84,7 +88,7 @@ def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: in
         if dict(g.attrs).get("params") != params:
             raise TerrabenchError(f"{out}: holds a store of other input or settings ({dict(g.attrs).get('params')}); "
                                   "choose another folder or remove it")
-        if g.attrs.get("complete"):
+        if g.attrs.get("complete") and g.attrs.get("nodes"):
             return out
     else:
         g = zarr.open_group(str(out), mode="w")
@@ -94,18 +98,21 @@ def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: in
                         "made_by": f"terrabench prepare, tiles of {n}", "progress": {}, "height_range": None})
     L = int(g.attrs["max_level"])
     bands = sum(-(-(_level_shape(rows, cols, l)[0] - 1) // n) for l in range(L + 1))
-    prog = _Progress(report, bands)
+    prog = _Progress(report, bands + node_bands(node_square(n, L)[0]))
     stop = [stop_after]
 
-    def band_done(level: int, ty: int, extra: dict | None = None):
+    def mark(key: str, count: int, what: str, extra: dict | None = None):
         p = dict(g.attrs["progress"])
-        p[str(level)] = ty + 1
+        p[key] = count
         g.attrs.update({"progress": p, **(extra or {})})
-        prog.step(f"level {level} band {ty + 1}")
+        prog.step(what)
         if stop[0] is not None:
             stop[0] -= 1
             if stop[0] <= 0:
                 raise KeyboardInterrupt("stopped as asked (stop_after)")
+
+    def band_done(level: int, ty: int, extra: dict | None = None):
+        mark(str(level), ty + 1, f"level {level} band {ty + 1}", extra)
 
     for level in range(L + 1):
         R, C = _level_shape(rows, cols, level)
@@ -156,6 +163,7 @@ def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: in
         if level:                                          # bounds of a level: its children's, 2 x 2
             zmin[:, :] = _block_reduce(np.asarray(g[f"zmin/{level - 1}"][:]), 2, np.minimum)
             zmax[:, :] = _block_reduce(np.asarray(g[f"zmax/{level - 1}"][:]), 2, np.maximum)
+    build_nodes(g, rows, cols, n, L, GPU_BETA, mark)
     g.attrs.update({"complete": True})
     return out
 
@@ -245,8 +253,8 @@ class StorePyramid(TilePyramid):
     @property
     def padded(self) -> np.ndarray:
         """Refused: a stored terrain is never gathered into one square."""
-        raise TerrabenchError(f"{self.hf.name!r} is a tile store; strategies that need the whole padded grid "
-                              "(the raster strategies' node errors) cannot draw it out of core; the ray caster can")
+        raise TerrabenchError(f"{self.hf.name!r} is a tile store: its padded grid is never built whole (the raster "
+                              "strategies read the store's node arrays instead)")
 
 
 def pyramid_for(hf, tile_size: int) -> TilePyramid:

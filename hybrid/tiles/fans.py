@@ -1,0 +1,104 @@
+"""Tilelet fan surfaces of the one quadtree over a square grid, evaluated on any window of it.
+
+A node of level m covers 2^(m+1) cells of an n-cell square grid (n a power of two); its full fan splits each of
+its four quadrants along the diagonal through the centre post (posts every 2^m samples, diagonals alternating
+with the parity of the post quad), its stitched fan is the four triangles centre-corner-corner. Samples on a node
+border belong to the node north or east of it, except on the grid's last row and column. Every sample's value is
+computed with the same floating-point operations whatever window holds it, so a grid's node errors can be
+measured window by window (the tile store's node arrays, ``hybrid.tiles.store_nodes``) with exactly the values
+``raster.quadtree.error_pyramid`` gives on the whole grid.
+
+This module sits below the strategies because ``prepare`` (``hybrid.tiles``) writes what the raster strategies
+read; ``raster.quadtree`` re-exports GPU_BETA.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+GPU_BETA = 0.9
+"""beta of the GPU-selected strategies: a node's effective error grows by 1/beta a level, so 0.9 models fewer
+triangles than 0.7 (23 % on the Puget flyover) over a shorter morph (the tolerance falls 10 % during it)."""
+
+
+def fans_at(h: np.ndarray, r0: int, c0: int, rows: np.ndarray, cols: np.ndarray, m: int, n: int):
+    """(full, stitched) fan heights (metres, float64) of level-m nodes at samples (rows x cols) of an n-cell grid.
+
+    ``h`` holds the grid's samples rows r0.., columns c0.. (a window, float64); ``rows``/``cols`` are grid indices
+    inside it. Posts outside the window are read at its edge: that happens only for samples on the window's last
+    row or column, where those posts are weighted by an exact zero (heights must be finite).
+    """
+    k = 1 << m
+    s = 2 * k
+
+    def post(i, lo, size):
+        return np.clip(i - lo, 0, size - 1)
+
+    R, C = h.shape
+    # full fan: quads of the post grid, diagonal SW-NE where (I + J) is even, NW-SE where odd
+    Ir, Ic = np.minimum(rows // k, n // k - 1), np.minimum(cols // k, n // k - 1)
+    fi, fj = ((rows - Ir * k) / k)[:, None], ((cols - Ic * k) / k)[None, :]
+    a0, a1 = post(Ir * k, r0, R), post(Ir * k + k, r0, R)
+    b0, b1 = post(Ic * k, c0, C), post(Ic * k + k, c0, C)
+    h00, h01 = h[np.ix_(a0, b0)], h[np.ix_(a0, b1)]
+    h10, h11 = h[np.ix_(a1, b0)], h[np.ix_(a1, b1)]
+    main = np.where(fj >= fi, h00 + fj * (h01 - h00) + fi * (h11 - h01), h00 + fi * (h10 - h00) + fj * (h11 - h10))
+    anti = np.where(fi + fj <= 1.0, h00 + fj * (h01 - h00) + fi * (h10 - h00),
+                    h11 + (1.0 - fj) * (h10 - h11) + (1.0 - fi) * (h01 - h11))
+    del h00, h01, h10, h11
+    odd = ((Ir[:, None] + Ic[None, :]) & 1).astype(bool)
+    full = np.where(odd, anti, main)
+    del main, anti
+    # stitched fan: four triangles around the centre, local coordinates u (east), v (north) in [0, 2]
+    Ar, Ac = np.minimum(rows // s, n // s - 1), np.minimum(cols // s, n // s - 1)
+    v, u = ((rows - Ar * s) / k)[:, None], ((cols - Ac * s) / k)[None, :]
+    s0, s1, sc = post(Ar * s, r0, R), post(Ar * s + s, r0, R), post(Ar * s + k, r0, R)
+    w0, w1, wc = post(Ac * s, c0, C), post(Ac * s + s, c0, C), post(Ac * s + k, c0, C)
+    sw, se = h[np.ix_(s0, w0)], h[np.ix_(s0, w1)]
+    nw, ne = h[np.ix_(s1, w0)], h[np.ix_(s1, w1)]
+    c = h[np.ix_(sc, wc)]
+    bottom = sw + 0.5 * u * (se - sw) + v * (c - 0.5 * (sw + se))
+    right = se + 0.5 * v * (ne - se) + (2.0 - u) * (c - 0.5 * (se + ne))
+    top = nw + 0.5 * u * (ne - nw) + (2.0 - v) * (c - 0.5 * (nw + ne))
+    left = sw + 0.5 * v * (nw - sw) + u * (c - 0.5 * (sw + nw))
+    below_main = v <= u            # below the SW-NE diagonal
+    below_anti = v <= 2.0 - u      # below the NW-SE diagonal
+    stitched = np.where(below_main, np.where(below_anti, bottom, right), np.where(below_anti, left, top))
+    return full, stitched
+
+
+def fan_deviation(h: np.ndarray, r0: int, c0: int, rows: np.ndarray, cols: np.ndarray, m: int, n: int) -> np.ndarray:
+    """max(|full - h|, |stitched - h|) in metres of level-m nodes at samples (rows x cols), as ``fans_at``."""
+    full, stitched = fans_at(h, r0, c0, rows, cols, m, n)
+    own = h[np.ix_(rows - r0, cols - c0)]
+    return np.maximum(np.abs(full - own), np.abs(stitched - own))
+
+
+def cell_max(dev: np.ndarray) -> np.ndarray:
+    """Per cell: the max of a sample array over the cell's four corners ((r-1) x (c-1))."""
+    return np.maximum(np.maximum(dev[:-1, :-1], dev[:-1, 1:]), np.maximum(dev[1:, :-1], dev[1:, 1:]))
+
+
+def block2(a: np.ndarray, fn) -> np.ndarray:
+    """fn (np.max, np.min) over 2 x 2 blocks of an array with even sides."""
+    return fn(a.reshape(a.shape[0] // 2, 2, a.shape[1] // 2, 2), axis=(1, 3))
+
+
+def dilate4(a: np.ndarray) -> np.ndarray:
+    """Max of each element and its four edge neighbours (no wrap)."""
+    out = a.copy()
+    np.maximum(out[1:], a[:-1], out=out[1:])
+    np.maximum(out[:-1], a[1:], out=out[:-1])
+    np.maximum(out[:, 1:], a[:, :-1], out=out[:, 1:])
+    np.maximum(out[:, :-1], a[:, 1:], out=out[:, :-1])
+    return out
+
+
+def grow3(a: np.ndarray, fn) -> np.ndarray:
+    """fn (np.minimum, np.maximum) over each element's 3x3 neighbourhood (edges repeat)."""
+    p = np.pad(a, 1, mode="edge")
+    out = a.copy()
+    n0, n1 = a.shape
+    for dy in (0, 1, 2):
+        for dx in (0, 1, 2):
+            out = fn(out, p[dy:dy + n0, dx:dx + n1])
+    return out

@@ -1,0 +1,168 @@
+"""The raster strategies' node arrays in a tile store: equal to ``global_nodes`` of the grid in memory (bit for bit
+where measured, never below where bounded), resumable, read a tile at a time, and drawn as the grid is; a store
+prepared without them is refused by path."""
+import numpy as np
+import pytest
+import rasterio
+from rasterio.transform import from_origin
+from test_store import ArraySource
+
+from hybrid.errors import TerrabenchError
+from hybrid.terrain import stored as stored_mod
+from hybrid.terrain.datasets import puget
+from hybrid.terrain.grid_sources import GdalGridSource
+from hybrid.terrain.heightfield import HeightField
+from hybrid.terrain.loaders import load_terrain
+from hybrid.terrain.stored import open_store
+from hybrid.tiles import store_nodes
+from hybrid.tiles.pyramid import TilePyramid
+from hybrid.tiles.store import prepare_store
+from raster.nodes import global_nodes, nodes_for, tile_node_block
+
+SP = (30.0, 40.0)
+
+
+def _arrays(nodes, lev):
+    return [np.asarray(a[lev][:, :]) for a in (nodes.effective, nodes.zlo, nodes.zhi)]
+
+
+def open_store_attrs(path):
+    """A store's attributes, complete or not."""
+    import zarr
+    return zarr.open_group(str(path), mode="r").attrs
+
+
+def _compare(store_path, hf, n, exact_span):
+    """Assert the store's node arrays against global_nodes of hf: equal up to nodes of exact_span cells, the
+    errors above never below the exact ones (ranges always equal); returns the largest bound / exact ratio."""
+    ref = global_nodes(hf, n)
+    got = nodes_for(open_store(store_path), n)
+    assert got.cells == ref.cells and len(got.effective) == len(ref.effective)
+    loose = 1.0
+    for lev in range(len(ref.effective)):
+        (e, lo, hi), (re, rlo, rhi) = _arrays(got, lev), _arrays(ref, lev)
+        assert e.dtype == np.float32 and e.shape == re.shape, lev
+        assert np.array_equal(lo, rlo) and np.array_equal(hi, rhi), lev
+        if (2 << lev) <= exact_span:
+            assert np.array_equal(e, re), lev
+        else:
+            assert np.all(e >= re), lev
+            loose = max(loose, float((e / np.maximum(re, 1e-6)).max()))
+    return loose
+
+
+@pytest.mark.parametrize("shape", [(513, 513), (300, 700)])
+def test_node_arrays_equal_global_nodes_bit_for_bit(tmp_path, shape):
+    h = np.ascontiguousarray(puget().heights[200:200 + shape[0], 100:100 + shape[1]])
+    prepare_store(ArraySource(h, SP), tmp_path / "s", 64)
+    hf = HeightField(h, SP)
+    assert _compare(tmp_path / "s", hf, 64, 1 << 30) == 1.0        # every level measured: squares of 512, 1024
+    stored, ref = nodes_for(open_store(tmp_path / "s"), 64), global_nodes(hf, 64)
+    pyr = TilePyramid(hf, 64)
+    for level in range(pyr.max_level + 1):                          # every tile's block, apron included
+        for key in pyr.keys(level):
+            a, b = (tile_node_block(x, level, key.tx, key.ty, 64) for x in (stored, ref))
+            assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]), key
+
+
+def test_bounded_levels_never_below_the_exact_errors(tmp_path, monkeypatch):
+    h = puget(size=513).heights
+    monkeypatch.setattr(store_nodes, "NODE_EXACT_SPAN", 128)         # blocks of 128 cells; nodes of 256, 512 bounded
+    prepare_store(ArraySource(h, SP), tmp_path / "s", 64)
+    assert open_store(tmp_path / "s").store.attrs["nodes"]["exact_span"] == 128
+    assert _compare(tmp_path / "s", HeightField(h, SP), 64, 128) > 1.0       # a bound, not the exact value
+
+
+def test_an_interrupted_node_build_resumes_to_the_same_arrays(tmp_path, monkeypatch):
+    h = puget(size=257).heights
+    monkeypatch.setattr(store_nodes, "NODE_EXACT_SPAN", 64)          # 4 direct bands, then bounded levels
+    monkeypatch.setattr(store_nodes, "NODE_BAND", 512)               # levels 0, 1 in several bands
+    prepare_store(ArraySource(h, SP), tmp_path / "whole", 32)
+    level_bands = 8 + 4 + 2 + 1
+    for stop in (level_bands + 2, 5, 3):                             # in the direct bands, in level passes
+        with pytest.raises(KeyboardInterrupt):
+            prepare_store(ArraySource(h, SP), tmp_path / "s", 32, stop_after=stop)
+        assert "nodes" not in dict(open_store_attrs(tmp_path / "s"))
+    prepare_store(ArraySource(h, SP), tmp_path / "s", 32)
+    a, b = nodes_for(open_store(tmp_path / "s"), 32), nodes_for(open_store(tmp_path / "whole"), 32)
+    for lev in range(len(a.effective)):
+        for x, y in zip(_arrays(a, lev), _arrays(b, lev)):
+            assert np.array_equal(x, y), lev
+    assert _compare(tmp_path / "s", HeightField(h, SP), 32, 64) >= 1.0
+    assert not (tmp_path / "s" / "nodes" / "tmp").exists()
+
+
+def test_a_store_without_node_arrays_is_refused_by_path_until_prepared_again(tmp_path):
+    import shutil
+
+    import zarr
+    h = puget(size=129).heights
+    prepare_store(ArraySource(h, SP), tmp_path / "old", 32)
+    g = zarr.open_group(str(tmp_path / "old"), mode="r+")           # as a store prepared before node arrays
+    del g.attrs["nodes"]
+    g.attrs.update({"progress": {k: v for k, v in dict(g.attrs["progress"]).items() if not k.startswith("nodes")}})
+    shutil.rmtree(tmp_path / "old" / "nodes")
+    with pytest.raises(TerrabenchError, match=f"{tmp_path / 'old'}.*without the raster.*prepare again"):
+        nodes_for(open_store(tmp_path / "old"), 32)
+    prepare_store(ArraySource(h, SP), tmp_path / "old", 32)          # the same prepare adds them
+    assert _compare(tmp_path / "old", HeightField(h, SP), 32, 1 << 30) == 1.0
+
+
+def test_prepare_memory_stays_band_sized(tmp_path, monkeypatch):
+    import tracemalloc
+
+    from hybrid.terrain.grid_sources import FractalSource
+    from hybrid.tiles import store as store_mod
+    peaks, build = {}, store_mod.build_nodes
+
+    def measured(*a, **k):
+        peaks["levels"] = tracemalloc.get_traced_memory()[1]
+        tracemalloc.reset_peak()
+        build(*a, **k)
+        peaks["nodes"] = tracemalloc.get_traced_memory()[1]
+
+    monkeypatch.setattr(store_mod, "build_nodes", measured)
+    tracemalloc.start()
+    try:
+        prepare_store(FractalSource(2049, seed=0), tmp_path / "s", 128)
+    finally:
+        tracemalloc.stop()
+    # measured here: levels 157 MiB, node arrays 72 MiB (the grid as float64 is 32 MiB, its square of nodes
+    # 16 MiB a level); the node build never holds more than one block of 1024² cells and one band a level
+    assert peaks["nodes"] < 100 * 2**20 and peaks["nodes"] <= peaks["levels"], peaks
+
+
+@pytest.fixture(scope="module")
+def puget_store(tmp_path_factory):
+    """Bundled Puget Sound written as a north-up GeoTIFF and prepared into a store of tiles of 128."""
+    d = tmp_path_factory.mktemp("puget")
+    hf = puget()
+    tif = d / "puget.tif"
+    with rasterio.open(tif, "w", driver="GTiff", height=hf.rows, width=hf.cols, count=1, dtype="float32",
+                       crs="EPSG:32610", transform=from_origin(500000, 5300000, 160, 160)) as dst:
+        dst.write(np.ascontiguousarray(hf.heights[::-1]).astype(np.float32), 1)
+    return prepare_store(GdalGridSource(tif), d / "puget.store", 128), load_terrain(tif)
+
+
+def test_puget_store_nodes_equal_the_loaded_grid(puget_store):
+    path, whole = puget_store
+    assert _compare(path, whole, 128, 1 << 30) == 1.0
+
+
+@pytest.mark.gl
+def test_raster_frames_from_the_store_equal_the_grid_without_loading_it(ctx, puget_store, monkeypatch):
+    from hybrid.camera.flight import preset
+    from hybrid.renderer import Renderer
+    path, whole = puget_store
+    stored = open_store(path)
+    monkeypatch.setattr(stored_mod, "MAX_LOAD_SAMPLES", 1000)       # nothing may gather the grid
+    with pytest.raises(TerrabenchError, match="out of core"):
+        stored.load()
+    for k in (2, 5):
+        v = preset("flyover", whole, 6, 160, 90).view(k)
+        for policy in ("raster", "raster_gs"):
+            with Renderer(ctx, stored, policy, 128) as a, Renderer(ctx, whole, policy, 128) as b:
+                x, y = a.render(v), b.render(v)
+            assert x.stats.counters["triangles"] == y.stats.counters["triangles"] > 0, policy
+            assert np.isfinite(x.distance).any(), policy
+            assert np.array_equal(x.colour, y.colour) and np.array_equal(x.distance, y.distance), (policy, k)
