@@ -8,7 +8,7 @@
 //
 // Heights are 16-bit codes (R16UI, hybrid/tiles/quantize.py): metres = float32(dq.x + dq.y * (q + dqb)). The
 // max mipmap texture holds levels 1..log2 N (its level k is max-mip level k + 1); level 0 is the largest of
-// a cell's four corner codes (rc_bound). Maxima are taken on codes: dequantisation is monotone.
+// a cell's four corner codes (rc_code); steps compare against a float32 upper bound of it (rc_bound). Maxima are taken on codes: dequantisation is monotone.
 //
 // Defines: RECON 0 planes (piecewise constant: a cell is a box of its max-mip height), 1 linear approximation
 // planes (Qu 3.1), 2 triangle mesh with the SW-NE diagonal (Qu 3.2), 3 bilinear patch (analytic);
@@ -27,17 +27,25 @@ float rc_height(uint q, dvec2 dq, int dqb) {
     return float(v);
 }
 
-// Max-mip bound (metres) of texel ri at level l: level 0 from the cell's four corner codes, level l >= 1 from
+// Max-mip code of texel ri at level l: level 0 the largest of the cell's four corner codes, level l >= 1
 // level l - 1 of the max-mip texture. Used for every bound the traversal reads (steps and LOD parents).
-float rc_bound(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int l, ivec2 ri) {
-    uint m;
+uint rc_code(usampler2D hmap, usampler2D mmap, int l, ivec2 ri) {
     if (l == 0) {
-        m = max(max(texelFetch(hmap, ri, 0).r, texelFetch(hmap, ri + ivec2(1, 0), 0).r),
-                max(texelFetch(hmap, ri + ivec2(0, 1), 0).r, texelFetch(hmap, ri + ivec2(1, 1), 0).r));
-    } else {
-        m = texelFetch(mmap, ri, l - 1).r;
+        // the four corners in one gather: the 2x2 texels around the cell's north-east corner (ri + 1)
+        uvec4 c = textureGather(hmap, (vec2(ri) + 1.0) / vec2(textureSize(hmap, 0)), 0);
+        return max(max(c.x, c.y), max(c.z, c.w));
     }
-    return rc_height(m, dq, dqb);
+    return texelFetch(mmap, ri, l - 1).r;
+}
+
+// An upper bound (metres) of rc_height(q) in float32 arithmetic, for the traversal's steps: the float
+// evaluation is within a few float32 units of the double one, and the margin (5 units of the terms' size)
+// covers that, so a bound is never below the heights it bounds. The exact height (rc_height) is taken only
+// for the cell a ray may hit.
+float rc_bound(uint q, vec2 dqf, int dqb) {
+    float k = float(int(q) + dqb);
+    float v = dqf.x + dqf.y * k;
+    return v + 6e-7 * (abs(dqf.x) + abs(dqf.y * k));
 }
 
 // Offset of the point at fraction f of a cell from the interpolating surface of its corners (bilinear).
@@ -183,6 +191,8 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
     // rasterizer every statement of a loop body runs for all lanes, so the costly cell test (four height
     // fetches and the reconstruction) is kept out of the per-step body. Same steps, same order, same floats.
     float s, H, dt;
+    uint mc = 0u;
+    vec2 dqf = vec2(dq);
     vec2 ij, e;
     ivec2 ri;
     bool cx, cy, cz;
@@ -201,13 +211,14 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
             while (!under && l < ltop) {
                 vec2 pij = floor(ij * 0.5);
                 ivec2 pri = ivec2(mx ? (nl >> 1) - 1 - int(pij.x) : int(pij.x), my ? (nl >> 1) - 1 - int(pij.y) : int(pij.y));
-                float PH = rc_bound(hmap, mmap, dq, dqb, l + 1, pri);
+                float PH = rc_bound(rc_code(hmap, mmap, l + 1, pri), dqf, dqb);
                 if (!rc_lod_final(l + 1, pij, PH, Om, zr.x, spacing, lod_k)) break;
                 l++; s *= 2.0; ij = pij; nl >>= 1;
             }
 #endif
             ri = ivec2(mx ? nl - 1 - int(ij.x) : int(ij.x), my ? nl - 1 - int(ij.y) : int(ij.y));
-            H = rc_bound(hmap, mmap, dq, dqb, l, ri);
+            mc = rc_code(hmap, mmap, l, ri);
+            H = rc_bound(mc, dqf, dqb);
             e = (ij + 1.0) * s;
             float dtx = D.x > 0.0 ? (e.x - P0.x) / D.x : RC_FAR;
             float dty = D.y > 0.0 ? (e.y - P0.y) / D.y : RC_FAR;
@@ -251,6 +262,7 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
         vec4 h4 = vec4(rc_height(texelFetch(hmap, c0, 0).r, dq, dqb), rc_height(texelFetch(hmap, c0 + ivec2(S, 0), 0).r, dq, dqb),
                        rc_height(texelFetch(hmap, c0 + ivec2(0, S), 0).r, dq, dqb),
                        rc_height(texelFetch(hmap, c0 + ivec2(S, S), 0).r, dq, dqb));
+        H = rc_height(mc, dq, dqb);               // the exact bound: the planes reconstruction's surface
         // a ray under the sheet crosses it upward: the same test with heights and ray z mirrored (z -> -z)
         float sg = under ? -1.0 : 1.0;
         float u = rc_cell_hit(vec3(A.xy, sg * A.z), vec3(B.xy, sg * B.z), vec2(c0), float(S), sg * h4, sg * H);
