@@ -43,6 +43,7 @@ def run_benchmark(ctx, hf, flights: dict, tau: float = 2 / 3, repeats: int = 3, 
                 for k in range(len(views)):
                     w, st = walls[(pol, k)], last[(pol, k)]
                     rows.append({"flight": fname, "policy": pol, "frame": k, "wall_ms": float(np.median(w)),
+                                 "wall_ms_repeats": [float(x) for x in w],
                                  "spread": float((max(w) - min(w)) / np.median(w)),
                                  "tiles": st.tiles, "tiles_raster": st.tiles_raster, "tiles_raycast": st.tiles_raycast,
                                  "tiles_gs": st.tiles_gs, "plan_ms": st.plan_ms,
@@ -57,7 +58,12 @@ def run_benchmark(ctx, hf, flights: dict, tau: float = 2 / 3, repeats: int = 3, 
 
 
 def summarize(frames: pd.DataFrame, tiles: pd.DataFrame, model) -> dict[str, pd.DataFrame]:
-    """The benchmark tables keyed by title: per flight and policy, the ratios, and the cost model's error."""
+    """The benchmark tables keyed by title: per flight and policy, the ratios, and the cost model's error.
+
+    Each target ratio (of total frame time) comes with the reading of the same pair from this run's repeats
+    (``experiments.noise.compare``: median frame times, bootstrap interval, repeat spread), so a ratio inside
+    the run's noise reads as a tie."""
+    from .noise import compare
     out, ratios = {}, []
     for fname, g in frames.groupby("flight", sort=False):
         t = g.groupby("policy", sort=False).agg(total_ms=("wall_ms", "sum"), median_ms=("wall_ms", "median"),
@@ -71,12 +77,15 @@ def summarize(frames: pd.DataFrame, tiles: pd.DataFrame, model) -> dict[str, pd.
         raster = min(("raster", "raster_gs"), key=lambda p: tot[p])
         best = min(("raster", "raster_gs", "raycast"), key=lambda p: tot[p])
         hy = t.loc["hybrid"]
+        by = {p: q for p, q in g.groupby("policy", sort=False)}
         ratios.append({"flight": fname, "faster raster": raster,
                        "faster raster / raycast (target <= 1.5)": tot[raster] / tot["raycast"],
+                       "reading": compare(raster, by[raster], "raycast", by["raycast"]).words(),
                        "hybrid raster tiles % (target >= 15 on one flight)":
                            100 * hy["raster_tiles"] / max(hy["raster_tiles"] + hy["raycast_tiles"], 1),
                        "better pure": best,
                        "hybrid / better pure (target <= 0.85 on one, <= 1.05 on every flight)": tot["hybrid"] / tot[best],
+                       "hybrid reading": compare("hybrid", by["hybrid"], best, by[best]).words(),
                        "hybrid / oracle": tot["hybrid"] / tot["oracle"],
                        "noise (median repeat spread %)": float(t["spread_pct"].median())})
     out["targets: ratios of total frame time in this run"] = pd.DataFrame(ratios)

@@ -81,13 +81,16 @@ class SkirtedStrategy(TileStrategy, Protocol):
 
 
 class TriangleEstimator(Protocol):
-    """Triangles a raster strategy would draw for one tile at a view, computed on the CPU without GL;
+    """Triangles a raster strategy would draw for tiles at a view, computed on the CPU without GL;
     ``build_ms`` is the wall time it has spent on one-time per-tile preparation."""
 
     build_ms: float
 
     def __call__(self, key: TileKey, selected: SelectedTile, view: View, tau: float) -> int:
         """Estimated triangle count of tile ``key`` at ``view`` for the bound tau (pixels)."""
+
+    def many(self, selected: Sequence[SelectedTile], view: View, tau: float) -> Any:
+        """Estimated triangle counts ((B,) array) of the selected tiles at ``view`` for the bound tau (pixels)."""
 
 
 @dataclass

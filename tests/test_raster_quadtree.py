@@ -122,21 +122,32 @@ def test_morph_off_gives_zero_alpha_and_bad_input(puget257):
         error_pyramid(np.zeros((5, 5), np.float32), beta=1.5)
 
 
-def test_triangle_estimate_bounds_the_drawn_count(ctx, puget_full):
-    """The cost model's cheap triangle estimate (one tolerance per tile, at its nearest point) is an upper bound
-    of what the GPU selection draws (a tolerance per node); it over-counts far parts of near tiles."""
+def test_triangle_estimate_follows_the_drawn_count(ctx, puget_full):
+    """The cost model's triangle estimate (small nodes at their block's distance, large ones at their own box's)
+    follows what the GPU selection draws (a distance per node) per frame and per tile, near tiles included; a
+    tolerance at each tile's nearest point (the estimate's old form) over-counts the far parts of near tiles."""
     from hybrid.camera.flight import preset
     from hybrid.renderer import Renderer
     from raster.estimate import TileletTriangleEstimator
     from raster.tilelets import read_leaves
-    ratios = []
-    with Renderer(ctx, puget_full, "raster", 256) as r:
+    ratios, frames, nearest = [], [], []
+    with Renderer(ctx, puget_full, "raster", 128) as r:
         est = TileletTriangleEstimator(r.pyramid)
         for v in (preset("flyover", puget_full, 6, 320, 180).view(2), preset("orbit", puget_full, 6, 320, 180).view(3)):
             r.render(v, culling=False)
-            for p in r.plan(v):
-                leaves = read_leaves(r.cache.entries[("raster", p.key)])
-                drawn = int(leaves["triangles"].sum())
-                ratios.append(est(p.key, p.selected, v, 2 / 3) / drawn)
-    assert len(ratios) > 8
-    assert min(ratios) >= 0.95, sorted(ratios)
+            plans = r.plan(v)
+            many = est.many([p.selected for p in plans], v, 2 / 3)
+            drawn = np.array([read_leaves(r.cache.entries[("raster", p.key)])["triangles"].sum() for p in plans])
+            single = np.array([est(p.key, p.selected, v, 2 / 3) for p in plans])
+            assert np.array_equal(many, single)                    # the frame's batch is the tiles' estimates
+            ratios += list(many / drawn)
+            frames.append(many.sum() / drawn.sum())
+            # the old form: every node of a tile at the tile's nearest distance
+            from raster.quadtree import estimate_triangles, split_errors
+            old = [estimate_triangles(split_errors(error_pyramid(r.pyramid.tile(p.key).heights, est.beta)),
+                                      2 / 3 * p.selected.distance / v.pixels_per_radian) for p in plans]
+            nearest.append(np.sum(old) / drawn.sum())
+    assert len(ratios) > 20
+    assert all(0.9 <= f <= 1.15 for f in frames), frames
+    assert 0.9 <= np.median(ratios) <= 1.15, sorted(ratios)
+    assert min(nearest) > max(frames), (nearest, frames)         # the per-node distances are what the fit sees

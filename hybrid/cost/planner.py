@@ -124,14 +124,15 @@ def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
     if not selected:
         return []
     triangles_fn = triangles_fn or default_estimator(pyramid)
-    triangles = [triangles_fn(s.key, s, view, tau) for s in selected]
     if batch:
+        triangles = triangles_fn.many(selected, view, tau)
         columns = feature_columns(pyramid, view, selected, triangles)
         features = features_from_columns(columns)
         pred = model.predict_columns(columns)
         predicted = [dict(zip(pred, p)) for p in zip(*(v.tolist() for v in pred.values()))]
         chosen = hedged_choices(pred, model) if policy == "hybrid" else choices(policy, columns, pred, threshold)
     else:
+        triangles = [triangles_fn(s.key, s, view, tau) for s in selected]
         features = [tile_features(pyramid, view, s, t) for s, t in zip(selected, triangles)]
         predicted = [model.predict(f) for f in features]
         if policy == "hybrid":
