@@ -89,8 +89,9 @@ class TriangleEstimator(Protocol):
     def __call__(self, key: TileKey, selected: SelectedTile, view: View, tau: float) -> int:
         """Estimated triangle count of tile ``key`` at ``view`` for the bound tau (pixels)."""
 
-    def many(self, selected: Sequence[SelectedTile], view: View, tau: float) -> Any:
-        """Estimated triangle counts ((B,) array) of the selected tiles at ``view`` for the bound tau (pixels)."""
+    def many(self, selected: Sequence[SelectedTile], view: View, tau: float) -> tuple[Any, Any]:
+        """(triangle counts, share of them inside the view frustum), (B,) arrays, of the selected tiles at
+        ``view`` for the bound tau (pixels)."""
 
 
 @dataclass

@@ -4,8 +4,9 @@ The GPU selection splits a node when ``E * K / tau > d``, with d the distance fr
 box, so the far part of a near tile is coarser than its near edge. The estimate follows it at two grains: a
 tile's small nodes are counted against the distance of the block of the tile they lie in (4 x 4 blocks a
 tile), its few large ones each against its own box (grown by its side, as the GPU's), and the tile's root
-always splits (the tile tree refined it). Per tile the node errors, blocks and boxes are built once; a frame's
-tiles are then estimated together in a handful of array operations.
+always splits (the tile tree refined it). The share of the splits in blocks (and large nodes) that reach into
+the view frustum estimates what is left after the GPU's tilelet culling. Per tile the node errors, blocks and
+boxes are built once; a frame's tiles are then estimated together in a handful of array operations.
 """
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ import numpy as np
 
 from hybrid.camera.view import View
 from hybrid.tiles.pyramid import TileKey, TilePyramid
-from hybrid.tiles.tiletree import SelectedTile, box_distances
+from hybrid.tiles.tiletree import SelectedTile, box_classes, box_distances
 
 from .quadtree import GPU_BETA, error_pyramid
 
@@ -84,30 +85,38 @@ def tile_nodes(tile, beta: float = GPU_BETA) -> TileNodes:
                      cat(coarse_lo, np.float64, 3), cat(coarse_hi, np.float64, 3), int(top >= 1))
 
 
-def estimate_many(nodes: list[TileNodes], eye, k_tau: float) -> np.ndarray:
-    """Triangles (B,) of B tiles' quadtrees for an eye (world metres) and K / tau (pixels per radian over tau):
-    8 per tilelet, a split adding 3, before restriction and stitching."""
-    if not nodes:
-        return np.zeros(0, np.int64)
+def estimate_many(nodes: list[TileNodes], eye, k_tau: float, planes=None) -> tuple[np.ndarray, np.ndarray]:
+    """(triangles (B,), visible share (B,)) of B tiles' quadtrees for an eye (world metres) and K / tau (pixels per
+    radian over tau): 8 triangles per tilelet, a split adding 3, before restriction and stitching; the share in
+    [0, 1] of those in blocks or large nodes inside the frustum ``planes`` (eye-relative, as View's; None: all)."""
+    b = len(nodes)
+    if not b:
+        return np.zeros(0, np.int64), np.zeros(0)
     eye = np.asarray(eye, dtype=np.float64)
     nb = len(nodes[0].block_lo)
-    d_block = box_distances(eye, np.concatenate([t.block_lo for t in nodes]), np.concatenate([t.block_hi for t in nodes]))
+    blo, bhi = np.concatenate([t.block_lo for t in nodes]), np.concatenate([t.block_hi for t in nodes])
+    d_block = box_distances(eye, blo, bhi)
+    seen = np.ones(len(blo), bool) if planes is None else box_classes(planes, blo - eye, bhi - eye) >= 0
     # a node splits only if E * k_tau exceeds its block's distance, so at least its tile's nearest block's:
     # only each tile's leading (largest) errors above that need their block's distance
-    lead = d_block.reshape(len(nodes), nb).min(axis=1) / k_tau
+    lead = d_block.reshape(b, nb).min(axis=1) / k_tau
     sizes = np.array([int(np.searchsorted(t.fine_neg, -c, side="left")) for t, c in zip(nodes, lead.tolist())])
-    tile_of = np.repeat(np.arange(len(nodes)), sizes)
+    tile_of = np.repeat(np.arange(b), sizes)
     block = np.concatenate([t.fine_block[:c] for t, c in zip(nodes, sizes)]) + tile_of * nb
-    err = np.concatenate([t.fine_error[:c] for t, c in zip(nodes, sizes)])
-    fine = np.bincount(tile_of, err * k_tau > d_block[block], minlength=len(nodes))
+    split = np.concatenate([t.fine_error[:c] for t, c in zip(nodes, sizes)]) * k_tau > d_block[block]
+    splits = np.bincount(tile_of, split, minlength=b)
+    shown = np.bincount(tile_of, split & seen[block], minlength=b)
     csizes = np.array([len(t.coarse_error) for t in nodes])
-    coarse = np.zeros(len(nodes))
     if csizes.sum():
-        d = box_distances(eye, np.concatenate([t.coarse_lo for t in nodes]), np.concatenate([t.coarse_hi for t in nodes]))
-        coarse = np.bincount(np.repeat(np.arange(len(nodes)), csizes),
-                             np.concatenate([t.coarse_error for t in nodes]) * k_tau > d, minlength=len(nodes))
-    splits = fine + coarse + np.array([t.root for t in nodes])
-    return (8 * (1 + 3 * splits)).astype(np.int64)
+        clo, chi = np.concatenate([t.coarse_lo for t in nodes]), np.concatenate([t.coarse_hi for t in nodes])
+        ctile = np.repeat(np.arange(b), csizes)
+        csplit = np.concatenate([t.coarse_error for t in nodes]) * k_tau > box_distances(eye, clo, chi)
+        cseen = np.ones(len(clo), bool) if planes is None else box_classes(planes, clo - eye, chi - eye) >= 0
+        splits = splits + np.bincount(ctile, csplit, minlength=b)
+        shown = shown + np.bincount(ctile, csplit & cseen, minlength=b)
+    root = np.array([t.root for t in nodes])
+    triangles = 8 * (1 + 3 * (splits + root))
+    return triangles.astype(np.int64), 8 * (1 + 3 * (shown + root)) / triangles
 
 
 class TileletTriangleEstimator:
@@ -130,10 +139,11 @@ class TileletTriangleEstimator:
             self.build_ms += (time.perf_counter() - t0) * 1e3
         return self._nodes[key]
 
-    def many(self, selected: list[SelectedTile], view: View, tau: float) -> np.ndarray:
-        """Estimated triangles (B,) of the selected tiles at ``view`` for the error bound tau (pixels)."""
-        return estimate_many([self._tile(s.key) for s in selected], view.eye, float(view.pixels_per_radian) / tau)
+    def many(self, selected: list[SelectedTile], view: View, tau: float) -> tuple[np.ndarray, np.ndarray]:
+        """(triangles (B,), visible share (B,)) of the selected tiles at ``view`` for the bound tau (pixels)."""
+        return estimate_many([self._tile(s.key) for s in selected], view.eye, float(view.pixels_per_radian) / tau,
+                             view.frustum_planes_rel())
 
     def __call__(self, key: TileKey, selected: SelectedTile, view: View, tau: float) -> int:
         """Estimated triangles of tile ``key`` at ``view`` for the error bound tau (pixels)."""
-        return int(estimate_many([self._tile(key)], view.eye, float(view.pixels_per_radian) / tau)[0])
+        return int(self.many([selected], view, tau)[0][0])

@@ -124,13 +124,14 @@ def test_morph_off_gives_zero_alpha_and_bad_input(puget257):
 
 def test_triangle_estimate_follows_the_drawn_count(ctx, puget_full):
     """The cost model's triangle estimate (small nodes at their block's distance, large ones at their own box's)
-    follows what the GPU selection draws (a distance per node) per frame and per tile, near tiles included; a
-    tolerance at each tile's nearest point (the estimate's old form) over-counts the far parts of near tiles."""
+    follows what the GPU selection draws (a distance per node) per frame and per tile, near tiles included, and
+    its share in blocks inside the frustum what is left after tilelet culling; a tolerance at each tile's
+    nearest point (the estimate's old form) over-counts the far parts of near tiles."""
     from hybrid.camera.flight import preset
     from hybrid.renderer import Renderer
     from raster.estimate import TileletTriangleEstimator
     from raster.tilelets import read_leaves
-    ratios, frames, nearest = [], [], []
+    ratios, frames, nearest, shown = [], [], [], []
     with Renderer(ctx, puget_full, "raster", 128) as r:
         est = TileletTriangleEstimator(r.pyramid)
         for v in (preset("flyover", puget_full, 6, 320, 180).view(2), preset("orbit", puget_full, 6, 320, 180).view(3)):
@@ -139,9 +140,14 @@ def test_triangle_estimate_follows_the_drawn_count(ctx, puget_full):
             many = est.many([p.selected for p in plans], v, 2 / 3)
             drawn = np.array([read_leaves(r.cache.entries[("raster", p.key)])["triangles"].sum() for p in plans])
             single = np.array([est(p.key, p.selected, v, 2 / 3) for p in plans])
-            assert np.array_equal(many, single)                    # the frame's batch is the tiles' estimates
-            ratios += list(many / drawn)
-            frames.append(many.sum() / drawn.sum())
+            assert np.array_equal(many[0], single)                 # the frame's batch is the tiles' estimates
+            ratios += list(many[0] / drawn)
+            frames.append(many[0].sum() / drawn.sum())
+            r.render(v)                                             # with tilelet culling: the visible share
+            culled = np.array([read_leaves(r.cache.entries[("raster", p.key)])["triangles"].sum() for p in plans])
+            shown.append(np.sum(many[0] * many[1]) / culled.sum())
+            assert shown[-1] < 0.9 * many[0].sum() / culled.sum()  # the share is nearer than taking all as seen
+            assert culled.sum() < 0.9 * drawn.sum() and np.all((many[1] > 0) & (many[1] <= 1))
             # the old form: every node of a tile at the tile's nearest distance
             from raster.quadtree import estimate_triangles, split_errors
             old = [estimate_triangles(split_errors(error_pyramid(r.pyramid.tile(p.key).heights, est.beta)),
@@ -151,3 +157,4 @@ def test_triangle_estimate_follows_the_drawn_count(ctx, puget_full):
     assert all(0.9 <= f <= 1.15 for f in frames), frames
     assert 0.9 <= np.median(ratios) <= 1.15, sorted(ratios)
     assert min(nearest) > max(frames), (nearest, frames)         # the per-node distances are what the fit sees
+    assert all(0.95 <= f <= 1.4 for f in shown), shown            # blocks reaching into the frustum count whole

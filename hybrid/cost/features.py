@@ -22,8 +22,9 @@ class TileFeatures:
       elevation angle, (zmax - zmin) / tan(elevation) metres counted in cells along the ray's heading (cells
       spacing_x by spacing_y metres), at most the tile's diagonal; the
       maximum-mipmap traversal takes about log2(1 + slab_cells) steps more per ray as it grows.
-    visible: share of the AABB's projection (cut at the near plane) inside the viewport, in [0, 1]; the raster
-      path culls tilelets outside the frustum, so its cost follows ``triangles * visible``.
+    visible: share of those triangles inside the view frustum, in [0, 1] (the raster strategy's estimate, by
+      blocks of the tile); the raster path culls tilelets outside the frustum, so its cost follows
+      ``triangles * visible``.
     surface_pixels: screen area of the tile's rectangle at mid height (the surface's rough footprint): rays
       there hit and pay for shading, rays elsewhere in the box leave it early.
     """
@@ -87,10 +88,8 @@ def _hull_area_clipped(pts: np.ndarray, w: float, h: float) -> float:
 _BOX_EDGES = [(a, b) for a in range(8) for b in range(a + 1, 8) if bin(a ^ b).count("1") == 1]
 
 
-def footprint_pixels(view: View, lo: np.ndarray, hi: np.ndarray, with_visible: bool = False):
+def footprint_pixels(view: View, lo: np.ndarray, hi: np.ndarray) -> float:
     """Screen area in pixels of a world AABB's projection, clipped to the near plane and the viewport.
-
-    With ``with_visible`` returns (area, share of the near-clipped projection inside the viewport).
 
     The box cut by the near plane is a convex polyhedron; its projection is the convex hull of its projected
     vertices: the corners in front of the plane and the points where box edges cross it.
@@ -105,17 +104,13 @@ def footprint_pixels(view: View, lo: np.ndarray, hi: np.ndarray, with_visible: b
             t = (near - depth[a]) / (depth[b] - depth[a])
             pts.append(rel[a] + t * (rel[b] - rel[a]))
     if len(pts) < 3:
-        return (0.0, 0.0) if with_visible else 0.0
+        return 0.0
     pts = np.array(pts)
     t = view.tan_half_fov
     x = (pts[:, 0] / -pts[:, 2]) / (t * view.aspect)
     y = (pts[:, 1] / -pts[:, 2]) / t
     screen = np.stack([(x + 1) * 0.5 * view.width, (1 - y) * 0.5 * view.height], axis=1)
-    area = _hull_area_clipped(screen, view.width, view.height)
-    if not with_visible:
-        return area
-    whole = _hull_area_clipped(screen, np.inf, np.inf)
-    return area, (min(area / whole, 1.0) if whole > 0 else 0.0)
+    return _hull_area_clipped(screen, view.width, view.height)
 
 
 def slab_cells(view: View, lo: np.ndarray, hi: np.ndarray, spacing_xy, n: int) -> float:
@@ -134,15 +129,16 @@ def slab_cells(view: View, lo: np.ndarray, hi: np.ndarray, spacing_xy, n: int) -
     return float(min(dz / tan_el * cells_per_m, diag))
 
 
-def tile_features(pyramid: TilePyramid, view: View, sel: SelectedTile, triangles: float) -> TileFeatures:
-    """Features of one selected tile; ``triangles`` comes from the raster strategy's mesh for this view."""
+def tile_features(pyramid: TilePyramid, view: View, sel: SelectedTile, triangles: float,
+                  visible: float = 1.0) -> TileFeatures:
+    """Features of one selected tile; ``triangles`` and their ``visible`` share come from the raster strategy's
+    estimate for this view."""
     lo, hi = pyramid.aabb(sel.key)
     k = 1 << sel.key.level
     spacing = (pyramid.hf.spacing_x * k, pyramid.hf.spacing_y * k)
-    area, visible = footprint_pixels(view, lo, hi, with_visible=True)
     mid = np.array([lo[0], lo[1], 0.5 * (lo[2] + hi[2])]), np.array([hi[0], hi[1], 0.5 * (lo[2] + hi[2])])
-    return TileFeatures(area, float(triangles), slab_cells(view, lo, hi, spacing, pyramid.n), sel.key.level,
-                        sel.distance, visible, footprint_pixels(view, *mid))
+    return TileFeatures(footprint_pixels(view, lo, hi), float(triangles), slab_cells(view, lo, hi, spacing, pyramid.n),
+                        sel.key.level, sel.distance, float(visible), footprint_pixels(view, *mid))
 
 
 def slab_cells_batch(view: View, lo: np.ndarray, hi: np.ndarray, spacing: np.ndarray, n: int) -> np.ndarray:
@@ -158,10 +154,12 @@ def slab_cells_batch(view: View, lo: np.ndarray, hi: np.ndarray, spacing: np.nda
     return np.where(steep, np.where(dz == 0.0, 0.0, 1.0), np.where(tan_el == 0.0, n * np.sqrt(2.0), cells))
 
 
-def feature_columns(pyramid: TilePyramid, view: View, selected: list[SelectedTile], triangles) -> dict:
+def feature_columns(pyramid: TilePyramid, view: View, selected: list[SelectedTile], triangles,
+                    visible=None) -> dict:
     """The features of all selected tiles of a frame as arrays, one per ``TileFeatures`` field (B,) each.
 
-    Equal to ``tile_features`` of each tile (within float rounding); ``triangles`` gives each tile's count.
+    Equal to ``tile_features`` of each tile (within float rounding); ``triangles`` gives each tile's count and
+    ``visible`` their share inside the frustum (default 1).
     """
     keys = np.array([(s.key.level, s.key.tx, s.key.ty) for s in selected], dtype=np.int64).reshape(-1, 3)
     lo, hi = pyramid.aabbs(keys[:, 0], keys[:, 1], keys[:, 2])
@@ -169,13 +167,14 @@ def feature_columns(pyramid: TilePyramid, view: View, selected: list[SelectedTil
     mid_lo, mid_hi = lo.copy(), hi.copy()
     mid_lo[:, 2] = mid_hi[:, 2] = mid
     b = len(keys)
-    area, visible = footprints(view, np.concatenate([lo, mid_lo]), np.concatenate([hi, mid_hi]))
+    area = footprints(view, np.concatenate([lo, mid_lo]), np.concatenate([hi, mid_hi]))
     k = (1 << keys[:, 0]).astype(np.float64)
     spacing = np.stack([pyramid.hf.spacing_x * k, pyramid.hf.spacing_y * k], axis=1)
     return {"pixels": area[:b], "triangles": np.asarray(triangles, dtype=np.float64).reshape(b),
             "slab_cells": slab_cells_batch(view, lo, hi, spacing, pyramid.n), "level": keys[:, 0],
             "distance": np.array([s.distance for s in selected], dtype=np.float64).reshape(b),
-            "visible": visible[:b], "surface_pixels": area[b:]}
+            "visible": np.ones(b) if visible is None else np.asarray(visible, dtype=np.float64).reshape(b),
+            "surface_pixels": area[b:]}
 
 
 def features_from_columns(columns: dict) -> list[TileFeatures]:
@@ -185,6 +184,7 @@ def features_from_columns(columns: dict) -> list[TileFeatures]:
     return [TileFeatures(**dict(zip(names, r))) for r in rows]
 
 
-def tile_features_batch(pyramid: TilePyramid, view: View, selected: list[SelectedTile], triangles) -> list[TileFeatures]:
+def tile_features_batch(pyramid: TilePyramid, view: View, selected: list[SelectedTile], triangles,
+                        visible=None) -> list[TileFeatures]:
     """``tile_features`` of every selected tile of a frame in one vectorized computation."""
-    return features_from_columns(feature_columns(pyramid, view, selected, triangles))
+    return features_from_columns(feature_columns(pyramid, view, selected, triangles, visible))

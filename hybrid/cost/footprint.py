@@ -145,9 +145,8 @@ def _cut_faces(rel: np.ndarray, near: float) -> np.ndarray:
     return np.where(empty[..., None, None], np.array([0.0, 0.0, -1.0]), out)   # a harmless point, no area
 
 
-def footprints(view: View, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per box (B, 3 corners each, world metres): viewport area in pixels of its near-cut projection, and the
-    share of that projection inside the viewport in [0, 1] (0 when it has no area)."""
+def footprints(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Per box (B, 3 corners each, world metres): viewport area in pixels of its near-cut projection."""
     lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
     b = lo.shape[0]
     rel = _eye_space(view, box_corners(lo, hi))
@@ -164,21 +163,16 @@ def footprints(view: View, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, 
     poly[front] = corners[:, _FACES[:, [0, 1, 2, 3, 3, 3, 3, 3][:m]]]
     if cut.any():
         poly[cut] = _project(view, _cut_faces(rel[cut], near))
-    flat = poly.reshape(b * 6, poly.shape[2], 2)
-    on = back.reshape(-1)
-    face_area = np.zeros(b * 6)
-    face_area[on] = signed_areas(flat[on])
-    whole = np.abs(face_area.reshape(b, 6).sum(axis=1))
-    # only boxes whose projection reaches past the viewport need the clip; the others are wholly inside
+    flat = poly.reshape(b * 6, m, 2)
     w, h = float(view.width), float(view.height)
+    # boxes whose projection reaches past the viewport take the clip; the others' faces are wholly inside
     crosses = cut.copy()
     crosses[front] = np.any((corners < 0) | (corners > np.array([w, h])), axis=(1, 2))
-    area = whole.copy()
-    if crosses.any():
-        clip = (on.reshape(b, 6) & crosses[:, None]).reshape(-1)
-        face_area[:] = 0.0
+    on = back.reshape(-1)
+    clip = on & np.repeat(crosses, 6)
+    whole = on & ~clip
+    face_area = np.zeros(b * 6)
+    face_area[whole] = signed_areas(flat[whole])
+    if clip.any():
         face_area[clip] = clipped_signed_areas(flat[clip], w, h)
-        area[crosses] = np.abs(face_area.reshape(b, 6).sum(axis=1))[crosses]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        visible = np.where(whole > 0, np.minimum(area / np.where(whole > 0, whole, 1.0), 1.0), 0.0)
-    return area, visible
+    return np.abs(face_area.reshape(b, 6).sum(axis=1))

@@ -110,7 +110,7 @@ def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
 
     A pure policy (one strategy for every tile) needs no features: its plans carry none. A mixed policy gets
     features, the model's predicted ms of every candidate it knows and its choice; ``triangles_fn`` gives the raster
-    mesh's triangle count for a tile (default: the raster strategy's CPU estimate from the registry, one per
+    mesh's triangle counts and their share inside the frustum (default: the raster strategy's CPU estimate from the registry, one per
     pyramid). Features and predictions of all tiles are computed as arrays; ``batch=False`` computes them
     tile by tile instead (the reference path: the same plans, slower).
     """
@@ -125,15 +125,15 @@ def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
         return []
     triangles_fn = triangles_fn or default_estimator(pyramid)
     if batch:
-        triangles = triangles_fn.many(selected, view, tau)
-        columns = feature_columns(pyramid, view, selected, triangles)
+        triangles, visible = triangles_fn.many(selected, view, tau)
+        columns = feature_columns(pyramid, view, selected, triangles, visible)
         features = features_from_columns(columns)
         pred = model.predict_columns(columns)
         predicted = [dict(zip(pred, p)) for p in zip(*(v.tolist() for v in pred.values()))]
         chosen = hedged_choices(pred, model) if policy == "hybrid" else choices(policy, columns, pred, threshold)
     else:
-        triangles = [triangles_fn(s.key, s, view, tau) for s in selected]
-        features = [tile_features(pyramid, view, s, t) for s, t in zip(selected, triangles)]
+        counts = [triangles_fn.many([s], view, tau) for s in selected]
+        features = [tile_features(pyramid, view, s, t[0], v[0]) for s, (t, v) in zip(selected, counts)]
         predicted = [model.predict(f) for f in features]
         if policy == "hybrid":
             chosen = hedged_choices({n: np.array([q[n] for q in predicted]) for n in predicted[0]}, model)
