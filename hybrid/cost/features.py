@@ -48,7 +48,7 @@ class TileFeatures:
 
 
 def _hull_area_clipped(pts: np.ndarray, w: float, h: float) -> float:
-    """Area of the convex hull of 2-D points clipped to the rectangle [0, w] x [0, h] (w = inf: unclipped)."""
+    """Area of the convex hull of 2-D points clipped to the rectangle [0, w] x [0, h]."""
     pts = sorted(set(map(tuple, np.round(pts, 6))))
     if len(pts) < 3:
         return 0.0
@@ -65,8 +65,7 @@ def _hull_area_clipped(pts: np.ndarray, w: float, h: float) -> float:
             upper.pop()
         upper.append(p)
     poly = lower[:-1] + upper[:-1]
-    bounds = () if w == np.inf else ((0, 0.0, False), (0, w, True), (1, 0.0, False), (1, h, True))
-    for axis, bound, keep_less in bounds:
+    for axis, bound, keep_less in ((0, 0.0, False), (0, w, True), (1, 0.0, False), (1, h, True)):
         out = []
         for i, cur in enumerate(poly):
             prev = poly[i - 1]
