@@ -17,7 +17,7 @@ import pandas as pd
 POLICIES = ("raster", "raster_gs", "raycast", "heuristic", "hybrid", "oracle")
 
 
-def run_benchmark(ctx, hf, flights: dict, tau: float = 2 / 3, repeats: int = 3, tile_size: int = 128) -> tuple:
+def run_benchmark(ctx, hf, flights: dict, tau: float = 2 / 3, repeats: int = 5, tile_size: int = 128) -> tuple:
     """(frames table, per-tile table): wall ms per policy and frame; predicted vs measured per tile.
 
     The policies of a flight are interleaved: every repeat draws each frame with every policy in turn, so a
@@ -103,7 +103,7 @@ def summarize(frames: pd.DataFrame, tiles: pd.DataFrame, model) -> dict[str, pd.
     return out
 
 
-def run(ctx, frames: int = 8, size: str = "640x360", tau: float = 2 / 3, repeats: int = 3,
+def run(ctx, frames: int = 8, size: str = "640x360", tau: float = 2 / 3, repeats: int = 5,
         flights=("flyover", "orbit"), tile_size: int = 128) -> dict[str, pd.DataFrame]:
     """The benchmark on Puget: its tables keyed by title; size WIDTHxHEIGHT in pixels, tau in pixels."""
     from hybrid.camera.flight import preset
@@ -128,7 +128,7 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=8)
     ap.add_argument("--size", default="640x360")
     ap.add_argument("--tau", type=float, default=2 / 3)
-    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--flights", default="flyover,orbit")
     a = ap.parse_args(argv)
     ctx = shared_context()
