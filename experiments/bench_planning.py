@@ -44,7 +44,7 @@ def run_benchmark(hf, flights: dict, model, tile_sizes=(256, 128), taus=(2 / 3,)
             for tau in taus:
                 for k, view in enumerate(views):
                     sel = select_tiles(pyramid, view, tau)
-                    tri = est.many(sel, view, tau)                      # warm: per-tile node data
+                    tri, vis = est.many(sel, view, tau)                 # warm: per-tile node data
                     rows.append({
                         "flight": fname, "tile_size": size, "tau": tau, "frame": k, "tiles": len(sel),
                         "plan per tile ms": _median_ms(lambda: plan_frame(pyramid, view, model, batch=False), repeats),
@@ -52,8 +52,8 @@ def run_benchmark(hf, flights: dict, model, tile_sizes=(256, 128), taus=(2 / 3,)
                         "select ms": _median_ms(lambda: select_tiles(pyramid, view, tau), repeats),
                         "triangles ms": _median_ms(lambda: est.many(sel, view, tau), repeats),
                         "features per tile ms": _median_ms(
-                            lambda: [tile_features(pyramid, view, s, t) for s, t in zip(sel, tri)], repeats),
-                        "features batch ms": _median_ms(lambda: feature_columns(pyramid, view, sel, tri), repeats)})
+                            lambda: [tile_features(pyramid, view, s, t, v) for s, t, v in zip(sel, tri, vis)], repeats),
+                        "features batch ms": _median_ms(lambda: feature_columns(pyramid, view, sel, tri, vis), repeats)})
     return pd.DataFrame(rows)
 
 

@@ -257,19 +257,3 @@ def fan_at(P: np.ndarray, u: np.ndarray, v: np.ndarray, dropped) -> np.ndarray:
         edge = np.where((dropped & bit) != 0, straight, split)
         out = np.where(sector == sec, c + w * (edge - c), out)
     return out
-
-
-def split_errors(pyr: ErrorPyramid) -> np.ndarray:
-    """Sorted effective errors (metres) of every node that can split (local levels >= 1) of a tile."""
-    if pyr.top < 1:
-        return np.zeros(0)
-    return np.sort(np.concatenate([e.ravel() for e in pyr.effective[1:]]))
-
-
-def estimate_triangles(sorted_errors: np.ndarray, tolerance: float) -> int:
-    """Triangles of a tile's quadtree at a tolerance (metres): 8 per tilelet, before restriction and stitching.
-
-    A node splits when its effective error exceeds the tolerance, adding 3 tilelets; one binary search.
-    """
-    splits = len(sorted_errors) - int(np.searchsorted(sorted_errors, float(tolerance), side="right"))
-    return 8 * (1 + 3 * splits)

@@ -148,10 +148,12 @@ def test_triangle_estimate_follows_the_drawn_count(ctx, puget_full):
             shown.append(np.sum(many[0] * many[1]) / culled.sum())
             assert shown[-1] < 0.9 * many[0].sum() / culled.sum()  # the share is nearer than taking all as seen
             assert culled.sum() < 0.9 * drawn.sum() and np.all((many[1] > 0) & (many[1] <= 1))
-            # the old form: every node of a tile at the tile's nearest distance
-            from raster.quadtree import estimate_triangles, split_errors
-            old = [estimate_triangles(split_errors(error_pyramid(r.pyramid.tile(p.key).heights, est.beta)),
-                                      2 / 3 * p.selected.distance / v.pixels_per_radian) for p in plans]
+            # the old form: every node of a tile (local levels >= 1) at the tile's nearest distance
+            old = []
+            for p in plans:
+                eff = error_pyramid(r.pyramid.tile(p.key).heights, est.beta).effective[1:]
+                tol = 2 / 3 * p.selected.distance / v.pixels_per_radian
+                old.append(8 * (1 + 3 * sum(int(np.sum(e > tol)) for e in eff)))
             nearest.append(np.sum(old) / drawn.sum())
     assert len(ratios) > 20
     assert all(0.9 <= f <= 1.15 for f in frames), frames
