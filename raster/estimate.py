@@ -29,18 +29,17 @@ class TileNodes:
     """What the estimate needs of one tile's quadtree (metres, world frame): errors and where the nodes are.
 
     fine_error: effective errors of the nodes no larger than a block, largest first (fine_neg: their negatives,
-    ascending, for binary searches); fine_block: the block each lies in (row-major, BLOCKS² blocks); block_lo/hi: the blocks' boxes (BLOCKS², 3); coarse_error and coarse_lo/hi:
-    the larger nodes below the root with their grown boxes; root: 1 where the tile's root can split, else 0.
+    ascending, for binary searches); fine_box: the block each lies in (row-major, BLOCKS² blocks); coarse_error:
+    the larger nodes below the root; box_lo/hi: the blocks' boxes, then the larger nodes' grown boxes
+    (BLOCKS² + coarse, 3); root: 1 where the tile's root can split, else 0.
     """
 
     fine_error: np.ndarray
     fine_neg: np.ndarray
-    fine_block: np.ndarray
-    block_lo: np.ndarray
-    block_hi: np.ndarray
+    fine_box: np.ndarray
     coarse_error: np.ndarray
-    coarse_lo: np.ndarray
-    coarse_hi: np.ndarray
+    box_lo: np.ndarray
+    box_hi: np.ndarray
     root: int
 
 
@@ -81,8 +80,9 @@ def tile_nodes(tile, beta: float = GPU_BETA) -> TileNodes:
         return np.zeros((0,) if width is None else (0, width), dtype)
     fe, fb = cat(fine_e, np.float64), cat(fine_b, np.int64)
     order = np.argsort(-fe, kind="stable")
-    return TileNodes(fe[order], -fe[order], fb[order], block_lo, block_hi, cat(coarse_e, np.float64),
-                     cat(coarse_lo, np.float64, 3), cat(coarse_hi, np.float64, 3), int(top >= 1))
+    return TileNodes(fe[order], -fe[order], fb[order], cat(coarse_e, np.float64),
+                     np.concatenate([block_lo, cat(coarse_lo, np.float64, 3)]),
+                     np.concatenate([block_hi, cat(coarse_hi, np.float64, 3)]), int(top >= 1))
 
 
 def estimate_many(nodes: list[TileNodes], eye, k_tau: float, planes=None) -> tuple[np.ndarray, np.ndarray]:
@@ -93,27 +93,24 @@ def estimate_many(nodes: list[TileNodes], eye, k_tau: float, planes=None) -> tup
     if not b:
         return np.zeros(0, np.int64), np.zeros(0)
     eye = np.asarray(eye, dtype=np.float64)
-    nb = len(nodes[0].block_lo)
-    blo, bhi = np.concatenate([t.block_lo for t in nodes]), np.concatenate([t.block_hi for t in nodes])
-    d_block = box_distances(eye, blo, bhi)
-    seen = np.ones(len(blo), bool) if planes is None else box_classes(planes, blo - eye, bhi - eye) >= 0
+    nbox, nc = len(nodes[0].box_lo), len(nodes[0].coarse_error)     # the same for every tile of a pyramid
+    nb = nbox - nc
+    lo, hi = np.concatenate([t.box_lo for t in nodes]), np.concatenate([t.box_hi for t in nodes])
+    d = box_distances(eye, lo, hi).reshape(b, nbox)
+    seen = (np.ones(len(lo), bool) if planes is None else box_classes(planes, lo - eye, hi - eye) >= 0).reshape(b, nbox)
     # a node splits only if E * k_tau exceeds its block's distance, so at least its tile's nearest block's:
     # only each tile's leading (largest) errors above that need their block's distance
-    lead = d_block.reshape(b, nb).min(axis=1) / k_tau
+    lead = d[:, :nb].min(axis=1) / k_tau
     sizes = np.array([int(np.searchsorted(t.fine_neg, -c, side="left")) for t, c in zip(nodes, lead.tolist())])
     tile_of = np.repeat(np.arange(b), sizes)
-    block = np.concatenate([t.fine_block[:c] for t, c in zip(nodes, sizes)]) + tile_of * nb
-    split = np.concatenate([t.fine_error[:c] for t, c in zip(nodes, sizes)]) * k_tau > d_block[block]
+    box = np.concatenate([t.fine_box[:c] for t, c in zip(nodes, sizes)]) + tile_of * nbox
+    split = np.concatenate([t.fine_error[:c] for t, c in zip(nodes, sizes)]) * k_tau > d.reshape(-1)[box]
     splits = np.bincount(tile_of, split, minlength=b)
-    shown = np.bincount(tile_of, split & seen[block], minlength=b)
-    csizes = np.array([len(t.coarse_error) for t in nodes])
-    if csizes.sum():
-        clo, chi = np.concatenate([t.coarse_lo for t in nodes]), np.concatenate([t.coarse_hi for t in nodes])
-        ctile = np.repeat(np.arange(b), csizes)
-        csplit = np.concatenate([t.coarse_error for t in nodes]) * k_tau > box_distances(eye, clo, chi)
-        cseen = np.ones(len(clo), bool) if planes is None else box_classes(planes, clo - eye, chi - eye) >= 0
-        splits = splits + np.bincount(ctile, csplit, minlength=b)
-        shown = shown + np.bincount(ctile, csplit & cseen, minlength=b)
+    shown = np.bincount(tile_of, split & seen.reshape(-1)[box], minlength=b)
+    if nc:
+        csplit = np.stack([t.coarse_error for t in nodes]) * k_tau > d[:, nb:]
+        splits = splits + csplit.sum(axis=1)
+        shown = shown + (csplit & seen[:, nb:]).sum(axis=1)
     root = np.array([t.root for t in nodes])
     triangles = 8 * (1 + 3 * (splits + root))
     return triangles.astype(np.int64), 8 * (1 + 3 * (shown + root)) / triangles

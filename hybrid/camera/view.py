@@ -163,12 +163,15 @@ class View:
     def frustum_planes_rel(self) -> np.ndarray:
         """6x4 planes (a, b, c, d), a*x+b*y+c*z+d >= 0 inside, for eye-relative world points; unit normals.
 
-        Order: left, right, bottom, top, near, far.
+        Order: left, right, bottom, top, near, far. Computed once per view (read-only).
         """
-        m = self.view_proj_rel
-        rows = [m[3] + m[0], m[3] - m[0], m[3] + m[1], m[3] - m[1], m[3] - m[2], m[2]]
-        planes = np.array(rows)
-        planes /= np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
+        planes = self.__dict__.get("_planes_rel")
+        if planes is None:
+            m = self.view_proj_rel
+            planes = np.array([m[3] + m[0], m[3] - m[0], m[3] + m[1], m[3] - m[1], m[3] - m[2], m[2]])
+            planes /= np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
+            planes.setflags(write=False)
+            self.__dict__["_planes_rel"] = planes
         return planes
 
     # --- rays and depth -----------------------------------------------------------------------
