@@ -33,7 +33,8 @@ from .fans import block2, cell_max, dilate4, fan_deviation, grow3
 NODE_EXACT_SPAN = 1024          # node sides (level-0 cells) up to which node errors are measured exactly
 SLICE_ROWS = 128                # sample rows measured at once inside a block (memory bound)
 NODE_BAND = 1 << 20             # nodes per band of a level's pass (memory bound)
-CHUNK = 512                     # chunk side of the node arrays (nodes)
+CHUNK = 512                     # chunk side of the build's working arrays (nodes)
+MIN_CHUNK = 8                   # smallest chunk side of the final node arrays (nodes)
 
 
 def node_square(n: int, max_level: int) -> tuple[int, int]:
@@ -72,11 +73,17 @@ def _window(lv0, rows: int, cols: int, r0: int, r1: int, c0: int, c1: int) -> np
     return w[np.ix_(ri - a0, ci - c_0)]
 
 
-def _array(g, name: str, total: int, dtype: str):
+def _array(g, name: str, total: int, dtype: str, chunk: int = CHUNK):
     if name in g:
         return g[name]
-    c = min(total, CHUNK)
+    c = min(total, chunk)
     return g.create_array(name, shape=(total, total), chunks=(c, c), dtype=dtype, fill_value=np.nan)
+
+
+def tile_chunk(n: int, level: int) -> int:
+    """Chunk side (nodes) of global node level ``level`` in a store of n-cell tiles: the nodes a level-0 tile
+    has there (at least MIN_CHUNK), so a tile's window and its one-node apron read a few small chunks."""
+    return max(MIN_CHUNK, n >> (level + 1))
 
 
 def _direct_band(lv0, rows, cols, R, B, gx, br) -> tuple[list, np.ndarray, np.ndarray]:
@@ -174,7 +181,7 @@ def build_nodes(g, rows: int, cols: int, n: int, max_level: int, beta: float, ma
             arr["error"][a0:a1, :] = e
             arr["eff"][a0:a1, :] = eff
             mark(key, i + 1, f"node level {lev}, band {i + 1}")
-        final = {k: _array(g, f"nodes/{k}/{lev}", total, "f4") for k in ("effective", "zlo", "zhi")}
+        final = {k: _array(g, f"nodes/{k}/{lev}", total, "f4", tile_chunk(n, lev)) for k in ("effective", "zlo", "zhi")}
         for i, a0 in enumerate(starts):                       # pass 2: float32 errors, 3x3 box ranges
             if len(starts) + i < done:
                 continue
