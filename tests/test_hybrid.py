@@ -28,9 +28,13 @@ SPLIT = split_model(4000)
 
 
 def median_split(pyramid, view) -> CostModel:
-    """split_model at the median triangle estimate of the view's tiles: about half the tiles either way."""
+    """split_model between the two distinct triangle estimates nearest the middle of the view's tiles: about half
+    the tiles either way, and both ways however many tiles share a count."""
     from hybrid.cost.planner import plan_frame
-    return split_model(float(np.median([p.features.triangles for p in plan_frame(pyramid, view, SPLIT)])))
+    t = np.sort([p.features.triangles for p in plan_frame(pyramid, view, SPLIT)])
+    cuts = np.nonzero(t[1:] > t[:-1])[0] + 1                     # k: t[k - 1] < t[k]
+    k = int(cuts[np.argmin(np.abs(cuts - len(t) / 2))]) if len(cuts) else len(t) // 2
+    return split_model(0.5 * (t[k - 1] + t[k]))
 
 
 def _views(hf):
