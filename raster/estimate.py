@@ -143,4 +143,5 @@ class TileletTriangleEstimator:
 
     def __call__(self, key: TileKey, selected: SelectedTile, view: View, tau: float) -> int:
         """Estimated triangles of tile ``key`` at ``view`` for the error bound tau (pixels)."""
-        return int(self.many([selected], view, tau)[0][0])
+        return int(estimate_many([self._tile(key)], view.eye, float(view.pixels_per_radian) / tau,
+                                 view.frustum_planes_rel())[0][0])

@@ -8,7 +8,8 @@
 //
 // Heights are 16-bit codes (R16UI, hybrid/tiles/quantize.py): metres = float32(dq.x + dq.y * (q + dqb)). The
 // max mipmap texture holds levels 1..log2 N (its level k is max-mip level k + 1); level 0 is the largest of
-// a cell's four corner codes (rc_code); steps compare against a float32 upper bound of it (rc_bound). Maxima are taken on codes: dequantisation is monotone.
+// a cell's four corner codes (rc_code); steps compare against a float32 upper bound of it (rc_bound). Maxima
+// are taken on codes: dequantisation is monotone.
 //
 // Defines: RECON 0 planes (piecewise constant: a cell is a box of its max-mip height), 1 linear approximation
 // planes (Qu 3.1), 2 triangle mesh with the SW-NE diagonal (Qu 3.2), 3 bilinear patch (analytic);

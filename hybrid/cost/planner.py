@@ -110,8 +110,8 @@ def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
 
     A pure policy (one strategy for every tile) needs no features: its plans carry none. A mixed policy gets
     features, the model's predicted ms of every candidate it knows and its choice; ``triangles_fn`` gives the raster
-    mesh's triangle counts and their share inside the frustum (default: the raster strategy's CPU estimate from the registry, one per
-    pyramid). Features and predictions of all tiles are computed as arrays; ``batch=False`` computes them
+    mesh's triangle counts and their share inside the frustum (default: the raster strategy's CPU estimate from
+    the registry, one per pyramid). Features and predictions of all tiles are computed as arrays; ``batch=False`` computes them
     tile by tile instead (the reference path: the same plans, slower).
     """
     if policy not in POLICIES:

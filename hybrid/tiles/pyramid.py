@@ -136,6 +136,8 @@ class TilePyramid:
         self.max_level = int(np.ceil(np.log2(tiles0))) if tiles0 > 1 else 0
         self.size = self.n * (1 << self.max_level) + 1      # samples a side of the addressing square
         self._boxes: dict = {}
+        self._qerr: dict = {}               # level -> quantisation error bounds, made on first use
+        self._on_step = None                # per cell: corners on the source step (hybrid.tiles.quantize)
         self._build_bounds()
 
     @property
@@ -222,14 +224,12 @@ class TilePyramid:
         """Bounds (metres, float64) on the 16-bit quantisation error of the level's tiles (tx, ty)
         (hybrid.tiles.quantize): 0 where the tile's heights are on the terrain's source step, else
         range / 131070 plus float32 rounding; tile selection adds them to the geometric errors."""
-        if not hasattr(self, "_qerr"):
-            self._qerr = {}
         if level not in self._qerr:
             lo, hi = self._zmin[level], self._zmax[level]
             exact = False
             step = getattr(self.hf, "source_step", None)
             if step is not None and isinstance(self.hf, HeightField):
-                if not hasattr(self, "_on_step"):
+                if self._on_step is None:
                     self._on_step = on_step_cells(self.hf.heights, step)
                 on = _block_reduce(self._on_step, self.n << level, np.minimum)
                 exact = on & ((hi.astype(np.float64) - lo) / float(step[0]) <= Q_MAX - 0.5)
