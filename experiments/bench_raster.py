@@ -129,14 +129,17 @@ def selection_rows(ctx, repeats=5):
 
 
 def memory_rows(ctx, hf, tiles):
-    """Rows (representation, bytes per tile, triangles, bytes per triangle)."""
+    """Rows (representation, bytes per tile, triangles, bytes per triangle); the tilelet strategies' resident
+    bytes per tile (heights, nodes, skirts, commands), then what their frame arena holds per drawn leaf."""
+    from raster.arena import INDEX_BYTES, RECORD_BYTES, VERTEX_BYTES
     from raster.tilelets import TileletStrategy
     from raster.tin import TinStrategy
     from raster.trianglelist import TriangleListStrategy
     rows = []
     tile = tiles[0]
     full_tris = 2 * tile.n * tile.n
-    for name, cls, kw in (("tilelets (GS)", TileletStrategy, {}), ("fullres list", TriangleListStrategy, {}),
+    for name, cls, kw in (("tilelets resident (raster, raster_gs)", TileletStrategy, {}),
+                          ("fullres list", TriangleListStrategy, {}),
                           ("tin 90% reduced", TinStrategy, {"reduction": 0.9})):
         s = cls(ctx, hf, **kw)
         g = s.upload(tile)
@@ -144,6 +147,9 @@ def memory_rows(ctx, hf, tiles):
         rows.append((name, g.nbytes, tris, f"{g.nbytes / tris:.1f}"))
         g.release()
         s.release()
+    for name, per_leaf in (("raster arena, a drawn leaf", VERTEX_BYTES + INDEX_BYTES),
+                           ("raster_gs arena, a drawn leaf", RECORD_BYTES)):
+        rows.append((name, per_leaf, 8, f"{per_leaf / 8:.1f}"))
     rows.append(("paper: list indices", full_tris * 12, full_tris, "12.0 (96 bits)"))
     return rows
 

@@ -29,17 +29,21 @@ class IndexedTileletStrategy(TileletDrawing):
         return (self.prog, self.skirt_prog)
 
     def tile_arrays(self, g: SelectedTileletTile) -> dict:
-        """The tile's leaf vertices with their index buffer, and per-instance skirt segments."""
-        return {"mesh": self.ctx.vertex_array(self.prog, [(g.mesh_vertices, "4f", "a_vertex")],
-                                              index_buffer=g.mesh_indices, index_element_size=4),
-                "skirts": self.ctx.vertex_array(self.skirt_prog, [(g.segments, "3f 3f/i", "a_p", "a_q")])}
+        """The tile's skirt segments, one instance each."""
+        return {"skirts": self.ctx.vertex_array(self.skirt_prog, [(g.segments, "3f 3f/i", "a_p", "a_q")])}
+
+    def arena_arrays(self) -> dict:
+        """The arena's leaf vertices with their index buffer."""
+        a = self.arena
+        return {"mesh": self.ctx.vertex_array(self.prog, [(a.vertices, "4f", "a_vertex")], index_buffer=a.indices,
+                                              index_element_size=4)}
 
     def draw_tile(self, g: SelectedTileletTile, tile, view, wireframe: bool = False) -> None:
-        """The tile's leaves as indexed triangles."""
+        """The tile's leaves as indexed triangles (count and first index from the selection)."""
         ctx = self.ctx
         ctx.wireframe = bool(wireframe)
         try:
-            g.vaos["mesh"].render_indirect(g.control, mode=ctx.TRIANGLES, count=1, first=CMD_TEMPLATE)
+            self.arena_vaos()["mesh"].render_indirect(g.control, mode=ctx.TRIANGLES, count=1, first=CMD_TEMPLATE)
         finally:
             ctx.wireframe = False
 

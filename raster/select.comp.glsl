@@ -9,13 +9,15 @@
 #include "raster/tile_block"
 layout(local_size_x = 64) in;
 layout(std430, binding = 0) readonly buffer Nodes { vec4 node[]; };   // E, zlo, zhi, inside; one apron
-layout(std430, binding = 1) writeonly buffer Leaves { uint leaf[]; }; // 13 words a leaf: j0 i0 m drop, h[9]
-layout(std430, binding = 2) buffer Commands { uint cmd[]; };          // indirect draws, 5 words each
+layout(std430, binding = 1) writeonly buffer Leaves { uint leaf[]; }; // arena: 13 words a leaf: j0 i0 m drop, h[9]
+layout(std430, binding = 2) buffer Commands { uint cmd[]; };          // indirect draws, 5 words each, then the
+                                                                      // tile's arena base and pass-0 groups done
 layout(std430, binding = 3) writeonly buffer Skirts { float seg[]; };  // 6 words a skirt segment
-layout(std430, binding = 4) buffer Frame { uint frame_count[]; };     // triangles, leaves, culled, segments
+layout(std430, binding = 4) buffer Frame { uint frame_count[]; };     // triangles, leaves, culled, segments,
+                                                                      // arena leaves reserved, overflow
 
-layout(std430, binding = 7) writeonly buffer MeshVerts { vec4 mesh_vertex[]; }; // 9 a leaf: x y z level
-layout(std430, binding = 8) writeonly buffer MeshIndex { uint mesh_index[]; };  // 24 a leaf
+layout(std430, binding = 7) writeonly buffer MeshVerts { vec4 mesh_vertex[]; }; // arena: 9 a leaf: x y z level
+layout(std430, binding = 8) writeonly buffer MeshIndex { uint mesh_index[]; };  // arena: 24 a leaf
 layout(std430, binding = 6) buffer Found { uint found[]; };          // groups x, 1, 1, leaves, leaves[]
 layout(std430, binding = 5) readonly buffer Heights { float height[]; };  // (n+1)^2 tile samples, row from
                                                                          // south, metres from the origin z
@@ -26,6 +28,13 @@ uniform bool morph;             // geomorph the posts a split creates (off: they
 uniform bool write_records;     // leaf records for the geometry-shader path (raster.tilelets)
 uniform bool write_mesh;        // vertices and indices for the plain indexed draw (raster.indexed)
 uniform vec4 planes[6];         // eye-relative frustum planes, inside where dot >= 0
+uniform uint arena_capacity;    // leaves the frame's arena holds (raster.arena)
+
+const int CMD_POINTS_ = 0, CMD_TEMPLATE_ = 1;   // indirect commands (raster.selection CMD_*)
+const int BASE_WORD = 15;       // cmd[]: the tile's first leaf in the arena
+const int DONE_WORD = 16;       // cmd[]: pass-0 work groups finished
+const int ARENA_FIELD = 4;      // frame_count[]: arena leaves reserved this frame
+const int OVERFLOW_FIELD = 5;   // frame_count[]: leaves of tiles that did not fit (drawn nothing)
 
 int side_of(int m) { return n_cells >> (m + 1); }
 
@@ -228,7 +237,7 @@ void emit_leaf(int m, int a, int b) {
         if (a == 0) skirts |= skirt_edges & 4;
         if (a == s - 1) skirts |= skirt_edges & 8;
     }
-    uint idx = reserve(0, 5, 1);
+    uint idx = cmd[BASE_WORD] + reserve(0, 5, 1);
     if (write_mesh) put_mesh(idx, m, j0, i0, k, drop, h);
     add_total(0, uint(8 - bitCount(drop)));
     if (write_records) {
@@ -254,11 +263,10 @@ void emit_leaf(int m, int a, int b) {
 // pass 1; pass 1, dispatched from that count, has one invocation per leaf and emits it.
 #endif
 
-void main() {
-    uint gid = gl_GlobalInvocationID.x;
 #if PASS == 0
-    // nodes of local level >= 1 (level 0 only in a 2-cell tile): a split level-1 node lists its four
-    // children itself, which keeps three quarters of the nodes out of this pass
+// nodes of local level >= 1 (level 0 only in a 2-cell tile): a split level-1 node lists its four
+// children itself, which keeps three quarters of the nodes out of this pass
+void list_node(uint gid) {
     int id = first_id + int(gid);
     if (id >= starts(top + 1)) return;
     int m = min(1, top);
@@ -279,6 +287,33 @@ void main() {
     if (cull && outside(m, a, b)) { add_total(2, 1u); return; }
     uint i = reserve_found();
     found[4u + i] = uint(m) | (uint(a) << 4) | (uint(b) << 18);
+}
+
+// Run by the last pass-0 work group of the tile, when every leaf is listed: the tile's leaves get their
+// place in the frame's arena and the draw commands start there; a tile that does not fit emits nothing.
+void reserve_arena() {
+    uint count = atomicAdd(found[3], 0u);
+    uint base = atomicAdd(frame_count[ARENA_FIELD], count);
+    if (base + count > arena_capacity) {
+        atomicAdd(frame_count[OVERFLOW_FIELD], count);
+        found[0] = 0u;
+        found[3] = 0u;
+        base = 0u;
+    }
+    cmd[BASE_WORD] = base;
+    cmd[5 * CMD_POINTS_ + 2] = base;           // DrawArraysIndirect: first
+    cmd[5 * CMD_TEMPLATE_ + 2] = 24u * base;   // DrawElementsIndirect: first index
+}
+#endif
+
+void main() {
+    uint gid = gl_GlobalInvocationID.x;
+#if PASS == 0
+    list_node(gid);
+    memoryBarrierBuffer();
+    barrier();
+    if (gl_LocalInvocationIndex == 0u && atomicAdd(cmd[DONE_WORD], 1u) == gl_NumWorkGroups.x - 1u)
+        reserve_arena();
 #else
     if (gid >= found[3]) return;
     uint w = found[4u + gid];

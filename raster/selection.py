@@ -1,10 +1,12 @@
 """GPU-resident tilelet quadtrees: what a tile keeps on the GPU, and the per-frame leaf selection (compute).
 
 At upload a tile gets its heights (a float32 storage buffer), its node errors and boxes with a one-node apron
-(raster.nodes), a leaf buffer with room for every possible leaf, a skirt-segment buffer and its indirect draw
-commands. Per frame the CPU writes one block of parameters per tile and issues the dispatches: the compute shader (select.comp.glsl) picks the leaves for the
-view, drops midpoints toward coarser neighbours, geomorphs and culls, and fills the indirect commands; the
-draw (geometry shader or indexed triangles, see raster.tilelets and raster.indexed) reads them.
+(raster.nodes), a skirt-segment buffer and a control buffer (its indirect draw commands and leaf list). Per
+frame the CPU writes one block of parameters per tile and issues the dispatches: the compute shader
+(select.comp.glsl) picks the leaves for the view, drops midpoints toward coarser neighbours, geomorphs and
+culls, writes the leaves into the frame's arena (raster.arena, shared by the frame's tiles and sized by what
+the view selects) and fills the indirect commands; the draw (geometry shader or indexed triangles, see
+raster.tilelets and raster.indexed) reads them.
 """
 from __future__ import annotations
 
@@ -15,6 +17,7 @@ from hybrid.gl.context import gl_bytes
 from hybrid.gl.programs import compute_shader, set_uniform
 from hybrid.gl.textures import terrain_texture
 
+from .arena import LeafArena
 from .nodes import nodes_for, tile_levels, tile_node_block
 from .quadtree import GPU_BETA
 from .tileblock import TileBlocks, register_tile_block, tile_blocks
@@ -24,7 +27,8 @@ LEAF_FORMAT = "4i 4f 4f 1f"
 SEGMENT_WORDS = 6               # skirt segment: x, y, height of both ends
 COMMAND_WORDS = 5               # moderngl's indirect command stride: count, instances, first, base, pad
 CMD_POINTS, CMD_TEMPLATE, CMD_SKIRTS = 0, 1, 2
-FRAME_FIELDS = ("triangles", "tilelets", "tilelets_culled", "skirt_segments")
+FRAME_FIELDS = ("triangles", "tilelets", "tilelets_culled", "skirt_segments", "arena_leaves", "arena_overflow")
+BASE_WORD = 15                  # control word: the tile's first leaf in the arena
 _LOCAL = 64                     # compute work group size (select.comp.glsl)
 FOUND_OFFSET = 256              # bytes: where a tile's control buffer holds the pass-0 leaf list
 
@@ -85,8 +89,9 @@ def first_levels(gs, eye_local: np.ndarray, k_tau: float) -> np.ndarray:
 
 
 class SelectedTileletTile:
-    """GPU objects of one tile: heights, node data, leaf (or mesh) and skirt buffers, and a control buffer with
-    the indirect draw commands at its start and the pass-0 leaf list at FOUND_OFFSET."""
+    """GPU objects of one tile: heights, node data, skirt buffer, and a control buffer with the indirect draw
+    commands and the tile's arena base at its start and the pass-0 leaf list at FOUND_OFFSET (the leaves
+    themselves are in the strategy's arena)."""
 
     def __init__(self, strategy, tile):
         ctx = strategy.ctx
@@ -105,29 +110,24 @@ class SelectedTileletTile:
         self.segments = ctx.buffer(reserve=max(4 * self.n, 8) * SEGMENT_WORDS * 4)
         self.control = ctx.buffer(reserve=FOUND_OFFSET + (4 + self.capacity) * 4)
         self.writes = strategy.writes
-        mesh = self.writes == "mesh"            # each strategy allocates only the output its draw reads
-        self.leaves = ctx.buffer(reserve=(1 if mesh else self.capacity) * LEAF_WORDS * 4)
-        self.mesh_vertices = ctx.buffer(reserve=(self.capacity if mesh else 1) * 9 * 16)
-        self.mesh_indices = ctx.buffer(reserve=(self.capacity if mesh else 1) * 24 * 4)
         self.vaos = strategy.tile_arrays(self)
 
     @property
     def nbytes(self) -> int:
         """GPU bytes of the tile's textures and buffers, as the driver reports them."""
-        return gl_bytes(self.heights, self.nodes, self.leaves, self.segments, self.control, self.mesh_vertices,
-                        self.mesh_indices)
+        return gl_bytes(self.heights, self.nodes, self.segments, self.control)
 
     def release(self) -> None:
         """Free the GPU objects."""
         for v in self.vaos.values():
             v.release()
-        for o in (self.leaves, self.mesh_vertices, self.mesh_indices, self.segments, self.control, self.nodes,
-                  self.heights):
+        for o in (self.segments, self.control, self.nodes, self.heights):
             o.release()
 
 
 class TileletSelection:
-    """The part the two tilelet strategies share: terrain texture, the selection shader, per-tile GPU data."""
+    """The part the two tilelet strategies share: terrain texture, the selection shader, the leaf arena,
+    per-tile GPU data."""
 
     kind = "raster"
     writes = "records"          # what the selection writes for the draw: leaf records or a mesh
@@ -141,14 +141,16 @@ class TileletSelection:
         self.texture = terrain_texture(ctx, hf)
         self.frame = ctx.buffer(reserve=4 * len(FRAME_FIELDS))
         self.blocks = TileBlocks(ctx)
+        self.arena = LeafArena(ctx, self.writes)
 
     @property
     def shared_nbytes(self) -> int:
-        """GPU bytes shared by all tiles, as the driver reports them: colour texture, frame counters."""
-        return gl_bytes(self.texture, self.frame, self.blocks.buffer)
+        """GPU bytes shared by all tiles, as the driver reports them: colour texture, frame counters, tile
+        blocks, leaf arena."""
+        return gl_bytes(self.texture, self.frame, self.blocks.buffer) + self.arena.nbytes
 
     def upload(self, tile) -> SelectedTileletTile:
-        """Put one tile on the GPU: heights, node errors and boxes, empty leaf buffers."""
+        """Put one tile on the GPU: heights, node errors and boxes, skirt and control buffers."""
         return SelectedTileletTile(self, tile)
 
     def tile_arrays(self, g: SelectedTileletTile) -> dict:
@@ -198,14 +200,15 @@ class TileletSelection:
         self.set_selection("beta", self.beta)
         self.set_selection("write_records", self.writes == "records")
         self.set_selection("write_mesh", self.writes == "mesh")
+        self.set_selection("arena_capacity", int(self.arena.capacity))
         self.frame.write(np.zeros(len(FRAME_FIELDS), np.uint32).tobytes())
         self.frame.bind_to_storage_buffer(4)
+        self.arena.bind()
         list_pass, emit_pass = self.passes
         for i, (g, tile, sel) in enumerate(items):
             self.blocks.bind(i)
             g.control.write(CONTROL_BLANK)
-            for binding, buf in ((0, g.nodes), (1, g.leaves), (3, g.segments), (5, g.heights), (7, g.mesh_vertices),
-                                 (8, g.mesh_indices)):
+            for binding, buf in ((0, g.nodes), (3, g.segments), (5, g.heights)):
                 buf.bind_to_storage_buffer(binding)
             g.control.bind_to_storage_buffer(2, size=FOUND_OFFSET)
             g.control.bind_to_storage_buffer(6, offset=FOUND_OFFSET)
@@ -221,7 +224,8 @@ class TileletSelection:
         return {f: int(v) for f, v in zip(FRAME_FIELDS, raw)}
 
     def release(self) -> None:
-        """Free the selection shader, the texture and the counters."""
+        """Free the selection shader, the texture, the counters and the arena."""
+        self.arena.release()
         self.blocks.release()
         for o in (*self.passes, self.texture, self.frame):
             if o is not None:

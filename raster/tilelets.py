@@ -14,24 +14,28 @@ from hybrid.gl.edges import TerrainEdges
 from hybrid.gl.programs import program, set_uniform
 from hybrid.gl.shading import resolve_mode
 
-from .selection import CMD_POINTS, LEAF_FORMAT, LEAF_WORDS, SelectedTileletTile, TileletSelection
+from .arena import SHRINK_BELOW
+from .selection import BASE_WORD, CMD_POINTS, LEAF_FORMAT, LEAF_WORDS, SelectedTileletTile, TileletSelection
 from .shading import MODES
 
 GL_CLIP_DISTANCE0 = 0x3000
 
 
-def read_leaves(g: SelectedTileletTile) -> dict:
-    """The leaves the last selection drew for a tile (for tests): level and triangles (non-degenerate) of each,
-    with j0, i0, dropped-edge bits and post heights where the selection wrote leaf records."""
-    count = int(np.frombuffer(g.control.read(size=4), dtype=np.uint32)[0])
+def read_leaves(strategy, g: SelectedTileletTile) -> dict:
+    """The leaves the last selection of a tilelet strategy drew for its tile g (for tests): level and triangles
+    (non-degenerate) of each, with j0, i0, dropped-edge bits and post heights where it wrote leaf records."""
+    words = np.frombuffer(g.control.read(size=(BASE_WORD + 1) * 4), dtype=np.uint32)
+    count, base = int(words[0]), int(words[BASE_WORD])
+    a = strategy.arena
+
+    def read(buf, nbytes: int, dtype) -> np.ndarray:
+        return np.frombuffer(buf.read(size=count * nbytes, offset=base * nbytes), dtype) if count else np.zeros(0, dtype)
     if g.writes == "mesh":
-        v = np.frombuffer(g.mesh_vertices.read(size=max(count, 1) * 9 * 16), np.float32)[:count * 36]
-        i = np.frombuffer(g.mesh_indices.read(size=max(count, 1) * 24 * 4), np.uint32)[:count * 24]
+        v, i = read(a.vertices, 9 * 16, np.float32), read(a.indices, 24 * 4, np.uint32)
         tri = i.reshape(count, 8, 3)
         solid = (tri[..., 0] != tri[..., 1]) & (tri[..., 1] != tri[..., 2]) & (tri[..., 0] != tri[..., 2])
         return {"level": v.reshape(count, 9, 4)[:, 0, 3].astype(np.int32), "triangles": solid.sum(axis=1)}
-    raw = np.frombuffer(g.leaves.read(size=max(count, 1) * LEAF_WORDS * 4), dtype=np.uint32)[:count * LEAF_WORDS]
-    raw = raw.reshape(count, LEAF_WORDS)
+    raw = read(a.records, LEAF_WORDS * 4, np.uint32).reshape(count, LEAF_WORDS)
     drop = raw[:, 3].astype(np.int32)
     return {"j0": raw[:, 0].astype(np.int32), "i0": raw[:, 1].astype(np.int32), "level": raw[:, 2].astype(np.int32),
             "drop": drop, "heights": raw[:, 4:].view(np.float32).copy(),
@@ -48,6 +52,8 @@ class TileletDrawing(TileletSelection):
         self._skirted: list = []          # (block index, tile) of the last draw_tiles call that hang skirts
         self.edges = TerrainEdges(ctx, hf)   # skirts are not drawn for rays from under the sheet
         self.skirt_prog = None                # the program that draws skirts (subclasses)
+        self._arena_vaos = (0, {})            # (arena version, vertex arrays over the arena's buffers)
+        self._need = 0                        # leaves the last selection reserved
 
     @property
     def shared_nbytes(self) -> int:
@@ -61,6 +67,20 @@ class TileletDrawing(TileletSelection):
     def draw_tile(self, g: SelectedTileletTile, tile, view, wireframe: bool = False) -> None:
         """Issue one tile's indirect draw (subclasses)."""
         raise NotImplementedError
+
+    def arena_arrays(self) -> dict:
+        """Vertex arrays over the arena's current buffers (subclasses)."""
+        raise NotImplementedError
+
+    def arena_vaos(self) -> dict:
+        """The vertex arrays over the arena, made again when the arena's buffers were replaced."""
+        version, vaos = self._arena_vaos
+        if version != self.arena.version:
+            for v in vaos.values():
+                v.release()
+            vaos = self.arena_arrays()
+            self._arena_vaos = (self.arena.version, vaos)
+        return vaos
 
     def draw_tile_skirts(self, g: SelectedTileletTile) -> None:
         """Issue one tile's skirt draw (subclasses)."""
@@ -92,12 +112,30 @@ class TileletDrawing(TileletSelection):
 
         ``skirts`` {tile key: edge bits} are selected here and drawn by ``draw_skirts``, which the renderer
         calls after the ray-cast tiles. Counters: triangles (drawn, stitched), tilelets, tilelets_culled,
-        skirt_segments.
+        skirt_segments, arena_leaves (leaves the arena held), arena_overflow (0: the frame drawn missed no leaf),
+        arena_regrown (1 if the arena grew and the frame was drawn again).
         """
         mode = resolve_mode(self.hf, mode, MODES)
         tau = leaf_tau if leaf_tau is not None else tau
         self.set_selection("morph", bool(morph))
         self.set_selection("stitch", bool(stitching))
+        if self._need < SHRINK_BELOW * self.arena.capacity:       # sparse since the last frame: shrink first
+            self.arena.fit(self._need)
+        counters = self._select_draw(target, view, items, tau, mode, wireframe, culling, skirts)
+        regrown = 0
+        if counters["arena_overflow"]:       # some tiles did not fit and drew nothing: grow, draw them
+            self.arena.fit(counters["arena_leaves"])
+            regrown = 1
+            counters = self._select_draw(target, view, items, tau, mode, wireframe, culling, skirts)
+            if counters["arena_overflow"]:
+                raise RuntimeError(f"leaf arena of {self.arena.capacity} leaves overflowed after growing for "
+                                   f"{counters['arena_leaves']}")
+        self._need = counters["arena_leaves"]
+        counters["arena_regrown"] = regrown
+        return counters
+
+    def _select_draw(self, target, view, items, tau, mode, wireframe, culling, skirts) -> dict:
+        """One selection and draw of the items (the depth test keeps a repeated draw's pixels as they were)."""
         self.select_leaves(view, items, tau, culling, skirts)
         ctx = self.ctx
         vp = view.view_proj_rel.T.astype(np.float32).tobytes()
@@ -126,6 +164,8 @@ class TileletDrawing(TileletSelection):
         """Free the programs, the selection shader, the texture and the counters."""
         for prog in self.programs():
             prog.release()
+        for v in self._arena_vaos[1].values():
+            v.release()
         self.edges.release()
         super().release()
 
@@ -145,16 +185,21 @@ class TileletStrategy(TileletDrawing):
         return (self.prog, self.skirt_prog)
 
     def tile_arrays(self, g: SelectedTileletTile) -> dict:
-        """Two vertex arrays of the leaf buffer as points: for the mesh and for the skirt program."""
-        attrs = [(g.leaves, LEAF_FORMAT, "a_node", "a_h0", "a_h1", "a_h8")]
+        """None per tile: the leaves are drawn from the arena."""
+        return {}
+
+    def arena_arrays(self) -> dict:
+        """Two vertex arrays of the arena's leaf records as points: for the mesh and for the skirt program."""
+        attrs = [(self.arena.records, LEAF_FORMAT, "a_node", "a_h0", "a_h1", "a_h8")]
         return {"points": self.ctx.vertex_array(self.prog, attrs),
                 "skirt_points": self.ctx.vertex_array(self.skirt_prog, attrs)}
 
     def draw_tile(self, g: SelectedTileletTile, tile, view, wireframe: bool = False) -> None:
-        """The tile's leaves as points through the geometry shader (count from the selection)."""
+        """The tile's leaves as points through the geometry shader (count and first leaf from the selection)."""
         self.prog["skirt_pass"].value = False
-        g.vaos["points"].render_indirect(g.control, mode=self.ctx.POINTS, count=1, first=CMD_POINTS)
+        self.arena_vaos()["points"].render_indirect(g.control, mode=self.ctx.POINTS, count=1, first=CMD_POINTS)
 
     def draw_tile_skirts(self, g: SelectedTileletTile) -> None:
         """The tile's leaves again through the geometry shader's skirt program, emitting only their skirts."""
-        g.vaos["skirt_points"].render_indirect(g.control, mode=self.ctx.POINTS, count=1, first=CMD_POINTS)
+        self.arena_vaos()["skirt_points"].render_indirect(g.control, mode=self.ctx.POINTS, count=1,
+                                                          first=CMD_POINTS)

@@ -138,13 +138,13 @@ def test_triangle_estimate_follows_the_drawn_count(ctx, puget_full):
             r.render(v, culling=False)
             plans = r.plan(v)
             many = est.many([p.selected for p in plans], v, 2 / 3)
-            drawn = np.array([read_leaves(r.cache.entries[("raster", p.key)])["triangles"].sum() for p in plans])
+            drawn = np.array([read_leaves(r.strategies["raster"], r.cache.entries[("raster", p.key)])["triangles"].sum() for p in plans])
             single = np.array([est(p.key, p.selected, v, 2 / 3) for p in plans])
             assert np.array_equal(many[0], single)                 # the frame's batch is the tiles' estimates
             ratios += list(many[0] / drawn)
             frames.append(many[0].sum() / drawn.sum())
             r.render(v)                                             # with tilelet culling: the visible share
-            culled = np.array([read_leaves(r.cache.entries[("raster", p.key)])["triangles"].sum() for p in plans])
+            culled = np.array([read_leaves(r.strategies["raster"], r.cache.entries[("raster", p.key)])["triangles"].sum() for p in plans])
             shown.append(np.sum(many[0] * many[1]) / culled.sum())
             assert shown[-1] < 0.9 * many[0].sum() / culled.sum()  # the share is nearer than taking all as seen
             assert culled.sum() < 0.9 * drawn.sum() and np.all((many[1] > 0) & (many[1] <= 1))

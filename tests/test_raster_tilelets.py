@@ -30,7 +30,7 @@ def renderers(ctx, puget257, synthetic):
 def leaf_sets(r, name, view):
     """The leaves every tile of the view's frame drew: {(level, tx, ty): read_leaves dict}."""
     keys = {p.key for p in r.plan(view)}
-    return {(k.level, k.tx, k.ty): read_leaves(g) for (s, k), g in r.cache.entries.items() if s == name and k in keys}
+    return {(k.level, k.tx, k.ty): read_leaves(r.strategies[name], g) for (s, k), g in r.cache.entries.items() if s == name and k in keys}
 
 
 @pytest.mark.parametrize("name", ["puget", "cliff", "spike", "staircase"])
@@ -159,3 +159,53 @@ def test_modes_and_far_origin(ctx, renderers):
         r.render(view, leaf_tau=0.0)
     with pytest.raises(TerrabenchError, match="no texture"):
         r.render(view, mode="texture")
+
+
+@pytest.mark.parametrize("strategy", STRATEGIES)
+def test_arena_overflow_grows_and_draws_every_leaf(ctx, puget257, strategy):
+    """A frame whose leaves do not fit the arena is drawn again into a grown one: the image is the image of a
+    frame that fitted, pixel for pixel, and the counters say it grew."""
+    from raster.arena import LeafArena, arena_leaves
+    view = border_views(puget257)[0]
+    roomy = Renderer(ctx, puget257, strategy, tile_size=64)
+    tight = Renderer(ctx, puget257, strategy, tile_size=64)
+    try:
+        want = roomy.render(view, mode="shaded", tau=0.5)
+        s = tight.strategies[strategy]
+        s.arena.release()
+        s.arena = LeafArena(ctx, s.writes, capacity=16)
+        got = tight.render(view, mode="shaded", tau=0.5)
+        c = got.stats.counters
+        assert c["arena_regrown"] == 1 and c["arena_overflow"] == 0
+        assert c["arena_leaves"] == want.stats.counters["arena_leaves"] > 16
+        assert s.arena.capacity == arena_leaves(c["arena_leaves"])
+        assert np.array_equal(got.colour, want.colour)
+        assert np.array_equal(got.distance, want.distance)
+        again = tight.render(view, mode="shaded", tau=0.5)
+        assert again.stats.counters["arena_regrown"] == 0            # it fits now
+    finally:
+        roomy.release()
+        tight.release()
+
+
+def test_arena_follows_the_view_not_the_tiles(ctx, puget257):
+    """The arena holds the leaves the view selects (within GROW of them, at least MIN_LEAVES), grows for a fine
+    view and shrinks back for a coarse one; tiles keep no leaf storage of their own."""
+    from raster.arena import GROW, MIN_LEAVES
+    view = border_views(puget257)[0]
+    r = Renderer(ctx, puget257, "raster", tile_size=64)
+    try:
+        s = r.strategies["raster"]
+        caps = []
+        for k, tau in enumerate((0.3, 0.3, 40.0, 40.0)):
+            res = r.render(view, mode="shaded", tau=tau)
+            need = res.stats.counters["arena_leaves"]
+            assert need == res.stats.counters["tilelets"] <= s.arena.capacity
+            if k % 2:                  # the second frame at a tau: sized for it (a shrink waits a frame)
+                assert s.arena.capacity <= max(MIN_LEAVES, GROW * need + 1024)
+            caps.append(s.arena.capacity)
+        assert caps[0] > MIN_LEAVES and caps[-1] < caps[0]
+        possible = sum((g.n // 2) ** 2 for (name, _), g in r.cache.entries.items() if name == "raster")
+        assert s.arena.capacity < possible / 4        # a fraction of the leaves the resident tiles could hold
+    finally:
+        r.release()

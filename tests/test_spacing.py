@@ -218,7 +218,7 @@ def test_gpu_leaf_selection_measures_node_boxes_per_axis(ctx, spacing):
                     hi = rel + [(b + 2) * size * tile.spacing_x, (a + 2) * size * tile.spacing_y, zhi]
                     return e * k_tau, np.linalg.norm(np.maximum(np.maximum(lo, -hi), 0.0))
 
-                leaves = read_leaves(r.cache.entries[("raster_gs", p.key)])
+                leaves = read_leaves(r.strategies["raster_gs"], r.cache.entries[("raster_gs", p.key)])
                 for m, i0, j0 in zip(leaves["level"], leaves["i0"], leaves["j0"]):
                     a, b = int(i0) >> (int(m) + 1), int(j0) >> (int(m) + 1)
                     levels.add(int(m))

@@ -1,0 +1,78 @@
+"""The frame's leaf arena of a tilelet strategy: one set of output buffers that every raster tile of a frame
+writes its selected leaves into, sized by what the view selects rather than by what a tile could hold.
+
+The GPU selection (select.comp.glsl) reserves each tile's leaves in the arena once its listing pass knows
+their count; a tile whose leaves do not fit draws nothing and is counted as overflow, and the strategy then
+grows the arena and draws the frame again (raster.tilelets), so no frame it returns misses a leaf. Between
+frames the arena shrinks when the frame's leaves fill under a quarter of it. Capacity is in leaves: a leaf
+is one 13-word record (geometry-shader path) or 9 vertices and 24 indices (indexed path).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from hybrid.gl.context import gl_bytes
+
+MIN_LEAVES = 4096               # smallest arena, leaves
+GROW = 1.5                      # a grown or shrunk arena holds this many times the frame's leaves
+SHRINK_BELOW = 0.25             # shrink when the frame's leaves fill less than this share
+RECORD_BYTES = 13 * 4           # raster.selection.LEAF_WORDS words a leaf record
+VERTEX_BYTES, INDEX_BYTES = 9 * 16, 24 * 4
+
+
+def arena_leaves(need: int) -> int:
+    """Capacity (leaves) of an arena made for ``need`` leaves: GROW times it, whole 1024s, at least MIN_LEAVES."""
+    return max(MIN_LEAVES, -(-int(np.ceil(need * GROW)) // 1024) * 1024)
+
+
+class LeafArena:
+    """Output buffers shared by a frame's raster tiles; ``writes`` is "records" or "mesh". ``version`` counts
+    allocations: vertex arrays made over the buffers are stale when it has changed."""
+
+    def __init__(self, ctx, writes: str, capacity: int = MIN_LEAVES):
+        self.ctx, self.writes = ctx, writes
+        self.capacity = 0
+        self.records = self.vertices = self.indices = None
+        self.version = 0
+        self._allocate(int(capacity))
+
+    def _allocate(self, capacity: int) -> None:
+        self._free()
+        mesh = self.writes == "mesh"          # only the output the strategy's draw reads is allocated
+        self.capacity = capacity
+        self.records = self.ctx.buffer(reserve=(1 if mesh else capacity) * RECORD_BYTES)
+        self.vertices = self.ctx.buffer(reserve=(capacity if mesh else 1) * VERTEX_BYTES)
+        self.indices = self.ctx.buffer(reserve=(capacity if mesh else 1) * INDEX_BYTES)
+        self.version += 1
+
+    def fit(self, leaves: int) -> bool:
+        """Resize for a frame that selected ``leaves`` leaves: grow if they did not fit, shrink if they fill
+        under SHRINK_BELOW; True if the buffers were replaced."""
+        if leaves <= self.capacity and (leaves >= SHRINK_BELOW * self.capacity or self.capacity <= MIN_LEAVES):
+            return False
+        new = arena_leaves(leaves)
+        if new == self.capacity:
+            return False
+        self._allocate(new)
+        return True
+
+    def bind(self) -> None:
+        """Bind the buffers where the selection writes them (storage bindings 1, 7, 8)."""
+        self.records.bind_to_storage_buffer(1)
+        self.vertices.bind_to_storage_buffer(7)
+        self.indices.bind_to_storage_buffer(8)
+
+    @property
+    def nbytes(self) -> int:
+        """GPU bytes of the arena's buffers, as the driver reports them."""
+        return gl_bytes(self.records, self.vertices, self.indices)
+
+    def _free(self) -> None:
+        for b in (self.records, self.vertices, self.indices):
+            if b is not None:
+                b.release()
+        self.records = self.vertices = self.indices = None
+
+    def release(self) -> None:
+        """Free the buffers."""
+        self._free()
