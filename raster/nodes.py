@@ -17,8 +17,9 @@ a one-node apron on every side: (E, zlo, zhi, inside) float32, zlo/zhi relative 
 
 An in-memory height field gets its arrays from ``global_nodes``; a tile store has them on disk, written by
 prepare (``hybrid.tiles.store_nodes``: the same values for nodes up to 1024 cells, an upper bound of the
-effective error above), and ``nodes_for`` hands their Zarr arrays to ``tile_node_block``, which reads one window
-per level, so the grid is never loaded.
+effective error above; and ``hybrid.tiles.store_blocks``: each tile's block of them), and ``nodes_for`` hands
+their Zarr arrays to ``tile_node_block``, which reads the tile's block (or one window per level of a store
+without blocks), so the grid is never loaded.
 """
 from __future__ import annotations
 
@@ -31,6 +32,7 @@ from hybrid.errors import TerrabenchError
 from hybrid.terrain.stored import MAX_LOAD_SAMPLES, StoredTerrain
 from hybrid.tiles.fans import grow3 as _grow
 from hybrid.tiles.pyramid import TilePyramid
+from hybrid.tiles.store_blocks import band_blocks, block_offsets
 
 from .quadtree import GPU_BETA, error_pyramid
 
@@ -51,6 +53,7 @@ class GlobalNodes:
     effective: tuple
     zlo: tuple
     zhi: tuple
+    blocks: tuple | None = None     # a store's per-tile blocks by pyramid level (hybrid.tiles.store_blocks)
 
 
 def global_nodes(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
@@ -93,8 +96,11 @@ def nodes_for(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
         return hit[1]
     levels = range(int(info["levels"]))
     g = hf.store
+    blocks = None
+    if hf.store.attrs.get("node_blocks"):
+        blocks = tuple(g[f"nodes/blocks/{lev}"] for lev in range(int(hf.store.attrs["max_level"]) + 1))
     nodes = GlobalNodes(int(info["square"]), float(beta), *(tuple(g[f"nodes/{k}/{lev}"] for lev in levels)
-                                                             for k in ("effective", "zlo", "zhi")))
+                                                             for k in ("effective", "zlo", "zhi")), blocks)
     _CACHE[key] = (weakref.ref(hf, lambda _r, k=key: _CACHE.pop(k, None)), nodes)
     return nodes
 
@@ -106,21 +112,10 @@ def tile_levels(n: int) -> int:
 
 def tile_node_block(nodes: GlobalNodes, level: int, tx: int, ty: int, n: int) -> tuple[np.ndarray, np.ndarray]:
     """(data (count, 4) float32, offsets (levels + 1,) int32): the tile's nodes with a one-node apron, per local
-    level m row by row from the south; columns E, zlo, zhi, inside (0 outside the grid). Reads one window of
-    each level (numpy or Zarr arrays alike)."""
-    blocks, offsets = [], [0]
-    for m in range(tile_levels(n)):
-        g = level + m
-        side = n >> (m + 1)
-        total = nodes.effective[g].shape[0]
-        r0, c0 = ty * side - 1, tx * side - 1
-        ra, rb = max(r0, 0), min(r0 + side + 2, total)
-        ca, cb = max(c0, 0), min(c0 + side + 2, total)
-        block = np.zeros((side + 2, side + 2, 4), np.float32)
-        win = (slice(ra - r0, rb - r0), slice(ca - c0, cb - c0))
-        for k, arr in enumerate((nodes.effective[g], nodes.zlo[g], nodes.zhi[g])):
-            block[win + (k,)] = np.asarray(arr[ra:rb, ca:cb])
-        block[win + (3,)] = 1.0
-        blocks.append(block.reshape(-1, 4))
-        offsets.append(offsets[-1] + (side + 2) ** 2)
-    return np.ascontiguousarray(np.concatenate(blocks), dtype=np.float32), np.array(offsets, np.int32)
+    level m row by row from the south; columns E, zlo, zhi, inside (0 outside the grid). One read of the
+    store's block where it has them, else one window of each level (numpy or Zarr arrays alike)."""
+    if nodes.blocks is not None:
+        data = np.asarray(nodes.blocks[level][ty, tx], dtype=np.float32)
+    else:
+        data = band_blocks(nodes.effective, nodes.zlo, nodes.zhi, level, ty, n, tx, tx + 1)[0]
+    return np.ascontiguousarray(data), block_offsets(n)

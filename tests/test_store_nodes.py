@@ -166,3 +166,55 @@ def test_raster_frames_from_the_store_equal_the_grid_without_loading_it(ctx, pug
             assert x.stats.counters["triangles"] == y.stats.counters["triangles"] > 0, policy
             assert np.isfinite(x.distance).any(), policy
             assert np.array_equal(x.colour, y.colour) and np.array_equal(x.distance, y.distance), (policy, k)
+
+
+def test_stored_blocks_are_the_node_arrays_around_each_tile(tmp_path):
+    """Every tile's stored block holds, node by node, the node arrays' values over the tile and its one-node
+    apron (zeros and inside 0 beyond the node square): checked against the arrays element by element."""
+    h = puget(size=129).heights
+    n = 16
+    prepare_store(ArraySource(h, SP), tmp_path / "s", n)
+    terrain = open_store(tmp_path / "s")
+    assert terrain.store.attrs["node_blocks"]
+    nodes = nodes_for(terrain, n)
+    assert nodes.blocks is not None
+    pyr = TilePyramid(HeightField(h, SP), n)
+    for level in range(pyr.max_level + 1):
+        arrays = {lev: _arrays(nodes, lev) for lev in range(len(nodes.effective))}
+        for key in pyr.keys(level):
+            data, offsets = tile_node_block(nodes, level, key.tx, key.ty, n)
+            for m in range(len(offsets) - 1):
+                side = n >> (m + 1)
+                grid = data[offsets[m]:offsets[m + 1]].reshape(side + 2, side + 2, 4)
+                e, lo, hi = arrays[level + m]
+                for a in range(-1, side + 1):
+                    for b in range(-1, side + 1):
+                        i, j = key.ty * side + a, key.tx * side + b
+                        inside = 0 <= i < e.shape[0] and 0 <= j < e.shape[1]
+                        want = (e[i, j], lo[i, j], hi[i, j], 1.0) if inside else (0.0, 0.0, 0.0, 0.0)
+                        assert tuple(grid[a + 1, b + 1]) == want, (key, m, a, b)
+
+
+def test_a_store_without_blocks_gets_them_from_prepare_and_draws_the_same(tmp_path):
+    """A store whose node blocks are missing (made before them) reads its nodes by windows; running prepare on
+    it again adds the blocks, and both give every tile the same block."""
+    import zarr
+    h = puget(size=129).heights
+    prepare_store(ArraySource(h, SP), tmp_path / "s", 32)
+    g = zarr.open_group(str(tmp_path / "s"), mode="r+")
+    del g["nodes/blocks"]
+    attrs = dict(g.attrs)
+    attrs.pop("node_blocks")
+    attrs["progress"] = {k: v for k, v in attrs["progress"].items() if not k.startswith("blocks:")}
+    g.attrs.clear()
+    g.attrs.update(attrs)
+    windows = nodes_for(open_store(tmp_path / "s"), 32)
+    assert windows.blocks is None
+    prepare_store(ArraySource(h, SP), tmp_path / "s", 32)
+    blocks = nodes_for(open_store(tmp_path / "s"), 32)
+    assert blocks.blocks is not None
+    pyr = TilePyramid(HeightField(h, SP), 32)
+    for level in range(pyr.max_level + 1):
+        for key in pyr.keys(level):
+            a, b = (tile_node_block(x, level, key.tx, key.ty, 32) for x in (windows, blocks))
+            assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]), key

@@ -30,6 +30,7 @@ from hybrid.terrain.stored import STORE_FORMAT, STORE_VERSION, StoredTerrain, _z
 
 from .fans import GPU_BETA
 from .pyramid import TilePyramid, _block_reduce, interpolate_clamped
+from .store_blocks import build_blocks
 from .store_nodes import build_nodes, node_bands, node_square
 
 COL_BLOCK = 4096                # about this many columns per piece of a band when measuring errors (memory bound)
@@ -88,7 +89,7 @@ def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: in
         if dict(g.attrs).get("params") != params:
             raise TerrabenchError(f"{out}: holds a store of other input or settings ({dict(g.attrs).get('params')}); "
                                   "choose another folder or remove it")
-        if g.attrs.get("complete") and g.attrs.get("nodes"):
+        if g.attrs.get("complete") and g.attrs.get("nodes") and g.attrs.get("node_blocks"):
             return out
     else:
         g = zarr.open_group(str(out), mode="w")
@@ -98,7 +99,7 @@ def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: in
                         "made_by": f"terrabench prepare, tiles of {n}", "progress": {}, "height_range": None})
     L = int(g.attrs["max_level"])
     bands = sum(-(-(_level_shape(rows, cols, l)[0] - 1) // n) for l in range(L + 1))
-    prog = _Progress(report, bands + node_bands(node_square(n, L)[0]))
+    prog = _Progress(report, 2 * bands + node_bands(node_square(n, L)[0]))   # levels, nodes, blocks
     stop = [stop_after]
 
     def mark(key: str, count: int, what: str, extra: dict | None = None):
@@ -164,6 +165,7 @@ def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: in
             zmin[:, :] = _block_reduce(np.asarray(g[f"zmin/{level - 1}"][:]), 2, np.minimum)
             zmax[:, :] = _block_reduce(np.asarray(g[f"zmax/{level - 1}"][:]), 2, np.maximum)
     build_nodes(g, rows, cols, n, L, GPU_BETA, mark)
+    build_blocks(g, n, L, mark)
     g.attrs.update({"complete": True})
     return out
 
@@ -192,7 +194,7 @@ def _band_error(piece_of, cols: int, k: int, n: int) -> np.ndarray:
 
 class StorePyramid(TilePyramid):
     """A TilePyramid over a tile store: bounds and errors from disk, tiles read on demand into a host LRU cache of
-    ``host_bytes`` (default 512 MiB); thread-safe, so a loader thread may read ahead (``request``)."""
+    ``host_bytes`` (default 512 MiB); thread-safe: one loader thread reads ahead what ``request`` asks for."""
 
     def __init__(self, terrain: StoredTerrain | str | Path, host_bytes: int = 512 << 20):
         if not isinstance(terrain, StoredTerrain):
@@ -214,6 +216,10 @@ class StorePyramid(TilePyramid):
         self.cache_bytes = 0
         self.stats = {"reads": 0, "hits": 0, "evictions": 0, "peak_bytes": 0}
         self._lock = threading.Lock()
+        self._wake = threading.Condition(threading.Lock())   # the loader thread's queue (request)
+        self._wanted: list = []
+        self._done = threading.Event()
+        self._loader = None
 
     def samples(self, key) -> np.ndarray:
         """The tile's (n+1)² level-l samples (float32 metres), read from disk or the host cache."""
@@ -245,12 +251,30 @@ class StorePyramid(TilePyramid):
         with self._lock:
             return key in self._cache
 
-    def request(self, keys) -> threading.Thread:
-        """Read the tiles in a background thread (front to back); returns the thread."""
-        keys = [k for k in keys if not self.cached(k)]
-        t = threading.Thread(target=lambda: [self.samples(k) for k in keys], daemon=True)
-        t.start()
-        return t
+    def request(self, keys) -> threading.Event:
+        """Have the loader thread read these tiles next, front to back, in place of what it was asked before;
+        returns an event set when it has read them (or was asked for others instead)."""
+        with self._wake:
+            self._done.set()
+            self._wanted = [k for k in dict.fromkeys(keys) if k not in self._cache]
+            self._done = threading.Event()
+            if not self._wanted:
+                self._done.set()
+            if self._loader is None:
+                self._loader = threading.Thread(target=self._load, name="terrabench-tile-loader", daemon=True)
+                self._loader.start()
+            self._wake.notify()
+            return self._done
+
+    def _load(self) -> None:
+        """The loader thread: read the wanted tiles one at a time, front first."""
+        while True:
+            with self._wake:
+                while not self._wanted:
+                    self._done.set()
+                    self._wake.wait()
+                key = self._wanted.pop(0)
+            self.samples(key)
 
     @property
     def padded(self) -> np.ndarray:
