@@ -11,11 +11,13 @@ mixed policies the features and choices) plus the drawing, wall clock with ctx.f
 Without an upload budget, tiles not yet resident are uploaded before the timed draw and counted apart
 (``uploads``); with ``upload_budget_ms`` uploads are jobs run inside the frame within that budget
 (``hybrid.uploads``), their time is part of ``wall_ms``, and tiles still waiting are drawn from a resident
-ancestor (``fallback_tiles``).
+ancestor (``fallback_tiles``); from a tile store, a tile's upload waits until the store's loader thread has
+read its samples, which it is asked for at the start of the frame.
 """
 from __future__ import annotations
 
 import time
+from collections import OrderedDict
 
 import numpy as np
 
@@ -79,7 +81,7 @@ class Renderer:
             raise TerrabenchError(f"upload budget must be a finite number of ms >= 0, got {upload_budget_ms!r}")
         self.upload_budget_ms = upload_budget_ms
         self._fallbacks: dict = {}
-        self._tiles: dict = {}
+        self._tiles: OrderedDict = OrderedDict()
         self._released = False
 
     def __enter__(self) -> "Renderer":
@@ -98,10 +100,15 @@ class Renderer:
 
     # --- planning (CPU) ---------------------------------------------------------------------------
     def tile(self, key):
-        """The pyramid tile (CPU copy, cached)."""
-        if key not in self._tiles:
-            self._tiles[key] = self.pyramid.tile(key)
-        return self._tiles[key]
+        """The pyramid tile (CPU copy), cached: least recently used first out beyond a store's host budget."""
+        if key in self._tiles:
+            self._tiles.move_to_end(key)
+            return self._tiles[key]
+        t = self._tiles[key] = self.pyramid.tile(key)
+        budget = getattr(self.pyramid, "host_budget", None)
+        if budget is not None and len(self._tiles) > max(budget // max(t.heights.nbytes, 1), 256):
+            self._tiles.popitem(last=False)
+        return t
 
     def plan(self, view: View, tau: float = DEFAULT_TAU) -> list[TilePlan]:
         """The frame's tiles front to back with the policy's choices (and, when mixed, features and costs)."""
@@ -245,8 +252,12 @@ class Renderer:
                 for p in plans:                # upload first: the timed frame measures drawing only
                     self._resident(p.choice, p.key, pinned)
             else:                              # uploads within the frame's budget, the rest from ancestors
+                ready = lambda key: True       # noqa: E731
+                if hasattr(self.pyramid, "request"):      # a store: its loader thread reads what is missing
+                    self.pyramid.request([p.key for p in plans if (p.choice, p.key) not in self.cache.entries])
+                    ready = self.pyramid.cached
                 streamed = stream_uploads(self.cache, self.strategies, plans, pinned, self.tile, self.pyramid.max_level,
-                                          self.upload_budget_ms)
+                                          self.upload_budget_ms, ready)
                 self._fallbacks = {plans[i].key: a for i, a in streamed.fallbacks.items()}
             target.clear()
             target.use()

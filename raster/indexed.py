@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from hybrid.gl.programs import program
 
-from .selection import CMD_SKIRTS, CMD_TEMPLATE, SelectedTileletTile
+from .selection import CMD_SKIRTS, CMD_TEMPLATE
 from .tilelets import TileletDrawing
 
 
@@ -28,8 +28,8 @@ class IndexedTileletStrategy(TileletDrawing):
         """The mesh and skirt programs."""
         return (self.prog, self.skirt_prog)
 
-    def tile_arrays(self, g: SelectedTileletTile) -> dict:
-        """The tile's skirt segments, one instance each."""
+    def tile_arrays(self, g) -> dict:
+        """The skirt segments of a tile (or a draw slot), one instance each."""
         return {"skirts": self.ctx.vertex_array(self.skirt_prog, [(g.segments, "3f 3f/i", "a_p", "a_q")])}
 
     def arena_arrays(self) -> dict:
@@ -38,7 +38,7 @@ class IndexedTileletStrategy(TileletDrawing):
         return {"mesh": self.ctx.vertex_array(self.prog, [(a.vertices, "4f", "a_vertex")], index_buffer=a.indices,
                                               index_element_size=4)}
 
-    def draw_tile(self, g: SelectedTileletTile, tile, view, wireframe: bool = False) -> None:
+    def draw_tile(self, g, tile, view, wireframe: bool = False) -> None:
         """The tile's leaves as indexed triangles (count and first index from the selection)."""
         ctx = self.ctx
         ctx.wireframe = bool(wireframe)
@@ -47,6 +47,6 @@ class IndexedTileletStrategy(TileletDrawing):
         finally:
             ctx.wireframe = False
 
-    def draw_tile_skirts(self, g: SelectedTileletTile) -> None:
+    def draw_tile_skirts(self, g) -> None:
         """The tile's skirt quads (one instance a segment)."""
         g.vaos["skirts"].render_indirect(g.control, mode=self.ctx.TRIANGLES, count=1, first=CMD_SKIRTS)

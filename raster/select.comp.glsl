@@ -168,6 +168,15 @@ bool outside(int m, int a, int b) {
     return false;
 }
 
+// true if node (m, a, b)'s square lies wholly outside the tile's clip rectangle: nothing of it would be drawn
+// (a tile drawn for a missing finer one is clipped to that one's rectangle, hybrid.uploads)
+bool outside_clip(int m, int a, int b) {
+    vec2 S = float(2 << m) * spacing;
+    vec2 lo = origin_rel.xy + vec2(float(b), float(a)) * S, hi = lo + S;
+    vec2 tol = 1e-4 * S;
+    return any(lessThan(hi + tol, clip_rel.xy)) || any(greaterThan(lo - tol, clip_rel.zw));
+}
+
 #if PASS == 1
 // posts [row * 3 + col]; counter-clockwise seen from above
 const int FAN[24] = int[24](4, 0, 1, 4, 1, 2,  4, 2, 5, 4, 5, 8,  4, 8, 7, 4, 7, 6,  4, 6, 3, 4, 3, 0);
@@ -277,6 +286,7 @@ void list_node(uint gid) {
     if (m == 1 && splits(1, a, b)) {
         for (int c = 0; c < 4; ++c) {
             int ca = 2 * a + (c >> 1), cb = 2 * b + (c & 1);
+            if (outside_clip(0, ca, cb)) continue;
             if (cull && outside(0, ca, cb)) { add_total(2, 1u); continue; }
             uint i = reserve_found();
             found[4u + i] = uint(ca << 4) | (uint(cb) << 18);
@@ -284,6 +294,7 @@ void list_node(uint gid) {
         return;
     }
     if (!splits(m + 1, a >> 1, b >> 1) || splits(m, a, b)) return;
+    if (outside_clip(m, a, b)) return;
     if (cull && outside(m, a, b)) { add_total(2, 1u); return; }
     uint i = reserve_found();
     found[4u + i] = uint(m) | (uint(a) << 4) | (uint(b) << 18);

@@ -88,6 +88,34 @@ def first_levels(gs, eye_local: np.ndarray, k_tau: float) -> np.ndarray:
     return np.where(hit, np.argmax(inner, axis=1) if inner.shape[1] else 0, top - 1)
 
 
+def slot_buffers(ctx, n: int):
+    """(skirt segments, control) buffers of one drawing of an n-cell tile: room for every segment and leaf."""
+    return (ctx.buffer(reserve=max(4 * n, 8) * SEGMENT_WORDS * 4),
+            ctx.buffer(reserve=FOUND_OFFSET + (4 + (n // 2) ** 2) * 4))
+
+
+class DrawSlot:
+    """Control and skirt buffers for a second drawing of a tile in one frame (a tile drawn for several missing
+    finer ones, each clipped to its own rectangle, selects its leaves once for each)."""
+
+    def __init__(self, strategy, n: int):
+        self.n = n
+        self.segments, self.control = slot_buffers(strategy.ctx, n)
+        self.vaos = strategy.tile_arrays(self)
+
+    @property
+    def nbytes(self) -> int:
+        """GPU bytes of the slot's buffers, as the driver reports them."""
+        return gl_bytes(self.segments, self.control)
+
+    def release(self) -> None:
+        """Free the buffers."""
+        for v in self.vaos.values():
+            v.release()
+        self.segments.release()
+        self.control.release()
+
+
 class SelectedTileletTile:
     """GPU objects of one tile: heights, node data, skirt buffer, and a control buffer with the indirect draw
     commands and the tile's arena base at its start and the pass-0 leaf list at FOUND_OFFSET (the leaves
@@ -107,8 +135,7 @@ class SelectedTileletTile:
         self.heights = ctx.buffer(h.tobytes())
         self.nodes = ctx.buffer(data.tobytes())
         self.capacity = (self.n // 2) ** 2
-        self.segments = ctx.buffer(reserve=max(4 * self.n, 8) * SEGMENT_WORDS * 4)
-        self.control = ctx.buffer(reserve=FOUND_OFFSET + (4 + self.capacity) * 4)
+        self.segments, self.control = slot_buffers(ctx, self.n)
         self.writes = strategy.writes
         self.vaos = strategy.tile_arrays(self)
 
@@ -142,12 +169,15 @@ class TileletSelection:
         self.frame = ctx.buffer(reserve=4 * len(FRAME_FIELDS))
         self.blocks = TileBlocks(ctx)
         self.arena = LeafArena(ctx, self.writes)
+        self.spare_slots: dict[int, list[DrawSlot]] = {}     # cell count -> slots for repeated tiles
+        self.slots: list = []                                # the last selection's slot of every item
 
     @property
     def shared_nbytes(self) -> int:
         """GPU bytes shared by all tiles, as the driver reports them: colour texture, frame counters, tile
         blocks, leaf arena."""
-        return gl_bytes(self.texture, self.frame, self.blocks.buffer) + self.arena.nbytes
+        return (gl_bytes(self.texture, self.frame, self.blocks.buffer) + self.arena.nbytes +
+                sum(s.nbytes for slots in self.spare_slots.values() for s in slots))
 
     def upload(self, tile) -> SelectedTileletTile:
         """Put one tile on the GPU: heights, node errors and boxes, skirt and control buffers."""
@@ -205,18 +235,36 @@ class TileletSelection:
         self.frame.bind_to_storage_buffer(4)
         self.arena.bind()
         list_pass, emit_pass = self.passes
-        for i, (g, tile, sel) in enumerate(items):
+        self.slots = self.draw_slots([g for g, _, _ in items])
+        for i, ((g, tile, sel), slot) in enumerate(zip(items, self.slots)):
             self.blocks.bind(i)
-            g.control.write(CONTROL_BLANK)
-            for binding, buf in ((0, g.nodes), (3, g.segments), (5, g.heights)):
+            slot.control.write(CONTROL_BLANK)
+            for binding, buf in ((0, g.nodes), (3, slot.segments), (5, g.heights)):
                 buf.bind_to_storage_buffer(binding)
-            g.control.bind_to_storage_buffer(2, size=FOUND_OFFSET)
-            g.control.bind_to_storage_buffer(6, offset=FOUND_OFFSET)
+            slot.control.bind_to_storage_buffer(2, size=FOUND_OFFSET)
+            slot.control.bind_to_storage_buffer(6, offset=FOUND_OFFSET)
             first = int(blocks[i]["shape"][2])
             list_pass.run(group_x=(int(g.starts[-1]) - first + _LOCAL - 1) // _LOCAL)
             self.ctx.memory_barrier()
-            emit_pass.run_indirect(g.control, offset=FOUND_OFFSET)
+            emit_pass.run_indirect(slot.control, offset=FOUND_OFFSET)
         self.ctx.memory_barrier()
+
+    def draw_slots(self, gs: list) -> list:
+        """Where each item's selection goes: its tile's own buffers the first time the tile is in the list,
+        a spare slot (made once, kept for later frames) each further time."""
+        seen, used, out = set(), {}, []
+        for g in gs:
+            if id(g) not in seen:
+                seen.add(id(g))
+                out.append(g)
+                continue
+            k = used.get(g.n, 0)
+            used[g.n] = k + 1
+            pool = self.spare_slots.setdefault(g.n, [])
+            if k == len(pool):
+                pool.append(DrawSlot(self, g.n))
+            out.append(pool[k])
+        return out
 
     def frame_counters(self) -> dict:
         """Counters of the last selection, summed over its tiles (one read of a small buffer)."""
@@ -224,7 +272,10 @@ class TileletSelection:
         return {f: int(v) for f, v in zip(FRAME_FIELDS, raw)}
 
     def release(self) -> None:
-        """Free the selection shader, the texture, the counters and the arena."""
+        """Free the selection shader, the texture, the counters, the arena and the spare slots."""
+        for slots in self.spare_slots.values():
+            for s in slots:
+                s.release()
         self.arena.release()
         self.blocks.release()
         for o in (*self.passes, self.texture, self.frame):

@@ -64,8 +64,8 @@ class TileletDrawing(TileletSelection):
         """Every program whose uniforms follow the frame (subclasses)."""
         raise NotImplementedError
 
-    def draw_tile(self, g: SelectedTileletTile, tile, view, wireframe: bool = False) -> None:
-        """Issue one tile's indirect draw (subclasses)."""
+    def draw_tile(self, g, tile, view, wireframe: bool = False) -> None:
+        """Issue one tile's indirect draw from the control buffer of g, its draw slot (subclasses)."""
         raise NotImplementedError
 
     def arena_arrays(self) -> dict:
@@ -82,8 +82,8 @@ class TileletDrawing(TileletSelection):
             self._arena_vaos = (self.arena.version, vaos)
         return vaos
 
-    def draw_tile_skirts(self, g: SelectedTileletTile) -> None:
-        """Issue one tile's skirt draw (subclasses)."""
+    def draw_tile_skirts(self, g) -> None:
+        """Issue one tile's skirt draw from g, its draw slot (subclasses)."""
         raise NotImplementedError
 
     def draw_skirts(self, target, view) -> None:
@@ -151,10 +151,11 @@ class TileletDrawing(TileletSelection):
         for i in range(4):
             ctx.enable_direct(GL_CLIP_DISTANCE0 + i)
         try:
-            for i, (g, tile, sel) in enumerate(items):
+            for i, ((g, tile, sel), slot) in enumerate(zip(items, self.slots)):
                 self.blocks.bind(i)
-                self.draw_tile(g, tile, view, wireframe)
-            self._skirted = [(i, g) for i, (g, tile, sel) in enumerate(items) if (skirts or {}).get(sel.key, 0)]
+                self.draw_tile(slot, tile, view, wireframe)
+            self._skirted = [(i, slot) for i, ((g, tile, sel), slot) in enumerate(zip(items, self.slots))
+                             if (skirts or {}).get(sel.key, 0)]
         finally:
             for i in range(4):
                 ctx.disable_direct(GL_CLIP_DISTANCE0 + i)
@@ -194,12 +195,12 @@ class TileletStrategy(TileletDrawing):
         return {"points": self.ctx.vertex_array(self.prog, attrs),
                 "skirt_points": self.ctx.vertex_array(self.skirt_prog, attrs)}
 
-    def draw_tile(self, g: SelectedTileletTile, tile, view, wireframe: bool = False) -> None:
+    def draw_tile(self, g, tile, view, wireframe: bool = False) -> None:
         """The tile's leaves as points through the geometry shader (count and first leaf from the selection)."""
         self.prog["skirt_pass"].value = False
         self.arena_vaos()["points"].render_indirect(g.control, mode=self.ctx.POINTS, count=1, first=CMD_POINTS)
 
-    def draw_tile_skirts(self, g: SelectedTileletTile) -> None:
+    def draw_tile_skirts(self, g) -> None:
         """The tile's leaves again through the geometry shader's skirt program, emitting only their skirts."""
         self.arena_vaos()["skirt_points"].render_indirect(g.control, mode=self.ctx.POINTS, count=1,
                                                           first=CMD_POINTS)

@@ -101,7 +101,7 @@ def test_tiles_on_demand_within_a_host_budget_and_a_loader_thread(grid, tmp_path
     assert [p.cached(k) for k in keys[:5]] == [False, False, True, True, True]
     p.tile(keys[4])
     assert p.stats["hits"] == 1
-    p.request(keys[5:8]).join(10)
+    assert p.request(keys[5:8]).wait(10)
     assert all(p.cached(k) for k in keys[5:8]) and p.stats["peak_bytes"] <= 3 * tile_bytes
 
 

@@ -1,6 +1,8 @@
 """Uploads as jobs under a per-frame budget: tiles not yet resident are drawn from a resident ancestor (no hole),
 the queue drains one job a frame at a zero budget, the GPU byte budget is never exceeded, and a drained queue
 draws the very frame an unbudgeted renderer draws."""
+import threading
+
 import numpy as np
 import pytest
 
@@ -77,3 +79,62 @@ def test_bad_upload_budget_is_refused(ctx, puget257):
     for bad in (-1.0, float("nan"), float("inf")):
         with pytest.raises(TerrabenchError, match="upload budget"):
             Renderer(ctx, puget257, "raycast", 32, upload_budget_ms=bad)
+
+
+@pytest.mark.parametrize("policy", ["raycast", "raster"])
+def test_store_uploads_wait_for_the_loader_thread(ctx, puget257, tmp_path, policy):
+    """From a tile store, a frame asks the loader thread for the tiles it lacks and uploads only those already
+    read: the first frame draws every tile from the root (nothing read yet, no hole); once the loader has read
+    them, a generous budget uploads them all and the frame is the in-memory renderer's."""
+    from test_store import ArraySource
+
+    from hybrid.tiles.store import StorePyramid, prepare_store
+    prepare_store(ArraySource(np.asarray(puget257.heights), (puget257.spacing_x, puget257.spacing_y)),
+                  tmp_path / "s", 32)
+    pyramid = StorePyramid(tmp_path / "s")
+    v = preset("flyover", pyramid.hf, 6, *SIZE).view(2)
+    with Renderer(ctx, pyramid.hf, policy, 32, pyramid=pyramid) as full:
+        want = full.render(v, mode="shaded")
+    pyramid = StorePyramid(tmp_path / "s")
+    disk, go = pyramid.samples, threading.Event()
+
+    def slow_disk(key):                 # the loader reads nothing but the root until the first frame is drawn
+        if key != pyramid.root():
+            assert go.wait(30)
+        return disk(key)
+    pyramid.samples = slow_disk
+    with Renderer(ctx, pyramid.hf, policy, 32, pyramid=pyramid, upload_budget_ms=1e6) as r:
+        first = r.render(v, mode="shaded")
+        assert first.stats.uploads == 1 and first.stats.fallback_tiles == first.stats.tiles   # the root only
+        assert (np.isfinite(want.distance) & ~np.isfinite(first.distance)).mean() < 0.05
+        go.set()
+        assert pyramid.request([p.key for p in r.plan(v)]).wait(30)
+        res = r.render(v, mode="shaded")
+        assert res.stats.fallback_tiles == 0 and res.stats.uploads == res.stats.tiles
+    assert np.array_equal(res.colour, want.colour)
+    both = np.isfinite(want.distance)
+    assert np.array_equal(np.isfinite(res.distance), both) and np.array_equal(res.distance[both], want.distance[both])
+
+
+def test_a_tile_drawn_for_missing_ones_selects_only_their_leaves(ctx, puget257):
+    """With every tile of a frame drawn from the root, each drawing selects only the root's leaves over its own
+    rectangle: together the root's leaves over the view, a large leaf once for each rectangle it reaches into,
+    not all of them once per missing tile (before: the tiles' count times the root's leaves)."""
+    from hybrid.contract import TileItem
+    from hybrid.gl.target import FrameTarget
+    from hybrid.uploads import fallback_selection
+    v = preset("flyover", puget257, 6, *SIZE).view(2)
+    with Renderer(ctx, puget257, "raster", 32, upload_budget_ms=0.0) as r:
+        res = r.render(v)
+        assert res.stats.fallback_tiles == res.stats.tiles > 4
+        root = r.pyramid.root()
+        item = TileItem(r.cache.entries[("raster", root)], r.tile(root), fallback_selection(r.plan(v)[0].selected, root))
+        target = FrameTarget(ctx, *SIZE)
+        try:
+            target.clear()
+            alone = r.strategies["raster"].draw_tiles(target, v, [item], 2 / 3)
+        finally:
+            target.release()
+    assert alone["tilelets"] > 0
+    assert alone["tilelets"] <= res.stats.counters["tilelets"] <= res.stats.tiles * alone["tilelets"] / 4, \
+        (res.stats.counters, alone)
