@@ -79,7 +79,7 @@ def reading(frames: pd.DataFrame, table: pd.DataFrame, refused: pd.DataFrame) ->
     shared = (table["peak_gpu_mib"] - table["peak_resident_mib"]).max()
     out.append(("Resident tiles' GPU bytes stayed within the budget in every frame" if over.empty else
                 f"Resident tiles' GPU bytes passed the budget in {len(over)} flights") +
-               f"; the strategies' shared objects (terrain texture, pre-pass targets, node tables) add up to "
+               f"; the strategies' shared objects (terrain texture, pre-pass targets, leaf arenas, frame counters) add up to "
                f"{shared:.0f} MiB on top.")
     out.append(f"Peak host RSS (the whole process, GL driver included): {table['peak_host_rss_mib'].max():.0f} MiB.")
     out.append(f"Frames drawing some tile from a coarser ancestor while its upload waited: "

@@ -4,8 +4,9 @@ Bhattacharjee et al. (§4.3) keep a frame's GPU work bounded by queueing what a 
 builds, per-tile buffers) and running only as much of it as fits in the frame; a tile whose data is not yet on
 the GPU is drawn from its resident ancestor meanwhile, so the frame never shows a hole. Here one job is one
 ``strategy.upload(tile)`` (which includes the strategy's per-tile GPU builds). Each frame runs jobs front to
-back until ``budget_ms`` of wall time is spent (at least one job a frame, so the queue always drains); a job
-whose CPU tile the ``ready`` callback says is not loaded yet waits. The coarsest tile (the root) of every
+back until ``budget_ms`` of wall time is spent (at least one job a frame, so the queue always drains): first
+those whose CPU tile the ``ready`` callback says is loaded (a tile store's loader thread reads ahead), then
+the others, whose job reads the tile as well. The coarsest tile (the root) of every
 strategy in use is made resident before anything else, whatever the budget, so every tile has an ancestor.
 
 A fallback draws the ancestor's GPU data clipped to the missing tile's rectangle, without stitching to its
@@ -72,11 +73,12 @@ def stream_uploads(cache, strategies: dict, plans, pinned: set, make_tile, max_l
             report.uploads += 1
         pinned.add((name, root))
     missing = [i for i, p in enumerate(plans) if (p.choice, p.key) not in cache.entries]
-    for i in missing:
+    loaded = [ready(plans[i].key) for i in missing]
+    # tiles whose samples are loaded first (their job is the GPU's part), then the others (read here too)
+    for i in [i for i, r in zip(missing, loaded) if r] + [i for i, r in zip(missing, loaded) if not r]:
         p = plans[i]
-        spent = (time.perf_counter() - t0) * 1e3
-        if (report.uploads and spent >= budget_ms) or not ready(p.key):
-            continue
+        if report.uploads and (time.perf_counter() - t0) * 1e3 >= budget_ms:
+            break
         try:
             cache.get(p.choice, strategies[p.choice], p.key, lambda p=p: make_tile(p.key), pinned)
             report.uploads += 1

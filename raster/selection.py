@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from hybrid.errors import TerrabenchError
-from hybrid.gl.context import gl_bytes
+from hybrid.gl.context import gl_bytes, gl_finish
 from hybrid.gl.programs import compute_shader, set_uniform
 from hybrid.gl.textures import terrain_texture
 
@@ -267,7 +267,9 @@ class TileletSelection:
         return out
 
     def frame_counters(self) -> dict:
-        """Counters of the last selection, summed over its tiles (one read of a small buffer)."""
+        """Counters of the last selection, summed over its tiles (one read of a small buffer, after a wait that
+        lets other threads run)."""
+        gl_finish(self.ctx)
         raw = np.frombuffer(self.frame.read(), dtype=np.uint32)
         return {f: int(v) for f, v in zip(FRAME_FIELDS, raw)}
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from hybrid.errors import TerrabenchError
-from hybrid.gl.context import gl_bytes
+from hybrid.gl.context import gl_bytes, gl_finish
 from hybrid.gl.edges import TerrainEdges
 from hybrid.gl.programs import program, register_include, set_uniform, write_uniform
 from hybrid.gl.shading import resolve_mode
@@ -310,6 +310,7 @@ class RaycastStrategy:
         ctx.memory_barrier()
         counters = {"rays": 0, "hits": 0, "steps": 0, "max_steps": 0, "capped": 0}
         if opts.stats and n_items:
+            gl_finish(self.ctx)                 # the wait lets other threads (the tile loader) run
             raw = np.frombuffer(self.stats_buf.read(size=STAT_SLOTS * STAT_STRIDE * n_items), dtype=np.uint32)
             raw = raw.reshape(n_items, STAT_SLOTS, STAT_STRIDE // 4)[:, :, :len(STAT_FIELDS)].astype(np.int64)
             st = raw.sum(axis=1)

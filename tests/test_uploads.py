@@ -1,8 +1,6 @@
 """Uploads as jobs under a per-frame budget: tiles not yet resident are drawn from a resident ancestor (no hole),
 the queue drains one job a frame at a zero budget, the GPU byte budget is never exceeded, and a drained queue
 draws the very frame an unbudgeted renderer draws."""
-import threading
-
 import numpy as np
 import pytest
 
@@ -82,10 +80,10 @@ def test_bad_upload_budget_is_refused(ctx, puget257):
 
 
 @pytest.mark.parametrize("policy", ["raycast", "raster"])
-def test_store_uploads_wait_for_the_loader_thread(ctx, puget257, tmp_path, policy):
-    """From a tile store, a frame asks the loader thread for the tiles it lacks and uploads only those already
-    read: the first frame draws every tile from the root (nothing read yet, no hole); once the loader has read
-    them, a generous budget uploads them all and the frame is the in-memory renderer's."""
+def test_store_uploads_take_what_the_loader_thread_read_first(ctx, puget257, tmp_path, policy):
+    """From a tile store, tiles the loader thread has read are uploaded before those it has not: at a zero
+    budget (one job a frame) the job is a loaded tile, not the nearest missing one; the queue drains to the
+    frame of the in-memory renderer."""
     from test_store import ArraySource
 
     from hybrid.tiles.store import StorePyramid, prepare_store
@@ -96,22 +94,18 @@ def test_store_uploads_wait_for_the_loader_thread(ctx, puget257, tmp_path, polic
     with Renderer(ctx, pyramid.hf, policy, 32, pyramid=pyramid) as full:
         want = full.render(v, mode="shaded")
     pyramid = StorePyramid(tmp_path / "s")
-    disk, go = pyramid.samples, threading.Event()
-
-    def slow_disk(key):                 # the loader reads nothing but the root until the first frame is drawn
-        if key != pyramid.root():
-            assert go.wait(30)
-        return disk(key)
-    pyramid.samples = slow_disk
-    with Renderer(ctx, pyramid.hf, policy, 32, pyramid=pyramid, upload_budget_ms=1e6) as r:
-        first = r.render(v, mode="shaded")
-        assert first.stats.uploads == 1 and first.stats.fallback_tiles == first.stats.tiles   # the root only
-        assert (np.isfinite(want.distance) & ~np.isfinite(first.distance)).mean() < 0.05
-        go.set()
-        assert pyramid.request([p.key for p in r.plan(v)]).wait(30)
-        res = r.render(v, mode="shaded")
-        assert res.stats.fallback_tiles == 0 and res.stats.uploads == res.stats.tiles
-    assert np.array_equal(res.colour, want.colour)
+    with Renderer(ctx, pyramid.hf, policy, 32, pyramid=pyramid, upload_budget_ms=0.0) as r:
+        keys = [p.key for p in r.plan(v)]
+        assert pyramid.request(keys[3:4]).wait(30) and not pyramid.cached(keys[0])
+        r.pyramid.request = lambda keys: None          # the frame asks for nothing more: only that tile is loaded
+        assert r.render(v, mode="shaded").stats.uploads == 1             # the root: the first frame's job
+        assert r.render(v, mode="shaded").stats.uploads == 1             # then the loaded tile, not the nearest
+        assert (policy, keys[3]) in r.cache.entries and (policy, keys[0]) not in r.cache.entries
+        for _ in range(len(keys) + 1):
+            res = r.render(v, mode="shaded")
+            if res.stats.pending_uploads == 0:
+                break
+    assert res.stats.fallback_tiles == 0 and np.array_equal(res.colour, want.colour)
     both = np.isfinite(want.distance)
     assert np.array_equal(np.isfinite(res.distance), both) and np.array_equal(res.distance[both], want.distance[both])
 

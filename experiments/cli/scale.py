@@ -14,7 +14,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("stores", nargs="+", help="tile stores (terrabench prepare), or STORE@periodicSIZE for a virtual "
                    "periodic extension of one to SIZE x SIZE samples (SIZE = k x its cells + 1)")
     p.add_argument("--frames", type=argtypes.int_in("--frames", 2, 10000), default=48, help="frames of the flight")
-    p.add_argument("--flight", default="flyover", help="preset flight, scaled to each store's extent")
+    p.add_argument("--flight", default="transect",
+                   help="preset flight, scaled to each store's extent (transect: straight and level, new tiles all along)")
     p.add_argument("--size", type=argtypes.size("--size"), default="640x360", help="viewport WIDTHxHEIGHT")
     p.add_argument("--tau", type=argtypes.positive_float("--tau", "pixels"), default=2 / 3,
                    help="screen-space error bound in pixels")
@@ -29,7 +30,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="reports/scaling", help="report folder")
 
 
-def run(stores, frames=48, flight="flyover", size=(640, 360), tau=2 / 3,
+def run(stores, frames=48, flight="transect", size=(640, 360), tau=2 / 3,
         methods=("raycast", "raster", "raster_gs", "hybrid"), gpu_budget_mib=256, upload_budget_ms=8.0,
         host_budget_mib=512, out="reports/scaling", device=None, resident=False) -> Path:
     """Run the experiment and write its report; returns the report's path."""

@@ -21,7 +21,7 @@ from hybrid.camera.view import View
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.heightfield import HeightField
 
-PRESETS = ("orbit", "flyover", "grazing", "lookdown", "dolly")
+PRESETS = ("orbit", "flyover", "grazing", "lookdown", "dolly", "transect")
 GRAZING_RISE_DEG = 10.0         # the ground ahead of a grazing eye rises at most this far above its level view
 GRAZING_RADIUS_CELLS = 4        # the grazing eye clears the samples within this many cells by a tenth of their relief
 
@@ -163,6 +163,29 @@ def _dolly_line(hf: HeightField, k: np.ndarray, step: float) -> tuple[np.ndarray
     return eyes, targets
 
 
+TRANSECT_PITCH_DEG = 15.0
+
+
+def _transect(hf: HeightField, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eyes and targets (world metres) of the transect at path fractions s in [0, 1]: a straight level line from
+    20 % to 60 % of the terrain's south-west to north-east diagonal at one height (the highest ground within 3 % of
+    the terrain's size of any point of it, plus max(30 m, 1 % of the size, 20 % of that neighbourhood's relief)),
+    looking along it TRANSECT_PITCH_DEG below the horizon. Scaled to the extent, so a larger terrain streams
+    through as many tiles of its pyramid."""
+    w, d = hf.extent
+    ox, oy, _ = hf.origin
+    size = max(w, d)
+    heading = np.array([w, d]) / np.hypot(w, d)
+    x, y = ox + w * (0.2 + 0.4 * s), oy + d * (0.2 + 0.4 * s)
+    ground = _stencil_heights(hf, x, y, 0.03 * size)
+    high, low = ground.max(), ground.min()
+    z = np.full(len(s), high + max(30.0, 0.01 * size, 0.2 * (high - low)))
+    eyes = np.stack([x, y, z], 1)
+    ahead = 0.15 * size
+    targets = eyes + [ahead * heading[0], ahead * heading[1], -ahead * np.tan(np.radians(TRANSECT_PITCH_DEG))]
+    return eyes, targets
+
+
 def _dolly(hf: HeightField, k: np.ndarray, fov_y: float, height: int) -> tuple[np.ndarray, np.ndarray]:
     """Eyes and targets (world metres) of the dolly at frame numbers k: a straight level line to the north-east.
 
@@ -184,8 +207,9 @@ def _dolly(hf: HeightField, k: np.ndarray, fov_y: float, height: int) -> tuple[n
 
 def preset(name: str, hf: HeightField, frames: int = 60, width: int = 640, height: int = 360,
            fov_y: float = 60.0) -> Flight:
-    """A named flight over hf: orbit, flyover (low), grazing (low, level, the horizon in view), lookdown or dolly
-    (slow, straight and level, low over the terrain, looking ahead and slightly down)."""
+    """A named flight over hf: orbit, flyover (low), grazing (low, level, the horizon in view), lookdown, dolly
+    (slow, straight and level, low over the terrain, looking ahead and slightly down) or transect (straight and
+    level across the terrain, looking ahead and down: like content every frame, new tiles all along)."""
     w, d = hf.extent
     ox, oy, oz = hf.origin
     lo, hi = hf.height_range
@@ -230,6 +254,9 @@ def preset(name: str, hf: HeightField, frames: int = 60, width: int = 640, heigh
         near = max(0.5, size * 1e-5)
     elif name == "dolly":
         eyes, targets = _dolly(hf, s * (n_key - 1), fov_y, height)
+        near = 1.0
+    elif name == "transect":
+        eyes, targets = _transect(hf, s)
         near = 1.0
     else:
         raise TerrabenchError(f"unknown flight {name!r}; choose one of {', '.join(PRESETS)} or give a .json/.csv file")

@@ -128,6 +128,12 @@ def shared_context(device: int | None = None):
     return _SHARED[device]
 
 
+def gl_finish(ctx) -> None:
+    """glFinish on the current context, through ctypes, which lets other Python threads run while the GL works
+    (moderngl's ctx.finish() and buffer reads hold the interpreter lock while they wait)."""
+    _gl_function(b"glFinish")()
+
+
 def _gl_function(name: bytes, *argtypes):
     key = (name, argtypes)
     if key not in _FUNCTIONS:

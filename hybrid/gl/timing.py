@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import time
 
-from hybrid.gl.context import gl_info
+from hybrid.gl.context import gl_finish, gl_info
 
 
 def timer_queries_valid(ctx) -> bool:
@@ -31,7 +31,7 @@ def timed(ctx, fn):
             out = fn()
     else:
         out = fn()
-    ctx.finish()
+    gl_finish(ctx)                          # other threads (the tile loader) run while the GL works
     wall = (time.perf_counter() - t0) * 1e3
     gpu = None
     if query is not None:

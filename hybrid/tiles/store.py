@@ -220,6 +220,7 @@ class StorePyramid(TilePyramid):
         self._wanted: list = []
         self._done = threading.Event()
         self._loader = None
+        self._failed: set = set()
 
     def samples(self, key) -> np.ndarray:
         """The tile's (n+1)² level-l samples (float32 metres), read from disk or the host cache."""
@@ -247,9 +248,10 @@ class StorePyramid(TilePyramid):
             return self._cache[key]
 
     def cached(self, key) -> bool:
-        """Whether the tile's samples are in the host cache."""
+        """Whether the tile's samples are in the host cache (or the loader failed to read them: then a read in the
+        caller's thread raises the error)."""
         with self._lock:
-            return key in self._cache
+            return key in self._cache or key in self._failed
 
     def request(self, keys) -> threading.Event:
         """Have the loader thread read these tiles next, front to back, in place of what it was asked before;
@@ -274,7 +276,11 @@ class StorePyramid(TilePyramid):
                     self._done.set()
                     self._wake.wait()
                 key = self._wanted.pop(0)
-            self.samples(key)
+            try:
+                self.samples(key)
+            except Exception:                # the renderer's own read of it raises the error where it is seen
+                with self._lock:
+                    self._failed.add(key)
 
     @property
     def padded(self) -> np.ndarray:
