@@ -4,7 +4,8 @@ writes its selected leaves into, sized by what the view selects rather than by w
 The GPU selection (select.comp.glsl) reserves each tile's leaves in the arena once its listing pass knows
 their count; a tile whose leaves do not fit draws nothing and is counted as overflow, and the strategy then
 grows the arena and draws the frame again (raster.tilelets), so no frame it returns misses a leaf. Between
-frames the arena shrinks when the frame's leaves fill under a quarter of it. Capacity is in leaves: a leaf
+frames the arena is made again for twice the last frame's leaves when they filled over three quarters of it
+(so that a frame rarely overflows) or under a quarter. Capacity is in leaves: a leaf
 is one 13-word record (geometry-shader path) or 9 vertices and 24 indices (indexed path).
 """
 from __future__ import annotations
@@ -14,7 +15,8 @@ import numpy as np
 from hybrid.gl.context import gl_bytes
 
 MIN_LEAVES = 4096               # smallest arena, leaves
-GROW = 1.5                      # a grown or shrunk arena holds this many times the frame's leaves
+GROW = 2.0                      # a grown or shrunk arena holds this many times the frame's leaves
+GROW_ABOVE = 0.75               # grow before the next frame when the frame's leaves fill more than this share
 SHRINK_BELOW = 0.25             # shrink when the frame's leaves fill less than this share
 RECORD_BYTES = 13 * 4           # raster.selection.LEAF_WORDS words a leaf record
 VERTEX_BYTES, INDEX_BYTES = 9 * 16, 24 * 4
@@ -45,10 +47,17 @@ class LeafArena:
         self.indices = self.ctx.buffer(reserve=(capacity if mesh else 1) * INDEX_BYTES)
         self.version += 1
 
+    def fits(self, leaves: int) -> bool:
+        """Whether the arena suits a frame of ``leaves`` leaves: they fill between SHRINK_BELOW and GROW_ABOVE of
+        it (or less, when it is the smallest arena)."""
+        if leaves > GROW_ABOVE * self.capacity:
+            return False
+        return leaves >= SHRINK_BELOW * self.capacity or self.capacity <= MIN_LEAVES
+
     def fit(self, leaves: int) -> bool:
-        """Resize for a frame that selected ``leaves`` leaves: grow if they did not fit, shrink if they fill
-        under SHRINK_BELOW; True if the buffers were replaced."""
-        if leaves <= self.capacity and (leaves >= SHRINK_BELOW * self.capacity or self.capacity <= MIN_LEAVES):
+        """Make the arena again for ``leaves`` leaves (GROW times them) unless it suits them; True if the
+        buffers were replaced."""
+        if self.fits(leaves):
             return False
         new = arena_leaves(leaves)
         if new == self.capacity:

@@ -14,7 +14,6 @@ from hybrid.gl.edges import TerrainEdges
 from hybrid.gl.programs import program, set_uniform
 from hybrid.gl.shading import resolve_mode
 
-from .arena import SHRINK_BELOW
 from .selection import BASE_WORD, CMD_POINTS, LEAF_FORMAT, LEAF_WORDS, SelectedTileletTile, TileletSelection
 from .shading import MODES
 
@@ -119,8 +118,7 @@ class TileletDrawing(TileletSelection):
         tau = leaf_tau if leaf_tau is not None else tau
         self.set_selection("morph", bool(morph))
         self.set_selection("stitch", bool(stitching))
-        if self._need < SHRINK_BELOW * self.arena.capacity:       # sparse since the last frame: shrink first
-            self.arena.fit(self._need)
+        self.arena.fit(self._need)          # sized for the last frame's leaves, with room to grow
         counters = self._select_draw(target, view, items, tau, mode, wireframe, culling, skirts)
         regrown = 0
         if counters["arena_overflow"]:       # some tiles did not fit and drew nothing: grow, draw them
