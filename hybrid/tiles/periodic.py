@@ -164,7 +164,7 @@ def open_periodic(path, size: int) -> StoredTerrain:
     view = PeriodicStore(terrain, size)
     grid = LazyGrid(view["levels/0"], terrain.height_range, view.attrs["name"])
     return StoredTerrain(grid, (terrain.spacing_x, terrain.spacing_y), terrain.origin, view.attrs["name"], None,
-                         source=terrain.path, notes=list(terrain.notes) + [
+                         source_step=terrain.source_step, source=terrain.path, notes=list(terrain.notes) + [
                              f"periodic extension to {size}x{size} samples of {terrain.cols}x{terrain.rows} "
                              f"(wrapped every {terrain.cols - 1} cells; virtual, nothing written)"],
                          store=view, path=f"{terrain.path}@periodic{size}")
