@@ -5,11 +5,13 @@ side, and nothing is written to disk. Its name ends in ``-periodic-<size>`` and 
 
 Tiles that lie inside one period are the source's tiles with the source's bounds and errors. A tile whose last
 row or column falls on a seam (where sample P of the source gives way to its sample 0) differs from its source
-tile there: its bounds take in the source's first row or column over the same span, and its error is bounded
-by the source tile's error plus twice the largest seam step over its span (the extension's level-0 samples and
-its level-l surface each differ from the source's by at most that step). Coarser levels whose tiles span more
-than a period repeat the source's pattern: their errors are bounded along the chain of levels on one period of
-the source's top grid, wrapped, and their bounds are the terrain's height range.
+tile there: its bounds take in the source's first row or column over the same span (the corner sample (0, 0)
+included), and its error is bounded by the source tile's error plus twice the largest seam step over its span
+(the extension's level-0 samples and its level-l surface each differ from the source's by at most that step).
+Coarser levels whose tiles span more than a period repeat the source's pattern: their errors are bounded along
+the chain of levels on one period of the source's top grid, wrapped, and their bounds are the terrain's height
+range. The extension may hold any whole number k of periods a side; for k not a power of two its last tiles of a
+coarse level cover the padding beyond it, as any grid's do.
 """
 from __future__ import annotations
 
@@ -89,16 +91,18 @@ class PeriodicStore:
         L = _levels(size, size, n)
         self.attrs = {**src_attrs, "max_level": L, "name": f"{src_attrs['name']}-periodic-{size}",
                       "periodic": {"source": terrain.path, "period_cells": P, "size": int(size)}}
-        col_step = np.abs(np.asarray(terrain.heights[:, P]) - np.asarray(terrain.heights[:, 0]))   # seam steps
-        row_step = np.abs(np.asarray(terrain.heights[P, :]) - np.asarray(terrain.heights[0, :]))
-        col0, row0 = np.asarray(terrain.heights[:, 0]), np.asarray(terrain.heights[0, :])
+        wrap = np.arange(P + 1) % P                         # a seam's samples: the source's row/column 0, wrapped,
+        col0 = np.asarray(terrain.heights[:, 0], dtype=np.float64)[wrap]      # so the corner's is (0, 0)
+        row0 = np.asarray(terrain.heights[0, :], dtype=np.float64)[wrap]
+        col_step = np.abs(np.asarray(terrain.heights[:, P], dtype=np.float64) - col0)   # seam steps
+        row_step = np.abs(np.asarray(terrain.heights[P, :], dtype=np.float64) - row0)
         lo, hi = terrain.height_range
         self.arrays = {}
         src_L = int(src_attrs["max_level"])
         beyond: dict = {}
         for level in range(L + 1):
             span = n << level
-            tiles = (size - 1) // span
+            tiles = -(-(size - 1) // span)                 # the last may cover padding (k not a power of two)
             if span <= P and level <= src_L:
                 t = P // span
                 idx = np.arange(tiles) % t
