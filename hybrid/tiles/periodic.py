@@ -11,7 +11,10 @@ included), and its error is bounded by the source tile's error plus twice the la
 Coarser levels whose tiles span more than a period repeat the source's pattern: their errors are bounded along
 the chain of levels on one period of the source's top grid, wrapped, and their bounds are the terrain's height
 range. The extension may hold any whole number k of periods a side; for k not a power of two its last tiles of a
-coarse level cover the padding beyond it, as any grid's do.
+coarse level cover the padding beyond it, as any grid's do. The extension's samples are the source's, so it keeps
+the source's ``source_step``. When the source has the raster strategies' node arrays, the extension serves its
+own from them, window by window (``hybrid.tiles.periodic_nodes``: the source's values away from the seams,
+conservative bounds near them).
 """
 from __future__ import annotations
 
@@ -20,15 +23,9 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.stored import LazyGrid, StoredTerrain, open_store
 
+from .periodic_nodes import KINDS, PeriodicNodes, _spans, seam_profiles
 from .pyramid import _block_reduce, interpolate_clamped
 from .store import _levels
-
-
-def _spans(profile: np.ndarray, span: int, fn) -> np.ndarray:
-    """fn over each tile's span of a (P + 1,) profile, both ends included: (P / span,)."""
-    blocks = _block_reduce(profile[None, :-1], span, fn)[0]
-    ends = profile[span::span]
-    return fn(blocks, ends)
 
 
 class _WrappedLevel:
@@ -91,11 +88,8 @@ class PeriodicStore:
         L = _levels(size, size, n)
         self.attrs = {**src_attrs, "max_level": L, "name": f"{src_attrs['name']}-periodic-{size}",
                       "periodic": {"source": terrain.path, "period_cells": P, "size": int(size)}}
-        wrap = np.arange(P + 1) % P                         # a seam's samples: the source's row/column 0, wrapped,
-        col0 = np.asarray(terrain.heights[:, 0], dtype=np.float64)[wrap]      # so the corner's is (0, 0)
-        row0 = np.asarray(terrain.heights[0, :], dtype=np.float64)[wrap]
-        col_step = np.abs(np.asarray(terrain.heights[:, P], dtype=np.float64) - col0)   # seam steps
-        row_step = np.abs(np.asarray(terrain.heights[P, :], dtype=np.float64) - row0)
+        seams = seam_profiles(terrain.heights, P)          # the seams' samples (corner included) and steps
+        col_step, row_step, col0, row0 = seams.col_step, seams.row_step, seams.col0, seams.row0
         lo, hi = terrain.height_range
         self.arrays = {}
         src_L = int(src_attrs["max_level"])
@@ -136,6 +130,22 @@ class PeriodicStore:
             src_level = min(level, src_L)                  # above the source's levels: its top grid, strided
             self.arrays[f"levels/{level}"] = _WrappedLevel(g[f"levels/{src_level}"], max(P >> level, 1),
                                                            ((size - 1) >> level) + 1, 1 << (level - src_level))
+
+        self._add_nodes(src_attrs.get("nodes"), seams, terrain.height_range)
+
+    def _add_nodes(self, info, seams, height_range) -> None:
+        """The raster strategies' node arrays, served from the source's (hybrid.tiles.periodic_nodes), when the
+        source has them; ``attrs["nodes"]`` then describes the extension's."""
+        self.attrs.pop("nodes", None)
+        if not info or int(info["square"]) != self.P:
+            return
+        square = self.n << int(self.attrs["max_level"])
+        nodes = PeriodicNodes(self.source, self.P, (self.size - 1) // self.P, square, seams, float(info["beta"]),
+                              height_range)
+        self.attrs["nodes"] = {**info, "levels": nodes.levels, "square": square, "periodic": True}
+        for kind in KINDS:
+            for lev in range(nodes.levels):
+                self.arrays[f"nodes/{kind}/{lev}"] = nodes.level(kind, lev)
 
     def __getitem__(self, name):
         return self.arrays[name]
