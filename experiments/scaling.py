@@ -9,8 +9,8 @@ samples read from disk on demand within a host byte budget. A frame is drawn onc
 queue drained), so the per-frame times carry the machine's noise: the tables give medians and 99th
 percentiles over a flight, and the ray caster's size ratio is read against the spread of its own frames.
 Host memory is the process's resident set (``/proc/self/statm``) after each frame. A method that cannot draw a
-store (the raster strategies on a store prepared without node arrays, or on a periodic extension too large to
-load for its node errors) is recorded with the reason.
+store (the raster strategies on a store prepared without node arrays, or on a large periodic extension of one)
+is recorded with the reason.
 """
 from __future__ import annotations
 
@@ -48,7 +48,8 @@ def run_scaling(ctx, stores, frames: int = 48, size=(640, 360), tau: float = 2 /
     """(frames, refusals, setup) tables of every method over every store (paths), one pass each (streaming within
     ``upload_budget_ms``, or with None each frame's tiles uploaded before it, untimed); setup
     is the one-off time before the first frame (the root tile of each strategy, with the raster strategies'
-    node data, and one frame of the root alone, in which the driver compiles the shaders)."""
+    node data, read from the store: a periodic extension's from its source's, window by window; and one frame of
+    the root alone, in which the driver compiles the shaders)."""
     from hybrid.camera.flight import preset
     from hybrid.errors import TerrabenchError
     from hybrid.renderer import Renderer

@@ -19,7 +19,9 @@ An in-memory height field gets its arrays from ``global_nodes``; a tile store ha
 prepare (``hybrid.tiles.store_nodes``: the same values for nodes up to 1024 cells, an upper bound of the
 effective error above; and ``hybrid.tiles.store_blocks``: each tile's block of them), and ``nodes_for`` hands
 their Zarr arrays to ``tile_node_block``, which reads the tile's block (or one window per level of a store
-without blocks), so the grid is never loaded.
+without blocks), so the grid is never loaded. A periodic extension of a store serves arrays of the same shape
+and slicing, computed window by window from its source's (``hybrid.tiles.periodic_nodes``: the source's values
+away from the seams, never below the exact ones near them).
 """
 from __future__ import annotations
 
@@ -75,18 +77,24 @@ def global_nodes(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
 
 
 def nodes_for(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
-    """The nodes the tiles of hf read: a tile store's node arrays (Zarr, read a tile's window at a time) when it
-    has them for this tile size and beta, else ``global_nodes`` (a store prepared without them is refused)."""
-    if not isinstance(hf, StoredTerrain) or hf.store.attrs.get("periodic"):
+    """The nodes the tiles of hf read: a tile store's node arrays (Zarr, or a periodic extension's served from its
+    source's, read a tile's window at a time) when it has them for this tile size and beta, else ``global_nodes``
+    (a store prepared without them is refused; a periodic extension of one is loaded whole if small enough)."""
+    if not isinstance(hf, StoredTerrain):
         return global_nodes(hf, tile_size, beta)
+    periodic = hf.store.attrs.get("periodic")
+    path = periodic["source"] if periodic else hf.path              # the store that prepare writes
+    small = hf.rows * hf.cols <= MAX_LOAD_SAMPLES
     info = hf.store.attrs.get("nodes")
     if not info:
+        if periodic and small:
+            return global_nodes(hf, tile_size, beta)
         raise TerrabenchError(
-            f"{hf.path}: this tile store was prepared without the raster strategies' node arrays; run terrabench "
-            f"prepare again on the same input with --out {hf.path} to add them (the ray caster draws it as it is)")
+            f"{path}: this tile store was prepared without the raster strategies' node arrays; run terrabench "
+            f"prepare again on the same input with --out {path} to add them (the ray caster draws it as it is)")
     if int(tile_size) != int(hf.store.attrs["tile_size"]) or float(beta) != float(info["beta"]):
-        if hf.size > MAX_LOAD_SAMPLES:
-            raise TerrabenchError(f"{hf.path}: node arrays were prepared for tiles of {hf.store.attrs['tile_size']} "
+        if not small:
+            raise TerrabenchError(f"{path}: node arrays were prepared for tiles of {hf.store.attrs['tile_size']} "
                                   f"and beta {info['beta']}, not {tile_size} and {beta}; the grid is too large to "
                                   "build them in memory")
         return global_nodes(hf, tile_size, beta)
@@ -97,7 +105,7 @@ def nodes_for(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
     levels = range(int(info["levels"]))
     g = hf.store
     blocks = None
-    if hf.store.attrs.get("node_blocks"):
+    if hf.store.attrs.get("node_blocks") and not periodic:       # an extension's blocks would differ at seams
         blocks = tuple(g[f"nodes/blocks/{lev}"] for lev in range(int(hf.store.attrs["max_level"]) + 1))
     nodes = GlobalNodes(int(info["square"]), float(beta), *(tuple(g[f"nodes/{k}/{lev}"] for lev in levels)
                                                              for k in ("effective", "zlo", "zhi")), blocks)

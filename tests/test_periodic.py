@@ -2,6 +2,7 @@
 extension built in memory), its bounds and errors never below the exact ones, and it is labelled periodic."""
 import numpy as np
 import pytest
+from test_store import ArraySource
 
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.grid_sources import FractalSource
@@ -47,3 +48,31 @@ def test_a_seamless_source_extends_without_seam_error(tmp_path):
         assert np.allclose(ext._err[level][:t, :t], plain._err[level]), level
     with pytest.raises(TerrabenchError, match="period must be a power of two"):
         FractalSource(1025, period=1000)
+
+
+def _bounds_hold(ext, n):
+    """The extension's pyramid against the in-memory pyramid of its whole grid: the same tiles and samples, bounds
+    and errors never tighter than the exact ones."""
+    stored, mem = StorePyramid(ext), TilePyramid(ext.load(), n)
+    assert stored.max_level == mem.max_level
+    for level in range(mem.max_level + 1):
+        assert stored.tile_counts(level) == mem.tile_counts(level) == stored._err[level].shape, level
+        for key in mem.keys(level):
+            assert np.array_equal(stored.tile(key).heights, mem.tile(key).heights), key
+        assert (stored._zmin[level] <= mem._zmin[level]).all() and (stored._zmax[level] >= mem._zmax[level]).all()
+        assert (stored._err[level] >= mem._err[level] - 1e-6).all(), level
+
+
+def test_seam_corner_tiles_take_in_the_source_corner_sample(tmp_path):
+    h = FractalSource(129, seed=4).read_rows(0, 129)
+    h[0, 0], h[0, 1] = h.min() - 500.0, h.max() + 500.0          # a pit at the corner, where four seams meet
+    prepare_store(ArraySource(h, 10.0), tmp_path / "s", 16)
+    _bounds_hold(open_periodic(tmp_path / "s", 257), 16)
+
+
+@pytest.mark.parametrize("periods", [3, 5])
+def test_an_extension_of_any_whole_number_of_periods_has_every_tile(tmp_path, periods):
+    prepare_store(FractalSource(129, seed=1), tmp_path / "s", 32)
+    ext = open_periodic(tmp_path / "s", 128 * periods + 1)
+    _bounds_hold(ext, 32)
+    assert StorePyramid(ext).tile_counts(StorePyramid(ext).max_level) == (1, 1)

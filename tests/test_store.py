@@ -14,16 +14,18 @@ from hybrid.terrain.grid_sources import FractalSource, GdalGridSource
 from hybrid.terrain.heightfield import HeightField
 from hybrid.terrain.stored import open_store
 from hybrid.tiles import store as store_mod
+from hybrid.tiles.periodic import open_periodic
 from hybrid.tiles.pyramid import TilePyramid
+from hybrid.tiles.quantize import dequantize, quantize
 from hybrid.tiles.store import StorePyramid, prepare_store
 
 
 class ArraySource:
     """A grid source over an in-memory array (the tests' oracle input)."""
 
-    def __init__(self, h, spacing):
+    def __init__(self, h, spacing, source_step=None):
         self.h, self.rows, self.cols, self.spacing, self.name, self.notes = h, h.shape[0], h.shape[1], spacing, "a", []
-        self.reads = 0
+        self.reads, self.source_step = 0, source_step
 
     def read_rows(self, r0, r1):
         self.reads += 1
@@ -123,6 +125,67 @@ def test_geotiffs_in_two_crs_prepare_like_loading_them_whole(tmp_path):
         t = open_store(out)
         assert np.allclose((t.spacing_x, t.spacing_y), (whole.spacing_x, whole.spacing_y))
         assert np.array_equal(t.heights[:, :], whole.heights)
+
+
+def _stepped(size=129, seed=5):
+    """Rough heights on a 0.1 m step with a 5 m offset, as a 16-bit DEM scaled: float32(5 + 0.1 k), k in int16."""
+    rng = np.random.default_rng(seed)
+    k = np.cumsum(np.cumsum(rng.integers(-40, 41, (size, size)), axis=0), axis=1)
+    k = np.clip(k - k.min() - 20000, -32768, 32767).astype(np.int16)
+    return (5.0 + 0.1 * k.astype(np.float64)).astype(np.float32)
+
+
+def test_a_store_keeps_its_source_height_step_and_its_16_bit_tiles_are_exact(tmp_path):
+    h = _stepped()
+    prepare_store(ArraySource(h, 10.0, source_step=(0.1, 5.0)), tmp_path / "s", 32)
+    t = open_store(tmp_path / "s")
+    assert t.source_step == (0.1, 5.0) and t.load().source_step == (0.1, 5.0)
+    for terrain in (t, open_periodic(tmp_path / "s", 385)):       # the extension's samples are the source's
+        assert terrain.source_step == (0.1, 5.0)
+        pyr = StorePyramid(terrain)
+        for level in range(pyr.max_level + 1):
+            for key in pyr.keys(level):
+                tile = pyr.tile(key)
+                z = quantize(tile.heights, terrain.source_step)
+                back = dequantize(z.q, z.offset, z.step, z.base)
+                assert z.error == 0.0 and np.array_equal(back.view(np.uint32), tile.heights.view(np.uint32)), key
+                assert pyr.quantization_error(key) == 0.0, key
+    # a float source has no step: quantised lossily, the error bounded and added to the tiles' errors
+    prepare_store(ArraySource(h + np.float32(0.013), 10.0), tmp_path / "f", 32)
+    f = StorePyramid(tmp_path / "f")
+    assert f.hf.source_step is None and open_periodic(tmp_path / "f", 257).source_step is None
+    key = f.root()
+    assert quantize(f.tile(key).heights).error > 0 and f.quantization_error(key) >= quantize(f.tile(key).heights).error
+    # a claimed step one sample is off is not recorded
+    off = h.copy()
+    off[100, 7] += np.float32(0.04)
+    prepare_store(ArraySource(off, 10.0, source_step=(0.1, 5.0)), tmp_path / "o", 32)
+    assert open_store(tmp_path / "o").source_step is None
+    with pytest.raises(TerrabenchError, match="source_step must"):
+        prepare_store(ArraySource(h, 10.0, source_step=(0.0, 5.0)), tmp_path / "bad", 32)
+
+
+def test_a_store_without_a_recorded_step_reads_as_one_without_step(tmp_path):
+    import zarr
+    prepare_store(ArraySource(_stepped(65), 10.0, source_step=(0.1, 5.0)), tmp_path / "s", 32)
+    g = zarr.open_group(str(tmp_path / "s"), mode="r+")            # as a store written before the attribute
+    del g.attrs["source_step"]
+    assert open_store(tmp_path / "s").source_step is None
+    assert StorePyramid(tmp_path / "s").quantization_error(StorePyramid(tmp_path / "s").root()) > 0
+
+
+def test_a_16_bit_geotiff_source_carries_its_step_into_the_store(tmp_path):
+    from hybrid.terrain.loaders import load_terrain
+    k = np.arange(65 * 65, dtype=np.int16).reshape(65, 65) % 977
+    path = tmp_path / "dem.tif"
+    with rasterio.open(path, "w", driver="GTiff", height=65, width=65, count=1, dtype="int16", crs="EPSG:32610",
+                       transform=from_origin(500000, 5200000, 30, 30)) as dst:
+        dst.write(k, 1)
+        dst.scales = (0.1,)
+    src = GdalGridSource(path)
+    assert src.source_step == load_terrain(path).source_step == (0.1, 0.0)
+    t = open_store(prepare_store(src, tmp_path / "s", 32))
+    assert t.source_step == (0.1, 0.0) and StorePyramid(t).quantization_error(StorePyramid(t).root()) == 0.0
 
 
 def test_nodata_is_refused_by_name(tmp_path):

@@ -1,7 +1,9 @@
 """Height grids read a band of rows at a time, for building tile stores out of core.
 
 A grid source has ``rows``, ``cols``, ``spacing`` (metres, one number or (x, y)), ``name``, ``notes`` and
-``read_rows(r0, r1)``: rows r0..r1-1 (south to north, as every terrabench grid) as float32 metres. Two kinds:
+``read_rows(r0, r1)``: rows r0..r1-1 (south to north, as every terrabench grid) as float32 metres, and may have
+``source_step`` ((step, offset) metres when every height is float32(offset + step * k), k an integer, as
+``HeightField.source_step``; a tile store records it). Two kinds:
 a GDAL file through rasterio (windows of the file, never the whole grid), and a seeded fractal terrain whose
 every sample is a function of its own position and the seed, so any window gives the same samples.
 """
@@ -33,6 +35,8 @@ class GdalGridSource:
         self.notes = list(self.h.notes)
         self._row0 = 0 if self.h.window is None else int(self.h.window.row_off)
         self._col0 = 0 if self.h.window is None else int(self.h.window.col_off)
+        integer = np.issubdtype(np.dtype(self.src.dtypes[self.h.band - 1]), np.integer)
+        self.source_step = (float(self.h.scale), float(self.h.offset)) if integer else None   # as the loader's
 
     def read_rows(self, r0: int, r1: int) -> np.ndarray:
         """Rows r0..r1-1 counted from the south, (r1 - r0, cols) float32 metres; no-data is refused by name."""

@@ -4,8 +4,9 @@ The store is a Zarr v3 group (a directory): ``levels/<l>`` holds the pyramid's l
 2^l-th level-0 sample, the last row and column kept, chunks of one tile's cells), ``zmin/<l>``, ``zmax/<l>``
 and ``error/<l>`` the per-tile bounds and geometric errors, ``nodes/effective|zlo|zhi/<g>`` the raster
 strategies' node arrays (hybrid.tiles.store_nodes), and the group's attributes the header (format, version, name,
-spacing, origin, CRS, height range, tile size, how it was made, the node arrays' parameters under ``nodes``, and
-whether it is complete).
+spacing, origin, CRS, height range, tile size, how it was made, the node arrays' parameters under ``nodes``, the
+source's height step ``source_step`` as [step, offset] metres or null, and whether it is complete). A store written
+before ``source_step`` was recorded lacks the attribute and reads as null (no step).
 Zarr was chosen over a COG with overviews because every level is a plain chunked array with its own per-tile
 tables beside it in one self-describing directory, written and read a window at a time from Python with no
 GDAL driver in the loop, and resumable chunk by chunk.
@@ -102,7 +103,8 @@ class LazyGrid:
 
 @dataclass
 class StoredTerrain(HeightField):
-    """A HeightField over a tile store: ``heights`` is a LazyGrid of level 0; ``store`` is the opened group."""
+    """A HeightField over a tile store: ``heights`` is a LazyGrid of level 0; ``store`` is the opened group;
+    ``source_step`` is the store's recorded step (None for a store without one)."""
 
     store: object = None
     path: str = ""
@@ -137,7 +139,7 @@ class StoredTerrain(HeightField):
     def load(self) -> HeightField:
         """The whole grid as an in-memory HeightField (refused beyond MAX_LOAD_SAMPLES)."""
         return HeightField(np.asarray(self.heights), (self.spacing_x, self.spacing_y), self.origin, self.name,
-                           None, source=self.path, notes=list(self.notes))
+                           None, source=self.path, notes=list(self.notes), source_step=self.source_step)
 
 
 def open_store(path) -> StoredTerrain:
@@ -154,5 +156,7 @@ def open_store(path) -> StoredTerrain:
         raise TerrabenchError(f"{path}: tile store is incomplete (interrupted prepare); run the same prepare "
                               "command again to finish it")
     notes = [f"tile store {p.name}: {a.get('made_by', '')}"] + (["periodic extension"] if a.get("periodic") else [])
+    step = a.get("source_step")
     return StoredTerrain(LazyGrid(g["levels/0"], tuple(a["height_range"]), a["name"]), tuple(a["spacing"]),
-                         tuple(a["origin"]), a["name"], None, source=str(p), notes=notes, store=g, path=str(p))
+                         tuple(a["origin"]), a["name"], None, source=str(p), notes=notes,
+                         source_step=None if step is None else (float(step[0]), float(step[1])), store=g, path=str(p))

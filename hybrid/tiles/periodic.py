@@ -5,11 +5,16 @@ side, and nothing is written to disk. Its name ends in ``-periodic-<size>`` and 
 
 Tiles that lie inside one period are the source's tiles with the source's bounds and errors. A tile whose last
 row or column falls on a seam (where sample P of the source gives way to its sample 0) differs from its source
-tile there: its bounds take in the source's first row or column over the same span, and its error is bounded
-by the source tile's error plus twice the largest seam step over its span (the extension's level-0 samples and
-its level-l surface each differ from the source's by at most that step). Coarser levels whose tiles span more
-than a period repeat the source's pattern: their errors are bounded along the chain of levels on one period of
-the source's top grid, wrapped, and their bounds are the terrain's height range.
+tile there: its bounds take in the source's first row or column over the same span (the corner sample (0, 0)
+included), and its error is bounded by the source tile's error plus twice the largest seam step over its span
+(the extension's level-0 samples and its level-l surface each differ from the source's by at most that step).
+Coarser levels whose tiles span more than a period repeat the source's pattern: their errors are bounded along
+the chain of levels on one period of the source's top grid, wrapped, and their bounds are the terrain's height
+range. The extension may hold any whole number k of periods a side; for k not a power of two its last tiles of a
+coarse level cover the padding beyond it, as any grid's do. The extension's samples are the source's, so it keeps
+the source's ``source_step``. When the source has the raster strategies' node arrays, the extension serves its
+own from them, window by window (``hybrid.tiles.periodic_nodes``: the source's values away from the seams,
+conservative bounds near them).
 """
 from __future__ import annotations
 
@@ -18,15 +23,9 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.stored import LazyGrid, StoredTerrain, open_store
 
+from .periodic_nodes import KINDS, PeriodicNodes, _spans, seam_profiles
 from .pyramid import _block_reduce, interpolate_clamped
 from .store import _levels
-
-
-def _spans(profile: np.ndarray, span: int, fn) -> np.ndarray:
-    """fn over each tile's span of a (P + 1,) profile, both ends included: (P / span,)."""
-    blocks = _block_reduce(profile[None, :-1], span, fn)[0]
-    ends = profile[span::span]
-    return fn(blocks, ends)
 
 
 class _WrappedLevel:
@@ -89,16 +88,15 @@ class PeriodicStore:
         L = _levels(size, size, n)
         self.attrs = {**src_attrs, "max_level": L, "name": f"{src_attrs['name']}-periodic-{size}",
                       "periodic": {"source": terrain.path, "period_cells": P, "size": int(size)}}
-        col_step = np.abs(np.asarray(terrain.heights[:, P]) - np.asarray(terrain.heights[:, 0]))   # seam steps
-        row_step = np.abs(np.asarray(terrain.heights[P, :]) - np.asarray(terrain.heights[0, :]))
-        col0, row0 = np.asarray(terrain.heights[:, 0]), np.asarray(terrain.heights[0, :])
+        seams = seam_profiles(terrain.heights, P)          # the seams' samples (corner included) and steps
+        col_step, row_step, col0, row0 = seams.col_step, seams.row_step, seams.col0, seams.row0
         lo, hi = terrain.height_range
         self.arrays = {}
         src_L = int(src_attrs["max_level"])
         beyond: dict = {}
         for level in range(L + 1):
             span = n << level
-            tiles = (size - 1) // span
+            tiles = -(-(size - 1) // span)                 # the last may cover padding (k not a power of two)
             if span <= P and level <= src_L:
                 t = P // span
                 idx = np.arange(tiles) % t
@@ -133,6 +131,22 @@ class PeriodicStore:
             self.arrays[f"levels/{level}"] = _WrappedLevel(g[f"levels/{src_level}"], max(P >> level, 1),
                                                            ((size - 1) >> level) + 1, 1 << (level - src_level))
 
+        self._add_nodes(src_attrs.get("nodes"), seams, terrain.height_range)
+
+    def _add_nodes(self, info, seams, height_range) -> None:
+        """The raster strategies' node arrays, served from the source's (hybrid.tiles.periodic_nodes), when the
+        source has them; ``attrs["nodes"]`` then describes the extension's."""
+        self.attrs.pop("nodes", None)
+        if not info or int(info["square"]) != self.P:
+            return
+        square = self.n << int(self.attrs["max_level"])
+        nodes = PeriodicNodes(self.source, self.P, (self.size - 1) // self.P, square, seams, float(info["beta"]),
+                              height_range)
+        self.attrs["nodes"] = {**info, "levels": nodes.levels, "square": square, "periodic": True}
+        for kind in KINDS:
+            for lev in range(nodes.levels):
+                self.arrays[f"nodes/{kind}/{lev}"] = nodes.level(kind, lev)
+
     def __getitem__(self, name):
         return self.arrays[name]
 
@@ -164,7 +178,7 @@ def open_periodic(path, size: int) -> StoredTerrain:
     view = PeriodicStore(terrain, size)
     grid = LazyGrid(view["levels/0"], terrain.height_range, view.attrs["name"])
     return StoredTerrain(grid, (terrain.spacing_x, terrain.spacing_y), terrain.origin, view.attrs["name"], None,
-                         source=terrain.path, notes=list(terrain.notes) + [
+                         source_step=terrain.source_step, source=terrain.path, notes=list(terrain.notes) + [
                              f"periodic extension to {size}x{size} samples of {terrain.cols}x{terrain.rows} "
                              f"(wrapped every {terrain.cols - 1} cells; virtual, nothing written)"],
                          store=view, path=f"{terrain.path}@periodic{size}")

@@ -229,12 +229,16 @@ class TilePyramid:
             exact = False
             step = getattr(self.hf, "source_step", None)
             if step is not None and isinstance(self.hf, HeightField):
-                if self._on_step is None:
-                    self._on_step = on_step_cells(self.hf.heights, step)
-                on = _block_reduce(self._on_step, self.n << level, np.minimum)
+                on = self._on_step_tiles(level, step)
                 exact = on & ((hi.astype(np.float64) - lo) / float(step[0]) <= Q_MAX - 0.5)
             self._qerr[level] = error_bound(lo, hi, exact)
         return self._qerr[level][np.asarray(ty, dtype=np.int64), np.asarray(tx, dtype=np.int64)]
+
+    def _on_step_tiles(self, level: int, step) -> np.ndarray:
+        """Per tile of a level: True where every level-0 sample it covers is on the source step."""
+        if self._on_step is None:
+            self._on_step = on_step_cells(self.hf.heights, step)
+        return _block_reduce(self._on_step, self.n << level, np.minimum)
 
     def quantization_error(self, key: TileKey) -> float:
         """Bound (metres) on the tile's 16-bit quantisation error, as quantization_errors_at."""

@@ -9,7 +9,9 @@ from level 0 by at most max |S_l - S_(l-1)| (taken at level l-1's samples: both 
 same diagonal, so S_(l-1)'s triangles refine S_l's and the largest difference sits at a vertex) plus the
 children's error. The bound is never below the exact error (tested), so the screen-space bound still holds;
 it may refine a little more than the exact error would. Then the raster strategies' node arrays are written
-(``store_nodes.build_nodes``; a complete store without them gets them when prepared again). Progress is kept in
+(``store_nodes.build_nodes``; a complete store without them gets them when prepared again). A source's
+``source_step`` is recorded in the attributes (``[step, offset]``, or null) when every level-0 sample lies on it, so
+the ray caster's 16-bit tiles of the store are exact, as the in-memory grid's are. Progress is kept in
 the store's attributes after every band, so an interrupted prepare resumes where it stopped; the store is marked
 complete last.
 
@@ -30,6 +32,7 @@ from hybrid.terrain.stored import STORE_FORMAT, STORE_VERSION, StoredTerrain, _z
 
 from .fans import GPU_BETA
 from .pyramid import TilePyramid, _block_reduce, interpolate_clamped
+from .quantize import on_step_cells
 from .store_blocks import build_blocks
 from .store_nodes import build_nodes, node_bands, node_square
 
@@ -96,7 +99,8 @@ def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: in
         g.attrs.update({"format": STORE_FORMAT, "version": STORE_VERSION, "complete": False, "params": params,
                         "name": source.name, "spacing": [float(sx), float(sy)], "origin": [0.0, 0.0, 0.0],
                         "tile_size": n, "max_level": _levels(rows, cols, n), "notes": list(source.notes),
-                        "made_by": f"terrabench prepare, tiles of {n}", "progress": {}, "height_range": None})
+                        "made_by": f"terrabench prepare, tiles of {n}", "progress": {}, "height_range": None,
+                        "source_step": _claimed_step(source)})
     L = int(g.attrs["max_level"])
     bands = sum(-(-(_level_shape(rows, cols, l)[0] - 1) // n) for l in range(L + 1))
     prog = _Progress(report, 2 * bands + node_bands(node_square(n, L)[0]))   # levels, nodes, blocks
@@ -135,6 +139,9 @@ def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: in
             if level == 0:
                 band = source.read_rows(r0, r1)
                 own = np.zeros(tx_n)
+                step = g.attrs.get("source_step")
+                if step and not on_step_cells(band, step).all():   # a claimed step the samples are not on
+                    g.attrs.update({"source_step": None})
             else:
                 a0, a1 = 2 * r0, min(2 * (r1 - 1), R1 - 1) + 1      # level l-1 rows under the band
                 fine = np.asarray(prev[a0:a1, :], dtype=np.float32)
@@ -168,6 +175,21 @@ def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: in
     build_blocks(g, n, L, mark)
     g.attrs.update({"complete": True})
     return out
+
+
+def _claimed_step(source) -> list | None:
+    """The source's ``source_step`` as [step, offset] metres (checked: finite, step > 0), or None."""
+    step = getattr(source, "source_step", None)
+    if step is None:
+        return None
+    try:
+        s, o = (float(v) for v in step)
+    except (TypeError, ValueError):
+        raise TerrabenchError(f"{source.name}: source_step must be (step, offset) in metres, got {step!r}") from None
+    if not (np.isfinite(s) and np.isfinite(o) and s > 0):
+        raise TerrabenchError(f"{source.name}: source_step must have a finite step > 0 and a finite offset (metres), "
+                              f"got {step!r}")
+    return [s, o]
 
 
 def _band_error(piece_of, cols: int, k: int, n: int) -> np.ndarray:
@@ -206,7 +228,6 @@ class StorePyramid(TilePyramid):
         self.size = self.n * (1 << self.max_level) + 1
         self._boxes: dict = {}
         self._qerr: dict = {}
-        self._on_step = None
         self._zmin = {l: np.asarray(g[f"zmin/{l}"][:]) for l in range(self.max_level + 1)}
         self._zmax = {l: np.asarray(g[f"zmax/{l}"][:]) for l in range(self.max_level + 1)}
         self._err = {l: np.asarray(g[f"error/{l}"][:]) for l in range(self.max_level + 1)}
@@ -246,6 +267,10 @@ class StorePyramid(TilePyramid):
                     self.stats["evictions"] += 1
                 self.stats["peak_bytes"] = max(self.stats["peak_bytes"], self.cache_bytes)
             return self._cache[key]
+
+    def _on_step_tiles(self, level: int, step) -> np.ndarray:
+        """Every tile of a store is on its recorded step: prepare records it only when every sample is."""
+        return np.ones(self._zmin[level].shape, dtype=bool)
 
     def cached(self, key) -> bool:
         """Whether the tile's samples are in the host cache (or the loader failed to read them: then a read in the
