@@ -29,6 +29,8 @@ uniform bool write_records;     // leaf records for the geometry-shader path (ra
 uniform bool write_mesh;        // vertices and indices for the plain indexed draw (raster.indexed)
 uniform vec4 planes[6];         // eye-relative frustum planes, inside where dot >= 0
 uniform uint arena_capacity;    // leaves the frame's arena holds (raster.arena)
+uniform vec3 eye_terrain;       // eye minus the terrain's origin, metres
+uniform vec2 cell_metres;       // the terrain's level-0 spacing (x, y), metres
 
 const int CMD_POINTS_ = 0, CMD_TEMPLATE_ = 1;   // indirect commands (raster.selection CMD_*)
 const int BASE_WORD = 15;       // cmd[]: the tile's first leaf in the arena
@@ -60,9 +62,12 @@ int split_state(int m, int a, int b, out float E, out float d) {
     int s = side_of(m);
     vec4 nd = node[offsets(m) + (a + 1) * (s + 2) + (b + 1)];
     if (nd.w == 0.0) return -1;
-    float S = float(2 << m);
-    vec3 lo = origin_rel + vec3(vec2(float(b) - 1.0, float(a) - 1.0) * S * spacing, nd.y);
-    vec3 hi = origin_rel + vec3(vec2(float(b) + 2.0, float(a) + 2.0) * S * spacing, nd.z);
+    // the box from the node's level-0 cells and the eye in the terrain's frame: every tile that reads this
+    // node (its own, a neighbour through its apron) gets the same distance, so they agree on splits and morphs
+    int S = (2 << m) << tile_level;
+    ivec2 c0 = tile_cell + ivec2(b - 1, a - 1) * S;
+    vec3 lo = vec3(vec2(c0) * cell_metres, nd.y) - eye_terrain;
+    vec3 hi = vec3(vec2(c0 + 3 * S) * cell_metres, nd.z) - eye_terrain;
     d = length(max(max(lo, -hi), vec3(0.0)));
     E = nd.x;
     if (mb >= top) return -1;                    // that tile's root (or above): always split
@@ -226,6 +231,10 @@ void emit_leaf(int m, int a, int b) {
         int st = split_state(m + 1, na >> 1, nbb >> 1, E, d);
         if (st == 0) { if (stitch) drop |= bit[e]; }
         else am[e] = max(ap, alpha_of(st, E, d));
+        // on a border with a tile of another pyramid level the two sides cannot see each other's forced
+        // (tile root) morphs: the shared posts stay at their own heights on both sides
+        int od = owner_delta(m, na, nbb);
+        if (od != 0 && od != 9) am[e] = 0.0;
     }
     float h[9];
     for (int r = 0; r < 3; ++r)

@@ -231,6 +231,8 @@ class TileletSelection:
         self.set_selection("write_records", self.writes == "records")
         self.set_selection("write_mesh", self.writes == "mesh")
         self.set_selection("arena_capacity", int(self.arena.capacity))
+        self.set_selection("eye_terrain", tuple(float(e - o) for e, o in zip(view.eye, self.hf.origin)))
+        self.set_selection("cell_metres", (float(self.hf.spacing_x), float(self.hf.spacing_y)))
         self.frame.write(np.zeros(len(FRAME_FIELDS), np.uint32).tobytes())
         self.frame.bind_to_storage_buffer(4)
         self.arena.bind()

@@ -7,7 +7,7 @@ layout(std140, binding = 0) uniform TileBlock {
     vec4 t_uv;                // texture coordinate of tile sample [0, 0]; texture step per tile cell
     ivec4 t_shape;            // cells a side, coarsest local level, first node dispatched, pyramid level
     ivec4 t_nb_delta;         // W, E, S, N: neighbour tile level minus this tile's; 9 = no neighbour
-    ivec4 t_flags;            // skirt edges (W=1 E=2 S=4 N=8), cull (0/1)
+    ivec4 t_flags;            // skirt edges (W=1 E=2 S=4 N=8), cull (0/1), level-0 cell (column, row) of sample [0, 0]
     vec4 t_skirt;             // eye-relative z of the skirts' lower edge
     ivec4 t_offsets[4];       // start of each local level's node grid (with apron) in the node buffer
     ivec4 t_starts[4];        // index of each local level's first node among the tile's own nodes
@@ -24,6 +24,7 @@ layout(std140, binding = 0) uniform TileBlock {
 #define nb_delta (t_nb_delta)
 #define skirt_edges (t_flags.x)
 #define cull (t_flags.y != 0)
+#define tile_cell (t_flags.zw)
 #define skirt_bottom (t_skirt.x)
 #define offsets(m) (t_offsets[(m) >> 2][(m) & 3])
 #define starts(m) (t_starts[(m) >> 2][(m) & 3])

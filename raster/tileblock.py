@@ -48,6 +48,8 @@ def tile_blocks(hf, view, items, skirts: dict | None = None, culling: bool = Tru
     sk = skirts or {}
     out["flags"][:, 0] = [int(sk.get(s.key, 0)) for s in sels]
     out["flags"][:, 1] = [int(bool(culling) and not bool(s.inside)) for s in sels]
+    cells = np.array([(s.key.tx * t.n << s.key.level, s.key.ty * t.n << s.key.level) for s, t in zip(sels, tiles)])
+    out["flags"][:, 2:] = cells.reshape(-1, 2)
     zmin = np.array([t.zmin for t in tiles], dtype=np.float64)
     out["skirt"][:, 0] = zmin - eye[2] - 1.0 - 0.01 * spacing.max(axis=1)   # eye-relative skirt bottom: below zmin
     if per_frame is not None:
