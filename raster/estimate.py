@@ -11,17 +11,21 @@ boxes are built once; a frame's tiles are then estimated together in a handful o
 from __future__ import annotations
 
 import time
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
 
 from hybrid.camera.view import View
+from hybrid.terrain.stored import StoredTerrain
 from hybrid.tiles.pyramid import TileKey, TilePyramid
 from hybrid.tiles.tiletree import SelectedTile, box_classes, box_distances
 
+from .nodes import nodes_for, tile_node_block
 from .quadtree import GPU_BETA, error_pyramid
 
 BLOCKS = 4                      # blocks a tile side for the small nodes' distances
+MAX_TILES = 4096                # tiles whose TileNodes are kept (least recently used first out)
 
 
 @dataclass(frozen=True)
@@ -44,17 +48,33 @@ class TileNodes:
 
 
 def tile_nodes(tile, beta: float = GPU_BETA) -> TileNodes:
-    """The estimate's data of one pyramid tile (``hybrid.tiles.pyramid.Tile``: heights, origin, spacing)."""
+    """The estimate's data of one pyramid tile (``hybrid.tiles.pyramid.Tile``: heights, origin, spacing), from
+    its own heights' error pyramid."""
     pyr = error_pyramid(tile.heights, beta)
-    n, top = pyr.n, pyr.top
+    return _tile_nodes(pyr.effective, pyr.zmin, pyr.zmax, tile.n, tile.origin, (tile.spacing_x, tile.spacing_y))
+
+
+def block_tile_nodes(data: np.ndarray, offsets: np.ndarray, n: int, origin, spacing) -> TileNodes:
+    """The estimate's data of an n-cell tile at world ``origin`` with ``spacing`` (x, y) metres, from its node
+    block (``raster.nodes.tile_node_block``): the saturated errors and grown box ranges the GPU selection reads
+    (from a tile store, one read and no error pyramid)."""
+    grids = [data[offsets[m]:offsets[m + 1]].reshape((n >> (m + 1)) + 2, (n >> (m + 1)) + 2, 4)[1:-1, 1:-1]
+             for m in range(len(offsets) - 1)]
+    return _tile_nodes([g[..., 0].astype(np.float64) for g in grids], [g[..., 1] for g in grids],
+                       [g[..., 2] for g in grids], n, origin, spacing)
+
+
+def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing) -> TileNodes:
+    """TileNodes from per local level effective errors and height ranges (metres above the origin z)."""
+    top = len(effective) - 1
     nb = max(1, min(BLOCKS, n // 8))
     cells = n // nb                                              # block side, tile cells
-    org = np.asarray(tile.origin, dtype=np.float64)
-    sp = np.array([tile.spacing_x, tile.spacing_y])
+    org = np.asarray(origin, dtype=np.float64)
+    sp = np.asarray(spacing, dtype=np.float64)
     fine_e, fine_b, coarse_e, coarse_lo, coarse_hi = [], [], [], [], []
     for m in range(1, top):
         side = 2 << m                                            # node side, tile cells
-        e = pyr.effective[m]
+        e = effective[m]
         a, b = np.indices(e.shape)
         if side <= cells:
             fine_e.append(e.ravel())
@@ -63,11 +83,11 @@ def tile_nodes(tile, beta: float = GPU_BETA) -> TileNodes:
             lo_xy = org[:2] + np.stack([(b - 1) * side, (a - 1) * side], -1).reshape(-1, 2) * sp
             hi_xy = org[:2] + np.stack([(b + 2) * side, (a + 2) * side], -1).reshape(-1, 2) * sp
             coarse_e.append(e.ravel())
-            coarse_lo.append(np.column_stack([lo_xy, org[2] + pyr.zmin[m].ravel()]))
-            coarse_hi.append(np.column_stack([hi_xy, org[2] + pyr.zmax[m].ravel()]))
+            coarse_lo.append(np.column_stack([lo_xy, org[2] + zmin[m].ravel()]))
+            coarse_hi.append(np.column_stack([hi_xy, org[2] + zmax[m].ravel()]))
     by, bx = np.divmod(np.arange(nb * nb), nb)
     # block heights: the level-1 nodes' ranges reduced over each block (level 1 covers every sample)
-    z1lo, z1hi = pyr.zmin[min(1, top)], pyr.zmax[min(1, top)]
+    z1lo, z1hi = zmin[min(1, top)], zmax[min(1, top)]
     per = z1lo.shape[0] // nb
     zlo = z1lo.reshape(nb, per, nb, per).min(axis=(1, 3)).ravel()
     zhi = z1hi.reshape(nb, per, nb, per).max(axis=(1, 3)).ravel()
@@ -126,14 +146,27 @@ class TileletTriangleEstimator:
     def __init__(self, pyramid: TilePyramid, beta: float = GPU_BETA):
         self.pyramid = pyramid
         self.beta = float(beta)
-        self._nodes: dict = {}
+        self._nodes: OrderedDict = OrderedDict()
         self.build_ms = 0.0
+        hf = pyramid.hf
+        # a tile store with per-tile node blocks: each tile's block is one read (no heights, no error pyramid)
+        self._blocks = None
+        if isinstance(hf, StoredTerrain) and hf.store.attrs.get("node_blocks") and not hf.store.attrs.get("periodic"):
+            self._blocks = nodes_for(hf, pyramid.n, beta)
 
     def _tile(self, key: TileKey) -> TileNodes:
-        if key not in self._nodes:
-            t0 = time.perf_counter()
+        if key in self._nodes:
+            self._nodes.move_to_end(key)
+            return self._nodes[key]
+        t0 = time.perf_counter()
+        if self._blocks is not None:
+            data, offsets = tile_node_block(self._blocks, key.level, key.tx, key.ty, self.pyramid.n)
+            self._nodes[key] = block_tile_nodes(data, offsets, self.pyramid.n, *self.pyramid.placement(key))
+        else:
             self._nodes[key] = tile_nodes(self.pyramid.tile(key), self.beta)
-            self.build_ms += (time.perf_counter() - t0) * 1e3
+        if len(self._nodes) > MAX_TILES:
+            self._nodes.popitem(last=False)
+        self.build_ms += (time.perf_counter() - t0) * 1e3
         return self._nodes[key]
 
     def many(self, selected: list[SelectedTile], view: View, tau: float) -> tuple[np.ndarray, np.ndarray]:

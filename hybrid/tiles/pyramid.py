@@ -295,14 +295,19 @@ class TilePyramid:
         if not self.exists(key):
             raise TerrabenchError(f"tile {key} does not exist (levels 0..{self.max_level}, "
                                   f"{self.tiles_per_side(key.level) if 0 <= key.level <= self.max_level else 0} tiles a side)")
+        h = self.samples(key)
+        origin, (sx, sy) = self.placement(key)
+        z0, z1 = self.zrange(key)
+        return Tile(key, np.ascontiguousarray(h, dtype=np.float32), origin, sx, sy,
+                    self.clip(key), z0, z1, self.error(key), getattr(self.hf, "source_step", None))
+
+    def placement(self, key: TileKey) -> tuple[tuple[float, float, float], tuple[float, float]]:
+        """(world origin of the tile's sample [0, 0], (spacing_x, spacing_y)) in metres, without its samples."""
         k = 1 << key.level
         i0, j0 = key.ty * self.n * k, key.tx * self.n * k
-        h = self.samples(key)
         hf = self.hf
-        origin = (hf.origin[0] + j0 * hf.spacing_x, hf.origin[1] + i0 * hf.spacing_y, hf.origin[2])
-        z0, z1 = self.zrange(key)
-        return Tile(key, np.ascontiguousarray(h, dtype=np.float32), origin, hf.spacing_x * k, hf.spacing_y * k,
-                    self.clip(key), z0, z1, self.error(key), getattr(self.hf, "source_step", None))
+        return ((hf.origin[0] + j0 * hf.spacing_x, hf.origin[1] + i0 * hf.spacing_y, hf.origin[2]),
+                (hf.spacing_x * k, hf.spacing_y * k))
 
     def samples(self, key: TileKey) -> np.ndarray:
         """The tile's (N+1)² level-l samples (metres, rows south to north), gathered with clamped indices."""
