@@ -4,8 +4,9 @@ writes its selected leaves into, sized by what the view selects rather than by w
 The GPU selection (select.comp.glsl) reserves each tile's leaves in the arena once its listing pass knows
 their count; a tile whose leaves do not fit draws nothing and is counted as overflow, and the strategy then
 grows the arena and draws the frame again (raster.tilelets), so no frame it returns misses a leaf. Between
-frames the arena is made again for twice the last frame's leaves when they filled over three quarters of it
-(so that a frame rarely overflows) or under a quarter. Capacity is in leaves: a leaf
+draw calls the arena is made again for twice the last call's leaves when they filled over three quarters of it
+(so that a frame rarely overflows), and for twice the largest of 64 calls in a row that all filled under a
+quarter of it (single tiles drawn by a timing pass do not shrink it under the frames around them). Capacity is in leaves: a leaf
 is one 13-word record (geometry-shader path) or 9 vertices and 24 indices (indexed path).
 """
 from __future__ import annotations
@@ -17,7 +18,8 @@ from hybrid.gl.context import gl_bytes
 MIN_LEAVES = 4096               # smallest arena, leaves
 GROW = 2.0                      # a grown or shrunk arena holds this many times the frame's leaves
 GROW_ABOVE = 0.75               # grow before the next frame when the frame's leaves fill more than this share
-SHRINK_BELOW = 0.25             # shrink when the frame's leaves fill less than this share
+SHRINK_BELOW = 0.25             # shrink when the calls' leaves fill less than this share ...
+SHRINK_AFTER = 64               # ... in this many draw calls in a row
 RECORD_BYTES = 13 * 4           # raster.selection.LEAF_WORDS words a leaf record
 VERTEX_BYTES, INDEX_BYTES = 9 * 16, 24 * 4
 
@@ -36,6 +38,7 @@ class LeafArena:
         self.capacity = 0
         self.records = self.vertices = self.indices = None
         self.version = 0
+        self.last = self.sparse = self.sparse_peak = 0
         self._allocate(int(capacity))
 
     def _allocate(self, capacity: int) -> None:
@@ -47,18 +50,27 @@ class LeafArena:
         self.indices = self.ctx.buffer(reserve=(capacity if mesh else 1) * INDEX_BYTES)
         self.version += 1
 
-    def fits(self, leaves: int) -> bool:
-        """Whether the arena suits a frame of ``leaves`` leaves: they fill between SHRINK_BELOW and GROW_ABOVE of
-        it (or less, when it is the smallest arena)."""
-        if leaves > GROW_ABOVE * self.capacity:
-            return False
-        return leaves >= SHRINK_BELOW * self.capacity or self.capacity <= MIN_LEAVES
+    def note(self, leaves: int) -> None:
+        """Record a draw call's leaves (every call: whole frames, and the single tiles a timing pass draws)."""
+        self.last = int(leaves)
+        if self.last < SHRINK_BELOW * self.capacity and self.capacity > MIN_LEAVES:
+            self.sparse += 1
+            self.sparse_peak = max(self.sparse_peak, self.last)
+        else:
+            self.sparse, self.sparse_peak = 0, 0
 
-    def fit(self, leaves: int) -> bool:
-        """Make the arena again for ``leaves`` leaves (GROW times them) unless it suits them; True if the
-        buffers were replaced."""
-        if self.fits(leaves):
-            return False
+    def prepare(self) -> bool:
+        """Before a draw call: grow for the last call's leaves if they filled over GROW_ABOVE of the arena, shrink
+        for the largest of a run of SHRINK_AFTER calls that all filled under SHRINK_BELOW; True if remade."""
+        if self.last > GROW_ABOVE * self.capacity:
+            return self.remake(self.last)
+        if self.sparse >= SHRINK_AFTER:
+            return self.remake(self.sparse_peak)
+        return False
+
+    def remake(self, leaves: int) -> bool:
+        """Make the arena again for ``leaves`` leaves (GROW times them); True if the buffers were replaced."""
+        self.sparse, self.sparse_peak = 0, 0
         new = arena_leaves(leaves)
         if new == self.capacity:
             return False

@@ -52,7 +52,6 @@ class TileletDrawing(TileletSelection):
         self.edges = TerrainEdges(ctx, hf)   # skirts are not drawn for rays from under the sheet
         self.skirt_prog = None                # the program that draws skirts (subclasses)
         self._arena_vaos = (0, {})            # (arena version, vertex arrays over the arena's buffers)
-        self._need = 0                        # leaves the last selection reserved
 
     @property
     def shared_nbytes(self) -> int:
@@ -118,17 +117,17 @@ class TileletDrawing(TileletSelection):
         tau = leaf_tau if leaf_tau is not None else tau
         self.set_selection("morph", bool(morph))
         self.set_selection("stitch", bool(stitching))
-        self.arena.fit(self._need)          # sized for the last frame's leaves, with room to grow
+        self.arena.prepare()                # sized for the recent calls' leaves, with room to grow
         counters = self._select_draw(target, view, items, tau, mode, wireframe, culling, skirts)
         regrown = 0
         if counters["arena_overflow"]:       # some tiles did not fit and drew nothing: grow, draw them
-            self.arena.fit(counters["arena_leaves"])
+            self.arena.remake(counters["arena_leaves"])
             regrown = 1
             counters = self._select_draw(target, view, items, tau, mode, wireframe, culling, skirts)
             if counters["arena_overflow"]:
                 raise RuntimeError(f"leaf arena of {self.arena.capacity} leaves overflowed after growing for "
                                    f"{counters['arena_leaves']}")
-        self._need = counters["arena_leaves"]
+        self.arena.note(counters["arena_leaves"])
         counters["arena_regrown"] = regrown
         return counters
 

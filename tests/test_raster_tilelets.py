@@ -189,24 +189,33 @@ def test_arena_overflow_grows_and_draws_every_leaf(ctx, puget257, strategy):
 
 
 def test_arena_follows_the_view_not_the_tiles(ctx, puget257):
-    """The arena holds the leaves the view selects (within GROW of them, at least MIN_LEAVES), grows for a fine
-    view and shrinks back for a coarse one; tiles keep no leaf storage of their own."""
-    from raster.arena import GROW, MIN_LEAVES
+    """The arena holds the leaves the view selects (within GROW of them, at least MIN_LEAVES): it grows for a fine
+    view, keeps its size while single tiles are drawn between frames (a timing pass), and shrinks back once
+    SHRINK_AFTER calls in a row fill under a quarter of it."""
+    from hybrid.gl.target import FrameTarget
+    from raster.arena import GROW, MIN_LEAVES, SHRINK_AFTER
     view = border_views(puget257)[0]
     r = Renderer(ctx, puget257, "raster", tile_size=64)
     try:
         s = r.strategies["raster"]
-        caps = []
-        for k, tau in enumerate((0.3, 0.3, 40.0, 40.0)):
-            res = r.render(view, mode="shaded", tau=tau)
-            need = res.stats.counters["arena_leaves"]
-            assert need == res.stats.counters["tilelets"] <= s.arena.capacity
-            if k % 2:                  # the second frame at a tau: sized for it (a shrink waits a frame)
-                assert s.arena.capacity <= max(MIN_LEAVES, GROW * need + 1024)
-            caps.append(s.arena.capacity)
-        assert caps[0] > MIN_LEAVES and caps[-1] < caps[0]
-        possible = sum((g.n // 2) ** 2 for (name, _), g in r.cache.entries.items() if name == "raster")
-        assert s.arena.capacity < possible / 4        # a fraction of the leaves the resident tiles could hold
+        fine = [r.render(view, mode="shaded", tau=0.3) for _ in range(2)][-1]
+        need = fine.stats.counters["arena_leaves"]
+        assert need == fine.stats.counters["tilelets"] <= s.arena.capacity <= max(MIN_LEAVES, GROW * need + 1024)
+        big = s.arena.capacity
+        assert big > MIN_LEAVES
+        items = r._items("raster", r.plan(view, 0.3), set())
+        target = FrameTarget(ctx, view.width, view.height)
+        try:
+            for _ in range(3):                    # a timing pass: each tile alone, then the frame again
+                for item in items:
+                    s.draw_tiles(target, view, [item], 0.3)
+                r.render(view, mode="shaded", tau=0.3)
+        finally:
+            target.release()
+        assert s.arena.capacity == big
+        coarse = [r.render(view, mode="shaded", tau=40.0) for _ in range(SHRINK_AFTER + 1)][-1]
+        few = coarse.stats.counters["arena_leaves"]
+        assert few <= s.arena.capacity <= max(MIN_LEAVES, GROW * few + 1024) and s.arena.capacity < big
     finally:
         r.release()
 
