@@ -6,8 +6,8 @@ their count; a tile whose leaves do not fit draws nothing and is counted as over
 grows the arena and draws the frame again (raster.tilelets), so no frame it returns misses a leaf. Between
 draw calls the arena is made again for twice the last call's leaves when they filled over three quarters of it
 (so that a frame rarely overflows), and for twice the largest of 64 calls in a row that all filled under a
-quarter of it (single tiles drawn by a timing pass do not shrink it under the frames around them). Capacity is in leaves: a leaf
-is one 13-word record (geometry-shader path) or 9 vertices and 24 indices (indexed path).
+quarter of it (single tiles drawn by a timing pass do not shrink it under the frames around them). Capacity is
+in leaves: a leaf is one 13-word record (geometry-shader path) or 9 vertices and 24 indices (indexed path).
 """
 from __future__ import annotations
 

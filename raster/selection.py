@@ -134,7 +134,6 @@ class SelectedTileletTile:
         self.level_error, self.level_lo, self.level_hi = level_bounds(data, self.offsets, self.n, tile.spacing_xy)
         self.heights = ctx.buffer(h.tobytes())
         self.nodes = ctx.buffer(data.tobytes())
-        self.capacity = (self.n // 2) ** 2
         self.segments, self.control = slot_buffers(ctx, self.n)
         self.writes = strategy.writes
         self.vaos = strategy.tile_arrays(self)

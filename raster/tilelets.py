@@ -14,6 +14,7 @@ from hybrid.gl.edges import TerrainEdges
 from hybrid.gl.programs import program, set_uniform
 from hybrid.gl.shading import resolve_mode
 
+from .arena import INDEX_BYTES, RECORD_BYTES, VERTEX_BYTES
 from .selection import BASE_WORD, CMD_POINTS, LEAF_FORMAT, LEAF_WORDS, SelectedTileletTile, TileletSelection
 from .shading import MODES
 
@@ -28,13 +29,15 @@ def read_leaves(strategy, g: SelectedTileletTile) -> dict:
     a = strategy.arena
 
     def read(buf, nbytes: int, dtype) -> np.ndarray:
-        return np.frombuffer(buf.read(size=count * nbytes, offset=base * nbytes), dtype) if count else np.zeros(0, dtype)
+        if not count:
+            return np.zeros(0, dtype)
+        return np.frombuffer(buf.read(size=count * nbytes, offset=base * nbytes), dtype)
     if g.writes == "mesh":
-        v, i = read(a.vertices, 9 * 16, np.float32), read(a.indices, 24 * 4, np.uint32)
+        v, i = read(a.vertices, VERTEX_BYTES, np.float32), read(a.indices, INDEX_BYTES, np.uint32)
         tri = i.reshape(count, 8, 3)
         solid = (tri[..., 0] != tri[..., 1]) & (tri[..., 1] != tri[..., 2]) & (tri[..., 0] != tri[..., 2])
         return {"level": v.reshape(count, 9, 4)[:, 0, 3].astype(np.int32), "triangles": solid.sum(axis=1)}
-    raw = read(a.records, LEAF_WORDS * 4, np.uint32).reshape(count, LEAF_WORDS)
+    raw = read(a.records, RECORD_BYTES, np.uint32).reshape(count, LEAF_WORDS)
     drop = raw[:, 3].astype(np.int32)
     return {"j0": raw[:, 0].astype(np.int32), "i0": raw[:, 1].astype(np.int32), "level": raw[:, 2].astype(np.int32),
             "drop": drop, "heights": raw[:, 4:].view(np.float32).copy(),
