@@ -149,10 +149,13 @@ class TileletTriangleEstimator:
         self._nodes: OrderedDict = OrderedDict()
         self.build_ms = 0.0
         hf = pyramid.hf
-        # a tile store with per-tile node blocks: each tile's block is one read (no heights, no error pyramid)
+        # a tile store whose nodes (as the GPU reads them) come in per-tile blocks: each tile's is one read, no
+        # heights, no error pyramid; stores without them are not opened here (nodes_for may refuse or load them)
         self._blocks = None
-        if isinstance(hf, StoredTerrain) and hf.store.attrs.get("node_blocks") and not hf.store.attrs.get("periodic"):
-            self._blocks = nodes_for(hf, pyramid.n, beta)
+        if isinstance(hf, StoredTerrain) and hf.store.attrs.get("node_blocks") and \
+                int(hf.store.attrs["tile_size"]) == pyramid.n:
+            nodes = nodes_for(hf, pyramid.n, beta)
+            self._blocks = nodes if nodes.blocks is not None else None
 
     def _tile(self, key: TileKey) -> TileNodes:
         if key in self._nodes:
