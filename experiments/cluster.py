@@ -6,9 +6,9 @@ Each worker makes its headless GL context once, in the thread that runs its task
 on the EGL device its environment names (TERRABENCH_GL_DEVICE, else the default), and reports its GL
 renderer; a worker whose context cannot be made is reported by name and gets no task (tasks ask for the
 worker resource the plugin sets only where the context works, so a worker restarted by its nanny takes tasks
-again once its context is made). A configuration is one
-task; the task gets the spec and the configuration (datasets travel as paths or names and are loaded on the
-worker) and returns its rows and images, which this process journals as they arrive: a resumed run redoes
+again once its context is made). A group of configurations timed together (``config_task.run_group``) is
+one task; the task gets the spec and the configurations (datasets travel as paths or names and are loaded
+on the worker) and returns their rows and images, which this process journals as they arrive: a resumed run redoes
 nothing finished, and the task of a worker that dies is run again elsewhere by Dask, never journaled twice.
 Rows carry the device (GL renderer) and the worker that timed them; each task uses the cost model
 calibrated for its worker's device when this process's costs file has one.
@@ -70,13 +70,13 @@ def worker_info(dask_worker) -> dict:
     return {"renderer": tb["renderer"], "error": tb["error"], "pid": os.getpid()}
 
 
-def config_task(spec: Spec, c: dict, todo: list[int], costs: dict):
-    """On a worker: run one configuration with the worker's GL context (experiments.config_task.run_config)."""
+def group_task(spec: Spec, items: list, costs: dict):
+    """On a worker: run one group of configurations with the worker's GL context (config_task.run_group)."""
     from distributed import get_worker
 
     from hybrid.cost.model import cost_model_from_dict
 
-    from .config_task import run_config
+    from .config_task import run_group
     w = get_worker()
     tb = getattr(w, "terrabench", None)
     if tb is None or tb["state"] is None:
@@ -84,7 +84,7 @@ def config_task(spec: Spec, c: dict, todo: list[int], costs: dict):
     state = tb["state"]
     model = costs.get(tb["renderer"])
     state.cost_model = cost_model_from_dict(model, "costs file sent by the client") if model else None
-    return run_config(spec, c, todo, state, extra={"device": tb["renderer"], "worker": w.address})
+    return run_group(spec, items, state, extra={"device": tb["renderer"], "worker": w.address})
 
 
 def connect(scheduler: str | None = None, workers: str | None = None):
@@ -118,6 +118,7 @@ def run_on_cluster(spec: Spec, folder: Path, client, progress: bool = True) -> N
 
     from hybrid.cost.model import read_costs_file
 
+    from .config_task import ConfigResult, groups
     from .journal import Journal, pending, record
     from .progress import Progress
     info = ready_workers(client)
@@ -133,19 +134,19 @@ def run_on_cluster(spec: Spec, folder: Path, client, progress: bool = True) -> N
     todo = pending(spec, journal)
     total = len(spec.configs()) * spec.frames
     bar = Progress(total, total - sum(len(t) for _, t in todo), progress)
-    futures = {client.submit(config_task, spec, c, frames, costs, key=f"terrabench-{spec.name}-{c['config']}",
-                             pure=False, resources={GL_RESOURCE: 1}): (c, frames) for c, frames in todo}
+    futures = {client.submit(group_task, spec, items, costs, key=f"terrabench-{spec.name}-{items[0][0]['config']}",
+                             pure=False, resources={GL_RESOURCE: 1}): items for items in groups(todo)}
     for fut in as_completed(futures):
-        c, frames = futures[fut]
+        items = futures[fut]
         try:
-            result = fut.result()
+            results = fut.result()
         except Exception as exc:  # the task itself failed (e.g. on every worker it was tried on)
-            from .config_task import ConfigResult
-            result = ConfigResult(c, error={**c, "error": f"{type(exc).__name__}: {exc}"})
-        record(folder, journal, result)
+            results = [ConfigResult(c, error={**c, "error": f"{type(exc).__name__}: {exc}"}) for c, _ in items]
+        for result, (c, frames) in zip(results, items):
+            record(folder, journal, result)
+            bar.done += len(frames) - 1
+            bar.step(c["config"])
         journal.write_tables()
-        bar.done += len(frames) - 1
-        bar.step(c["config"])
     bar.close()
 
 

@@ -1,17 +1,19 @@
-"""One configuration of a spec, run where a GL context lives: draw and time its frames, then measure them.
+"""A group of a spec's configurations, run where a GL context lives: draw and time their frames, then measure them.
 
-This is the unit of work of a run, the same whether the run is serial (``experiments.runner``) or spread over
-a Dask cluster (``experiments.cluster``): it takes the spec, the configuration and the frames still to do,
+A group is the unit of work of a run, the same whether the run is serial (``experiments.runner``) or spread over
+a Dask cluster (``experiments.cluster``): it takes the spec, the configurations and the frames still to do,
 and returns plain results (frame rows with their tile rows, images to save, or the error) for the caller to
 journal. Datasets are loaded where the task runs, from the spec's paths or names, and kept per process.
 
-Timing is kept apart from measuring: a configuration's frames are all drawn and timed first (results kept
-in memory), and only then compared with the references, so the metrics' own threads (FLIP) and the
-reference renders never run between timed draws. Each configuration first draws one untimed warm-up frame
-(shader compiles, first uploads: one-off costs that are not a frame's); then every frame is drawn ``repeats``
-times in a row, all kept in ``wall_ms_repeats`` and their median in ``wall_ms``. Maps for the report's images
-come from one more, untimed, draw. A configuration resumed part-way first replays its earlier frames untimed,
-so that its GPU tile cache is in the state an uninterrupted run would have.
+Timing is kept apart from measuring: a group's frames are all drawn and timed first (results kept in
+memory), and only then compared with the references, so the metrics' own threads (FLIP) and the reference
+renders never run between timed draws. The configurations of a group (the same paired views and tau, every
+policy) are timed interleaved, frame by frame and repeat by repeat, so that a drift of the machine over the
+run falls on all of them alike (``run_group``). Each configuration first draws one untimed warm-up frame
+(shader compiles, first uploads: one-off costs that are not a frame's); every frame is drawn ``repeats``
+times, all kept in ``wall_ms_repeats`` and their median in ``wall_ms``. Maps for the report's images come
+from one more, untimed, draw. A configuration resumed part-way first replays its earlier frames untimed, so
+that its GPU tile cache is in the state an uninterrupted run would have.
 """
 from __future__ import annotations
 
@@ -113,70 +115,154 @@ def _image(stem: str, result, full: bool) -> ImageOut:
                     dict(getattr(result, "maps", {})) if full else {})
 
 
-def run_config(spec: Spec, c: dict, todo: list[int], state: TaskState, step=None, fail_fast: bool = False,
-               extra: dict | None = None) -> ConfigResult:
-    """Draw, time and measure frames ``todo`` of configuration c; ``step(label)`` is called per timed frame and
-    ``extra`` columns (device, worker) are added to every row. A failure is returned, not raised (unless
-    ``fail_fast``), with the frames it never reached counted."""
-    from hybrid.renderer import make_renderer
-    out = ConfigResult(c)
-    renderer = None
-    timed: dict = {}
-    try:
-        hf, views = state.views(spec, c)
-        model = state.cost_model
-        renderer = make_renderer(state.ctx, hf, c["policy"], tile_size=spec.tile_size,
-                                 reconstruction=c["reconstruction"], budget_bytes=spec.gpu_budget_mib << 20,
-                                 upload_budget_ms=spec.upload_budget_ms,
-                                 **({"cost_model": model} if model is not None and c["policy"] in MIXED else {}))
-        # 1. time every frame first; a short settle lets threads of earlier work go idle, and an untimed
-        #    warm-up draw takes the one-off costs (compiles, first uploads) out of the first frame
-        for k in range(todo[0]):               # a resumed configuration: its cache as an uninterrupted run's
-            renderer.render(views[k], c["tau"])
-        time.sleep(SETTLE_S)
-        renderer.render(views[todo[0]], c["tau"])
-        for k in todo:
-            results = [renderer.render(views[k], c["tau"]) for _ in range(spec.repeats)]
-            res = results[-1]
-            if k in spec.image_frames and c["policy"] in MIXED:
-                res = renderer.render(views[k], c["tau"], maps=True)        # untimed, for its maps
-            timed[k] = (res, [r.stats.wall_ms for r in results], results[-1].stats)
-            if step:
-                step(f"{c['config']} frame {k}")
-        # 2. then accuracy against the references; neighbours a resumed run did not time are drawn now
-        #    (untimed) for the temporal measures
-        drawn = {k: v[0] for k, v in timed.items()}
+def group_key(c: dict) -> tuple:
+    """Configurations timed together, frame by frame: the same paired views and the same tau."""
+    return (group_id(c), c["tau"])
 
-        def frame(j):
-            if j not in drawn:
-                drawn[j] = renderer.render(views[j], c["tau"])
-            return drawn[j]
 
-        def ref(j):
-            return state.reference(spec, c, j, out.images)
+def groups(items: list[tuple[dict, list[int]]]) -> list[list[tuple[dict, list[int]]]]:
+    """(configuration, frames to do) pairs gathered by group_key, in the order they first appear."""
+    out: dict = {}
+    for c, todo in items:
+        out.setdefault(group_key(c), []).append((c, todo))
+    return list(out.values())
 
-        for k in todo:
-            res, walls, timed_stats = timed[k]                 # counters of a timed draw, not the maps draw
-            row = {**c, "frame": k, **timed_stats.row(), **(extra or {}), "wall_ms": float(np.median(walls)),
-                   "wall_ms_min": float(np.min(walls)), "wall_ms_max": float(np.max(walls)),
-                   "wall_ms_repeats": [float(w) for w in walls], **frame_accuracy(res, ref(k), flip=spec.flip)}
-            if k > 0:
-                row.update(temporal_errors(frame(k - 1), res, ref(k - 1), ref(k)))
-            if 0 < k < spec.frames - 1:
-                row.update(popping((frame(k - 1), res, frame(k + 1)), (ref(k - 1), ref(k), ref(k + 1)),
-                                   views[k - 1:k + 2]))
-            tiles = [{"config": c["config"], "frame": k, "policy": c["policy"], **t} for t in timed_stats.tile_rows]
-            out.frames.append((row, tiles))
-            if k in spec.image_frames or spec.video:
-                out.images.append(_image(f"{c['config']}-f{k}", res, k in spec.image_frames))
-    except Exception as exc:  # a failed configuration is returned; the run goes on with the others
-        if fail_fast:
-            raise
+
+class _ConfigRun:
+    """One configuration inside a group: its renderer (GPU state), its timed draws and its result."""
+
+    def __init__(self, c: dict, todo: list[int]):
+        self.c, self.todo = c, todo
+        self.renderer = None
+        self.timed: dict = {}
+        self.out = ConfigResult(c)
+
+    def attempt(self, fn, fail_fast: bool) -> None:
+        """Run fn(); a failure ends this configuration (its error kept, its renderer released), not the group."""
+        if self.out.error is not None:
+            return
+        try:
+            fn()
+        except Exception as exc:  # a failed configuration is returned; the group goes on with the others
+            if fail_fast:
+                raise
+            self.fail(exc)
+
+    def fail(self, exc: Exception) -> None:
+        """Keep exc as this configuration's error and release its renderer."""
         msg = str(exc) if isinstance(exc, TerrabenchError) else f"{type(exc).__name__}: {exc}"
-        out.error = {**c, "error": msg, "trace": traceback.format_exc(limit=4), **(extra or {})}
-        out.frames = []
-        out.unreached = len([k for k in todo if k not in timed])
+        self.out.error = {**self.c, "error": msg, "trace": traceback.format_exc(limit=4)}
+        self.out.frames, self.out.images = [], []
+        self.out.unreached = len([k for k in self.todo if k not in self.timed])
+        self.release()
+
+    def release(self) -> None:
+        """Release the renderer's GPU resources."""
+        if self.renderer is not None:
+            self.renderer.release()
+            self.renderer = None
+
+
+def run_group(spec: Spec, items: list[tuple[dict, list[int]]], state: TaskState, step=None,
+              fail_fast: bool = False, extra: dict | None = None) -> list[ConfigResult]:
+    """Draw, time and measure the frames to do of configurations that share their views (one group_key).
+
+    The configurations are timed interleaved: each repeat of a frame is drawn by every configuration in
+    turn, the turn's first configuration rotating from draw to draw, so that a drift of the machine over the
+    run (clocks, heat, other processes) falls on every configuration alike instead of on whichever ran
+    last. ``step(label)`` is called per configuration and timed frame; ``extra`` columns (device, worker) are
+    added to every row. A failure is returned in that configuration's result, not raised (unless
+    ``fail_fast``), with the frames it never reached counted."""
+    runs = [_ConfigRun(c, todo) for c, todo in items]
+    try:
+        try:
+            hf, views = state.views(spec, items[0][0])
+        except Exception as exc:
+            if fail_fast:
+                raise
+            for r in runs:
+                r.fail(exc)
+            return [r.out for r in runs]
+        for r in runs:
+            r.attempt(lambda r=r: _open(spec, r, state, hf, views), fail_fast)
+        time.sleep(SETTLE_S)           # threads of earlier work (compiles, uploads) go idle before timing
+        for k in sorted({k for r in runs for k in r.todo}):
+            _time_frame(spec, [r for r in runs if k in r.todo], k, views, fail_fast, step)
+        for r in runs:
+            r.attempt(lambda r=r: _measure(spec, r, state, views, extra), fail_fast)
     finally:
-        if renderer is not None:
-            renderer.release()
-    return out
+        for r in runs:
+            r.release()
+    if extra:
+        for r in runs:
+            if r.out.error is not None:
+                r.out.error.update(extra)
+    return [r.out for r in runs]
+
+
+def _open(spec: Spec, r: _ConfigRun, state: TaskState, hf, views) -> None:
+    """Make r's renderer, replay the frames before its first one to do (a resumed configuration: its cache as
+    an uninterrupted run's) and draw that frame once untimed (compiles, first uploads: one-off costs)."""
+    from hybrid.renderer import make_renderer
+    c, model = r.c, state.cost_model
+    r.renderer = make_renderer(state.ctx, hf, c["policy"], tile_size=spec.tile_size,
+                               reconstruction=c["reconstruction"], budget_bytes=spec.gpu_budget_mib << 20,
+                               upload_budget_ms=spec.upload_budget_ms,
+                               **({"cost_model": model} if model is not None and c["policy"] in MIXED else {}))
+    for k in range(r.todo[0]):
+        r.renderer.render(views[k], c["tau"])
+    r.renderer.render(views[r.todo[0]], c["tau"])
+
+
+def _time_frame(spec: Spec, live: list[_ConfigRun], k: int, views, fail_fast: bool, step) -> None:
+    """Time frame k: ``spec.repeats`` rounds, each drawn by every live configuration, the first one rotating."""
+    draws: dict = {id(r): [] for r in live}
+    for rep in range(spec.repeats):
+        turn = [r for r in live if r.out.error is None]
+        if not turn:
+            return
+        shift = (k * spec.repeats + rep) % len(turn)
+        for r in turn[shift:] + turn[:shift]:
+            r.attempt(lambda r=r: draws[id(r)].append(r.renderer.render(views[k], r.c["tau"])), fail_fast)
+    for r in live:
+        if r.out.error is not None:
+            continue
+        results = draws[id(r)]
+        mapped: list = []
+        if k in spec.image_frames and r.c["policy"] in MIXED:       # untimed, for its maps
+            r.attempt(lambda r=r: mapped.append(r.renderer.render(views[k], r.c["tau"], maps=True)), fail_fast)
+        if r.out.error is not None:
+            continue
+        r.timed[k] = ((mapped or results)[-1], [x.stats.wall_ms for x in results], results[-1].stats)
+        if step:
+            step(f"{r.c['config']} frame {k}")
+
+
+def _measure(spec: Spec, r: _ConfigRun, state: TaskState, views, extra: dict | None) -> None:
+    """Accuracy of r's timed frames against the references; neighbours a resumed run did not time are drawn
+    now (untimed) for the temporal measures."""
+    c, out = r.c, r.out
+    drawn = {k: v[0] for k, v in r.timed.items()}
+
+    def frame(j):
+        if j not in drawn:
+            drawn[j] = r.renderer.render(views[j], c["tau"])
+        return drawn[j]
+
+    def ref(j):
+        return state.reference(spec, c, j, out.images)
+
+    for k in r.todo:
+        res, walls, timed_stats = r.timed[k]                   # counters of a timed draw, not the maps draw
+        row = {**c, "frame": k, **timed_stats.row(), **(extra or {}), "wall_ms": float(np.median(walls)),
+               "wall_ms_min": float(np.min(walls)), "wall_ms_max": float(np.max(walls)),
+               "wall_ms_repeats": [float(w) for w in walls], **frame_accuracy(res, ref(k), flip=spec.flip)}
+        if k > 0:
+            row.update(temporal_errors(frame(k - 1), res, ref(k - 1), ref(k)))
+        if 0 < k < spec.frames - 1:
+            row.update(popping((frame(k - 1), res, frame(k + 1)), (ref(k - 1), ref(k), ref(k + 1)),
+                               views[k - 1:k + 2]))
+        tiles = [{"config": c["config"], "frame": k, "policy": c["policy"], **t} for t in timed_stats.tile_rows]
+        out.frames.append((row, tiles))
+        if k in spec.image_frames or spec.video:
+            out.images.append(_image(f"{c['config']}-f{k}", res, k in spec.image_frames))

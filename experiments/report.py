@@ -108,7 +108,9 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
           "Every method renders the same camera views (paired flights); accuracy is measured against the "
           f"full-resolution reference image (colour supersampled {spec.get('supersample', 1)}x). Frame time is "
           f"the wall clock around `ctx.finish()`, median of {spec.get('repeats')} repeats after one untimed warm-up "
-          "frame per configuration; the reading calls a difference within the noise of this run a tie.", "",
+          "frame per configuration; the methods of a scene and tau are timed interleaved, each repeat of a frame "
+          "drawn by every method in turn, so a drift of the machine falls on all alike; the reading calls a "
+          "difference within the noise of this run a tie.", "",
           "## Environment", "",
           f"- GL renderer: {env['gl_renderer']} ({env['gl_version']})",
           f"- CPU: {env['cpu']} ({env['cpu_count']} cores); Python {env['python']}; {env['platform']}",

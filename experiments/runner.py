@@ -6,16 +6,17 @@ Run folder layout (runs/<name>/):
     frames.jsonl                    the journal: one finished frame a line (its row with its tile rows, so
                                     the two are never parted), flushed as it is written
     errors.jsonl                    configurations that failed, with their error; the rest goes on
-    frames.parquet, tiles.parquet   the tables, rewritten from the journal after every configuration
+    frames.parquet, tiles.parquet   the tables, rewritten from the journal after every group
     images/                         colour + depth of the spec's image_frames for every configuration
 An interrupted run resumes from the journal without redoing finished (configuration, frame) rows; a
 configuration resumed part-way first replays its earlier frames untimed, so that its GPU tile cache (and
 with it the memory and upload columns) is in the state an uninterrupted run would have. Every table and
 image is written under a temporary name and renamed (hybrid.atomic).
 
-How one configuration is drawn, timed and measured is ``experiments.config_task``; with ``--workers`` or
-``--scheduler`` the configurations run as tasks on a Dask cluster (``experiments.cluster``) and this process
-keeps the journal, so a resumed or distributed run never loses or repeats a frame.
+How a group of configurations (the same paired views and tau) is drawn, timed interleaved and measured is
+``experiments.config_task``; with ``--workers`` or ``--scheduler`` the groups run as tasks on a Dask cluster
+(``experiments.cluster``) and this process keeps the journal, so a resumed or distributed run never loses or
+repeats a frame.
 """
 from __future__ import annotations
 
@@ -61,10 +62,11 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
 
 
 def _run_configs(spec: Spec, folder: Path, ctx, progress: bool, fail_fast: bool) -> None:
-    """The body of run_spec, under the folder's lock: every configuration not yet in the journal, in order."""
+    """The body of run_spec, under the folder's lock: every configuration not yet in the journal, a group of
+    configurations timed together at a time (experiments.config_task.run_group)."""
     from hybrid.gl.context import gl_info
 
-    from .config_task import TaskState, run_config
+    from .config_task import TaskState, groups, run_group
     journal = Journal(folder)
     todo = pending(spec, journal)
     total = len(spec.configs()) * spec.frames
@@ -72,10 +74,10 @@ def _run_configs(spec: Spec, folder: Path, ctx, progress: bool, fail_fast: bool)
     state = TaskState(ctx)
     extra = {"device": gl_info(ctx).renderer, "worker": "local"}
     try:
-        for c, frames in todo:
-            result = run_config(spec, c, frames, state, bar.step, fail_fast, extra)
-            bar.done += result.unreached
-            record(folder, journal, result)
+        for group in groups(todo):
+            for result in run_group(spec, group, state, bar.step, fail_fast, extra):
+                bar.done += result.unreached
+                record(folder, journal, result)
             journal.write_tables()
     finally:
         state.release_group()

@@ -5,6 +5,7 @@ import os
 import signal
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -14,8 +15,17 @@ distributed = pytest.importorskip("distributed")
 
 from experiments.cluster import worker_info  # noqa: E402
 from experiments.runner import run_spec  # noqa: E402
-from experiments.spec import load_spec  # noqa: E402
+from experiments.spec import parse_spec  # noqa: E402
 from hybrid.errors import TerrabenchError  # noqa: E402
+
+# the tiny spec at two taus: two groups of configurations, one task each, for the two workers
+TWO_GROUPS = (Path(__file__).parents[1] / "experiments" / "tiny.toml").read_text().replace(
+    "taus = [0.6667]", "taus = [0.6667, 2.0]")
+
+
+def two_groups():
+    return parse_spec(TWO_GROUPS, "tiny at two taus")
+
 
 # columns that depend on timing or on where a frame ran; every other column must match the serial run
 TIMED = {"wall_ms", "wall_ms_min", "wall_ms_max", "wall_ms_repeats", "plan_ms", "draw_ms", "gpu_ms", "upload_ms",
@@ -39,7 +49,7 @@ def same_rows(a: pd.DataFrame, b: pd.DataFrame) -> None:
 
 @pytest.fixture(scope="module")
 def serial(ctx, tmp_path_factory):
-    return frames(run_spec(load_spec("tiny"), tmp_path_factory.mktemp("serial"), ctx, progress=False))
+    return frames(run_spec(two_groups(), tmp_path_factory.mktemp("serial"), ctx, progress=False))
 
 
 @pytest.fixture(scope="module")
@@ -51,10 +61,11 @@ def cluster():
 
 def test_cluster_run_has_the_serial_rows(serial, cluster, tmp_path):
     _, client = cluster
-    folder = run_spec(load_spec("tiny"), tmp_path, progress=False, client=client)
+    folder = run_spec(two_groups(), tmp_path, progress=False, client=client)
     f = frames(folder)
     same_rows(f, serial)
-    assert f["worker"].nunique() == 2 and f["device"].str.contains("llvmpipe|NVIDIA|Mesa", regex=True).all()
+    assert f["worker"].nunique() == 2 and (f.groupby("tau")["worker"].nunique() == 1).all()   # a group, one worker
+    assert f["device"].str.contains("llvmpipe|NVIDIA|Mesa", regex=True).all()
     assert set(serial["worker"]) == {"local"}
     env = json.loads((folder / "env.json").read_text())
     assert len(env["workers"]) == 2 and all(w["error"] is None for w in env["workers"].values())
@@ -78,13 +89,13 @@ def test_a_worker_killed_mid_task_loses_nothing(serial, cluster, tmp_path):
 
     t = threading.Thread(target=kill_one_busy_worker)
     t.start()
-    folder = run_spec(load_spec("tiny"), tmp_path, progress=False, client=client)
+    folder = run_spec(two_groups(), tmp_path, progress=False, client=client)
     t.join()
     assert killed, "no task was ever seen running"
     f = frames(folder)
     journal = [json.loads(line) for line in (folder / "frames.jsonl").read_text().splitlines()]
     keys = [(r["config"], r["frame"]) for r in journal]
-    assert len(keys) == len(set(keys)) == 3 * 3                  # every frame once: nothing lost, nothing twice
+    assert len(keys) == len(set(keys)) == 2 * 3 * 3                  # every frame once: nothing lost, nothing twice
     same_rows(f, serial)
     assert not (folder / "errors.jsonl").exists()
     client.wait_for_workers(2, timeout=60)                        # the nanny brought the worker back
@@ -99,16 +110,16 @@ def test_a_worker_without_gl_is_reported_not_hung(tmp_path, capsys):
     with SpecCluster(workers=workers, scheduler={"cls": Scheduler, "options": {"dashboard": False}}) as cl, \
             distributed.Client(cl) as client:
         client.wait_for_workers(2, timeout=60)
-        folder = run_spec(load_spec("tiny"), tmp_path / "mixed", progress=False, client=client)
+        folder = run_spec(two_groups(), tmp_path / "mixed", progress=False, client=client)
         out = capsys.readouterr().out
         assert "has no GL context and gets no task" in out and "99" in out
         f = frames(folder)
-        assert len(f) == 9 and f["worker"].nunique() == 1
+        assert len(f) == 18 and f["worker"].nunique() == 1
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
                                   env={"TERRABENCH_GL_DEVICE": "99"}) as cl, distributed.Client(cl) as client:
         t0 = time.time()
         with pytest.raises(TerrabenchError, match="no worker of the cluster could make a GL context.*99"):
-            run_spec(load_spec("tiny"), tmp_path / "none", progress=False, client=client)
+            run_spec(two_groups(), tmp_path / "none", progress=False, client=client)
         assert time.time() - t0 < 60
 
 

@@ -182,3 +182,26 @@ def test_a_streaming_spec_reports_uploads_and_fallbacks_inside_its_budgets(ctx, 
     f = pd.read_parquet(folder / "frames.parquet")
     assert (f["gpu_bytes"] - f["shared_bytes"]).le(1 << 20).all()
     assert f["upload_ms"].ge(0).all() and f["fallback_tiles"].ge(0).all() and "pending_uploads" in f
+
+
+def test_a_groups_configurations_are_timed_interleaved_in_rotating_order(ctx, tmp_path, monkeypatch):
+    import hybrid.renderer as renderers
+    draws, make = [], renderers.make_renderer
+
+    def logged(ctx, hf, policy, **kw):          # the real renderer, its draws logged in the order they happen
+        r = make(ctx, hf, policy, **kw)
+        render = r.render
+        r.render = lambda view, tau, **k: draws.append((policy, k.get("maps", False))) or render(view, tau, **k)
+        return r
+
+    monkeypatch.setattr(renderers, "make_renderer", logged)
+    folder = run_spec(parse_spec(TINY), tmp_path, ctx, progress=False)
+    policies = ["raster", "raycast", "hybrid"]
+    assert draws[:3] == [(p, False) for p in policies]           # one untimed warm-up draw each
+    timed = [p for p, maps in draws[3:] if not maps]
+    assert [p for p, maps in draws if maps] == ["hybrid"]        # one untimed maps draw, for the image frame
+    rounds = [timed[i:i + 3] for i in range(0, len(timed), 3)]
+    assert len(rounds) == 3 * 3 and all(sorted(r) == sorted(policies) for r in rounds)   # frames x repeats
+    assert [r[0] for r in rounds] == [policies[i % 3] for i in range(9)]   # the first of a round rotates
+    f = pd.read_parquet(folder / "frames.parquet")
+    assert len(f) == 9 and (f["wall_ms_repeats"].map(len) == 3).all()
