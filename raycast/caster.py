@@ -19,7 +19,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from hybrid.errors import TerrabenchError
-from hybrid.gl.context import gl_bytes, gl_finish
+from hybrid.gl.context import gl_bytes, gl_finish, gl_info
 from hybrid.gl.edges import TerrainEdges
 from hybrid.gl.programs import program, register_include, set_uniform, write_uniform
 from hybrid.gl.shading import resolve_mode
@@ -28,7 +28,7 @@ from hybrid.gl.textures import terrain_texture
 from hybrid.tiles.quantize import quantize
 
 from .maxmip import MaxMipBuilder, bytes_per_sample, level_count, tile_nbytes
-from .options import MODES, RECONSTRUCTIONS, CastOptions, default_max_steps
+from .options import MODES, RECONSTRUCTIONS, CastOptions, default_max_steps, prepass_default
 
 STAT_FIELDS = ("rays", "hits", "steps", "max_steps", "capped", "shadow_rays", "shadow_steps", "shadow_capped")
 STAT_SLOTS = 64          # copies of each tile's counters (one per 64x64 screen bin, modulo), as in raycast.frag.glsl
@@ -104,7 +104,8 @@ class RaycastStrategy:
     def __init__(self, ctx, hf, **options):
         self.ctx, self.hf = ctx, hf
         register_include(ctx, "raycast/traverse", "raycast", "traverse.glsl")
-        self.options = CastOptions().updated(**options)
+        self._prepass = prepass_default(gl_info(ctx).is_software)
+        self.options = self._resolved(CastOptions().updated(**options))
         self._check_mode(self.options)
         self.builder = MaxMipBuilder(ctx)
         self.cube = ctx.buffer(_cube_back_face_triangles().tobytes())
@@ -123,7 +124,12 @@ class RaycastStrategy:
     def _check_mode(self, opts: CastOptions) -> str:
         return resolve_mode(self.hf, opts.mode, MODES)
 
+    def _resolved(self, opts: CastOptions) -> CastOptions:
+        """opts with a pre-pass left to the device (None) set to the device's default (prepass_default)."""
+        return opts if opts.prepass is not None else opts.updated(prepass=self._prepass)
+
     def _program(self, opts: CastOptions, mode: str):
+        opts = self._resolved(opts)
         key = (opts.reconstruction, opts.traversal, opts.lod is not None, opts.prepass, opts.stats, opts.shadows, mode)
         if key not in self.programs:
             defines = {"RECON": RECONSTRUCTIONS.index(opts.reconstruction), "NAIVE": int(opts.traversal == "naive"),
@@ -192,7 +198,7 @@ class RaycastStrategy:
 
         ``tau`` (px) is the frame's bound; the caster refines to it only when the ``lod`` option asks.
         """
-        opts = self.options.updated(**options)
+        opts = self._resolved(self.options.updated(**options))
         mode = self._check_mode(opts)
         prog, vao = self._program(opts, mode)
         ctx, hf = self.ctx, self.hf

@@ -22,7 +22,8 @@ class CastOptions:
       (Dick), 'linear' = Qu's linear approximation planes, 'triangles' = two triangles split SW-NE (Qu 3.2,
       the reference surface), 'bilinear' = bilinear patch, intersected analytically).
     traversal: 'maxmip' (hierarchical, Dick 3.2) or 'naive' (every level-0 texel along the ray).
-    prepass: tile-ID pre-pass so only pixels still empty cast a ray (Dick 3.4).
+    prepass: tile-ID pre-pass so only pixels still empty cast a ray (Dick 3.4); None: the device's default
+      (``prepass_default``).
     lod: None, or tau in pixels: stop descending at the level whose texel projects to <= tau pixels.
     mode: shading mode (None = 'texture' when the terrain has one, else 'shaded').
     shadows: cast a shadow ray toward LIGHT_DIR from every hit (whole terrain, primary ray's level).
@@ -33,7 +34,7 @@ class CastOptions:
 
     reconstruction: Reconstruction = "triangles"
     traversal: Traversal = "maxmip"
-    prepass: bool = True
+    prepass: bool | None = None
     lod: float | None = None
     mode: CastMode | None = None
     shadows: bool = False
@@ -48,7 +49,9 @@ class CastOptions:
             raise TerrabenchError(f"traversal must be one of {', '.join(TRAVERSALS)}, got {self.traversal!r}")
         if self.mode is not None and self.mode not in MODES:
             raise TerrabenchError(f"mode must be one of {', '.join(MODES)} (or None), got {self.mode!r}")
-        for name in ("prepass", "shadows", "stats"):
+        if self.prepass is not None and not isinstance(self.prepass, bool):
+            raise TerrabenchError(f"prepass must be True, False or None (the device's default), got {self.prepass!r}")
+        for name in ("shadows", "stats"):
             if not isinstance(getattr(self, name), bool):
                 raise TerrabenchError(f"{name} must be True or False, got {getattr(self, name)!r}")
         if self.lod is not None:
@@ -74,3 +77,14 @@ class CastOptions:
 def default_max_steps(n: int) -> int:
     """Default step cap for a grid of n cells a side: 8 n + 64 (naive stepping needs at most 2 n + 1)."""
     return 8 * int(n) + 64
+
+
+def prepass_default(software: bool) -> bool:
+    """Whether the tile-ID pre-pass is on by default: on a GPU (Dick et al. 3.4), not on a CPU rasterizer.
+
+    A tile's cast pass reads the IDs its pre-pass wrote, so a tiled CPU rasterizer (llvmpipe) must finish
+    rasterizing each tile's pre-pass before its cast pass starts: the frame is serialised tile by tile, which
+    costs more than the occluded rays it saves (llvmpipe, 2 cores, same images: Puget bench 24.5 against
+    21.1 ms a frame; 16385² transect with 62 tiles a frame 79 against 60 ms). A GPU runs the passes in order
+    without that wait."""
+    return not software

@@ -5,6 +5,7 @@ import pytest
 from hybrid.camera.flight import preset
 from hybrid.camera.view import View, default_view
 from hybrid.errors import TerrabenchError
+from hybrid.gl.context import gl_info
 from hybrid.reference import ReferenceRenderer
 from hybrid.renderer import Renderer
 from hybrid.terrain.heightfield import HeightField
@@ -177,6 +178,14 @@ def test_prepass_same_image_fewer_rays(ctx, puget_full):
     assert np.allclose(a.distance[a.mask], b.distance[b.mask], rtol=1e-6)
     assert b.stats.counters["rays"] < a.stats.counters["rays"]
     assert b.stats.counters["hits"] == a.mask.sum()
+    r = Renderer(ctx, puget_full, "raycast")                   # no choice made: the device's default
+    try:
+        c = r.render(view, mode="shaded")
+    finally:
+        r.release()
+    software = gl_info(ctx).is_software                        # off on a CPU rasterizer, on on a GPU
+    assert c.stats.counters["rays"] == (a if software else b).stats.counters["rays"]
+    assert np.array_equal(c.mask, a.mask)
 
 
 def test_lod_fewer_steps_close_image(ctx, puget_full):

@@ -36,7 +36,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="cells per tile side (power of two)")
     p.add_argument("--reconstruction", default="triangles", help="ray-cast surface: planes, linear, triangles, bilinear")
     p.add_argument("--traversal", default="maxmip", help="ray-cast traversal: maxmip or naive (level-0 stepping)")
-    p.add_argument("--no-prepass", dest="prepass", action="store_false", help="ray casting without the tile-ID pre-pass")
+    pre = p.add_mutually_exclusive_group()
+    pre.add_argument("--prepass", dest="prepass", action="store_const", const=True, default=None,
+                     help="ray casting with the tile-ID pre-pass (default: on a GPU, not on a CPU rasterizer)")
+    pre.add_argument("--no-prepass", dest="prepass", action="store_const", const=False,
+                     help="ray casting without the tile-ID pre-pass")
     p.add_argument("--lod", action="store_true", help="ray casting stops descending at tau pixels (LOD)")
     p.add_argument("--shadows", action="store_true", help="ray-cast shadow rays toward the light")
     p.add_argument("--wireframe", action="store_true", help="raster methods: draw edges only")
@@ -44,21 +48,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def draw_options(method: str, tau: float, shading=None, reconstruction="triangles", traversal="maxmip",
-                 prepass=True, lod=False, shadows=False, wireframe=False) -> dict:
+                 prepass=None, lod=False, shadows=False, wireframe=False) -> dict:
     """Strategy draw options for a method (only those asked for, so the rest stay the strategy's defaults)."""
     opts = {}
     if shading:
         opts["mode"] = shading
     if method == "raycast":
-        opts.update(reconstruction=reconstruction, traversal=traversal, prepass=prepass)
+        opts.update(reconstruction=reconstruction, traversal=traversal)
+        if prepass is not None:
+            opts["prepass"] = prepass
         if shadows:
             opts["shadows"] = True
         if lod:
             opts["lod"] = tau
-    elif shadows or lod or not prepass or traversal != "maxmip":
-        raise TerrabenchError("--shadows, --lod, --no-prepass and --traversal apply to --method raycast only")
+    elif shadows or lod or prepass is not None or traversal != "maxmip":
+        raise TerrabenchError("--shadows, --lod, --prepass, --no-prepass and --traversal apply to --method raycast "
+                              "only")
     if method in MIXED:
-        opts.update(reconstruction=reconstruction, prepass=prepass)
+        opts.update(reconstruction=reconstruction, **({} if prepass is None else {"prepass": prepass}))
     if wireframe:
         if method not in RASTER_METHODS:
             raise TerrabenchError("--wireframe applies to the raster methods (raster, fullres, tin)")
@@ -68,7 +75,8 @@ def draw_options(method: str, tau: float, shading=None, reconstruction="triangle
 
 def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions(),
         view: ViewOptions = ViewOptions(), shading: str | None = None, supersample: int = 1, tau: float = 2 / 3,
-        tile_size: int = 256, reconstruction: str = "triangles", traversal: str = "maxmip", prepass: bool = True,
+        tile_size: int = 256, reconstruction: str = "triangles", traversal: str = "maxmip",
+        prepass: bool | None = None,
         lod: bool = False, shadows: bool = False, wireframe: bool = False, show_strategy: bool = False,
         device: int | None = None):
     """Render one view with a method; write out (.png) and its .depth.npy; returns the RenderResult."""
