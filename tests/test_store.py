@@ -107,6 +107,21 @@ def test_tiles_on_demand_within_a_host_budget_and_a_loader_thread(grid, tmp_path
     assert all(p.cached(k) for k in keys[5:8]) and p.stats["peak_bytes"] <= 3 * tile_bytes
 
 
+def test_neighbouring_tiles_decode_each_chunk_once(grid, tmp_path):
+    h, sp = grid
+    prepare_store(ArraySource(h, sp), tmp_path / "s", 32)
+    p, mem = StorePyramid(tmp_path / "s", host_bytes=64 << 20), TilePyramid(HeightField(h, sp), 32)
+    chunks = 0
+    for level in range(mem.max_level + 1):
+        for key in mem.keys(level):         # a tile's apron comes from its neighbours' chunks, decoded before
+            assert np.array_equal(p.tile(key).heights, mem.tile(key).heights), key
+        rows, cols = p._levels[level].shape
+        chunks += -(-rows // 32) * -(-cols // 32)
+    assert p.stats["chunk_reads"] == chunks                      # every chunk of every level decoded once
+    tiles = sum(len(mem.keys(level)) for level in range(mem.max_level + 1))
+    assert p.cache_bytes == tiles * 33 * 33 * 4 + p.chunk_bytes and 0 < p.chunk_bytes <= p.chunk_budget
+
+
 def test_geotiffs_in_two_crs_prepare_like_loading_them_whole(tmp_path):
     from hybrid.terrain.loaders import load_terrain
     h = puget(size=129).heights[::-1]                          # north-up rows as a file stores them

@@ -37,6 +37,7 @@ from .store_blocks import build_blocks
 from .store_nodes import build_nodes, node_bands, node_square
 
 COL_BLOCK = 4096                # about this many columns per piece of a band when measuring errors (memory bound)
+CHUNK_SHARE = 8                 # decoded chunks may hold 1/CHUNK_SHARE of a StorePyramid's host budget
 EXACT_SPAN = 1024               # levels whose tiles span at most this many level-0 cells get exact errors
 
 
@@ -234,8 +235,13 @@ class StorePyramid(TilePyramid):
         self._levels = {l: g[f"levels/{l}"] for l in range(self.max_level + 1)}
         self.host_budget = int(host_bytes)
         self._cache: OrderedDict = OrderedDict()
-        self.cache_bytes = 0
-        self.stats = {"reads": 0, "hits": 0, "evictions": 0, "peak_bytes": 0}
+        self.cache_bytes = 0                      # tiles and decoded chunks held, bytes (<= host_budget)
+        # decoded chunks of the levels (a tile's samples span 4 of them: its own, one row and one column of two
+        # neighbours and a corner), so that neighbouring tiles decode each chunk once
+        self.chunk_budget = self.host_budget // CHUNK_SHARE
+        self._chunks: OrderedDict = OrderedDict()
+        self.chunk_bytes = 0
+        self.stats = {"reads": 0, "hits": 0, "evictions": 0, "peak_bytes": 0, "chunk_reads": 0}
         self._lock = threading.Lock()
         self._wake = threading.Condition(threading.Lock())   # the loader thread's queue (request)
         self._wanted: list = []
@@ -250,10 +256,7 @@ class StorePyramid(TilePyramid):
                 self._cache.move_to_end(key)
                 self.stats["hits"] += 1
                 return self._cache[key]
-        arr = self._levels[key.level]
-        R, C = arr.shape
-        r0, c0 = key.ty * self.n, key.tx * self.n
-        win = np.asarray(arr[r0:min(r0 + self.n + 1, R), c0:min(c0 + self.n + 1, C)], dtype=np.float32)
+        win = self._window(key)
         pad = ((0, self.n + 1 - win.shape[0]), (0, self.n + 1 - win.shape[1]))
         h = np.ascontiguousarray(np.pad(win, pad, mode="edge"))
         with self._lock:
@@ -261,12 +264,57 @@ class StorePyramid(TilePyramid):
                 self._cache[key] = h
                 self.cache_bytes += h.nbytes
                 self.stats["reads"] += 1
-                while self.cache_bytes > self.host_budget and len(self._cache) > 1:
-                    _, old = self._cache.popitem(last=False)
-                    self.cache_bytes -= old.nbytes
-                    self.stats["evictions"] += 1
-                self.stats["peak_bytes"] = max(self.stats["peak_bytes"], self.cache_bytes)
+                self._evict()
             return self._cache[key]
+
+    def _evict(self) -> None:
+        """Under the lock: drop the oldest decoded chunks past their share (a chunk being gathered stays alive
+        with its caller), then the oldest tiles (all but the newest) while tiles and chunks pass the budget."""
+        while self.chunk_bytes > self.chunk_budget and self._chunks:
+            _, old = self._chunks.popitem(last=False)
+            self.chunk_bytes -= old.nbytes
+            self.cache_bytes -= old.nbytes
+        while self.cache_bytes > self.host_budget and len(self._cache) > 1:
+            _, old = self._cache.popitem(last=False)
+            self.cache_bytes -= old.nbytes
+            self.stats["evictions"] += 1
+        self.stats["peak_bytes"] = max(self.stats["peak_bytes"], self.cache_bytes)
+
+    def _window(self, key) -> np.ndarray:
+        """The tile's samples inside the level's grid (float32, up to (n+1)², fewer at the grid's last tiles),
+        gathered from the decoded chunks it spans."""
+        n, (R, C) = self.n, self._levels[key.level].shape
+        r0, c0 = key.ty * n, key.tx * n
+        rows = [self._chunk(key.level, key.ty, key.tx)]
+        if r0 + n < R:
+            rows.append(self._chunk(key.level, key.ty + 1, key.tx)[:1])
+        win = np.concatenate(rows)
+        if c0 + n < C:
+            col = [self._chunk(key.level, key.ty, key.tx + 1)[:, :1]]
+            if r0 + n < R:
+                col.append(self._chunk(key.level, key.ty + 1, key.tx + 1)[:1, :1])
+            win = np.concatenate([win, np.concatenate(col)], axis=1)
+        return win
+
+    def _chunk(self, level: int, cy: int, cx: int) -> np.ndarray:
+        """Samples [cy n, (cy + 1) n) x [cx n, (cx + 1) n) of a level (float32, clipped to its grid): one chunk of
+        the store, decoded once and kept in a small LRU (``chunk_budget`` bytes, counted in ``cache_bytes``)."""
+        key = (level, cy, cx)
+        with self._lock:
+            if key in self._chunks:
+                self._chunks.move_to_end(key)
+                return self._chunks[key]
+        n = self.n
+        c = np.asarray(self._levels[level][cy * n:(cy + 1) * n, cx * n:(cx + 1) * n], dtype=np.float32)
+        with self._lock:
+            self.stats["chunk_reads"] += 1
+            if key in self._chunks:                  # decoded meanwhile by the other thread
+                return self._chunks[key]
+            self._chunks[key] = c
+            self.chunk_bytes += c.nbytes
+            self.cache_bytes += c.nbytes
+            self._evict()
+            return c
 
     def _on_step_tiles(self, level: int, step) -> np.ndarray:
         """Every tile of a store is on its recorded step: prepare records it only when every sample is."""
