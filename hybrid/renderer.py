@@ -145,7 +145,9 @@ class Renderer:
             if anc is None:
                 out.append(TileItem(self._resident(name, p.key, pinned), self.tile(p.key), p.selected))
             else:                                   # drawn from its resident ancestor, clipped to its own area
-                out.append(TileItem(self._resident(name, anc, pinned), fallback_tile(self.tile(anc), self.pyramid.clip(p.key)),
+                z = self.pyramid.zrange(p.key) if self.kind(name) == "raycast" else None
+                out.append(TileItem(self._resident(name, anc, pinned),
+                                    fallback_tile(self.tile(anc), self.pyramid.clip(p.key), z),
                                     fallback_selection(p.selected, anc)))
         return out
 

@@ -50,9 +50,13 @@ def fallback_selection(sel, key: TileKey):
     return replace(sel, key=key, coarser_edges=0, edge_deltas=(NO_NEIGHBOUR,) * 4)
 
 
-def fallback_tile(ancestor_tile, clip):
-    """The ancestor's CPU tile restricted to the missing tile's world rectangle ``clip`` (x0, y0, x1, y1)."""
-    return replace(ancestor_tile, clip=tuple(float(c) for c in clip))
+def fallback_tile(ancestor_tile, clip, zrange=None):
+    """The ancestor's CPU tile restricted to the missing tile's world rectangle ``clip`` (x0, y0, x1, y1) and, with
+    ``zrange``, to the missing tile's height bounds (world metres): they bound the ancestor's ray-cast surface
+    there too, a union of the ancestor's cells whose corners are samples of the missing tile. (Not for a raster
+    tile: its leaves reach past the rectangle, so its surface inside may not lie within them.)"""
+    out = replace(ancestor_tile, clip=tuple(float(c) for c in clip))
+    return out if zrange is None else replace(out, zmin=float(zrange[0]), zmax=float(zrange[1]))
 
 
 def stream_uploads(cache, strategies: dict, plans, pinned: set, make_tile, max_level: int, budget_ms: float,

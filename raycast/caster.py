@@ -268,8 +268,9 @@ class RaycastStrategy:
                 org = np.asarray(tile.origin, dtype=np.float64)
                 x0, y0, x1, y1 = (float(v) for v in tile.clip)
                 pad = 1e-3 * max(sx, sy) + 0.01
-                box_lo = np.array([x0 - pad, y0 - pad, tile.zmin - pad]) - eye
-                box_hi = np.array([x1 + pad, y1 + pad, tile.zmax + pad]) - eye
+                zq = float(g.quant_error)           # the codes' heights lie within zq of the tile's bounds
+                box_lo = np.array([x0 - pad, y0 - pad, tile.zmin - zq - pad]) - eye
+                box_hi = np.array([x1 + pad, y1 + pad, tile.zmax + zq + pad]) - eye
                 for p in (prog, self.prepass_prog):
                     set_uniform(p, "box_lo", tuple(box_lo.astype(np.float32)))
                     set_uniform(p, "box_hi", tuple(box_hi.astype(np.float32)))
@@ -278,8 +279,9 @@ class RaycastStrategy:
                 set_uniform(prog, "dq", (g.offset, g.step))
                 set_uniform(prog, "dq_base", g.base)
                 set_uniform(prog, "n_levels", level_count(g.n) - 1)
-                set_uniform(prog, "ext", ((x1 - org[0]) / sx, (y1 - org[1]) / sy))     # texels from the tile's origin
-                set_uniform(prog, "zr", (tile.zmin - org[2], tile.zmax - org[2]))
+                set_uniform(prog, "ext_lo", ((x0 - org[0]) / sx, (y0 - org[1]) / sy))  # texels from the tile's origin
+                set_uniform(prog, "ext", ((x1 - org[0]) / sx, (y1 - org[1]) / sy))
+                set_uniform(prog, "zr", (tile.zmin - zq - org[2], tile.zmax + zq - org[2]))
                 e = eye - org
                 set_uniform(prog, "eye_tex", (e[0] / sx, e[1] / sy, e[2]))
                 set_uniform(prog, "origin_rel", tuple((org - eye).astype(np.float32)))

@@ -25,7 +25,8 @@ uniform dvec2 dq;              // (offset, step) metres: height = offset + step 
 uniform int dq_base;
 uniform int n_cells;           // N
 uniform int n_levels;          // log2 N
-uniform vec2 ext;              // clip rectangle size in texels
+uniform vec2 ext_lo;           // clip rectangle's lower corner in texels from the tile's origin (0 but in a fallback)
+uniform vec2 ext;              // clip rectangle's upper corner in texels from the tile's origin
 uniform vec2 zr;               // tile z range, metres relative to terrain origin z
 uniform vec3 eye_tex;          // eye in tile texel space
 uniform vec3 origin_rel;       // tile origin (sample [0,0] at terrain origin z) minus eye, metres
@@ -159,7 +160,7 @@ void main() {
     vec3 D = vec3(d.xy / spacing, d.z);
     bool under = ray_starts_under(d);
     vec3 Q; ivec2 cell; int lev; vec4 hc; int steps;
-    int r = rc_traverse(hmap, mmap, dq, dq_base, n_cells, n_levels, ext, zr, eye_tex, D, near_plane, 0, spacing, lod_k,
+    int r = rc_traverse(hmap, mmap, dq, dq_base, n_cells, n_levels, ext_lo, ext, zr, eye_tex, D, near_plane, 0, spacing, lod_k,
                         max_steps, outer, under, Q, cell, lev, hc, steps);
 #if STATS
     ivec2 bin = ivec2(gl_FragCoord.xy) >> 6;
@@ -184,7 +185,7 @@ void main() {
         vec3 Og = vec3(g_tile_off + Q.xy * k, Q.z + 1e-3 * max(spacing.x, spacing.y) * float(S) + 0.01);
         vec3 Dg = vec3(L.xy / g_spacing, L.z);
         vec3 Qs; ivec2 cs; int ls; vec4 hs; int ssteps;
-        int rs = rc_traverse(g_hmap, g_mmap, g_dq, g_dq_base, g_cells, g_levels, g_ext, g_zr, Og, Dg, 0.0, gl, g_spacing, 0.0,
+        int rs = rc_traverse(g_hmap, g_mmap, g_dq, g_dq_base, g_cells, g_levels, vec2(0.0), g_ext, g_zr, Og, Dg, 0.0, gl, g_spacing, 0.0,
                              g_max_steps, 15, false, Qs, cs, ls, hs, ssteps);
         if (rs != RC_MISS) lit = 0.0;
 #if STATS

@@ -1,7 +1,8 @@
 // Height-field ray traversal over a maximum mipmap (Dick et al. 2009, sections 3.1-3.2), shared by primary
 // and shadow rays. Texel space: x, y in texels of the grid (sample (i, j) at (j, i)), z in metres relative to
 // the terrain's origin z; a ray is P(t) = O + t * D. The grid has N cells a side (N a power of two), the real
-// terrain covers [0, ext.x] x [0, ext.y] of it and heights lie in [zr.x, zr.y]. Max-mip level l texel (i, j)
+// terrain drawn covers [elo.x, ext.x] x [elo.y, ext.y] of it (elo = 0 but for a tile drawn for a missing finer
+// one: that tile's rectangle) and heights lie in [zr.x, zr.y]. Max-mip level l texel (i, j)
 // bounds the cells [i*2^l, (i+1)*2^l) x [j*2^l, (j+1)*2^l). Texel space scales world x and y separately (metres
 // per texel spacing.x east-west, spacing.y north-south): a world ray E + t d becomes O + t D with
 // D = (d.x / spacing.x, d.y / spacing.y, d.z), so t stays the world ray parameter and hit depths stay metres.
@@ -136,7 +137,8 @@ bool rc_lod_final(int l, vec2 ij, float H, vec3 Om, float zlo, vec2 spacing, flo
 // (near plane); lmin: the finest level to descend to; steps: texels visited. under: the ray starts under the
 // terrain sheet (hybrid/gl/edges.glsl): its hit is where it first comes up through the surface (the sheet's
 // underside, as the two-sided reference draws it), found by stepping every lmin texel (no LOD).
-int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int LMAX, vec2 ext, vec2 zr, vec3 O, vec3 D,
+int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int LMAX, vec2 elo, vec2 ext, vec2 zr,
+                vec3 O, vec3 D,
                 float tmin, int lmin, vec2 spacing, float lod_k, int max_steps, int outer,
                 bool under, out vec3 hit, out ivec2 cell, out int level, out vec4 hc, out int steps) {
     steps = 0; level = 0; cell = ivec2(0); hit = vec3(0.0); hc = vec4(0.0);
@@ -150,15 +152,15 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
     int face = 0;
     bool zentry = false;   // entered through the bottom or top face: put P exactly on it (no rounding above/below)
     if (D.x != 0.0) {
-        float ta = -O.x / D.x, tb = (ext.x - O.x) / D.x;
+        float ta = (elo.x - O.x) / D.x, tb = (ext.x - O.x) / D.x;
         if (min(ta, tb) > t0) { t0 = min(ta, tb); face = D.x > 0.0 ? 1 : 2; }
         t1 = min(t1, max(ta, tb));
-    } else if (O.x < 0.0 || O.x > ext.x) return RC_MISS;
+    } else if (O.x < elo.x || O.x > ext.x) return RC_MISS;
     if (D.y != 0.0) {
-        float ta = -O.y / D.y, tb = (ext.y - O.y) / D.y;
+        float ta = (elo.y - O.y) / D.y, tb = (ext.y - O.y) / D.y;
         if (min(ta, tb) > t0) { t0 = min(ta, tb); face = D.y > 0.0 ? 4 : 8; }
         t1 = min(t1, max(ta, tb));
-    } else if (O.y < 0.0 || O.y > ext.y) return RC_MISS;
+    } else if (O.y < elo.y || O.y > ext.y) return RC_MISS;
     if (D.z != 0.0) {
         float ta = (zr.x - O.z) / D.z, tb = (zr.y - O.z) / D.z;
         if (min(ta, tb) > t0) { t0 = min(ta, tb); face = 0; zentry = true; }
@@ -174,8 +176,8 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
     vec3 Om = O;
     if (mx) { P.x = Nf - P.x; D.x = -D.x; Om.x = Nf - O.x; }
     if (my) { P.y = Nf - P.y; D.y = -D.y; Om.y = Nf - O.y; }
-    vec2 lo = vec2(mx ? Nf - ext.x : 0.0, my ? Nf - ext.y : 0.0);
-    vec2 hi = vec2(mx ? Nf : ext.x, my ? Nf : ext.y);
+    vec2 lo = vec2(mx ? Nf - ext.x : elo.x, my ? Nf - ext.y : elo.y);
+    vec2 hi = vec2(mx ? Nf - elo.x : ext.x, my ? Nf - elo.y : ext.y);
     P.xy = clamp(P.xy, lo, hi);
     // every exit is computed from the entry point P0 (no accumulated rounding): X = P0 + s * D
     vec3 P0 = P;
@@ -271,7 +273,7 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
             if (u == 0.0 && !moved && no_entry_hit) return RC_MISS;
             vec3 Q = mix(A, B, u);
             if (Q.x > ext.x + 1e-4 || Q.y > ext.y + 1e-4) return RC_MISS;   // first hit lies in the padding
-            Q.xy = clamp(Q.xy, vec2(0.0), ext);
+            Q.xy = clamp(Q.xy, elo, ext);
             hit = Q; cell = ri; level = l; hc = h4;
             return RC_HIT;
         }

@@ -132,3 +132,51 @@ def test_a_tile_drawn_for_missing_ones_selects_only_their_leaves(ctx, puget257):
     assert alone["tilelets"] > 0
     assert alone["tilelets"] <= res.stats.counters["tilelets"] <= res.stats.tiles * alone["tilelets"] / 4, \
         (res.stats.counters, alone)
+
+
+def test_a_ray_cast_tile_drawn_for_a_missing_one_hits_only_inside_its_rectangle(ctx, puget257):
+    """The ancestor drawn for a missing tile traverses only the missing tile's rectangle, within its height
+    bounds: every hit lies inside the rectangle (before, rays crossed the ancestor's cells in front of it and
+    could hit there, over tiles drawn by others), and where the whole ancestor's own hit lies well inside the
+    rectangle the clipped draw finds the same one."""
+    from hybrid.contract import TileItem
+    from hybrid.gl.target import FrameTarget
+    from hybrid.uploads import fallback_selection, fallback_tile
+    v = preset("flyover", puget257, 6, *SIZE).view(2)
+    rays = v.pixel_rays()
+    eye = np.asarray(v.eye)
+
+    def draw(r, items):
+        target = FrameTarget(ctx, *SIZE)
+        try:
+            target.clear()
+            target.use()
+            r.strategies["raycast"].draw_tiles(target, v, items, 2 / 3)
+            return v.distance_from_depth(target.read_depth())
+        finally:
+            target.release()
+
+    with Renderer(ctx, puget257, "raycast", 32, upload_budget_ms=0.0) as r:
+        r.render(v)
+        root = r.pyramid.root()
+        g, whole_tile = r.cache.entries[("raycast", root)], r.tile(root)
+        plans = r.plan(v)
+        whole = draw(r, [TileItem(g, whole_tile, fallback_selection(plans[0].selected, root))])
+        whole_xy = eye[:2] + rays[..., :2] * whole[..., None]
+        checked = 0
+        for p in plans[:8]:
+            x0, y0, x1, y1 = r.pyramid.clip(p.key)
+            tile = fallback_tile(whole_tile, (x0, y0, x1, y1), r.pyramid.zrange(p.key))
+            d = draw(r, [TileItem(g, tile, fallback_selection(p.selected, root))])
+            hit = np.isfinite(d)
+            xy = eye[:2] + rays[..., :2] * d[..., None]
+            tol = 1e-3 * (x1 - x0)
+            assert np.all((xy[hit, 0] >= x0 - tol) & (xy[hit, 0] <= x1 + tol)), p.key
+            assert np.all((xy[hit, 1] >= y0 - tol) & (xy[hit, 1] <= y1 + tol)), p.key
+            cell = whole_tile.spacing_x
+            inside = np.isfinite(whole) & (whole_xy[..., 0] > x0 + cell) & (whole_xy[..., 0] < x1 - cell) & \
+                (whole_xy[..., 1] > y0 + cell) & (whole_xy[..., 1] < y1 - cell)
+            assert np.array_equal(hit & inside, inside), p.key
+            assert np.allclose(d[inside], whole[inside], rtol=1e-5), p.key
+            checked += int(inside.sum())
+    assert checked > 1000
