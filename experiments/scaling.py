@@ -85,6 +85,7 @@ def run_scaling(ctx, stores, frames: int = 48, size=(640, 360), tau: float = 2 /
                              upload_budget_ms=upload_budget_ms)
             except TerrabenchError as exc:
                 refused.append({"store": terrain.name, "samples": samples, "method": method, "reason": str(exc)})
+                pyramid.close()
                 continue
             try:
                 t0 = time.perf_counter()                  # one-off setup (the root tile's upload): not a frame
@@ -109,6 +110,7 @@ def run_scaling(ctx, stores, frames: int = 48, size=(640, 360), tau: float = 2 /
                 rows[:] = [x for x in rows if not (x["store"] == terrain.name and x["method"] == method)]
             finally:
                 r.release()
+                pyramid.close()                   # its loader thread and host cache go with the method's run
     return (pd.DataFrame(rows), pd.DataFrame(refused, columns=["store", "samples", "method", "reason"]),
             pd.DataFrame(setup, columns=["store", "samples", "method", "setup_s"]))
 

@@ -70,6 +70,7 @@ class Renderer:
             raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
         self.ctx, self.hf, self.policy = ctx, hf, policy
         self.mixed = policy in MIXED_POLICIES
+        self._own_pyramid = pyramid is None              # made here: closed (its loader thread) on release
         self.pyramid = pyramid or pyramid_for(hf, tile_size)
         self.cache = ResidencyCache(budget_bytes)
         self.strategies = {n: make_strategy(n, ctx, hf) for n in (CANDIDATES if self.mixed else (policy,))}
@@ -334,12 +335,15 @@ class Renderer:
         return out
 
     def release(self) -> None:
-        """Free resident tiles and strategies; the renderer cannot draw afterwards."""
+        """Free resident tiles and strategies (and stop the loader of a store pyramid made here); the renderer
+        cannot draw afterwards."""
         if self._released:
             return
         self.cache.clear()
         for s in self.strategies.values():
             s.release()
+        if self._own_pyramid and hasattr(self.pyramid, "close"):
+            self.pyramid.close()
         self._released = True
 
 

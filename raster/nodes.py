@@ -21,7 +21,8 @@ effective error above; and ``hybrid.tiles.store_blocks``: each tile's block of t
 their Zarr arrays to ``tile_node_block``, which reads the tile's block (or one window per level of a store
 without blocks), so the grid is never loaded. A periodic extension of a store serves arrays of the same shape
 and slicing, computed window by window from its source's (``hybrid.tiles.periodic_nodes``: the source's values
-away from the seams, never below the exact ones near them).
+away from the seams, never below the exact ones near them), and its tiles' blocks are the source's blocks away
+from the seams (``hybrid.tiles.periodic_blocks``).
 """
 from __future__ import annotations
 
@@ -34,6 +35,7 @@ from hybrid.errors import TerrabenchError
 from hybrid.terrain.stored import MAX_LOAD_SAMPLES, StoredTerrain
 from hybrid.tiles.fans import grow3 as _grow
 from hybrid.tiles.pyramid import TilePyramid
+from hybrid.tiles.periodic_blocks import PeriodicBlocks
 from hybrid.tiles.store_blocks import band_blocks, block_offsets
 
 from .quadtree import GPU_BETA, error_pyramid
@@ -55,7 +57,7 @@ class GlobalNodes:
     effective: tuple
     zlo: tuple
     zhi: tuple
-    blocks: tuple | None = None     # a store's per-tile blocks by pyramid level (hybrid.tiles.store_blocks)
+    blocks: object = None           # a store's per-tile blocks, [level][ty, tx] (hybrid.tiles.store_blocks)
 
 
 def global_nodes(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
@@ -104,11 +106,17 @@ def nodes_for(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
         return hit[1]
     levels = range(int(info["levels"]))
     g = hf.store
+    arrays = tuple(tuple(g[f"nodes/{k}/{lev}"] for lev in levels) for k in ("effective", "zlo", "zhi"))
     blocks = None
-    if hf.store.attrs.get("node_blocks") and not periodic:       # an extension's blocks would differ at seams
-        blocks = tuple(g[f"nodes/blocks/{lev}"] for lev in range(int(hf.store.attrs["max_level"]) + 1))
-    nodes = GlobalNodes(int(info["square"]), float(beta), *(tuple(g[f"nodes/{k}/{lev}"] for lev in levels)
-                                                             for k in ("effective", "zlo", "zhi")), blocks)
+    if hf.store.attrs.get("node_blocks"):
+        tiers = range(int(hf.store.attrs["max_level"]) + 1)
+        if periodic:                            # the source's blocks away from the seams, cut near them
+            src, src_levels = g.source, range(int(g.source.attrs["max_level"]) + 1)
+            blocks = PeriodicBlocks(tuple(src[f"nodes/blocks/{lev}"] for lev in src_levels), arrays, int(tile_size),
+                                    int(periodic["period_cells"]), int(periodic["size"]) - 1, len(tiers))
+        else:
+            blocks = tuple(g[f"nodes/blocks/{lev}"] for lev in tiers)
+    nodes = GlobalNodes(int(info["square"]), float(beta), *arrays, blocks)
     _CACHE[key] = (weakref.ref(hf, lambda _r, k=key: _CACHE.pop(k, None)), nodes)
     return nodes
 

@@ -12,8 +12,10 @@ from hybrid.terrain.grid_sources import FractalSource
 from hybrid.tiles import store_nodes
 from hybrid.tiles.fans import block2, dilate4
 from hybrid.tiles.periodic import open_periodic
+from hybrid.tiles.periodic_blocks import PeriodicBlocks, source_block_tile
 from hybrid.tiles.pyramid import TilePyramid
 from hybrid.tiles.store import prepare_store
+from hybrid.tiles.store_blocks import band_blocks
 from raster import nodes as nodes_mod
 from raster.nodes import global_nodes, nodes_for, tile_node_block
 
@@ -100,6 +102,23 @@ def test_every_tile_block_reads_bounds_of_the_exact_block(tmp_path, periods):
             (a, ao), (b, bo) = (tile_node_block(x, level, key.tx, key.ty, 16) for x in (got, ref))
             assert np.array_equal(ao, bo) and np.array_equal(a[:, 3], b[:, 3]), key
             assert np.all(a[:, 0] >= b[:, 0]) and np.all(a[:, 1] <= b[:, 1]) and np.all(a[:, 2] >= b[:, 2]), key
+
+
+@pytest.mark.parametrize("periods", [2, 3])
+def test_tile_blocks_away_from_the_seams_are_the_sources_and_equal_the_cut_ones(tmp_path, periods):
+    prepare_store(_rough(seed=2), tmp_path / "s", 16)
+    ext = open_periodic(tmp_path / "s", 128 * periods + 1)
+    got = nodes_for(ext, 16)
+    assert isinstance(got.blocks, PeriodicBlocks)
+    pyr = TilePyramid(ext.load(), 16)
+    reused = 0
+    for level in range(pyr.max_level + 1):
+        for key in pyr.keys(level):
+            block = tile_node_block(got, level, key.tx, key.ty, 16)[0]
+            cut = band_blocks(got.effective, got.zlo, got.zhi, level, key.ty, 16, key.tx, key.tx + 1)[0]
+            assert np.array_equal(block, cut), key              # the source's block is the extension's, bit for bit
+            reused += source_block_tile(level, key.tx, key.ty, 16, 128, 128 * periods) is not None
+    assert reused >= 9 * periods ** 2                           # level 0: tiles 2..4 of 8 a period, each axis
 
 
 def test_a_large_extension_serves_tile_windows_without_building_a_level(tmp_path):

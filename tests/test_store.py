@@ -245,3 +245,18 @@ def test_a_store_renders_as_its_grid_does(ctx, grid, tmp_path):
         assert np.array_equal(x.colour, y.colour), policy
     with pytest.raises(TerrabenchError, match="prepared with tiles of 32"):
         Renderer(ctx, stored, "raycast", 64)
+
+
+def test_close_stops_the_loader_thread_and_frees_the_host_cache(grid, tmp_path):
+    h, sp = grid
+    prepare_store(ArraySource(h, sp), tmp_path / "s", 32)
+    p = StorePyramid(tmp_path / "s")
+    keys = p.keys(0)
+    assert p.request(keys[:4]).wait(10) and p.cache_bytes > 0
+    p.request(keys)                                             # still reading when closed
+    loader = p._loader
+    p.close()
+    assert not loader.is_alive()
+    assert p.cache_bytes == 0 and not p.cached(keys[0])
+    assert p.request(keys[:2]).wait(10) and p.cached(keys[1])   # a new loader on the next request
+    p.close()

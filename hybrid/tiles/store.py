@@ -247,6 +247,7 @@ class StorePyramid(TilePyramid):
         self._wanted: list = []
         self._done = threading.Event()
         self._loader = None
+        self._closing = False
         self._failed: set = set()
 
     def samples(self, key) -> np.ndarray:
@@ -341,13 +342,32 @@ class StorePyramid(TilePyramid):
             self._wake.notify()
             return self._done
 
+    def close(self) -> None:
+        """Stop the loader thread (it ends after the tile it is reading) and drop the host cache; a later read
+        reads from disk again and a later ``request`` starts a new loader."""
+        with self._wake:
+            self._wanted = []
+            self._closing = True
+            self._wake.notify()
+            loader, self._loader = self._loader, None
+        if loader is not None:
+            loader.join()
+        with self._lock:
+            self._cache.clear()
+            self._chunks.clear()
+            self.cache_bytes = self.chunk_bytes = 0
+        self._closing = False
+
     def _load(self) -> None:
-        """The loader thread: read the wanted tiles one at a time, front first."""
+        """The loader thread: read the wanted tiles one at a time, front first, until ``close``."""
         while True:
             with self._wake:
-                while not self._wanted:
+                while not self._wanted and not self._closing:
                     self._done.set()
                     self._wake.wait()
+                if self._closing:
+                    self._done.set()
+                    return
                 key = self._wanted.pop(0)
             try:
                 self.samples(key)

@@ -1,0 +1,63 @@
+"""Per-tile node blocks (``hybrid.tiles.store_blocks``) of a virtual periodic extension (``hybrid.tiles.periodic``).
+
+Away from the seams every node of the extension is its source node's value exactly (``hybrid.tiles.periodic_nodes``:
+only nodes at local indices T-2, T-1 and 0 of a period, T nodes a period, may differ), so the block of a tile whose
+nodes, apron included, all lie at local indices 1..T-3 of their level is the source tile's block at the same place in
+its period: one read of one chunk. Tiles near a seam, tiles of levels whose tiles span a whole period and tiles
+reaching over the padding cut their block from the extension's node arrays, window by window, as before.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .store_blocks import band_blocks
+
+
+def source_block_tile(level: int, tx: int, ty: int, n: int, period: int, cells: int) -> tuple[int, int] | None:
+    """(tx, ty) of the source tile whose block equals the extension tile's, or None where it may differ.
+
+    ``period``: the source's cells a side (a power of two, a multiple of n); ``cells``: the extension's cells a
+    side. Global node level g = level + m holds T = period >> (g + 1) nodes a period; the tile's nodes at local
+    level m, with their one-node apron, are the indices i*side - 1 .. (i + 1)*side of side = n >> (m + 1)."""
+    span = n << level
+    if span > period:
+        return None
+    per = period // span                                    # tiles a period at this level
+    sx, sy = tx % per, ty % per
+    for m in range(int(np.log2(n))):
+        side, g = n >> (m + 1), level + m
+        T, inside = period >> (g + 1), cells >> (g + 1)    # nodes a period; nodes over the extension
+        for i, a in ((sx, tx), (sy, ty)):
+            if i * side - 1 < 1 or (i + 1) * side > T - 3 or (a + 1) * side >= inside:
+                return None
+    return sx, sy
+
+
+class _LevelBlocks:
+    """The blocks of one pyramid level, indexed [ty, tx] as a store's ``nodes/blocks/<level>`` array."""
+
+    def __init__(self, owner: "PeriodicBlocks", level: int):
+        self.owner, self.level = owner, level
+
+    def __getitem__(self, index) -> np.ndarray:
+        ty, tx = (int(i) for i in index)
+        o = self.owner
+        at = source_block_tile(self.level, tx, ty, o.n, o.period, o.cells)
+        if at is not None:
+            return np.asarray(o.source_blocks[self.level][at[1], at[0]], dtype=np.float32)
+        return band_blocks(*o.arrays, self.level, ty, o.n, tx, tx + 1)[0]
+
+
+class PeriodicBlocks:
+    """Node blocks of an extension by pyramid level: the source's where they are equal, else cut (see module)."""
+
+    def __init__(self, source_blocks: tuple, arrays: tuple, n: int, period: int, cells: int, levels: int):
+        self.source_blocks, self.arrays = source_blocks, arrays
+        self.n, self.period, self.cells = int(n), int(period), int(cells)
+        self._levels = tuple(_LevelBlocks(self, lev) for lev in range(levels))
+
+    def __getitem__(self, level: int) -> _LevelBlocks:
+        return self._levels[level]
+
+    def __len__(self) -> int:
+        return len(self._levels)
