@@ -150,7 +150,8 @@ class TileletTriangleEstimator:
         self.build_ms = 0.0
         hf = pyramid.hf
         # a tile store whose nodes (as the GPU reads them) come in per-tile blocks: each tile's is one read, no
-        # heights, no error pyramid; stores without them are not opened here (nodes_for may refuse or load them)
+        # heights, no error pyramid (a periodic extension's where ``ready``: else from the tile's heights);
+        # stores without them are not opened here (nodes_for may refuse or load them)
         self._blocks = None
         if isinstance(hf, StoredTerrain) and hf.store.attrs.get("node_blocks") and \
                 int(hf.store.attrs["tile_size"]) == pyramid.n:
@@ -162,7 +163,8 @@ class TileletTriangleEstimator:
             self._nodes.move_to_end(key)
             return self._nodes[key]
         t0 = time.perf_counter()
-        if self._blocks is not None:
+        ready = getattr(self._blocks.blocks, "ready", None) if self._blocks is not None else None
+        if self._blocks is not None and (ready is None or ready(key.level, key.tx, key.ty)):
             data, offsets = tile_node_block(self._blocks, key.level, key.tx, key.ty, self.pyramid.n)
             self._nodes[key] = block_tile_nodes(data, offsets, self.pyramid.n, *self.pyramid.placement(key))
         else:

@@ -12,7 +12,7 @@ from hybrid.terrain.grid_sources import FractalSource
 from hybrid.tiles import store_nodes
 from hybrid.tiles.fans import block2, dilate4
 from hybrid.tiles.periodic import open_periodic
-from hybrid.tiles.periodic_blocks import PeriodicBlocks, source_block_tile
+from hybrid.tiles.periodic_blocks import PeriodicBlocks, period_residue, source_block_tile
 from hybrid.tiles.pyramid import TilePyramid
 from hybrid.tiles.store import prepare_store
 from hybrid.tiles.store_blocks import band_blocks
@@ -104,21 +104,45 @@ def test_every_tile_block_reads_bounds_of_the_exact_block(tmp_path, periods):
             assert np.all(a[:, 0] >= b[:, 0]) and np.all(a[:, 1] <= b[:, 1]) and np.all(a[:, 2] >= b[:, 2]), key
 
 
-@pytest.mark.parametrize("periods", [2, 3])
-def test_tile_blocks_away_from_the_seams_are_the_sources_and_equal_the_cut_ones(tmp_path, periods):
+def _cut(nodes, level, tx, ty):
+    return band_blocks(nodes.effective, nodes.zlo, nodes.zhi, level, ty, 16, tx, tx + 1)[0]
+
+
+def test_tile_blocks_away_from_the_seams_are_the_sources_and_equal_the_cut_ones(tmp_path):
     prepare_store(_rough(seed=2), tmp_path / "s", 16)
-    ext = open_periodic(tmp_path / "s", 128 * periods + 1)
+    ext = open_periodic(tmp_path / "s", 128 * 3 + 1)
     got = nodes_for(ext, 16)
     assert isinstance(got.blocks, PeriodicBlocks)
-    pyr = TilePyramid(ext.load(), 16)
+    # a row and a column of level 0 (8 tiles a period), a row of every coarser level
+    keys = [(0, tx, 11) for tx in range(24)] + [(0, 3, ty) for ty in range(24)] + [(1, tx, 5) for tx in range(12)] + \
+        [(level, tx, 0) for level in (2, 3, 4) for tx in range(24 >> level)]
     reused = 0
-    for level in range(pyr.max_level + 1):
-        for key in pyr.keys(level):
-            block = tile_node_block(got, level, key.tx, key.ty, 16)[0]
-            cut = band_blocks(got.effective, got.zlo, got.zhi, level, key.ty, 16, key.tx, key.tx + 1)[0]
-            assert np.array_equal(block, cut), key              # the source's block is the extension's, bit for bit
-            reused += source_block_tile(level, key.tx, key.ty, 16, 128, 128 * periods) is not None
-    assert reused >= 9 * periods ** 2                           # level 0: tiles 2..4 of 8 a period, each axis
+    for level, tx, ty in keys:
+        block = tile_node_block(got, level, tx, ty, 16)[0]
+        assert np.array_equal(block, _cut(got, level, tx, ty)), (level, tx, ty)   # the source's is the extension's
+        reused += source_block_tile(level, tx, ty, 16, 128, 384) is not None
+    # level 0: residues 2..4 in the row (ty 11: residue 3) and the column; from level 1 every tile has a node
+    # (apron included) at local index T-2, T-1 or 0 of some node level, so every block is cut
+    assert reused == 9 + 9 and source_block_tile(0, 3, 11, 16, 128, 384) == (3, 3)
+
+
+def test_blocks_cut_near_seams_repeat_every_period_inside_the_extension(tmp_path):
+    prepare_store(_rough(seed=4), tmp_path / "s", 16)
+    ext = open_periodic(tmp_path / "s", 128 * 5 + 1)           # periods 1..3 are inside
+    got = nodes_for(ext, 16)
+    for level, tx, ty in ((0, 8, 8), (0, 15, 9), (0, 12, 15), (1, 4, 7), (2, 3, 2), (3, 1, 1)):
+        span = 16 << level
+        shift = max(128 // span, 1)                                  # a period, in tiles of this level
+        where = period_residue(level, tx, ty, 16, 128, 640)
+        assert where is not None and source_block_tile(level, tx, ty, 16, 128, 640) is None
+        first = _cut(got, level, tx, ty)
+        for dx, dy in ((shift, 0), (0, shift), (shift, shift)):
+            if (tx + dx + 1) * span > 512 or (ty + dy + 1) * span > 512:
+                continue
+            assert period_residue(level, tx + dx, ty + dy, 16, 128, 640) == where
+            assert np.array_equal(_cut(got, level, tx + dx, ty + dy), first), (level, tx + dx, ty + dy)
+            assert np.array_equal(tile_node_block(got, level, tx + dx, ty + dy, 16)[0], first)
+    assert period_residue(0, 7, 8, 16, 128, 640) is None and period_residue(0, 8, 32, 16, 128, 640) is None
 
 
 def test_a_large_extension_serves_tile_windows_without_building_a_level(tmp_path):

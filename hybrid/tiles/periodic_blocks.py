@@ -4,13 +4,19 @@ Away from the seams every node of the extension is its source node's value exact
 only nodes at local indices T-2, T-1 and 0 of a period, T nodes a period, may differ), so the block of a tile whose
 nodes, apron included, all lie at local indices 1..T-3 of their level is the source tile's block at the same place in
 its period: one read of one chunk. Tiles near a seam, tiles of levels whose tiles span a whole period and tiles
-reaching over the padding cut their block from the extension's node arrays, window by window, as before.
+reaching over the padding cut their block from the extension's node arrays, window by window. Those arrays repeat
+every period away from the extension's first and last period, so a block cut there serves every tile at the same
+place in another period (kept in a small LRU): the periodic pattern is cut once.
 """
 from __future__ import annotations
+
+from collections import OrderedDict
 
 import numpy as np
 
 from .store_blocks import band_blocks
+
+CUT_BLOCKS = 64                 # blocks cut near the seams kept (by their place in the period), least recent out
 
 
 def source_block_tile(level: int, tx: int, ty: int, n: int, period: int, cells: int) -> tuple[int, int] | None:
@@ -33,6 +39,18 @@ def source_block_tile(level: int, tx: int, ty: int, n: int, period: int, cells: 
     return sx, sy
 
 
+def period_residue(level: int, tx: int, ty: int, n: int, period: int, cells: int) -> tuple[int, int] | None:
+    """Where an extension tile sits in the pattern that repeats every period: (x, y) of its corner modulo the
+    period, in tiles, for a tile outside the first and the last period (its block, cut from the extension's
+    arrays, is then the same as every such tile's at that place); None for a tile in the first or last period,
+    whose nodes may see the extension's edges or padding."""
+    span = n << level
+    for a in (tx, ty):
+        if a * span < period or (a + 1) * span > cells - period:
+            return None
+    return (tx * span) % period // span, (ty * span) % period // span
+
+
 class _LevelBlocks:
     """The blocks of one pyramid level, indexed [ty, tx] as a store's ``nodes/blocks/<level>`` array."""
 
@@ -45,7 +63,17 @@ class _LevelBlocks:
         at = source_block_tile(self.level, tx, ty, o.n, o.period, o.cells)
         if at is not None:
             return np.asarray(o.source_blocks[self.level][at[1], at[0]], dtype=np.float32)
-        return band_blocks(*o.arrays, self.level, ty, o.n, tx, tx + 1)[0]
+        residue = period_residue(self.level, tx, ty, o.n, o.period, o.cells)
+        key = None if residue is None else (self.level, *residue)
+        if key in o.cut:                                    # a tile at the same place in another period
+            o.cut.move_to_end(key)
+            return o.cut[key]
+        block = band_blocks(*o.arrays, self.level, ty, o.n, tx, tx + 1)[0]
+        if key is not None:
+            o.cut[key] = block
+            while len(o.cut) > CUT_BLOCKS:
+                o.cut.popitem(last=False)
+        return block
 
 
 class PeriodicBlocks:
@@ -54,10 +82,19 @@ class PeriodicBlocks:
     def __init__(self, source_blocks: tuple, arrays: tuple, n: int, period: int, cells: int, levels: int):
         self.source_blocks, self.arrays = source_blocks, arrays
         self.n, self.period, self.cells = int(n), int(period), int(cells)
+        self.cut: OrderedDict = OrderedDict()              # blocks cut near seams, by (level, place in the period)
         self._levels = tuple(_LevelBlocks(self, lev) for lev in range(levels))
 
     def __getitem__(self, level: int) -> _LevelBlocks:
         return self._levels[level]
+
+    def ready(self, level: int, tx: int, ty: int) -> bool:
+        """Whether the tile's block is one read (the source's, or cut before for its place in the period), not a
+        cut from the node arrays (hundreds of ms a tile near the seams of a large extension)."""
+        if source_block_tile(level, tx, ty, self.n, self.period, self.cells) is not None:
+            return True
+        residue = period_residue(level, tx, ty, self.n, self.period, self.cells)
+        return residue is not None and (level, *residue) in self.cut
 
     def __len__(self) -> int:
         return len(self._levels)
