@@ -3,12 +3,14 @@ tile stores of growing size; per frame the wall time, uploads, fallback tiles, G
 
     terrabench scale STORE [STORE ...] [--frames 48] [--methods raycast,raster,raster_gs,hybrid]
 
-Every method draws the flight once, streaming: uploads are jobs inside each frame within ``upload_budget_ms``
+Every method draws the flight once per store, the stores interleaved frame by frame (a drift of the machine
+falls on every size alike), streaming: uploads are jobs inside each frame within ``upload_budget_ms``
 (tiles still waiting are drawn from a resident ancestor), resident tiles within a GPU byte budget, tile
 samples read from disk on demand within a host byte budget. A frame is drawn once (a repeat would find the
 queue drained), so the per-frame times carry the machine's noise: the tables give medians and 99th
 percentiles over a flight, and the ray caster's size ratio is read against the spread of its own frames.
-Host memory is the process's resident set (``/proc/self/statm``) after each frame. A method that cannot draw a
+Host memory is the process's resident set (``/proc/self/statm``) after each frame, with every store of the method
+open (an upper bound of one store's), and each store's host cache (tiles and decoded chunks). A method that cannot draw a
 store (the raster strategies on a store prepared without node arrays, or on a large periodic extension of one)
 is recorded with the reason.
 """
@@ -16,6 +18,7 @@ from __future__ import annotations
 
 import os
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -59,6 +62,25 @@ def warm_up(r, view, tau: float) -> None:
         target.release()
 
 
+@dataclass
+class _Flight:
+    """One store's flight for one method: its terrain, views, pyramid and renderer (GPU state)."""
+
+    terrain: object
+    views: list
+    pyramid: object = None
+    renderer: object = None
+
+    def close(self) -> None:
+        """Release the renderer and stop the pyramid's loader thread (freeing its host cache)."""
+        if self.renderer is not None:
+            self.renderer.release()
+            self.renderer = None
+        if self.pyramid is not None:
+            self.pyramid.close()
+            self.pyramid = None
+
+
 def run_scaling(ctx, stores, frames: int = 48, size=(640, 360), tau: float = 2 / 3, methods=METHODS,
                 gpu_budget_mib: int = 256, upload_budget_ms: float | None = 8.0, host_budget_mib: int = 512,
                 flight: str = "transect") -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
@@ -66,53 +88,78 @@ def run_scaling(ctx, stores, frames: int = 48, size=(640, 360), tau: float = 2 /
     ``upload_budget_ms``, or with None each frame's tiles uploaded before it, untimed); setup
     is the one-off time before the first frame (the root tile of each strategy, with the raster strategies'
     node data, read from the store: a periodic extension's from its source's, window by window; and one frame of
-    the root alone, in which the driver compiles the shaders)."""
+    the root alone, in which the driver compiles the shaders).
+
+    A method's flights over the stores are timed interleaved, frame k of every store before frame k + 1 (the
+    first store rotating), so a drift of the machine over the run falls on every size alike and the size ratios
+    compare frames drawn at the same time. Host RSS is the process's, with every store of the method open."""
     from hybrid.camera.flight import preset
-    from hybrid.errors import TerrabenchError
-    from hybrid.renderer import Renderer
     from hybrid.tiles.periodic import open_any_store
-    from hybrid.tiles.store import StorePyramid
     rows, refused, setup = [], [], []
+    flights = []
     for path in stores:
         terrain = open_any_store(path)
-        samples = terrain.rows * terrain.cols
-        views = preset(flight, terrain, frames, *size).views()
-        n = int(terrain.store.attrs["tile_size"])
-        for method in methods:
-            pyramid = StorePyramid(terrain, host_bytes=host_budget_mib << 20)
-            try:
-                r = Renderer(ctx, terrain, method, n, pyramid=pyramid, budget_bytes=gpu_budget_mib << 20,
-                             upload_budget_ms=upload_budget_ms)
-            except TerrabenchError as exc:
-                refused.append({"store": terrain.name, "samples": samples, "method": method, "reason": str(exc)})
-                pyramid.close()
-                continue
-            try:
-                t0 = time.perf_counter()                  # one-off setup (the root tile's upload): not a frame
-                for name in r.strategies:
-                    r.cache.get(name, r.strategies[name], pyramid.root(), lambda: pyramid.tile(pyramid.root()))
-                warm_up(r, overview(terrain, *size), tau)
-                setup.append({"store": terrain.name, "samples": samples, "method": method,
-                              "setup_s": time.perf_counter() - t0})
-                for k, v in enumerate(views):
-                    t0 = time.perf_counter()
-                    st = r.render(v, tau).stats
-                    rows.append({"store": terrain.name, "samples": samples, "side": terrain.cols,
-                                 "periodic": bool(terrain.store.attrs.get("periodic")), "method": method, "frame": k,
-                                 "wall_ms": st.wall_ms, "draw_ms": st.draw_ms, "plan_ms": st.plan_ms,
-                                 "upload_ms": st.upload_ms, "uploads": st.uploads, "fallback_tiles": st.fallback_tiles,
-                                 "pending_uploads": st.pending_uploads, "tiles": st.tiles, "gpu_bytes": st.gpu_bytes,
-                                 "resident_bytes": st.gpu_bytes - st.shared_bytes, "prep_ms": st.prep_ms,
-                                 "gpu_budget": gpu_budget_mib << 20, "host_cache_bytes": pyramid.cache_bytes,
-                                 "host_rss": rss_bytes(), "call_ms": (time.perf_counter() - t0) * 1e3})
-            except TerrabenchError as exc:
-                refused.append({"store": terrain.name, "samples": samples, "method": method, "reason": str(exc)})
-                rows[:] = [x for x in rows if not (x["store"] == terrain.name and x["method"] == method)]
-            finally:
-                r.release()
-                pyramid.close()                   # its loader thread and host cache go with the method's run
+        flights.append(_Flight(terrain, preset(flight, terrain, frames, *size).views()))
+    for method in methods:
+        live = [f for f in flights if _open(ctx, f, method, tau, size, gpu_budget_mib, upload_budget_ms,
+                                            host_budget_mib, refused, setup)]
+        try:
+            for k in range(frames):
+                turn = [f for f in live if f.renderer is not None]
+                shift = k % max(len(turn), 1)
+                for f in turn[shift:] + turn[:shift]:
+                    _frame(f, method, k, tau, gpu_budget_mib, rows, refused)
+        finally:
+            for f in flights:
+                f.close()
     return (pd.DataFrame(rows), pd.DataFrame(refused, columns=["store", "samples", "method", "reason"]),
             pd.DataFrame(setup, columns=["store", "samples", "method", "setup_s"]))
+
+
+def _open(ctx, f: _Flight, method: str, tau: float, size, gpu_budget_mib: int, upload_budget_ms, host_budget_mib: int,
+          refused: list, setup: list) -> bool:
+    """Make f's pyramid and renderer for the method and time its setup; False (the reason recorded) if refused."""
+    from hybrid.errors import TerrabenchError
+    from hybrid.renderer import Renderer
+    from hybrid.tiles.store import StorePyramid
+    t = f.terrain
+    samples = t.rows * t.cols
+    f.pyramid = StorePyramid(t, host_bytes=host_budget_mib << 20)
+    try:
+        f.renderer = r = Renderer(ctx, t, method, int(t.store.attrs["tile_size"]), pyramid=f.pyramid,
+                                  budget_bytes=gpu_budget_mib << 20, upload_budget_ms=upload_budget_ms)
+        t0 = time.perf_counter()                      # one-off setup (the root tile's upload): not a frame
+        for name in r.strategies:
+            r.cache.get(name, r.strategies[name], f.pyramid.root(), lambda: f.pyramid.tile(f.pyramid.root()))
+        warm_up(r, overview(t, *size), tau)
+        setup.append({"store": t.name, "samples": samples, "method": method, "setup_s": time.perf_counter() - t0})
+        return True
+    except TerrabenchError as exc:
+        refused.append({"store": t.name, "samples": samples, "method": method, "reason": str(exc)})
+        f.close()
+        return False
+
+
+def _frame(f: _Flight, method: str, k: int, tau: float, gpu_budget_mib: int, rows: list, refused: list) -> None:
+    """Draw frame k of f's flight and append its row; a refusal mid-flight drops the store's rows for the method."""
+    from hybrid.errors import TerrabenchError
+    t = f.terrain
+    t0 = time.perf_counter()
+    try:
+        st = f.renderer.render(f.views[k], tau).stats
+    except TerrabenchError as exc:
+        refused.append({"store": t.name, "samples": t.rows * t.cols, "method": method, "reason": str(exc)})
+        rows[:] = [x for x in rows if not (x["store"] == t.name and x["method"] == method)]
+        f.close()
+        return
+    rows.append({"store": t.name, "samples": t.rows * t.cols, "side": t.cols,
+                 "periodic": bool(t.store.attrs.get("periodic")), "method": method, "frame": k,
+                 "wall_ms": st.wall_ms, "draw_ms": st.draw_ms, "plan_ms": st.plan_ms,
+                 "upload_ms": st.upload_ms, "uploads": st.uploads, "fallback_tiles": st.fallback_tiles,
+                 "pending_uploads": st.pending_uploads, "tiles": st.tiles, "gpu_bytes": st.gpu_bytes,
+                 "resident_bytes": st.gpu_bytes - st.shared_bytes, "prep_ms": st.prep_ms,
+                 "gpu_budget": gpu_budget_mib << 20, "host_cache_bytes": f.pyramid.cache_bytes,
+                 "host_rss": rss_bytes(), "call_ms": (time.perf_counter() - t0) * 1e3})
 
 
 def summary(frames: pd.DataFrame) -> pd.DataFrame:

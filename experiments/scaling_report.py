@@ -91,7 +91,8 @@ def reading(frames: pd.DataFrame, table: pd.DataFrame, refused: pd.DataFrame) ->
                 f"Resident tiles' GPU bytes passed the budget in {len(over)} flights") +
                f"; the strategies' shared objects (terrain texture, pre-pass targets, leaf arenas, frame counters) add up to "
                f"{shared:.0f} MiB on top.")
-    out.append(f"Peak host RSS (the whole process, GL driver included): {table['peak_host_rss_mib'].max():.0f} MiB.")
+    out.append(f"Peak host RSS (the whole process, GL driver included, with every store of a method open, as the "
+               f"stores' flights are interleaved): {table['peak_host_rss_mib'].max():.0f} MiB.")
     out.append(f"Frames drawing some tile from a coarser ancestor while its upload waited: "
                f"{int(table['fallback_frames'].sum())} of {int(table['frames'].sum())}; no tile is ever missing "
                "(a tile without data is drawn from its ancestor).")

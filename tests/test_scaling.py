@@ -21,6 +21,10 @@ def test_scaling_streams_within_budgets_and_reports(ctx, stores, tmp_path):
                                          gpu_budget_mib=8, upload_budget_ms=0.0, host_budget_mib=1)
     assert refused.empty and len(setup) == 4 and (setup["setup_s"] > 0).all()
     assert len(frames) == 2 * 2 * 4
+    # a method's stores are drawn interleaved, frame by frame, the first store rotating
+    order = [(m, k, side) for m, k, side in zip(frames["method"], frames["frame"], frames["side"])]
+    assert order[:8] == [("raycast", 0, 257), ("raycast", 0, 513), ("raycast", 1, 513), ("raycast", 1, 257),
+                         ("raycast", 2, 257), ("raycast", 2, 513), ("raycast", 3, 513), ("raycast", 3, 257)]
     resident = frames.groupby(["side", "method"])["resident_bytes"].max()
     assert (resident <= 8 << 20).all() and (frames["gpu_bytes"] >= frames["resident_bytes"]).all(), resident
     assert frames["host_cache_bytes"].max() <= (1 << 20) + 65 * 65 * 4    # one tile over the budget at most
