@@ -152,7 +152,8 @@ class _ConfigRun:
         """Keep exc as this configuration's error and release its renderer."""
         msg = str(exc) if isinstance(exc, TerrabenchError) else f"{type(exc).__name__}: {exc}"
         self.out.error = {**self.c, "error": msg, "trace": traceback.format_exc(limit=4)}
-        self.out.frames, self.out.images = [], []
+        self.out.frames = []
+        self.out.images = [i for i in self.out.images if i.stem.startswith("ref-")]   # the group's references
         self.out.unreached = len([k for k in self.todo if k not in self.timed])
         self.release()
 

@@ -106,11 +106,13 @@ def pending(spec: Spec, journal: "Journal") -> list[tuple[dict, list[int]]]:
 
 
 def record(folder: Path, journal: "Journal", result) -> None:
-    """Journal a configuration's result (its frames, or its error) and save its images (a reference image once)."""
+    """Journal a configuration's result (its frames, or its error) and save its images (a reference image once;
+    a failed configuration's references too: they are its group's, rendered once for all its configurations)."""
     if result.error is not None:
         journal.append("errors", [result.error])
-        return
     for img in result.images:
+        if result.error is not None and not img.stem.startswith("ref-"):
+            continue
         path = folder / "images" / f"{img.stem}.png"
         if img.stem.startswith("ref-") and path.exists():
             continue

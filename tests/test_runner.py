@@ -205,3 +205,21 @@ def test_a_groups_configurations_are_timed_interleaved_in_rotating_order(ctx, tm
     assert [r[0] for r in rounds] == [policies[i % 3] for i in range(9)]   # the first of a round rotates
     f = pd.read_parquet(folder / "frames.parquet")
     assert len(f) == 9 and (f["wall_ms_repeats"].map(len) == 3).all()
+
+
+def test_a_configuration_failing_in_its_measures_keeps_its_groups_reference_images(ctx, tmp_path, monkeypatch):
+    import experiments.config_task as task
+    accuracy, calls = task.frame_accuracy, []
+
+    def first_fails(res, ref, **kw):              # raster's frame 1, after that image frame's reference is rendered
+        calls.append(1)
+        if len(calls) == 2:
+            raise RuntimeError("measure failed")
+        return accuracy(res, ref, **kw)
+
+    monkeypatch.setattr(task, "frame_accuracy", first_fails)
+    folder = run_spec(parse_spec(TINY), tmp_path, ctx, progress=False)
+    errors = [json.loads(l) for l in (folder / "errors.jsonl").read_text().splitlines()]
+    assert [e["policy"] for e in errors] == ["raster"] and "measure failed" in errors[0]["error"]
+    assert len(pd.read_parquet(folder / "frames.parquet")) == 2 * 3          # the other two went on
+    assert (folder / "images" / "ref-fbm-s0-flyover-160x90-f1.png").stat().st_size > 1000
