@@ -63,8 +63,7 @@ class _LevelBlocks:
         at = source_block_tile(self.level, tx, ty, o.n, o.period, o.cells)
         if at is not None:
             return np.asarray(o.source_blocks[self.level][at[1], at[0]], dtype=np.float32)
-        residue = period_residue(self.level, tx, ty, o.n, o.period, o.cells)
-        key = None if residue is None else (self.level, *residue)
+        key = o.cut_key(self.level, tx, ty)
         if key in o.cut:                                    # a tile at the same place in another period
             o.cut.move_to_end(key)
             return o.cut[key]
@@ -88,13 +87,19 @@ class PeriodicBlocks:
     def __getitem__(self, level: int) -> _LevelBlocks:
         return self._levels[level]
 
+    def cut_key(self, level: int, tx: int, ty: int) -> tuple | None:
+        """The key of a cut block in ``cut``: (level, place in the period), None for a tile in the first or last
+        period (its cut block is its own)."""
+        residue = period_residue(level, tx, ty, self.n, self.period, self.cells)
+        return None if residue is None else (level, *residue)
+
     def ready(self, level: int, tx: int, ty: int) -> bool:
         """Whether the tile's block is one read (the source's, or cut before for its place in the period), not a
         cut from the node arrays (hundreds of ms a tile near the seams of a large extension)."""
         if source_block_tile(level, tx, ty, self.n, self.period, self.cells) is not None:
             return True
-        residue = period_residue(level, tx, ty, self.n, self.period, self.cells)
-        return residue is not None and (level, *residue) in self.cut
+        key = self.cut_key(level, tx, ty)
+        return key is not None and key in self.cut
 
     def __len__(self) -> int:
         return len(self._levels)
