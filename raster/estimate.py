@@ -32,15 +32,12 @@ MAX_TILES = 4096                # tiles whose TileNodes are kept (least recently
 class TileNodes:
     """What the estimate needs of one tile's quadtree (metres, world frame): errors and where the nodes are.
 
-    fine_error: effective errors of the nodes no larger than a block, largest first (fine_neg: their negatives,
-    ascending, for binary searches); fine_box: the block each lies in (row-major, BLOCKS² blocks); coarse_error:
-    the larger nodes below the root; box_lo/hi: the blocks' boxes, then the larger nodes' grown boxes
-    (BLOCKS² + coarse, 3); root: 1 where the tile's root can split, else 0.
+    fine: effective errors of the nodes no larger than a block, one row per block (row-major, BLOCKS² blocks;
+    every block holds as many); coarse_error: the larger nodes below the root; box_lo/hi: the blocks' boxes,
+    then the larger nodes' grown boxes (BLOCKS² + coarse, 3); root: 1 where the tile's root can split, else 0.
     """
 
-    fine_error: np.ndarray
-    fine_neg: np.ndarray
-    fine_box: np.ndarray
+    fine: np.ndarray
     coarse_error: np.ndarray
     box_lo: np.ndarray
     box_hi: np.ndarray
@@ -71,14 +68,14 @@ def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing) -> TileNodes:
     cells = n // nb                                              # block side, tile cells
     org = np.asarray(origin, dtype=np.float64)
     sp = np.asarray(spacing, dtype=np.float64)
-    fine_e, fine_b, coarse_e, coarse_lo, coarse_hi = [], [], [], [], []
+    fine, coarse_e, coarse_lo, coarse_hi = [np.zeros((nb * nb, 0))], [], [], []
     for m in range(1, top):
         side = 2 << m                                            # node side, tile cells
         e = effective[m]
         a, b = np.indices(e.shape)
-        if side <= cells:
-            fine_e.append(e.ravel())
-            fine_b.append(((a * side // cells) * nb + b * side // cells).ravel())
+        if side <= cells:                                        # (block, node in block): blocks hold equal shares
+            per = cells // side
+            fine.append(np.asarray(e, np.float64).reshape(nb, per, nb, per).transpose(0, 2, 1, 3).reshape(nb * nb, -1))
         else:
             lo_xy = org[:2] + np.stack([(b - 1) * side, (a - 1) * side], -1).reshape(-1, 2) * sp
             hi_xy = org[:2] + np.stack([(b + 2) * side, (a + 2) * side], -1).reshape(-1, 2) * sp
@@ -98,9 +95,7 @@ def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing) -> TileNodes:
         if parts:
             return np.concatenate(parts).astype(dtype)
         return np.zeros((0,) if width is None else (0, width), dtype)
-    fe, fb = cat(fine_e, np.float64), cat(fine_b, np.int64)
-    order = np.argsort(-fe, kind="stable")
-    return TileNodes(fe[order], -fe[order], fb[order], cat(coarse_e, np.float64),
+    return TileNodes(np.concatenate(fine, axis=1), cat(coarse_e, np.float64),
                      np.concatenate([block_lo, cat(coarse_lo, np.float64, 3)]),
                      np.concatenate([block_hi, cat(coarse_hi, np.float64, 3)]), int(top >= 1))
 
@@ -108,29 +103,24 @@ def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing) -> TileNodes:
 def estimate_many(nodes: list[TileNodes], eye, k_tau: float, planes=None) -> tuple[np.ndarray, np.ndarray]:
     """(triangles (B,), visible share (B,)) of B tiles' quadtrees for an eye (world metres) and K / tau (pixels per
     radian over tau): 8 triangles per tilelet, a split adding 3, before restriction and stitching; the share in
-    [0, 1] of those in blocks or large nodes inside the frustum ``planes`` (eye-relative, as View's; None: all)."""
+    [0, 1] of those in blocks or large nodes inside the frustum ``planes`` (eye-relative, as View's; None: all).
+
+    A node splits when E * k_tau exceeds its block's (or, large, its own box's) distance; every tile of a pyramid
+    has the same blocks and nodes, so a frame's tiles are compared in a few (B, blocks, nodes) array operations."""
     b = len(nodes)
     if not b:
         return np.zeros(0, np.int64), np.zeros(0)
     eye = np.asarray(eye, dtype=np.float64)
-    nbox, nc = len(nodes[0].box_lo), len(nodes[0].coarse_error)     # the same for every tile of a pyramid
-    nb = nbox - nc
+    nb = nodes[0].fine.shape[0]
     lo, hi = np.concatenate([t.box_lo for t in nodes]), np.concatenate([t.box_hi for t in nodes])
-    d = box_distances(eye, lo, hi).reshape(b, nbox)
-    seen = (np.ones(len(lo), bool) if planes is None else box_classes(planes, lo - eye, hi - eye) >= 0).reshape(b, nbox)
-    # a node splits only if E * k_tau exceeds its block's distance, so at least its tile's nearest block's:
-    # only each tile's leading (largest) errors above that need their block's distance
-    lead = d[:, :nb].min(axis=1) / k_tau
-    sizes = np.array([int(np.searchsorted(t.fine_neg, -c, side="left")) for t, c in zip(nodes, lead.tolist())])
-    tile_of = np.repeat(np.arange(b), sizes)
-    box = np.concatenate([t.fine_box[:c] for t, c in zip(nodes, sizes)]) + tile_of * nbox
-    split = np.concatenate([t.fine_error[:c] for t, c in zip(nodes, sizes)]) * k_tau > d.reshape(-1)[box]
-    splits = np.bincount(tile_of, split, minlength=b)
-    shown = np.bincount(tile_of, split & seen.reshape(-1)[box], minlength=b)
-    if nc:
-        csplit = np.stack([t.coarse_error for t in nodes]) * k_tau > d[:, nb:]
-        splits = splits + csplit.sum(axis=1)
-        shown = shown + (csplit & seen[:, nb:]).sum(axis=1)
+    d = box_distances(eye, lo, hi).reshape(b, -1)
+    seen = (np.ones(d.shape, bool) if planes is None else
+            (box_classes(planes, lo - eye, hi - eye) >= 0).reshape(b, -1))
+    split = np.stack([t.fine for t in nodes]) * k_tau > d[:, :nb, None]        # (B, blocks, nodes)
+    per_box = split.sum(axis=2)
+    if d.shape[1] > nb:
+        per_box = np.concatenate([per_box, np.stack([t.coarse_error for t in nodes]) * k_tau > d[:, nb:]], axis=1)
+    splits, shown = per_box.sum(axis=1), (per_box * seen).sum(axis=1)
     root = np.array([t.root for t in nodes])
     triangles = 8 * (1 + 3 * (splits + root))
     return triangles.astype(np.int64), 8 * (1 + 3 * (shown + root)) / triangles
