@@ -4,8 +4,8 @@ import pytest
 
 from hybrid.camera.flight import preset
 from hybrid.camera.view import View
-from hybrid.cost.features import feature_columns, footprint_pixels, tile_features, tile_features_batch
-from hybrid.cost.footprint import footprints, near_cut
+from hybrid.cost.features import _hull_area_clipped, feature_columns, footprint_pixels, tile_features, tile_features_batch
+from hybrid.cost.footprint import clipped_signed_areas, footprints, near_cut
 from hybrid.cost.model import load_cost_model
 from hybrid.cost.planner import plan_frame
 from hybrid.terrain.datasets import cliff, fbm, puget, ridged
@@ -94,3 +94,23 @@ def test_feature_columns_of_no_tiles():
     pyramid = TilePyramid(fbm(65), 16)
     cols = feature_columns(pyramid, preset("orbit", pyramid.hf, 2).view(0), [], [])
     assert all(len(v) == 0 for v in cols.values())
+
+
+def test_clipped_areas_equal_the_clipped_hulls():
+    """The viewport clip by clamping (hybrid.cost.footprint) against a Sutherland-Hodgman clip of the same convex
+    polygons (the scalar reference's), either orientation, polygons inside, across the border, around and off."""
+    rng = np.random.default_rng(11)
+    w, h = 320.0, 200.0
+    polys, want = [], []
+    for i in range(300):
+        c, r = rng.uniform(-200, 520, 2), rng.uniform(1, 500, 2)
+        ang = np.sort(rng.uniform(0, 2 * np.pi, 6))
+        p = np.round(c + r * np.stack([np.cos(ang), np.sin(ang)], 1), 6)      # as projected points are
+        polys.append(p if i % 2 else p[::-1])                   # counter-clockwise and clockwise
+        want.append(_hull_area_clipped(p, w, h))
+    polys.append(np.array([[-1e3, -1e3], [1e3, -1e3], [1e3, 1e3], [1e3, 1e3], [-1e3, 1e3], [-1e3, 1e3]]))
+    want.append(w * h)                                           # around the viewport, padded by repeats
+    got = clipped_signed_areas(np.array(polys), w, h)
+    assert np.allclose(np.abs(got), want, rtol=1e-9, atol=1e-8)
+    assert np.all(got[:300:2] <= 1e-8) and np.all(got[1:300:2] >= -1e-8)       # each polygon's own orientation
+    assert np.sum(np.array(want) == 0) > 10 and np.sum((np.array(want) > 0) & (np.array(want) < w * h)) > 100

@@ -4,10 +4,13 @@ The batched counterpart of ``hybrid.cost.features.footprint_pixels``, computed a
 eye through a point of a convex body's projection leaves the body exactly once, through a face turned away
 from the eye: the projections of a box's back faces tile its projection. So the footprint clipped to the
 viewport is the sum of the back faces' projected quads clipped to the viewport, each a convex polygon, every
-face of every box in one pass: no convex hull, no silhouette, no sequential clip. Faces reaching behind the
-near plane are cut at it first (the cut box's back faces are the cut faces; its cap on the near plane faces
-the eye). Vertices are the reference's: the same corners and near-plane crossings of the box edges (from
-the lower corner index to the higher), projected the same way and rounded to 1e-6 px.
+back face of every box in one pass: no convex hull, no silhouette. Faces reaching behind the near plane are
+cut at it first (the cut box's back faces are the cut faces; its cap on the near plane faces the eye).
+Vertices are the reference's: the same corners and near-plane crossings of the box edges (from the lower
+corner index to the higher), projected the same way and rounded to 1e-6 px.
+
+A frame has a few dozen tiles, so the time is set by the number of array operations, not their size: each
+step works on every back face at once, and the viewport clip is a clamp (``clipped_signed_areas``).
 """
 from __future__ import annotations
 
@@ -22,8 +25,35 @@ _FACES = np.array([[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2
 _FACE_AXIS = np.array([0, 0, 1, 1, 2, 2])
 _FACE_HI = np.array([False, True, False, True, False, True])
 _FACE_SPAN = np.array([[(a + 1) % 3, (a + 2) % 3] for a in _FACE_AXIS])  # the two axes each face spans
-_EDGE_LO = np.minimum(_FACES, np.roll(_FACES, -1, axis=1))         # each face edge from its lower corner index
-_EDGE_HI = np.maximum(_FACES, np.roll(_FACES, -1, axis=1))
+
+
+def _silhouettes() -> tuple[np.ndarray, np.ndarray]:
+    """Per eye position code (per axis: bit 0 the eye above the box's low side, bit 1 below its high side; code
+    = x + 4 y + 16 z), the box's outline as 6 corner indices in order along it (a 4-corner outline repeats its
+    last), and whether the code has one (an eye outside a box of some extent on every axis): the boundary of its
+    back faces, the edges that belong to exactly one of them (Schmalstieg and Tobler's table of box outlines)."""
+    table, ok = np.zeros((64, 6), np.int64), np.zeros(64, bool)
+    for code in range(64):
+        states = [(code >> (2 * a)) & 3 for a in range(3)]
+        if any(st != 3 and st == 0 for st in states) or all(st == 3 for st in states):
+            continue                            # an axis on which the box has no extent, or the eye inside it
+        count: dict = {}
+        for f, (axis, hi_side) in enumerate(zip(_FACE_AXIS, _FACE_HI)):
+            if (states[axis] >> int(hi_side)) & 1:
+                for k in range(4):
+                    e = frozenset((int(_FACES[f, k]), int(_FACES[f, (k + 1) % 4])))
+                    count[e] = count.get(e, 0) + 1
+        edges = [tuple(e) for e, c in count.items() if c == 1]
+        cycle = [edges[0][0], edges[0][1]]
+        rest = edges[1:]
+        while rest:
+            nxt = next(e for e in rest if cycle[-1] in e)
+            rest.remove(nxt)
+            cycle.append(nxt[0] if nxt[1] == cycle[-1] else nxt[1])
+        cycle = cycle[:-1]                      # back at the start
+        table[code] = cycle + [cycle[-1]] * (6 - len(cycle))
+        ok[code] = True
+    return table, ok
 
 
 def box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -52,7 +82,10 @@ def _project(view: View, pts: np.ndarray) -> np.ndarray:
     tan = view.tan_half_fov
     x = (pts[..., 0] / -pts[..., 2]) / (tan * view.aspect)
     y = (pts[..., 1] / -pts[..., 2]) / tan
-    return np.round(np.stack([(x + 1) * 0.5 * view.width, (1 - y) * 0.5 * view.height], axis=-1), 6)
+    out = np.empty((*x.shape, 2))
+    out[..., 0] = (x + 1) * 0.5 * view.width
+    out[..., 1] = (1 - y) * 0.5 * view.height
+    return np.round(out, 6, out=out)
 
 
 class _Next(dict):
@@ -64,6 +97,9 @@ class _Next(dict):
 
 
 _NEXT = _Next()
+_PREV = np.array([3, 0, 1, 2])                                              # face vertex k's previous edge
+_FLIP = _FACES > np.roll(_FACES, -1, axis=1)                                # face edge k runs high to low corner
+_OUTLINE, _HAS_OUTLINE = _silhouettes()
 
 
 def signed_areas(poly: np.ndarray) -> np.ndarray:
@@ -73,106 +109,88 @@ def signed_areas(poly: np.ndarray) -> np.ndarray:
 
 
 def clipped_signed_areas(poly: np.ndarray, w: float, h: float) -> np.ndarray:
-    """Signed areas (B,) of convex padded polygons (B, m, 2) clipped to the rectangle [0, w] x [0, h] (pixels),
+    """Signed areas (N,) of convex padded polygons (N, m, 2) clipped to the rectangle [0, w] x [0, h] (pixels),
     with the sign of each polygon's own orientation.
 
-    Green's theorem over the boundary of the intersection: the polygon's edges clipped to the rectangle
-    (Liang-Barsky) and the rectangle's sides clipped to the polygon (Cyrus-Beck, the polygon being convex), both
-    run the polygon's way round. Repeated vertices (padding) are edges of no length and add nothing; a polygon
-    of no area (a point, or a segment: a box face seen from a flat box's side) has none clipped either.
+    Clamping (x, y) to the rectangle is the nearest-point projection onto it, affine on each of the nine regions
+    the lines x = 0, x = w, y = 0, y = h cut the plane into. Every edge is split where it crosses those lines
+    (its crossings in order along it), so each piece lies in one region and clamps to a segment: the clamped
+    boundary is a closed polygon. It winds once around every point of the intersection and never around a
+    point outside the rectangle (the straight path from a point outside to its projection never enters the
+    rectangle's interior), so its shoelace area is the clipped area. Repeated vertices (padding) are edges of
+    no length and add nothing.
     """
-    m = poly.shape[1]
-    sa = signed_areas(poly)
-    orient = np.where(sa < 0, -1.0, 1.0)
-    a, d = poly, poly[:, _NEXT[m]] - poly                                       # edges a -> a + d, (B, m, 2)
-    lim = np.array([w, h])
+    n, m = poly.shape[:2]
+    d = poly[:, _NEXT[m]] - poly                                               # edges a -> a + d, (N, m, 2)
     with np.errstate(divide="ignore", invalid="ignore"):
-        t_a, t_b = -a / d, (lim - a) / d
-    moving, within = d != 0, (a >= 0) & (a <= lim)
-    t_in = np.where(moving, np.minimum(t_a, t_b), np.where(within, -np.inf, np.inf)).max(axis=-1)
-    t_out = np.where(moving, np.maximum(t_a, t_b), np.where(within, np.inf, -np.inf)).min(axis=-1)
-    t0, t1 = np.clip(t_in, 0.0, 1.0), np.clip(t_out, 0.0, 1.0)
-    p0, p1 = a + t0[..., None] * d, a + t1[..., None] * d
-    own = np.where(t1 > t0, p0[..., 0] * p1[..., 1] - p1[..., 0] * p0[..., 1], 0.0).sum(axis=1)
-    # the rectangle's sides, counter-clockwise in (x, y) (reversed for clockwise polygons), clipped to the polygon
-    r0 = np.array([[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]])
-    r1 = r0[[1, 2, 3, 0]]
-    ccw = (orient > 0)[:, None, None]
-    q0 = np.where(ccw, r0, r1)[:, :, None, :]                                  # (B, 4, 1, 2)
-    dq = np.where(ccw, r1, r0)[:, :, None, :] - q0
-    ea, ed = a[:, None], d[:, None]                                            # (B, 1, m, 2)
-    s = orient[:, None, None]
-    fa = s * (ed[..., 0] * (q0[..., 1] - ea[..., 1]) - ed[..., 1] * (q0[..., 0] - ea[..., 0]))   # (B, 4, m)
-    fb = s * (ed[..., 0] * dq[..., 1] - ed[..., 1] * dq[..., 0])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        root = -fa / fb
-    u0 = np.maximum(np.where(fb > 0, root, -np.inf).max(axis=-1), 0.0)
-    u1 = np.minimum(np.where(fb < 0, root, np.inf).min(axis=-1), 1.0)
-    # a side parallel to an edge is kept only strictly inside it, so a side along an edge counts once
-    real = (d[..., 0] != 0) | (d[..., 1] != 0)                                # (B, m): edges of some length
-    blocked = np.any((fb == 0) & (fa <= 0) & real[:, None], axis=-1)
-    g0, g1 = q0[:, :, 0] + u0[..., None] * dq[:, :, 0], q0[:, :, 0] + u1[..., None] * dq[:, :, 0]
-    side = np.where((u1 > u0) & ~blocked, g0[..., 0] * g1[..., 1] - g1[..., 0] * g0[..., 1], 0.0).sum(axis=1)
-    return np.where(sa == 0, 0.0, 0.5 * (own + side))           # a point or a segment bounds nothing
+        t = np.concatenate([-poly / d, (np.array([w, h]) - poly) / d], axis=-1)   # (N, m, 4) line crossings
+    t = np.where((t > 0) & (t < 1), t, 0.0)                                    # none (or parallel): the start
+    t = [t[..., i] for i in range(4)]
+    for i, j in ((0, 1), (2, 3), (0, 2), (1, 3), (1, 2)):                      # sorted along the edge
+        t[i], t[j] = np.minimum(t[i], t[j]), np.maximum(t[i], t[j])
+    pts = np.empty((n, m, 5, 2))
+    pts[:, :, 0] = poly
+    pts[:, :, 1:] = poly[:, :, None, :] + np.stack(t, axis=-1)[..., None] * d[:, :, None, :]
+    pts = pts.reshape(n, 5 * m, 2)
+    x = np.minimum(np.maximum(pts[..., 0], 0.0), w)
+    y = np.minimum(np.maximum(pts[..., 1], 0.0), h)
+    nxt = _NEXT[5 * m]
+    return 0.5 * np.sum(x * y[:, nxt] - x[:, nxt] * y, axis=1)
 
 
-def _cut_faces(rel: np.ndarray, near: float) -> np.ndarray:
-    """Faces (B, 6, 4, 3) of boxes' eye-space corners cut at depth >= near: (B, 6, 8, 3) padded polygons.
+def _cut_faces(face: np.ndarray, fid: np.ndarray, near: float) -> np.ndarray:
+    """Faces (N, 4, 3) in eye space, face ``fid`` (N,) of their box (corners in ``_FACES`` order), cut at depth
+    >= near: (N, 8, 3) padded polygons.
 
     One Sutherland-Hodgman step: each vertex yields the crossing of the edge into it (if the edge crosses),
     then itself (if in front); empty slots repeat the previous point, so a face wholly behind collapses to a
     point (no area). Crossings are computed along box edges from their lower corner index, as the reference.
     """
-    face = rel[:, _FACES]                                                      # (B, 6, 4, 3)
-    depth = -face[..., 2]
-    keep = depth >= near
-    ra, rb = rel[:, _EDGE_LO], rel[:, _EDGE_HI]                                # edge k: corner k -> k + 1
+    n = len(face)
+    nxt = face[:, _NEXT[4]]
+    flip = _FLIP[fid][..., None]
+    ra, rb = np.where(flip, nxt, face), np.where(flip, face, nxt)              # edge k from its lower corner
     da, db = -ra[..., 2], -rb[..., 2]
     cross = (da - near) * (db - near) < 0
     with np.errstate(divide="ignore", invalid="ignore"):
         t = np.where(cross, (near - da) / np.where(cross, db - da, 1.0), 0.0)
     hit = ra + t[..., None] * (rb - ra)
-    # the crossing of edge k (vertex k -> k + 1) comes before vertex k + 1
-    into = np.roll(hit, 1, axis=2)
-    into_ok = np.roll(cross, 1, axis=2)
-    pts = np.stack([into, face], axis=3).reshape(*face.shape[:2], 8, 3)
-    ok = np.stack([into_ok, keep], axis=3).reshape(*face.shape[:2], 8)
-    slot = np.where(ok, np.arange(8), -1)
-    last = np.maximum.accumulate(slot, axis=2)
-    last = np.where(last < 0, last[..., -1:], last)                           # leading gaps take the final point
-    out = np.take_along_axis(pts, np.maximum(last, 0)[..., None], axis=2)
-    empty = ~ok.any(axis=2)
-    return np.where(empty[..., None, None], np.array([0.0, 0.0, -1.0]), out)   # a harmless point, no area
+    pts = np.empty((n, 4, 2, 3))                                               # the crossing into vertex k, vertex k
+    pts[:, :, 0], pts[:, :, 1] = hit[:, _PREV], face
+    ok = np.stack([cross[:, _PREV], -face[..., 2] >= near], axis=2).reshape(n, 8)
+    last = np.maximum.accumulate(np.where(ok, np.arange(8), -1), axis=1)
+    last = np.where(last < 0, last[:, -1:], last)                              # leading gaps take the final point
+    out = pts.reshape(-1, 3)[np.maximum(last, 0) + 8 * np.arange(n)[:, None]]
+    return np.where(ok.any(axis=1)[:, None, None], out, np.array([0.0, 0.0, -1.0]))   # else a point, no area
 
 
 def footprints(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Per box (B, 3 corners each, world metres): viewport area in pixels of its near-cut projection."""
+    """Per box (B, 3 corners each, world metres): viewport area in pixels of its near-cut projection.
+
+    A box wholly in front of the near plane with some extent on every axis projects to its outline, one
+    polygon of 4 or 6 corners looked up by where the eye is (``_silhouettes``); any other box (flat, or reaching
+    behind the near plane) to its back faces, cut at the near plane when any reaches behind it. All polygons
+    are projected and clipped to the viewport in one pass; a box's areas are then summed."""
     lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
     b = lo.shape[0]
     rel = _eye_space(view, box_corners(lo, hi))
     near = _near(view)
     eye = np.asarray(view.eye, dtype=np.float64)
+    below, above = eye < hi, eye > lo                                          # (B, 3): each side's face is back
+    code = (above + 2 * below) @ np.array([1, 4, 16])
+    cut = np.any(rel[..., 2] > -near, axis=1)
+    outline = _HAS_OUTLINE[code] & ~cut
     e, l, u = eye[_FACE_AXIS][None], lo[:, _FACE_AXIS], hi[:, _FACE_AXIS]
     back = np.where(_FACE_HI[None], e < u, e > l)                              # (B, 6): turned away from the eye
-    back &= np.all((hi - lo)[:, _FACE_SPAN] > 0, axis=2)                       # a face of no area adds none
-    cut = np.any(-rel[..., 2] < near, axis=1)
-    m = 8 if cut.any() else 4
-    poly = np.empty((b, 6, m, 2))
-    front = ~cut
-    corners = _project(view, rel[front])                                       # (F, 8, 2)
-    poly[front] = corners[:, _FACES[:, [0, 1, 2, 3, 3, 3, 3, 3][:m]]]
+    spans = (hi - lo) > 0
+    box, fid = np.nonzero(back & spans[:, _FACE_SPAN[:, 0]] & spans[:, _FACE_SPAN[:, 1]] & ~outline[:, None])
+    face = rel[box[:, None], _FACES[fid]]                                      # (N, 4, 3)
     if cut.any():
-        poly[cut] = _project(view, _cut_faces(rel[cut], near))
-    flat = poly.reshape(b * 6, m, 2)
-    w, h = float(view.width), float(view.height)
-    # boxes whose projection reaches past the viewport take the clip; the others' faces are wholly inside
-    crosses = cut.copy()
-    crosses[front] = np.any((corners < 0) | (corners > np.array([w, h])), axis=(1, 2))
-    on = back.reshape(-1)
-    clip = on & np.repeat(crosses, 6)
-    whole = on & ~clip
-    face_area = np.zeros(b * 6)
-    face_area[whole] = signed_areas(flat[whole])
-    if clip.any():
-        face_area[clip] = clipped_signed_areas(flat[clip], w, h)
-    return np.abs(face_area.reshape(b, 6).sum(axis=1))
+        face = _cut_faces(face, fid, near)
+    sbox = np.flatnonzero(outline)
+    sil = rel[sbox[:, None], _OUTLINE[code[sbox]]]                             # (S, 6, 3)
+    m = max(6, face.shape[1])
+    pad = lambda p: np.concatenate([p, np.repeat(p[:, -1:], m - p.shape[1], axis=1)], axis=1)   # noqa: E731
+    poly = _project(view, np.concatenate([pad(sil), pad(face)]))
+    area = clipped_signed_areas(poly, float(view.width), float(view.height))
+    return np.abs(np.bincount(np.concatenate([sbox, box]), area, minlength=b))
