@@ -18,6 +18,7 @@ least its children's).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -28,9 +29,10 @@ from hybrid.tiles.quantize import Q_MAX, error_bound, on_step_cells
 EDGE_W, EDGE_E, EDGE_S, EDGE_N = 1, 2, 4, 8
 
 
-@dataclass(frozen=True, order=True)
-class TileKey:
-    """A tile's address: pyramid level (0 = finest) and column tx / row ty among that level's tiles."""
+class TileKey(NamedTuple):
+    """A tile's address: pyramid level (0 = finest) and column tx / row ty among that level's tiles.
+
+    A named tuple: hashed and compared in C, as the keys of every per-tile cache are, many times a frame."""
 
     level: int
     tx: int
