@@ -13,14 +13,14 @@ Policies:
 from __future__ import annotations
 
 import weakref
-from dataclasses import dataclass, field
+from dataclasses import fields
 
 import numpy as np
 
 from hybrid.camera.view import View
 from hybrid.contract import CANDIDATES, POLICIES, PURE_POLICIES, TriangleEstimator
 from hybrid.cost.choice import best_assignment
-from hybrid.cost.features import TileFeatures, feature_columns, features_from_columns, tile_features
+from hybrid.cost.features import TileFeatures, feature_columns, tile_features
 from hybrid.cost.model import CostModel
 from hybrid.errors import TerrabenchError
 from hybrid.strategies import triangle_estimator
@@ -28,20 +28,58 @@ from hybrid.tiles.pyramid import TileKey, TilePyramid
 from hybrid.tiles.tiletree import DEFAULT_TAU, SelectedTile, select_tiles
 
 
-@dataclass
+class FrameColumns:
+    """A frame's per-tile feature columns and predicted ms ((B,) arrays), shared by its TilePlans, which read their
+    row as objects only when asked (tables, calibration): drawing needs the choices alone."""
+
+    __slots__ = ("columns", "predicted")
+
+    def __init__(self, columns: dict, predicted: dict):
+        self.columns, self.predicted = columns, predicted
+
+    def features(self, i: int) -> TileFeatures:
+        """Row i's features."""
+        return TileFeatures(**{n: self.columns[n][i].item() for n in _FEATURE_NAMES})
+
+    def prediction(self, i: int) -> dict:
+        """Row i's predicted ms per candidate."""
+        return {n: float(v[i]) for n, v in self.predicted.items()}
+
+
+_FEATURE_NAMES = tuple(f.name for f in fields(TileFeatures))
+
+
 class TilePlan:
     """One tile of a frame: where it is, what it costs (predicted, and measured where measured), how it is drawn."""
 
-    selected: SelectedTile
-    features: TileFeatures | None
-    predicted: dict
-    choice: str
-    measured: dict = field(default_factory=dict)
+    __slots__ = ("selected", "choice", "measured", "_features", "_predicted", "_frame", "_row")
+
+    def __init__(self, selected: SelectedTile, features: TileFeatures | None, predicted: dict | None, choice: str,
+                 measured: dict | None = None, frame: FrameColumns | None = None, row: int = -1):
+        self.selected, self.choice, self.measured = selected, choice, {} if measured is None else measured
+        self._features, self._predicted, self._frame, self._row = features, predicted, frame, row
+
+    @property
+    def features(self) -> TileFeatures | None:
+        """The cost model's features of the tile in this view (None for a pure policy)."""
+        if self._features is None and self._frame is not None:
+            self._features = self._frame.features(self._row)
+        return self._features
+
+    @property
+    def predicted(self) -> dict:
+        """Predicted ms per candidate strategy ({} for a pure policy)."""
+        if self._predicted is None:
+            self._predicted = self._frame.prediction(self._row) if self._frame is not None else {}
+        return self._predicted
 
     @property
     def key(self) -> TileKey:
         """The tile's address."""
         return self.selected.key
+
+    def __repr__(self) -> str:
+        return f"TilePlan({self.selected.key}, choice={self.choice!r})"
 
     def row(self) -> dict:
         """A flat dict for the tiles table."""
@@ -127,10 +165,10 @@ def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
     if batch:
         triangles, visible = triangles_fn.many(selected, view, tau)
         columns = feature_columns(pyramid, view, selected, triangles, visible)
-        features = features_from_columns(columns)
         pred = model.predict_columns(columns)
-        predicted = [dict(zip(pred, p)) for p in zip(*(v.tolist() for v in pred.values()))]
         chosen = hedged_choices(pred, model) if policy == "hybrid" else choices(policy, columns, pred, threshold)
+        frame = FrameColumns(columns, pred)
+        return [TilePlan(s, None, None, c, frame=frame, row=i) for i, (s, c) in enumerate(zip(selected, chosen))]
     else:
         counts = [triangles_fn.many([s], view, tau) for s in selected]
         features = [tile_features(pyramid, view, s, t[0], v[0]) for s, (t, v) in zip(selected, counts)]
