@@ -38,10 +38,9 @@ def best_assignment(costs: dict[str, np.ndarray], overhead: dict[str, float],
     else:
         priced = np.where(masks[:, :, None], table[None], np.inf)                   # (K, S, B)
         pick = np.argmin(priced, axis=1)                                             # (K, B), first on ties
-        used = np.zeros_like(masks)
-        np.put_along_axis(used, pick, True, axis=1)
+        used = (pick[:, None, :] == np.arange(len(names))[None, :, None]).any(axis=2)   # (K, S)
     fits = used.sum(axis=1) == masks.sum(axis=1)        # a subset some strategy of which is unused: priced smaller
-    tiles = np.take_along_axis(table, pick, axis=0).sum(axis=1) if n_tiles else np.zeros(len(masks))
+    tiles = table[pick, np.arange(n_tiles)].sum(axis=1) if n_tiles else np.zeros(len(masks))
     total = tiles + used.astype(np.float64) @ np.array([overhead.get(n, 0.0) for n in names])
     if pure_ms:
         single = masks.sum(axis=1) == 1

@@ -36,17 +36,27 @@ TERMS = {"raster": RASTER_TERMS, "raster_gs": RASTER_TERMS,
 """The model's terms per candidate strategy (hybrid.contract.CANDIDATES)."""
 
 
-def term_values(f, strategy: str) -> np.ndarray:
-    """The model's input terms for one tile (a ``TileFeatures``: shape (4,)) or many (a dict of (B,) feature
-    columns as from ``hybrid.cost.features.feature_columns``: shape (B, 4))."""
+ALL_TERMS = ("const", "triangles", "visible_triangles", "pixels", "surface_pixels", "pixel_steps")
+_TERM_INDEX = {s: [ALL_TERMS.index(t) for t in terms] for s, terms in TERMS.items()}
+
+
+def all_term_values(f) -> np.ndarray:
+    """Every term of ``ALL_TERMS`` for one tile (a ``TileFeatures``: shape (6,)) or many (a dict of (B,) feature
+    columns as from ``hybrid.cost.features.feature_columns``, all of one shape: shape (B, 6))."""
     g = f if isinstance(f, dict) else vars(f)
-    if strategy in ("raster", "raster_gs"):
-        terms = (1.0, g["triangles"], g["triangles"] * g["visible"], g["pixels"])
-    elif strategy == "raycast":
-        terms = (1.0, g["pixels"], g["surface_pixels"], g["pixels"] * np.log2(1.0 + g["slab_cells"]))
-    else:
+    tri, px = np.asarray(g["triangles"], dtype=np.float64), np.asarray(g["pixels"], dtype=np.float64)
+    terms = (np.ones_like(px), tri, tri * np.asarray(g["visible"], dtype=np.float64), px,
+             np.asarray(g["surface_pixels"], dtype=np.float64),
+             px * np.log2(1.0 + np.asarray(g["slab_cells"], dtype=np.float64)))
+    return np.stack(terms, axis=-1)
+
+
+def term_values(f, strategy: str) -> np.ndarray:
+    """The model's input terms of one strategy for one tile (shape (4,)) or many (shape (B, 4)), as
+    ``all_term_values``."""
+    if strategy not in TERMS:
         raise TerrabenchError(f"unknown strategy {strategy!r} for the cost model; choose one of {', '.join(TERMS)}")
-    return np.stack(np.broadcast_arrays(*(np.asarray(t, dtype=np.float64) for t in terms)), axis=-1)
+    return all_term_values(f)[..., _TERM_INDEX[strategy]]
 
 
 @dataclass
@@ -81,8 +91,12 @@ class CostModel:
 
     def predict_columns(self, columns) -> dict[str, np.ndarray]:
         """Predicted milliseconds of each strategy for many tiles at once, from feature columns ((B,) arrays)."""
-        return {s: term_values(columns, s) @ np.array([getattr(self, s)[t] for t in TERMS[s]])
-                for s in self.candidates}
+        names = self.candidates
+        coef = np.zeros((len(ALL_TERMS), len(names)))
+        for j, s in enumerate(names):
+            coef[_TERM_INDEX[s], j] = [getattr(self, s)[t] for t in TERMS[s]]
+        out = all_term_values(columns) @ coef
+        return {s: out[..., j] for j, s in enumerate(names)}
 
     def explain(self) -> str:
         """The formulas with their coefficients, and the held-out error."""
