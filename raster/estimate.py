@@ -116,10 +116,11 @@ def estimate_many(nodes: list[TileNodes], eye, k_tau: float, planes=None) -> tup
     d = box_distances(eye, lo, hi).reshape(b, -1)
     seen = (np.ones(d.shape, bool) if planes is None else
             (box_classes(planes, lo - eye, hi - eye) >= 0).reshape(b, -1))
-    split = np.stack([t.fine for t in nodes]) * k_tau > d[:, :nb, None]        # (B, blocks, nodes)
+    split = np.concatenate([t.fine for t in nodes]).reshape(b, nb, -1) * k_tau > d[:, :nb, None]   # (B, blocks, nodes)
     per_box = split.sum(axis=2)
     if d.shape[1] > nb:
-        per_box = np.concatenate([per_box, np.stack([t.coarse_error for t in nodes]) * k_tau > d[:, nb:]], axis=1)
+        coarse = np.concatenate([t.coarse_error for t in nodes]).reshape(b, -1)
+        per_box = np.concatenate([per_box, coarse * k_tau > d[:, nb:]], axis=1)
     splits, shown = per_box.sum(axis=1), (per_box * seen).sum(axis=1)
     root = np.array([t.root for t in nodes])
     triangles = 8 * (1 + 3 * (splits + root))

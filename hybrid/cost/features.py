@@ -168,7 +168,7 @@ def feature_columns(pyramid: TilePyramid, view: View, selected: list[SelectedTil
     b = len(keys)
     area = footprints(view, np.concatenate([lo, mid_lo]), np.concatenate([hi, mid_hi]))
     k = (1 << keys[:, 0]).astype(np.float64)
-    spacing = np.stack([pyramid.hf.spacing_x * k, pyramid.hf.spacing_y * k], axis=1)
+    spacing = k[:, None] * np.array([pyramid.hf.spacing_x, pyramid.hf.spacing_y])
     return {"pixels": area[:b], "triangles": np.asarray(triangles, dtype=np.float64).reshape(b),
             "slab_cells": slab_cells_batch(view, lo, hi, spacing, pyramid.n), "level": keys[:, 0],
             "distance": np.array([s.distance for s in selected], dtype=np.float64).reshape(b),

@@ -85,7 +85,7 @@ def _project(view: View, pts: np.ndarray) -> np.ndarray:
     out = np.empty((*x.shape, 2))
     out[..., 0] = (x + 1) * 0.5 * view.width
     out[..., 1] = (1 - y) * 0.5 * view.height
-    return np.round(out, 6, out=out)
+    return out.round(6, out=out)
 
 
 class _Next(dict):
@@ -100,12 +100,13 @@ _NEXT = _Next()
 _PREV = np.array([3, 0, 1, 2])                                              # face vertex k's previous edge
 _FLIP = _FACES > np.roll(_FACES, -1, axis=1)                                # face edge k runs high to low corner
 _OUTLINE, _HAS_OUTLINE = _silhouettes()
+_PAD = {k: np.minimum(np.arange(8), k - 1) for k in (4, 6, 8)}            # k vertices padded to 8 by the last
 
 
 def signed_areas(poly: np.ndarray) -> np.ndarray:
     """Shoelace signed areas (...) of padded polygons (..., m, 2): positive counter-clockwise in (x, y)."""
     nxt = poly[..., _NEXT[poly.shape[-2]], :]
-    return 0.5 * np.sum(poly[..., 0] * nxt[..., 1] - nxt[..., 0] * poly[..., 1], axis=-1)
+    return 0.5 * (poly[..., 0] * nxt[..., 1] - nxt[..., 0] * poly[..., 1]).sum(axis=-1)
 
 
 def clipped_signed_areas(poly: np.ndarray, w: float, h: float) -> np.ndarray:
@@ -125,17 +126,20 @@ def clipped_signed_areas(poly: np.ndarray, w: float, h: float) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         t = np.concatenate([-poly / d, (np.array([w, h]) - poly) / d], axis=-1)   # (N, m, 4) line crossings
     t = np.where((t > 0) & (t < 1), t, 0.0)                                    # none (or parallel): the start
+    ts = np.empty((n, m, 4))
     t = [t[..., i] for i in range(4)]
     for i, j in ((0, 1), (2, 3), (0, 2), (1, 3), (1, 2)):                      # sorted along the edge
         t[i], t[j] = np.minimum(t[i], t[j]), np.maximum(t[i], t[j])
+    for i in range(4):
+        ts[..., i] = t[i]
     pts = np.empty((n, m, 5, 2))
     pts[:, :, 0] = poly
-    pts[:, :, 1:] = poly[:, :, None, :] + np.stack(t, axis=-1)[..., None] * d[:, :, None, :]
+    pts[:, :, 1:] = poly[:, :, None, :] + ts[..., None] * d[:, :, None, :]
     pts = pts.reshape(n, 5 * m, 2)
     x = np.minimum(np.maximum(pts[..., 0], 0.0), w)
     y = np.minimum(np.maximum(pts[..., 1], 0.0), h)
     nxt = _NEXT[5 * m]
-    return 0.5 * np.sum(x * y[:, nxt] - x[:, nxt] * y, axis=1)
+    return 0.5 * (x * y[:, nxt] - x[:, nxt] * y).sum(axis=1)
 
 
 def _cut_faces(face: np.ndarray, fid: np.ndarray, near: float) -> np.ndarray:
@@ -157,7 +161,9 @@ def _cut_faces(face: np.ndarray, fid: np.ndarray, near: float) -> np.ndarray:
     hit = ra + t[..., None] * (rb - ra)
     pts = np.empty((n, 4, 2, 3))                                               # the crossing into vertex k, vertex k
     pts[:, :, 0], pts[:, :, 1] = hit[:, _PREV], face
-    ok = np.stack([cross[:, _PREV], -face[..., 2] >= near], axis=2).reshape(n, 8)
+    ok = np.empty((n, 4, 2), bool)
+    ok[..., 0], ok[..., 1] = cross[:, _PREV], -face[..., 2] >= near
+    ok = ok.reshape(n, 8)
     last = np.maximum.accumulate(np.where(ok, np.arange(8), -1), axis=1)
     last = np.where(last < 0, last[:, -1:], last)                              # leading gaps take the final point
     out = pts.reshape(-1, 3)[np.maximum(last, 0) + 8 * np.arange(n)[:, None]]
@@ -178,7 +184,7 @@ def footprints(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     eye = np.asarray(view.eye, dtype=np.float64)
     below, above = eye < hi, eye > lo                                          # (B, 3): each side's face is back
     code = (above + 2 * below) @ np.array([1, 4, 16])
-    cut = np.any(rel[..., 2] > -near, axis=1)
+    cut = (rel[..., 2] > -near).any(axis=1)
     outline = _HAS_OUTLINE[code] & ~cut
     e, l, u = eye[_FACE_AXIS][None], lo[:, _FACE_AXIS], hi[:, _FACE_AXIS]
     back = np.where(_FACE_HI[None], e < u, e > l)                              # (B, 6): turned away from the eye
@@ -190,7 +196,7 @@ def footprints(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     sbox = np.flatnonzero(outline)
     sil = rel[sbox[:, None], _OUTLINE[code[sbox]]]                             # (S, 6, 3)
     m = max(6, face.shape[1])
-    pad = lambda p: np.concatenate([p, np.repeat(p[:, -1:], m - p.shape[1], axis=1)], axis=1)   # noqa: E731
+    pad = lambda p: p[:, _PAD[p.shape[1]][:m]]                                 # noqa: E731  repeat the last
     poly = _project(view, np.concatenate([pad(sil), pad(face)]))
     area = clipped_signed_areas(poly, float(view.width), float(view.height))
     return np.abs(np.bincount(np.concatenate([sbox, box]), area, minlength=b))

@@ -45,10 +45,12 @@ def all_term_values(f) -> np.ndarray:
     columns as from ``hybrid.cost.features.feature_columns``, all of one shape: shape (B, 6))."""
     g = f if isinstance(f, dict) else vars(f)
     tri, px = np.asarray(g["triangles"], dtype=np.float64), np.asarray(g["pixels"], dtype=np.float64)
-    terms = (np.ones_like(px), tri, tri * np.asarray(g["visible"], dtype=np.float64), px,
-             np.asarray(g["surface_pixels"], dtype=np.float64),
-             px * np.log2(1.0 + np.asarray(g["slab_cells"], dtype=np.float64)))
-    return np.stack(terms, axis=-1)
+    out = np.empty((*px.shape, len(ALL_TERMS)))
+    out[..., 0] = 1.0
+    out[..., 1], out[..., 2], out[..., 3] = tri, tri * np.asarray(g["visible"], dtype=np.float64), px
+    out[..., 4] = np.asarray(g["surface_pixels"], dtype=np.float64)
+    out[..., 5] = px * np.log2(1.0 + np.asarray(g["slab_cells"], dtype=np.float64))
+    return out
 
 
 def term_values(f, strategy: str) -> np.ndarray:

@@ -122,7 +122,7 @@ def hedged_choices(predicted: dict, model: CostModel) -> list[str]:
     strategy's per-frame overhead and, on a CPU rasterizer, risks the rare tile that is many times slower than
     predicted."""
     names = list(predicted)
-    pure = {n: float(np.sum(predicted[n])) + model.overhead.get(n, 0.0) for n in names}
+    pure = {n: float(np.asarray(predicted[n]).sum()) + model.overhead.get(n, 0.0) for n in names}
     base = min(pure, key=pure.get)
     err = {n: float(model.fit_error.get(n, 0.0)) for n in names}
     order = [base] + [n for n in names if n != base]            # ties stay with the base

@@ -290,7 +290,9 @@ class TilePyramid:
             at = levels == level
             z0[at] = oz + self._zmin[int(level)][ty[at], tx[at]].astype(np.float64)
             z1[at] = oz + self._zmax[int(level)][ty[at], tx[at]].astype(np.float64)
-        return np.stack([x0, y0, z0], axis=1), np.stack([x1, y1, z1], axis=1)
+        lo, hi = np.empty((len(levels), 3)), np.empty((len(levels), 3))
+        lo[:, 0], lo[:, 1], lo[:, 2], hi[:, 0], hi[:, 1], hi[:, 2] = x0, y0, z0, x1, y1, z1
+        return lo, hi
 
     def tile(self, key: TileKey) -> Tile:
         """The tile's level-l samples and placement."""
