@@ -100,31 +100,67 @@ def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing) -> TileNodes:
                      np.concatenate([block_hi, cat(coarse_hi, np.float64, 3)]), int(top >= 1))
 
 
-def estimate_many(nodes: list[TileNodes], eye, k_tau: float, planes=None) -> tuple[np.ndarray, np.ndarray]:
-    """(triangles (B,), visible share (B,)) of B tiles' quadtrees for an eye (world metres) and K / tau (pixels per
-    radian over tau): 8 triangles per tilelet, a split adding 3, before restriction and stitching; the share in
-    [0, 1] of those in blocks or large nodes inside the frustum ``planes`` (eye-relative, as View's; None: all).
+def estimate_rows(fine: np.ndarray, coarse: np.ndarray, lo: np.ndarray, hi: np.ndarray, root: np.ndarray, eye,
+                  k_tau: float, planes=None) -> tuple[np.ndarray, np.ndarray]:
+    """(triangles (B,), visible share (B,)) of B tiles' quadtrees given as stacked ``TileNodes`` fields (fine
+    (B, blocks, nodes), coarse (B, C), lo / hi (B, blocks + C, 3), root (B,)) for an eye (world metres) and
+    K / tau (pixels per radian over tau): 8 triangles per tilelet, a split adding 3, before restriction and
+    stitching; the share in [0, 1] of those in blocks or large nodes inside the frustum ``planes``
+    (eye-relative, as View's; None: all).
 
     A node splits when E * k_tau exceeds its block's (or, large, its own box's) distance; every tile of a pyramid
     has the same blocks and nodes, so a frame's tiles are compared in a few (B, blocks, nodes) array operations."""
-    b = len(nodes)
+    b, nb = fine.shape[:2]
     if not b:
         return np.zeros(0, np.int64), np.zeros(0)
     eye = np.asarray(eye, dtype=np.float64)
-    nb = nodes[0].fine.shape[0]
-    lo, hi = np.concatenate([t.box_lo for t in nodes]), np.concatenate([t.box_hi for t in nodes])
+    lo, hi = lo.reshape(-1, 3), hi.reshape(-1, 3)
     d = box_distances(eye, lo, hi).reshape(b, -1)
     seen = (np.ones(d.shape, bool) if planes is None else
             (box_classes(planes, lo - eye, hi - eye) >= 0).reshape(b, -1))
-    split = np.concatenate([t.fine for t in nodes]).reshape(b, nb, -1) * k_tau > d[:, :nb, None]   # (B, blocks, nodes)
-    per_box = split.sum(axis=2)
-    if d.shape[1] > nb:
-        coarse = np.concatenate([t.coarse_error for t in nodes]).reshape(b, -1)
-        per_box = np.concatenate([per_box, coarse * k_tau > d[:, nb:]], axis=1)
+    per_box = np.empty(d.shape, np.int64)
+    per_box[:, :nb] = (fine * k_tau > d[:, :nb, None]).sum(axis=2)
+    per_box[:, nb:] = coarse * k_tau > d[:, nb:]
     splits, shown = per_box.sum(axis=1), (per_box * seen).sum(axis=1)
-    root = np.array([t.root for t in nodes])
     triangles = 8 * (1 + 3 * (splits + root))
     return triangles.astype(np.int64), 8 * (1 + 3 * (shown + root)) / triangles
+
+
+class _Rows:
+    """Many tiles' TileNodes as stacked arrays, one row per tile, so a frame's tiles are gathered in one
+    indexing per field; beyond ``limit`` tiles the least recently used row is reused."""
+
+    FIELDS = ("fine", "coarse_error", "box_lo", "box_hi", "root")
+
+    def __init__(self, limit: int):
+        self.limit, self.row = limit, OrderedDict()            # key -> row
+        self.arrays: dict = {}
+
+    def get(self, key) -> int | None:
+        """The key's row (now the most recently used), or None."""
+        r = self.row.get(key)
+        if r is not None:
+            self.row.move_to_end(key)
+        return r
+
+    def put(self, key, nodes: TileNodes) -> int:
+        """Store a tile's nodes; returns its row."""
+        if len(self.row) >= self.limit:
+            _, r = self.row.popitem(last=False)
+        else:
+            r = len(self.row)
+            cap = len(self.arrays["root"]) if self.arrays else 0
+            if r >= cap:                                        # grow by doubling
+                new = min(max(2 * cap, 16), self.limit)
+                vals = {f: np.asarray(getattr(nodes, f)) for f in self.FIELDS}
+                grown = {f: np.zeros((new, *v.shape), v.dtype if f != "root" else np.int64) for f, v in vals.items()}
+                for f in self.FIELDS if self.arrays else ():
+                    grown[f][:cap] = self.arrays[f]
+                self.arrays = grown
+        for f in self.FIELDS:
+            self.arrays[f][r] = getattr(nodes, f)
+        self.row[key] = r
+        return r
 
 
 class TileletTriangleEstimator:
@@ -137,7 +173,7 @@ class TileletTriangleEstimator:
     def __init__(self, pyramid: TilePyramid, beta: float = GPU_BETA):
         self.pyramid = pyramid
         self.beta = float(beta)
-        self._nodes: OrderedDict = OrderedDict()
+        self._rows = _Rows(MAX_TILES)
         self.build_ms = 0.0
         hf = pyramid.hf
         # a tile store whose nodes (as the GPU reads them) come in per-tile blocks: each tile's is one read, no
@@ -149,28 +185,34 @@ class TileletTriangleEstimator:
             nodes = nodes_for(hf, pyramid.n, beta)
             self._blocks = nodes if nodes.blocks is not None else None
 
-    def _tile(self, key: TileKey) -> TileNodes:
-        if key in self._nodes:
-            self._nodes.move_to_end(key)
-            return self._nodes[key]
+    def _row(self, key: TileKey) -> int:
+        r = self._rows.get(key)
+        if r is not None:
+            return r
         t0 = time.perf_counter()
         ready = getattr(self._blocks.blocks, "ready", None) if self._blocks is not None else None
         if self._blocks is not None and (ready is None or ready(key.level, key.tx, key.ty)):
             data, offsets = tile_node_block(self._blocks, key.level, key.tx, key.ty, self.pyramid.n)
-            self._nodes[key] = block_tile_nodes(data, offsets, self.pyramid.n, *self.pyramid.placement(key))
+            nodes = block_tile_nodes(data, offsets, self.pyramid.n, *self.pyramid.placement(key))
         else:
-            self._nodes[key] = tile_nodes(self.pyramid.tile(key), self.beta)
-        if len(self._nodes) > MAX_TILES:
-            self._nodes.popitem(last=False)
+            nodes = tile_nodes(self.pyramid.tile(key), self.beta)
+        r = self._rows.put(key, nodes)
         self.build_ms += (time.perf_counter() - t0) * 1e3
-        return self._nodes[key]
+        return r
+
+    def _estimate(self, keys, view: View, tau: float) -> tuple[np.ndarray, np.ndarray]:
+        self._rows.limit = max(self._rows.limit, len(keys))    # a frame's own rows are never reused for it
+        rows = np.array([self._row(k) for k in keys], dtype=np.int64)
+        a = self._rows.arrays
+        if not len(rows):
+            return np.zeros(0, np.int64), np.zeros(0)
+        return estimate_rows(a["fine"][rows], a["coarse_error"][rows], a["box_lo"][rows], a["box_hi"][rows],
+                             a["root"][rows], view.eye, float(view.pixels_per_radian) / tau, view.frustum_planes_rel())
 
     def many(self, selected: list[SelectedTile], view: View, tau: float) -> tuple[np.ndarray, np.ndarray]:
         """(triangles (B,), visible share (B,)) of the selected tiles at ``view`` for the bound tau (pixels)."""
-        return estimate_many([self._tile(s.key) for s in selected], view.eye, float(view.pixels_per_radian) / tau,
-                             view.frustum_planes_rel())
+        return self._estimate([s.key for s in selected], view, tau)
 
     def __call__(self, key: TileKey, selected: SelectedTile, view: View, tau: float) -> int:
         """Estimated triangles of tile ``key`` at ``view`` for the error bound tau (pixels)."""
-        return int(estimate_many([self._tile(key)], view.eye, float(view.pixels_per_radian) / tau,
-                                 view.frustum_planes_rel())[0][0])
+        return int(self._estimate([key], view, tau)[0][0])

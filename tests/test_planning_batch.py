@@ -47,6 +47,10 @@ def test_batch_features_equal_per_tile(hf, size):
         tiles += len(sel)
         lo, hi = pyramid.aabbs(*np.array([(s.key.level, s.key.tx, s.key.ty) for s in sel]).T)
         cut += int(np.sum(near_cut(view, lo, hi)))
+        # the selection's own arrays (which the batch reads) are its tiles', in its order
+        assert np.array_equal(sel.keys, [(s.key.level, s.key.tx, s.key.ty) for s in sel])
+        assert np.array_equal(sel.lo, lo) and np.array_equal(sel.hi, hi)
+        assert np.array_equal(sel.distance, [s.distance for s in sel])
     assert tiles > 50 and cut > 0          # many tiles, and some boxes reach behind the eye
 
 

@@ -188,3 +188,26 @@ def test_triangle_estimate_from_a_stores_node_blocks_follows_the_drawn_count(ctx
                               for p in plans])
             frames.append(tri.sum() / drawn.sum())
     assert all(0.9 <= f <= 1.2 for f in frames), frames
+
+
+def test_triangle_estimate_reuses_rows_of_tiles_least_recently_used():
+    """The estimator keeps tiles' nodes in rows of stacked arrays; past its limit it reuses the least recently
+    used row, never one of the frame at hand (the limit grows to a frame's tiles), and the estimates stay
+    those of an estimator that kept every tile."""
+    from hybrid.camera.flight import preset
+    from hybrid.terrain.datasets import fbm
+    from hybrid.tiles.pyramid import TilePyramid
+    from hybrid.tiles.tiletree import select_tiles
+    from raster.estimate import TileletTriangleEstimator, _Rows
+    hf = fbm(257, seed=4)
+    pyramid = TilePyramid(hf, 32)
+    small, full = TileletTriangleEstimator(pyramid), TileletTriangleEstimator(pyramid)
+    small._rows = _Rows(4)
+    seen = set()
+    for v in preset("flyover", hf, 5, 160, 90).views() + preset("orbit", hf, 5, 160, 90).views():
+        sel = select_tiles(pyramid, v, 2 / 3)
+        seen |= {s.key for s in sel}
+        a, b = small.many(sel, v, 2 / 3), full.many(sel, v, 2 / 3)
+        assert np.array_equal(a[0], b[0]) and np.allclose(a[1], b[1], rtol=0, atol=1e-12)
+        assert set(small._rows.row) >= {s.key for s in sel}
+    assert len(seen) > small._rows.limit >= 4 and len(small._rows.row) <= small._rows.limit

@@ -8,7 +8,7 @@ import numpy as np
 from hybrid.camera.view import View
 from hybrid.cost.footprint import footprints
 from hybrid.tiles.pyramid import TilePyramid
-from hybrid.tiles.tiletree import SelectedTile
+from hybrid.tiles.tiletree import SelectedTile, TileSelection
 
 
 @dataclass(frozen=True)
@@ -160,8 +160,12 @@ def feature_columns(pyramid: TilePyramid, view: View, selected: list[SelectedTil
     Equal to ``tile_features`` of each tile (within float rounding); ``triangles`` gives each tile's count and
     ``visible`` their share inside the frustum (default 1).
     """
-    keys = np.array([(s.key.level, s.key.tx, s.key.ty) for s in selected], dtype=np.int64).reshape(-1, 3)
-    lo, hi = pyramid.aabbs(keys[:, 0], keys[:, 1], keys[:, 2])
+    if isinstance(selected, TileSelection):          # select_tiles' own arrays
+        keys, lo, hi, distance = selected.keys, selected.lo, selected.hi, selected.distance
+    else:
+        keys = np.array([(s.key.level, s.key.tx, s.key.ty) for s in selected], dtype=np.int64).reshape(-1, 3)
+        lo, hi = pyramid.aabbs(keys[:, 0], keys[:, 1], keys[:, 2])
+        distance = np.array([s.distance for s in selected], dtype=np.float64).reshape(-1)
     mid = 0.5 * (lo[:, 2] + hi[:, 2])
     mid_lo, mid_hi = lo.copy(), hi.copy()
     mid_lo[:, 2] = mid_hi[:, 2] = mid
@@ -171,7 +175,7 @@ def feature_columns(pyramid: TilePyramid, view: View, selected: list[SelectedTil
     spacing = k[:, None] * np.array([pyramid.hf.spacing_x, pyramid.hf.spacing_y])
     return {"pixels": area[:b], "triangles": np.asarray(triangles, dtype=np.float64).reshape(b),
             "slab_cells": slab_cells_batch(view, lo, hi, spacing, pyramid.n), "level": keys[:, 0],
-            "distance": np.array([s.distance for s in selected], dtype=np.float64).reshape(b),
+            "distance": distance,
             "visible": np.ones(b) if visible is None else np.asarray(visible, dtype=np.float64).reshape(b),
             "surface_pixels": area[b:]}
 

@@ -103,7 +103,7 @@ class _Selection:
     def __init__(self, pyramid: TilePyramid, view: View, tau: float):
         self.pyramid, self.eye, self.tau = pyramid, np.asarray(view.eye, dtype=np.float64), tau
         self.planes, self.K = view.frustum_planes_rel(), view.pixels_per_radian
-        self.parts = []                                   # (level, tx, ty, d, pe, c) arrays of selected tiles
+        self.parts = []                                   # (level, tx, ty, d, pe, c, lo, hi) arrays of selected tiles
 
     def measure(self, level: int, tx: np.ndarray, ty: np.ndarray):
         """Existing, not culled tiles of a level among (tx, ty), with distance, projected error and class."""
@@ -118,24 +118,26 @@ class _Selection:
         err = p.errors_at(level, tx, ty) + p.quantization_errors_at(level, tx, ty)   # ray-cast tiles' 16-bit heights
         with np.errstate(divide="ignore", invalid="ignore"):
             pe = np.where(d > 0, err * self.K / d, np.where(err > 0, np.inf, 0.0))
-        return tx, ty, d, pe, c
+        return tx, ty, d, pe, c, lo, hi
 
     def refine(self) -> None:
         """Split from the root down, one level at a time, while the projected error exceeds tau."""
         level = self.pyramid.max_level
         tx, ty = np.zeros(1, np.int64), np.zeros(1, np.int64)
         while level >= 0 and len(tx):
-            tx, ty, d, pe, c = self.measure(level, tx, ty)
+            tx, ty, d, pe, c, lo, hi = self.measure(level, tx, ty)
             split = (pe > self.tau) & (level > 0)
             keep = ~split
-            self.parts.append((np.full(int(keep.sum()), level), tx[keep], ty[keep], d[keep], pe[keep], c[keep]))
+            self.parts.append((np.full(int(keep.sum()), level), tx[keep], ty[keep], d[keep], pe[keep], c[keep],
+                               lo[keep], hi[keep]))
             tx, ty = _children(tx[split], ty[split])
             level -= 1
 
     def arrays(self):
-        """(level, tx, ty, d, pe, c) of every selected tile, concatenated."""
-        return tuple(np.concatenate([part[i] for part in self.parts]) if self.parts else np.zeros(0)
-                     for i in range(6))
+        """(level, tx, ty, d, pe, c, lo, hi) of every selected tile, concatenated (lo, hi: (N, 3) box corners)."""
+        if not self.parts:
+            return (*(np.zeros(0) for _ in range(6)), np.zeros((0, 3)), np.zeros((0, 3)))
+        return tuple(np.concatenate([part[i] for part in self.parts]) for i in range(8))
 
     def edge_levels(self, lv, tx, ty) -> np.ndarray:
         """(4, N) per edge W, E, S, N: level of the selected tile at the tile's level or coarser that covers
@@ -178,8 +180,8 @@ class _Selection:
             for level in np.unique(split >> (2 * _SHIFT)):
                 at = split[(split >> (2 * _SHIFT)) == level]
                 cx, cy = _children(at & mask, (at >> _SHIFT) & mask)
-                cx, cy, dist, pe, c = self.measure(int(level) - 1, cx, cy)
-                self.parts.append((np.full(len(cx), int(level) - 1), cx, cy, dist, pe, c))
+                cx, cy, dist, pe, c, lo, hi = self.measure(int(level) - 1, cx, cy)
+                self.parts.append((np.full(len(cx), int(level) - 1), cx, cy, dist, pe, c, lo, hi))
 
     def front_to_back(self, lv, tx, ty) -> np.ndarray:
         """Order of the tiles by the quadtree traversal that visits the eye's child quadrant first."""
@@ -205,6 +207,13 @@ def _children(tx: np.ndarray, ty: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             np.concatenate([2 * ty, 2 * ty, 2 * ty + 1, 2 * ty + 1]))
 
 
+class TileSelection(list):
+    """Selected tiles front to back (``SelectedTile``s), with the same tiles as arrays in the same order: keys
+    (B, 3) int64 level, tx, ty; distance (B,) metres; lo, hi (B, 3) world box corners (metres)."""
+
+    __slots__ = ("keys", "distance", "lo", "hi")
+
+
 def select_tiles(pyramid: TilePyramid, view: View, tau: float = DEFAULT_TAU) -> list[SelectedTile]:
     """Tiles to draw for a view with screen-space error <= tau pixels: restricted, culled, front to back.
 
@@ -215,14 +224,20 @@ def select_tiles(pyramid: TilePyramid, view: View, tau: float = DEFAULT_TAU) -> 
     sel = _Selection(pyramid, view, tau)
     sel.refine()
     cov = sel.restrict()
-    lv, tx, ty, d, pe, c = sel.arrays()
+    lv, tx, ty, d, pe, c, lo, hi = sel.arrays()
     lv, tx, ty = lv.astype(np.int64), tx.astype(np.int64), ty.astype(np.int64)
     deltas = np.where(cov >= 0, cov - lv[None, :], np.where(sel.finer_neighbours(lv, tx, ty), -1, NO_NEIGHBOUR)).T
     bits = np.array([bit for bit, _, _ in _EDGES])
     masks = ((deltas == 1) * bits).sum(axis=1)
-    return [SelectedTile(TileKey(int(lv[i]), int(tx[i]), int(ty[i])), float(d[i]), float(pe[i]), int(masks[i]),
-                         bool(c[i] == 1), tuple(int(v) for v in deltas[i]))
-            for i in sel.front_to_back(lv, tx, ty)]
+    order = sel.front_to_back(lv, tx, ty)
+    out = TileSelection(
+        SelectedTile(TileKey(level, x, y), dist, err, mask, inside, tuple(delta))
+        for level, x, y, dist, err, mask, inside, delta in zip(
+            lv[order].tolist(), tx[order].tolist(), ty[order].tolist(), d[order].tolist(), pe[order].tolist(),
+            masks[order].tolist(), (c[order] == 1).tolist(), deltas[order].tolist()))
+    out.keys = np.stack([lv, tx, ty], axis=1)[order]
+    out.distance, out.lo, out.hi = d[order].astype(np.float64), lo[order], hi[order]
+    return out
 
 
 def edge_neighbours(keys: set, key: TileKey, dx: int, dy: int, max_level: int) -> list[TileKey]:
