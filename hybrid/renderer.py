@@ -159,6 +159,11 @@ class Renderer:
     def _draw(self, target, view, plans: list[TilePlan], pinned, tau: float, options: dict) -> dict:
         counters: dict = {}
         skirts = self.skirts(plans)
+        kinds = [self.kind(p.choice) for p in plans]
+        # rays can pass behind raster tiles only where one of those lies nearer (earlier front to back)
+        behind = "raster" in kinds and "raycast" in kinds and \
+            kinds.index("raster") < len(kinds) - 1 - kinds[::-1].index("raycast")
+        rasterized = False
         for name in self._order():
             sub = [p for p in plans if p.choice == name]
             if not sub:
@@ -166,6 +171,9 @@ class Renderer:
             opts = options[name]
             if skirts and "skirts" in self.strategies[name].draw_options:
                 opts = {**opts, "skirts": skirts}
+            if behind and rasterized and "occluders" in self.strategies[name].draw_options and "occluders" not in opts:
+                opts = {**opts, "occluders": True}      # rays stop behind the raster tiles drawn before them
+            rasterized |= self.kind(name) == "raster"
             c = self.strategies[name].draw_tiles(target, view, self._items(name, sub, pinned), tau, **opts) or {}
             for k, v in c.items():
                 if isinstance(v, (int, float, np.integer, np.floating)):

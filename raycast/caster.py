@@ -19,7 +19,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from hybrid.errors import TerrabenchError
-from hybrid.gl.context import gl_bytes, gl_finish, gl_info
+from hybrid.gl.context import depth32f_texture, gl_bytes, gl_finish, gl_info
 from hybrid.gl.edges import TerrainEdges
 from hybrid.gl.programs import program, register_include, set_uniform, write_uniform
 from hybrid.gl.shading import resolve_mode
@@ -116,6 +116,7 @@ class RaycastStrategy:
         self.stats_buf = ctx.buffer(reserve=STAT_SLOTS * STAT_STRIDE)
         self.edges = TerrainEdges(ctx, hf)
         self.ids = None
+        self.prior = None                       # the frame's earlier passes, for occluded passes
         self._next_id = 1
         self.grid: _Grid | None = None
         self.last_tile_stats = np.zeros((0, len(STAT_FIELDS)), np.int64)
@@ -130,11 +131,12 @@ class RaycastStrategy:
 
     def _program(self, opts: CastOptions, mode: str):
         opts = self._resolved(opts)
-        key = (opts.reconstruction, opts.traversal, opts.lod is not None, opts.prepass, opts.stats, opts.shadows, mode)
+        key = (opts.reconstruction, opts.traversal, opts.lod is not None, opts.prepass, opts.stats, opts.shadows, mode,
+               opts.occluders)
         if key not in self.programs:
             defines = {"RECON": RECONSTRUCTIONS.index(opts.reconstruction), "NAIVE": int(opts.traversal == "naive"),
                        "LOD": int(opts.lod is not None), "PREPASS": int(opts.prepass), "STATS": int(opts.stats),
-                       "SHADOWS": int(opts.shadows), "MODE": MODES.index(mode)}
+                       "SHADOWS": int(opts.shadows), "MODE": MODES.index(mode), "OCCLUDERS": int(opts.occluders)}
             prog = program(self.ctx, "raycast", "box.vert.glsl", "raycast.frag.glsl", defines=defines)
             vao = self.ctx.vertex_array(prog, [(self.cube, "3f", "corner")])
             self.programs[key] = (prog, vao)
@@ -143,9 +145,10 @@ class RaycastStrategy:
     @property
     def shared_nbytes(self) -> int:
         """GPU bytes held for all tiles as the driver reports them: colour texture, box, counters, tile IDs,
-        terrain edges, shadow grid."""
+        the copy of a frame's earlier passes, terrain edges, shadow grid."""
         grid = (self.grid.tex.heights, self.grid.tex.maxmip) if self.grid is not None else ()
-        return gl_bytes(self.texture, self.cube, self.stats_buf, self.ids, *grid) + self.edges.nbytes
+        prior = (*self.prior.color_attachments, self.prior.depth_attachment) if self.prior is not None else ()
+        return gl_bytes(self.texture, self.cube, self.stats_buf, self.ids, *prior, *grid) + self.edges.nbytes
 
     # --- tiles ------------------------------------------------------------------------------------
     @staticmethod
@@ -191,6 +194,22 @@ class RaycastStrategy:
             self.ids.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
             self._next_id = 1
         return self.ids
+
+    def _prior_target(self, size):
+        """A colour + depth framebuffer of the viewport's size (made on first use): the copy of what a frame's
+        earlier passes drew, read as a texture by an occluded pass."""
+        if self.prior is None or self.prior.size != tuple(size):
+            self._release_prior()
+            depth = depth32f_texture(self.ctx, tuple(size))
+            depth.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+            self.prior = self.ctx.framebuffer(color_attachments=[self.ctx.texture(tuple(size), 4)], depth_attachment=depth)
+        return self.prior
+
+    def _release_prior(self) -> None:
+        if self.prior is not None:
+            for a in (*self.prior.color_attachments, self.prior.depth_attachment, self.prior):
+                a.release()
+            self.prior = None
 
     # --- drawing ----------------------------------------------------------------------------------
     def draw_tiles(self, target, view, items, tau: float | None = None, **options) -> dict:
@@ -249,6 +268,13 @@ class RaycastStrategy:
             self.stats_buf = ctx.buffer(reserve=need)
         self.stats_buf.clear()
         self.stats_buf.bind_to_storage_buffer(0)
+        if opts.occluders and n_items:
+            prior = self._prior_target((W, H))
+            self.ctx.copy_framebuffer(prior, target.fbo)       # depth (and colour) drawn so far this frame
+            prior.depth_attachment.use(8)
+            set_uniform(prog, "prior_depth", 8)
+            n, f = float(view.near), float(view.far)
+            set_uniform(prog, "depth_ab", (n / (f - n), n * f / (f - n)))
         id_fbo = None
         if opts.prepass and n_items:
             ids = self._ids_texture((W, H))
@@ -350,4 +376,5 @@ class RaycastStrategy:
         if self.grid is not None:
             self.grid.tex.release()
             self.grid = None
+        self._release_prior()
         self.builder.release()

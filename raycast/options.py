@@ -24,6 +24,8 @@ class CastOptions:
     traversal: 'maxmip' (hierarchical, Dick 3.2) or 'naive' (every level-0 texel along the ray).
     prepass: tile-ID pre-pass so only pixels still empty cast a ray (Dick 3.4); None: the device's default
       (``prepass_default``).
+    occluders: what the target's depth holds when the pass starts (an earlier pass of the frame: the raster
+      tiles of a mixed frame) bounds every ray, which stops where it would pass behind it (the renderer sets it).
     lod: None, or tau in pixels: stop descending at the level whose texel projects to <= tau pixels.
     mode: shading mode (None = 'texture' when the terrain has one, else 'shaded').
     shadows: cast a shadow ray toward LIGHT_DIR from every hit (whole terrain, primary ray's level).
@@ -35,6 +37,7 @@ class CastOptions:
     reconstruction: Reconstruction = "triangles"
     traversal: Traversal = "maxmip"
     prepass: bool | None = None
+    occluders: bool = False
     lod: float | None = None
     mode: CastMode | None = None
     shadows: bool = False
@@ -51,7 +54,7 @@ class CastOptions:
             raise TerrabenchError(f"mode must be one of {', '.join(MODES)} (or None), got {self.mode!r}")
         if self.prepass is not None and not isinstance(self.prepass, bool):
             raise TerrabenchError(f"prepass must be True, False or None (the device's default), got {self.prepass!r}")
-        for name in ("shadows", "stats"):
+        for name in ("shadows", "stats", "occluders"):
             if not isinstance(getattr(self, name), bool):
                 raise TerrabenchError(f"{name} must be True or False, got {getattr(self, name)!r}")
         if self.lod is not None:

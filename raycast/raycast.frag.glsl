@@ -1,6 +1,6 @@
 #version 430
 // One tile's ray-casting pass: the fragment of a back face of the tile's box casts the pixel-centre ray.
-// Defines (set by raycast.caster): RECON, NAIVE, LOD, PREPASS, STATS, SHADOWS, MODE
+// Defines (set by raycast.caster): RECON, NAIVE, LOD, PREPASS, STATS, SHADOWS, MODE, OCCLUDERS
 // MODE: 0 texture (textureGrad), 1 texture_plain (texture), 2 shaded, 3 height, 4 normal, 5 depth,
 //       6 level, 7 steps
 #if STATS
@@ -38,6 +38,10 @@ uniform float lod_k;           // max(spacing.x, spacing.y) * K / tau (metres), 
 uniform int max_steps;
 uniform int outer;             // tile box sides on the terrain's outer boundary (W 1, E 2, S 4, N 8)
 uniform int tile_index;        // index into the statistics array
+#if OCCLUDERS
+uniform sampler2D prior_depth; // reversed-Z depth of what the frame's earlier passes drew (0: nothing)
+uniform vec2 depth_ab;         // (a, b): reversed-Z depth = b / view depth - a
+#endif
 uniform int stat_bins_x;       // 64-pixel screen bins a row (statistics slots follow the rasterizer's bins)
 uniform uint tile_id;          // pre-pass ID
 uniform usampler2D ids;        // pre-pass target
@@ -160,7 +164,14 @@ void main() {
     vec3 D = vec3(d.xy / spacing, d.z);
     bool under = ray_starts_under(d);
     vec3 Q; ivec2 cell; int lev; vec4 hc; int steps;
-    int r = rc_traverse(hmap, mmap, dq, dq_base, n_cells, n_levels, ext_lo, ext, zr, eye_tex, D, near_plane, 0, spacing, lod_k,
+    float tmax = RC_FAR;
+#if OCCLUDERS
+    // what an earlier pass of the frame drew here bounds the ray: a hit behind it would fail the depth test;
+    // a little past it (1e-5 of the distance, far above float rounding) the depth test still decides
+    float zp = texelFetch(prior_depth, ivec2(gl_FragCoord.xy), 0).r;
+    if (zp > 0.0) tmax = depth_ab.y / (zp + depth_ab.x) * 1.00001;
+#endif
+    int r = rc_traverse(hmap, mmap, dq, dq_base, n_cells, n_levels, ext_lo, ext, zr, eye_tex, D, near_plane, tmax, 0, spacing, lod_k,
                         max_steps, outer, under, Q, cell, lev, hc, steps);
 #if STATS
     ivec2 bin = ivec2(gl_FragCoord.xy) >> 6;
@@ -185,7 +196,7 @@ void main() {
         vec3 Og = vec3(g_tile_off + Q.xy * k, Q.z + 1e-3 * max(spacing.x, spacing.y) * float(S) + 0.01);
         vec3 Dg = vec3(L.xy / g_spacing, L.z);
         vec3 Qs; ivec2 cs; int ls; vec4 hs; int ssteps;
-        int rs = rc_traverse(g_hmap, g_mmap, g_dq, g_dq_base, g_cells, g_levels, vec2(0.0), g_ext, g_zr, Og, Dg, 0.0, gl, g_spacing, 0.0,
+        int rs = rc_traverse(g_hmap, g_mmap, g_dq, g_dq_base, g_cells, g_levels, vec2(0.0), g_ext, g_zr, Og, Dg, 0.0, RC_FAR, gl, g_spacing, 0.0,
                              g_max_steps, 15, false, Qs, cs, ls, hs, ssteps);
         if (rs != RC_MISS) lit = 0.0;
 #if STATS

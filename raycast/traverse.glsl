@@ -134,12 +134,12 @@ bool rc_lod_final(int l, vec2 ij, float H, vec3 Om, float zlo, vec2 spacing, flo
 // Cast one ray through the grid (height codes hmap, max mipmap mmap, dequantised by dq, dqb): returns RC_MISS,
 // RC_HIT or RC_CAPPED. On a hit, hit is the point (real texel
 // space), cell the hit texel (x, y) at level `level`, hc its corner heights. tmin: smallest ray parameter
-// (near plane); lmin: the finest level to descend to; steps: texels visited. under: the ray starts under the
+// (near plane); tmax: largest (RC_FAR: none; a ray stopped there is a miss); lmin: the finest level to descend to; steps: texels visited. under: the ray starts under the
 // terrain sheet (hybrid/gl/edges.glsl): its hit is where it first comes up through the surface (the sheet's
 // underside, as the two-sided reference draws it), found by stepping every lmin texel (no LOD).
 int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int LMAX, vec2 elo, vec2 ext, vec2 zr,
                 vec3 O, vec3 D,
-                float tmin, int lmin, vec2 spacing, float lod_k, int max_steps, int outer,
+                float tmin, float tmax, int lmin, vec2 spacing, float lod_k, int max_steps, int outer,
                 bool under, out vec3 hit, out ivec2 cell, out int level, out vec4 hc, out int steps) {
     steps = 0; level = 0; cell = ivec2(0); hit = vec3(0.0); hc = vec4(0.0);
     // entry into the box; `face` is the box side the ray enters through (EDGE_W/E/S/N bits, 0 for the top,
@@ -148,7 +148,7 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
     // the top or at tmin, is not a hit there. Entering through an interior side on the wrong side of this
     // tile's surface is a hit (a wall): the ray met the neighbour's surface first (the nearer hit wins) or
     // passed through a crack between tiles of different levels (the wall fills it).
-    float t0 = tmin, t1 = RC_FAR;
+    float t0 = tmin, t1 = tmax;
     int face = 0;
     bool zentry = false;   // entered through the bottom or top face: put P exactly on it (no rounding above/below)
     if (D.x != 0.0) {
@@ -182,6 +182,7 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
     // every exit is computed from the entry point P0 (no accumulated rounding): X = P0 + s * D
     vec3 P0 = P;
     float sP = 0.0;
+    float s_max = tmax - t0;                // past it the ray is behind what the frame already drew there
     int ltop = max(LMAX - 1, 0);
     lmin = min(lmin, ltop);
 #if NAIVE
@@ -205,6 +206,7 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
         while (steps < max_steps) {
             if (P.x >= hi.x || P.y >= hi.y) return RC_MISS;
             if (D.z >= 0.0 && P.z > zr.y) return RC_MISS;
+            if (sP > s_max) return RC_MISS;
             steps++;
             s = float(1 << l);
             ij = floor(P.xy / s);

@@ -277,3 +277,22 @@ def test_shading_mode_reaches_both_strategies(ctx, puget_full):
     for code in (1, 2):                                     # both raster and ray-cast pixels changed colour
         sel = smap == code
         assert np.abs(tex.colour[sel].astype(int) - height.colour[sel]).mean() > 5
+
+
+def test_rays_stop_behind_the_raster_tiles_drawn_before_them(ctx, puget_full):
+    """In a mixed frame whose near tiles are rasterized, the ray-cast tiles behind them bound each ray by the depth
+    the raster pass left (occluders): the same image and depths as casting every ray to its end, in fewer steps."""
+    from hybrid.cost.planner import plan_frame
+    v = preset("dolly", puget_full, 6, *SIZE).view(2)
+    with Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT) as r:
+        px = np.median([p.features.pixels for p in plan_frame(r.pyramid, v, SPLIT)])
+        # raster a flat 1 ms a tile, ray casting 1 ms per px pixels: the big near tiles are rasterized
+        r.model = CostModel("near-raster", {"const": 1.0, "triangles": 0.0, "visible_triangles": 0.0, "pixels": 0.0},
+                            {"const": 0.0, "pixels": 1.0 / px, "surface_pixels": 0.0, "pixel_steps": 0.0})
+        plans = r.plan(v)
+        kinds = [r.kind(p.choice) for p in plans]
+        assert "raster" in kinds and "raycast" in kinds and kinds.index("raster") < len(kinds) - 1 - kinds[::-1].index("raycast")
+        bounded, full = r.render(v), r.render(v, occluders=False)
+    assert np.array_equal(bounded.colour, full.colour) and np.array_equal(bounded.distance, full.distance)
+    assert bounded.stats.counters["rays"] == full.stats.counters["rays"] > 0
+    assert bounded.stats.counters["steps"] < 0.9 * full.stats.counters["steps"]
