@@ -89,9 +89,11 @@ class TriangleEstimator(Protocol):
     def __call__(self, key: TileKey, selected: SelectedTile, view: View, tau: float) -> int:
         """Estimated triangle count of tile ``key`` at ``view`` for the bound tau (pixels)."""
 
-    def many(self, selected: Sequence[SelectedTile], view: View, tau: float) -> tuple[Any, Any]:
-        """(triangle counts, share of them inside the view frustum), (B,) arrays, of the selected tiles at
-        ``view`` for the bound tau (pixels)."""
+    def many(self, selected: Sequence[SelectedTile], view: View, tau: float,
+             budget_ms: float | None = None) -> tuple[Any, Any]:
+        """(triangle counts, share of them inside the view frustum), (B,) float arrays, of the selected tiles at
+        ``view`` for the bound tau (pixels); with ``budget_ms``, per-tile preparation stops after that much wall
+        time (at least one tile a call) and the tiles left are NaN in both."""
 
 
 @dataclass

@@ -113,9 +113,11 @@ class Renderer:
         return t
 
     def plan(self, view: View, tau: float = DEFAULT_TAU) -> list[TilePlan]:
-        """The frame's tiles front to back with the policy's choices (and, when mixed, features and costs)."""
+        """The frame's tiles front to back with the policy's choices (and, when mixed, features and costs); when
+        streaming, new tiles' estimates are prepared within the upload budget (the rest ray cast this frame)."""
         self._check_live()
-        return plan_frame(self.pyramid, view, self.model, self.triangles, self.policy, tau, self.threshold)
+        return plan_frame(self.pyramid, view, self.model, self.triangles, self.policy, tau, self.threshold,
+                          prep_budget_ms=self.upload_budget_ms)
 
     def skirts(self, plans: list[TilePlan]) -> dict:
         """Edge bits of every raster tile that touches a ray-cast tile: skirts close the seam there."""
@@ -268,8 +270,9 @@ class Renderer:
                 if hasattr(self.pyramid, "request"):      # a store: its loader thread reads what is missing
                     self.pyramid.request([p.key for p in plans if (p.choice, p.key) not in self.cache.entries])
                     ready = self.pyramid.cached
+                # the frame's budget covers the estimate's preparation and the uploads together
                 streamed = stream_uploads(self.cache, self.strategies, plans, pinned, self.tile, self.pyramid.max_level,
-                                          self.upload_budget_ms, ready)
+                                          max(self.upload_budget_ms - prep_ms, 0.0), ready)
                 self._fallbacks = {plans[i].key: a for i, a in streamed.fallbacks.items()}
             target.clear()
             target.use()

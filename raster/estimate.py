@@ -174,7 +174,7 @@ class TileletTriangleEstimator:
         self.pyramid = pyramid
         self.beta = float(beta)
         self._rows = _Rows(MAX_TILES)
-        self.build_ms = 0.0
+        self.build_ms, self.builds = 0.0, 0
         hf = pyramid.hf
         # a tile store whose nodes (as the GPU reads them) come in per-tile blocks: each tile's is one read, no
         # heights, no error pyramid (a periodic extension's where ``ready``: else from the tile's heights);
@@ -185,11 +185,14 @@ class TileletTriangleEstimator:
             nodes = nodes_for(hf, pyramid.n, beta)
             self._blocks = nodes if nodes.blocks is not None else None
 
-    def _row(self, key: TileKey) -> int:
+    def _row(self, key: TileKey, deadline: float | None = None) -> int:
+        """The key's row, its nodes built first if new; -1 (not built) once ``deadline`` (perf_counter s) passed."""
         r = self._rows.get(key)
         if r is not None:
             return r
         t0 = time.perf_counter()
+        if deadline is not None and t0 >= deadline:
+            return -1
         ready = getattr(self._blocks.blocks, "ready", None) if self._blocks is not None else None
         if self._blocks is not None and (ready is None or ready(key.level, key.tx, key.ty)):
             data, offsets = tile_node_block(self._blocks, key.level, key.tx, key.ty, self.pyramid.n)
@@ -197,21 +200,34 @@ class TileletTriangleEstimator:
         else:
             nodes = tile_nodes(self.pyramid.tile(key), self.beta)
         r = self._rows.put(key, nodes)
+        self.builds += 1
         self.build_ms += (time.perf_counter() - t0) * 1e3
         return r
 
-    def _estimate(self, keys, view: View, tau: float) -> tuple[np.ndarray, np.ndarray]:
+    def _estimate(self, keys, view: View, tau: float, budget_ms: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         self._rows.limit = max(self._rows.limit, len(keys))    # a frame's own rows are never reused for it
-        rows = np.array([self._row(k) for k in keys], dtype=np.int64)
+        deadline = None if budget_ms is None else time.perf_counter() + budget_ms / 1e3
+        builds = self.builds
+        rows = np.array([self._row(k, deadline) for k in keys], dtype=np.int64)
+        missing = np.flatnonzero(rows < 0)
+        if len(missing) and self.builds == builds:              # at least one build a call: the queue drains
+            rows[missing[0]] = self._row(keys[missing[0]])
         a = self._rows.arrays
-        if not len(rows):
-            return np.zeros(0, np.int64), np.zeros(0)
-        return estimate_rows(a["fine"][rows], a["coarse_error"][rows], a["box_lo"][rows], a["box_hi"][rows],
-                             a["root"][rows], view.eye, float(view.pixels_per_radian) / tau, view.frustum_planes_rel())
+        tri, vis = np.full(len(rows), np.nan), np.full(len(rows), np.nan)
+        ok = rows >= 0
+        if ok.any():
+            r = rows[ok]
+            tri[ok], vis[ok] = estimate_rows(a["fine"][r], a["coarse_error"][r], a["box_lo"][r], a["box_hi"][r], a["root"][r],
+                                             view.eye, float(view.pixels_per_radian) / tau, view.frustum_planes_rel())
+        return tri, vis
 
-    def many(self, selected: list[SelectedTile], view: View, tau: float) -> tuple[np.ndarray, np.ndarray]:
-        """(triangles (B,), visible share (B,)) of the selected tiles at ``view`` for the bound tau (pixels)."""
-        return self._estimate([s.key for s in selected], view, tau)
+    def many(self, selected: list[SelectedTile], view: View, tau: float,
+             budget_ms: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(triangles (B,) float, visible share (B,)) of the selected tiles at ``view`` for the bound tau (pixels).
+
+        With ``budget_ms``, new tiles' nodes are built front to back only until that much wall time is spent (at
+        least one a call); the tiles left get NaN for both (unknown this frame, built in a later one)."""
+        return self._estimate([s.key for s in selected], view, tau, budget_ms)
 
     def __call__(self, key: TileKey, selected: SelectedTile, view: View, tau: float) -> int:
         """Estimated triangles of tile ``key`` at ``view`` for the error bound tau (pixels)."""

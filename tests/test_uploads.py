@@ -180,3 +180,29 @@ def test_a_ray_cast_tile_drawn_for_a_missing_one_hits_only_inside_its_rectangle(
             assert np.allclose(d[inside], whole[inside], rtol=1e-5), p.key
             checked += int(inside.sum())
     assert checked > 1000
+
+
+def test_hybrid_prepares_estimates_within_the_streaming_budget(ctx, puget257):
+    """Streaming (at 2 px, where raster wins tiles), the hybrid's triangle estimate prepares new tiles within the frame's budget (one a frame at a zero
+    budget); a tile not yet prepared has unknown triangles and is ray cast, never a hole; once all are prepared
+    the choices are those of a renderer that prepared everything at once."""
+    from hybrid.cost.model import load_cost_model
+    model = load_cost_model("llvmpipe")
+    v = preset("orbit", puget257, 6, *SIZE).view(1)
+    with Renderer(ctx, puget257, "hybrid", 32, cost_model=model) as full:
+        want = full.render(v, 2.0)
+        choices = [p.choice for p in full.plan(v, 2.0)]
+    assert "raster" in choices                                 # the check below needs tiles that want raster
+    with Renderer(ctx, puget257, "hybrid", 32, cost_model=model, upload_budget_ms=0.0) as r:
+        built = []
+        for _ in range(3 * len(choices)):
+            plans = r.plan(v, 2.0)
+            unknown = [p for p in plans if np.isnan(p.features.triangles)]
+            assert all(p.choice == "raycast" for p in unknown)
+            built.append(len(plans) - len(unknown))
+            res = r.render(v, 2.0)
+            assert (np.isfinite(want.distance) & ~np.isfinite(res.distance)).mean() < 0.05     # no hole
+            if not unknown and res.stats.pending_uploads == 0:
+                break
+        assert built[0] <= 2 and np.all(np.diff(built) <= 2)    # a tile a call (plan, then render's plan)
+        assert [p.choice for p in r.plan(v, 2.0)] == choices

@@ -93,12 +93,9 @@ class CostModel:
 
     def predict_columns(self, columns) -> dict[str, np.ndarray]:
         """Predicted milliseconds of each strategy for many tiles at once, from feature columns ((B,) arrays)."""
-        names = self.candidates
-        coef = np.zeros((len(ALL_TERMS), len(names)))
-        for j, s in enumerate(names):
-            coef[_TERM_INDEX[s], j] = [getattr(self, s)[t] for t in TERMS[s]]
-        out = all_term_values(columns) @ coef
-        return {s: out[..., j] for j, s in enumerate(names)}
+        terms = all_term_values(columns)       # each strategy from its own terms: one's unknown (NaN) term spares others
+        return {s: terms[..., _TERM_INDEX[s]] @ np.array([getattr(self, s)[t] for t in TERMS[s]])
+                for s in self.candidates}
 
     def explain(self) -> str:
         """The formulas with their coefficients, and the held-out error."""

@@ -23,7 +23,7 @@ from hybrid.cost.choice import best_assignment
 from hybrid.cost.features import TileFeatures, feature_columns, tile_features
 from hybrid.cost.model import CostModel
 from hybrid.errors import TerrabenchError
-from hybrid.strategies import triangle_estimator
+from hybrid.strategies import STRATEGIES, triangle_estimator
 from hybrid.tiles.pyramid import TileKey, TilePyramid
 from hybrid.tiles.tiletree import DEFAULT_TAU, SelectedTile, select_tiles
 
@@ -100,12 +100,22 @@ def choices(policy: str, columns: dict, predicted: dict, threshold: float = 1.0)
         costs = np.stack([np.asarray(predicted[n], dtype=np.float64) for n in names])
         return [names[i] for i in np.argmin(costs, axis=0)]
     if policy == "heuristic":
-        raster = ~(np.asarray(columns["triangles"]) > threshold * np.maximum(columns["pixels"], 1.0))
+        tri = np.asarray(columns["triangles"], dtype=np.float64)
+        raster = ~(tri > threshold * np.maximum(columns["pixels"], 1.0)) & ~np.isnan(tri)
     elif policy == "oracle":
         raster = np.ones(len(columns["pixels"]), dtype=bool)
     else:
         raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
     return np.where(raster, "raster", "raycast").tolist()
+
+
+def unknown_raster_costs(predicted: dict, columns: dict) -> dict:
+    """Predictions with the raster strategies' cost infinite for tiles whose triangles are unknown (NaN: not yet
+    prepared under a streaming budget), so that every policy ray casts them."""
+    unknown = np.isnan(np.asarray(columns["triangles"], dtype=np.float64))
+    if not unknown.any():
+        return predicted
+    return {s: np.where(unknown, np.inf, v) if STRATEGIES[s].kind == "raster" else v for s, v in predicted.items()}
 
 
 def choose(policy: str, features: TileFeatures, predicted: dict, threshold: float = 1.0) -> str:
@@ -120,9 +130,11 @@ def hedged_choices(predicted: dict, model: CostModel) -> list[str]:
     only where another strategy is predicted cheaper by more than both models' held-out median relative errors
     together (``model.fit_error``): a choice inside the model's error is a coin toss that costs the other
     strategy's per-frame overhead and, on a CPU rasterizer, risks the rare tile that is many times slower than
-    predicted."""
+    predicted. The pure frames are priced over the tiles every strategy can draw (a tile not yet prepared for
+    raster, infinite there, takes ray casting whatever the base)."""
     names = list(predicted)
-    pure = {n: float(np.asarray(predicted[n]).sum()) + model.overhead.get(n, 0.0) for n in names}
+    known = np.all([np.isfinite(predicted[n]) for n in names], axis=0)      # tiles every strategy can draw
+    pure = {n: float(np.asarray(predicted[n])[known].sum()) + model.overhead.get(n, 0.0) for n in names}
     base = min(pure, key=pure.get)
     err = {n: float(model.fit_error.get(n, 0.0)) for n in names}
     order = [base] + [n for n in names if n != base]            # ties stay with the base
@@ -143,14 +155,16 @@ def default_estimator(pyramid: TilePyramid) -> TriangleEstimator:
 
 def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
                triangles_fn: TriangleEstimator | None = None, policy: str = "hybrid", tau: float = DEFAULT_TAU,
-               threshold: float = 1.0, batch: bool = True) -> list[TilePlan]:
+               threshold: float = 1.0, batch: bool = True, prep_budget_ms: float | None = None) -> list[TilePlan]:
     """Selected tiles front to back with the policy's choice of strategy for each.
 
     A pure policy (one strategy for every tile) needs no features: its plans carry none. A mixed policy gets
     features, the model's predicted ms of every candidate it knows and its choice; ``triangles_fn`` gives the raster
     mesh's triangle counts and their share inside the frustum (default: the raster strategy's CPU estimate from
     the registry, one per pyramid). Features and predictions of all tiles are computed as arrays; ``batch=False`` computes them
-    tile by tile instead (the reference path: the same plans, slower).
+    tile by tile instead (the reference path: the same plans, slower). With ``prep_budget_ms`` (streaming), the
+    estimate prepares new tiles only within that much wall time; a tile it could not prepare has unknown
+    triangles (NaN) and is ray cast this frame (its raster cost is unknown, ray casting needs no such preparation).
     """
     if policy not in POLICIES:
         raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
@@ -163,9 +177,12 @@ def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
         return []
     triangles_fn = triangles_fn or default_estimator(pyramid)
     if batch:
-        triangles, visible = triangles_fn.many(selected, view, tau)
+        if prep_budget_ms is None:
+            triangles, visible = triangles_fn.many(selected, view, tau)
+        else:
+            triangles, visible = triangles_fn.many(selected, view, tau, prep_budget_ms)
         columns = feature_columns(pyramid, view, selected, triangles, visible)
-        pred = model.predict_columns(columns)
+        pred = unknown_raster_costs(model.predict_columns(columns), columns)
         chosen = hedged_choices(pred, model) if policy == "hybrid" else choices(policy, columns, pred, threshold)
         frame = FrameColumns(columns, pred)
         return [TilePlan(s, None, None, c, frame=frame, row=i) for i, (s, c) in enumerate(zip(selected, chosen))]
