@@ -92,7 +92,9 @@ def run_scaling(ctx, stores, frames: int = 48, size=(640, 360), tau: float = 2 /
 
     A method's flights over the stores are timed interleaved, frame k of every store before frame k + 1 (the
     first store rotating), so a drift of the machine over the run falls on every size alike and the size ratios
-    compare frames drawn at the same time. Host RSS is the process's, with every store of the method open."""
+    compare frames drawn at the same time; while a store's frame is timed the other stores' loader threads are
+    held, so that none reads in the background of another's frame. Host RSS is the process's, with every store
+    of the method open."""
     from hybrid.camera.flight import preset
     from hybrid.tiles.periodic import open_any_store
     rows, refused, setup = [], [], []
@@ -108,6 +110,9 @@ def run_scaling(ctx, stores, frames: int = 48, size=(640, 360), tau: float = 2 /
                 turn = [f for f in live if f.renderer is not None]
                 shift = k % max(len(turn), 1)
                 for f in turn[shift:] + turn[:shift]:
+                    for g in turn:                 # only this store's loader reads while its frame is timed
+                        if g.pyramid is not None:
+                            g.pyramid.pause(g is not f)
                     _frame(f, method, k, tau, gpu_budget_mib, rows, refused)
         finally:
             for f in flights:

@@ -40,3 +40,6 @@ def test_scaling_streams_within_budgets_and_reports(ctx, stores, tmp_path):
     for chart in ("scaling_frame_time.png", "scaling_gpu_memory.png", "scaling_size.png"):
         assert (tmp_path / "rep" / chart).stat().st_size > 1000
     assert np.isfinite(t["p99_over_median"]).all()
+    met = int((t["p99_over_median"] <= 2).sum())                # the reading counts the flights that meet it
+    assert f"target <= 2x met in {met} of {len(t)} flights" in text
+    assert (met == len(t)) == ("missed by" not in text)

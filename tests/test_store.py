@@ -260,3 +260,23 @@ def test_close_stops_the_loader_thread_and_frees_the_host_cache(grid, tmp_path):
     assert p.cache_bytes == 0 and not p.cached(keys[0])
     assert p.request(keys[:2]).wait(10) and p.cached(keys[1])   # a new loader on the next request
     p.close()
+
+
+def test_a_paused_loader_reads_nothing_until_let_go(grid, tmp_path):
+    """A paused loader thread holds before its next tile (the scaling run pauses every store but the one timed);
+    let go, it reads what it was asked; closing a paused loader ends it."""
+    h, sp = grid
+    prepare_store(ArraySource(h, sp), tmp_path / "s", 32)
+    p = StorePyramid(tmp_path / "s")
+    keys = p.keys(0)
+    assert p.request(keys[:1]).wait(10)
+    p.pause()
+    done = p.request(keys[1:4])
+    assert not done.wait(0.3) and not any(p.cached(k) for k in keys[2:4])
+    p.pause(False)
+    assert done.wait(10) and all(p.cached(k) for k in keys[1:4])
+    p.pause()
+    p.request(keys[4:])
+    loader = p._loader
+    p.close()                                                   # ends though paused
+    assert not loader.is_alive()

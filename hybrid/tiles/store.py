@@ -246,6 +246,8 @@ class StorePyramid(TilePyramid):
         self._wake = threading.Condition(threading.Lock())   # the loader thread's queue (request)
         self._wanted: list = []
         self._done = threading.Event()
+        self._go = threading.Event()                          # cleared: the loader waits before its next tile
+        self._go.set()
         self._loader = None
         self._closing = False
         self._failed: set = set()
@@ -342,6 +344,14 @@ class StorePyramid(TilePyramid):
             self._wake.notify()
             return self._done
 
+    def pause(self, paused: bool = True) -> None:
+        """Hold the loader thread before its next tile (the one it is reading finishes), or let it go on: so that
+        one store's background reads do not run while another store's frame is timed."""
+        if paused:
+            self._go.clear()
+        else:
+            self._go.set()
+
     def close(self) -> None:
         """Stop the loader thread (it ends after the tile it is reading) and drop the host cache; a later read
         reads from disk again and a later ``request`` starts a new loader."""
@@ -349,6 +359,7 @@ class StorePyramid(TilePyramid):
             self._wanted = []
             self._closing = True
             self._wake.notify()
+            self._go.set()
             loader, self._loader = self._loader, None
         if loader is not None:
             loader.join()
@@ -368,6 +379,10 @@ class StorePyramid(TilePyramid):
                 if self._closing:
                     self._done.set()
                     return
+            self._go.wait()
+            with self._wake:
+                if self._closing or not self._wanted:
+                    continue
                 key = self._wanted.pop(0)
             try:
                 self.samples(key)
