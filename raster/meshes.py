@@ -9,7 +9,7 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 from hybrid.gl.context import gl_bytes
-from hybrid.gl.programs import program
+from hybrid.gl.programs import program, set_uniform
 from hybrid.gl.shading import resolve_mode
 from hybrid.gl.textures import terrain_texture
 
@@ -80,8 +80,7 @@ class MeshStrategyBase:
         ctx, prog = self.ctx, self.prog
         prog["view_proj_rel"].write(view.view_proj_rel.T.astype(np.float32).tobytes())
         prog["mode"].value = MODES[mode]
-        if "wireframe" in prog:
-            prog["wireframe"].value = False
+        set_uniform(prog, "wireframe", False)
         prog["hrange"].value = tuple(float(v) for v in self.hf.height_range)
         if self.texture is not None:
             self.texture.use(1)

@@ -14,7 +14,7 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 from hybrid.gl.context import gl_bytes, gl_finish
-from hybrid.gl.programs import compute_shader, set_uniform
+from hybrid.gl.programs import compute_shader, set_uniform, write_uniform
 from hybrid.gl.textures import terrain_texture
 
 from .arena import LeafArena
@@ -223,8 +223,7 @@ class TileletSelection:
         blocks = self.frame_blocks(view, items, tau, culling, skirts)
         planes = view.frustum_planes_rel().astype(np.float32).tobytes()
         for prog in self.passes:
-            if "planes" in prog:
-                prog["planes"].write(planes)
+            write_uniform(prog, "planes", planes)
         self.set_selection("k_tau", float(view.pixels_per_radian) / float(tau))
         self.set_selection("beta", self.beta)
         self.set_selection("write_records", self.writes == "records")

@@ -51,12 +51,15 @@ def compute_shader(ctx, package: str, name: str, defines: dict | None = None):
 
 
 def set_uniform(prog, name: str, value) -> None:
-    """Set a uniform if the linked program kept it (compilers drop unused uniforms)."""
-    if name in prog:
-        prog[name].value = value
+    """Set a uniform if the linked program kept it (compilers drop unused uniforms). Looked up with
+    ``Program.get`` (a dict): ``name in prog`` walks every member of the program in Python."""
+    u = prog.get(name, None)
+    if u is not None:
+        u.value = value
 
 
 def write_uniform(prog, name: str, data: bytes) -> None:
     """Write a uniform's raw bytes (matrices) if the linked program kept it."""
-    if name in prog:
-        prog[name].write(data)
+    u = prog.get(name, None)
+    if u is not None:
+        u.write(data)
