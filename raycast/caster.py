@@ -29,6 +29,7 @@ from hybrid.tiles.quantize import quantize
 
 from .maxmip import MaxMipBuilder, bytes_per_sample, level_count, tile_nbytes
 from .options import MODES, RECONSTRUCTIONS, CastOptions, default_max_steps, prepass_default
+from .tile_params import TILE_BLOCK, block_stride, outer_bits, tile_params
 
 STAT_FIELDS = ("rays", "hits", "steps", "max_steps", "capped", "shadow_rays", "shadow_steps", "shadow_capped")
 STAT_SLOTS = 64          # copies of each tile's counters (one per 64x64 screen bin, modulo), as in raycast.frag.glsl
@@ -87,12 +88,7 @@ class _Grid:
 
 def outer_faces(clip, hf) -> int:
     """Bit mask of a tile's box sides lying on the terrain's outer boundary (W 1, E 2, S 4, N 8)."""
-    x0, y0, x1, y1 = (float(v) for v in clip)
-    ox, oy = float(hf.origin[0]), float(hf.origin[1])
-    w, d = hf.extent
-    tol = 1e-6 * min(hf.spacing_x, hf.spacing_y)
-    return ((abs(x0 - ox) <= tol) * 1 | (abs(x1 - (ox + w)) <= tol) * 2
-            | (abs(y0 - oy) <= tol) * 4 | (abs(y1 - (oy + d)) <= tol) * 8)
+    return int(outer_bits([[float(v) for v in clip]], hf)[0])
 
 
 class RaycastStrategy:
@@ -104,6 +100,7 @@ class RaycastStrategy:
     def __init__(self, ctx, hf, **options):
         self.ctx, self.hf = ctx, hf
         register_include(ctx, "raycast/traverse", "raycast", "traverse.glsl")
+        register_include(ctx, "raycast/tile_block", "raycast", "tile_block.glsl")
         self._prepass = prepass_default(gl_info(ctx).is_software)
         self.options = self._resolved(CastOptions().updated(**options))
         self._check_mode(self.options)
@@ -117,6 +114,8 @@ class RaycastStrategy:
         self.edges = TerrainEdges(ctx, hf)
         self.ids = None
         self.prior = None                       # the frame's earlier passes, for occluded passes
+        self.tile_buf = None                    # the frame's TileParams blocks (tile_params)
+        self._stride = block_stride(ctx.info.get("GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT", 256))
         self._next_id = 1
         self.grid: _Grid | None = None
         self.last_tile_stats = np.zeros((0, len(STAT_FIELDS)), np.int64)
@@ -148,7 +147,7 @@ class RaycastStrategy:
         the copy of a frame's earlier passes, terrain edges, shadow grid."""
         grid = (self.grid.tex.heights, self.grid.tex.maxmip) if self.grid is not None else ()
         prior = (*self.prior.color_attachments, self.prior.depth_attachment) if self.prior is not None else ()
-        return gl_bytes(self.texture, self.cube, self.stats_buf, self.ids, *prior, *grid) + self.edges.nbytes
+        return gl_bytes(self.texture, self.cube, self.stats_buf, self.ids, self.tile_buf, *prior, *grid) + self.edges.nbytes
 
     # --- tiles ------------------------------------------------------------------------------------
     @staticmethod
@@ -289,44 +288,16 @@ class RaycastStrategy:
         ctx.front_face = "ccw"
         ctx.cull_face = "front"
         try:
+            lod_scale = K / float(opts.lod) if opts.lod else 0.0
+            blocks = tile_params(items, eye, hf, lod_scale, opts.max_steps, self._next_id, self._stride)
+            if self.tile_buf is None or self.tile_buf.size < blocks.nbytes:
+                if self.tile_buf is not None:
+                    self.tile_buf.release()
+                self.tile_buf = ctx.buffer(reserve=max(blocks.nbytes, 64 * self._stride))
+            self.tile_buf.write(blocks.tobytes())
             for k, (g, tile, _sel) in enumerate(items):
-                sx, sy = tile.spacing_xy
-                org = np.asarray(tile.origin, dtype=np.float64)
-                x0, y0, x1, y1 = (float(v) for v in tile.clip)
-                pad = 1e-3 * max(sx, sy) + 0.01
-                zq = float(g.quant_error)           # the codes' heights lie within zq of the tile's bounds
-                box_lo = np.array([x0 - pad, y0 - pad, tile.zmin - zq - pad]) - eye
-                box_hi = np.array([x1 + pad, y1 + pad, tile.zmax + zq + pad]) - eye
-                for p in (prog, self.prepass_prog):
-                    set_uniform(p, "box_lo", tuple(box_lo.astype(np.float32)))
-                    set_uniform(p, "box_hi", tuple(box_hi.astype(np.float32)))
-                level = int(tile.key.level) if hasattr(tile, "key") else 0
-                set_uniform(prog, "n_cells", g.n)
-                set_uniform(prog, "dq", (g.offset, g.step))
-                set_uniform(prog, "dq_base", g.base)
-                set_uniform(prog, "n_levels", level_count(g.n) - 1)
-                set_uniform(prog, "ext_lo", ((x0 - org[0]) / sx, (y0 - org[1]) / sy))  # texels from the tile's origin
-                set_uniform(prog, "ext", ((x1 - org[0]) / sx, (y1 - org[1]) / sy))
-                set_uniform(prog, "zr", (tile.zmin - zq - org[2], tile.zmax + zq - org[2]))
-                e = eye - org
-                set_uniform(prog, "eye_tex", (e[0] / sx, e[1] / sy, e[2]))
-                set_uniform(prog, "origin_rel", tuple((org - eye).astype(np.float32)))
-                set_uniform(prog, "spacing", (sx, sy))
-                set_uniform(prog, "tile_level", level)
-                set_uniform(prog, "uv_off", ((org[0] - hf.origin[0]) / ext_w, (org[1] - hf.origin[1]) / ext_d))
-                set_uniform(prog, "uv_scale", (sx / ext_w, sy / ext_d))
-                set_uniform(prog, "lod_k", max(sx, sy) * K / float(opts.lod) if opts.lod else 0.0)
-                set_uniform(prog, "max_steps", opts.max_steps or default_max_steps(g.n))
-                set_uniform(prog, "tile_index", k)
-                set_uniform(prog, "outer", outer_faces(tile.clip, hf))
-                if grid is not None:
-                    set_uniform(prog, "g_tile_off", ((org[0] - hf.origin[0]) / hf.spacing_x,
-                                                     (org[1] - hf.origin[1]) / hf.spacing_y))
+                self.tile_buf.bind_to_uniform_block(3, offset=k * self._stride, size=TILE_BLOCK.itemsize)
                 if id_fbo is not None:
-                    tid = self._next_id
-                    self._next_id += 1
-                    self.prepass_prog["tile_id"].value = tid
-                    set_uniform(prog, "tile_id", tid)
                     id_fbo.use()
                     ctx.depth_func = ">"
                     self.prepass_vao.render()
@@ -339,6 +310,7 @@ class RaycastStrategy:
             ctx.disable(ctx.CULL_FACE)
             ctx.cull_face = "back"
             if id_fbo is not None:
+                self._next_id += n_items
                 target.fbo.use()
                 id_fbo.release()
         ctx.memory_barrier()
@@ -370,7 +342,8 @@ class RaycastStrategy:
             vao.release()
             prog.release()
         self.programs.clear()
-        for o in (self.prepass_vao, self.prepass_prog, self.cube, self.stats_buf, self.texture, self.ids, self.edges):
+        for o in (self.prepass_vao, self.prepass_prog, self.cube, self.stats_buf, self.texture, self.ids, self.edges,
+                  self.tile_buf):
             if o is not None:
                 o.release()
         if self.grid is not None:

@@ -9,6 +9,7 @@
 #extension GL_ARB_ES3_1_compatibility : enable
 #endif
 #include "raycast/traverse"
+#include "raycast/tile_block"
 #include "terrain_edges"
 
 // --- view ---
@@ -21,29 +22,11 @@ uniform float far_plane;
 // --- tile ---
 uniform usampler2D hmap;       // R16UI (N+1)² height codes (metres = rc_height(code, dq, dq_base))
 uniform usampler2D mmap;       // R16UI (N/2)², max-mip levels 1..log2 N as texture levels 0..log2 N - 1
-uniform dvec2 dq;              // (offset, step) metres: height = offset + step * (code + dq_base)
-uniform int dq_base;
-uniform int n_cells;           // N
-uniform int n_levels;          // log2 N
-uniform vec2 ext_lo;           // clip rectangle's lower corner in texels from the tile's origin (0 but in a fallback)
-uniform vec2 ext;              // clip rectangle's upper corner in texels from the tile's origin
-uniform vec2 zr;               // tile z range, metres relative to terrain origin z
-uniform vec3 eye_tex;          // eye in tile texel space
-uniform vec3 origin_rel;       // tile origin (sample [0,0] at terrain origin z) minus eye, metres
-uniform vec2 spacing;          // metres per tile texel east-west (x) and north-south (y)
-uniform int tile_level;        // pyramid level of the tile
-uniform vec2 uv_off;           // texture coordinate of the tile origin
-uniform vec2 uv_scale;         // texture coordinate per tile texel
-uniform float lod_k;           // max(spacing.x, spacing.y) * K / tau (metres), for LOD
-uniform int max_steps;
-uniform int outer;             // tile box sides on the terrain's outer boundary (W 1, E 2, S 4, N 8)
-uniform int tile_index;        // index into the statistics array
 #if OCCLUDERS
 uniform sampler2D prior_depth; // reversed-Z depth of what the frame's earlier passes drew (0: nothing)
 uniform vec2 depth_ab;         // (a, b): reversed-Z depth = b / view depth - a
 #endif
 uniform int stat_bins_x;       // 64-pixel screen bins a row (statistics slots follow the rasterizer's bins)
-uniform uint tile_id;          // pre-pass ID
 uniform usampler2D ids;        // pre-pass target
 // --- shading ---
 uniform sampler2D tex;         // terrain colour, whole terrain, mipmapped
@@ -58,7 +41,6 @@ uniform int g_cells;
 uniform int g_levels;
 uniform vec2 g_ext;
 uniform vec2 g_zr;
-uniform vec2 g_tile_off;       // tile origin in level-0 terrain texels
 uniform vec2 g_spacing;        // terrain spacing east-west and north-south, metres
 uniform int g_max_steps;
 

@@ -63,3 +63,26 @@ def test_unknown_mode_is_refused(ctx, puget257):
     from hybrid.camera.view import default_view
     with ReferenceRenderer(ctx, puget257) as ref, pytest.raises(TerrabenchError, match="unknown shading mode 'glow'"):
         ref.render(default_view(puget257, 32, 18), mode="glow")
+
+
+def test_tile_block_offsets_are_the_drivers(ctx, puget257):
+    """The ray caster's per-tile uniform block (tile_block.glsl) is written with std140 offsets computed in
+    raycast.tile_params; the linked program's own offsets of every member, asked from the driver, are those."""
+    import ctypes
+
+    from hybrid.gl.context import _gl_function
+    from raycast.tile_params import TILE_BLOCK
+    rc = RaycastStrategy(ctx, puget257)
+    opts = CastOptions(shadows=True, prepass=True, lod=0.5)
+    prog, _ = rc._program(opts, rc._check_mode(opts))
+    names = list(TILE_BLOCK.names)
+    c_names = (ctypes.c_char_p * len(names))(*[n.encode() for n in names])
+    idx = (ctypes.c_uint * len(names))()
+    _gl_function(b"glGetUniformIndices", ctypes.c_uint, ctypes.c_int, ctypes.POINTER(ctypes.c_char_p),
+                 ctypes.POINTER(ctypes.c_uint))(prog.glo, len(names), c_names, idx)
+    assert all(i != 0xFFFFFFFF for i in idx), dict(zip(names, idx))       # every member kept by the linker
+    offsets = (ctypes.c_int * len(names))()
+    _gl_function(b"glGetActiveUniformsiv", ctypes.c_uint, ctypes.c_int, ctypes.POINTER(ctypes.c_uint), ctypes.c_uint,
+                 ctypes.POINTER(ctypes.c_int))(prog.glo, len(names), idx, 0x8A3B, offsets)   # GL_UNIFORM_OFFSET
+    assert dict(zip(names, offsets)) == {n: TILE_BLOCK.fields[n][1] for n in names}
+    rc.release()

@@ -1,0 +1,84 @@
+"""The per-tile parameters of a ray-cast frame as one uniform buffer: the std140 ``TileParams`` block of
+tile_block.glsl, one block a tile, so that a tile's draw binds a range instead of setting some 20 uniforms.
+
+Every field is computed for all of the frame's tiles at once; only the tiles' own attributes are gathered
+tile by tile.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .maxmip import level_count
+from .options import default_max_steps
+
+# std140 offsets of TileParams (tile_block.glsl): dvec2 and vec3 align to 16 bytes, vec2 to 8, scalars to 4;
+# a scalar may follow a vec3 in its last 4 bytes; the block's size rounds up to 16
+TILE_BLOCK = np.dtype({
+    "names": ["dq", "box_lo", "dq_base", "box_hi", "n_cells", "eye_tex", "n_levels", "origin_rel", "tile_level",
+              "ext_lo", "ext", "zr", "spacing", "uv_off", "uv_scale", "g_tile_off", "lod_k", "max_steps", "outer",
+              "tile_index", "tile_id"],
+    "formats": [("<f8", 2), ("<f4", 3), "<i4", ("<f4", 3), "<i4", ("<f4", 3), "<i4", ("<f4", 3), "<i4",
+                ("<f4", 2), ("<f4", 2), ("<f4", 2), ("<f4", 2), ("<f4", 2), ("<f4", 2), ("<f4", 2), "<f4", "<i4",
+                "<i4", "<i4", "<u4"],
+    "offsets": [0, 16, 28, 32, 44, 48, 60, 64, 76, 80, 88, 96, 104, 112, 120, 128, 136, 140, 144, 148, 152],
+    "itemsize": 160})
+
+
+def outer_bits(clip: np.ndarray, hf) -> np.ndarray:
+    """Per tile, the bit mask of its box sides on the terrain's outer boundary (W 1, E 2, S 4, N 8), from (B, 4)
+    clip rectangles (x0, y0, x1, y1) in world metres."""
+    clip = np.asarray(clip, dtype=np.float64).reshape(-1, 4)
+    ox, oy = float(hf.origin[0]), float(hf.origin[1])
+    w, d = hf.extent
+    tol = 1e-6 * min(hf.spacing_x, hf.spacing_y)
+    return ((np.abs(clip[:, 0] - ox) <= tol) * 1 | (np.abs(clip[:, 2] - (ox + w)) <= tol) * 2
+            | (np.abs(clip[:, 1] - oy) <= tol) * 4 | (np.abs(clip[:, 3] - (oy + d)) <= tol) * 8)
+
+
+def block_stride(alignment: int) -> int:
+    """Bytes between two tiles' blocks in the buffer: the block's size rounded up to the driver's
+    GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT."""
+    a = max(int(alignment), 1)
+    return -(-TILE_BLOCK.itemsize // a) * a
+
+
+def tile_params(items, eye, hf, lod_k_scale: float, max_steps: int | None, first_id: int, stride: int) -> np.ndarray:
+    """The TileParams blocks (bytes laid out ``stride`` apart, as a (B, stride) uint8 array) of the frame's
+    (gpu_tile, tile, selected) items for an eye (world metres); ``lod_k_scale`` is K / lod (0: no LOD),
+    ``first_id`` the first tile's pre-pass ID."""
+    b = len(items)
+    clip = np.array([[float(v) for v in t.clip] for _, t, _ in items], dtype=np.float64).reshape(b, 4)
+    org = np.array([t.origin for _, t, _ in items], dtype=np.float64).reshape(b, 3)
+    sp = np.array([t.spacing_xy for _, t, _ in items], dtype=np.float64).reshape(b, 2)
+    z = np.array([(t.zmin, t.zmax) for _, t, _ in items], dtype=np.float64).reshape(b, 2)
+    g = np.array([(gt.offset, gt.step, gt.quant_error) for gt, _, _ in items], dtype=np.float64).reshape(b, 3)
+    ints = np.array([(gt.n, gt.base, int(t.key.level) if hasattr(t, "key") else 0) for gt, t, _ in items],
+                    dtype=np.int64).reshape(b, 3)
+    eye = np.asarray(eye, dtype=np.float64)
+    ox, oy = float(hf.origin[0]), float(hf.origin[1])
+    ext_w, ext_d = hf.extent
+    pad = 1e-3 * sp.max(axis=1) + 0.01
+    zq = g[:, 2]                                    # the codes' heights lie within zq of the tile's bounds
+    out = np.zeros(b, TILE_BLOCK)
+    out["dq"] = g[:, :2]
+    out["box_lo"] = np.stack([clip[:, 0] - pad, clip[:, 1] - pad, z[:, 0] - zq - pad], axis=1) - eye
+    out["box_hi"] = np.stack([clip[:, 2] + pad, clip[:, 3] + pad, z[:, 1] + zq + pad], axis=1) - eye
+    out["dq_base"], out["n_cells"], out["tile_level"] = ints[:, 1], ints[:, 0], ints[:, 2]
+    out["n_levels"] = [level_count(int(n)) - 1 for n in ints[:, 0]]
+    out["eye_tex"] = np.column_stack([(eye[0] - org[:, 0]) / sp[:, 0], (eye[1] - org[:, 1]) / sp[:, 1], eye[2] - org[:, 2]])
+    out["origin_rel"] = org - eye
+    out["ext_lo"] = (clip[:, :2] - org[:, :2]) / sp            # texels from the tile's origin
+    out["ext"] = (clip[:, 2:] - org[:, :2]) / sp
+    out["zr"] = np.column_stack([z[:, 0] - zq - org[:, 2], z[:, 1] + zq - org[:, 2]])
+    out["spacing"] = sp
+    out["uv_off"] = np.column_stack([(org[:, 0] - ox) / ext_w, (org[:, 1] - oy) / ext_d])
+    out["uv_scale"] = sp / np.array([ext_w, ext_d])
+    out["g_tile_off"] = np.column_stack([(org[:, 0] - ox) / hf.spacing_x, (org[:, 1] - oy) / hf.spacing_y])
+    out["lod_k"] = sp.max(axis=1) * lod_k_scale
+    out["max_steps"] = [max_steps or default_max_steps(int(n)) for n in ints[:, 0]]
+    out["outer"] = outer_bits(clip, hf)
+    out["tile_index"] = np.arange(b)
+    out["tile_id"] = first_id + np.arange(b)
+    blocks = np.zeros((b, stride), np.uint8)
+    blocks[:, :TILE_BLOCK.itemsize] = out.view(np.uint8).reshape(b, TILE_BLOCK.itemsize)
+    return blocks
