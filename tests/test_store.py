@@ -13,7 +13,7 @@ from hybrid.terrain.datasets import puget
 from hybrid.terrain.grid_sources import FractalSource, GdalGridSource
 from hybrid.terrain.heightfield import HeightField
 from hybrid.terrain.stored import open_store
-from hybrid.tiles import store as store_mod
+from hybrid.tiles import store_prepare as store_mod
 from hybrid.tiles.periodic import open_periodic
 from hybrid.tiles.pyramid import TilePyramid
 from hybrid.tiles.quantize import dequantize, quantize

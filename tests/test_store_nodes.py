@@ -112,7 +112,7 @@ def test_prepare_memory_stays_band_sized(tmp_path, monkeypatch):
     import tracemalloc
 
     from hybrid.terrain.grid_sources import FractalSource
-    from hybrid.tiles import store as store_mod
+    from hybrid.tiles import store_prepare as store_mod
     peaks, build = {}, store_mod.build_nodes
 
     def measured(*a, **k):

@@ -25,7 +25,7 @@ from hybrid.terrain.stored import LazyGrid, StoredTerrain, open_store
 
 from .periodic_nodes import KINDS, PeriodicNodes, _spans, seam_profiles
 from .pyramid import _block_reduce, interpolate_clamped
-from .store import _levels
+from .store_prepare import _levels
 
 
 class _WrappedLevel:
