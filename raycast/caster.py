@@ -237,7 +237,6 @@ class RaycastStrategy:
         set_uniform(prog, "hrange", (lo, hi))
         set_uniform(prog, "heat_max", float(opts.heat_max))
         K = float(view.height) / (2.0 * t)
-        ext_w, ext_d = hf.extent
         if self.texture is not None:
             self.texture.use(2)
             set_uniform(prog, "tex", 2)

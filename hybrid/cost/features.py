@@ -15,8 +15,8 @@ from hybrid.tiles.tiletree import SelectedTile, TileSelection
 class TileFeatures:
     """What the cost model sees of one tile in one view.
 
-    pixels: screen area (px) of the tile's AABB projection clipped to the viewport (the whole viewport if
-      the box reaches behind the near plane) — an upper bound of the pixels either strategy shades.
+    pixels: screen area (px) of the tile's AABB projection, cut at the near plane and clipped to the viewport
+      — an upper bound of the pixels either strategy shades.
     triangles: triangles the raster strategy would draw for this tile at this view.
     slab_cells: level-0-of-the-tile cells a ray crosses inside the tile's height slab at this view's
       elevation angle, (zmax - zmin) / tan(elevation) metres counted in cells along the ray's heading (cells

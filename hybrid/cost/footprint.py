@@ -2,15 +2,16 @@
 
 The batched counterpart of ``hybrid.cost.features.footprint_pixels``, computed another way. A ray from the
 eye through a point of a convex body's projection leaves the body exactly once, through a face turned away
-from the eye: the projections of a box's back faces tile its projection. So the footprint clipped to the
-viewport is the sum of the back faces' projected quads clipped to the viewport, each a convex polygon, every
-back face of every box in one pass: no convex hull, no silhouette. Faces reaching behind the near plane are
-cut at it first (the cut box's back faces are the cut faces; its cap on the near plane faces the eye).
-Vertices are the reference's: the same corners and near-plane crossings of the box edges (from the lower
-corner index to the higher), projected the same way and rounded to 1e-6 px.
+from the eye: the projections of a box's back faces tile its projection, whose boundary is the outline of
+those faces. A box wholly in front of the near plane is one polygon, its outline (4 or 6 corners, from a
+table by where the eye lies); a box reaching behind the near plane is its back faces, each cut at the plane
+first (the cut box's back faces are the cut faces; its cap on the near plane faces the eye). Every polygon is
+clipped to the viewport and its area summed per box. Vertices are the reference's: the same corners and
+near-plane crossings of the box edges (from the lower corner index to the higher), projected the same way
+and rounded to 1e-6 px.
 
 A frame has a few dozen tiles, so the time is set by the number of array operations, not their size: each
-step works on every back face at once, and the viewport clip is a clamp (``clipped_signed_areas``).
+step works on every polygon at once, and the viewport clip is a clamp (``clipped_signed_areas``).
 """
 from __future__ import annotations
 
@@ -101,12 +102,6 @@ _PREV = np.array([3, 0, 1, 2])                                              # fa
 _FLIP = _FACES > np.roll(_FACES, -1, axis=1)                                # face edge k runs high to low corner
 _OUTLINE, _HAS_OUTLINE = _silhouettes()
 _PAD = {k: np.minimum(np.arange(8), k - 1) for k in (4, 6, 8)}            # k vertices padded to 8 by the last
-
-
-def signed_areas(poly: np.ndarray) -> np.ndarray:
-    """Shoelace signed areas (...) of padded polygons (..., m, 2): positive counter-clockwise in (x, y)."""
-    nxt = poly[..., _NEXT[poly.shape[-2]], :]
-    return 0.5 * (poly[..., 0] * nxt[..., 1] - nxt[..., 0] * poly[..., 1]).sum(axis=-1)
 
 
 def clipped_signed_areas(poly: np.ndarray, w: float, h: float) -> np.ndarray:

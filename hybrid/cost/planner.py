@@ -177,10 +177,7 @@ def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
         return []
     triangles_fn = triangles_fn or default_estimator(pyramid)
     if batch:
-        if prep_budget_ms is None:
-            triangles, visible = triangles_fn.many(selected, view, tau)
-        else:
-            triangles, visible = triangles_fn.many(selected, view, tau, prep_budget_ms)
+        triangles, visible = triangles_fn.many(selected, view, tau, prep_budget_ms)
         columns = feature_columns(pyramid, view, selected, triangles, visible)
         pred = unknown_raster_costs(model.predict_columns(columns), columns)
         chosen = hedged_choices(pred, model) if policy == "hybrid" else choices(policy, columns, pred, threshold)
