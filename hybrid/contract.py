@@ -82,9 +82,13 @@ class SkirtedStrategy(TileStrategy, Protocol):
 
 class TriangleEstimator(Protocol):
     """Triangles a raster strategy would draw for tiles at a view, computed on the CPU without GL;
-    ``build_ms`` is the wall time it has spent on one-time per-tile preparation."""
+    ``build_ms`` is the wall time it has spent on one-time per-tile preparation. With ``background`` set, slow
+    preparation is left to a store's loader thread: the tiles it concerns are unknown (NaN) in ``many``, and
+    ``waiting`` maps each of them to that work (a callable), for the renderer to hand to the loader."""
 
     build_ms: float
+    background: bool
+    waiting: dict
 
     def __call__(self, key: TileKey, selected: SelectedTile, view: View, tau: float) -> int:
         """Estimated triangle count of tile ``key`` at ``view`` for the bound tau (pixels)."""

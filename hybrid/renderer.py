@@ -12,8 +12,9 @@ mixed policies the features and choices) plus the drawing, wall clock with ctx.f
 Without an upload budget, tiles not yet resident are uploaded before the timed draw and counted apart
 (``uploads``); with ``upload_budget_ms`` uploads are jobs run inside the frame within that budget
 (``hybrid.uploads``), their time is part of ``wall_ms``, and tiles still waiting are drawn from a resident
-ancestor (``fallback_tiles``); from a tile store, a tile's upload waits until the store's loader thread has
-read its samples, which it is asked for at the start of the frame.
+ancestor (``fallback_tiles``); from a tile store, the store's loader thread is asked at the start of the frame
+for the samples the frame lacks and for the slow host work of uploads and estimates (``hybrid.uploads.host_jobs``),
+and an upload whose host work it has not yet done waits for it.
 """
 from __future__ import annotations
 
@@ -39,7 +40,7 @@ from hybrid.terrain.heightfield import HeightField
 from hybrid.tiles.pyramid import EDGE_E, EDGE_N, EDGE_S, EDGE_W, TilePyramid
 from hybrid.tiles.store import pyramid_for
 from hybrid.tiles.tiletree import DEFAULT_TAU, edge_neighbours
-from hybrid.uploads import fallback_selection, fallback_tile, stream_uploads
+from hybrid.uploads import fallback_selection, fallback_tile, host_jobs, stream_uploads
 
 STRATEGY_CODES = {"raster": 1, "raycast": 2}
 """Per-pixel codes of the strategy map, by strategy kind (0 = no terrain)."""
@@ -77,6 +78,8 @@ class Renderer:
         self.options = route_options(self.strategies, options)
         self.model = cost_model or (load_cost_model(gl_info(ctx).renderer) if self.mixed else None)
         self.triangles = triangle_estimator(self.pyramid) if self.mixed else None
+        if self.triangles is not None and upload_budget_ms is not None and hasattr(self.pyramid, "request"):
+            self.triangles.background = True             # blocks still to cut: the store's loader thread cuts them
         self.threshold = threshold
         self.oracle_repeats = int(oracle_repeats)
         if upload_budget_ms is not None and not (np.isfinite(upload_budget_ms) and upload_budget_ms >= 0):
@@ -266,13 +269,16 @@ class Renderer:
                 for p in plans:                # upload first: the timed frame measures drawing only
                     self._resident(p.choice, p.key, pinned)
             else:                              # uploads within the frame's budget, the rest from ancestors
-                ready = lambda key: True       # noqa: E731
+                ready, deferred = (lambda key: True), (lambda plan: False)     # noqa: E731
                 if hasattr(self.pyramid, "request"):      # a store: its loader thread reads what is missing
-                    self.pyramid.request([p.key for p in plans if (p.choice, p.key) not in self.cache.entries])
+                    missing = [p for p in plans if (p.choice, p.key) not in self.cache.entries]
+                    work, waiting = host_jobs(self.strategies, self.triangles, missing, self.pyramid.n)
+                    self.pyramid.request([p.key for p in missing] + list(work), work)
                     ready = self.pyramid.cached
+                    deferred = lambda p: (p.choice, p.key) in waiting and not self.pyramid.failed(p.key)  # noqa: E731
                 # the frame's budget covers the estimate's preparation and the uploads together
                 streamed = stream_uploads(self.cache, self.strategies, plans, pinned, self.tile, self.pyramid.max_level,
-                                          max(self.upload_budget_ms - prep_ms, 0.0), ready)
+                                          max(self.upload_budget_ms - prep_ms, 0.0), ready, deferred)
                 self._fallbacks = {plans[i].key: a for i, a in streamed.fallbacks.items()}
             target.clear()
             target.use()

@@ -6,7 +6,9 @@ the GPU is drawn from its resident ancestor meanwhile, so the frame never shows 
 ``strategy.upload(tile)`` (which includes the strategy's per-tile GPU builds). Each frame runs jobs front to
 back until ``budget_ms`` of wall time is spent (at least one job a frame, so the queue always drains): first
 those whose CPU tile the ``ready`` callback says is loaded (a tile store's loader thread reads ahead), then
-the others, whose job reads the tile as well. The coarsest tile (the root) of every
+the others, whose job reads the tile as well, except those ``deferred`` to the loader thread: jobs whose slow CPU part
+(``host_jobs``: a periodic extension's node block cut near a seam, tens to hundreds of ms) it runs first, so that
+no frame waits for it. The coarsest tile (the root) of every
 strategy in use is made resident before anything else, whatever the budget, so every tile has an ancestor.
 
 A fallback draws the ancestor's GPU data clipped to the missing tile's rectangle, without stitching to its
@@ -59,8 +61,23 @@ def fallback_tile(ancestor_tile, clip, zrange=None):
     return out if zrange is None else replace(out, zmin=float(zrange[0]), zmax=float(zrange[1]))
 
 
+def host_jobs(strategies: dict, estimator, plans, n: int) -> tuple[dict, set]:
+    """A frame's host work for a store's loader thread: (key -> callables, the (choice, key) uploads waiting for
+    it). ``plans`` are the tiles whose upload is missing; strategies with a ``host_work(key, n)`` (the raster
+    ones) give theirs, and the triangle estimate (``estimator.waiting``, if any) the cuts it left unknown."""
+    work = {k: [fn] for k, fn in (getattr(estimator, "waiting", None) or {}).items()}
+    waiting = set()
+    for p in plans:
+        fn = getattr(strategies[p.choice], "host_work", None)
+        job = fn(p.key, n) if fn is not None else None
+        if job is not None:
+            work.setdefault(p.key, []).append(job)
+            waiting.add((p.choice, p.key))
+    return work, waiting
+
+
 def stream_uploads(cache, strategies: dict, plans, pinned: set, make_tile, max_level: int, budget_ms: float,
-                   ready=lambda key: True) -> UploadReport:
+                   ready=lambda key: True, deferred=lambda plan: False) -> UploadReport:
     """Run a frame's upload jobs within ``budget_ms`` and pick an ancestor for every tile still missing.
 
     ``plans`` (front to back) carry ``key`` and ``choice``; ``pinned`` gains every (strategy, key) the frame
@@ -77,9 +94,11 @@ def stream_uploads(cache, strategies: dict, plans, pinned: set, make_tile, max_l
             report.uploads += 1
         pinned.add((name, root))
     missing = [i for i, p in enumerate(plans) if (p.choice, p.key) not in cache.entries]
-    loaded = [ready(plans[i].key) for i in missing]
+    waiting = {i for i in missing if deferred(plans[i])}           # the loader thread's first: not this frame
+    missing_now = [i for i in missing if i not in waiting]
+    loaded = [ready(plans[i].key) for i in missing_now]
     # tiles whose samples are loaded first (their job is the GPU's part), then the others (read here too)
-    for i in [i for i, r in zip(missing, loaded) if r] + [i for i, r in zip(missing, loaded) if not r]:
+    for i in [i for i, r in zip(missing_now, loaded) if r] + [i for i, r in zip(missing_now, loaded) if not r]:
         p = plans[i]
         if report.uploads and (time.perf_counter() - t0) * 1e3 >= budget_ms:
             break

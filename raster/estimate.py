@@ -21,7 +21,7 @@ from hybrid.terrain.stored import StoredTerrain
 from hybrid.tiles.pyramid import TileKey, TilePyramid
 from hybrid.tiles.tiletree import SelectedTile, box_classes, box_distances
 
-from .nodes import nodes_for, tile_node_block
+from .nodes import nodes_for, pending_cut, tile_node_block
 from .quadtree import GPU_BETA, error_pyramid
 
 BLOCKS = 4                      # blocks a tile side for the small nodes' distances
@@ -167,7 +167,9 @@ class TileletTriangleEstimator:
     """A ``hybrid.contract.TriangleEstimator`` for the tilelet strategy over one tile pyramid.
 
     Per tile, its ``TileNodes`` are built once; ``build_ms`` adds up the wall time spent building them: one-time
-    work per tile, which renderers count apart from planning.
+    work per tile, which renderers count apart from planning. With ``background`` (a store's loader thread cuts
+    blocks), a tile whose node block still needs cutting is left unknown (NaN) rather than built from its
+    heights in the caller's thread, and the cut is in ``waiting`` for the loader to run.
     """
 
     def __init__(self, pyramid: TilePyramid, beta: float = GPU_BETA):
@@ -175,10 +177,12 @@ class TileletTriangleEstimator:
         self.beta = float(beta)
         self._rows = _Rows(MAX_TILES)
         self.build_ms, self.builds = 0.0, 0
+        self.background = False
+        self.waiting: dict = {}     # tiles of the last call left unknown for their block's cut -> the cut (callable)
         hf = pyramid.hf
         # a tile store whose nodes (as the GPU reads them) come in per-tile blocks: each tile's is one read, no
-        # heights, no error pyramid (a periodic extension's where ``ready``: else from the tile's heights);
-        # stores without them are not opened here (nodes_for may refuse or load them)
+        # heights, no error pyramid (a periodic extension's near its seams is cut first, as the GPU's upload
+        # cuts it); stores without them are not opened here (nodes_for may refuse or load them)
         self._blocks = None
         if isinstance(hf, StoredTerrain) and hf.store.attrs.get("node_blocks") and \
                 int(hf.store.attrs["tile_size"]) == pyramid.n:
@@ -186,15 +190,19 @@ class TileletTriangleEstimator:
             self._blocks = nodes if nodes.blocks is not None else None
 
     def _row(self, key: TileKey, deadline: float | None = None) -> int:
-        """The key's row, its nodes built first if new; -1 (not built) once ``deadline`` (perf_counter s) passed."""
+        """The key's row, its nodes built first if new; -1 (not built) once ``deadline`` (perf_counter s) passed,
+        or with ``background`` while its block waits to be cut (the cut then in ``waiting``)."""
         r = self._rows.get(key)
         if r is not None:
             return r
         t0 = time.perf_counter()
         if deadline is not None and t0 >= deadline:
             return -1
-        ready = getattr(self._blocks.blocks, "ready", None) if self._blocks is not None else None
-        if self._blocks is not None and (ready is None or ready(key.level, key.tx, key.ty)):
+        ready = self._block_ready(key)
+        if ready is False and self.background:
+            self.waiting[key] = pending_cut(self.pyramid.hf, self.pyramid.n, self.beta, key)
+            return -1
+        if ready is not None:                                   # the block the GPU reads (cut here if need be)
             data, offsets = tile_node_block(self._blocks, key.level, key.tx, key.ty, self.pyramid.n)
             nodes = block_tile_nodes(data, offsets, self.pyramid.n, *self.pyramid.placement(key))
         else:
@@ -204,14 +212,21 @@ class TileletTriangleEstimator:
         self.build_ms += (time.perf_counter() - t0) * 1e3
         return r
 
+    def _block_ready(self, key: TileKey) -> bool | None:
+        """Whether the tile's node block is one read (None: the store has no blocks; built from heights)."""
+        if self._blocks is None:
+            return None
+        ready = getattr(self._blocks.blocks, "ready", None)
+        return ready is None or ready(key.level, key.tx, key.ty)
+
     def _estimate(self, keys, view: View, tau: float, budget_ms: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         self._rows.limit = max(self._rows.limit, len(keys))    # a frame's own rows are never reused for it
         deadline = None if budget_ms is None else time.perf_counter() + budget_ms / 1e3
-        builds = self.builds
+        builds, self.waiting = self.builds, {}
         rows = np.array([self._row(k, deadline) for k in keys], dtype=np.int64)
-        missing = np.flatnonzero(rows < 0)
-        if len(missing) and self.builds == builds:              # at least one build a call: the queue drains
-            rows[missing[0]] = self._row(keys[missing[0]])
+        missing = [i for i in np.flatnonzero(rows < 0) if not self.background or self._block_ready(keys[i])]
+        if missing and self.builds == builds:                   # at least one build a call: the queue drains
+            rows[missing[0]] = self._row(keys[missing[0]])      # (blocks left to cut: the loader's, not here)
         a = self._rows.arrays
         tri, vis = np.full(len(rows), np.nan), np.full(len(rows), np.nan)
         ok = rows >= 0

@@ -121,6 +121,19 @@ def nodes_for(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
     return nodes
 
 
+def pending_cut(hf, n: int, beta: float, key):
+    """The slow part of reading tile ``key``'s node block as a callable a loader thread can run ahead (cutting a
+    periodic extension's block near a seam from its node arrays), or None where the block is one read."""
+    if not isinstance(hf, StoredTerrain) or not hf.store.attrs.get("periodic") or \
+            not hf.store.attrs.get("node_blocks") or int(hf.store.attrs["tile_size"]) != int(n):
+        return None
+    blocks = nodes_for(hf, n, beta).blocks
+    if not isinstance(blocks, PeriodicBlocks) or blocks.ready(key.level, key.tx, key.ty):
+        return None
+    level, tx, ty = int(key.level), int(key.tx), int(key.ty)
+    return lambda: blocks[level][ty, tx]
+
+
 def tile_levels(n: int) -> int:
     """Local levels of an n-cell tile's quadtree (0 .. log2(n) - 1)."""
     return int(np.log2(n))

@@ -18,7 +18,7 @@ from hybrid.gl.programs import compute_shader, set_uniform, write_uniform
 from hybrid.gl.textures import terrain_texture
 
 from .arena import LeafArena
-from .nodes import nodes_for, tile_levels, tile_node_block
+from .nodes import nodes_for, pending_cut, tile_levels, tile_node_block
 from .quadtree import GPU_BETA
 from .tileblock import TileBlocks, register_tile_block, tile_blocks
 
@@ -181,6 +181,11 @@ class TileletSelection:
     def upload(self, tile) -> SelectedTileletTile:
         """Put one tile on the GPU: heights, node errors and boxes, skirt and control buffers."""
         return SelectedTileletTile(self, tile)
+
+    def host_work(self, key, n: int):
+        """Slow CPU work of tile ``key``'s upload (n cells a side) that a loader thread can do ahead, as a callable
+        (a periodic extension's node block cut near a seam), or None."""
+        return pending_cut(self.hf, n, self.beta, key)
 
     def tile_arrays(self, g: SelectedTileletTile) -> dict:
         """The vertex arrays a strategy draws a tile's leaves with (subclasses)."""

@@ -6,17 +6,20 @@ nodes, apron included, all lie at local indices 1..T-3 of their level is the sou
 its period: one read of one chunk. Tiles near a seam, tiles of levels whose tiles span a whole period and tiles
 reaching over the padding cut their block from the extension's node arrays, window by window. Those arrays repeat
 every period away from the extension's first and last period, so a block cut there serves every tile at the same
-place in another period (kept in a small LRU): the periodic pattern is cut once.
+place in another period: the periodic pattern is cut once. Cut blocks are kept in an LRU bounded in bytes, keyed by
+their place in the period (a tile of the first or last period by its own key); cutting is thread-safe, so a store's
+loader thread can cut a tile's block ahead of its upload (``PeriodicBlocks.ready`` says whether it still needs to).
 """
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
 
 import numpy as np
 
 from .store_blocks import band_blocks
 
-CUT_BLOCKS = 64                 # blocks cut near the seams kept (by their place in the period), least recent out
+CUT_BYTES = 64 << 20            # bytes of blocks cut near the seams kept, least recent out
 
 
 def source_block_tile(level: int, tx: int, ty: int, n: int, period: int, cells: int) -> tuple[int, int] | None:
@@ -64,42 +67,52 @@ class _LevelBlocks:
         if at is not None:
             return np.asarray(o.source_blocks[self.level][at[1], at[0]], dtype=np.float32)
         key = o.cut_key(self.level, tx, ty)
-        if key in o.cut:                                    # a tile at the same place in another period
-            o.cut.move_to_end(key)
-            return o.cut[key]
+        with o.lock:
+            hit = o.cut.get(key)
+            if hit is not None:                             # cut before, or a tile at this place in another period
+                o.cut.move_to_end(key)
+                return hit
         block = band_blocks(*o.arrays, self.level, ty, o.n, tx, tx + 1)[0]
-        if key is not None:
-            o.cut[key] = block
-            while len(o.cut) > CUT_BLOCKS:
-                o.cut.popitem(last=False)
-        return block
+        with o.lock:
+            if key not in o.cut:
+                o.cut[key] = block
+                o.cut_bytes += block.nbytes
+                o.cuts += 1
+                while o.cut_bytes > o.budget and len(o.cut) > 1:
+                    _, old = o.cut.popitem(last=False)
+                    o.cut_bytes -= old.nbytes
+            return o.cut[key]
 
 
 class PeriodicBlocks:
     """Node blocks of an extension by pyramid level: the source's where they are equal, else cut (see module)."""
 
-    def __init__(self, source_blocks: tuple, arrays: tuple, n: int, period: int, cells: int, levels: int):
+    def __init__(self, source_blocks: tuple, arrays: tuple, n: int, period: int, cells: int, levels: int,
+                 budget: int = CUT_BYTES):
         self.source_blocks, self.arrays = source_blocks, arrays
         self.n, self.period, self.cells = int(n), int(period), int(cells)
-        self.cut: OrderedDict = OrderedDict()              # blocks cut near seams, by (level, place in the period)
+        self.cut: OrderedDict = OrderedDict()              # blocks cut near seams (``cut_key``), least recent first
+        self.cut_bytes, self.cuts, self.budget = 0, 0, int(budget)
+        self.lock = threading.Lock()
         self._levels = tuple(_LevelBlocks(self, lev) for lev in range(levels))
 
     def __getitem__(self, level: int) -> _LevelBlocks:
         return self._levels[level]
 
-    def cut_key(self, level: int, tx: int, ty: int) -> tuple | None:
-        """The key of a cut block in ``cut``: (level, place in the period), None for a tile in the first or last
-        period (its cut block is its own)."""
+    def cut_key(self, level: int, tx: int, ty: int) -> tuple:
+        """The key of a cut block in ``cut``: (level, place in the period), or ("tile", level, tx, ty) for a tile
+        in the first or last period (its cut block is its own)."""
         residue = period_residue(level, tx, ty, self.n, self.period, self.cells)
-        return None if residue is None else (level, *residue)
+        return ("tile", level, tx, ty) if residue is None else (level, *residue)
 
     def ready(self, level: int, tx: int, ty: int) -> bool:
-        """Whether the tile's block is one read (the source's, or cut before for its place in the period), not a
-        cut from the node arrays (hundreds of ms a tile near the seams of a large extension)."""
+        """Whether the tile's block is one read (the source's, or cut before), not a cut from the node arrays
+        (tens to hundreds of ms a tile near the seams of a large extension)."""
         if source_block_tile(level, tx, ty, self.n, self.period, self.cells) is not None:
             return True
         key = self.cut_key(level, tx, ty)
-        return key is not None and key in self.cut
+        with self.lock:
+            return key in self.cut
 
     def __len__(self) -> int:
         return len(self._levels)

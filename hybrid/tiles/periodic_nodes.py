@@ -33,6 +33,8 @@ Bounds are rounded up to float32 with a little headroom (``_UP``) for the float3
 """
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,6 +48,7 @@ KINDS = ("effective", "zlo", "zhi")
 _UP = 1.0 + 2.0 ** -21          # relative headroom over float32 rounding (2^-24 per rounded value)
 MAX_WHOLE_NODES = 1 << 26       # a level may be read whole (np.asarray) up to this many nodes
 DEPTH = 2                       # levels below a near-seam node whose bounds tighten its own (``_effective``)
+CHUNK_BYTES = 64 << 20          # decoded chunks of the source's node arrays kept (``SourceChunks``)
 
 
 def _spans(profile: np.ndarray, span: int, fn) -> np.ndarray:
@@ -92,15 +95,72 @@ def _runs(u: np.ndarray) -> list[tuple[int, int, int, int]]:
     return [(int(u[a]), int(u[b - 1]) + 1, int(a), int(b)) for a, b in zip(starts, stops)]
 
 
-def _gather(arr, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """arr[rows x cols] (float32) of a 2-D array (numpy or Zarr), read as a few rectangular windows."""
+def _gather(read, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """arr[rows x cols] (float32) of a 2-D array, read as a few rectangular windows: ``read(r0, r1, c0, c1)``."""
     ur, ir = np.unique(rows, return_inverse=True)
     uc, ic = np.unique(cols, return_inverse=True)
     block = np.empty((len(ur), len(uc)), np.float32)
     for r0, r1, a0, a1 in _runs(ur):
         for c0, c1, b0, b1 in _runs(uc):
-            block[a0:a1, b0:b1] = np.asarray(arr[r0:r1, c0:c1], dtype=np.float32)
+            block[a0:a1, b0:b1] = read(r0, r1, c0, c1)
     return block[np.ix_(ir.ravel(), ic.ravel())]
+
+
+class SourceChunks:
+    """Windows of the source store's node arrays (float32 metres), served from their decoded chunks, each read
+    once and kept, least recent out past ``budget`` bytes: a block cut near a seam reads the same few chunks for
+    every local level, kind and tightening level, and neighbouring cuts share them. Thread-safe (a loader thread
+    cuts blocks ahead of the renderer)."""
+
+    def __init__(self, group, budget: int = CHUNK_BYTES):
+        self.group, self.budget = group, int(budget)
+        self._arrays: dict = {}
+        self._chunks: OrderedDict = OrderedDict()
+        self.nbytes, self.reads = 0, 0
+        self._lock = threading.Lock()
+
+    def array(self, kind: str, g: int):
+        """The source's array of a kind at global level g (its handle looked up once)."""
+        key = (kind, g)
+        if key not in self._arrays:
+            self._arrays[key] = self.group[f"nodes/{kind}/{g}"]
+        return self._arrays[key]
+
+    def _chunk(self, kind: str, g: int, cy: int, cx: int) -> np.ndarray:
+        key = (kind, g, cy, cx)
+        with self._lock:
+            hit = self._chunks.get(key)
+            if hit is not None:
+                self._chunks.move_to_end(key)
+                return hit
+        arr = self.array(kind, g)
+        ch, cw = arr.chunks
+        c = np.asarray(arr[cy * ch:(cy + 1) * ch, cx * cw:(cx + 1) * cw], dtype=np.float32)
+        with self._lock:
+            if key not in self._chunks:
+                self._chunks[key] = c
+                self.nbytes += c.nbytes
+                self.reads += 1
+                while self.nbytes > self.budget and len(self._chunks) > 1:
+                    _, old = self._chunks.popitem(last=False)
+                    self.nbytes -= old.nbytes
+            return self._chunks[key]
+
+    def window(self, kind: str, g: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
+        """Rows r0..r1-1, columns c0..c1-1 (inside the array) of a kind's level-g array (float32)."""
+        ch, cw = self.array(kind, g).chunks
+        out = np.empty((r1 - r0, c1 - c0), np.float32)
+        for cy in range(r0 // ch, (r1 - 1) // ch + 1):
+            ya, yb = max(r0, cy * ch), min(r1, (cy + 1) * ch)
+            for cx in range(c0 // cw, (c1 - 1) // cw + 1):
+                xa, xb = max(c0, cx * cw), min(c1, (cx + 1) * cw)
+                c = self._chunk(kind, g, cy, cx)
+                out[ya - r0:yb - r0, xa - c0:xb - c0] = c[ya - cy * ch:yb - cy * ch, xa - cx * cw:xb - cx * cw]
+        return out
+
+    def reader(self, kind: str, g: int):
+        """``read(r0, r1, c0, c1)`` of a kind's level-g array, for ``_gather``."""
+        return lambda r0, r1, c0, c1: self.window(kind, g, r0, r1, c0, c1)
 
 
 def _nbr3(v: np.ndarray, fn) -> np.ndarray:
@@ -135,6 +195,7 @@ class PeriodicNodes:
         self.mu = 16 * np.finfo(np.float64).eps * max(abs(lo), abs(hi), 1.0)
         self._spans: dict = {}
         self._top: tuple | None = None
+        self.chunks = SourceChunks(source)
 
     def level(self, kind: str, g: int) -> "NodeLevel":
         """The lazy array of kind ``effective``, ``zlo`` or ``zhi`` (metres, float32) at global level g."""
@@ -196,7 +257,7 @@ class PeriodicNodes:
             lo = None if wrap == "below" else 0
             rr, rc = (self._rho(np.clip(i, lo, total - 1), T, False) for i in (ri, ci))
             ok_r, ok_c = ((i < total) & ((i >= 0) | (lo is None)) for i in (ri, ci))
-        vals = _gather(self.source[f"nodes/{kind}/{g}"], rr, rc).astype(np.float64)
+        vals = _gather(self.chunks.reader(kind, g), rr, rc).astype(np.float64)
         return vals, ri, ci, rr, rc, ok_r, ok_c
 
     def _flat(self, g: int, r0: int, r1: int, c0: int, c1: int, wrap) -> np.ndarray:
@@ -245,7 +306,7 @@ class PeriodicNodes:
         whose nodes that pattern does not describe."""
         T = self.P >> (g + 1)
         ri, ci = np.arange(r0, r1), np.arange(c0, c1)
-        out = _gather(self.source[f"nodes/effective/{g}"], self._rho(ri, T, False), self._rho(ci, T, False))
+        out = _gather(self.chunks.reader("effective", g), self._rho(ri, T, False), self._rho(ci, T, False))
         near_r, near_c = self._near(ri, T, g, "effective"), self._near(ci, T, g, "effective")
         locs = [T - 1, T] if g else [T - 1]                          # near a seam: local T-1, and 0 from level 1
         if near_c.any():

@@ -52,6 +52,7 @@ class StorePyramid(TilePyramid):
         self._lock = threading.Lock()
         self._wake = threading.Condition(threading.Lock())   # the loader thread's queue (request)
         self._wanted: list = []
+        self._work: dict = {}                                 # key -> host work the loader runs after its samples
         self._done = threading.Event()
         self._go = threading.Event()                          # cleared: the loader waits before its next tile
         self._go.set()
@@ -136,12 +137,16 @@ class StorePyramid(TilePyramid):
         with self._lock:
             return key in self._cache or key in self._failed
 
-    def request(self, keys) -> threading.Event:
-        """Have the loader thread read these tiles next, front to back, in place of what it was asked before;
-        returns an event set when it has read them (or was asked for others instead)."""
+    def request(self, keys, work: dict | None = None) -> threading.Event:
+        """Have the loader thread read these tiles next, front to back, in place of what it was asked before, and
+        after a tile's samples run its ``work`` (key -> callables: host work of its upload or estimate, thread-safe,
+        such as cutting a periodic extension's node block near a seam); returns an event set when it is done (or
+        was asked for others instead)."""
+        work = work or {}
         with self._wake:
             self._done.set()
-            self._wanted = [k for k in dict.fromkeys(keys) if k not in self._cache]
+            self._wanted = [k for k in dict.fromkeys(keys) if k not in self._cache or k in work]
+            self._work = {k: list(work[k]) for k in self._wanted if k in work}
             self._done = threading.Event()
             if not self._wanted:
                 self._done.set()
@@ -150,6 +155,11 @@ class StorePyramid(TilePyramid):
                 self._loader.start()
             self._wake.notify()
             return self._done
+
+    def failed(self, key) -> bool:
+        """Whether the loader failed on the tile (its samples or its work): the caller's own read raises the error."""
+        with self._lock:
+            return key in self._failed
 
     def pause(self, paused: bool = True) -> None:
         """Hold the loader thread before its next tile (the one it is reading finishes), or let it go on: so that
@@ -163,7 +173,7 @@ class StorePyramid(TilePyramid):
         """Stop the loader thread (it ends after the tile it is reading) and drop the host cache; a later read
         reads from disk again and a later ``request`` starts a new loader."""
         with self._wake:
-            self._wanted = []
+            self._wanted, self._work = [], {}
             self._closing = True
             self._wake.notify()
             self._go.set()
@@ -177,7 +187,7 @@ class StorePyramid(TilePyramid):
         self._closing = False
 
     def _load(self) -> None:
-        """The loader thread: read the wanted tiles one at a time, front first, until ``close``."""
+        """The loader thread: read the wanted tiles one at a time, front first, each with its work, until ``close``."""
         while True:
             with self._wake:
                 while not self._wanted and not self._closing:
@@ -191,8 +201,11 @@ class StorePyramid(TilePyramid):
                 if self._closing or not self._wanted:
                     continue
                 key = self._wanted.pop(0)
+                work = self._work.pop(key, ())
             try:
                 self.samples(key)
+                for fn in work:
+                    fn()
             except Exception:                # the renderer's own read of it raises the error where it is seen
                 with self._lock:
                     self._failed.add(key)
