@@ -46,8 +46,9 @@ def overview(terrain, width: int, height: int):
 
 
 def warm_up(r, view, tau: float) -> None:
-    """Draw the view (the root tile) with each of the renderer's strategies, skirts included, so that the
-    driver compiles their shaders before the flight's first frame."""
+    """Draw the view (the root tile) with each of the renderer's strategies, skirts included (and, for a mixed
+    policy, the ray caster stopping at an earlier pass's depth, a program of its own), so that the driver compiles
+    their shaders before the flight's first frame."""
     from hybrid.gl.target import FrameTarget
     plans = r.plan(view, tau)
     target = FrameTarget(r.ctx, view.width, view.height)
@@ -58,6 +59,8 @@ def warm_up(r, view, tau: float) -> None:
                 strategy.draw_tiles(target, view, r._items(name, plans, set()), tau,
                                     skirts={p.key: 15 for p in plans})
                 strategy.draw_skirts(target, view)
+            if r.mixed and "occluders" in strategy.draw_options:
+                strategy.draw_tiles(target, view, r._items(name, plans, set()), tau, occluders=True)
     finally:
         target.release()
 
