@@ -40,14 +40,26 @@ def test_calibrate_fits_the_tiles_the_renderer_selects(ctx, fbm129, views):
         for name in CANDIDATES:
             in_frame, together = rec[name]
             assert len(in_frame) == len(frame) and together > 0
+    per_view = len(CANDIDATES) + 6                  # each candidate alone, then six random assignments
+    assert len(cal.samples) == len(views) * per_view
+    for i, (sample, frame) in enumerate(zip(cal.samples, [p for p in plans for _ in range(per_view)])):
+        assert sample.ms > 0 and np.isfinite(sample.ms)
+        if i % per_view < len(CANDIDATES):          # a pure frame: its strategy holds every tile's terms
+            name = CANDIDATES[i % per_view]
+            assert [k for k, u in sample.used.items() if u] == [name]
+            assert np.isclose(sample.sums[name][0], len(frame))                # the const term counts tiles
+        else:
+            assert sum(sample.used.values()) >= 2 or len(frame) < 2
+            assert np.isclose(sum(sample.sums[k][0] for k in CANDIDATES), len(frame))
     m = cal.model
-    assert m.tiles == n and m.renderer == gl_info(ctx).renderer
+    assert m.tiles == n and m.frames == len(cal.samples) and m.renderer == gl_info(ctx).renderer
     for s in CANDIDATES:
         coef = getattr(m, s)
         assert set(coef) == set(TERMS[s])
         assert all(np.isfinite(c) and c >= 0 for c in coef.values()), (s, coef)
         assert np.isfinite(m.overhead[s]) and m.overhead[s] >= 0
         assert np.isfinite(m.fit_error[s]) and m.fit_error[s] >= 0
+        assert np.isfinite(m.tile_error[s]) and m.tile_error[s] >= 0
     for f in cal.features:                         # a fitted model predicts a finite, non-negative cost
         assert all(np.isfinite(c) and c >= 0 for c in m.predict(f).values())
 

@@ -5,8 +5,8 @@ import pytest
 
 from hybrid.camera.view import View
 from hybrid.cost.features import TileFeatures, _hull_area_clipped, footprint_pixels
-from hybrid.cost.fit import estimate_overhead, fit_cost_model, fit_strategy, median_rel_error
-from hybrid.cost.model import CostModel, load_cost_model, save_cost_model
+from hybrid.cost.fit import FrameSample, estimate_overhead, fit_frames
+from hybrid.cost.model import TERMS, CostModel, load_cost_model, save_cost_model, term_values
 from hybrid.cost.planner import choose
 from hybrid.errors import TerrabenchError
 from hybrid.residency import ResidencyCache
@@ -24,40 +24,49 @@ def synthetic_tiles(n=300, seed=0):
             for _ in range(n)]
 
 
-def test_fit_recovers_known_coefficients():
-    feats = synthetic_tiles()
-    rng = np.random.default_rng(1)
-    times = {s: np.array([TRUE.predict(f)[s] for f in feats]) * rng.normal(1, 0.02, len(feats))
-             for s in ("raster", "raster_gs", "raycast")}
-    m = fit_cost_model(feats, times, "test")
-    assert m.candidates == ("raster", "raster_gs", "raycast")
-    for s in ("raster", "raster_gs", "raycast"):
+OVERHEAD = {"raster": 2.0, "raster_gs": 3.0, "raycast": 1.5}
+NAMES = ("raster", "raster_gs", "raycast")
+
+
+def synthetic_frames(n=240, seed=0, noise=0.005, names=NAMES):
+    """Frames of 4-30 synthetic tiles, pure and assigned at random, timed by TRUE plus OVERHEAD per strategy used."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(n):
+        count = int(rng.integers(4, 31))
+        feats = synthetic_tiles(count, seed=seed * 1000 + k)
+        a = np.array([names[k % len(names)]] * count) if k % 4 == 0 else rng.choice(names, size=count)
+        terms = {s: np.array([term_values(f, s) for f in feats]) for s in names}
+        ms = sum(OVERHEAD[s] + sum(TRUE.predict(f)[s] for f, c in zip(feats, a) if c == s) for s in names if (a == s).any())
+        out.append(FrameSample({s: bool((a == s).any()) for s in names}, {s: terms[s][a == s].sum(axis=0) for s in names},
+                               float(ms * rng.normal(1, noise))))
+    return out
+
+
+def test_frame_fit_recovers_known_coefficients_and_overheads():
+    m = fit_frames(synthetic_frames(), "test", holdout=0.3)
+    assert m.candidates == NAMES and m.frames == 240
+    for s in NAMES:
         for t, v in getattr(TRUE, s).items():
-            assert np.isclose(getattr(m, s)[t], v, rtol=0.1), (s, t)
-        assert m.fit_error[s] < 0.03                          # held-out median relative error ~ the noise
-    assert "raster_gs ms = " in m.explain() and "never chosen" not in m.explain()
-    two = fit_cost_model(feats, {s: times[s] for s in ("raster", "raycast")}, "test")
+            assert np.isclose(getattr(m, s)[t], v, rtol=0.25), (s, t, getattr(m, s)[t], v)   # small terms: ~20 %
+        assert np.isclose(m.overhead[s], OVERHEAD[s], rtol=0.25), (s, m.overhead[s])
+        assert m.fit_error[s] < 0.01                          # held-out frames: about the noise
+    assert "of 240 frames' times" in m.explain() and "raster_gs ms = " in m.explain()
+    two = fit_frames(synthetic_frames(names=("raster", "raycast")), "test", names=("raster", "raycast"))
     assert two.candidates == ("raster", "raycast") and "raster_gs not calibrated: never chosen" in two.explain()
 
 
-@pytest.mark.parametrize("strategy", ["raster", "raycast"])
-def test_fit_strategy_takes_the_overhead_off(strategy):
-    # single-tile times include the per-frame overhead once; the fit must return the per-tile coefficients
-    feats = synthetic_tiles(200, seed=2)
-    overhead = 1.7
-    noise = np.random.default_rng(3).normal(1, 0.01, len(feats))
-    ms = np.array([TRUE.predict(f)[strategy] for f in feats]) * noise + overhead
-    coef = fit_strategy(feats, ms, strategy, overhead)
-    want = getattr(TRUE, strategy)
-    assert coef.keys() == want.keys()
-    for t, v in want.items():
-        assert np.isclose(coef[t], v, rtol=0.1), (t, coef[t], v)
-    m = CostModel("t", TRUE.raster, TRUE.raycast, overhead={"raster": 0.0, "raycast": 0.0, strategy: overhead})
-    setattr(m, strategy, coef)
-    assert median_rel_error(m, feats, ms, strategy) < 0.01
-    # a model that forgets the overhead is off by it on every tile
-    m.overhead[strategy] = 0.0
-    assert median_rel_error(m, feats, ms, strategy) > 0.05
+def test_frame_fit_rejects_bad_timings():
+    frames = synthetic_frames(40)
+    with pytest.raises(TerrabenchError, match="finite times > 0"):
+        fit_frames(frames[:-1] + [FrameSample(frames[0].used, frames[0].sums, 0.0)], "t")
+    with pytest.raises(TerrabenchError, match="at least 15 frames"):
+        fit_frames(frames[:10], "t")
+    with pytest.raises(TerrabenchError, match="holdout"):
+        fit_frames(frames, "t", holdout=1.0)
+    with pytest.raises(KeyError):
+        fit_frames(frames, "t", names=("raster", "raycast", "tin"))
+    assert all(len(TERMS[s]) == 4 for s in NAMES)
 
 
 def test_estimate_overhead_recovers_a_known_overhead():
@@ -90,18 +99,6 @@ def test_choice_follows_predicted_costs():
     assert choose("heuristic", rough_big, b) == "raycast" and choose("heuristic", flat_small, a) == "raster"
     with pytest.raises(TerrabenchError, match="unknown policy"):
         choose("fastest", flat_small, a)
-
-
-def test_fit_rejects_bad_timings():
-    feats = synthetic_tiles(10)
-    with pytest.raises(TerrabenchError, match="finite and > 0"):
-        fit_cost_model(feats, {"raster": np.zeros(10), "raycast": np.ones(10)}, "t")
-    with pytest.raises(TerrabenchError, match="at least 4"):
-        fit_cost_model(feats[:2], {"raster": np.ones(2), "raycast": np.ones(2)}, "t", holdout=0.0)
-    with pytest.raises(TerrabenchError, match="without raycast times"):
-        fit_cost_model(feats, {"raster": np.ones(10)}, "t")
-    with pytest.raises(TerrabenchError, match="no cost terms for tin"):
-        fit_cost_model(feats, {"raster": np.ones(10), "raycast": np.ones(10), "tin": np.ones(10)}, "t")
 
 
 def test_save_load_by_renderer(tmp_path):

@@ -24,7 +24,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="cells per tile side (power of two)")
     p.add_argument("--repeats", type=argtypes.int_in("--repeats", 1, 100), default=3,
                    help="timed draws per tile and strategy (median)")
-    p.add_argument("--holdout", type=float, default=0.3, help="share of tiles held out to measure the fit")
+    p.add_argument("--holdout", type=float, default=0.3, help="share of timed frames held out to measure the fit")
     p.add_argument("--save", default="user", help="'user' (default costs file), a path, or '' for no save")
     p.add_argument("--key", default=None, help="save under this key instead of the full GL renderer string "
                    "(the shipped defaults use a substring such as 'llvmpipe')")

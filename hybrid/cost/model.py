@@ -11,7 +11,8 @@ the ray caster's pre-pass target and counters) paid once when any tile uses it:
 
     frame_ms = sum over strategies used of overhead_s + sum of tiles
 
-``terrabench calibrate`` times tiles on this device and fits the coefficients (``hybrid.cost.fit``), then
+``terrabench calibrate`` times whole frames on this device, pure and with tiles assigned to the strategies at
+random, and fits the coefficients and overheads to the frame times together (``hybrid.cost.fit.fit_frames``), then
 saves the model keyed by the GL renderer string. ``load_cost_model`` finds it again: the user's file ($TERRABENCH_COSTS or
 ~/.config/terrabench/costs.json), then the defaults shipped in hybrid/cost/costs_default.json (matched by a
 key contained in the renderer string, e.g. 'llvmpipe').
@@ -63,7 +64,9 @@ def term_values(f, strategy: str) -> np.ndarray:
 
 @dataclass
 class CostModel:
-    """Coefficients (milliseconds per unit of each term) per candidate strategy, and how well they fit.
+    """Coefficients (milliseconds per unit of each term) per candidate strategy, and how well they fit: ``fit_error``
+    the held-out median relative error of frame times (frames using the strategy) when fitted on ``frames`` whole
+    frames, else of per-tile times.
 
     ``raster_gs`` is empty in a model calibrated before the geometry-shader path was a candidate: such a
     model never chooses it.
@@ -77,6 +80,8 @@ class CostModel:
     source: str = ""
     overhead: dict = field(default_factory=lambda: {s: 0.0 for s in TERMS})
     raster_gs: dict = field(default_factory=dict)
+    frames: int = 0                 # whole frames fitted (0: fitted on per-tile times)
+    tile_error: dict = field(default_factory=dict)   # per-tile error against tiles timed a call each, when fitted on frames
 
     @property
     def candidates(self) -> tuple[str, ...]:
@@ -109,8 +114,12 @@ class CostModel:
                  "  per-frame overhead: " + ", ".join(f"{s} {self.overhead.get(s, 0):.3g} ms" for s in self.candidates)]
         if "raster_gs" not in self.candidates:
             lines.append("  raster_gs not calibrated: never chosen")
+        what = f"of {self.frames} frames' times" if self.frames else "per tile"
         for s, e in self.fit_error.items():
-            lines.append(f"  held-out median |relative error| {s}: {100 * e:.1f} %")
+            lines.append(f"  held-out median |relative error| {what} using {s}: {100 * e:.1f} %")
+        for s, e in self.tile_error.items():
+            lines.append(f"  median |relative error| per tile against tiles timed one call each (less the call's "
+                         f"overhead) {s}: {100 * e:.1f} %")
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
@@ -155,7 +164,7 @@ def cost_model_from_dict(d: dict, source: str) -> CostModel:
     try:
         m = CostModel(d["renderer"], dict(d["raster"]), dict(d["raycast"]), dict(d.get("fit_error", {})),
                       int(d.get("tiles", 0)), source, {**{s: 0.0 for s in TERMS}, **d.get("overhead", {})},
-                      dict(d.get("raster_gs") or {}))
+                      dict(d.get("raster_gs") or {}), int(d.get("frames", 0)), dict(d.get("tile_error", {})))
         for s in m.candidates:
             for t in TERMS[s]:
                 getattr(m, s).setdefault(t, 0.0)     # a model saved before a term existed has it at 0
