@@ -97,11 +97,24 @@ def test_a_cut_reads_each_source_chunk_once_and_cuts_again_from_them(tmp_path):
     prepare_store(_rough(seed=4), tmp_path / "s", 16)
     ext = open_periodic(tmp_path / "s", 385)
     blocks = nodes_for(ext, 16).blocks
-    chunks = ext.store["nodes/effective/0"].nodes.chunks
+    chunks = ext.store["nodes/effective/0"].nodes.source_chunks
     assert not blocks.ready(0, 7, 3)                          # next to the seam at x = 128 cells
     first = blocks[0][3, 7].copy()
-    reads = chunks.reads
-    assert 0 < reads == len(chunks._chunks) and blocks.ready(0, 7, 3)     # each chunk decoded once
+    reads = chunks.chunks.made
+    assert 0 < reads == len(chunks.chunks) and blocks.ready(0, 7, 3)      # each chunk decoded once
     blocks.cut.clear()
     assert not blocks.ready(0, 7, 3)
-    assert np.array_equal(blocks[0][3, 7], first) and chunks.reads == reads        # no chunk read twice
+    assert np.array_equal(blocks[0][3, 7], first) and chunks.chunks.made == reads  # no chunk read twice
+
+
+def test_byte_lru_keeps_the_newest_within_its_bytes_and_makes_each_once():
+    from hybrid.tiles.byte_lru import ByteLRU
+    lru, made = ByteLRU(3 * 800), []
+    make = lambda k: (lambda: made.append(k) or np.full(100, k, np.float64))      # noqa: E731  (800 bytes)
+    for k in (1, 2, 3):
+        assert lru.get(k, make(k))[0] == k
+    assert lru.get(1, make(1))[0] == 1 and made == [1, 2, 3]          # a hit makes nothing and refreshes 1
+    lru.get(4, make(4))                                                 # over budget: 2, the least recent, goes
+    assert 2 not in lru and all(k in lru for k in (1, 3, 4)) and lru.nbytes == 2400
+    big = ByteLRU(10)
+    assert big.get("a", make(5))[0] == 5 and "a" in big and len(big) == 1     # the newest stays, even too big

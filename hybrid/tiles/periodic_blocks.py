@@ -12,11 +12,9 @@ loader thread can cut a tile's block ahead of its upload (``PeriodicBlocks.ready
 """
 from __future__ import annotations
 
-import threading
-from collections import OrderedDict
-
 import numpy as np
 
+from .byte_lru import ByteLRU
 from .store_blocks import band_blocks
 
 CUT_BYTES = 64 << 20            # bytes of blocks cut near the seams kept, least recent out
@@ -66,22 +64,8 @@ class _LevelBlocks:
         at = source_block_tile(self.level, tx, ty, o.n, o.period, o.cells)
         if at is not None:
             return np.asarray(o.source_blocks[self.level][at[1], at[0]], dtype=np.float32)
-        key = o.cut_key(self.level, tx, ty)
-        with o.lock:
-            hit = o.cut.get(key)
-            if hit is not None:                             # cut before, or a tile at this place in another period
-                o.cut.move_to_end(key)
-                return hit
-        block = band_blocks(*o.arrays, self.level, ty, o.n, tx, tx + 1)[0]
-        with o.lock:
-            if key not in o.cut:
-                o.cut[key] = block
-                o.cut_bytes += block.nbytes
-                o.cuts += 1
-                while o.cut_bytes > o.budget and len(o.cut) > 1:
-                    _, old = o.cut.popitem(last=False)
-                    o.cut_bytes -= old.nbytes
-            return o.cut[key]
+        key = o.cut_key(self.level, tx, ty)       # cut before, or a tile at this place in another period
+        return o.cut.get(key, lambda: band_blocks(*o.arrays, self.level, ty, o.n, tx, tx + 1)[0])
 
 
 class PeriodicBlocks:
@@ -91,9 +75,7 @@ class PeriodicBlocks:
                  budget: int = CUT_BYTES):
         self.source_blocks, self.arrays = source_blocks, arrays
         self.n, self.period, self.cells = int(n), int(period), int(cells)
-        self.cut: OrderedDict = OrderedDict()              # blocks cut near seams (``cut_key``), least recent first
-        self.cut_bytes, self.cuts, self.budget = 0, 0, int(budget)
-        self.lock = threading.Lock()
+        self.cut = ByteLRU(budget)                          # blocks cut near seams, by ``cut_key``
         self._levels = tuple(_LevelBlocks(self, lev) for lev in range(levels))
 
     def __getitem__(self, level: int) -> _LevelBlocks:
@@ -110,9 +92,7 @@ class PeriodicBlocks:
         (tens to hundreds of ms a tile near the seams of a large extension)."""
         if source_block_tile(level, tx, ty, self.n, self.period, self.cells) is not None:
             return True
-        key = self.cut_key(level, tx, ty)
-        with self.lock:
-            return key in self.cut
+        return self.cut_key(level, tx, ty) in self.cut
 
     def __len__(self) -> int:
         return len(self._levels)

@@ -33,14 +33,13 @@ Bounds are rounded up to float32 with a little headroom (``_UP``) for the float3
 """
 from __future__ import annotations
 
-import threading
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
 
 from hybrid.errors import TerrabenchError
 
+from .byte_lru import ByteLRU
 from .fans import block2, dilate4
 from .pyramid import _block_reduce
 
@@ -113,11 +112,9 @@ class SourceChunks:
     cuts blocks ahead of the renderer)."""
 
     def __init__(self, group, budget: int = CHUNK_BYTES):
-        self.group, self.budget = group, int(budget)
+        self.group = group
         self._arrays: dict = {}
-        self._chunks: OrderedDict = OrderedDict()
-        self.nbytes, self.reads = 0, 0
-        self._lock = threading.Lock()
+        self.chunks = ByteLRU(budget)                       # decoded chunks by (kind, g, chunk row, chunk column)
 
     def array(self, kind: str, g: int):
         """The source's array of a kind at global level g (its handle looked up once)."""
@@ -127,24 +124,10 @@ class SourceChunks:
         return self._arrays[key]
 
     def _chunk(self, kind: str, g: int, cy: int, cx: int) -> np.ndarray:
-        key = (kind, g, cy, cx)
-        with self._lock:
-            hit = self._chunks.get(key)
-            if hit is not None:
-                self._chunks.move_to_end(key)
-                return hit
         arr = self.array(kind, g)
         ch, cw = arr.chunks
-        c = np.asarray(arr[cy * ch:(cy + 1) * ch, cx * cw:(cx + 1) * cw], dtype=np.float32)
-        with self._lock:
-            if key not in self._chunks:
-                self._chunks[key] = c
-                self.nbytes += c.nbytes
-                self.reads += 1
-                while self.nbytes > self.budget and len(self._chunks) > 1:
-                    _, old = self._chunks.popitem(last=False)
-                    self.nbytes -= old.nbytes
-            return self._chunks[key]
+        return self.chunks.get((kind, g, cy, cx), lambda: np.asarray(arr[cy * ch:(cy + 1) * ch, cx * cw:(cx + 1) * cw],
+                                                                       dtype=np.float32))
 
     def window(self, kind: str, g: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
         """Rows r0..r1-1, columns c0..c1-1 (inside the array) of a kind's level-g array (float32)."""
@@ -195,7 +178,7 @@ class PeriodicNodes:
         self.mu = 16 * np.finfo(np.float64).eps * max(abs(lo), abs(hi), 1.0)
         self._spans: dict = {}
         self._top: tuple | None = None
-        self.chunks = SourceChunks(source)
+        self.source_chunks = SourceChunks(source)
 
     def level(self, kind: str, g: int) -> "NodeLevel":
         """The lazy array of kind ``effective``, ``zlo`` or ``zhi`` (metres, float32) at global level g."""
@@ -257,7 +240,7 @@ class PeriodicNodes:
             lo = None if wrap == "below" else 0
             rr, rc = (self._rho(np.clip(i, lo, total - 1), T, False) for i in (ri, ci))
             ok_r, ok_c = ((i < total) & ((i >= 0) | (lo is None)) for i in (ri, ci))
-        vals = _gather(self.chunks.reader(kind, g), rr, rc).astype(np.float64)
+        vals = _gather(self.source_chunks.reader(kind, g), rr, rc).astype(np.float64)
         return vals, ri, ci, rr, rc, ok_r, ok_c
 
     def _flat(self, g: int, r0: int, r1: int, c0: int, c1: int, wrap) -> np.ndarray:
@@ -306,7 +289,7 @@ class PeriodicNodes:
         whose nodes that pattern does not describe."""
         T = self.P >> (g + 1)
         ri, ci = np.arange(r0, r1), np.arange(c0, c1)
-        out = _gather(self.chunks.reader("effective", g), self._rho(ri, T, False), self._rho(ci, T, False))
+        out = _gather(self.source_chunks.reader("effective", g), self._rho(ri, T, False), self._rho(ci, T, False))
         near_r, near_c = self._near(ri, T, g, "effective"), self._near(ci, T, g, "effective")
         locs = [T - 1, T] if g else [T - 1]                          # near a seam: local T-1, and 0 from level 1
         if near_c.any():
