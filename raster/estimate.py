@@ -168,8 +168,8 @@ class TileletTriangleEstimator:
 
     Per tile, its ``TileNodes`` are built once; ``build_ms`` adds up the wall time spent building them: one-time
     work per tile, which renderers count apart from planning. With ``background`` (a store's loader thread cuts
-    blocks), a tile whose node block still needs cutting is left unknown (NaN) rather than built from its
-    heights in the caller's thread, and the cut is in ``waiting`` for the loader to run.
+    blocks), a tile whose node block still needs cutting is left unknown (NaN) rather than cut in the caller's
+    thread, and the cut is in ``waiting`` for the loader to run.
     """
 
     def __init__(self, pyramid: TilePyramid, beta: float = GPU_BETA):
@@ -195,12 +195,14 @@ class TileletTriangleEstimator:
         r = self._rows.get(key)
         if r is not None:
             return r
-        t0 = time.perf_counter()
-        if deadline is not None and t0 >= deadline:
-            return -1
         ready = self._block_ready(key)
         if ready is False and self.background:
-            self.waiting[key] = pending_cut(self.pyramid.hf, self.pyramid.n, self.beta, key)
+            cut = pending_cut(self.pyramid.hf, self.pyramid.n, self.beta, key)
+            if cut is not None:                                 # (None: the loader has just cut it)
+                self.waiting[key] = cut
+                return -1
+        t0 = time.perf_counter()
+        if deadline is not None and t0 >= deadline:
             return -1
         if ready is not None:                                   # the block the GPU reads (cut here if need be)
             data, offsets = tile_node_block(self._blocks, key.level, key.tx, key.ty, self.pyramid.n)
