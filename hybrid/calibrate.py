@@ -62,31 +62,26 @@ def time_frames(ctx, hf: HeightField, views: list[View], tau: float = DEFAULT_TA
     rng = np.random.default_rng(seed)
     out = []
     with Renderer(ctx, hf, "hybrid", tile_size) as r:
-        plan = r.plan
-        try:
-            for v in views:
-                plans = plan(v, tau)
-                if not plans:
-                    continue
-                terms = {n: term_values({k: np.array(c) for k, c in _columns(plans).items()}, n) for n in CANDIDATES}
-                assigns = [np.array([n] * len(plans)) for n in CANDIDATES]
-                for _ in range(mixes):
-                    pool = rng.choice(CANDIDATES, size=int(rng.integers(2, len(CANDIDATES) + 1)), replace=False)
-                    assigns.append(rng.choice(pool, size=len(plans)))
-                r.plan = lambda view, t, plans=plans: plans
-                ms = [[] for _ in assigns]
-                for rep in range(repeats + 1):               # the first round warms (uploads, compiles)
-                    for a, m in zip(assigns, ms):
-                        for p, c in zip(plans, a):
-                            p.choice = str(c)
-                        t = r.render(v, tau).stats.draw_ms
-                        if rep:
-                            m.append(t)
+        for v in views:
+            plans = r.plan(v, tau)
+            if not plans:
+                continue
+            terms = {n: term_values({k: np.array(c) for k, c in _columns(plans).items()}, n) for n in CANDIDATES}
+            assigns = [np.array([n] * len(plans)) for n in CANDIDATES]
+            for _ in range(mixes):
+                pool = rng.choice(CANDIDATES, size=int(rng.integers(2, len(CANDIDATES) + 1)), replace=False)
+                assigns.append(rng.choice(pool, size=len(plans)))
+            ms = [[] for _ in assigns]
+            for rep in range(repeats + 1):                   # the first round warms (uploads, compiles)
                 for a, m in zip(assigns, ms):
-                    out.append(FrameSample({n: bool((a == n).any()) for n in CANDIDATES},
-                                           {n: terms[n][a == n].sum(axis=0) for n in CANDIDATES}, float(np.median(m))))
-        finally:
-            r.plan = plan
+                    for p, c in zip(plans, a):
+                        p.choice = str(c)
+                    t = r.render(v, tau, plans=plans).stats.draw_ms
+                    if rep:
+                        m.append(t)
+            for a, m in zip(assigns, ms):
+                out.append(FrameSample({n: bool((a == n).any()) for n in CANDIDATES},
+                                       {n: terms[n][a == n].sum(axis=0) for n in CANDIDATES}, float(np.median(m))))
     return out
 
 

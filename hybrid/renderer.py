@@ -240,8 +240,9 @@ class Renderer:
         return together
 
     def render(self, view: View, tau: float = DEFAULT_TAU, *, measure: bool = False, maps: bool = False,
-               **options) -> RenderResult:
-        """Draw the view and read it back: colour, distance (m) and FrameStats.
+               plans: list[TilePlan] | None = None, **options) -> RenderResult:
+        """Draw the view and read it back: colour, distance (m) and FrameStats; ``plans`` (from ``plan``, choices
+        possibly changed, as calibration does) are drawn instead of the view's own.
 
         With ``measure`` (always for the oracle; mixed policies only) every tile is also timed inside frames
         every candidate way (``time_in_frame``); with ``maps`` the result carries the per-pixel strategy map (extra untimed renders). Per-call
@@ -253,7 +254,7 @@ class Renderer:
         opts = {n: {**self.options[n], **o} for n, o in route_options(self.strategies, options).items()}
         prep0 = self.triangles.build_ms if self.triangles is not None else 0.0
         t_plan = time.perf_counter()
-        plans = self.plan(view, tau)
+        plans = self.plan(view, tau) if plans is None else plans
         prep_ms = (self.triangles.build_ms if self.triangles is not None else 0.0) - prep0
         plan_ms = (time.perf_counter() - t_plan) * 1e3 - prep_ms      # first-seen tiles' one-time work apart
         pinned = {(p.choice, p.key) for p in plans}
