@@ -3,7 +3,6 @@ node block from the extension's node arrays) runs in the store's loader thread, 
 drawn from its resident ancestor (or ray cast, for the estimate) meanwhile, with no hole, and once the loader is done
 the frame is the one a renderer that cut everything first draws."""
 import threading
-import time
 
 import numpy as np
 import pytest
@@ -64,19 +63,19 @@ def test_near_seam_blocks_are_cut_in_the_loader_thread_not_in_frames(ctx, tmp_pa
     monkeypatch.setattr(estimate_mod, "tile_nodes", lambda *a: heights_built.append(a) or real_nodes(*a))
     with Renderer(ctx, ext, policy, 16, pyramid=pyramid, cost_model=model, upload_budget_ms=1e6) as r:
         history, gaps, unknown, waited = [], [], [], []
-        for _ in range(200):
+        for _ in range(50):
             res = r.render(v, 2.0, mode="shaded")
             history.append(res.stats)
             waited.append(len(r.triangles.waiting) if policy == "hybrid" else 0)   # estimates left to the loader
             # waiting tiles drawn from their ancestor: no hole but a few pixels where the ancestor meets finer
             # tiles unstitched (as in test_uploads); once drained the frame of the renderer that cut everything first
             gaps.append(holes(res, rf, v, whole))
-            assert gaps[-1] <= 2e-3 * res.distance.size, gaps    # measured up to 68 px (0.12 %) here
+            assert gaps[-1] <= 1e-3 * res.distance.size, gaps
             plans = r.plan(v, 2.0)
             unknown.append(int(np.isnan([p.features.triangles for p in plans] if policy == "hybrid" else []).sum()))
             if res.stats.pending_uploads == 0 and not unknown[-1]:
                 break
-            time.sleep(0.02)                                  # the loader cuts meanwhile
+            assert pyramid.idle(120)                          # the loader has cut what this frame asked for
     root = pyramid.max_level
     in_frames = [c for c in cuts if c[0] != "terrabench-tile-loader"]
     loader = [c for c in cuts if c[0] == "terrabench-tile-loader"]

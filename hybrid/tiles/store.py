@@ -156,6 +156,12 @@ class StorePyramid(TilePyramid):
             self._wake.notify()
             return self._done
 
+    def idle(self, timeout: float | None = None) -> bool:
+        """Wait until the loader has done what it was last asked for (tiles and their work); False on timeout."""
+        with self._wake:
+            done = self._done
+        return done.wait(timeout)
+
     def failed(self, key) -> bool:
         """Whether the loader failed on the tile (its samples or its work): the caller's own read raises the error."""
         with self._lock:
