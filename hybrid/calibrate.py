@@ -66,7 +66,7 @@ def time_frames(ctx, hf: HeightField, views: list[View], tau: float = DEFAULT_TA
             plans = r.plan(v, tau)
             if not plans:
                 continue
-            terms = {n: term_values({k: np.array(c) for k, c in _columns(plans).items()}, n) for n in CANDIDATES}
+            terms = {n: np.array([term_values(p.features, n) for p in plans]) for n in CANDIDATES}
             assigns = [np.array([n] * len(plans)) for n in CANDIDATES]
             for _ in range(mixes):
                 pool = rng.choice(CANDIDATES, size=int(rng.integers(2, len(CANDIDATES) + 1)), replace=False)
@@ -83,12 +83,6 @@ def time_frames(ctx, hf: HeightField, views: list[View], tau: float = DEFAULT_TA
                 out.append(FrameSample({n: bool((a == n).any()) for n in CANDIDATES},
                                        {n: terms[n][a == n].sum(axis=0) for n in CANDIDATES}, float(np.median(m))))
     return out
-
-
-def _columns(plans) -> dict:
-    """The plans' features as lists by name (for ``term_values``)."""
-    rows = [vars(p.features) for p in plans]
-    return {k: [row[k] for row in rows] for k in rows[0]}
 
 
 def tile_errors(model: CostModel, feats: list[TileFeatures], times: dict, frames: list) -> dict:
