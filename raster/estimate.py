@@ -19,7 +19,7 @@ import numpy as np
 from hybrid.camera.view import View
 from hybrid.terrain.stored import StoredTerrain
 from hybrid.tiles.pyramid import TileKey, TilePyramid
-from hybrid.tiles.tiletree import SelectedTile, box_classes, box_distances
+from hybrid.tiles.tiletree import SelectedTile
 
 from .nodes import nodes_for, pending_cut, tile_node_block
 from .quadtree import GPU_BETA, error_pyramid
@@ -42,6 +42,11 @@ class TileNodes:
     box_lo: np.ndarray
     box_hi: np.ndarray
     root: int
+
+    @property
+    def boxes(self) -> np.ndarray:
+        """The boxes as (blocks + coarse, 6) rows of (hi, lo) corners, as ``estimate_rows`` reads them."""
+        return np.concatenate([self.box_hi, self.box_lo], axis=1)
 
 
 def tile_nodes(tile, beta: float = GPU_BETA) -> TileNodes:
@@ -100,67 +105,116 @@ def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing) -> TileNodes:
                      np.concatenate([block_hi, cat(coarse_hi, np.float64, 3)]), int(top >= 1))
 
 
-def estimate_rows(fine: np.ndarray, coarse: np.ndarray, lo: np.ndarray, hi: np.ndarray, root: np.ndarray, eye,
-                  k_tau: float, planes=None) -> tuple[np.ndarray, np.ndarray]:
-    """(triangles (B,), visible share (B,)) of B tiles' quadtrees given as stacked ``TileNodes`` fields (fine
-    (B, blocks, nodes), coarse (B, C), lo / hi (B, blocks + C, 3), root (B,)) for an eye (world metres) and
-    K / tau (pixels per radian over tau): 8 triangles per tilelet, a split adding 3, before restriction and
-    stitching; the share in [0, 1] of those in blocks or large nodes inside the frustum ``planes``
-    (eye-relative, as View's; None: all).
+def fine_keys(fine: np.ndarray, first_block: int) -> np.ndarray:
+    """Sort keys (blocks, nodes) int64 of a tile's small-node errors (blocks, nodes) metres whose blocks are
+    numbered from ``first_block``: the block's number above its error's float32 bits, each block's ascending, so
+    that keys of consecutively numbered blocks are one sorted array (errors are >= 0, whose float32 bits order
+    as they do; an error <= 0 never splits, so it is kept as 0)."""
+    bits = np.sort(np.maximum(fine, 0.0).astype(np.float32), axis=1).view(np.int32).astype(np.int64)
+    return ((first_block + np.arange(len(fine), dtype=np.int64))[:, None] << 32) | bits
 
-    A node splits when E * k_tau exceeds its block's (or, large, its own box's) distance; every tile of a pyramid
-    has the same blocks and nodes, so a frame's tiles are compared in a few (B, blocks, nodes) array operations."""
-    b, nb = fine.shape[:2]
+
+def fine_splits(keys: np.ndarray, blocks: np.ndarray, threshold: np.ndarray) -> np.ndarray:
+    """Per block (any shape of block numbers into the flat sorted ``keys`` of ``fine_keys``, ``nodes`` keys a
+    block): its nodes whose error exceeds the block's ``threshold`` (metres, same shape), one binary search each."""
+    nodes = keys.shape[-1]
+    q = (blocks << 32) | threshold.astype(np.float32).view(np.int32).astype(np.int64)
+    return (blocks + 1) * nodes - np.searchsorted(keys.reshape(-1), q.reshape(-1), side="right").reshape(q.shape)
+
+
+def estimate_rows(keys: np.ndarray, rows: np.ndarray, coarse: np.ndarray, boxes: np.ndarray, root: np.ndarray, eye,
+                  k_tau: float, planes=None, inside=None) -> tuple[np.ndarray, np.ndarray]:
+    """(triangles (B,), visible share (B,)) of B tiles' quadtrees for an eye (world metres) and K / tau (pixels per
+    radian over tau): 8 triangles per tilelet, a split adding 3, before restriction and stitching; the share in
+    [0, 1] of those in blocks or large nodes inside the frustum ``planes`` (eye-relative, as View's; None: all).
+
+    The tiles are rows of stacked ``TileNodes``: ``keys`` (rows, blocks, nodes) the small nodes' sort keys
+    (``fine_keys``, block numbers row * blocks + block) of which ``rows`` (B,) are the tiles'; coarse (B, C)
+    errors; boxes (B, blocks + C, 6) as (hi, lo) corners in world metres; root (B,). ``inside`` (B,) marks tiles
+    wholly inside the frustum, whose boxes need no test. A node splits when E * k_tau exceeds its block's (or,
+    large, its own box's) distance: a block's count is one binary search among its sorted errors."""
+    b, nb = len(rows), keys.shape[1]
     if not b:
         return np.zeros(0, np.int64), np.zeros(0)
     eye = np.asarray(eye, dtype=np.float64)
-    lo, hi = lo.reshape(-1, 3), hi.reshape(-1, 3)
-    d = box_distances(eye, lo, hi).reshape(b, -1)
-    seen = (np.ones(d.shape, bool) if planes is None else
-            (box_classes(planes, lo - eye, hi - eye) >= 0).reshape(b, -1))
+    boxes = boxes.reshape(-1, 6)
+    gap = boxes * _GAP_SIGN + np.concatenate([eye, -eye])            # eye - hi, lo - eye (as box_distances)
+    g = np.maximum(np.maximum(gap[:, :3], gap[:, 3:]), 0.0)
+    d = np.sqrt(g[:, 0] * g[:, 0] + g[:, 1] * g[:, 1] + g[:, 2] * g[:, 2]).reshape(b, -1)
     per_box = np.empty(d.shape, np.int64)
-    per_box[:, :nb] = (fine * k_tau > d[:, :nb, None]).sum(axis=2)
+    per_box[:, :nb] = fine_splits(keys, rows[:, None] * nb + np.arange(nb), d[:, :nb] / k_tau) if keys.shape[2] else 0
     per_box[:, nb:] = coarse * k_tau > d[:, nb:]
-    splits, shown = per_box.sum(axis=1), (per_box * seen).sum(axis=1)
+    splits = per_box.sum(axis=1)
+    test = np.ones(b, bool) if inside is None else ~np.asarray(inside, bool)
+    if planes is None or not test.any():
+        shown = splits
+    else:                          # a box is outside when its corner farthest along some plane's normal is behind it
+        n = planes[:, :3].T
+        w = np.concatenate([np.maximum(n, 0.0), np.minimum(n, 0.0)])
+        seen = (boxes.reshape(b, -1, 6)[test] @ w >= eye @ n - planes[:, 3]).all(axis=2)
+        shown = splits.copy()
+        shown[test] = (per_box[test] * seen).sum(axis=1)
     triangles = 8 * (1 + 3 * (splits + root))
-    return triangles.astype(np.int64), 8 * (1 + 3 * (shown + root)) / triangles
+    return triangles, 8 * (1 + 3 * (shown + root)) / triangles
+
+
+_GAP_SIGN = np.array([-1.0, -1.0, -1.0, 1.0, 1.0, 1.0])
 
 
 class _Rows:
     """Many tiles' TileNodes as stacked arrays, one row per tile, so a frame's tiles are gathered in one
-    indexing per field; beyond ``limit`` tiles the least recently used row is reused."""
+    indexing per field; beyond ``limit`` tiles the least recently used row is reused (never one of the call at
+    hand: ``lookup`` stamps its rows with the call's tick)."""
 
-    FIELDS = ("fine", "coarse_error", "box_lo", "box_hi", "root")
+    FIELDS = ("coarse_error", "boxes", "root")      # as TileNodes has them; "fine_keys" from its fine errors
 
     def __init__(self, limit: int):
-        self.limit, self.row = limit, OrderedDict()            # key -> row
+        self.limit, self.row = limit, {}                       # key -> row
+        self.keys: list = []                                   # row -> key
         self.arrays: dict = {}
+        self.stamp = np.zeros(0, np.int64)                     # row -> tick of its last use
+        self.tick = 0
 
-    def get(self, key) -> int | None:
-        """The key's row (now the most recently used), or None."""
-        r = self.row.get(key)
-        if r is not None:
-            self.row.move_to_end(key)
-        return r
+    def lookup(self, keys) -> np.ndarray:
+        """(len(keys),) rows of the keys, -1 where not stored; the stored ones are now the most recently used."""
+        self.tick += 1
+        get = self.row.get
+        rows = np.array([get(k, -1) for k in keys], dtype=np.int64)
+        self.stamp[rows[rows >= 0]] = self.tick
+        return rows
 
     def put(self, key, nodes: TileNodes) -> int:
-        """Store a tile's nodes; returns its row."""
+        """Store a tile's nodes as used by the call at hand; returns its row."""
         if len(self.row) >= self.limit:
-            _, r = self.row.popitem(last=False)
+            r = int(self.stamp[:len(self.keys)].argmin())      # the least recently used
+            del self.row[self.keys[r]]
+            self.keys[r] = key
         else:
-            r = len(self.row)
-            cap = len(self.arrays["root"]) if self.arrays else 0
-            if r >= cap:                                        # grow by doubling
-                new = min(max(2 * cap, 16), self.limit)
-                vals = {f: np.asarray(getattr(nodes, f)) for f in self.FIELDS}
-                grown = {f: np.zeros((new, *v.shape), v.dtype if f != "root" else np.int64) for f, v in vals.items()}
-                for f in self.FIELDS if self.arrays else ():
-                    grown[f][:cap] = self.arrays[f]
-                self.arrays = grown
+            r = len(self.keys)
+            self.keys.append(key)
+            if r >= len(self.stamp):
+                self._grow(nodes)
+        nb = nodes.fine.shape[0]
+        self.arrays["fine_keys"][r] = fine_keys(nodes.fine, r * nb)
         for f in self.FIELDS:
             self.arrays[f][r] = getattr(nodes, f)
+        self.stamp[r] = self.tick
         self.row[key] = r
         return r
+
+    def _grow(self, nodes: TileNodes) -> None:
+        """Double the rows (at least 16); rows not yet filled hold keys of errors 0, so the keys stay sorted."""
+        cap = len(self.stamp)
+        new = max(2 * cap, 16)
+        vals = {f: np.asarray(getattr(nodes, f)) for f in self.FIELDS}
+        grown = {f: np.zeros((new, *v.shape), v.dtype if f != "root" else np.int64) for f, v in vals.items()}
+        nb, nodes_per_block = nodes.fine.shape
+        grown["fine_keys"] = np.broadcast_to((np.arange(new * nb, dtype=np.int64) << 32).reshape(new, nb, 1),
+                                             (new, nb, nodes_per_block)).copy()
+        for f in grown if self.arrays else ():
+            grown[f][:cap] = self.arrays[f]
+        self.arrays = grown
+        self.stamp = np.concatenate([self.stamp, np.zeros(new - cap, np.int64)])
 
 
 class TileletTriangleEstimator:
@@ -190,11 +244,8 @@ class TileletTriangleEstimator:
             self._blocks = nodes if nodes.blocks is not None else None
 
     def _row(self, key: TileKey, deadline: float | None = None) -> int:
-        """The key's row, its nodes built first if new; -1 (not built) once ``deadline`` (perf_counter s) passed,
+        """The new key's row, its nodes built first; -1 (not built) once ``deadline`` (perf_counter s) passed,
         or with ``background`` while its block waits to be cut (the cut then in ``waiting``)."""
-        r = self._rows.get(key)
-        if r is not None:
-            return r
         ready = self._block_ready(key)
         if ready is False and self.background:
             cut = pending_cut(self.pyramid.hf, self.pyramid.n, self.beta, key)
@@ -221,21 +272,30 @@ class TileletTriangleEstimator:
         ready = getattr(self._blocks.blocks, "ready", None)
         return ready is None or ready(key.level, key.tx, key.ty)
 
-    def _estimate(self, keys, view: View, tau: float, budget_ms: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def _estimate(self, keys, view: View, tau: float, budget_ms: float | None = None,
+                  inside=None) -> tuple[np.ndarray, np.ndarray]:
         self._rows.limit = max(self._rows.limit, len(keys))    # a frame's own rows are never reused for it
         deadline = None if budget_ms is None else time.perf_counter() + budget_ms / 1e3
         builds, self.waiting = self.builds, {}
-        rows = np.array([self._row(k, deadline) for k in keys], dtype=np.int64)
-        missing = [i for i in np.flatnonzero(rows < 0) if not self.background or self._block_ready(keys[i])]
-        if missing and self.builds == builds:                   # at least one build a call: the queue drains
-            rows[missing[0]] = self._row(keys[missing[0]])      # (blocks left to cut: the loader's, not here)
-        a = self._rows.arrays
-        tri, vis = np.full(len(rows), np.nan), np.full(len(rows), np.nan)
+        rows = self._rows.lookup(keys)
+        for i in np.flatnonzero(rows < 0).tolist():
+            rows[i] = self._row(keys[i], deadline)
         ok = rows >= 0
-        if ok.any():
-            r = rows[ok]
-            tri[ok], vis[ok] = estimate_rows(a["fine"][r], a["coarse_error"][r], a["box_lo"][r], a["box_hi"][r], a["root"][r],
-                                             view.eye, float(view.pixels_per_radian) / tau, view.frustum_planes_rel())
+        if not ok.all():
+            missing = [i for i in np.flatnonzero(~ok) if not self.background or self._block_ready(keys[i])]
+            if missing and self.builds == builds:               # at least one build a call: the queue drains
+                rows[missing[0]] = self._row(keys[missing[0]])  # (blocks left to cut: the loader's, not here)
+                ok = rows >= 0
+        a, r = self._rows.arrays, rows[ok]
+        if not len(r):
+            return np.full(len(rows), np.nan), np.full(len(rows), np.nan)
+        est = estimate_rows(a["fine_keys"], r, a["coarse_error"][r], a["boxes"][r], a["root"][r], view.eye,
+                            float(view.pixels_per_radian) / tau, view.frustum_planes_rel(),
+                            None if inside is None else inside[ok])
+        if len(r) == len(rows):
+            return est[0].astype(np.float64), est[1]
+        tri, vis = np.full(len(rows), np.nan), np.full(len(rows), np.nan)
+        tri[ok], vis[ok] = est
         return tri, vis
 
     def many(self, selected: list[SelectedTile], view: View, tau: float,
@@ -244,7 +304,7 @@ class TileletTriangleEstimator:
 
         With ``budget_ms``, new tiles' nodes are built front to back only until that much wall time is spent (at
         least one a call); the tiles left get NaN for both (unknown this frame, built in a later one)."""
-        return self._estimate([s.key for s in selected], view, tau, budget_ms)
+        return self._estimate([s.key for s in selected], view, tau, budget_ms, getattr(selected, "inside", None))
 
     def __call__(self, key: TileKey, selected: SelectedTile, view: View, tau: float) -> int:
         """Estimated triangles of tile ``key`` at ``view`` for the error bound tau (pixels)."""

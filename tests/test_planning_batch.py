@@ -118,3 +118,20 @@ def test_clipped_areas_equal_the_clipped_hulls():
     assert np.allclose(np.abs(got), want, rtol=1e-9, atol=1e-8)
     assert np.all(got[:300:2] <= 1e-8) and np.all(got[1:300:2] >= -1e-8)       # each polygon's own orientation
     assert np.sum(np.array(want) == 0) > 10 and np.sum((np.array(want) > 0) & (np.array(want) < w * h)) > 100
+
+
+def test_slab_cells_batch_equals_the_scalar_at_its_edge_cases():
+    """Eye straight above a box's centre, level with it, both, flat boxes and general ones: the batch's closed form
+    against the scalar angle-based reference."""
+    from hybrid.cost.features import slab_cells, slab_cells_batch
+    view = View([50.0, 50.0, 10.0], [0.0, 0.0, 0.0])
+    rng = np.random.default_rng(2)
+    lo = np.array([[40, 40, 0], [40, 40, 5], [0, 0, 0], [0, 0, 3], [40, 40, 10]] + rng.uniform(-80, 80, (40, 3)).tolist())
+    hi = lo + np.array([[20, 20, 4], [20, 20, 10], [30, 20, 20], [30, 20, 0], [20, 20, 0]] +
+                       rng.uniform(0, 30, (40, 3)).tolist())
+    spacing = np.tile([2.0, 3.0], (len(lo), 1))
+    want = [slab_cells(view, a, b, s, 64) for a, b, s in zip(lo, hi, spacing)]
+    got = slab_cells_batch(view, lo, hi, spacing, 64)
+    assert np.allclose(got, want, rtol=1e-12, atol=0)
+    assert got[0] == 1.0 and got[1] == 1.0 and got[3] == 0.0 and got[4] == 0.0   # above (and level): 1; flat: 0
+    assert got[2] == 64 * np.sqrt(2.0) and np.isfinite(got).all()                 # level with the eye: the diagonal

@@ -20,33 +20,51 @@ def _subsets(s: int) -> np.ndarray:
     return np.array(rows, dtype=bool).reshape(-1, s)
 
 
+@functools.lru_cache(maxsize=None)
+def _sizes(s: int) -> np.ndarray:
+    """(2^s - 1,) strategies in each subset of ``_subsets(s)``."""
+    return _subsets(s).sum(axis=1)
+
+
 def best_assignment(costs: dict[str, np.ndarray], overhead: dict[str, float],
                     pure_ms: dict[str, float] | None = None) -> tuple[list[str], float]:
     """(strategy per tile, frame ms) of the cheapest assignment; ``costs`` are per-tile ms ((B,) arrays, overhead
     excluded), ``overhead`` ms per frame per strategy used, ``pure_ms`` a measured frame time that replaces the
-    sum for a one-strategy frame. Ties go to the earlier strategy in ``costs`` and to fewer strategies.
+    sum for a one-strategy frame. Ties go to the earlier strategy in ``costs`` and to fewer strategies."""
+    names = list(costs)
+    table = np.array([np.asarray(costs[n], dtype=np.float64) for n in names], dtype=np.float64).reshape(len(names), -1)
+    pure = None if not pure_ms else np.array([pure_ms.get(n, np.nan) for n in names], dtype=np.float64)
+    pick, total = best_assignment_table(table, np.array([overhead.get(n, 0.0) for n in names], dtype=np.float64), pure)
+    return [names[i] for i in pick.tolist()], total
+
+
+def best_assignment_table(table: np.ndarray, overhead: np.ndarray,
+                          pure_ms: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    """(strategy index per tile (B,), frame ms) of the cheapest assignment of an (S, B) table of per-tile ms under
+    (S,) per-frame overheads; ``pure_ms`` (S,) measured one-strategy frame times (NaN: the sum), as
+    ``best_assignment``.
 
     Every subset is priced at once: (subsets, strategies, tiles) costs with the strategies outside a subset
     at infinity."""
-    names = list(costs)
-    table = np.stack([np.asarray(costs[n], dtype=np.float64) for n in names])       # (S, B)
-    n_tiles = table.shape[1]
-    masks = _subsets(len(names))                                                     # (K, S)
+    s, n_tiles = table.shape
+    masks = _subsets(s)                                                              # (K, S)
     if n_tiles == 0:
         pick = np.zeros((len(masks), 0), dtype=np.int64)
         used = masks & (np.cumsum(masks, axis=1) == 1)                              # a frame of nothing: first only
+        tiles = np.zeros(len(masks))
     else:
-        priced = np.where(masks[:, :, None], table[None], np.inf)                   # (K, S, B)
-        pick = np.argmin(priced, axis=1)                                             # (K, B), first on ties
-        used = (pick[:, None, :] == np.arange(len(names))[None, :, None]).any(axis=2)   # (K, S)
-    fits = used.sum(axis=1) == masks.sum(axis=1)        # a subset some strategy of which is unused: priced smaller
-    tiles = table[pick, np.arange(n_tiles)].sum(axis=1) if n_tiles else np.zeros(len(masks))
-    total = tiles + used.astype(np.float64) @ np.array([overhead.get(n, 0.0) for n in names])
-    if pure_ms:
-        single = masks.sum(axis=1) == 1
-        for i, n in enumerate(names):
-            if n in pure_ms:
-                total[single & masks[:, i]] = float(pure_ms[n])
-    total = np.where(fits, total, np.inf)
-    k = int(np.argmax(total <= total.min() + 1e-12))                                 # the first of the cheapest
-    return [names[i] for i in pick[k].tolist()], float(total[k])
+        priced = np.where(masks[:, :, None], table, np.inf)                         # (K, S, B)
+        pick = priced.argmin(axis=1)                                                 # (K, B), first on ties
+        used = (pick[:, None, :] == _ARANGE[:s, None]).any(axis=2)                   # (K, S)
+        tiles = priced.min(axis=1).sum(axis=1)
+    total = tiles + used @ overhead
+    if pure_ms is not None:
+        measured = ~np.isnan(pure_ms)                   # the first s subsets are the one-strategy ones, in order
+        total[:s][measured] = pure_ms[measured]
+    total[used.sum(axis=1) != _sizes(s)] = np.inf     # a subset some strategy of which is unused: priced smaller
+    k = int((total <= total.min() + 1e-12).argmax())                                # the first of the cheapest
+    return pick[k], float(total[k])
+
+
+_ARANGE = np.arange(16)
+

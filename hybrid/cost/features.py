@@ -141,16 +141,16 @@ def tile_features(pyramid: TilePyramid, view: View, sel: SelectedTile, triangles
 
 
 def slab_cells_batch(view: View, lo: np.ndarray, hi: np.ndarray, spacing: np.ndarray, n: int) -> np.ndarray:
-    """``slab_cells`` of B tiles at once: (B, 3) box corners in metres, (B, 2) (x, y) sample spacings in metres."""
+    """``slab_cells`` of B tiles at once: (B, 3) box corners in metres, (B, 2) (x, y) sample spacings in metres.
+
+    dz / tan(elevation) metres along the heading is dz * horizontal / |vertical| metres, so the cells are
+    dz * (cells along the heading to the centre) / |vertical|: no angle is formed."""
     d = 0.5 * (lo + hi) - view.eye
-    horiz = np.hypot(d[:, 0], d[:, 1])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        tan_el = np.where(horiz > 0, np.abs(d[:, 2]) / np.where(horiz > 0, horiz, 1.0), np.inf)
-        cells_per_m = np.hypot(d[:, 0] / spacing[:, 0], d[:, 1] / spacing[:, 1]) / horiz
-        cells = np.minimum((hi[:, 2] - lo[:, 2]) / tan_el * cells_per_m, n * np.sqrt(2.0))
     dz = hi[:, 2] - lo[:, 2]
-    steep = np.isinf(tan_el) | (dz == 0.0)
-    return np.where(steep, np.where(dz == 0.0, 0.0, 1.0), np.where(tan_el == 0.0, n * np.sqrt(2.0), cells))
+    along = np.hypot(d[:, 0] / spacing[:, 0], d[:, 1] / spacing[:, 1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cells = np.minimum(dz * along / np.abs(d[:, 2]), n * np.sqrt(2.0))     # level eye: the diagonal
+    return np.where(dz == 0.0, 0.0, np.where(along == 0.0, 1.0, cells))         # flat: none; eye straight above: 1
 
 
 def feature_columns(pyramid: TilePyramid, view: View, selected: list[SelectedTile], triangles,

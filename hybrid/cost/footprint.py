@@ -6,9 +6,9 @@ from the eye: the projections of a box's back faces tile its projection, whose b
 those faces. A box wholly in front of the near plane is one polygon, its outline (4 or 6 corners, from a
 table by where the eye lies); a box reaching behind the near plane is its back faces, each cut at the plane
 first (the cut box's back faces are the cut faces; its cap on the near plane faces the eye). Every polygon is
-clipped to the viewport and its area summed per box. Vertices are the reference's: the same corners and
-near-plane crossings of the box edges (from the lower corner index to the higher), projected the same way
-and rounded to 1e-6 px.
+clipped to the viewport and its area summed per box. Vertices are the reference's corners and near-plane
+crossings of the box edges (within rounding: a crossing is found along the face's edge as it runs), projected
+the same way and rounded to 1e-6 px.
 
 A frame has a few dozen tiles, so the time is set by the number of array operations, not their size: each
 step works on every polygon at once, and the viewport clip is a clamp (``clipped_signed_areas``).
@@ -81,11 +81,8 @@ def near_cut(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 def _project(view: View, pts: np.ndarray) -> np.ndarray:
     """Eye-space points (..., 3) in front of the near plane to pixels (..., 2), rounded to 1e-6 px."""
     tan = view.tan_half_fov
-    x = (pts[..., 0] / -pts[..., 2]) / (tan * view.aspect)
-    y = (pts[..., 1] / -pts[..., 2]) / tan
-    out = np.empty((*x.shape, 2))
-    out[..., 0] = (x + 1) * 0.5 * view.width
-    out[..., 1] = (1 - y) * 0.5 * view.height
+    scale = np.array([-0.5 * view.width / (tan * view.aspect), 0.5 * view.height / tan])
+    out = pts[..., :2] / pts[..., 2:3] * scale + np.array([0.5 * view.width, 0.5 * view.height])
     return out.round(6, out=out)
 
 
@@ -98,8 +95,6 @@ class _Next(dict):
 
 
 _NEXT = _Next()
-_PREV = np.array([3, 0, 1, 2])                                              # face vertex k's previous edge
-_FLIP = _FACES > np.roll(_FACES, -1, axis=1)                                # face edge k runs high to low corner
 _OUTLINE, _HAS_OUTLINE = _silhouettes()
 _PAD = {k: np.minimum(np.arange(8), k - 1) for k in (4, 6, 8)}            # k vertices padded to 8 by the last
 
@@ -121,15 +116,10 @@ def clipped_signed_areas(poly: np.ndarray, w: float, h: float) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         t = np.concatenate([-poly / d, (np.array([w, h]) - poly) / d], axis=-1)   # (N, m, 4) line crossings
     t = np.where((t > 0) & (t < 1), t, 0.0)                                    # none (or parallel): the start
-    ts = np.empty((n, m, 4))
-    t = [t[..., i] for i in range(4)]
-    for i, j in ((0, 1), (2, 3), (0, 2), (1, 3), (1, 2)):                      # sorted along the edge
-        t[i], t[j] = np.minimum(t[i], t[j]), np.maximum(t[i], t[j])
-    for i in range(4):
-        ts[..., i] = t[i]
+    t.sort(axis=-1)                                                            # in order along the edge
     pts = np.empty((n, m, 5, 2))
     pts[:, :, 0] = poly
-    pts[:, :, 1:] = poly[:, :, None, :] + ts[..., None] * d[:, :, None, :]
+    pts[:, :, 1:] = poly[:, :, None, :] + t[..., None] * d[:, :, None, :]
     pts = pts.reshape(n, 5 * m, 2)
     x = np.minimum(np.maximum(pts[..., 0], 0.0), w)
     y = np.minimum(np.maximum(pts[..., 1], 0.0), h)
@@ -137,32 +127,32 @@ def clipped_signed_areas(poly: np.ndarray, w: float, h: float) -> np.ndarray:
     return 0.5 * (x * y[:, nxt] - x[:, nxt] * y).sum(axis=1)
 
 
-def _cut_faces(face: np.ndarray, fid: np.ndarray, near: float) -> np.ndarray:
-    """Faces (N, 4, 3) in eye space, face ``fid`` (N,) of their box (corners in ``_FACES`` order), cut at depth
-    >= near: (N, 8, 3) padded polygons.
+def _cut_faces(face: np.ndarray, near: float) -> np.ndarray:
+    """Faces (N, 4, 3) in eye space cut at depth >= near: (N, 8, 3) closed polygons whose projections have the
+    cut faces' signed areas.
 
-    One Sutherland-Hodgman step: each vertex yields the crossing of the edge into it (if the edge crosses),
-    then itself (if in front); empty slots repeat the previous point, so a face wholly behind collapses to a
-    point (no area). Crossings are computed along box edges from their lower corner index, as the reference.
-    """
+    Each edge k yields vertex k and the point where the edge crosses the plane (vertex k again if it does not).
+    Points behind the plane are then replaced by one crossing of their face: the face meets the plane in a line,
+    so what replaced them runs along that line and back, which adds no area to the projection (the clipped
+    face is what is left). A face wholly behind becomes a point in front of the eye (no area)."""
     n = len(face)
     nxt = face[:, _NEXT[4]]
-    flip = _FLIP[fid][..., None]
-    ra, rb = np.where(flip, nxt, face), np.where(flip, face, nxt)              # edge k from its lower corner
-    da, db = -ra[..., 2], -rb[..., 2]
-    cross = (da - near) * (db - near) < 0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(cross, (near - da) / np.where(cross, db - da, 1.0), 0.0)
-    hit = ra + t[..., None] * (rb - ra)
-    pts = np.empty((n, 4, 2, 3))                                               # the crossing into vertex k, vertex k
-    pts[:, :, 0], pts[:, :, 1] = hit[:, _PREV], face
-    ok = np.empty((n, 4, 2), bool)
-    ok[..., 0], ok[..., 1] = cross[:, _PREV], -face[..., 2] >= near
-    ok = ok.reshape(n, 8)
-    last = np.maximum.accumulate(np.where(ok, np.arange(8), -1), axis=1)
-    last = np.where(last < 0, last[:, -1:], last)                              # leading gaps take the final point
-    out = pts.reshape(-1, 3)[np.maximum(last, 0) + 8 * np.arange(n)[:, None]]
-    return np.where(ok.any(axis=1)[:, None, None], out, np.array([0.0, 0.0, -1.0]))   # else a point, no area
+    depth = -face[..., 2]
+    front = depth >= near
+    cross = front != front[:, _NEXT[4]]
+    step = depth - depth[:, _NEXT[4]]
+    t = (depth - near) / np.where(cross, step, 1.0)                            # along edge k where it crosses
+    hit = face + t[..., None] * (nxt - face)
+    pts = np.empty((n, 4, 2, 3))
+    pts[:, :, 0] = face
+    pts[:, :, 1] = np.where(cross[..., None], hit, face)
+    keep = np.empty((n, 4, 2), bool)
+    keep[..., 0], keep[..., 1] = front, front | cross
+    anchor = np.where(cross.any(axis=1)[:, None], hit[np.arange(n), cross.argmax(axis=1)], _AHEAD)
+    return np.where(keep.reshape(n, 8, 1), pts.reshape(n, 8, 3), anchor[:, None, :])
+
+
+_AHEAD = np.array([0.0, 0.0, -1.0])                                         # a point in front of the eye
 
 
 def footprints(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -177,21 +167,24 @@ def footprints(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     rel = _eye_space(view, box_corners(lo, hi))
     near = _near(view)
     eye = np.asarray(view.eye, dtype=np.float64)
-    below, above = eye < hi, eye > lo                                          # (B, 3): each side's face is back
-    code = (above + 2 * below) @ np.array([1, 4, 16])
+    side = np.concatenate([eye > lo, eye < hi], axis=1)        # (B, 6): per axis the low, then the high face is back
+    code = side @ _CODE_WEIGHTS
     cut = (rel[..., 2] > -near).any(axis=1)
     outline = _HAS_OUTLINE[code] & ~cut
-    e, l, u = eye[_FACE_AXIS][None], lo[:, _FACE_AXIS], hi[:, _FACE_AXIS]
-    back = np.where(_FACE_HI[None], e < u, e > l)                              # (B, 6): turned away from the eye
     spans = (hi - lo) > 0
-    box, fid = np.nonzero(back & spans[:, _FACE_SPAN[:, 0]] & spans[:, _FACE_SPAN[:, 1]] & ~outline[:, None])
+    back = side[:, _FACE_SIDE] & spans[:, _FACE_SPAN[:, 0]] & spans[:, _FACE_SPAN[:, 1]]
+    back[outline] = False
+    box, fid = np.nonzero(back)
     face = rel[box[:, None], _FACES[fid]]                                      # (N, 4, 3)
     if cut.any():
-        face = _cut_faces(face, fid, near)
+        face = _cut_faces(face, near)
     sbox = np.flatnonzero(outline)
     sil = rel[sbox[:, None], _OUTLINE[code[sbox]]]                             # (S, 6, 3)
     m = max(6, face.shape[1])
-    pad = lambda p: p[:, _PAD[p.shape[1]][:m]]                                 # noqa: E731  repeat the last
-    poly = _project(view, np.concatenate([pad(sil), pad(face)]))
+    poly = _project(view, np.concatenate([sil[:, _PAD[6][:m]], face[:, _PAD[face.shape[1]][:m]]]))
     area = clipped_signed_areas(poly, float(view.width), float(view.height))
     return np.abs(np.bincount(np.concatenate([sbox, box]), area, minlength=b))
+
+
+_CODE_WEIGHTS = np.array([1, 4, 16, 2, 8, 32])             # the eye position code of ``_silhouettes`` from ``side``
+_FACE_SIDE = np.array([0, 3, 1, 4, 2, 5])                  # face f's column of ``side`` (faces in _FACES order)

@@ -97,10 +97,26 @@ class CostModel:
         return {s: float(v) for s, v in self.predict_columns(f).items()}
 
     def predict_columns(self, columns) -> dict[str, np.ndarray]:
-        """Predicted milliseconds of each strategy for many tiles at once, from feature columns ((B,) arrays)."""
-        terms = all_term_values(columns)       # each strategy from its own terms: one's unknown (NaN) term spares others
-        return {s: terms[..., _TERM_INDEX[s]] @ np.array([getattr(self, s)[t] for t in TERMS[s]])
-                for s in self.candidates}
+        """Predicted milliseconds of each strategy for many tiles at once, from feature columns ((B,) arrays); a
+        raster strategy's is NaN where the triangles are unknown (NaN), the ray caster's is not."""
+        return dict(zip(self.candidates, self.predict_table(columns)))
+
+    def predict_table(self, columns, unknown: float = np.nan) -> np.ndarray:
+        """(candidates, B) predicted ms, rows in ``candidates`` order, from feature columns ((B,) arrays, or one
+        ``TileFeatures``: (candidates,)); the raster rows are ``unknown`` where the triangles are NaN."""
+        terms = all_term_values(columns)
+        shape, terms = terms.shape[:-1], terms.reshape(-1, len(ALL_TERMS))
+        cands = self.candidates
+        coef = np.array([[getattr(self, s).get(t, 0.0) if t in TERMS[s] else 0.0 for t in ALL_TERMS] for s in cands],
+                        dtype=np.float64)
+        nan = np.isnan(terms[:, 1])
+        if nan.any():
+            terms = terms.copy()
+            terms[nan, 1:3] = 0.0                   # raster terms only: the ray caster's prediction stays known
+        table = coef @ terms.T
+        if nan.any():
+            table[np.ix_([TERMS[s] is RASTER_TERMS for s in cands], nan)] = unknown
+        return table.reshape(len(cands), *shape)
 
     def explain(self) -> str:
         """The formulas with their coefficients, and the held-out error."""

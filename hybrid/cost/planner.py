@@ -19,7 +19,7 @@ import numpy as np
 
 from hybrid.camera.view import View
 from hybrid.contract import CANDIDATES, POLICIES, PURE_POLICIES, TriangleEstimator
-from hybrid.cost.choice import best_assignment
+from hybrid.cost.choice import best_assignment_table
 from hybrid.cost.features import TileFeatures, feature_columns, tile_features
 from hybrid.cost.model import CostModel
 from hybrid.errors import TerrabenchError
@@ -109,15 +109,6 @@ def choices(policy: str, columns: dict, predicted: dict, threshold: float = 1.0)
     return np.where(raster, "raster", "raycast").tolist()
 
 
-def unknown_raster_costs(predicted: dict, columns: dict) -> dict:
-    """Predictions with the raster strategies' cost infinite for tiles whose triangles are unknown (NaN: not yet
-    prepared under a streaming budget), so that every policy ray casts them."""
-    unknown = np.isnan(np.asarray(columns["triangles"], dtype=np.float64))
-    if not unknown.any():
-        return predicted
-    return {s: np.where(unknown, np.inf, v) if STRATEGIES[s].kind == "raster" else v for s, v in predicted.items()}
-
-
 def choose(policy: str, features: TileFeatures, predicted: dict, threshold: float = 1.0) -> str:
     """The strategy a policy picks for one tile (oracle: 'raster' until measured)."""
     columns = {n: np.array([v]) for n, v in vars(features).items()}
@@ -133,14 +124,21 @@ def hedged_choices(predicted: dict, model: CostModel) -> list[str]:
     predicted. The pure frames are priced over the tiles every strategy can draw (a tile not yet prepared for
     raster, infinite there, takes ray casting whatever the base)."""
     names = list(predicted)
-    known = np.all([np.isfinite(predicted[n]) for n in names], axis=0)      # tiles every strategy can draw
-    pure = {n: float(np.asarray(predicted[n])[known].sum()) + model.overhead.get(n, 0.0) for n in names}
-    base = min(pure, key=pure.get)
-    err = {n: float(model.fit_error.get(n, 0.0)) for n in names}
-    order = [base] + [n for n in names if n != base]            # ties stay with the base
-    hedged = {n: np.asarray(predicted[n], dtype=np.float64) * (1.0 if n == base else 1.0 + err[n] + err[base])
-              for n in order}
-    return best_assignment(hedged, model.overhead)[0]
+    table = np.array([np.asarray(predicted[n], dtype=np.float64) for n in names]).reshape(len(names), -1)
+    return [names[i] for i in hedged_picks(table, names, model).tolist()]
+
+
+def hedged_picks(table: np.ndarray, names: list[str], model: CostModel) -> np.ndarray:
+    """``hedged_choices`` as indices into ``names`` (B,), from an (S, B) table of predicted ms in ``names`` order."""
+    overhead = np.array([model.overhead.get(n, 0.0) for n in names], dtype=np.float64)
+    err = np.array([model.fit_error.get(n, 0.0) for n in names], dtype=np.float64)
+    known = np.isfinite(table).all(axis=0)                          # tiles every strategy can draw
+    base = int((np.where(known, table, 0.0).sum(axis=1) + overhead).argmin())
+    order = np.array([base] + [i for i in range(len(names)) if i != base])   # ties stay with the base
+    factor = 1.0 + err + err[base]
+    factor[base] = 1.0
+    pick, _ = best_assignment_table((table * factor[:, None])[order], overhead[order])
+    return order[pick]
 
 
 _ESTIMATORS: "weakref.WeakKeyDictionary[TilePyramid, TriangleEstimator]" = weakref.WeakKeyDictionary()
@@ -179,8 +177,13 @@ def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
     if batch:
         triangles, visible = triangles_fn.many(selected, view, tau, prep_budget_ms)
         columns = feature_columns(pyramid, view, selected, triangles, visible)
-        pred = unknown_raster_costs(model.predict_columns(columns), columns)
-        chosen = hedged_choices(pred, model) if policy == "hybrid" else choices(policy, columns, pred, threshold)
+        names = model.candidates
+        table = model.predict_table(columns, unknown=np.inf)   # unknown triangles: raster infinite, so ray cast
+        pred = dict(zip(names, table))
+        if policy == "hybrid":
+            chosen = [names[i] for i in hedged_picks(table, names, model).tolist()]
+        else:
+            chosen = choices(policy, columns, pred, threshold)
         frame = FrameColumns(columns, pred)
         return [TilePlan(s, None, None, c, frame=frame, row=i) for i, (s, c) in enumerate(zip(selected, chosen))]
     else:

@@ -209,9 +209,9 @@ def _children(tx: np.ndarray, ty: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 class TileSelection(list):
     """Selected tiles front to back (``SelectedTile``s), with the same tiles as arrays in the same order: keys
-    (B, 3) int64 level, tx, ty; distance (B,) metres; lo, hi (B, 3) world box corners (metres)."""
+    (B, 3) int64 level, tx, ty; distance (B,) metres; lo, hi (B, 3) world box corners (metres); inside (B,) bool."""
 
-    __slots__ = ("keys", "distance", "lo", "hi")
+    __slots__ = ("keys", "distance", "lo", "hi", "inside")
 
 
 def select_tiles(pyramid: TilePyramid, view: View, tau: float = DEFAULT_TAU) -> list[SelectedTile]:
@@ -230,11 +230,13 @@ def select_tiles(pyramid: TilePyramid, view: View, tau: float = DEFAULT_TAU) -> 
     bits = np.array([bit for bit, _, _ in _EDGES])
     masks = ((deltas == 1) * bits).sum(axis=1)
     order = sel.front_to_back(lv, tx, ty)
+    inside = c[order] == 1
     out = TileSelection(
-        SelectedTile(TileKey(level, x, y), dist, err, mask, inside, tuple(delta))
-        for level, x, y, dist, err, mask, inside, delta in zip(
+        SelectedTile(TileKey(level, x, y), dist, err, mask, ins, tuple(delta))
+        for level, x, y, dist, err, mask, ins, delta in zip(
             lv[order].tolist(), tx[order].tolist(), ty[order].tolist(), d[order].tolist(), pe[order].tolist(),
-            masks[order].tolist(), (c[order] == 1).tolist(), deltas[order].tolist()))
+            masks[order].tolist(), inside.tolist(), deltas[order].tolist()))
+    out.inside = inside
     out.keys = np.stack([lv, tx, ty], axis=1)[order]
     out.distance, out.lo, out.hi = d[order].astype(np.float64), lo[order], hi[order]
     return out
