@@ -4,7 +4,7 @@ The batched counterpart of ``hybrid.cost.features.footprint_pixels``, computed a
 eye through a point of a convex body's projection leaves the body exactly once, through a face turned away
 from the eye: the projections of a box's back faces tile its projection, whose boundary is the outline of
 those faces. A box wholly in front of the near plane is one polygon, its outline (4 or 6 corners, from a
-table by where the eye lies); a box reaching behind the near plane is its back faces, each cut at the plane
+table by where the eye lies; a box flat in z, its rectangle); a box reaching behind the near plane is its back faces, each cut at the plane
 first (the cut box's back faces are the cut faces; its cap on the near plane faces the eye). Every polygon is
 clipped to the viewport and its area summed per box. Vertices are the reference's corners and near-plane
 crossings of the box edges (within rounding: a crossing is found along the face's edge as it runs), projected
@@ -159,8 +159,9 @@ def footprints(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Per box (B, 3 corners each, world metres): viewport area in pixels of its near-cut projection.
 
     A box wholly in front of the near plane with some extent on every axis projects to its outline, one
-    polygon of 4 or 6 corners looked up by where the eye is (``_silhouettes``); any other box (flat, or reaching
-    behind the near plane) to its back faces, cut at the near plane when any reaches behind it. All polygons
+    polygon of 4 or 6 corners looked up by where the eye is (``_silhouettes``), and one flat in z to its
+    rectangle; any other box (flat in x or y, or reaching behind the near plane) to its back faces, cut at the
+    near plane when any reaches behind it. All polygons
     are projected and clipped to the viewport in one pass; a box's areas are then summed."""
     lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
     b = lo.shape[0]
@@ -170,16 +171,17 @@ def footprints(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     side = np.concatenate([eye > lo, eye < hi], axis=1)        # (B, 6): per axis the low, then the high face is back
     code = side @ _CODE_WEIGHTS
     cut = (rel[..., 2] > -near).any(axis=1)
-    outline = _HAS_OUTLINE[code] & ~cut
     spans = (hi - lo) > 0
+    flat = spans[:, 0] & spans[:, 1] & ~spans[:, 2]             # a rectangle at one height: its outline is itself
+    outline = (_HAS_OUTLINE[code] | flat) & ~cut
+    sbox = np.flatnonzero(outline)
+    sil = rel[sbox[:, None], np.where(flat[sbox, None], _FLAT_OUTLINE, _OUTLINE[code[sbox]])]   # (S, 6, 3)
     back = side[:, _FACE_SIDE] & spans[:, _FACE_SPAN[:, 0]] & spans[:, _FACE_SPAN[:, 1]]
     back[outline] = False
     box, fid = np.nonzero(back)
     face = rel[box[:, None], _FACES[fid]]                                      # (N, 4, 3)
     if cut.any():
         face = _cut_faces(face, near)
-    sbox = np.flatnonzero(outline)
-    sil = rel[sbox[:, None], _OUTLINE[code[sbox]]]                             # (S, 6, 3)
     m = max(6, face.shape[1])
     poly = _project(view, np.concatenate([sil[:, _PAD[6][:m]], face[:, _PAD[face.shape[1]][:m]]]))
     area = clipped_signed_areas(poly, float(view.width), float(view.height))
@@ -188,3 +190,4 @@ def footprints(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 _CODE_WEIGHTS = np.array([1, 4, 16, 2, 8, 32])             # the eye position code of ``_silhouettes`` from ``side``
 _FACE_SIDE = np.array([0, 3, 1, 4, 2, 5])                  # face f's column of ``side`` (faces in _FACES order)
+_FLAT_OUTLINE = np.array([0, 2, 6, 4, 4, 4])               # a box flat in z: its low z face, padded to 6 corners
