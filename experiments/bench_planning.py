@@ -78,6 +78,9 @@ def summarize(df: pd.DataFrame) -> pd.DataFrame:
     out = df.groupby(["flight", "tile_size", "tau"], sort=False)[["tiles"] + cols].median()
     out["plan speed-up"] = out["plan per tile ms"] / out["plan batch ms"]
     out["features speed-up"] = out["features per tile ms"] / out["features batch ms"]
+    # the machine's speed drifts between runs and sessions; the share of the selection (the same code every
+    # policy runs, timed in the same repeats) compares across them
+    out["features + choices / select"] = out["features + choices ms (target <= 0.5)"] / out["select ms"]
     return out.reset_index()
 
 
