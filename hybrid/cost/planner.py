@@ -23,7 +23,7 @@ from hybrid.cost.choice import best_assignment_table
 from hybrid.cost.features import TileFeatures, feature_columns, tile_features
 from hybrid.cost.model import CostModel
 from hybrid.errors import TerrabenchError
-from hybrid.strategies import STRATEGIES, triangle_estimator
+from hybrid.strategies import triangle_estimator
 from hybrid.tiles.pyramid import TileKey, TilePyramid
 from hybrid.tiles.tiletree import DEFAULT_TAU, SelectedTile, select_tiles
 
