@@ -138,8 +138,7 @@ def estimate_rows(keys: np.ndarray, rows: np.ndarray, coarse: np.ndarray, boxes:
         return np.zeros(0, np.int64), np.zeros(0)
     eye = np.asarray(eye, dtype=np.float64)
     boxes = boxes.reshape(-1, 6)
-    gap = boxes * _GAP_SIGN + np.concatenate([eye, -eye])            # eye - hi, lo - eye (as box_distances)
-    g = np.maximum(np.maximum(gap[:, :3], gap[:, 3:]), 0.0)
+    g = np.minimum(np.maximum(eye, boxes[:, 3:]), boxes[:, :3]) - eye     # to the box's nearest point
     d = np.sqrt(g[:, 0] * g[:, 0] + g[:, 1] * g[:, 1] + g[:, 2] * g[:, 2]).reshape(b, -1)
     per_box = np.empty(d.shape, np.int64)
     per_box[:, :nb] = fine_splits(keys, rows[:, None] * nb + np.arange(nb), d[:, :nb] / k_tau) if keys.shape[2] else 0
@@ -149,16 +148,20 @@ def estimate_rows(keys: np.ndarray, rows: np.ndarray, coarse: np.ndarray, boxes:
     if planes is None or not test.any():
         shown = splits
     else:                          # a box is outside when its corner farthest along some plane's normal is behind it
-        n = planes[:, :3].T
-        w = np.concatenate([np.maximum(n, 0.0), np.minimum(n, 0.0)])
-        seen = (boxes.reshape(b, -1, 6)[test] @ w >= eye @ n - planes[:, 3]).all(axis=2)
+        w, bias = _corner_test(planes, eye)
+        seen = (boxes.reshape(b, -1, 6)[test] @ w >= bias).all(axis=2)
         shown = splits.copy()
         shown[test] = (per_box[test] * seen).sum(axis=1)
     triangles = 8 * (1 + 3 * (splits + root))
     return triangles, 8 * (1 + 3 * (shown + root)) / triangles
 
 
-_GAP_SIGN = np.array([-1.0, -1.0, -1.0, 1.0, 1.0, 1.0])
+def _corner_test(planes: np.ndarray, eye: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(6, 6) weights and (6,) bounds such that a (hi, lo) world box row r lies wholly behind some frustum plane
+    (eye-relative ``planes``) exactly where some column of r @ weights falls below its bound: per plane, its
+    corner farthest along the normal."""
+    n = planes[:, :3].T
+    return np.concatenate([np.maximum(n, 0.0), np.minimum(n, 0.0)]), eye @ n - planes[:, 3]
 
 
 class _Rows:

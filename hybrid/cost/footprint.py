@@ -113,9 +113,10 @@ def clipped_signed_areas(poly: np.ndarray, w: float, h: float) -> np.ndarray:
     """
     n, m = poly.shape[:2]
     d = poly[:, _NEXT[m]] - poly                                               # edges a -> a + d, (N, m, 2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.concatenate([-poly / d, (np.array([w, h]) - poly) / d], axis=-1)   # (N, m, 4) line crossings
-    t = np.where((t > 0) & (t < 1), t, 0.0)                                    # none (or parallel): the start
+    with np.errstate(divide="ignore", invalid="ignore"):                       # (N, m, 4) line crossings
+        t = ((np.array([[0.0, 0.0], [w, h]]) - poly[:, :, None, :]) / d[:, :, None, :]).reshape(n, m, 4)
+    # a crossing off the edge (or of a parallel line, or a zero-length edge's NaN) becomes one of the edge's ends
+    t = np.fmin(np.fmax(t, 0.0), 1.0)
     t.sort(axis=-1)                                                            # in order along the edge
     pts = np.empty((n, m, 5, 2))
     pts[:, :, 0] = poly
@@ -176,6 +177,8 @@ def footprints(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     outline = (_HAS_OUTLINE[code] | flat) & ~cut
     sbox = np.flatnonzero(outline)
     sil = rel[sbox[:, None], np.where(flat[sbox, None], _FLAT_OUTLINE, _OUTLINE[code[sbox]])]   # (S, 6, 3)
+    if len(sbox) == b:                                          # every box one polygon (in box order): no faces
+        return np.abs(clipped_signed_areas(_project(view, sil), float(view.width), float(view.height)))
     back = side[:, _FACE_SIDE] & spans[:, _FACE_SPAN[:, 0]] & spans[:, _FACE_SPAN[:, 1]]
     back[outline] = False
     box, fid = np.nonzero(back)
