@@ -5,7 +5,7 @@ import pytest
 
 from hybrid.camera.view import View
 from hybrid.cost.features import TileFeatures, _hull_area_clipped, footprint_pixels
-from hybrid.cost.fit import FrameSample, estimate_overhead, fit_frames
+from hybrid.cost.fit import FrameSample, TileSample, estimate_overhead, fit_frames
 from hybrid.cost.model import TERMS, CostModel, load_cost_model, save_cost_model, term_values
 from hybrid.cost.planner import choose
 from hybrid.errors import TerrabenchError
@@ -54,6 +54,34 @@ def test_frame_fit_recovers_known_coefficients_and_overheads():
     assert "of 240 frames' times" in m.explain() and "raster_gs ms = " in m.explain()
     two = fit_frames(synthetic_frames(names=("raster", "raycast")), "test", names=("raster", "raycast"))
     assert two.candidates == ("raster", "raycast") and "raster_gs not calibrated: never chosen" in two.explain()
+
+
+CALL = {"raster": 0.8, "raster_gs": 0.6, "raycast": 0.9}
+
+
+def synthetic_single_calls(n=150, seed=1, noise=0.005):
+    """Tiles drawn one call each: TRUE's per-tile cost plus CALL, every candidate way."""
+    rng = np.random.default_rng(seed)
+    return [TileSample(s, term_values(f, s), float((TRUE.predict(f)[s] + CALL[s]) * rng.normal(1, noise)))
+            for f in synthetic_tiles(n, seed) for s in NAMES]
+
+
+def test_joint_fit_recovers_the_per_call_overhead_and_holds_tiles_out():
+    """Frames and tiles timed one call each share the coefficients; each strategy's per-call overhead is fitted
+    with them, and the held-out tiles are predicted within the noise, as the held-out frames."""
+    tiles = synthetic_single_calls()
+    m = fit_frames(synthetic_frames(), "test", holdout=0.3, tiles=tiles)
+    assert m.tiles == len(tiles) and set(m.call_overhead) == set(NAMES)
+    for s in NAMES:
+        assert np.isclose(m.call_overhead[s], CALL[s], rtol=0.1), (s, m.call_overhead[s])
+        assert np.isclose(m.overhead[s], OVERHEAD[s], rtol=0.25), (s, m.overhead[s])
+        assert m.tile_error[s] < 0.01 and m.fit_error[s] < 0.01
+    assert "per-call overhead of a tile drawn as its own call" in m.explain()
+    # without the tiles there is no per-call overhead nor tile error; a bad tile time is refused
+    plain = fit_frames(synthetic_frames(), "test", holdout=0.3)
+    assert plain.call_overhead == {} and plain.tile_error == {}
+    with pytest.raises(TerrabenchError, match="one call each need finite times"):
+        fit_frames(synthetic_frames(), "test", tiles=tiles[:-1] + [TileSample("raster", tiles[0].terms, float("nan"))])
 
 
 def test_frame_fit_rejects_bad_timings():
@@ -106,6 +134,11 @@ def test_save_load_by_renderer(tmp_path):
     save_cost_model(TRUE, p)
     got = load_cost_model("test", p)
     assert got.raster == TRUE.raster and got.raycast == TRUE.raycast and got.raster_gs == TRUE.raster_gs
+    fitted = CostModel("fitted", TRUE.raster, TRUE.raycast, raster_gs=TRUE.raster_gs, call_overhead=dict(CALL),
+                       tile_error={"raster": 0.1})
+    save_cost_model(fitted, p)
+    again = load_cost_model("fitted", p)
+    assert again.call_overhead == CALL and again.tile_error == {"raster": 0.1}
     shipped = load_cost_model("llvmpipe (LLVM 15.0.6, 256 bits)", p)
     assert "llvmpipe" in shipped.source
     other = load_cost_model("Some Unknown GPU", p)

@@ -12,7 +12,8 @@ the ray caster's pre-pass target and counters) paid once when any tile uses it:
     frame_ms = sum over strategies used of overhead_s + sum of tiles
 
 ``terrabench calibrate`` times whole frames on this device, pure and with tiles assigned to the strategies at
-random, and fits the coefficients and overheads to the frame times together (``hybrid.cost.fit.fit_frames``), then
+random, and the frames' tiles one call each, and fits the coefficients, the per-frame overheads and a per-call
+overhead to both together (``hybrid.cost.fit.fit_frames``), then
 saves the model keyed by the GL renderer string. ``load_cost_model`` finds it again: the user's file ($TERRABENCH_COSTS or
 ~/.config/terrabench/costs.json), then the defaults shipped in hybrid/cost/costs_default.json (matched by a
 key contained in the renderer string, e.g. 'llvmpipe').
@@ -81,7 +82,8 @@ class CostModel:
     overhead: dict = field(default_factory=lambda: {s: 0.0 for s in TERMS})
     raster_gs: dict = field(default_factory=dict)
     frames: int = 0                 # whole frames fitted (0: fitted on per-tile times)
-    tile_error: dict = field(default_factory=dict)   # per-tile error against tiles timed a call each, when fitted on frames
+    tile_error: dict = field(default_factory=dict)   # held-out per-tile error against tiles timed a call each
+    call_overhead: dict = field(default_factory=dict)   # ms one tile drawn as its own call adds (fitted with the tiles)
 
     @property
     def candidates(self) -> tuple[str, ...]:
@@ -133,9 +135,12 @@ class CostModel:
         what = f"of {self.frames} frames' times" if self.frames else "per tile"
         for s, e in self.fit_error.items():
             lines.append(f"  held-out median |relative error| {what} using {s}: {100 * e:.1f} %")
+        if self.call_overhead:
+            lines.append("  per-call overhead of a tile drawn as its own call: " +
+                         ", ".join(f"{s} {v:.3g} ms" for s, v in self.call_overhead.items()))
         for s, e in self.tile_error.items():
-            lines.append(f"  median |relative error| per tile against tiles timed one call each (less the call's "
-                         f"overhead) {s}: {100 * e:.1f} %")
+            lines.append(f"  held-out median |relative error| per tile against tiles timed one call each (with the "
+                         f"call's overhead) {s}: {100 * e:.1f} %")
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
@@ -180,7 +185,8 @@ def cost_model_from_dict(d: dict, source: str) -> CostModel:
     try:
         m = CostModel(d["renderer"], dict(d["raster"]), dict(d["raycast"]), dict(d.get("fit_error", {})),
                       int(d.get("tiles", 0)), source, {**{s: 0.0 for s in TERMS}, **d.get("overhead", {})},
-                      dict(d.get("raster_gs") or {}), int(d.get("frames", 0)), dict(d.get("tile_error", {})))
+                      dict(d.get("raster_gs") or {}), int(d.get("frames", 0)), dict(d.get("tile_error", {})),
+                      {s: float(v) for s, v in (d.get("call_overhead") or {}).items()})
         for s in m.candidates:
             for t in TERMS[s]:
                 getattr(m, s).setdefault(t, 0.0)     # a model saved before a term existed has it at 0
