@@ -19,7 +19,7 @@ import numpy as np
 from hybrid.camera.view import View
 from hybrid.terrain.stored import StoredTerrain
 from hybrid.tiles.pyramid import TileKey, TilePyramid
-from hybrid.tiles.tiletree import SelectedTile
+from hybrid.tiles.tiletree import SelectedTile, box_distances
 
 from .nodes import nodes_for, pending_cut, tile_node_block
 from .quadtree import GPU_BETA, error_pyramid
@@ -138,8 +138,7 @@ def estimate_rows(keys: np.ndarray, rows: np.ndarray, coarse: np.ndarray, boxes:
         return np.zeros(0, np.int64), np.zeros(0)
     eye = np.asarray(eye, dtype=np.float64)
     boxes = boxes.reshape(-1, 6)
-    g = np.minimum(np.maximum(eye, boxes[:, 3:]), boxes[:, :3]) - eye     # to the box's nearest point
-    d = np.sqrt(g[:, 0] * g[:, 0] + g[:, 1] * g[:, 1] + g[:, 2] * g[:, 2]).reshape(b, -1)
+    d = box_distances(eye, boxes[:, 3:], boxes[:, :3]).reshape(b, -1)
     per_box = np.empty(d.shape, np.int64)
     per_box[:, :nb] = fine_splits(keys, rows[:, None] * nb + np.arange(nb), d[:, :nb] / k_tau) if keys.shape[2] else 0
     per_box[:, nb:] = coarse * k_tau > d[:, nb:]
@@ -206,9 +205,9 @@ class _Rows:
         return r
 
     def _grow(self, nodes: TileNodes) -> None:
-        """Double the rows (at least 16); rows not yet filled hold keys of errors 0, so the keys stay sorted."""
+        """Double the rows (at least 16, at most ``limit``); rows not yet filled hold keys of errors 0, so the keys stay sorted."""
         cap = len(self.stamp)
-        new = max(2 * cap, 16)
+        new = min(max(2 * cap, 16), self.limit)          # the call's own rows fit: limit >= its tiles
         vals = {f: np.asarray(getattr(nodes, f)) for f in self.FIELDS}
         grown = {f: np.zeros((new, *v.shape), v.dtype if f != "root" else np.int64) for f, v in vals.items()}
         nb, nodes_per_block = nodes.fine.shape

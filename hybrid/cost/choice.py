@@ -55,7 +55,7 @@ def best_assignment_table(table: np.ndarray, overhead: np.ndarray,
     else:
         priced = np.where(masks[:, :, None], table, np.inf)                         # (K, S, B)
         pick = priced.argmin(axis=1)                                                 # (K, B), first on ties
-        used = (pick[:, None, :] == _ARANGE[:s, None]).any(axis=2)                   # (K, S)
+        used = (pick[:, None, :] == np.arange(s)[:, None]).any(axis=2)               # (K, S)
         tiles = priced.min(axis=1).sum(axis=1)
     total = tiles + used @ overhead
     if pure_ms is not None:
@@ -64,7 +64,3 @@ def best_assignment_table(table: np.ndarray, overhead: np.ndarray,
     total[used.sum(axis=1) != _sizes(s)] = np.inf     # a subset some strategy of which is unused: priced smaller
     k = int((total <= total.min() + 1e-12).argmax())                                # the first of the cheapest
     return pick[k], float(total[k])
-
-
-_ARANGE = np.arange(16)
-

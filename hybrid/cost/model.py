@@ -112,12 +112,13 @@ class CostModel:
         coef = np.array([[getattr(self, s).get(t, 0.0) if t in TERMS[s] else 0.0 for t in ALL_TERMS] for s in cands],
                         dtype=np.float64)
         nan = np.isnan(terms[:, 1])
-        if nan.any():
+        unknown_any = bool(nan.any())
+        if unknown_any:
             terms = terms.copy()
-            terms[nan, 1:3] = 0.0                   # raster terms only: the ray caster's prediction stays known
+            terms[nan, 1:3] = 0.0                   # triangle terms only: the ray caster's prediction stays known
         table = coef @ terms.T
-        if nan.any():
-            table[np.ix_([TERMS[s] is RASTER_TERMS for s in cands], nan)] = unknown
+        if unknown_any:
+            table[np.ix_(["triangles" in TERMS[s] for s in cands], nan)] = unknown
         return table.reshape(len(cands), *shape)
 
     def explain(self) -> str:
