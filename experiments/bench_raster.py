@@ -1,7 +1,8 @@
 """Benchmark of the raster strategies: tables as DataFrames; `python -m experiments.bench_raster` prints them.
 
-1. Triangles against max vertical error on Puget tiles: restricted quadtree (plain errors; morph-safe errors at
-   beta 0.7; at the GPU strategies' beta, what raster and raster_gs draw) vs pymartini (RTIN), pydelatin and
+1. Triangles against max vertical error on Puget tiles: restricted quadtree (plain errors with full fans, and
+   lean: every midpoint no finer neighbour needs dropped; morph-safe errors at beta 0.7; at the GPU strategies'
+   beta with lean leaves, what raster and raster_gs draw) vs pymartini (RTIN), pydelatin and
    fast-simplification, every max error measured the same way.
 2. Per-view leaf selection + restriction time of a 257² tile.
 3. GPU bytes per tile and representation, next to the paper's 96 bits (12 bytes) per triangle.
@@ -57,22 +58,23 @@ def triangles_vs_error(tiles, errors=(5.0, 10.0, 20.0, 40.0, 80.0)):
     from raster.tin import TinMesh, build_tin, tin_max_error
     rows = []
     pyrs = {"quadtree": [error_pyramid(t.heights) for t in tiles]}
-    pyrs["quadtree-morph"] = pyrs["quadtree"]
+    pyrs["quadtree-lean"] = pyrs["quadtree-morph"] = pyrs["quadtree"]
     pyrs["quadtree-gpu"] = [error_pyramid(t.heights, GPU_BETA) for t in tiles]   # what raster, raster_gs draw
     n = tiles[0].n
     martini = Martini(n + 1)
     for e in errors:
         res = {}
-        for name in ("quadtree", "quadtree-morph", "quadtree-gpu", "martini", "delatin", "fast-simpl"):
+        for name in ("quadtree", "quadtree-lean", "quadtree-morph", "quadtree-gpu", "martini", "delatin",
+                     "fast-simpl"):
             tri, err = 0, 0.0
             for i, t in enumerate(tiles):
                 h = np.asarray(t.heights, dtype=np.float32)
                 if name.startswith("quadtree"):
-                    morph = name != "quadtree"
-                    ts = restrict_frame([TileLod((0, 0, 0), pyrs[name][i], e)], morph=morph,
-                                        use_effective=morph)[(0, 0, 0)]
+                    morph = name in ("quadtree-morph", "quadtree-gpu")
+                    ts = restrict_frame([TileLod((0, 0, 0), pyrs[name][i], e)], morph=morph, use_effective=morph,
+                                        lean=name in ("quadtree-lean", "quadtree-gpu"))[(0, 0, 0)]
                     tri += ts.triangles
-                    err = max(err, float(drawn_max_error(h, ts.leaves, ts.coarser).max()))
+                    err = max(err, float(drawn_max_error(h, ts.leaves, ts.drop).max()))
                     continue
                 if name == "martini":
                     # martini checks its error only at split midpoints: bisect its parameter until the

@@ -33,11 +33,15 @@ class TileNodes:
     """What the estimate needs of one tile's quadtree (metres, world frame): errors and where the nodes are.
 
     fine: effective errors of the nodes no larger than a block, one row per block (row-major, BLOCKS² blocks;
-    every block holds as many); coarse_error: the larger nodes below the root; box_lo/hi: the blocks' boxes,
-    then the larger nodes' grown boxes (BLOCKS² + coarse, 3); root: 1 where the tile's root can split, else 0.
+    every block holds as many); lean: the same with the level-0 nodes (which never split, but keep their edge
+    midpoints near their own split), but 0 in a full-resolution tile, whose level-0 leaves keep every midpoint;
+    split1: there, the level-1 nodes' errors (a split one makes four such leaves), else zeros; coarse_error: the larger nodes below the root; box_lo/hi: the blocks'
+    boxes, then the larger nodes' grown boxes (BLOCKS² + coarse, 3); root: 1 where the tile's root can split.
     """
 
     fine: np.ndarray
+    lean: np.ndarray
+    split1: np.ndarray
     coarse_error: np.ndarray
     box_lo: np.ndarray
     box_hi: np.ndarray
@@ -49,24 +53,26 @@ class TileNodes:
         return np.concatenate([self.box_hi, self.box_lo], axis=1)
 
 
-def tile_nodes(tile, beta: float = GPU_BETA) -> TileNodes:
+def tile_nodes(tile, beta: float = GPU_BETA, full_res: bool = False) -> TileNodes:
     """The estimate's data of one pyramid tile (``hybrid.tiles.pyramid.Tile``: heights, origin, spacing), from
-    its own heights' error pyramid."""
+    its own heights' error pyramid; ``full_res``: a level-0 tile."""
     pyr = error_pyramid(tile.heights, beta)
-    return _tile_nodes(pyr.effective, pyr.zmin, pyr.zmax, tile.n, tile.origin, (tile.spacing_x, tile.spacing_y))
+    return _tile_nodes(pyr.effective, pyr.zmin, pyr.zmax, tile.n, tile.origin, (tile.spacing_x, tile.spacing_y),
+                       full_res)
 
 
-def block_tile_nodes(data: np.ndarray, offsets: np.ndarray, n: int, origin, spacing) -> TileNodes:
+def block_tile_nodes(data: np.ndarray, offsets: np.ndarray, n: int, origin, spacing,
+                     full_res: bool = False) -> TileNodes:
     """The estimate's data of an n-cell tile at world ``origin`` with ``spacing`` (x, y) metres, from its node
     block (``raster.nodes.tile_node_block``): the saturated errors and grown box ranges the GPU selection reads
     (from a tile store, one read and no error pyramid)."""
     grids = [data[offsets[m]:offsets[m + 1]].reshape((n >> (m + 1)) + 2, (n >> (m + 1)) + 2, 4)[1:-1, 1:-1]
              for m in range(len(offsets) - 1)]
     return _tile_nodes([g[..., 0].astype(np.float64) for g in grids], [g[..., 1] for g in grids],
-                       [g[..., 2] for g in grids], n, origin, spacing)
+                       [g[..., 2] for g in grids], n, origin, spacing, full_res)
 
 
-def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing) -> TileNodes:
+def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing, full_res: bool = False) -> TileNodes:
     """TileNodes from per local level effective errors and height ranges (metres above the origin z)."""
     top = len(effective) - 1
     nb = max(1, min(BLOCKS, n // 8))
@@ -74,13 +80,15 @@ def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing) -> TileNodes:
     org = np.asarray(origin, dtype=np.float64)
     sp = np.asarray(spacing, dtype=np.float64)
     fine, coarse_e, coarse_lo, coarse_hi = [np.zeros((nb * nb, 0))], [], [], []
-    for m in range(1, top):
+    for m in range(0, top):
         side = 2 << m                                            # node side, tile cells
         e = effective[m]
         a, b = np.indices(e.shape)
         if side <= cells:                                        # (block, node in block): blocks hold equal shares
             per = cells // side
             fine.append(np.asarray(e, np.float64).reshape(nb, per, nb, per).transpose(0, 2, 1, 3).reshape(nb * nb, -1))
+        elif m == 0:
+            fine.append(np.zeros((nb * nb, 0)))
         else:
             lo_xy = org[:2] + np.stack([(b - 1) * side, (a - 1) * side], -1).reshape(-1, 2) * sp
             hi_xy = org[:2] + np.stack([(b + 2) * side, (a + 2) * side], -1).reshape(-1, 2) * sp
@@ -100,7 +108,16 @@ def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing) -> TileNodes:
         if parts:
             return np.concatenate(parts).astype(dtype)
         return np.zeros((0,) if width is None else (0, width), dtype)
-    return TileNodes(np.concatenate(fine, axis=1), cat(coarse_e, np.float64),
+    level0 = fine[1].shape[1] if len(fine) > 1 else 0
+    lean = np.concatenate(fine, axis=1)
+    split1 = fine[2] if len(fine) > 2 else np.zeros((nb * nb, 0))
+    if not full_res:
+        split1 = np.zeros_like(split1)
+    fine_only = lean[:, level0:]
+    if full_res:
+        lean = lean.copy()
+        lean[:, :level0] = 0.0                                   # errors 0 never count
+    return TileNodes(fine_only, lean, split1, cat(coarse_e, np.float64),
                      np.concatenate([block_lo, cat(coarse_lo, np.float64, 3)]),
                      np.concatenate([block_hi, cat(coarse_hi, np.float64, 3)]), int(top >= 1))
 
@@ -123,10 +140,15 @@ def fine_splits(keys: np.ndarray, blocks: np.ndarray, threshold: np.ndarray) -> 
 
 
 def estimate_rows(keys: np.ndarray, rows: np.ndarray, coarse: np.ndarray, boxes: np.ndarray, root: np.ndarray, eye,
-                  k_tau: float, planes=None, inside=None) -> tuple[np.ndarray, np.ndarray]:
+                  k_tau: float, planes=None, inside=None, lean_keys: np.ndarray | None = None,
+                  split1_keys: np.ndarray | None = None, beta: float = GPU_BETA) -> tuple[np.ndarray, np.ndarray]:
     """(triangles (B,), visible share (B,)) of B tiles' quadtrees for an eye (world metres) and K / tau (pixels per
-    radian over tau): 8 triangles per tilelet, a split adding 3, before restriction and stitching; the share in
-    [0, 1] of those in blocks or large nodes inside the frustum ``planes`` (eye-relative, as View's; None: all).
+    radian over tau), and the share in [0, 1] of their splits in blocks or large nodes inside the frustum
+    ``planes`` (eye-relative, as View's; None: all). Without ``lean_keys``: 8 triangles a leaf (a split adds 3
+    leaves). With them (the small nodes' keys, level 0 included), as lean leaves draw: 4 a leaf, and 6 more for
+    each leaf near its own split (its tolerance below E / beta): it keeps its edge midpoints, each a triangle on
+    both sides, and near leaves lie together, sharing some (6 follows the Puget flights within 0.9-1.2x a frame);
+    ``split1_keys`` count full-resolution tiles' split level-1 nodes, whose four leaves draw 8 each.
 
     The tiles are rows of stacked ``TileNodes``: ``keys`` (rows, blocks, nodes) the small nodes' sort keys
     (``fine_keys``, block numbers row * blocks + block) of which ``rows`` (B,) are the tiles'; coarse (B, C)
@@ -143,6 +165,14 @@ def estimate_rows(keys: np.ndarray, rows: np.ndarray, coarse: np.ndarray, boxes:
     per_box[:, :nb] = fine_splits(keys, rows[:, None] * nb + np.arange(nb), d[:, :nb] / k_tau) if keys.shape[2] else 0
     per_box[:, nb:] = coarse * k_tau > d[:, nb:]
     splits = per_box.sum(axis=1)
+    near = None
+    if lean_keys is not None:
+        near = -splits
+        if lean_keys.shape[2]:
+            near = near + fine_splits(lean_keys, rows[:, None] * nb + np.arange(nb), beta * d[:, :nb] / k_tau).sum(axis=1)
+        near = near + (coarse * k_tau > beta * d[:, nb:]).sum(axis=1)
+        if split1_keys is not None and split1_keys.shape[2]:
+            near = near + (16 / 7) * fine_splits(split1_keys, rows[:, None] * nb + np.arange(nb), d[:, :nb] / k_tau).sum(axis=1)
     test = np.ones(b, bool) if inside is None else ~np.asarray(inside, bool)
     if planes is None or not test.any():
         shown = splits
@@ -151,8 +181,11 @@ def estimate_rows(keys: np.ndarray, rows: np.ndarray, coarse: np.ndarray, boxes:
         seen = (boxes.reshape(b, -1, 6)[test] @ w >= bias).all(axis=2)
         shown = splits.copy()
         shown[test] = (per_box[test] * seen).sum(axis=1)
-    triangles = 8 * (1 + 3 * (splits + root))
-    return triangles, 8 * (1 + 3 * (shown + root)) / triangles
+    if near is None:
+        triangles = 8 * (1 + 3 * (splits + root))
+        return triangles, 8 * (1 + 3 * (shown + root)) / triangles
+    triangles = 4 * (1 + 3 * (splits + root)) + 7 * near
+    return triangles, np.minimum(1.0, (1 + 3 * (shown + root)) / (1 + 3 * (splits + root)))
 
 
 def _corner_test(planes: np.ndarray, eye: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -168,7 +201,8 @@ class _Rows:
     indexing per field; beyond ``limit`` tiles the least recently used row is reused (never one of the call at
     hand: ``lookup`` stamps its rows with the call's tick)."""
 
-    FIELDS = ("coarse_error", "boxes", "root")      # as TileNodes has them; "fine_keys" from its fine errors
+    FIELDS = ("coarse_error", "boxes", "root")      # as TileNodes has them; "fine_keys", "lean_keys" from its
+                                                    # fine and lean errors
 
     def __init__(self, limit: int):
         self.limit, self.row = limit, {}                       # key -> row
@@ -198,6 +232,8 @@ class _Rows:
                 self._grow(nodes)
         nb = nodes.fine.shape[0]
         self.arrays["fine_keys"][r] = fine_keys(nodes.fine, r * nb)
+        self.arrays["lean_keys"][r] = fine_keys(nodes.lean, r * nb)
+        self.arrays["split1_keys"][r] = fine_keys(nodes.split1, r * nb)
         for f in self.FIELDS:
             self.arrays[f][r] = getattr(nodes, f)
         self.stamp[r] = self.tick
@@ -210,9 +246,11 @@ class _Rows:
         new = min(max(2 * cap, 16), self.limit)          # the call's own rows fit: limit >= its tiles
         vals = {f: np.asarray(getattr(nodes, f)) for f in self.FIELDS}
         grown = {f: np.zeros((new, *v.shape), v.dtype if f != "root" else np.int64) for f, v in vals.items()}
-        nb, nodes_per_block = nodes.fine.shape
-        grown["fine_keys"] = np.broadcast_to((np.arange(new * nb, dtype=np.int64) << 32).reshape(new, nb, 1),
-                                             (new, nb, nodes_per_block)).copy()
+        nb = nodes.fine.shape[0]
+        for f, per_block in (("fine_keys", nodes.fine.shape[1]), ("lean_keys", nodes.lean.shape[1]),
+                             ("split1_keys", nodes.split1.shape[1])):
+            grown[f] = np.broadcast_to((np.arange(new * nb, dtype=np.int64) << 32).reshape(new, nb, 1),
+                                       (new, nb, per_block)).copy()
         for f in grown if self.arrays else ():
             grown[f][:cap] = self.arrays[f]
         self.arrays = grown
@@ -228,9 +266,9 @@ class TileletTriangleEstimator:
     thread, and the cut is in ``waiting`` for the loader to run.
     """
 
-    def __init__(self, pyramid: TilePyramid, beta: float = GPU_BETA):
+    def __init__(self, pyramid: TilePyramid, beta: float = GPU_BETA, lean: bool = True):
         self.pyramid = pyramid
-        self.beta = float(beta)
+        self.beta, self.lean = float(beta), bool(lean)
         self._rows = _Rows(MAX_TILES)
         self.build_ms, self.builds = 0.0, 0
         self.background = False
@@ -259,9 +297,9 @@ class TileletTriangleEstimator:
             return -1
         if ready is not None:                                   # the block the GPU reads (cut here if need be)
             data, offsets = tile_node_block(self._blocks, key.level, key.tx, key.ty, self.pyramid.n)
-            nodes = block_tile_nodes(data, offsets, self.pyramid.n, *self.pyramid.placement(key))
+            nodes = block_tile_nodes(data, offsets, self.pyramid.n, *self.pyramid.placement(key), key.level == 0)
         else:
-            nodes = tile_nodes(self.pyramid.tile(key), self.beta)
+            nodes = tile_nodes(self.pyramid.tile(key), self.beta, key.level == 0)
         r = self._rows.put(key, nodes)
         self.builds += 1
         self.build_ms += (time.perf_counter() - t0) * 1e3
@@ -293,7 +331,8 @@ class TileletTriangleEstimator:
             return np.full(len(rows), np.nan), np.full(len(rows), np.nan)
         est = estimate_rows(a["fine_keys"], r, a["coarse_error"][r], a["boxes"][r], a["root"][r], view.eye,
                             float(view.pixels_per_radian) / tau, view.frustum_planes_rel(),
-                            None if inside is None else inside[ok])
+                            None if inside is None else inside[ok], a["lean_keys"] if self.lean else None,
+                            a["split1_keys"], self.beta)
         if len(r) == len(rows):
             return est[0].astype(np.float64), est[1]
         tri, vis = np.full(len(rows), np.nan), np.full(len(rows), np.nan)

@@ -12,7 +12,7 @@ hybrid's tile tree guarantees; otherwise a TerrabenchError says so.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -41,7 +41,8 @@ class TileletSet:
 
     coarser, finer: per leaf bit masks W=1, E=2, S=4, N=8. morph: (count, 5) float32 morph factors in
     [0, 1] of the edge midpoints W, E, S, N and of the centre (0 = own height, 1 = on the coarser surface).
-    level_map: (n/2)² local leaf levels. global_level: tile level + leaf level per leaf.
+    level_map: (n/2)² local leaf levels. global_level: tile level + leaf level per leaf. dropped: the edges
+    drawn without their midpoint, where lean leaves drop more than ``coarser`` (None: just those).
     """
 
     leaves: Leaves
@@ -50,6 +51,12 @@ class TileletSet:
     morph: np.ndarray
     level_map: np.ndarray
     tile_level: int
+    dropped: np.ndarray | None = None
+
+    @property
+    def drop(self) -> np.ndarray:
+        """Per leaf bit mask (W=1, E=2, S=4, N=8) of the edges drawn without their midpoint."""
+        return self.coarser if self.dropped is None else self.dropped
 
     @property
     def global_level(self) -> np.ndarray:
@@ -59,7 +66,7 @@ class TileletSet:
     @property
     def triangles(self) -> int:
         """Triangles drawn with stitching: 8 a leaf, one fewer per dropped edge midpoint."""
-        return int(8 * len(self.leaves) - np.unpackbits(self.coarser.astype(np.uint8)[:, None], axis=1).sum())
+        return int(8 * len(self.leaves) - np.unpackbits(self.drop.astype(np.uint8)[:, None], axis=1).sum())
 
 
 def _edge_profile(levels: np.ndarray, edge: int) -> np.ndarray:
@@ -156,10 +163,15 @@ class _Frame:
         return changed
 
 
-def restrict_frame(tiles: list[TileLod], morph: bool = True, use_effective: bool | None = None) -> dict:
+def restrict_frame(tiles: list[TileLod], morph: bool = True, use_effective: bool | None = None,
+                   lean: bool = False) -> dict:
     """Restricted leaf sets of all tiles of a frame: {key tuple: TileletSet}; morph=False gives zero morph.
 
     use_effective (default: same as morph) splits on the morph-safe effective errors instead of the plain ones.
+    lean drops, as the GPU selection's lean leaves (raster/select.comp.glsl), the edge midpoints between leaves
+    of one tile that are both far from their own split (tolerance >= E / beta; with morph=False, >= E: the
+    error bounds a leaf's fan with its midpoints dropped), and toward the terrain's edge; midpoints on tile
+    borders and of full-resolution leaves are kept.
     """
     use_effective = morph if use_effective is None else use_effective
     fr = _Frame(list(tiles), use_effective)
@@ -174,7 +186,45 @@ def restrict_frame(tiles: list[TileLod], morph: bool = True, use_effective: bool
                 nxt.add(k)
                 nxt.update(_neighbour_keys(fr, k))
         pending = nxt
-    return {k: _tilelet_set(fr, k, morph) for k in fr.tiles}
+    sets = {k: _tilelet_set(fr, k, morph) for k in fr.tiles}
+    return {k: _lean_set(fr, k, ts, morph) for k, ts in sets.items()} if lean else sets
+
+
+def _lean_set(fr: _Frame, key, ts: TileletSet, morph: bool) -> TileletSet:
+    """The set with its lean drops (``restrict_frame``): midpoints of edges whose leaves' lean factors are 1."""
+    t = fr.tiles[key]
+    E = t.pyramid.effective if fr.use_effective else t.pyramid.errors
+    beta = t.pyramid.beta
+    lv, U = ts.leaves, ts.level_map.shape[0]
+    m = lv.level.astype(np.int64)
+    ua, ub, su = lv.i0 // 2, lv.j0 // 2, 1 << m
+
+    def factor(a, b, level):
+        e = np.zeros(len(a))
+        for x in np.unique(level):
+            s = level == x
+            e[s] = E[x][a[s] >> x, b[s] >> x]
+        with np.errstate(divide="ignore"):
+            r = np.where(e > 0, t.tolerance / np.where(e > 0, e, 1.0), np.inf)
+        if not morph:                                   # level-0 leaves may exceed the tolerance: kept
+            f = (r >= 1.0).astype(np.float64)
+        else:
+            f = np.clip((r - 1.0) / (1.0 / beta - 1.0), 0.0, 1.0)
+        return np.where((level == 0) & (key[0] == 0), 0.0, f)     # full resolution keeps the reference's cells
+    own = factor(ua, ub, m)
+    dropped = ts.coarser.copy()
+    specs = ((ub > 0, ua, ub - 1), (ub + su < U, ua, ub + su), (ua > 0, ua - 1, ub), (ua + su < U, ua + su, ub))
+    for edge, (inside, na, nb_) in enumerate(specs):
+        bit = EDGE_BITS[edge]
+        na_c, nb_c = np.clip(na, 0, U - 1), np.clip(nb_, 0, U - 1)
+        same = inside & (ts.level_map[na_c, nb_c] == m)
+        le = np.zeros(len(lv))
+        le[same] = np.minimum(own[same], factor(na_c[same], nb_c[same], m[same]))
+        edge_of_terrain = ~inside & ((ts.finer & bit) == 0) & (fr.neighbour_profile(key, edge)[(
+            (lv.i0 if edge < 2 else lv.j0).astype(np.int64) << key[0])] < 0)
+        le[edge_of_terrain] = own[edge_of_terrain]
+        dropped[np.maximum(ts.morph[:, edge], le) >= 1.0] |= bit
+    return replace(ts, dropped=dropped)
 
 
 def _neighbour_keys(fr: _Frame, key) -> set:

@@ -1,7 +1,8 @@
 #version 430
 // GPU leaf selection of one tile's tilelet quadtree (raster.nodes), in two passes (PASS 0 lists, PASS 1 emits).
 // A node is a leaf when its parent splits and it does not; its edge midpoint is dropped where the same-size
-// neighbour's parent does not split (that side is one level coarser). The leaf's nine post heights are
+// neighbour's parent does not split (that side is one level coarser), and where neither the leaf nor its
+// same-size neighbour is near its own split (lean leaves, below). The leaf's nine post heights are
 // fetched and geomorphed, and it is appended as a record (geometry-shader path) or as 9 vertices and 24
 // indices (indexed path) for the tile's indirect draw, with skirt segments where asked.
 #extension GL_ARB_shader_ballot : enable
@@ -25,6 +26,7 @@ uniform float k_tau;            // K / tau: a node splits when E * k_tau > dista
 uniform float beta;             // morph-safe error growth (raster.quadtree)
 uniform bool stitch;            // drop midpoints toward coarser neighbours (off: cracks, for tests)
 uniform bool morph;             // geomorph the posts a split creates (off: they appear at their own height)
+uniform bool lean;              // drop the edge midpoints that no finer neighbour and no near split needs
 uniform bool write_records;     // leaf records for the geometry-shader path (raster.tilelets)
 uniform bool write_mesh;        // vertices and indices for the plain indexed draw (raster.indexed)
 uniform vec4 planes[6];         // eye-relative frustum planes, inside where dot >= 0
@@ -50,6 +52,19 @@ int owner_delta(int m, int a, int b) {
     return 0;
 }
 
+vec4 node_at(int m, int a, int b) { return node[offsets(m) + (a + 1) * (side_of(m) + 2) + (b + 1)]; }
+
+// distance (metres) from the eye to node (m, a, b)'s box: its level-0 cells grown by its side, in the terrain's
+// frame; every tile that reads this node (its own, a neighbour through its apron) gets the same distance, so
+// they agree on splits and morphs
+float box_distance(int m, int a, int b, vec4 nd) {
+    int S = (2 << m) << tile_level;
+    ivec2 c0 = tile_cell + ivec2(b - 1, a - 1) * S;
+    vec3 lo = vec3(vec2(c0) * cell_metres, nd.y) - eye_terrain;
+    vec3 hi = vec3(vec2(c0 + 3 * S) * cell_metres, nd.z) - eye_terrain;
+    return length(max(max(lo, -hi), vec3(0.0)));
+}
+
 // 1 split, 0 not split, -1 split by the tile tree (forced), for any node of this tile or its apron;
 // E and d (effective error, distance to the box) where the node has data, else d = -1
 int split_state(int m, int a, int b, out float E, out float d) {
@@ -59,19 +74,31 @@ int split_state(int m, int a, int b, out float E, out float d) {
     if (delta == 9) return -1;                   // beyond the terrain: nothing to match
     int mb = m - delta;                          // the node's local level in its own tile
     if (mb < 1) return 0;                        // that tile's finest nodes cannot split
-    int s = side_of(m);
-    vec4 nd = node[offsets(m) + (a + 1) * (s + 2) + (b + 1)];
+    vec4 nd = node_at(m, a, b);
     if (nd.w == 0.0) return -1;
-    // the box from the node's level-0 cells and the eye in the terrain's frame: every tile that reads this
-    // node (its own, a neighbour through its apron) gets the same distance, so they agree on splits and morphs
-    int S = (2 << m) << tile_level;
-    ivec2 c0 = tile_cell + ivec2(b - 1, a - 1) * S;
-    vec3 lo = vec3(vec2(c0) * cell_metres, nd.y) - eye_terrain;
-    vec3 hi = vec3(vec2(c0 + 3 * S) * cell_metres, nd.z) - eye_terrain;
-    d = length(max(max(lo, -hi), vec3(0.0)));
+    d = box_distance(m, a, b, nd);
     E = nd.x;
     if (mb >= top) return -1;                    // that tile's root (or above): always split
     return E * k_tau > d ? 1 : 0;
+}
+
+// Lean factor of a same-pyramid-level node that does not split: 1 while its tolerance (d / k_tau) is at least
+// E / beta, falling to 0 as the tolerance falls to E, where it splits; 0 where it splits or has no data. An
+// edge midpoint between two such leaves lies on their edge by the smaller of their two factors (a leaf's
+// error bounds its fan with any midpoints dropped, raster.quadtree), so it is dropped while that is 1 and
+// has reached its own height when either leaf splits. Every node whose split makes a leaf has E at least
+// 1 / beta times the leaf's, so a leaf starts lean and a coarser neighbour's leaves see it lean.
+float lean_of(int m, int a, int b) {
+    if (m == 0 && tile_level == 0) return 0.0;   // full resolution: the reference's cells, as tau -> 0
+    float E, d;
+    if (split_state(m, a, b, E, d) != 0) return 0.0;
+    vec4 nd = node_at(m, a, b);
+    if (nd.w == 0.0) return 0.0;
+    E = nd.x;
+    if (E <= 0.0) return 1.0;
+    float r = box_distance(m, a, b, nd) / (E * k_tau);
+    if (!morph) return r >= 1.0 / beta ? 1.0 : 0.0;
+    return clamp((r - 1.0) / (1.0 / beta - 1.0), 0.0, 1.0);
 }
 
 bool splits(int m, int a, int b) { float E, d; return split_state(m, a, b, E, d) != 0; }
@@ -224,17 +251,28 @@ void emit_leaf(int m, int a, int b) {
     float ap = alpha_of(split_state(m + 1, a >> 1, b >> 1, E, d), E, d);
     int drop = 0;
     float am[4];
+    float own_lean = lean ? lean_of(m, a, b) : 0.0;
     for (int e = 0; e < 4; ++e) {
         int na = a + nb[e].x, nbb = b + nb[e].y;
         am[e] = ap;
-        if ((na >> 1) == (a >> 1) && (nbb >> 1) == (b >> 1)) continue;    // a sibling: same parent
-        int st = split_state(m + 1, na >> 1, nbb >> 1, E, d);
-        if (st == 0) { if (stitch) drop |= bit[e]; }
-        else am[e] = max(ap, alpha_of(st, E, d));
-        // on a border with a tile of another pyramid level the two sides cannot see each other's forced
-        // (tile root) morphs: the shared posts stay at their own heights on both sides
-        int od = owner_delta(m, na, nbb);
-        if (od != 0 && od != 9) am[e] = 0.0;
+        float le = 0.0;
+        if ((na >> 1) == (a >> 1) && (nbb >> 1) == (b >> 1)) {          // a sibling: same parent
+            if (lean) le = min(own_lean, lean_of(m, na, nbb));
+        } else {
+            int st = split_state(m + 1, na >> 1, nbb >> 1, E, d);
+            if (st == 0) { if (stitch) drop |= bit[e]; }
+            else {
+                am[e] = max(ap, alpha_of(st, E, d));
+                if (lean) le = min(own_lean, lean_of(m, na, nbb));
+            }
+            // on a border with a tile of another pyramid level the two sides cannot see each other's forced
+            // (tile root) morphs: the shared posts stay at their own heights on both sides
+            int od = owner_delta(m, na, nbb);
+            if (od == 9) le = own_lean;                                  // the terrain's edge: no neighbour
+            else if (od != 0) { am[e] = 0.0; le = 0.0; }
+        }
+        am[e] = max(am[e], le);
+        if (lean && am[e] >= 1.0) drop |= bit[e];            // on the edge: its two triangles as one
     }
     float h[9];
     for (int r = 0; r < 3; ++r)

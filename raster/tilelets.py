@@ -47,7 +47,7 @@ def read_leaves(strategy, g: SelectedTileletTile) -> dict:
 class TileletDrawing(TileletSelection):
     """Uniforms and state shared by both tilelet draws; subclasses issue the draw of one tile."""
 
-    draw_options = frozenset({"mode", "wireframe", "morph", "stitching", "culling", "leaf_tau", "skirts"})
+    draw_options = frozenset({"mode", "wireframe", "morph", "stitching", "lean", "culling", "leaf_tau", "skirts"})
 
     def __init__(self, ctx, hf, **options):
         super().__init__(ctx, hf, **options)
@@ -107,12 +107,13 @@ class TileletDrawing(TileletSelection):
                 ctx.disable_direct(GL_CLIP_DISTANCE0 + i)
 
     def draw_tiles(self, target, view, items, tau: float | None = None, mode: str | None = None,
-                   wireframe: bool = False, morph: bool = True, stitching: bool = True, culling: bool = True,
-                   leaf_tau: float | None = None, skirts: dict | None = None) -> dict:
+                   wireframe: bool = False, morph: bool = True, stitching: bool = True, lean: bool = True,
+                   culling: bool = True, leaf_tau: float | None = None, skirts: dict | None = None) -> dict:
         """Select and draw (gpu_tile, tile, selected) items into target at tau px (``leaf_tau`` overrides it).
 
         ``skirts`` {tile key: edge bits} are selected here and drawn by ``draw_skirts``, which the renderer
-        calls after the ray-cast tiles. Counters: triangles (drawn, stitched), tilelets, tilelets_culled,
+        calls after the ray-cast tiles. ``lean`` drops the edge midpoints that neither a finer neighbour nor a near
+        split needs (off: a leaf drops only those toward coarser neighbours). Counters: triangles (drawn, stitched), tilelets, tilelets_culled,
         skirt_segments, arena_leaves (leaves the arena held), arena_overflow (0: the frame drawn missed no leaf),
         arena_regrown (1 if the arena grew and the frame was drawn again).
         """
@@ -120,6 +121,7 @@ class TileletDrawing(TileletSelection):
         tau = leaf_tau if leaf_tau is not None else tau
         self.set_selection("morph", bool(morph))
         self.set_selection("stitch", bool(stitching))
+        self.set_selection("lean", bool(lean))
         self.arena.prepare()                # sized for the recent calls' leaves, with room to grow
         counters = self._select_draw(target, view, items, tau, mode, wireframe, culling, skirts)
         regrown = 0

@@ -222,7 +222,7 @@ def test_pure_hybrid_and_heuristic_policies_follow_their_rules(ctx, puget_full):
     assert [p.choice for p in plans] == ["raycast" if p.features.triangles > n else "raster" for p in plans]
     assert {p.choice for p in plans} == {"raster", "raycast"}
     # Dick et al.'s rule: ray cast where the tile's triangles outnumber threshold x its pixels
-    for threshold in (4.0, 10.0):                           # both split this view's tiles
+    for threshold in (1.0, 4.0):                            # both split this view's tiles
         with Renderer(ctx, puget_full, "heuristic", tile_size=128, cost_model=SPLIT, threshold=threshold) as r:
             plans = r.plan(v)
         for p in plans:

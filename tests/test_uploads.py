@@ -183,12 +183,15 @@ def test_a_ray_cast_tile_drawn_for_a_missing_one_hits_only_inside_its_rectangle(
 
 
 def test_hybrid_prepares_estimates_within_the_streaming_budget(ctx, puget257):
-    """Streaming (at 2 px, where raster wins tiles), the hybrid's triangle estimate prepares new tiles within the frame's budget (one a frame at a zero
-    budget); a tile not yet prepared has unknown triangles and is ray cast, never a hole; once all are prepared
-    the choices are those of a renderer that prepared everything at once."""
-    from hybrid.cost.model import load_cost_model
-    model = load_cost_model("llvmpipe")
+    """Streaming, with a model that splits the view's tiles between raster and ray casting by their triangles,
+    the hybrid's triangle estimate prepares new tiles within the frame's budget (one a frame at a zero budget); a
+    tile not yet prepared has unknown triangles and is ray cast, never a hole; once all are prepared the choices
+    are those of a renderer that prepared everything at once."""
+    from test_hybrid import median_split
+
+    from hybrid.tiles.pyramid import TilePyramid
     v = preset("orbit", puget257, 6, *SIZE).view(1)
+    model = median_split(TilePyramid(puget257, 32), v)
     with Renderer(ctx, puget257, "hybrid", 32, cost_model=model) as full:
         want = full.render(v, 2.0)
         choices = [p.choice for p in full.plan(v, 2.0)]

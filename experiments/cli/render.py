@@ -44,11 +44,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lod", action="store_true", help="ray casting stops descending at tau pixels (LOD)")
     p.add_argument("--shadows", action="store_true", help="ray-cast shadow rays toward the light")
     p.add_argument("--wireframe", action="store_true", help="raster methods: draw edges only")
+    p.add_argument("--no-lean", dest="lean", action="store_false",
+                   help="raster, raster_gs (and their tiles in mixed policies): every leaf keeps the edge midpoints "
+                        "that only lean leaves drop (those no finer neighbour and no near split needs)")
     p.add_argument("--show-strategy", action="store_true", help="hybrid: also write PATH.strategy.png")
 
 
 def draw_options(method: str, tau: float, shading=None, reconstruction="triangles", traversal="maxmip",
-                 prepass=None, lod=False, shadows=False, wireframe=False) -> dict:
+                 prepass=None, lod=False, shadows=False, wireframe=False, lean=True) -> dict:
     """Strategy draw options for a method (only those asked for, so the rest stay the strategy's defaults)."""
     opts = {}
     if shading:
@@ -70,6 +73,11 @@ def draw_options(method: str, tau: float, shading=None, reconstruction="triangle
         if method not in RASTER_METHODS:
             raise TerrabenchError("--wireframe applies to the raster methods (raster, fullres, tin)")
         opts["wireframe"] = True
+    if not lean:
+        if method not in ("raster", "raster_gs", *MIXED):
+            raise TerrabenchError("--no-lean applies to raster, raster_gs and the mixed policies (hybrid, heuristic, "
+                                  "oracle)")
+        opts["lean"] = False
     return opts
 
 
@@ -78,7 +86,7 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
         tile_size: int = 256, reconstruction: str = "triangles", traversal: str = "maxmip",
         prepass: bool | None = None,
         lod: bool = False, shadows: bool = False, wireframe: bool = False, show_strategy: bool = False,
-        device: int | None = None):
+        device: int | None = None, lean: bool = True):
     """Render one view with a method; write out (.png) and its .depth.npy; returns the RenderResult."""
     from hybrid.gl.context import shared_context
     from hybrid.gl.target import check_png_path
@@ -95,7 +103,7 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
             result = r.render(v, mode=shading, supersample=supersample)
     else:
         from hybrid.renderer import Renderer
-        opts = draw_options(method, tau, shading, reconstruction, traversal, prepass, lod, shadows, wireframe)
+        opts = draw_options(method, tau, shading, reconstruction, traversal, prepass, lod, shadows, wireframe, lean)
         with Renderer(ctx, hf, method, tile_size, **opts) as r:
             result = r.render(v, tau, maps=show_strategy)
     png, depth = result.save(out)
@@ -115,7 +123,7 @@ def run_from_args(args: argparse.Namespace) -> int:
     """The render command from parsed arguments; returns the exit code."""
     run(args.out, args.method, from_args(TerrainOptions, args), from_args(ViewOptions, args), args.shading,
         args.supersample, args.tau, args.tile_size, args.reconstruction, args.traversal, args.prepass, args.lod,
-        args.shadows, args.wireframe, args.show_strategy, args.device)
+        args.shadows, args.wireframe, args.show_strategy, args.device, args.lean)
     return 0
 
 
