@@ -50,6 +50,14 @@ def test_hedged_choices_leave_the_base_only_beyond_the_model_error():
     assert hedged_choices(pred, m) == ["raycast", "raster", "raycast"]
     pred["raster"][0] = 2.4 / 1.25                           # 36 % cheaper: beyond the error, it leaves too
     assert hedged_choices(pred, m) == ["raster", "raster", "raycast"]
+    # a tile that leaves by more than the error, but a frame that saves less than the base's 10 %: stays pure
+    few = {"raster": np.array([2.5, 1.2, 7.0]), "raycast": np.array([3.0, 2.0, 3.5])}    # 7.7 against 8.5 ms
+    assert hedged_choices(few, m) == ["raycast", "raycast", "raycast"]
+    few["raster"][1] = 1.0                                    # 7.5 against 8.5: beyond 10 %, it mixes
+    assert hedged_choices(few, m) == ["raycast", "raster", "raycast"]
+    m.mix_error = 0.2                                         # unless mixed frames were predicted worse than that
+    assert hedged_choices(few, m) == ["raycast", "raycast", "raycast"]
+    m.mix_error = 0.0
     # without a measured error the plain cheapest assignment
     m.fit_error = {}
     assert hedged_choices(pred, m) == best_assignment(pred, m.overhead)[0] == ["raster", "raster", "raycast"]

@@ -51,6 +51,7 @@ def test_frame_fit_recovers_known_coefficients_and_overheads():
             assert np.isclose(getattr(m, s)[t], v, rtol=0.25), (s, t, getattr(m, s)[t], v)   # small terms: ~20 %
         assert np.isclose(m.overhead[s], OVERHEAD[s], rtol=0.25), (s, m.overhead[s])
         assert m.fit_error[s] < 0.01                          # held-out frames: about the noise
+    assert 0 < m.mix_error < 0.01 and "of mixed frames" in m.explain()   # the frames given tiles at random
     assert "of 240 frames' times" in m.explain() and "raster_gs ms = " in m.explain()
     two = fit_frames(synthetic_frames(names=("raster", "raycast")), "test", names=("raster", "raycast"))
     assert two.candidates == ("raster", "raycast") and "raster_gs not calibrated: never chosen" in two.explain()

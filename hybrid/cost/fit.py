@@ -72,9 +72,10 @@ def fit_frames(samples: list[FrameSample], renderer: str, holdout: float = 0.3, 
                names=("raster", "raster_gs", "raycast"), tiles: list[TileSample] = ()) -> CostModel:
     """Coefficients and per-frame overheads of every strategy in ``names`` fitted together on a random
     (1 - holdout) share of whole frames' times (non-negative, relative error); ``fit_error`` is the held-out median
-    relative error of the frames using each strategy. With ``tiles`` (timed one call each), a random (1 - holdout)
-    share of them joins the fit with a per-call overhead per strategy (``call_overhead``), and ``tile_error`` is the
-    held-out median relative error of the rest per strategy."""
+    relative error of the frames using each strategy, ``mix_error`` that of the frames using more than one. With
+    ``tiles`` (timed one call each), a random (1 - holdout) share of them joins the fit with a per-call overhead
+    per strategy (``call_overhead``), and ``tile_error`` is the held-out median relative error of the rest per
+    strategy."""
     if not (0.0 <= holdout < 1.0):
         raise TerrabenchError(f"holdout must lie in [0, 1), got {holdout}")
     ms = np.array([f.ms for f in samples], dtype=np.float64)
@@ -117,6 +118,8 @@ def fit_frames(samples: list[FrameSample], renderer: str, holdout: float = 0.3, 
         err = np.abs(X[test] @ x - ms[test]) / ms[test]
         used = X[test][:, offsets[:-1]] > 0
         model.fit_error = {s: float(np.median(err[used[:, j]])) for j, s in enumerate(names) if used[:, j].any()}
+        mixed = used.sum(axis=1) > 1
+        model.mix_error = float(np.median(err[mixed])) if mixed.any() else 0.0
     if len(t_test):
         err = np.abs(T[t_test] @ x - tms[t_test]) / tms[t_test]
         which = np.array([names.index(tiles[i].strategy) for i in t_test])

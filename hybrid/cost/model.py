@@ -84,6 +84,7 @@ class CostModel:
     frames: int = 0                 # whole frames fitted (0: fitted on per-tile times)
     tile_error: dict = field(default_factory=dict)   # held-out per-tile error against tiles timed a call each
     call_overhead: dict = field(default_factory=dict)   # ms one tile drawn as its own call adds (fitted with the tiles)
+    mix_error: float = 0.0          # held-out median relative error of the frames that use more than one strategy
 
     @property
     def candidates(self) -> tuple[str, ...]:
@@ -136,6 +137,9 @@ class CostModel:
         what = f"of {self.frames} frames' times" if self.frames else "per tile"
         for s, e in self.fit_error.items():
             lines.append(f"  held-out median |relative error| {what} using {s}: {100 * e:.1f} %")
+        if self.mix_error:
+            lines.append(f"  held-out median |relative error| of mixed frames (more than one strategy): "
+                         f"{100 * self.mix_error:.1f} %")
         if self.call_overhead:
             lines.append("  per-call overhead of a tile drawn as its own call: " +
                          ", ".join(f"{s} {v:.3g} ms" for s, v in self.call_overhead.items()))
@@ -187,7 +191,7 @@ def cost_model_from_dict(d: dict, source: str) -> CostModel:
         m = CostModel(d["renderer"], dict(d["raster"]), dict(d["raycast"]), dict(d.get("fit_error", {})),
                       int(d.get("tiles", 0)), source, {**{s: 0.0 for s in TERMS}, **d.get("overhead", {})},
                       dict(d.get("raster_gs") or {}), int(d.get("frames", 0)), dict(d.get("tile_error", {})),
-                      {s: float(v) for s, v in (d.get("call_overhead") or {}).items()})
+                      {s: float(v) for s, v in (d.get("call_overhead") or {}).items()}, float(d.get("mix_error", 0.0)))
         for s in m.candidates:
             for t in TERMS[s]:
                 getattr(m, s).setdefault(t, 0.0)     # a model saved before a term existed has it at 0

@@ -119,10 +119,13 @@ def hedged_choices(predicted: dict, model: CostModel) -> list[str]:
     """The hybrid's strategy per tile: the cheapest assignment (``best_assignment``) after hedging against the
     model's error. The frame's base is the strategy whose pure frame is predicted cheapest; a tile leaves it
     only where another strategy is predicted cheaper by more than both models' held-out median relative errors
-    together (``model.fit_error``): a choice inside the model's error is a coin toss that costs the other
+    per tile together (``model.tile_error``, else the frames' ``model.fit_error``): a choice inside the model's
+    error is a coin toss that costs the other
     strategy's per-frame overhead and, on a CPU rasterizer, risks the rare tile that is many times slower than
     predicted. The pure frames are priced over the tiles every strategy can draw (a tile not yet prepared for
-    raster, infinite there, takes ray casting whatever the base)."""
+    raster, infinite there, takes ray casting whatever the base). A mix whose predicted frame saves less than
+    the model's held-out error of the base's frames or of mixed frames (the larger, ``model.mix_error``) of the
+    base's pure frame is not taken either: the frame stays pure."""
     names = list(predicted)
     table = np.array([np.asarray(predicted[n], dtype=np.float64) for n in names]).reshape(len(names), -1)
     return [names[i] for i in hedged_picks(table, names, model).tolist()]
@@ -132,13 +135,23 @@ def hedged_picks(table: np.ndarray, names: list[str], model: CostModel) -> np.nd
     """``hedged_choices`` as indices into ``names`` (B,), from an (S, B) table of predicted ms in ``names`` order."""
     overhead = np.array([model.overhead.get(n, 0.0) for n in names], dtype=np.float64)
     err = np.array([model.fit_error.get(n, 0.0) for n in names], dtype=np.float64)
+    tile_err = np.array([model.tile_error.get(n, model.fit_error.get(n, 0.0)) for n in names], dtype=np.float64)
     known = np.isfinite(table).all(axis=0)                          # tiles every strategy can draw
     base = int((np.where(known, table, 0.0).sum(axis=1) + overhead).argmin())
     order = np.array([base] + [i for i in range(len(names)) if i != base])   # ties stay with the base
-    factor = 1.0 + err + err[base]
+    factor = 1.0 + tile_err + tile_err[base]
     factor[base] = 1.0
     pick, _ = best_assignment_table((table * factor[:, None])[order], overhead[order])
-    return order[pick]
+    picks = order[pick]
+    pure = np.where(known, base, picks)
+    margin = max(err[base], model.mix_error)
+    if margin > 0 and np.any(picks != pure):
+        cols = np.arange(table.shape[1])
+        mixed_ms = table[picks, cols].sum() + overhead[np.unique(picks)].sum()
+        pure_ms = table[pure, cols].sum() + overhead[np.unique(pure)].sum()
+        if pure_ms - mixed_ms < margin * pure_ms:
+            return pure
+    return picks
 
 
 _ESTIMATORS: "weakref.WeakKeyDictionary[TilePyramid, TriangleEstimator]" = weakref.WeakKeyDictionary()
