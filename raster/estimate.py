@@ -26,6 +26,8 @@ from .quadtree import GPU_BETA, error_pyramid
 
 BLOCKS = 4                      # blocks a tile side for the small nodes' distances
 MAX_TILES = 4096                # tiles whose TileNodes are kept (least recently used first out)
+NEAR_TRIANGLES = 7              # a lean leaf near its split draws this many more than 4 (fitted to Puget flights:
+                                # 0.86-1.31x the drawn count a frame; 8 if no neighbour shared its midpoints)
 
 
 @dataclass(frozen=True)
@@ -145,10 +147,10 @@ def estimate_rows(keys: np.ndarray, rows: np.ndarray, coarse: np.ndarray, boxes:
     """(triangles (B,), visible share (B,)) of B tiles' quadtrees for an eye (world metres) and K / tau (pixels per
     radian over tau), and the share in [0, 1] of their splits in blocks or large nodes inside the frustum
     ``planes`` (eye-relative, as View's; None: all). Without ``lean_keys``: 8 triangles a leaf (a split adds 3
-    leaves). With them (the small nodes' keys, level 0 included), as lean leaves draw: 4 a leaf, and 6 more for
-    each leaf near its own split (its tolerance below E / beta): it keeps its edge midpoints, each a triangle on
-    both sides, and near leaves lie together, sharing some (6 follows the Puget flights within 0.9-1.2x a frame);
-    ``split1_keys`` count full-resolution tiles' split level-1 nodes, whose four leaves draw 8 each.
+    leaves). With them (the small nodes' keys, level 0 included), as lean leaves draw: 4 a leaf, and
+    ``NEAR_TRIANGLES`` more for each leaf near its own split (its tolerance below E / beta): it keeps its edge
+    midpoints, each a triangle on both sides, and near leaves lie together, sharing some; ``split1_keys`` count
+    full-resolution tiles' split level-1 nodes, whose four leaves draw 8 each.
 
     The tiles are rows of stacked ``TileNodes``: ``keys`` (rows, blocks, nodes) the small nodes' sort keys
     (``fine_keys``, block numbers row * blocks + block) of which ``rows`` (B,) are the tiles'; coarse (B, C)
@@ -172,7 +174,8 @@ def estimate_rows(keys: np.ndarray, rows: np.ndarray, coarse: np.ndarray, boxes:
             near = near + fine_splits(lean_keys, rows[:, None] * nb + np.arange(nb), beta * d[:, :nb] / k_tau).sum(axis=1)
         near = near + (coarse * k_tau > beta * d[:, nb:]).sum(axis=1)
         if split1_keys is not None and split1_keys.shape[2]:
-            near = near + (16 / 7) * fine_splits(split1_keys, rows[:, None] * nb + np.arange(nb), d[:, :nb] / k_tau).sum(axis=1)
+            full = fine_splits(split1_keys, rows[:, None] * nb + np.arange(nb), d[:, :nb] / k_tau).sum(axis=1)
+            near = near + (4 * 4 / NEAR_TRIANGLES) * full          # four leaves, four more triangles each
     test = np.ones(b, bool) if inside is None else ~np.asarray(inside, bool)
     if planes is None or not test.any():
         shown = splits
@@ -184,7 +187,7 @@ def estimate_rows(keys: np.ndarray, rows: np.ndarray, coarse: np.ndarray, boxes:
     if near is None:
         triangles = 8 * (1 + 3 * (splits + root))
         return triangles, 8 * (1 + 3 * (shown + root)) / triangles
-    triangles = 4 * (1 + 3 * (splits + root)) + 7 * near
+    triangles = 4 * (1 + 3 * (splits + root)) + NEAR_TRIANGLES * near
     return triangles, np.minimum(1.0, (1 + 3 * (shown + root)) / (1 + 3 * (splits + root)))
 
 
