@@ -241,3 +241,32 @@ def test_no_crack_where_a_morphing_tile_meets_a_finer_one(ctx, strategy):
             still = holes(r.render(view, mode="shaded", morph=False), rf, view, hf)
             assert holes(r.render(view, mode="shaded", morph=True), rf, view, hf) == still <= 2
         assert mixed > 10                              # borders between tiles of different levels were drawn
+
+
+@pytest.mark.parametrize("strategy", STRATEGIES)
+def test_lean_leaves_drop_midpoints_only(renderers, strategy):
+    """Lean leaves are the paper's leaves with more edge midpoints dropped: the same leaves at the same levels,
+    every midpoint the paper's form drops dropped too, fewer triangles in all, and no crack (the crack test
+    above runs lean)."""
+    hf, rs, ref = renderers["puget"]
+    r = rs[strategy]
+    fewer = []
+    for view in border_views(hf):
+        paper = r.render(view, mode="shaded", lean=False, culling=False)
+        full = leaf_sets(r, strategy, view)
+        lean = r.render(view, mode="shaded", culling=False)
+        thin = leaf_sets(r, strategy, view)
+        assert set(full) == set(thin)
+        for k in full:
+            if "j0" not in full[k]:                      # the indexed path keeps no records: levels and counts
+                assert np.array_equal(np.sort(full[k]["level"]), np.sort(thin[k]["level"])), k
+                assert thin[k]["triangles"].sum() <= full[k]["triangles"].sum(), k
+                continue
+            a = np.lexsort((full[k]["j0"], full[k]["i0"], full[k]["level"]))
+            b = np.lexsort((thin[k]["j0"], thin[k]["i0"], thin[k]["level"]))
+            for f in ("j0", "i0", "level"):
+                assert np.array_equal(full[k][f][a], thin[k][f][b]), (k, f)
+            assert np.all((full[k]["drop"][a] & ~thin[k]["drop"][b]) == 0), k
+        fewer.append(lean.stats.counters["triangles"] / paper.stats.counters["triangles"])
+        assert holes(lean, ref.render(view, mode="shaded"), view, hf) == 0
+    assert max(fewer) <= 1.0 and min(fewer) < 0.9, fewer
