@@ -197,7 +197,7 @@ def _lean_set(fr: _Frame, key, ts: TileletSet, morph: bool) -> TileletSet:
     beta = t.pyramid.beta
     lv, U = ts.leaves, ts.level_map.shape[0]
     m = lv.level.astype(np.int64)
-    ua, ub, su = lv.i0 // 2, lv.j0 // 2, 1 << m
+    ua, ub = lv.i0 // 2, lv.j0 // 2
 
     def factor(a, b, level):
         e = np.zeros(len(a))
@@ -213,18 +213,25 @@ def _lean_set(fr: _Frame, key, ts: TileletSet, morph: bool) -> TileletSet:
         return np.where((level == 0) & (key[0] == 0), 0.0, f)     # full resolution keeps the reference's cells
     own = factor(ua, ub, m)
     dropped = ts.coarser.copy()
-    specs = ((ub > 0, ua, ub - 1), (ub + su < U, ua, ub + su), (ua > 0, ua - 1, ub), (ua + su < U, ua + su, ub))
-    for edge, (inside, na, nb_) in enumerate(specs):
+    for edge, (inside, na, nb_, along) in enumerate(_edge_neighbours(lv, U)):
         bit = EDGE_BITS[edge]
         na_c, nb_c = np.clip(na, 0, U - 1), np.clip(nb_, 0, U - 1)
         same = inside & (ts.level_map[na_c, nb_c] == m)
         le = np.zeros(len(lv))
         le[same] = np.minimum(own[same], factor(na_c[same], nb_c[same], m[same]))
-        edge_of_terrain = ~inside & ((ts.finer & bit) == 0) & (fr.neighbour_profile(key, edge)[(
-            (lv.i0 if edge < 2 else lv.j0).astype(np.int64) << key[0])] < 0)
+        edge_of_terrain = ~inside & ((ts.finer & bit) == 0) & \
+            (fr.neighbour_profile(key, edge)[along.astype(np.int64) << key[0]] < 0)
         le[edge_of_terrain] = own[edge_of_terrain]
         dropped[np.maximum(ts.morph[:, edge], le) >= 1.0] |= bit
     return replace(ts, dropped=dropped)
+
+
+def _edge_neighbours(lv: Leaves, U: int) -> tuple:
+    """Per edge W, E, S, N of every leaf: (neighbour inside the tile, unit row and column just outside the edge,
+    the leaf's border cell index along the edge, for neighbours across the tile border)."""
+    ua, ub, su = lv.i0 // 2, lv.j0 // 2, 1 << lv.level.astype(np.int64)
+    return ((ub > 0, ua, ub - 1, lv.i0), (ub + su < U, ua, ub + su, lv.i0),
+            (ua > 0, ua - 1, ub, lv.j0), (ua + su < U, ua + su, ub, lv.j0))
 
 
 def _neighbour_keys(fr: _Frame, key) -> set:
@@ -275,7 +282,7 @@ def _tilelet_set(fr: _Frame, key, morph: bool) -> TileletSet:
     U = levels.shape[0]
     lv = leaves_from_levels(levels)
     m = lv.level.astype(np.int64)
-    ua, ub, su = lv.i0 // 2, lv.j0 // 2, 1 << m
+    ua, ub = lv.i0 // 2, lv.j0 // 2
     G = m + l
     coarser = np.zeros(len(lv), np.int32)
     finer = np.zeros(len(lv), np.int32)
@@ -288,10 +295,7 @@ def _tilelet_set(fr: _Frame, key, morph: bool) -> TileletSet:
             parent_e[s] = E[lev + 1][ua[s] >> (lev + 1), ub[s] >> (lev + 1)]
         own = np.where(has_parent, morph_factor(t.tolerance, parent_e, t.pyramid.beta), 0.0)
         alpha[:, 4] = own
-    # neighbour units just outside each edge (in-tile) and border cell index along the edge (cross-tile)
-    specs = ((ub > 0, ua, ub - 1, lv.i0), (ub + su < U, ua, ub + su, lv.i0),
-             (ua > 0, ua - 1, ub, lv.j0), (ua + su < U, ua + su, ub, lv.j0))
-    for edge, (inside, na, nb_, along) in enumerate(specs):
+    for edge, (inside, na, nb_, along) in enumerate(_edge_neighbours(lv, U)):
         bit = EDGE_BITS[edge]
         nlev = np.full(len(lv), -1, np.int64)
         na_c, nb_c = np.clip(na, 0, U - 1), np.clip(nb_, 0, U - 1)
