@@ -37,8 +37,9 @@ class TileNodes:
     fine: effective errors of the nodes no larger than a block, one row per block (row-major, BLOCKS² blocks;
     every block holds as many); lean: the same with the level-0 nodes (which never split, but keep their edge
     midpoints near their own split), but 0 in a full-resolution tile, whose level-0 leaves keep every midpoint;
-    split1: there, the level-1 nodes' errors (a split one makes four such leaves), else zeros; coarse_error: the larger nodes below the root; box_lo/hi: the blocks'
-    boxes, then the larger nodes' grown boxes (BLOCKS² + coarse, 3); root: 1 where the tile's root can split.
+    split1: there, the level-1 nodes' errors (a split one makes four such leaves), else zeros; coarse_error: the
+    larger nodes below the root; box_lo/hi: the blocks' boxes, then the larger nodes' grown boxes (BLOCKS² +
+    coarse, 3); root: 1 where the tile's root can split.
     """
 
     fine: np.ndarray
@@ -89,8 +90,6 @@ def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing, full_res: bool =
         if side <= cells:                                        # (block, node in block): blocks hold equal shares
             per = cells // side
             fine.append(np.asarray(e, np.float64).reshape(nb, per, nb, per).transpose(0, 2, 1, 3).reshape(nb * nb, -1))
-        elif m == 0:
-            fine.append(np.zeros((nb * nb, 0)))
         else:
             lo_xy = org[:2] + np.stack([(b - 1) * side, (a - 1) * side], -1).reshape(-1, 2) * sp
             hi_xy = org[:2] + np.stack([(b + 2) * side, (a + 2) * side], -1).reshape(-1, 2) * sp
@@ -110,16 +109,13 @@ def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing, full_res: bool =
         if parts:
             return np.concatenate(parts).astype(dtype)
         return np.zeros((0,) if width is None else (0, width), dtype)
-    level0 = fine[1].shape[1] if len(fine) > 1 else 0
-    lean = np.concatenate(fine, axis=1)
-    split1 = fine[2] if len(fine) > 2 else np.zeros((nb * nb, 0))
-    if not full_res:
-        split1 = np.zeros_like(split1)
-    fine_only = lean[:, level0:]
-    if full_res:
-        lean = lean.copy()
-        lean[:, :level0] = 0.0                                   # errors 0 never count
-    return TileNodes(fine_only, lean, split1, cat(coarse_e, np.float64),
+    empty = np.zeros((nb * nb, 0))
+    level0, rest = (fine[1], fine[2:]) if len(fine) > 1 else (empty, [])
+    above = np.concatenate([empty, *rest], axis=1)
+    level1 = rest[0] if rest else empty
+    lean = np.concatenate([np.zeros_like(level0) if full_res else level0, above], axis=1)   # errors 0 never count
+    split1 = level1 if full_res else np.zeros_like(level1)
+    return TileNodes(above, lean, split1, cat(coarse_e, np.float64),
                      np.concatenate([block_lo, cat(coarse_lo, np.float64, 3)]),
                      np.concatenate([block_hi, cat(coarse_hi, np.float64, 3)]), int(top >= 1))
 
@@ -164,17 +160,18 @@ def estimate_rows(keys: np.ndarray, rows: np.ndarray, coarse: np.ndarray, boxes:
     boxes = boxes.reshape(-1, 6)
     d = box_distances(eye, boxes[:, 3:], boxes[:, :3]).reshape(b, -1)
     per_box = np.empty(d.shape, np.int64)
-    per_box[:, :nb] = fine_splits(keys, rows[:, None] * nb + np.arange(nb), d[:, :nb] / k_tau) if keys.shape[2] else 0
+    blocks = rows[:, None] * nb + np.arange(nb)                 # the tiles' blocks' numbers in the keys
+    per_box[:, :nb] = fine_splits(keys, blocks, d[:, :nb] / k_tau) if keys.shape[2] else 0
     per_box[:, nb:] = coarse * k_tau > d[:, nb:]
     splits = per_box.sum(axis=1)
     near = None
     if lean_keys is not None:
         near = -splits
         if lean_keys.shape[2]:
-            near = near + fine_splits(lean_keys, rows[:, None] * nb + np.arange(nb), beta * d[:, :nb] / k_tau).sum(axis=1)
+            near = near + fine_splits(lean_keys, blocks, beta * d[:, :nb] / k_tau).sum(axis=1)
         near = near + (coarse * k_tau > beta * d[:, nb:]).sum(axis=1)
         if split1_keys is not None and split1_keys.shape[2]:
-            full = fine_splits(split1_keys, rows[:, None] * nb + np.arange(nb), d[:, :nb] / k_tau).sum(axis=1)
+            full = fine_splits(split1_keys, blocks, d[:, :nb] / k_tau).sum(axis=1)
             near = near + (4 * 4 / NEAR_TRIANGLES) * full          # four leaves, four more triangles each
     test = np.ones(b, bool) if inside is None else ~np.asarray(inside, bool)
     if planes is None or not test.any():

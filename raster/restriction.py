@@ -200,10 +200,7 @@ def _lean_set(fr: _Frame, key, ts: TileletSet, morph: bool) -> TileletSet:
     ua, ub = lv.i0 // 2, lv.j0 // 2
 
     def factor(a, b, level):
-        e = np.zeros(len(a))
-        for x in np.unique(level):
-            s = level == x
-            e[s] = E[x][a[s] >> x, b[s] >> x]
+        e = _errors_at(E, a, b, level)
         with np.errstate(divide="ignore"):
             r = np.where(e > 0, t.tolerance / np.where(e > 0, e, 1.0), np.inf)
         if not morph:                                   # level-0 leaves may exceed the tolerance: kept
@@ -224,6 +221,15 @@ def _lean_set(fr: _Frame, key, ts: TileletSet, morph: bool) -> TileletSet:
         le[edge_of_terrain] = own[edge_of_terrain]
         dropped[np.maximum(ts.morph[:, edge], le) >= 1.0] |= bit
     return replace(ts, dropped=dropped)
+
+
+def _errors_at(E, a: np.ndarray, b: np.ndarray, level: np.ndarray) -> np.ndarray:
+    """Errors (metres) E[level][a >> level, b >> level] of the nodes of ``level`` covering units (a, b)."""
+    out = np.zeros(len(level))
+    for x in np.unique(level):
+        s = level == x
+        out[s] = E[x][a[s] >> x, b[s] >> x]
+    return out
 
 
 def _edge_neighbours(lv: Leaves, U: int) -> tuple:
@@ -255,12 +261,8 @@ def _own_alpha(fr: _Frame, key, levels: np.ndarray, ua: np.ndarray, ub: np.ndarr
     E = t.pyramid.effective if fr.use_effective else t.pyramid.errors
     m = levels[ua, ub].astype(np.int64)
     out = np.zeros(ua.shape, dtype=np.float64)
-    for lv in np.unique(m):
-        if lv >= t.pyramid.top:
-            continue
-        s = m == lv
-        e = E[lv + 1][ua[s] >> (lv + 1), ub[s] >> (lv + 1)]
-        out[s] = morph_factor(t.tolerance, e, t.pyramid.beta)
+    s = m < t.pyramid.top
+    out[s] = morph_factor(t.tolerance, _errors_at(E, ua[s], ub[s], m[s] + 1), t.pyramid.beta)
     return out
 
 
@@ -290,9 +292,7 @@ def _tilelet_set(fr: _Frame, key, morph: bool) -> TileletSet:
     if morph:
         parent_e = np.full(len(lv), np.inf)
         has_parent = m < top
-        for lev in np.unique(m[has_parent]):
-            s = m == lev
-            parent_e[s] = E[lev + 1][ua[s] >> (lev + 1), ub[s] >> (lev + 1)]
+        parent_e[has_parent] = _errors_at(E, ua[has_parent], ub[has_parent], m[has_parent] + 1)
         own = np.where(has_parent, morph_factor(t.tolerance, parent_e, t.pyramid.beta), 0.0)
         alpha[:, 4] = own
     for edge, (inside, na, nb_, along) in enumerate(_edge_neighbours(lv, U)):
@@ -314,9 +314,7 @@ def _tilelet_set(fr: _Frame, key, morph: bool) -> TileletSet:
         s_in = same & inside & (m < top)
         if np.any(s_in):
             e_nb = np.full(len(lv), np.inf)
-            for lev in np.unique(m[s_in]):
-                s = s_in & (m == lev)
-                e_nb[s] = E[lev + 1][na_c[s] >> (lev + 1), nb_c[s] >> (lev + 1)]
+            e_nb[s_in] = _errors_at(E, na_c[s_in], nb_c[s_in], m[s_in] + 1)
             e_min = np.minimum(parent_e, e_nb)
             a[s_in] = morph_factor(t.tolerance, e_min[s_in], t.pyramid.beta)
         # same level across a tile border: the larger of the two sides' own factors

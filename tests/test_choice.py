@@ -58,6 +58,10 @@ def test_hedged_choices_leave_the_base_only_beyond_the_model_error():
     m.mix_error = 0.2                                         # unless mixed frames were predicted worse than that
     assert hedged_choices(few, m) == ["raycast", "raycast", "raycast"]
     m.mix_error = 0.0
+    # per-tile errors, where the model has them, set the tile's hedge: 1.0 against 2.0 is inside 0.6 + 0.5
+    m.tile_error = {"raster": 0.6, "raycast": 0.5}
+    assert hedged_choices(few, m) == ["raycast", "raycast", "raycast"]
+    m.tile_error = {}
     # without a measured error the plain cheapest assignment
     m.fit_error = {}
     assert hedged_choices(pred, m) == best_assignment(pred, m.overhead)[0] == ["raster", "raster", "raycast"]

@@ -120,12 +120,11 @@ def hedged_choices(predicted: dict, model: CostModel) -> list[str]:
     model's error. The frame's base is the strategy whose pure frame is predicted cheapest; a tile leaves it
     only where another strategy is predicted cheaper by more than both models' held-out median relative errors
     per tile together (``model.tile_error``, else the frames' ``model.fit_error``): a choice inside the model's
-    error is a coin toss that costs the other
-    strategy's per-frame overhead and, on a CPU rasterizer, risks the rare tile that is many times slower than
-    predicted. The pure frames are priced over the tiles every strategy can draw (a tile not yet prepared for
-    raster, infinite there, takes ray casting whatever the base). A mix whose predicted frame saves less than
-    the model's held-out error of the base's frames or of mixed frames (the larger, ``model.mix_error``) of the
-    base's pure frame is not taken either: the frame stays pure."""
+    error is a coin toss that costs the other strategy's per-frame overhead and, on a CPU rasterizer, risks the
+    rare tile that is many times slower than predicted. The pure frames are priced over the tiles every strategy
+    can draw (a tile not yet prepared for raster, infinite there, takes ray casting whatever the base). Nor is a
+    mix taken whose predicted frame saves less than a share of the base's pure frame: the larger of the model's
+    held-out errors of the base's frames and of mixed frames (``model.mix_error``)."""
     names = list(predicted)
     table = np.array([np.asarray(predicted[n], dtype=np.float64) for n in names]).reshape(len(names), -1)
     return [names[i] for i in hedged_picks(table, names, model).tolist()]
@@ -147,8 +146,7 @@ def hedged_picks(table: np.ndarray, names: list[str], model: CostModel) -> np.nd
     margin = max(err[base], model.mix_error)
     if margin > 0 and np.any(picks != pure):
         cols = np.arange(table.shape[1])
-        mixed_ms = table[picks, cols].sum() + overhead[np.unique(picks)].sum()
-        pure_ms = table[pure, cols].sum() + overhead[np.unique(pure)].sum()
+        mixed_ms, pure_ms = (model.frame_ms(table[p, cols], {names[i] for i in p.tolist()}) for p in (picks, pure))
         if pure_ms - mixed_ms < margin * pure_ms:
             return pure
     return picks
