@@ -22,12 +22,10 @@ from hybrid.tiles.pyramid import TileKey, TilePyramid
 from hybrid.tiles.tiletree import SelectedTile, box_distances
 
 from .nodes import nodes_for, pending_cut, tile_node_block
-from .midpoints import midpoint_errors
 from .quadtree import GPU_BETA, error_pyramid
 
 BLOCKS = 4                      # blocks a tile side for the small nodes' distances
 MAX_TILES = 4096                # tiles whose TileNodes are kept (least recently used first out)
-EDGE_KEYS = 64                  # a full-resolution block's level-0 edge keys are kept as this many order statistics
 NEAR_TRIANGLES = 7              # a lean leaf near its split draws this many more than 4 (fitted to Puget flights:
                                 # 0.86-1.31x the drawn count a frame; 8 if no neighbour shared its midpoints)
 
@@ -38,18 +36,15 @@ class TileNodes:
 
     fine: effective errors of the nodes no larger than a block, one row per block (row-major, BLOCKS² blocks;
     every block holds as many); lean: the same with the level-0 nodes (which never split, but keep their edge
-    midpoints near their own split), but 0 in a full-resolution tile, whose level-0 leaves keep their midpoints by
-    each one's own error; edges: there, per block the keys of its level-0 units' east and north edges, each the
-    error above which that edge both exists (the level-1 nodes beside it split) and keeps its midpoint (its error
-    / beta, raster.midpoints), as EDGE_KEYS order statistics each standing for ``edge_weight`` edges, else zeros;
-    coarse_error: the larger nodes below the root; box_lo/hi: the blocks' boxes, then the larger nodes' grown
-    boxes (BLOCKS² + coarse, 3); root: 1 where the tile's root can split.
+    midpoints near their own split), but 0 in a full-resolution tile, whose level-0 leaves keep every midpoint;
+    split1: there, the level-1 nodes' errors (a split one makes four such leaves), else zeros; coarse_error: the
+    larger nodes below the root; box_lo/hi: the blocks' boxes, then the larger nodes' grown boxes (BLOCKS² +
+    coarse, 3); root: 1 where the tile's root can split.
     """
 
     fine: np.ndarray
     lean: np.ndarray
-    edges: np.ndarray
-    edge_weight: float
+    split1: np.ndarray
     coarse_error: np.ndarray
     box_lo: np.ndarray
     box_hi: np.ndarray
@@ -66,25 +61,22 @@ def tile_nodes(tile, beta: float = GPU_BETA, full_res: bool = False) -> TileNode
     its own heights' error pyramid; ``full_res``: a level-0 tile."""
     pyr = error_pyramid(tile.heights, beta)
     return _tile_nodes(pyr.effective, pyr.zmin, pyr.zmax, tile.n, tile.origin, (tile.spacing_x, tile.spacing_y),
-                       full_res, pyr.midpoints, beta)
+                       full_res)
 
 
 def block_tile_nodes(data: np.ndarray, offsets: np.ndarray, n: int, origin, spacing,
-                     full_res: bool = False, midpoints=()) -> TileNodes:
+                     full_res: bool = False) -> TileNodes:
     """The estimate's data of an n-cell tile at world ``origin`` with ``spacing`` (x, y) metres, from its node
     block (``raster.nodes.tile_node_block``): the saturated errors and grown box ranges the GPU selection reads
-    (from a tile store, one read and no error pyramid); a full-resolution tile's ``midpoints``
-    (raster.midpoints.midpoint_errors of its heights)."""
+    (from a tile store, one read and no error pyramid)."""
     grids = [data[offsets[m]:offsets[m + 1]].reshape((n >> (m + 1)) + 2, (n >> (m + 1)) + 2, 4)[1:-1, 1:-1]
              for m in range(len(offsets) - 1)]
     return _tile_nodes([g[..., 0].astype(np.float64) for g in grids], [g[..., 1] for g in grids],
-                       [g[..., 2] for g in grids], n, origin, spacing, full_res, midpoints)
+                       [g[..., 2] for g in grids], n, origin, spacing, full_res)
 
 
-def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing, full_res: bool = False, midpoints=(),
-                beta: float = GPU_BETA) -> TileNodes:
-    """TileNodes from per local level effective errors and height ranges (metres above the origin z), and the
-    level-0 midpoints' errors (raster.midpoints; () where unknown)."""
+def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing, full_res: bool = False) -> TileNodes:
+    """TileNodes from per local level effective errors and height ranges (metres above the origin z)."""
     top = len(effective) - 1
     nb = max(1, min(BLOCKS, n // 8))
     cells = n // nb                                              # block side, tile cells
@@ -122,35 +114,10 @@ def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing, full_res: bool =
     above = np.concatenate([empty, *rest], axis=1)
     level1 = rest[0] if rest else empty
     lean = np.concatenate([np.zeros_like(level0) if full_res else level0, above], axis=1)   # errors 0 never count
-    units = 2 * ((n // 2) // nb) ** 2 if top >= 1 else 0                   # edge keys a block
-    edges = _edge_keys(effective[1], midpoints, beta, nb) if full_res and units and midpoints else \
-        np.zeros((nb * nb, len(_edge_samples(units))))
-    return TileNodes(above, lean, edges, units / max(1, edges.shape[1]), cat(coarse_e, np.float64),
+    split1 = level1 if full_res else np.zeros_like(level1)
+    return TileNodes(above, lean, split1, cat(coarse_e, np.float64),
                      np.concatenate([block_lo, cat(coarse_lo, np.float64, 3)]),
                      np.concatenate([block_hi, cat(coarse_hi, np.float64, 3)]), int(top >= 1))
-
-
-def _edge_keys(e1: np.ndarray, midpoints, beta: float, nb: int) -> np.ndarray:
-    """(nb², EDGE_KEYS) keys of a full-resolution tile's level-0 east and north edges: the smaller of the
-    level-1 errors beside the edge (metres) and its midpoint's error (raster.midpoints) / beta (no neighbour in
-    the tile: the first alone)."""
-    p = np.repeat(np.repeat(np.asarray(e1, np.float64), 2, axis=0), 2, axis=1)    # each unit's parent's error
-    east, north = p.copy(), p.copy()
-    east[:, :-1] = np.minimum(p[:, :-1], p[:, 1:])
-    north[:-1] = np.minimum(p[:-1], p[1:])
-    ex, ey = midpoints
-    east[:, :-1] = np.minimum(east[:, :-1], ex[:, 1:-1] / beta)
-    north[:-1] = np.minimum(north[:-1], ey[1:-1] / beta)
-    per = p.shape[0] // nb
-    keys = np.sort(np.concatenate([k.reshape(nb, per, nb, per).transpose(0, 2, 1, 3).reshape(nb * nb, -1)
-                                   for k in (east, north)], axis=1), axis=1)
-    return keys[:, _edge_samples(keys.shape[1])]
-
-
-def _edge_samples(count: int) -> np.ndarray:
-    """Indices of the EDGE_KEYS evenly spaced order statistics kept of a block's ``count`` sorted edge keys."""
-    k = min(count, EDGE_KEYS)
-    return ((np.arange(k) + 0.5) * count / k).astype(np.int64)
 
 
 def fine_keys(fine: np.ndarray, first_block: int) -> np.ndarray:
@@ -172,16 +139,14 @@ def fine_splits(keys: np.ndarray, blocks: np.ndarray, threshold: np.ndarray) -> 
 
 def estimate_rows(keys: np.ndarray, rows: np.ndarray, coarse: np.ndarray, boxes: np.ndarray, root: np.ndarray, eye,
                   k_tau: float, planes=None, inside=None, lean_keys: np.ndarray | None = None,
-                  edge_keys: np.ndarray | None = None, edge_weight: np.ndarray | None = None,
-                  beta: float = GPU_BETA) -> tuple[np.ndarray, np.ndarray]:
+                  split1_keys: np.ndarray | None = None, beta: float = GPU_BETA) -> tuple[np.ndarray, np.ndarray]:
     """(triangles (B,), visible share (B,)) of B tiles' quadtrees for an eye (world metres) and K / tau (pixels per
     radian over tau), and the share in [0, 1] of their splits in blocks or large nodes inside the frustum
     ``planes`` (eye-relative, as View's; None: all). Without ``lean_keys``: 8 triangles a leaf (a split adds 3
     leaves). With them (the small nodes' keys, level 0 included), as lean leaves draw: 4 a leaf, and
     ``NEAR_TRIANGLES`` more for each leaf near its own split (its tolerance below E / beta): it keeps its edge
-    midpoints, each a triangle on both sides, and near leaves lie together, sharing some; ``edge_keys`` count
-    full-resolution tiles' level-0 edges that keep their midpoints (``TileNodes.edges``; each key stands for
-    ``edge_weight`` (B,) edges), a triangle each side.
+    midpoints, each a triangle on both sides, and near leaves lie together, sharing some; ``split1_keys`` count
+    full-resolution tiles' split level-1 nodes, whose four leaves draw 8 each.
 
     The tiles are rows of stacked ``TileNodes``: ``keys`` (rows, blocks, nodes) the small nodes' sort keys
     (``fine_keys``, block numbers row * blocks + block) of which ``rows`` (B,) are the tiles'; coarse (B, C)
@@ -205,9 +170,9 @@ def estimate_rows(keys: np.ndarray, rows: np.ndarray, coarse: np.ndarray, boxes:
         if lean_keys.shape[2]:
             near = near + fine_splits(lean_keys, blocks, beta * d[:, :nb] / k_tau).sum(axis=1)
         near = near + (coarse * k_tau > beta * d[:, nb:]).sum(axis=1)
-        if edge_keys is not None and edge_keys.shape[2]:
-            kept = fine_splits(edge_keys, blocks, d[:, :nb] / k_tau).sum(axis=1) * edge_weight
-            near = near + (2 / NEAR_TRIANGLES) * kept               # a triangle more on both sides
+        if split1_keys is not None and split1_keys.shape[2]:
+            full = fine_splits(split1_keys, blocks, d[:, :nb] / k_tau).sum(axis=1)
+            near = near + (4 * 4 / NEAR_TRIANGLES) * full          # four leaves, four more triangles each
     test = np.ones(b, bool) if inside is None else ~np.asarray(inside, bool)
     if planes is None or not test.any():
         shown = splits
@@ -236,7 +201,7 @@ class _Rows:
     indexing per field; beyond ``limit`` tiles the least recently used row is reused (never one of the call at
     hand: ``lookup`` stamps its rows with the call's tick)."""
 
-    FIELDS = ("coarse_error", "boxes", "root", "edge_weight")      # as TileNodes has them; "fine_keys", "lean_keys" from its
+    FIELDS = ("coarse_error", "boxes", "root")      # as TileNodes has them; "fine_keys", "lean_keys" from its
                                                     # fine and lean errors
 
     def __init__(self, limit: int):
@@ -268,7 +233,7 @@ class _Rows:
         nb = nodes.fine.shape[0]
         self.arrays["fine_keys"][r] = fine_keys(nodes.fine, r * nb)
         self.arrays["lean_keys"][r] = fine_keys(nodes.lean, r * nb)
-        self.arrays["edge_keys"][r] = fine_keys(nodes.edges, r * nb)
+        self.arrays["split1_keys"][r] = fine_keys(nodes.split1, r * nb)
         for f in self.FIELDS:
             self.arrays[f][r] = getattr(nodes, f)
         self.stamp[r] = self.tick
@@ -283,7 +248,7 @@ class _Rows:
         grown = {f: np.zeros((new, *v.shape), v.dtype if f != "root" else np.int64) for f, v in vals.items()}
         nb = nodes.fine.shape[0]
         for f, per_block in (("fine_keys", nodes.fine.shape[1]), ("lean_keys", nodes.lean.shape[1]),
-                             ("edge_keys", nodes.edges.shape[1])):
+                             ("split1_keys", nodes.split1.shape[1])):
             grown[f] = np.broadcast_to((np.arange(new * nb, dtype=np.int64) << 32).reshape(new, nb, 1),
                                        (new, nb, per_block)).copy()
         for f in grown if self.arrays else ():
@@ -332,9 +297,7 @@ class TileletTriangleEstimator:
             return -1
         if ready is not None:                                   # the block the GPU reads (cut here if need be)
             data, offsets = tile_node_block(self._blocks, key.level, key.tx, key.ty, self.pyramid.n)
-            full = key.level == 0                               # (and its heights, for the midpoints' errors)
-            nodes = block_tile_nodes(data, offsets, self.pyramid.n, *self.pyramid.placement(key), full,
-                                     midpoint_errors(self.pyramid.tile(key).heights) if full else ())
+            nodes = block_tile_nodes(data, offsets, self.pyramid.n, *self.pyramid.placement(key), key.level == 0)
         else:
             nodes = tile_nodes(self.pyramid.tile(key), self.beta, key.level == 0)
         r = self._rows.put(key, nodes)
@@ -369,7 +332,7 @@ class TileletTriangleEstimator:
         est = estimate_rows(a["fine_keys"], r, a["coarse_error"][r], a["boxes"][r], a["root"][r], view.eye,
                             float(view.pixels_per_radian) / tau, view.frustum_planes_rel(),
                             None if inside is None else inside[ok], a["lean_keys"] if self.lean else None,
-                            a["edge_keys"], a["edge_weight"][r], self.beta)
+                            a["split1_keys"], self.beta)
         if len(r) == len(rows):
             return est[0].astype(np.float64), est[1]
         tri, vis = np.full(len(rows), np.nan), np.full(len(rows), np.nan)

@@ -29,8 +29,6 @@ from hybrid.errors import TerrabenchError
 from hybrid.tiles.fans import GPU_BETA, fans_at  # noqa: F401  (GPU_BETA: the strategies' beta, defined with the fans)
 from hybrid.tiles.fans import dilate4 as _dilate4
 
-from .midpoints import midpoint_errors
-
 DEFAULT_BETA = 0.7
 
 
@@ -86,8 +84,6 @@ class ErrorPyramid:
 
     errors[m] and effective[m] have shape (n >> (m+1))² with row a from the south, column b from the west.
     zmin/zmax[m]: range of the tile's sample heights under each node (metres, relative to terrain origin z).
-    midpoints: (ex, ey), the errors of drawing each level-0 edge midpoint on its edge's line
-    (raster.midpoints.midpoint_errors; empty when not computed).
     """
 
     n: int
@@ -96,7 +92,6 @@ class ErrorPyramid:
     effective: tuple
     zmin: tuple
     zmax: tuple
-    midpoints: tuple = ()
 
     @property
     def top(self) -> int:
@@ -137,8 +132,7 @@ def error_pyramid(heights: np.ndarray, beta: float = DEFAULT_BETA) -> ErrorPyram
             eff = e
         errors.append(e)
         effective.append(eff)
-    return ErrorPyramid(n, float(beta), tuple(errors), tuple(effective), tuple(zmin), tuple(zmax),
-                        midpoint_errors(h))
+    return ErrorPyramid(n, float(beta), tuple(errors), tuple(effective), tuple(zmin), tuple(zmax))
 
 
 def leaf_levels(pyr: ErrorPyramid, tolerance: float, cap: np.ndarray | None = None,

@@ -170,9 +170,8 @@ def restrict_frame(tiles: list[TileLod], morph: bool = True, use_effective: bool
     use_effective (default: same as morph) splits on the morph-safe effective errors instead of the plain ones.
     lean drops, as the GPU selection's lean leaves (raster/select.comp.glsl), the edge midpoints between leaves
     of one tile that are both far from their own split (tolerance >= E / beta; with morph=False, >= E: the
-    error bounds a leaf's fan with its midpoints dropped), and toward the terrain's edge; a full-resolution
-    tile's level-0 leaves drop theirs by each midpoint's own error (raster.midpoints); midpoints on tile borders
-    are kept.
+    error bounds a leaf's fan with its midpoints dropped), and toward the terrain's edge; midpoints on tile
+    borders and of full-resolution leaves are kept.
     """
     use_effective = morph if use_effective is None else use_effective
     fr = _Frame(list(tiles), use_effective)
@@ -192,8 +191,7 @@ def restrict_frame(tiles: list[TileLod], morph: bool = True, use_effective: bool
 
 
 def _lean_set(fr: _Frame, key, ts: TileletSet, morph: bool) -> TileletSet:
-    """The set with its lean drops (``restrict_frame``): midpoints of edges whose leaves' lean factors are 1; in a
-    full-resolution tile, a level-0 leaf's by the error of its midpoint on the edge's line (raster.midpoints)."""
+    """The set with its lean drops (``restrict_frame``): midpoints of edges whose leaves' lean factors are 1."""
     t = fr.tiles[key]
     E = t.pyramid.effective if fr.use_effective else t.pyramid.errors
     beta = t.pyramid.beta
@@ -201,32 +199,26 @@ def _lean_set(fr: _Frame, key, ts: TileletSet, morph: bool) -> TileletSet:
     m = lv.level.astype(np.int64)
     ua, ub = lv.i0 // 2, lv.j0 // 2
 
-    def factor(e):
+    def factor(a, b, level):
+        e = _errors_at(E, a, b, level)
         with np.errstate(divide="ignore"):
             r = np.where(e > 0, t.tolerance / np.where(e > 0, e, 1.0), np.inf)
         if not morph:                                   # level-0 leaves may exceed the tolerance: kept
-            return (r >= 1.0).astype(np.float64)
-        return np.clip((r - 1.0) / (1.0 / beta - 1.0), 0.0, 1.0)
-    full_res = (m == 0) & (key[0] == 0)                 # the reference's cells: lean by their midpoints' errors
-    own = np.where(full_res, 0.0, factor(_errors_at(E, ua, ub, m)))
-    mids = ()
-    if full_res.any() and t.pyramid.midpoints:
-        ex, ey = t.pyramid.midpoints
-        mids = (ex[ua, ub], ex[ua, ub + 1], ey[ua, ub], ey[ua + 1, ub])
+            f = (r >= 1.0).astype(np.float64)
+        else:
+            f = np.clip((r - 1.0) / (1.0 / beta - 1.0), 0.0, 1.0)
+        return np.where((level == 0) & (key[0] == 0), 0.0, f)     # full resolution keeps the reference's cells
+    own = factor(ua, ub, m)
     dropped = ts.coarser.copy()
     for edge, (inside, na, nb_, along) in enumerate(_edge_neighbours(lv, U)):
         bit = EDGE_BITS[edge]
         na_c, nb_c = np.clip(na, 0, U - 1), np.clip(nb_, 0, U - 1)
         same = inside & (ts.level_map[na_c, nb_c] == m)
         le = np.zeros(len(lv))
-        le[same] = np.minimum(own[same], np.where(full_res[same], 0.0, factor(_errors_at(E, na_c[same], nb_c[same],
-                                                                                          m[same]))))
+        le[same] = np.minimum(own[same], factor(na_c[same], nb_c[same], m[same]))
         edge_of_terrain = ~inside & ((ts.finer & bit) == 0) & \
             (fr.neighbour_profile(key, edge)[along.astype(np.int64) << key[0]] < 0)
         le[edge_of_terrain] = own[edge_of_terrain]
-        if mids:
-            at = full_res & (same | edge_of_terrain)
-            le[at] = factor(mids[edge][at])
         dropped[np.maximum(ts.morph[:, edge], le) >= 1.0] |= bit
     return replace(ts, dropped=dropped)
 

@@ -2,8 +2,7 @@
 // GPU leaf selection of one tile's tilelet quadtree (raster.nodes), in two passes (PASS 0 lists, PASS 1 emits).
 // A node is a leaf when its parent splits and it does not; its edge midpoint is dropped where the same-size
 // neighbour's parent does not split (that side is one level coarser), and where neither the leaf nor its
-// same-size neighbour is near its own split (lean leaves, below; at full resolution, where the midpoint's own
-// error allows). The leaf's nine post heights are
+// same-size neighbour is near its own split (lean leaves, below). The leaf's nine post heights are
 // fetched and geomorphed, and it is appended as a record (geometry-shader path) or as 9 vertices and 24
 // indices (indexed path) for the tile's indirect draw, with skirt segments where asked.
 #extension GL_ARB_shader_ballot : enable
@@ -83,49 +82,23 @@ int split_state(int m, int a, int b, out float E, out float d) {
     return E * k_tau > d ? 1 : 0;
 }
 
-// Lean factor of a drop whose error is E at distance d: 1 while the tolerance (d / k_tau) is at least E / beta,
-// falling to 0 as it falls to E (without morphing: 1 or 0).
-float lean_factor(float E, float d) {
-    if (E <= 0.0) return 1.0;
-    float r = d / (E * k_tau);
-    if (!morph) return r >= 1.0 / beta ? 1.0 : 0.0;
-    return clamp((r - 1.0) / (1.0 / beta - 1.0), 0.0, 1.0);
-}
-
-// Lean factor of a same-pyramid-level node that does not split (0 where it splits or has no data). An edge
-// midpoint between two such leaves lies on their edge by the smaller of their two factors (a leaf's error
-// bounds its fan with any midpoints dropped, raster.quadtree), so it is dropped while that is 1 and has reached
-// its own height when either leaf splits. Every node whose split makes a leaf has E at least 1 / beta times the
-// leaf's, so a leaf starts lean and a coarser neighbour's leaves see it lean. Full-resolution leaves draw the
-// reference's cells: theirs go by each midpoint's own error (full_res_lean).
+// Lean factor of a same-pyramid-level node that does not split: 1 while its tolerance (d / k_tau) is at least
+// E / beta, falling to 0 as the tolerance falls to E, where it splits; 0 where it splits or has no data. An
+// edge midpoint between two such leaves lies on their edge by the smaller of their two factors (a leaf's
+// error bounds its fan with any midpoints dropped, raster.quadtree), so it is dropped while that is 1 and
+// has reached its own height when either leaf splits. Every node whose split makes a leaf has E at least
+// 1 / beta times the leaf's, so a leaf starts lean and a coarser neighbour's leaves see it lean.
 float lean_of(int m, int a, int b) {
-    if (m == 0 && tile_level == 0) return 0.0;
+    if (m == 0 && tile_level == 0) return 0.0;   // full resolution: the reference's cells, as tau -> 0
     float E, d;
     if (split_state(m, a, b, E, d) != 0) return 0.0;
     vec4 nd = node_at(m, a, b);
     if (nd.w == 0.0) return 0.0;
-    return lean_factor(nd.x, box_distance(m, a, b, nd));
-}
-
-float H(int i, int j) { return height[i * (n_cells + 1) + j]; }
-
-// half the gap between cell (r, c)'s two diagonals' mid-heights (0 beyond the tile), raster.midpoints
-float cell_gap(int r, int c) {
-    if (r < 0 || c < 0 || r >= n_cells || c >= n_cells) return 0.0;
-    return 0.5 * abs(H(r, c) + H(r + 1, c + 1) - H(r + 1, c) - H(r, c + 1));
-}
-
-// Lean factor of full-resolution leaf (a, b)'s edge e (W, E, S, N) toward a level-0 leaf (na, nb) of this tile
-// (has_nb) or the terrain's edge: by the error of its midpoint on the edge's line (its distance from the line,
-// the gaps of the two cells whose diagonal the drop turns; raster.midpoints), at the nearer leaf's distance.
-float full_res_lean(int a, int b, int e, int na, int nb, bool has_nb) {
-    const ivec4 MID[4] = ivec4[4](ivec4(1, 0, 1, 0), ivec4(1, 2, 1, 0), ivec4(0, 1, 0, 1), ivec4(2, 1, 0, 1));
-    ivec2 p = ivec2(2 * a, 2 * b) + MID[e].xy, q = MID[e].zw;        // midpoint (row, column), along the edge
-    float err = abs(H(p.x, p.y) - 0.5 * (H(p.x - q.x, p.y - q.y) + H(p.x + q.x, p.y + q.y)));
-    err = max(err, max(cell_gap(p.x - 1, p.y - 1), cell_gap(p.x, p.y)));
-    float d = box_distance(0, a, b, node_at(0, a, b));
-    if (has_nb) d = min(d, box_distance(0, na, nb, node_at(0, na, nb)));
-    return lean_factor(err, d);
+    E = nd.x;
+    if (E <= 0.0) return 1.0;
+    float r = box_distance(m, a, b, nd) / (E * k_tau);
+    if (!morph) return r >= 1.0 / beta ? 1.0 : 0.0;
+    return clamp((r - 1.0) / (1.0 / beta - 1.0), 0.0, 1.0);
 }
 
 bool splits(int m, int a, int b) { float E, d; return split_state(m, a, b, E, d) != 0; }
@@ -139,7 +112,70 @@ float alpha_of(int st, float E, float d) {
     return clamp((d / (E * k_tau) - beta) / (1.0 - beta), 0.0, 1.0);
 }
 
-#include "raster/append"
+#if defined(GL_ARB_shader_ballot) && defined(GL_ARB_gpu_shader_int64)
+// Appends of the invocations running together are counted once per subgroup: one atomic from the lowest
+// live invocation reserves room for all of them (each gets its rank among the live ones).
+uint live_count(uint64_t m) { uvec2 v = unpackUint2x32(m); return uint(bitCount(v.x) + bitCount(v.y)); }
+
+// True in the lowest live invocation of the subgroup, the one that makes the atomic for all of them.
+bool leads(uint64_t live) {
+    uvec2 lv = unpackUint2x32(live);
+    return gl_SubGroupInvocationARB == (lv.x != 0u ? uint(findLSB(lv.x)) : 32u + uint(findLSB(lv.y)));
+}
+
+// This invocation's slot from the base the leader reserved: its rank among the live invocations.
+uint slot(uint64_t live, uint base) { return readFirstInvocationARB(base) + live_count(live & gl_SubGroupLtMaskARB); }
+
+// A slot in counter cmd[word] for every live invocation; ``also`` (>= 0) gets 24 indices a slot added.
+uint reserve(int word, int also, int total) {
+    uint64_t live = ballotARB(true);
+    uint n = live_count(live), base = 0u;
+    if (leads(live)) {
+        base = atomicAdd(cmd[word], n);
+        if (also >= 0) atomicAdd(cmd[also], 24u * n);     // the indexed draw: 24 indices a leaf
+        if (total >= 0) atomicAdd(frame_count[total], n);
+    }
+    return slot(live, base);
+}
+
+// A slot in the leaf list for every live invocation; keeps the pass-1 work group count (x) up to date.
+uint reserve_found() {
+    uint64_t live = ballotARB(true);
+    uint n = live_count(live), base = 0u;
+    if (leads(live)) {
+        base = atomicAdd(found[3], n);
+        atomicMax(found[0], (base + n + 63u) / 64u);
+    }
+    return slot(live, base);
+}
+
+// Adds v of every live invocation to frame_count[word] with one atomic per subgroup.
+void add_total(int word, uint v) {
+    uint64_t live = ballotARB(true);
+    uint sum = 0u;
+    for (uint i = 0u; i < gl_SubGroupSizeARB; i++) {
+        uint x = readInvocationARB(v, i);
+        if (((live >> i) & 1ul) != 0ul) sum += x;
+    }
+    if (leads(live)) atomicAdd(frame_count[word], sum);
+}
+#else
+uint reserve(int word, int also, int total) {
+    if (also >= 0) atomicAdd(cmd[also], 24u);
+    if (total >= 0) atomicAdd(frame_count[total], 1u);
+    return atomicAdd(cmd[word], 1u);
+}
+
+void add_total(int word, uint v) { atomicAdd(frame_count[word], v); }
+
+uint reserve_found() {
+    uint base = atomicAdd(found[3], 1u);
+    atomicMax(found[0], (base + 64u) / 64u);
+    return base;
+}
+#endif
+
+float H(int i, int j) { return height[i * (n_cells + 1) + j]; }
 
 void put_segment(vec2 p, float hp, vec2 q, float hq) {
     uint k = reserve(11, -1, 3);
@@ -215,27 +251,24 @@ void emit_leaf(int m, int a, int b) {
     float ap = alpha_of(split_state(m + 1, a >> 1, b >> 1, E, d), E, d);
     int drop = 0;
     float am[4];
-    bool full = lean && m == 0 && tile_level == 0;
     float own_lean = lean ? lean_of(m, a, b) : 0.0;
     for (int e = 0; e < 4; ++e) {
         int na = a + nb[e].x, nbb = b + nb[e].y;
-        bool in_tile = na >= 0 && na < s && nbb >= 0 && nbb < s;
         am[e] = ap;
         float le = 0.0;
         if ((na >> 1) == (a >> 1) && (nbb >> 1) == (b >> 1)) {          // a sibling: same parent
-            if (lean) le = full ? full_res_lean(a, b, e, na, nbb, true) : min(own_lean, lean_of(m, na, nbb));
+            if (lean) le = min(own_lean, lean_of(m, na, nbb));
         } else {
             int st = split_state(m + 1, na >> 1, nbb >> 1, E, d);
             if (st == 0) { if (stitch) drop |= bit[e]; }
             else {
                 am[e] = max(ap, alpha_of(st, E, d));
-                if (lean) le = !full ? min(own_lean, lean_of(m, na, nbb))
-                             : in_tile ? full_res_lean(a, b, e, na, nbb, true) : 0.0;
+                if (lean) le = min(own_lean, lean_of(m, na, nbb));
             }
             // on a border with a tile of another pyramid level the two sides cannot see each other's forced
             // (tile root) morphs: the shared posts stay at their own heights on both sides
             int od = owner_delta(m, na, nbb);
-            if (od == 9) le = full ? full_res_lean(a, b, e, na, nbb, false) : own_lean;   // the terrain's edge
+            if (od == 9) le = own_lean;                                  // the terrain's edge: no neighbour
             else if (od != 0) { am[e] = 0.0; le = 0.0; }
         }
         am[e] = max(am[e], le);

@@ -163,8 +163,8 @@ def test_triangle_estimate_follows_the_drawn_count(ctx, puget_full):
 
 
 def test_triangle_estimate_from_a_stores_node_blocks_follows_the_drawn_count(ctx, puget_full, tmp_path):
-    """From a tile store the estimate reads each tile's node block (the errors and boxes the GPU reads: no error
-    pyramid; heights only of full-resolution tiles, for their midpoints' errors) and follows what the GPU selection draws per frame: 1.10-1.17x here, a little above the
+    """From a tile store the estimate reads each tile's node block (the errors and boxes the GPU reads: no heights,
+    no error pyramid) and follows what the GPU selection draws per frame: 1.10-1.17x here, a little above the
     estimate from heights, since the blocks' height ranges are those of the grown boxes."""
     from test_store import ArraySource
 
