@@ -22,20 +22,25 @@ def test_hand_cases():
     # ties go to the earlier strategy; no tiles at all is a frame of nothing
     assert best_assignment({"a": np.array([1.0]), "b": np.array([1.0])}, {}) == (["a"], 1.0)
     assert best_assignment({"a": np.array([]), "b": np.array([])}, {"a": 0.3, "b": 0.2}) == ([], 0.2)
+    # a mixed frame's own overhead: mixing saves 4 ms here, so it mixes at 3.9 ms and stays pure at 4.1
+    assert best_assignment(costs, {"a": 0.0, "b": 0.0}, mixed=3.9) == (["a", "b"], 5.9)
+    assert best_assignment(costs, {"a": 0.0, "b": 0.0}, mixed=4.1) == (["a", "a"], 6.0)
 
 
 @settings(max_examples=200, deadline=None)
-@given(st.integers(1, 5), st.integers(2, 3), st.integers(0, 2**32 - 1))
-def test_matches_brute_force(n_tiles, n_strategies, seed):
+@given(st.integers(1, 5), st.integers(2, 3), st.integers(0, 2**32 - 1), st.sampled_from([0.0, 0.7, 2.5]))
+def test_matches_brute_force(n_tiles, n_strategies, seed, mixed):
     rng = np.random.default_rng(seed)
     names = "abc"[:n_strategies]
     costs = {n: rng.uniform(0.0, 3.0, n_tiles) for n in names}
     overhead = {n: float(rng.uniform(0.0, 2.0)) for n in names}
-    best = min(sum(costs[c][i] for i, c in enumerate(assign)) + sum(overhead[c] for c in set(assign))
-               for assign in itertools.product(names, repeat=n_tiles))
-    chosen, total = best_assignment(costs, overhead)
-    recomputed = sum(costs[c][i] for i, c in enumerate(chosen)) + sum(overhead[c] for c in set(chosen))
-    assert np.isclose(total, best) and np.isclose(recomputed, best)
+
+    def frame(assign):
+        used = set(assign)
+        return sum(costs[c][i] for i, c in enumerate(assign)) + sum(overhead[c] for c in used) + mixed * (len(used) > 1)
+    best = min(frame(assign) for assign in itertools.product(names, repeat=n_tiles))
+    chosen, total = best_assignment(costs, overhead, mixed=mixed)
+    assert np.isclose(total, best) and np.isclose(frame(chosen), best)
 
 
 def test_hedged_choices_leave_the_base_only_beyond_the_model_error():
@@ -65,3 +70,8 @@ def test_hedged_choices_leave_the_base_only_beyond_the_model_error():
     # without a measured error the plain cheapest assignment
     m.fit_error = {}
     assert hedged_choices(pred, m) == best_assignment(pred, m.overhead)[0] == ["raster", "raster", "raycast"]
+    # a mixed frame's own overhead counts against the mix: it saves 2.58 ms against all ray cast (6.42 vs 9.0)
+    m.mix_overhead = 2.5
+    assert hedged_choices(pred, m) == ["raster", "raster", "raycast"]
+    m.mix_overhead = 2.7
+    assert hedged_choices(pred, m) == ["raycast", "raycast", "raycast"]

@@ -5,7 +5,7 @@ import pytest
 
 from hybrid.camera.view import View
 from hybrid.cost.features import TileFeatures, _hull_area_clipped, footprint_pixels
-from hybrid.cost.fit import FrameSample, TileSample, estimate_overhead, fit_frames
+from hybrid.cost.fit import FrameSample, TileSample, estimate_overhead, fit_frames, frame_design
 from hybrid.cost.model import TERMS, CostModel, load_cost_model, save_cost_model, term_values
 from hybrid.cost.planner import choose
 from hybrid.errors import TerrabenchError
@@ -25,11 +25,13 @@ def synthetic_tiles(n=300, seed=0):
 
 
 OVERHEAD = {"raster": 2.0, "raster_gs": 3.0, "raycast": 1.5}
+MIX = 1.2
 NAMES = ("raster", "raster_gs", "raycast")
 
 
-def synthetic_frames(n=240, seed=0, noise=0.005, names=NAMES):
-    """Frames of 4-30 synthetic tiles, pure and assigned at random, timed by TRUE plus OVERHEAD per strategy used."""
+def synthetic_frames(n=240, seed=0, noise=0.005, names=NAMES, mix=MIX):
+    """Frames of 4-30 synthetic tiles, pure and assigned at random, timed by TRUE plus OVERHEAD per strategy used
+    and ``mix`` where more than one is used."""
     rng = np.random.default_rng(seed)
     out = []
     for k in range(n):
@@ -38,6 +40,7 @@ def synthetic_frames(n=240, seed=0, noise=0.005, names=NAMES):
         a = np.array([names[k % len(names)]] * count) if k % 4 == 0 else rng.choice(names, size=count)
         terms = {s: np.array([term_values(f, s) for f in feats]) for s in names}
         ms = sum(OVERHEAD[s] + sum(TRUE.predict(f)[s] for f, c in zip(feats, a) if c == s) for s in names if (a == s).any())
+        ms += mix * (len(set(a.tolist())) > 1)
         out.append(FrameSample({s: bool((a == s).any()) for s in names}, {s: terms[s][a == s].sum(axis=0) for s in names},
                                float(ms * rng.normal(1, noise))))
     return out
@@ -51,7 +54,20 @@ def test_frame_fit_recovers_known_coefficients_and_overheads():
             assert np.isclose(getattr(m, s)[t], v, rtol=0.25), (s, t, getattr(m, s)[t], v)   # small terms: ~20 %
         assert np.isclose(m.overhead[s], OVERHEAD[s], rtol=0.25), (s, m.overhead[s])
         assert m.fit_error[s] < 0.01                          # held-out frames: about the noise
+    assert np.isclose(m.mix_overhead, MIX, rtol=0.25), m.mix_overhead
     assert 0 < m.mix_error < 0.01 and "of mixed frames" in m.explain()   # the frames given tiles at random
+    assert "a frame mixing strategies adds 1." in m.explain()
+    # frames whose mixing costs nothing more get no mixed-frame overhead; one that costs more, ignored, is
+    # predicted worse than the noise: the column is what takes it up
+    assert fit_frames(synthetic_frames(mix=0.0), "test", holdout=0.3).mix_overhead < 0.1
+    X = frame_design(synthetic_frames(), NAMES)
+    assert X.shape[1] == 16 and set(X[:, -1]) == {0.0, 1.0}
+    costly = fit_frames(synthetic_frames(mix=4.0), "test", holdout=0.3)
+    assert np.isclose(costly.mix_overhead, 4.0, rtol=0.1) and costly.mix_error < 0.01
+    mixed = {"raster", "raycast"}
+    assert costly.frame_ms([1.0, 2.0], mixed) == pytest.approx(3.0 + costly.overhead["raster"]
+                                                               + costly.overhead["raycast"] + costly.mix_overhead)
+    assert costly.frame_ms([1.0, 2.0], {"raster"}) == pytest.approx(3.0 + costly.overhead["raster"])
     assert "of 240 frames' times" in m.explain() and "raster_gs ms = " in m.explain()
     two = fit_frames(synthetic_frames(names=("raster", "raycast")), "test", names=("raster", "raycast"))
     assert two.candidates == ("raster", "raycast") and "raster_gs not calibrated: never chosen" in two.explain()
@@ -89,7 +105,7 @@ def test_frame_fit_rejects_bad_timings():
     frames = synthetic_frames(40)
     with pytest.raises(TerrabenchError, match="finite times > 0"):
         fit_frames(frames[:-1] + [FrameSample(frames[0].used, frames[0].sums, 0.0)], "t")
-    with pytest.raises(TerrabenchError, match="at least 15 frames"):
+    with pytest.raises(TerrabenchError, match="at least 16 frames"):
         fit_frames(frames[:10], "t")
     with pytest.raises(TerrabenchError, match="holdout"):
         fit_frames(frames, "t", holdout=1.0)
@@ -136,10 +152,10 @@ def test_save_load_by_renderer(tmp_path):
     got = load_cost_model("test", p)
     assert got.raster == TRUE.raster and got.raycast == TRUE.raycast and got.raster_gs == TRUE.raster_gs
     fitted = CostModel("fitted", TRUE.raster, TRUE.raycast, raster_gs=TRUE.raster_gs, call_overhead=dict(CALL),
-                       tile_error={"raster": 0.1})
+                       tile_error={"raster": 0.1}, mix_overhead=1.25)
     save_cost_model(fitted, p)
     again = load_cost_model("fitted", p)
-    assert again.call_overhead == CALL and again.tile_error == {"raster": 0.1}
+    assert again.call_overhead == CALL and again.tile_error == {"raster": 0.1} and again.mix_overhead == 1.25
     shipped = load_cost_model("llvmpipe (LLVM 15.0.6, 256 bits)", p)
     assert "llvmpipe" in shipped.source
     other = load_cost_model("Some Unknown GPU", p)

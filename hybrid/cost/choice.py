@@ -1,7 +1,7 @@
 """The cheapest assignment of tiles to strategies under per-tile costs and per-strategy frame overheads.
 
-A frame that uses a set S of strategies costs sum over s in S of overhead_s plus each tile's cost under the
-strategy it is given. For a fixed S every tile takes its cheapest strategy in S, so trying every non-empty S
+A frame that uses a set S of strategies costs sum over s in S of overhead_s, plus a mixed frame's own overhead
+where S has more than one, plus each tile's cost under the strategy it is given. For a fixed S every tile takes its cheapest strategy in S, so trying every non-empty S
 (7 sets for three candidates) finds the optimum exactly. Both the hybrid (predicted costs) and the oracle
 (costs measured inside frames) choose this way; a pure set may be priced by a measured whole-frame time.
 """
@@ -27,22 +27,24 @@ def _sizes(s: int) -> np.ndarray:
 
 
 def best_assignment(costs: dict[str, np.ndarray], overhead: dict[str, float],
-                    pure_ms: dict[str, float] | None = None) -> tuple[list[str], float]:
+                    pure_ms: dict[str, float] | None = None, mixed: float = 0.0) -> tuple[list[str], float]:
     """(strategy per tile, frame ms) of the cheapest assignment; ``costs`` are per-tile ms ((B,) arrays, overhead
     excluded), ``overhead`` ms per frame per strategy used, ``pure_ms`` a measured frame time that replaces the
-    sum for a one-strategy frame. Ties go to the earlier strategy in ``costs`` and to fewer strategies."""
+    sum for a one-strategy frame, ``mixed`` ms a frame using more than one strategy adds. Ties go to the earlier
+    strategy in ``costs`` and to fewer strategies."""
     names = list(costs)
     table = np.array([np.asarray(costs[n], dtype=np.float64) for n in names], dtype=np.float64).reshape(len(names), -1)
     pure = None if not pure_ms else np.array([pure_ms.get(n, np.nan) for n in names], dtype=np.float64)
-    pick, total = best_assignment_table(table, np.array([overhead.get(n, 0.0) for n in names], dtype=np.float64), pure)
+    pick, total = best_assignment_table(table, np.array([overhead.get(n, 0.0) for n in names], dtype=np.float64), pure,
+                                        mixed)
     return [names[i] for i in pick.tolist()], total
 
 
 def best_assignment_table(table: np.ndarray, overhead: np.ndarray,
-                          pure_ms: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+                          pure_ms: np.ndarray | None = None, mixed: float = 0.0) -> tuple[np.ndarray, float]:
     """(strategy index per tile (B,), frame ms) of the cheapest assignment of an (S, B) table of per-tile ms under
-    (S,) per-frame overheads; ``pure_ms`` (S,) measured one-strategy frame times (NaN: the sum), as
-    ``best_assignment``.
+    (S,) per-frame overheads; ``pure_ms`` (S,) measured one-strategy frame times (NaN: the sum), ``mixed`` ms added
+    to a frame of more than one strategy, as ``best_assignment``.
 
     Every subset is priced at once: (subsets, strategies, tiles) costs with the strategies outside a subset
     at infinity."""
@@ -57,7 +59,7 @@ def best_assignment_table(table: np.ndarray, overhead: np.ndarray,
         pick = priced.argmin(axis=1)                                                 # (K, B), first on ties
         used = (pick[:, None, :] == np.arange(s)[:, None]).any(axis=2)               # (K, S)
         tiles = priced.min(axis=1).sum(axis=1)
-    total = tiles + used @ overhead
+    total = tiles + used @ overhead + mixed * (_sizes(s) > 1)
     if pure_ms is not None:
         measured = ~np.isnan(pure_ms)                   # the first s subsets are the one-strategy ones, in order
         total[:s][measured] = pure_ms[measured]

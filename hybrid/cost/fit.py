@@ -2,7 +2,8 @@
 
 ``fit_frames`` (what calibration uses) fits every strategy's coefficients and per-frame overhead together to
 whole frames' times: frames drawn one way and frames whose tiles were given to the strategies at random, each
-row a frame (its time against, per strategy, whether it is used and the sum of its tiles' terms). A frame
+row a frame (its time against, per strategy, whether it is used and the sum of its tiles' terms, and whether it
+uses more than one: a mixed frame's own overhead, ``CostModel.mix_overhead``). A frame
 is what the choice must make fast, and on a CPU rasterizer it is not the sum of its tiles drawn one call each
 (a call of one tile cannot overlap its vertex and fragment work, nor its fragments with the next tile's): on
 Puget the per-tile fit priced raster frames of the orbit 30 % too cheap and of the dolly 25 % too dear. The
@@ -63,14 +64,17 @@ class TileSample:
 
 
 def frame_design(samples: list[FrameSample], names) -> np.ndarray:
-    """(frames, columns) rows of ``fit_frames``: per strategy of ``names``, used (0/1), then its terms' sums."""
+    """(frames, columns) rows of ``fit_frames``: per strategy of ``names``, used (0/1), then its terms' sums; last,
+    mixed (1 where the frame uses more than one strategy of ``names``)."""
     return np.array([np.concatenate([np.r_[float(f.used[s]), np.asarray(f.sums[s], dtype=np.float64)]
-                                     for s in names]) for f in samples])
+                                     for s in names] + [[float(sum(bool(f.used[s]) for s in names) > 1)]])
+                     for f in samples])
 
 
 def fit_frames(samples: list[FrameSample], renderer: str, holdout: float = 0.3, seed: int = 0,
                names=("raster", "raster_gs", "raycast"), tiles: list[TileSample] = ()) -> CostModel:
-    """Coefficients and per-frame overheads of every strategy in ``names`` fitted together on a random
+    """Coefficients and per-frame overheads of every strategy in ``names``, and the overhead of a frame that mixes
+    strategies (``mix_overhead``), fitted together on a random
     (1 - holdout) share of whole frames' times (non-negative, relative error); ``fit_error`` is the held-out median
     relative error of the frames using each strategy, ``mix_error`` that of the frames using more than one. With
     ``tiles`` (timed one call each), a random (1 - holdout) share of them joins the fit with a per-call overhead
@@ -79,7 +83,7 @@ def fit_frames(samples: list[FrameSample], renderer: str, holdout: float = 0.3, 
     if not (0.0 <= holdout < 1.0):
         raise TerrabenchError(f"holdout must lie in [0, 1), got {holdout}")
     ms = np.array([f.ms for f in samples], dtype=np.float64)
-    width = sum(1 + len(TERMS[s]) for s in names)
+    width = sum(1 + len(TERMS[s]) for s in names) + 1          # the strategies' columns, then mixed
     if len(samples) < width or not np.all(np.isfinite(ms)) or np.any(ms <= 0):
         raise TerrabenchError(f"need at least {width} frames with finite times > 0 ms to fit {', '.join(names)}, "
                               f"got {len(samples)}")
@@ -111,7 +115,7 @@ def fit_frames(samples: list[FrameSample], renderer: str, holdout: float = 0.3, 
         overhead[s] = float(x[offsets[j]])
         coef[s] = dict(zip(TERMS[s], map(float, x[offsets[j] + 1:offsets[j + 1]])))
     model = CostModel(renderer, coef["raster"], coef["raycast"], overhead=overhead, raster_gs=coef.get("raster_gs", {}),
-                      frames=len(samples), tiles=len(tiles))
+                      frames=len(samples), tiles=len(tiles), mix_overhead=float(x[width - 1]))
     if calls:
         model.call_overhead = {s: float(x[width + j]) for j, s in enumerate(names)}
     if len(test):

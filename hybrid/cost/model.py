@@ -7,9 +7,11 @@ One linear model with non-negative coefficients per candidate strategy, simple e
     raycast_ms   = c0 + c_px * pixels + c_hit * surface_pixels + c_step * pixels * log2(1 + slab_cells)
 
 per tile, plus each strategy's per-frame overhead (state setup, the raster paths' leaf-selection dispatches,
-the ray caster's pre-pass target and counters) paid once when any tile uses it:
+the ray caster's pre-pass target and counters) paid once when any tile uses it, and a mixed frame's own overhead
+(the copy of the raster pass's depth that rays stop at, skirts, switching between the passes) paid once when
+more than one strategy is used:
 
-    frame_ms = sum over strategies used of overhead_s + sum of tiles
+    frame_ms = sum over strategies used of overhead_s + [more than one used] * mix_overhead + sum of tiles
 
 ``terrabench calibrate`` times whole frames on this device, pure and with tiles assigned to the strategies at
 random, and the frames' tiles one call each, and fits the coefficients, the per-frame overheads and a per-call
@@ -85,6 +87,7 @@ class CostModel:
     tile_error: dict = field(default_factory=dict)   # held-out per-tile error against tiles timed a call each
     call_overhead: dict = field(default_factory=dict)   # ms one tile drawn as its own call adds (fitted with the tiles)
     mix_error: float = 0.0          # held-out median relative error of the frames that use more than one strategy
+    mix_overhead: float = 0.0       # ms a frame that uses more than one strategy adds (fitted with the frames)
 
     @property
     def candidates(self) -> tuple[str, ...]:
@@ -92,8 +95,10 @@ class CostModel:
         return tuple(s for s in TERMS if getattr(self, s))
 
     def frame_ms(self, tile_costs: list[float], strategies: set) -> float:
-        """Predicted frame time: the tiles' costs plus the overhead of each strategy used."""
-        return float(sum(tile_costs) + sum(self.overhead.get(s, 0.0) for s in strategies))
+        """Predicted frame time (ms): the tiles' costs plus the overhead of each strategy used, and the mixed
+        frame's own overhead where more than one is used."""
+        mixed = self.mix_overhead if len(strategies) > 1 else 0.0
+        return float(sum(tile_costs) + sum(self.overhead.get(s, 0.0) for s in strategies) + mixed)
 
     def predict(self, f: TileFeatures) -> dict[str, float]:
         """Predicted milliseconds each strategy adds to a frame for one tile (overhead not included)."""
@@ -131,7 +136,8 @@ class CostModel:
         lines = [f"cost model for {self.renderer} ({self.source or 'unsaved'}, {self.tiles} tiles)",
                  *(fmt(s) for s in self.candidates),
                  "  pixel_steps = pixels * log2(1 + slab_cells); visible_triangles = triangles * visible",
-                 "  per-frame overhead: " + ", ".join(f"{s} {self.overhead.get(s, 0):.3g} ms" for s in self.candidates)]
+                 "  per-frame overhead: " + ", ".join(f"{s} {self.overhead.get(s, 0):.3g} ms" for s in self.candidates)
+                 + f"; a frame mixing strategies adds {self.mix_overhead:.3g} ms"]
         if "raster_gs" not in self.candidates:
             lines.append("  raster_gs not calibrated: never chosen")
         what = f"of {self.frames} frames' times" if self.frames else "per tile"
@@ -191,7 +197,8 @@ def cost_model_from_dict(d: dict, source: str) -> CostModel:
         m = CostModel(d["renderer"], dict(d["raster"]), dict(d["raycast"]), dict(d.get("fit_error", {})),
                       int(d.get("tiles", 0)), source, {**{s: 0.0 for s in TERMS}, **d.get("overhead", {})},
                       dict(d.get("raster_gs") or {}), int(d.get("frames", 0)), dict(d.get("tile_error", {})),
-                      {s: float(v) for s, v in (d.get("call_overhead") or {}).items()}, float(d.get("mix_error", 0.0)))
+                      {s: float(v) for s, v in (d.get("call_overhead") or {}).items()}, float(d.get("mix_error", 0.0)),
+                      float(d.get("mix_overhead", 0.0)))
         for s in m.candidates:
             for t in TERMS[s]:
                 getattr(m, s).setdefault(t, 0.0)     # a model saved before a term existed has it at 0

@@ -122,7 +122,8 @@ def hedged_choices(predicted: dict, model: CostModel) -> list[str]:
     per tile together (``model.tile_error``, else the frames' ``model.fit_error``): a choice inside the model's
     error is a coin toss that costs the other strategy's per-frame overhead and, on a CPU rasterizer, risks the
     rare tile that is many times slower than predicted. The pure frames are priced over the tiles every strategy
-    can draw (a tile not yet prepared for raster, infinite there, takes ray casting whatever the base). Nor is a
+    can draw (a tile not yet prepared for raster, infinite there, takes ray casting whatever the base); a mixed
+    assignment also pays the model's mixed-frame overhead (``model.mix_overhead``). Nor is a
     mix taken whose predicted frame saves less than a share of the base's pure frame: the larger of the model's
     held-out errors of the base's frames and of mixed frames (``model.mix_error``)."""
     names = list(predicted)
@@ -140,7 +141,7 @@ def hedged_picks(table: np.ndarray, names: list[str], model: CostModel) -> np.nd
     order = np.array([base] + [i for i in range(len(names)) if i != base])   # ties stay with the base
     factor = 1.0 + tile_err + tile_err[base]
     factor[base] = 1.0
-    pick, _ = best_assignment_table((table * factor[:, None])[order], overhead[order])
+    pick, _ = best_assignment_table((table * factor[:, None])[order], overhead[order], mixed=model.mix_overhead)
     picks = order[pick]
     pure = np.where(known, base, picks)
     margin = max(err[base], model.mix_error)
