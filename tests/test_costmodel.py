@@ -11,9 +11,11 @@ from hybrid.cost.planner import choose
 from hybrid.errors import TerrabenchError
 from hybrid.residency import ResidencyCache
 
-TRUE = CostModel("test", {"const": 0.3, "triangles": 5e-5, "visible_triangles": 1.5e-4, "pixels": 1e-5},
+TRUE = CostModel("test", {"const": 0.3, "triangles": 5e-5, "visible_triangles": 1.5e-4, "pixels": 1e-5,
+                          "surface_pixels": 2e-5},
                  {"const": 0.5, "pixels": 2e-5, "surface_pixels": 1e-5, "pixel_steps": 1e-5},
-                 raster_gs={"const": 0.2, "triangles": 2e-4, "visible_triangles": 3e-4, "pixels": 1e-5})
+                 raster_gs={"const": 0.2, "triangles": 2e-4, "visible_triangles": 3e-4, "pixels": 1e-5,
+                            "surface_pixels": 2.5e-5})
 
 
 def synthetic_tiles(n=300, seed=0):
@@ -47,11 +49,15 @@ def synthetic_frames(n=240, seed=0, noise=0.005, names=NAMES, mix=MIX):
 
 
 def test_frame_fit_recovers_known_coefficients_and_overheads():
-    m = fit_frames(synthetic_frames(), "test", holdout=0.3)
+    frames = synthetic_frames()
+    m = fit_frames(frames, "test", holdout=0.3)
     assert m.candidates == NAMES and m.frames == 240
+    total = np.mean([f.ms for f in frames])
     for s in NAMES:
-        for t, v in getattr(TRUE, s).items():
-            assert np.isclose(getattr(m, s)[t], v, rtol=0.25), (s, t, getattr(m, s)[t], v)   # small terms: ~20 %
+        for i, (t, v) in enumerate(getattr(TRUE, s).items()):
+            share = v * np.mean([f.sums[s][i] for f in frames]) / total      # of the frames' time
+            # a term under a tenth of the time is weakly seen at this noise (0.5 %): within 60 %, else 25 %
+            assert np.isclose(getattr(m, s)[t], v, rtol=0.25 if share >= 0.1 else 0.6), (s, t, getattr(m, s)[t], v)
         assert np.isclose(m.overhead[s], OVERHEAD[s], rtol=0.25), (s, m.overhead[s])
         assert m.fit_error[s] < 0.01                          # held-out frames: about the noise
     assert np.isclose(m.mix_overhead, MIX, rtol=0.25), m.mix_overhead
@@ -61,7 +67,7 @@ def test_frame_fit_recovers_known_coefficients_and_overheads():
     # predicted worse than the noise: the column is what takes it up
     assert fit_frames(synthetic_frames(mix=0.0), "test", holdout=0.3).mix_overhead < 0.1
     X = frame_design(synthetic_frames(), NAMES)
-    assert X.shape[1] == 16 and set(X[:, -1]) == {0.0, 1.0}
+    assert X.shape[1] == 18 and set(X[:, -1]) == {0.0, 1.0}
     costly = fit_frames(synthetic_frames(mix=4.0), "test", holdout=0.3)
     assert np.isclose(costly.mix_overhead, 4.0, rtol=0.1) and costly.mix_error < 0.01
     mixed = {"raster", "raycast"}
@@ -105,13 +111,13 @@ def test_frame_fit_rejects_bad_timings():
     frames = synthetic_frames(40)
     with pytest.raises(TerrabenchError, match="finite times > 0"):
         fit_frames(frames[:-1] + [FrameSample(frames[0].used, frames[0].sums, 0.0)], "t")
-    with pytest.raises(TerrabenchError, match="at least 16 frames"):
+    with pytest.raises(TerrabenchError, match="at least 18 frames"):
         fit_frames(frames[:10], "t")
     with pytest.raises(TerrabenchError, match="holdout"):
         fit_frames(frames, "t", holdout=1.0)
     with pytest.raises(KeyError):
         fit_frames(frames, "t", names=("raster", "raycast", "tin"))
-    assert all(len(TERMS[s]) == 4 for s in NAMES)
+    assert [len(TERMS[s]) for s in NAMES] == [5, 5, 4]
 
 
 def test_estimate_overhead_recovers_a_known_overhead():

@@ -2,7 +2,7 @@
 
 One linear model with non-negative coefficients per candidate strategy, simple enough to print and explain:
 
-    raster_ms    = r0 + r_tri * triangles + r_vis * triangles * visible + r_px * pixels
+    raster_ms    = r0 + r_tri * triangles + r_vis * triangles * visible + r_px * pixels + r_hit * surface_pixels
     raster_gs_ms = the same terms with their own coefficients (the geometry-shader path)
     raycast_ms   = c0 + c_px * pixels + c_hit * surface_pixels + c_step * pixels * log2(1 + slab_cells)
 
@@ -34,7 +34,12 @@ from hybrid.atomic import write_json
 from hybrid.cost.features import TileFeatures
 from hybrid.errors import TerrabenchError
 
-RASTER_TERMS = ("const", "triangles", "visible_triangles", "pixels")
+RASTER_TERMS = ("const", "triangles", "visible_triangles", "pixels", "surface_pixels")
+"""The raster strategies' terms. Fragments follow the surface's screen area (surface_pixels) more than the box's
+(pixels), which seen at a grazing angle is mostly air: on one llvmpipe calibration of Puget fitted both ways (8
+hold-out draws each) the term took the held-out frame error from 9.8 to 7.8 % and the raster per-tile error from
+21.6 to 18.0 % (raster_gs 19.2 to 16.6 %), and the pure raster frames' median predicted / measured from 0.75 to
+0.83 on the orbit (surface 0.9 of the box, median tile) and 1.14 to 1.03 on the dolly (0.1)."""
 TERMS = {"raster": RASTER_TERMS, "raster_gs": RASTER_TERMS,
          "raycast": ("const", "pixels", "surface_pixels", "pixel_steps")}
 """The model's terms per candidate strategy (hybrid.contract.CANDIDATES)."""
