@@ -1,9 +1,10 @@
 """The cheapest assignment of tiles to strategies under per-tile costs and per-strategy frame overheads.
 
 A frame that uses a set S of strategies costs sum over s in S of overhead_s, plus a mixed frame's own overhead
-where S has more than one, plus each tile's cost under the strategy it is given. For a fixed S every tile takes its cheapest strategy in S, so trying every non-empty S
-(7 sets for three candidates) finds the optimum exactly. Both the hybrid (predicted costs) and the oracle
-(costs measured inside frames) choose this way; a pure set may be priced by a measured whole-frame time.
+where S has more than one, plus each tile's cost under the strategy it is given. For a fixed S every tile takes
+its cheapest strategy in S, so trying every non-empty S (7 sets for three candidates) finds the optimum exactly.
+Both the hybrid (predicted costs) and the oracle (costs measured inside frames) choose this way; a pure set may
+be priced by a measured whole-frame time.
 """
 from __future__ import annotations
 

@@ -8,8 +8,8 @@ One linear model with non-negative coefficients per candidate strategy, simple e
 
 per tile, plus each strategy's per-frame overhead (state setup, the raster paths' leaf-selection dispatches,
 the ray caster's pre-pass target and counters) paid once when any tile uses it, and a mixed frame's own overhead
-(the copy of the raster pass's depth that rays stop at, skirts, switching between the passes) paid once when
-more than one strategy is used:
+paid once when more than one strategy is used (what a mixed frame costs beyond its tiles and strategies: meant
+for the copy of the raster pass's depth that rays stop at, skirts and switching passes, not timed apart):
 
     frame_ms = sum over strategies used of overhead_s + [more than one used] * mix_overhead + sum of tiles
 
