@@ -120,59 +120,72 @@ def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing, full_res: bool =
                      np.concatenate([block_hi, cat(coarse_hi, np.float64, 3)]), int(top >= 1))
 
 
-def fine_keys(fine: np.ndarray, first_block: int) -> np.ndarray:
+KINDS = ("fine", "lean", "split1")   # the small-node error sets a tile keeps (``TileNodes`` fields), one key segment each
+_KIND_SHIFT = 58                     # a key's bits: kind above block number (< 2**26) above the error's float32 bits
+
+
+def fine_keys(fine: np.ndarray, first_block: int, kind: int = 0) -> np.ndarray:
     """Sort keys (blocks, nodes) int64 of a tile's small-node errors (blocks, nodes) metres whose blocks are
-    numbered from ``first_block``: the block's number above its error's float32 bits, each block's ascending, so
-    that keys of consecutively numbered blocks are one sorted array (errors are >= 0, whose float32 bits order
-    as they do; an error <= 0 never splits, so it is kept as 0)."""
+    numbered from ``first_block``: the kind (index into ``KINDS``) above the block's number above its error's
+    float32 bits, each block's ascending, so that keys of consecutively numbered blocks, and the segments of
+    the kinds in order, are one sorted array (errors are >= 0, whose float32 bits order as they do; an error
+    <= 0 never splits, so it is kept as 0)."""
     bits = np.sort(np.maximum(fine, 0.0).astype(np.float32), axis=1).view(np.int32).astype(np.int64)
-    return ((first_block + np.arange(len(fine), dtype=np.int64))[:, None] << 32) | bits
+    blocks = first_block + np.arange(len(fine), dtype=np.int64)
+    return ((kind << _KIND_SHIFT) | (blocks << 32))[:, None] | bits
 
 
-def fine_splits(keys: np.ndarray, blocks: np.ndarray, threshold: np.ndarray) -> np.ndarray:
-    """Per block (any shape of block numbers into the flat sorted ``keys`` of ``fine_keys``, ``nodes`` keys a
-    block): its nodes whose error exceeds the block's ``threshold`` (metres, same shape), one binary search each."""
-    nodes = keys.shape[-1]
-    q = (blocks << 32) | threshold.astype(np.float32).view(np.int32).astype(np.int64)
-    return (blocks + 1) * nodes - np.searchsorted(keys.reshape(-1), q.reshape(-1), side="right").reshape(q.shape)
+def kind_splits(keys: np.ndarray, starts: np.ndarray, nodes: np.ndarray, blocks: np.ndarray,
+                threshold: np.ndarray) -> np.ndarray:
+    """Per kind and block ((kinds, *blocks.shape)): the block's nodes of that kind whose error exceeds its
+    ``threshold`` (metres, (kinds, *blocks.shape)), one binary search each in the flat sorted ``keys`` whose kind
+    k segment starts at ``starts[k]`` and holds ``nodes[k]`` keys a block (block numbers into each segment)."""
+    shape = (-1,) + (1,) * blocks.ndim
+    kinds = np.arange(len(nodes), dtype=np.int64).reshape(shape) << _KIND_SHIFT
+    q = (kinds | (blocks << 32)) | threshold.astype(np.float32).view(np.int32).astype(np.int64)
+    ends = starts.reshape(shape) + (blocks + 1) * nodes.reshape(shape)
+    return ends - np.searchsorted(keys, q.reshape(-1), side="right").reshape(q.shape)
 
 
-def estimate_rows(keys: np.ndarray, rows: np.ndarray, coarse: np.ndarray, boxes: np.ndarray, root: np.ndarray, eye,
-                  k_tau: float, planes=None, inside=None, lean_keys: np.ndarray | None = None,
-                  split1_keys: np.ndarray | None = None, beta: float = GPU_BETA) -> tuple[np.ndarray, np.ndarray]:
+@dataclass(frozen=True)
+class NodeKeys:
+    """Stacked tiles' small-node sort keys (``fine_keys``) as one flat sorted int64 array: per kind of ``KINDS`` a
+    segment from ``starts[k]`` of ``nodes[k]`` keys a block, ``blocks`` blocks a tile (block numbers row * blocks +
+    block)."""
+
+    flat: np.ndarray
+    starts: np.ndarray
+    nodes: np.ndarray
+    blocks: int
+
+
+def estimate_rows(keys: NodeKeys, rows: np.ndarray, coarse: np.ndarray, boxes: np.ndarray, root: np.ndarray, eye,
+                  k_tau: float, planes=None, inside=None, lean: bool = True,
+                  beta: float = GPU_BETA) -> tuple[np.ndarray, np.ndarray]:
     """(triangles (B,), visible share (B,)) of B tiles' quadtrees for an eye (world metres) and K / tau (pixels per
     radian over tau), and the share in [0, 1] of their splits in blocks or large nodes inside the frustum
-    ``planes`` (eye-relative, as View's; None: all). Without ``lean_keys``: 8 triangles a leaf (a split adds 3
-    leaves). With them (the small nodes' keys, level 0 included), as lean leaves draw: 4 a leaf, and
+    ``planes`` (eye-relative, as View's; None: all). Without ``lean``: 8 triangles a leaf (a split adds 3
+    leaves). With it (the small nodes' lean keys, level 0 included), as lean leaves draw: 4 a leaf, and
     ``NEAR_TRIANGLES`` more for each leaf near its own split (its tolerance below E / beta): it keeps its edge
-    midpoints, each a triangle on both sides, and near leaves lie together, sharing some; ``split1_keys`` count
+    midpoints, each a triangle on both sides, and near leaves lie together, sharing some; the split1 keys count
     full-resolution tiles' split level-1 nodes, whose four leaves draw 8 each.
 
-    The tiles are rows of stacked ``TileNodes``: ``keys`` (rows, blocks, nodes) the small nodes' sort keys
-    (``fine_keys``, block numbers row * blocks + block) of which ``rows`` (B,) are the tiles'; coarse (B, C)
-    errors; boxes (B, blocks + C, 6) as (hi, lo) corners in world metres; root (B,). ``inside`` (B,) marks tiles
-    wholly inside the frustum, whose boxes need no test. A node splits when E * k_tau exceeds its block's (or,
-    large, its own box's) distance: a block's count is one binary search among its sorted errors."""
-    b, nb = len(rows), keys.shape[1]
+    The tiles are rows of stacked ``TileNodes``: ``keys`` the small nodes' sort keys of every kind, of which
+    ``rows`` (B,) are the tiles'; coarse (B, C) errors; boxes (B, blocks + C, 6) as (hi, lo) corners in world
+    metres; root (B,). ``inside`` (B,) marks tiles wholly inside the frustum, whose boxes need no test. A node
+    splits when E * k_tau exceeds its block's (or, large, its own box's) distance: a block's count of each kind
+    is one binary search among its sorted errors, all in one search."""
+    b, nb = len(rows), keys.blocks
     if not b:
         return np.zeros(0, np.int64), np.zeros(0)
     eye = np.asarray(eye, dtype=np.float64)
     boxes = boxes.reshape(-1, 6)
     d = box_distances(eye, boxes[:, 3:], boxes[:, :3]).reshape(b, -1)
-    per_box = np.empty(d.shape, np.int64)
+    thr = d[:, :nb] / k_tau
     blocks = rows[:, None] * nb + np.arange(nb)                 # the tiles' blocks' numbers in the keys
-    per_box[:, :nb] = fine_splits(keys, blocks, d[:, :nb] / k_tau) if keys.shape[2] else 0
-    per_box[:, nb:] = coarse * k_tau > d[:, nb:]
+    counts = kind_splits(keys.flat, keys.starts, keys.nodes, blocks, np.stack([thr, beta * thr, thr]))
+    per_box = np.concatenate([counts[0], coarse * k_tau > d[:, nb:]], axis=1)
     splits = per_box.sum(axis=1)
-    near = None
-    if lean_keys is not None:
-        near = -splits
-        if lean_keys.shape[2]:
-            near = near + fine_splits(lean_keys, blocks, beta * d[:, :nb] / k_tau).sum(axis=1)
-        near = near + (coarse * k_tau > beta * d[:, nb:]).sum(axis=1)
-        if split1_keys is not None and split1_keys.shape[2]:
-            full = fine_splits(split1_keys, blocks, d[:, :nb] / k_tau).sum(axis=1)
-            near = near + (4 * 4 / NEAR_TRIANGLES) * full          # four leaves, four more triangles each
     test = np.ones(b, bool) if inside is None else ~np.asarray(inside, bool)
     if planes is None or not test.any():
         shown = splits
@@ -181,9 +194,12 @@ def estimate_rows(keys: np.ndarray, rows: np.ndarray, coarse: np.ndarray, boxes:
         seen = (boxes.reshape(b, -1, 6)[test] @ w >= bias).all(axis=2)
         shown = splits.copy()
         shown[test] = (per_box[test] * seen).sum(axis=1)
-    if near is None:
+    if not lean:
         triangles = 8 * (1 + 3 * (splits + root))
         return triangles, 8 * (1 + 3 * (shown + root)) / triangles
+    per_kind = counts[1:].sum(axis=2)
+    near = per_kind[0] - splits + (coarse * k_tau > beta * d[:, nb:]).sum(axis=1) \
+        + (4 * 4 / NEAR_TRIANGLES) * per_kind[1]                    # a split level-1 node: four leaves, four more each
     triangles = 4 * (1 + 3 * (splits + root)) + NEAR_TRIANGLES * near
     return triangles, np.minimum(1.0, (1 + 3 * (shown + root)) / (1 + 3 * (splits + root)))
 
@@ -201,13 +217,14 @@ class _Rows:
     indexing per field; beyond ``limit`` tiles the least recently used row is reused (never one of the call at
     hand: ``lookup`` stamps its rows with the call's tick)."""
 
-    FIELDS = ("coarse_error", "boxes", "root")      # as TileNodes has them; "fine_keys", "lean_keys" from its
-                                                    # fine and lean errors
+    FIELDS = ("coarse_error", "boxes", "root")      # as TileNodes has them; the small nodes' errors of each of
+                                                    # KINDS as sort keys in ``node_keys``
 
     def __init__(self, limit: int):
         self.limit, self.row = limit, {}                       # key -> row
         self.keys: list = []                                   # row -> key
-        self.arrays: dict = {}
+        self.arrays: dict = {}                                 # FIELDS, and per kind its (rows, blocks, nodes) keys,
+        self.node_keys: NodeKeys | None = None                 # views into node_keys.flat
         self.stamp = np.zeros(0, np.int64)                     # row -> tick of its last use
         self.tick = 0
 
@@ -231,9 +248,8 @@ class _Rows:
             if r >= len(self.stamp):
                 self._grow(nodes)
         nb = nodes.fine.shape[0]
-        self.arrays["fine_keys"][r] = fine_keys(nodes.fine, r * nb)
-        self.arrays["lean_keys"][r] = fine_keys(nodes.lean, r * nb)
-        self.arrays["split1_keys"][r] = fine_keys(nodes.split1, r * nb)
+        for k, kind in enumerate(KINDS):
+            self.arrays[kind][r] = fine_keys(getattr(nodes, kind), r * nb, k)
         for f in self.FIELDS:
             self.arrays[f][r] = getattr(nodes, f)
         self.stamp[r] = self.tick
@@ -241,19 +257,24 @@ class _Rows:
         return r
 
     def _grow(self, nodes: TileNodes) -> None:
-        """Double the rows (at least 16, at most ``limit``); rows not yet filled hold keys of errors 0, so the keys stay sorted."""
+        """Double the rows (at least 16, at most ``limit``); rows not yet filled hold keys of errors 0, so the keys
+        stay sorted."""
         cap = len(self.stamp)
         new = min(max(2 * cap, 16), self.limit)          # the call's own rows fit: limit >= its tiles
         vals = {f: np.asarray(getattr(nodes, f)) for f in self.FIELDS}
         grown = {f: np.zeros((new, *v.shape), v.dtype if f != "root" else np.int64) for f, v in vals.items()}
         nb = nodes.fine.shape[0]
-        for f, per_block in (("fine_keys", nodes.fine.shape[1]), ("lean_keys", nodes.lean.shape[1]),
-                             ("split1_keys", nodes.split1.shape[1])):
-            grown[f] = np.broadcast_to((np.arange(new * nb, dtype=np.int64) << 32).reshape(new, nb, 1),
-                                       (new, nb, per_block)).copy()
+        per_block = np.array([getattr(nodes, kind).shape[1] for kind in KINDS], dtype=np.int64)
+        starts = np.concatenate([[0], np.cumsum(per_block * new * nb)[:-1]])
+        flat = np.empty(int(per_block.sum()) * new * nb, np.int64)
+        for k, kind in enumerate(KINDS):
+            grown[kind] = flat[starts[k]:starts[k] + per_block[k] * new * nb].reshape(new, nb, per_block[k])
+            grown[kind][:] = (((k << _KIND_SHIFT) | (np.arange(new * nb, dtype=np.int64) << 32))
+                              .reshape(new, nb, 1))
         for f in grown if self.arrays else ():
             grown[f][:cap] = self.arrays[f]
         self.arrays = grown
+        self.node_keys = NodeKeys(flat, starts, per_block, nb)
         self.stamp = np.concatenate([self.stamp, np.zeros(new - cap, np.int64)])
 
 
@@ -329,10 +350,9 @@ class TileletTriangleEstimator:
         a, r = self._rows.arrays, rows[ok]
         if not len(r):
             return np.full(len(rows), np.nan), np.full(len(rows), np.nan)
-        est = estimate_rows(a["fine_keys"], r, a["coarse_error"][r], a["boxes"][r], a["root"][r], view.eye,
+        est = estimate_rows(self._rows.node_keys, r, a["coarse_error"][r], a["boxes"][r], a["root"][r], view.eye,
                             float(view.pixels_per_radian) / tau, view.frustum_planes_rel(),
-                            None if inside is None else inside[ok], a["lean_keys"] if self.lean else None,
-                            a["split1_keys"], self.beta)
+                            None if inside is None else inside[ok], self.lean, self.beta)
         if len(r) == len(rows):
             return est[0].astype(np.float64), est[1]
         tri, vis = np.full(len(rows), np.nan), np.full(len(rows), np.nan)
