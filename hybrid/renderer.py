@@ -209,17 +209,33 @@ class Renderer:
         """(per-tile ms, whole-frame ms): every plan's tile drawn with one strategy inside a real frame, front to
         back, each in its own call timed as in ``time_draw`` (so each meets the depth its nearer tiles left, as
         in the frame), and the same frame drawn in one call; medians over ``oracle_repeats``."""
+        return self.time_in_frames(view, plans, [name], target, pinned, tau)[name]
+
+    def time_in_frames(self, view: View, plans: list[TilePlan], names, target: FrameTarget, pinned=frozenset(),
+                       tau: float = DEFAULT_TAU) -> dict[str, tuple[np.ndarray, float]]:
+        """``time_in_frame`` of several strategies, their passes interleaved (each repeat times every strategy in
+        turn), so that a drift of the machine's speed over the seconds this takes falls on all of them alike and
+        their ratios per tile, which the choice reads, stay comparable."""
         self._check_live()
-        items = self._items(name, plans, pinned)
-        strategy, opts = self.strategies[name], self.options[name]
-        per = np.empty((self.oracle_repeats, len(items)))
+        items = {n: self._items(n, plans, pinned) for n in names}
+        per = {n: np.empty((self.oracle_repeats, len(items[n]))) for n in names}
+        together = {n: [] for n in names}
         for r in range(self.oracle_repeats):
-            target.clear()
-            target.use()
-            for i, item in enumerate(items):
-                _, wall, gpu = timed(self.ctx, lambda: strategy.draw_tiles(target, view, [item], tau, **opts))
-                per[r, i] = wall if gpu is None else gpu
-        return np.median(per, axis=0), self.time_draw(view, plans, name, target, pinned, tau)
+            for n in names:
+                strategy, opts = self.strategies[n], self.options[n]
+                target.clear()
+                target.use()
+                for i, item in enumerate(items[n]):
+                    _, wall, gpu = timed(self.ctx, lambda: strategy.draw_tiles(target, view, [item], tau, **opts))
+                    per[n][r, i] = wall if gpu is None else gpu
+        for r in range(self.oracle_repeats):
+            for n in names:
+                strategy, opts = self.strategies[n], self.options[n]
+                target.clear()
+                target.use()
+                _, wall, gpu = timed(self.ctx, lambda: strategy.draw_tiles(target, view, items[n], tau, **opts))
+                together[n].append(wall if gpu is None else gpu)
+        return {n: (np.median(per[n], axis=0), float(np.median(together[n]))) for n in names}
 
     def _measure(self, view, plans, target, pinned, tau) -> dict:
         """Time every tile inside frames each candidate way (tile rows' meas_<strategy>_ms) and each pure frame;
@@ -227,9 +243,8 @@ class Renderer:
         pinned |= {(n, p.key) for p in plans for n in CANDIDATES}
         if not plans:
             return {}
-        per, together = {}, {}
-        for n in CANDIDATES:
-            per[n], together[n] = self.time_in_frame(view, plans, n, target, pinned, tau)
+        runs = self.time_in_frames(view, plans, CANDIDATES, target, pinned, tau)
+        per, together = {n: t[0] for n, t in runs.items()}, {n: t[1] for n, t in runs.items()}
         for i, p in enumerate(plans):
             p.measured = {n: float(per[n][i]) for n in CANDIDATES}
         if self.policy == "oracle":

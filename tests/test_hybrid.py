@@ -262,6 +262,33 @@ def test_oracle_picks_the_strategy_that_is_faster_when_timed_apart(ctx, puget257
     assert not wrong, wrong
 
 
+def test_in_frame_timing_interleaves_the_strategies(ctx, puget257):
+    """The oracle's and calibration's in-frame timing takes each repeat of every strategy in turn (a drift of the
+    machine then falls on all alike): the draws run strategy by strategy, each pass drawing every tile one call
+    each, then each whole frame; every time comes back positive, one per tile."""
+    v = preset("flyover", puget257, 6, 160, 90).view(2)
+    target = FrameTarget(ctx, v.width, v.height)
+    calls = []
+    try:
+        with Renderer(ctx, puget257, "hybrid", tile_size=64, cost_model=SPLIT, oracle_repeats=2) as r:
+            plans = r.plan(v)
+            for name, strategy in r.strategies.items():
+                draw = strategy.draw_tiles
+                strategy.draw_tiles = (lambda d, n: lambda t, view, items, *a, **k: calls.append((n, len(items)))
+                                       or d(t, view, items, *a, **k))(draw, name)
+            runs = r.time_in_frames(v, plans, CANDIDATES, target)
+    finally:
+        target.release()
+    b = len(plans)
+    assert b > 1
+    expected = [(n, 1) for _ in range(2) for n in CANDIDATES for _ in range(b)] + \
+               [(n, b) for _ in range(2) for n in CANDIDATES]
+    assert calls == expected
+    for n in CANDIDATES:
+        per, together = runs[n]
+        assert per.shape == (b,) and (per > 0).all() and together > 0
+
+
 def test_shading_mode_reaches_both_strategies(ctx, puget_full):
     v = _views(puget_full)[0]                               # a view the split model draws both ways
     frames = {}
