@@ -21,7 +21,34 @@ def environment(ctx) -> dict:
     import os
     return {"gl_renderer": info.renderer, "gl_vendor": info.vendor, "gl_version": info.version,
             "cpu": cpu, "cpu_count": os.cpu_count(), "python": platform.python_version(),
-            "platform": platform.platform(), "packages": package_versions()}
+            "platform": platform.platform(), "packages": package_versions(),
+            "cost_model": cost_model_fingerprint(info.renderer)}
+
+
+def cost_model_fingerprint(renderer: str) -> dict:
+    """Where the hybrid's cost model for a GL renderer comes from and a short hash of its coefficients, so that a
+    resumed run can tell whether its earlier frames were chosen by the same model."""
+    import hashlib
+    import json
+
+    from hybrid.cost.model import load_cost_model
+    model = load_cost_model(renderer)
+    d = model.to_dict()
+    d.pop("source", None)
+    digest = hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:12]
+    return {"source": model.source, "sha256": digest}
+
+
+RESUME_KEYS = ("gl_renderer", "cost_model")
+"""What must match between a run folder's earlier frames and a resumed run's (frames of another device or cost
+model would sit in one table as if measured together)."""
+
+
+def resume_mismatch(old: dict, new: dict) -> str | None:
+    """A sentence naming what differs in ``RESUME_KEYS`` between an earlier run's env.json and this one's, else
+    None (a key the earlier run did not record is not compared)."""
+    diffs = [f"{k} {old[k]!r} then, {new.get(k)!r} now" for k in RESUME_KEYS if k in old and old[k] != new.get(k)]
+    return "; ".join(diffs) or None
 
 
 def package_versions() -> dict[str, str]:

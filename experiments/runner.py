@@ -56,9 +56,23 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
             run_on_cluster(spec, folder, client, progress)
         else:
             ctx = ctx or shared_context()
-            write_json(folder / "env.json", environment(ctx))
+            env = environment(ctx)
+            _check_resume(folder, env)
+            write_json(folder / "env.json", env)
             _run_configs(spec, folder, ctx, progress, fail_fast)
     return folder
+
+
+def _check_resume(folder: Path, env: dict) -> None:
+    """Refuse to add frames to a run folder whose earlier frames ran on another GL renderer or cost model."""
+    from .environment import resume_mismatch
+    frames, old = folder / "frames.jsonl", folder / "env.json"
+    if not (frames.exists() and frames.stat().st_size and old.exists()):
+        return
+    why = resume_mismatch(json.loads(old.read_text()), env)
+    if why:
+        raise TerrabenchError(f"{folder} holds frames run with another setup ({why}); resuming would mix them in "
+                              f"one table: choose another --name or --runs folder, or remove {folder}")
 
 
 def _run_configs(spec: Spec, folder: Path, ctx, progress: bool, fail_fast: bool) -> None:

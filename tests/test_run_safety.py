@@ -88,6 +88,29 @@ def test_resume_after_a_kill_at_every_journal_write_equals_an_uninterrupted_run(
         pd.testing.assert_frame_equal(_comparable(folder, "tiles"), tiles, check_exact=False, rtol=1e-6)
 
 
+def test_resuming_with_another_cost_model_is_refused(ctx, tmp_path, monkeypatch):
+    """A run folder's frames were chosen by one cost model; a resume under another (recalibrated here through the
+    user's costs file) would put both in one table: it is refused, naming the two models, and the journal is left
+    as it was. Under the first model again it resumes."""
+    from hybrid.cost.model import load_cost_model, save_cost_model
+    from hybrid.gl.context import gl_info
+    spec = parse_spec(SMALL.replace("frames = 3", "frames = 1"))
+    monkeypatch.setenv("TERRABENCH_COSTS", str(tmp_path / "none.json"))      # the shipped model
+    folder = run_spec(spec, tmp_path / "runs", ctx, progress=False)
+    journal = (folder / "frames.jsonl").read_bytes()
+    renderer = gl_info(ctx).renderer
+    other = load_cost_model(renderer)
+    other.renderer, other.raycast = renderer, {**other.raycast, "const": other.raycast["const"] + 1.0}
+    save_cost_model(other, tmp_path / "costs.json")
+    monkeypatch.setenv("TERRABENCH_COSTS", str(tmp_path / "costs.json"))
+    with pytest.raises(TerrabenchError, match="cost_model .*shipped.* then, .*costs.json"):
+        run_spec(spec, tmp_path / "runs", ctx, progress=False)
+    assert (folder / "frames.jsonl").read_bytes() == journal
+    monkeypatch.setenv("TERRABENCH_COSTS", str(tmp_path / "none.json"))
+    run_spec(spec, tmp_path / "runs", ctx, progress=False)
+    assert (folder / "frames.jsonl").read_bytes() == journal             # nothing left to run, nothing added
+
+
 def test_run_exits_nonzero_naming_the_failed_configuration(tmp_path, capsys):
     spec = tmp_path / "bad.toml"
     spec.write_text(SMALL.replace('datasets = ["fbm"]', f'datasets = ["fbm", "{tmp_path / "missing.tif"}"]')
