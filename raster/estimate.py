@@ -316,8 +316,9 @@ class TileletTriangleEstimator:
         t0 = time.perf_counter()
         if deadline is not None and t0 >= deadline:
             return -1
-        if ready is not None:                                   # the block the GPU reads (cut here if need be)
-            data, offsets = tile_node_block(self._blocks, key.level, key.tx, key.ty, self.pyramid.n)
+        source = self._blocks if ready is not None else self._global_nodes()
+        if source is not None:                                  # the block the GPU reads (cut here if need be)
+            data, offsets = tile_node_block(source, key.level, key.tx, key.ty, self.pyramid.n)
             nodes = block_tile_nodes(data, offsets, self.pyramid.n, *self.pyramid.placement(key), key.level == 0)
         else:
             nodes = tile_nodes(self.pyramid.tile(key), self.beta, key.level == 0)
@@ -325,6 +326,15 @@ class TileletTriangleEstimator:
         self.builds += 1
         self.build_ms += (time.perf_counter() - t0) * 1e3
         return r
+
+    def _global_nodes(self):
+        """An in-memory height field's whole-grid nodes, which its GPU selection reads too (``nodes_for``, cached per
+        height field): errors saturated across tile borders and, for a coarser pyramid level's tile, from the
+        level-0 quadtree, where the tile's own heights' error pyramid misses what its neighbours and the finer data
+        force (on Puget's orbit, level-1 tiles drew 1.14x the leaves that estimate counted); None for a store
+        without blocks (built from its heights)."""
+        hf = self.pyramid.hf
+        return None if isinstance(hf, StoredTerrain) else nodes_for(hf, self.pyramid.n, self.beta)
 
     def _block_ready(self, key: TileKey) -> bool | None:
         """Whether the tile's node block is one read (None: the store has no blocks; built from heights)."""

@@ -125,13 +125,14 @@ def test_morph_off_gives_zero_alpha_and_bad_input(puget257):
 def test_triangle_estimate_follows_the_drawn_count(ctx, puget_full):
     """The cost model's triangle estimate (small nodes at their block's distance, large ones at their own box's)
     follows what the GPU selection draws (a distance per node) per frame and per tile, near tiles included, and
-    its share in blocks inside the frustum what is left after tilelet culling; a tolerance at each tile's
+    its share in blocks inside the frustum what is left after tilelet culling, on coarser pyramid levels' tiles as on
+    full-resolution ones; a tolerance at each tile's
     nearest point (the estimate's old form, 8 triangles a leaf) over-counts the far parts of near tiles."""
     from hybrid.camera.flight import preset
     from hybrid.renderer import Renderer
     from raster.estimate import TileletTriangleEstimator
     from raster.tilelets import read_leaves
-    ratios, frames, nearest, shown = [], [], [], []
+    ratios, frames, nearest, shown, coarse = [], [], [], [], []
     with Renderer(ctx, puget_full, "raster", 128) as r:
         est = TileletTriangleEstimator(r.pyramid)
         for v in (preset("flyover", puget_full, 6, 320, 180).view(2), preset("orbit", puget_full, 6, 320, 180).view(3)):
@@ -142,6 +143,7 @@ def test_triangle_estimate_follows_the_drawn_count(ctx, puget_full):
             single = np.array([est(p.key, p.selected, v, 2 / 3) for p in plans])
             assert np.array_equal(many[0], single)                 # the frame's batch is the tiles' estimates
             ratios += list(many[0] / drawn)
+            coarse += [t / d for p, t, d in zip(plans, many[0], drawn) if p.key.level > 0]
             frames.append(many[0].sum() / drawn.sum())
             r.render(v)                                             # with tilelet culling: the visible share
             culled = np.array([read_leaves(r.strategies["raster"], r.cache.entries[("raster", p.key)])["triangles"].sum() for p in plans])
@@ -158,6 +160,8 @@ def test_triangle_estimate_follows_the_drawn_count(ctx, puget_full):
     assert len(ratios) > 20
     assert all(0.85 <= f <= 1.15 for f in frames), frames       # lean leaves' kept midpoints follow their
     assert 0.9 <= np.median(ratios) <= 1.15, sorted(ratios)      # neighbours, which the counts do not see
+    # coarser pyramid levels' tiles too: their nodes are the level-0 quadtree's, errors saturated across borders
+    assert len(coarse) >= 5 and 0.9 <= np.median(coarse) <= 1.1, sorted(coarse)
     assert min(nearest) > max(frames), (nearest, frames)         # the per-node distances are what the fit sees
     assert all(0.95 <= f <= 1.4 for f in shown), shown            # blocks reaching into the frustum count whole
 
