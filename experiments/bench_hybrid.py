@@ -92,17 +92,22 @@ def summarize(frames: pd.DataFrame, tiles: pd.DataFrame, model) -> dict[str, pd.
     out["targets: ratios of total frame time in this run"] = pd.DataFrame(ratios)
     if len(tiles):
         from hybrid.cost.fit import estimate_overhead
-        err = []
+        err, pred_of = [], {}
         frames_of = tiles.groupby(["flight", "frame"])
         for s in model.candidates:                # each tile's call pays the model's per-call overhead (a model
             call = model.call_overhead.get(s)     # fitted without tiles: that of this run's frames)
             if call is None:
                 call = estimate_overhead([g[f"meas_{s}_ms"].to_numpy() for _, g in frames_of],
                                          [float(g[f"together_{s}_ms"].iloc[0]) for _, g in frames_of])
-            pred = tiles[f"pred_{s}_ms"] + call
+            pred = pred_of[s] = tiles[f"pred_{s}_ms"] + call
             meas = tiles[f"meas_{s}_ms"]
             err.append({"strategy": s, "median |relative error| %": 100 * float(np.median(np.abs(pred - meas) / meas)),
-                        "tiles": len(tiles)})
+                        "median predicted / measured": float(np.median(pred / meas)), "tiles": len(tiles)})
+        for e in err:                             # the ratio the choice reads, which a drift of the machine's speed
+            s = e["strategy"]                     # since calibration (the median above) does not change
+            if s != "raycast" and "raycast" in pred_of:
+                q = (pred_of[s] / pred_of["raycast"]) / (tiles[f"meas_{s}_ms"] / tiles["meas_raycast_ms"])
+                e["median |relative error| of the ratio to raycast %"] = 100 * float(np.median(np.abs(q - 1)))
         err.append({"strategy": "all", "median |relative error| %":
                     float(np.median([e["median |relative error| %"] for e in err])), "tiles": len(tiles)})
         out[f"cost model ({model.source}): per-tile error against the oracle's in-frame measurements, each tile's "
