@@ -8,13 +8,13 @@ import pandas as pd
 
 
 def md_table(df: pd.DataFrame, floatfmt: str = ".3g") -> str:
-    """A pandas frame as a GitHub markdown table."""
+    """A pandas frame as a GitHub markdown table (a '|' inside a header or cell escaped, so columns stay put)."""
     def fmt(v):
         if isinstance(v, (float, np.floating)):
             return "–" if not math.isfinite(v) else format(float(v), floatfmt)
-        return str(v)
+        return str(v).replace("|", "\\|")
     cols = list(df.columns)
-    lines = ["| " + " | ".join(map(str, cols)) + " |", "|" + "---|" * len(cols)]
+    lines = ["| " + " | ".join(str(c).replace("|", "\\|") for c in cols) + " |", "|" + "---|" * len(cols)]
     for _, r in df.iterrows():
         lines.append("| " + " | ".join(fmt(r[c]) for c in cols) + " |")
     return "\n".join(lines)

@@ -98,3 +98,17 @@ def test_frames_of_two_devices_are_never_compared():
     assert len(scenes) == 2 and "GPU A" in scenes[0] and "GPU B" in scenes[1]
     assert "the next, raycast (20.0 ms), is 2.00x slower" in scenes[0]
     assert "the next, raycast (200.0 ms), is 2.00x slower" in scenes[1]
+
+
+def test_markdown_tables_keep_their_columns_when_a_header_or_cell_holds_a_pipe():
+    """A '|' in a column name or value (as in 'median |relative error| %') is escaped: every row of the markdown
+    table splits into as many cells as the header."""
+    import re
+
+    import pandas as pd
+
+    from experiments.tables import md_table
+    text = md_table(pd.DataFrame({"strategy": ["raster", "a|b"], "median |relative error| %": [17.2, 18.6]}))
+    rows = text.splitlines()
+    cells = [len(re.split(r"(?<!\\)\|", r)) for r in rows]
+    assert len(set(cells)) == 1 and cells[0] == 4, rows
