@@ -151,11 +151,16 @@ def run_on_cluster(spec: Spec, folder: Path, client, progress: bool = True) -> N
 
 
 def cluster_environment(client) -> dict:
-    """The run's env.json on a cluster: this process's packages and every worker's GL renderer (or error)."""
-    from .environment import package_versions
+    """The run's env.json on a cluster: this process's packages, every worker's GL renderer (or error) and the cost
+    model each renderer's workers choose with (the client's costs file's, else the defaults as shipped here)."""
+    from hybrid.cost.model import read_costs_file
+
+    from .environment import cost_model_fingerprint, package_versions
     info = ready_workers(client)
+    renderers = sorted({i["renderer"] for i in info.values() if i["renderer"]})
+    sent = read_costs_file()
     return {"scheduler": client.scheduler.address, "workers": info, "packages": package_versions(),
-            "gl_renderer": sorted({i["renderer"] for i in info.values() if i["renderer"]})}
+            "gl_renderer": renderers, "cost_model": {r: cost_model_fingerprint(r, sent) for r in renderers}}
 
 
 def calibrate_task(args: tuple) -> dict:

@@ -25,14 +25,18 @@ def environment(ctx) -> dict:
             "cost_model": cost_model_fingerprint(info.renderer)}
 
 
-def cost_model_fingerprint(renderer: str) -> dict:
+def cost_model_fingerprint(renderer: str, sent: dict | None = None) -> dict:
     """Where the hybrid's cost model for a GL renderer comes from and a short hash of its coefficients, so that a
-    resumed run can tell whether its earlier frames were chosen by the same model."""
+    resumed run can tell whether its earlier frames were chosen by the same model: the model of ``sent`` (a costs
+    file's models by renderer, as a cluster's client sends them) where it has one, else this machine's own."""
     import hashlib
     import json
 
-    from hybrid.cost.model import load_cost_model
-    model = load_cost_model(renderer)
+    from hybrid.cost.model import cost_model_from_dict, load_cost_model
+    if sent and renderer in sent:
+        model = cost_model_from_dict(sent[renderer], "costs file sent by the client")
+    else:
+        model = load_cost_model(renderer)
     d = model.to_dict()
     d.pop("source", None)
     digest = hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:12]

@@ -52,7 +52,9 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
         write_json(old, spec.to_dict())
         if client is not None:
             from .cluster import cluster_environment, run_on_cluster
-            write_json(folder / "env.json", cluster_environment(client))
+            env = cluster_environment(client)
+            _check_resume(folder, env)
+            write_json(folder / "env.json", env)
             run_on_cluster(spec, folder, client, progress)
         else:
             ctx = ctx or shared_context()

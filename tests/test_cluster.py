@@ -72,6 +72,28 @@ def test_cluster_run_has_the_serial_rows(serial, cluster, tmp_path):
     assert not (folder / "errors.jsonl").exists()
 
 
+def test_a_cluster_run_is_not_resumed_under_another_cost_model(cluster, tmp_path, monkeypatch):
+    """env.json names the cost model each renderer's workers chose with; a resume whose client would send another
+    (a recalibrated costs file) is refused before any task runs, and the journal is left as it was."""
+    from hybrid.cost.model import load_cost_model, save_cost_model
+    _, client = cluster
+    spec = parse_spec(TWO_GROUPS.replace("frames = 3", "frames = 1").replace("image_frames = [1]", "image_frames = [0]"),
+                      "tiny, one frame")
+    monkeypatch.setenv("TERRABENCH_COSTS", str(tmp_path / "none.json"))
+    folder = run_spec(spec, tmp_path / "runs", progress=False, client=client)
+    env = json.loads((folder / "env.json").read_text())
+    renderer = env["gl_renderer"][0]
+    assert env["cost_model"][renderer]["source"].startswith("shipped")
+    journal = (folder / "frames.jsonl").read_bytes()
+    other = load_cost_model(renderer)
+    other.renderer, other.raster = renderer, {**other.raster, "const": other.raster["const"] + 1.0}
+    save_cost_model(other, tmp_path / "costs.json")
+    monkeypatch.setenv("TERRABENCH_COSTS", str(tmp_path / "costs.json"))
+    with pytest.raises(TerrabenchError, match="cost_model"):
+        run_spec(spec, tmp_path / "runs", progress=False, client=client)
+    assert (folder / "frames.jsonl").read_bytes() == journal
+
+
 def test_a_worker_killed_mid_task_loses_nothing(serial, cluster, tmp_path):
     _, client = cluster
     killed = {}
