@@ -9,12 +9,15 @@ import pandas as pd
 
 def md_table(df: pd.DataFrame, floatfmt: str = ".3g") -> str:
     """A pandas frame as a GitHub markdown table (a '|' inside a header or cell escaped, so columns stay put)."""
+    def text(v) -> str:
+        return str(v).replace("|", "\\|")
+
     def fmt(v):
         if isinstance(v, (float, np.floating)):
             return "–" if not math.isfinite(v) else format(float(v), floatfmt)
-        return str(v).replace("|", "\\|")
+        return text(v)
     cols = list(df.columns)
-    lines = ["| " + " | ".join(str(c).replace("|", "\\|") for c in cols) + " |", "|" + "---|" * len(cols)]
+    lines = ["| " + " | ".join(map(text, cols)) + " |", "|" + "---|" * len(cols)]
     for _, r in df.iterrows():
         lines.append("| " + " | ".join(fmt(r[c]) for c in cols) + " |")
     return "\n".join(lines)

@@ -199,10 +199,15 @@ class Renderer:
         for _ in range(self.oracle_repeats):
             target.clear()
             target.use()
-            _, wall, gpu = timed(self.ctx, lambda: self.strategies[name].draw_tiles(target, view, items, tau,
-                                                                                    **self.options[name]))
-            times.append(wall if gpu is None else gpu)
+            times.append(self._timed_call(target, view, name, items, tau))
         return float(np.median(times))
+
+    def _timed_call(self, target: FrameTarget, view: View, name: str, items: list[TileItem], tau: float) -> float:
+        """ms of one draw call of ``items`` with strategy ``name`` into the target as it stands (``time_draw``'s
+        clock)."""
+        _, wall, gpu = timed(self.ctx, lambda: self.strategies[name].draw_tiles(target, view, items, tau,
+                                                                                **self.options[name]))
+        return wall if gpu is None else gpu
 
     def time_in_frame(self, view: View, plans: list[TilePlan], name: str, target: FrameTarget, pinned=frozenset(),
                       tau: float = DEFAULT_TAU) -> tuple[np.ndarray, float]:
@@ -222,19 +227,14 @@ class Renderer:
         together = {n: [] for n in names}
         for r in range(self.oracle_repeats):
             for n in names:
-                strategy, opts = self.strategies[n], self.options[n]
                 target.clear()
                 target.use()
-                for i, item in enumerate(items[n]):
-                    _, wall, gpu = timed(self.ctx, lambda: strategy.draw_tiles(target, view, [item], tau, **opts))
-                    per[n][r, i] = wall if gpu is None else gpu
-        for r in range(self.oracle_repeats):
+                per[n][r] = [self._timed_call(target, view, n, [item], tau) for item in items[n]]
+        for _ in range(self.oracle_repeats):
             for n in names:
-                strategy, opts = self.strategies[n], self.options[n]
                 target.clear()
                 target.use()
-                _, wall, gpu = timed(self.ctx, lambda: strategy.draw_tiles(target, view, items[n], tau, **opts))
-                together[n].append(wall if gpu is None else gpu)
+                together[n].append(self._timed_call(target, view, n, items[n], tau))
         return {n: (np.median(per[n], axis=0), float(np.median(together[n]))) for n in names}
 
     def _measure(self, view, plans, target, pinned, tau) -> dict:
