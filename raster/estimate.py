@@ -6,10 +6,14 @@ tile's small nodes are counted against the distance of the block of the tile the
 tile), its few large ones each against its own box (grown by its side, as the GPU's), and the tile's root
 always splits (the tile tree refined it). The share of the splits in blocks (and large nodes) that reach into
 the view frustum estimates what is left after the GPU's tilelet culling. Per tile the node errors, blocks and
-boxes are built once; a frame's tiles are then estimated together in a handful of array operations.
+boxes are built once, the small nodes' errors as tables of split counts by threshold (errors rounded to the
+nearest of 32 bins an octave: on Puget's flights, tiles of 64-256 cells, 90 % of tiles within 3 % of the exact
+count, the median equal, frames within 1.5 %; a look-up each, where a binary search among the sorted errors
+missed the cache at nearly every step); a frame's tiles are then estimated together in a handful of array operations.
 """
 from __future__ import annotations
 
+import functools
 import time
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -52,8 +56,8 @@ class TileNodes:
 
     @property
     def boxes(self) -> np.ndarray:
-        """The boxes as (blocks + coarse, 6) rows of (hi, lo) corners, as ``estimate_rows`` reads them."""
-        return np.concatenate([self.box_hi, self.box_lo], axis=1)
+        """The boxes as (6, blocks + coarse): (hi, lo) corners' coordinates, as ``estimate_rows`` reads them."""
+        return np.concatenate([self.box_hi, self.box_lo], axis=1).T
 
 
 def tile_nodes(tile, beta: float = GPU_BETA, full_res: bool = False) -> TileNodes:
@@ -120,86 +124,106 @@ def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing, full_res: bool =
                      np.concatenate([block_hi, cat(coarse_hi, np.float64, 3)]), int(top >= 1))
 
 
-KINDS = ("fine", "lean", "split1")   # the small-node error sets a tile keeps (``TileNodes`` fields), one key segment each
-_KIND_SHIFT = 58                     # a key's bits: kind above block number (< 2**26) above the error's float32 bits
+KINDS = ("fine", "lean", "split1")   # the small-node error sets a tile keeps (``TileNodes`` fields), one table each
+BIN_SHIFT = 18                       # float32 bits below the bin: 32 bins an octave, 1.6-3.1 % apart
+TABLE_BINS = 640                     # a tile's tables span 20 octaves up to its largest error
 
 
-def fine_keys(fine: np.ndarray, first_block: int, kind: int = 0) -> np.ndarray:
-    """Sort keys (blocks, nodes) int64 of a tile's small-node errors (blocks, nodes) metres whose blocks are
-    numbered from ``first_block``: the kind (index into ``KINDS``) above the block's number above its error's
-    float32 bits, each block's ascending, so that keys of consecutively numbered blocks, and the segments of
-    the kinds in order, are one sorted array (errors are >= 0, whose float32 bits order as they do; an error
-    <= 0 never splits, so it is kept as 0)."""
-    bits = np.sort(np.maximum(fine, 0.0).astype(np.float32), axis=1).view(np.int32).astype(np.int64)
-    blocks = first_block + np.arange(len(fine), dtype=np.int64)
-    return ((kind << _KIND_SHIFT) | (blocks << 32))[:, None] | bits
+def _bins(x: np.ndarray) -> np.ndarray:
+    """Bin of each value >= 0 (metres): its float32 bits without the lowest ``BIN_SHIFT`` (the bins' lower edges
+    are the float32 values with those bits zero: 32 an octave, in equal steps within it)."""
+    return x.astype(np.float32).view(np.int32) >> BIN_SHIFT
 
 
-def kind_splits(keys: np.ndarray, starts: np.ndarray, nodes: np.ndarray, blocks: np.ndarray,
-                threshold: np.ndarray) -> np.ndarray:
-    """Per kind and block ((kinds, *blocks.shape)): the block's nodes of that kind whose error exceeds its
-    ``threshold`` (metres, (kinds, *blocks.shape)), one binary search each in the flat sorted ``keys`` whose kind
-    k segment starts at ``starts[k]`` and holds ``nodes[k]`` keys a block (block numbers into each segment)."""
-    shape = (-1,) + (1,) * blocks.ndim
-    kinds = np.arange(len(nodes), dtype=np.int64).reshape(shape) << _KIND_SHIFT
-    q = (kinds | (blocks << 32)) | threshold.astype(np.float32).view(np.int32).astype(np.int64)
-    ends = starts.reshape(shape) + (blocks + 1) * nodes.reshape(shape)
-    return ends - np.searchsorted(keys, q.reshape(-1), side="right").reshape(q.shape)
+def split_tables(errors: list[np.ndarray]) -> tuple[int, np.ndarray]:
+    """(base bin, (kinds, blocks, ``TABLE_BINS``) int64 table) of a tile's small-node errors, one (blocks, nodes)
+    array (metres) per kind of ``KINDS``: entry i of a block's row counts its nodes whose error, rounded to the
+    nearest bin edge, is at least the edge of bin base + 1 + i, so that for a threshold t in bin j = base + i
+    (``kind_splits``) it counts the nodes whose rounded error exceeds t. An error <= 0 never splits and is not
+    counted; one more than 20 octaves below the tile's largest is counted as that floor (only a threshold
+    below it sees the difference)."""
+    nb = errors[0].shape[0]
+    rounded = [(np.maximum(e, 0.0).astype(np.float32).view(np.int32).astype(np.int64)
+                + (1 << (BIN_SHIFT - 1))) >> BIN_SHIFT for e in errors]
+    positive = [e > 0 for e in errors]
+    top = max((int(r[p].max()) for r, p in zip(rounded, positive) if p.any()), default=0)
+    low = top + 2 - TABLE_BINS                                   # the table's first bin; its last counts nothing
+    hist = np.stack([np.bincount((np.arange(nb)[:, None] * TABLE_BINS + np.maximum(r - low, 0))[p],
+                                 minlength=nb * TABLE_BINS) for r, p in zip(rounded, positive)])
+    return low - 1, np.cumsum(hist.reshape(-1, nb, TABLE_BINS)[..., ::-1], axis=-1)[..., ::-1]
 
 
 @dataclass(frozen=True)
-class NodeKeys:
-    """Stacked tiles' small-node sort keys (``fine_keys``) as one flat sorted int64 array: per kind of ``KINDS`` a
-    segment from ``starts[k]`` of ``nodes[k]`` keys a block, ``blocks`` blocks a tile (block numbers row * blocks +
-    block)."""
+class SplitTables:
+    """Stacked tiles' ``split_tables``: per row (tile) its base bin (rows,) and its tables (rows, kinds, blocks,
+    ``TABLE_BINS``), looked up by flat index."""
 
-    flat: np.ndarray
-    starts: np.ndarray
-    nodes: np.ndarray
-    blocks: int
+    base: np.ndarray
+    tables: np.ndarray
+
+    @property
+    def blocks(self) -> int:
+        """Blocks a tile."""
+        return self.tables.shape[2]
 
 
-def estimate_rows(keys: NodeKeys, rows: np.ndarray, coarse: np.ndarray, boxes: np.ndarray, root: np.ndarray, eye,
+def kind_splits(tables: SplitTables, rows: np.ndarray, threshold: np.ndarray) -> np.ndarray:
+    """Per tile row, kind and block ((B, kinds, blocks)): the block's nodes of that kind whose error (rounded to a
+    bin edge) exceeds its ``threshold`` (metres, (B, kinds, blocks)), one table look-up each (int64 counts)."""
+    _, kinds, nb, width = tables.tables.shape
+    i = _bins(threshold) - tables.base[rows][:, None, None]
+    np.minimum(np.maximum(i, 0, out=i), width - 1, out=i)                  # the ends count all and none: exact
+    i += rows[:, None, None] * (kinds * nb * width) + _table_offsets(kinds, nb, width)
+    return tables.tables.reshape(-1).take(i).astype(np.int64)
+
+
+@functools.lru_cache(maxsize=None)
+def _table_offsets(kinds: int, nb: int, width: int) -> np.ndarray:
+    """(kinds, blocks) flat offsets of each kind's and block's table within a row of ``SplitTables.tables``."""
+    return (np.arange(kinds)[:, None] * nb + np.arange(nb)) * width
+
+
+def estimate_rows(tables: SplitTables, rows: np.ndarray, coarse: np.ndarray, boxes: np.ndarray, root: np.ndarray, eye,
                   k_tau: float, planes=None, inside=None, lean: bool = True,
                   beta: float = GPU_BETA) -> tuple[np.ndarray, np.ndarray]:
     """(triangles (B,), visible share (B,)) of B tiles' quadtrees for an eye (world metres) and K / tau (pixels per
     radian over tau), and the share in [0, 1] of their splits in blocks or large nodes inside the frustum
     ``planes`` (eye-relative, as View's; None: all). Without ``lean``: 8 triangles a leaf (a split adds 3
-    leaves). With it (the small nodes' lean keys, level 0 included), as lean leaves draw: 4 a leaf, and
+    leaves). With it (the small nodes' lean tables, level 0 included), as lean leaves draw: 4 a leaf, and
     ``NEAR_TRIANGLES`` more for each leaf near its own split (its tolerance below E / beta): it keeps its edge
-    midpoints, each a triangle on both sides, and near leaves lie together, sharing some; the split1 keys count
+    midpoints, each a triangle on both sides, and near leaves lie together, sharing some; the split1 tables count
     full-resolution tiles' split level-1 nodes, whose four leaves draw 8 each.
 
-    The tiles are rows of stacked ``TileNodes``: ``keys`` the small nodes' sort keys of every kind, of which
-    ``rows`` (B,) are the tiles'; coarse (B, C) errors; boxes (B, blocks + C, 6) as (hi, lo) corners in world
-    metres; root (B,). ``inside`` (B,) marks tiles wholly inside the frustum, whose boxes need no test. A node
-    splits when E * k_tau exceeds its block's (or, large, its own box's) distance: a block's count of each kind
-    is one binary search among its sorted errors, all in one search."""
-    b, nb = len(rows), keys.blocks
+    The tiles are rows of stacked ``TileNodes``: ``tables`` the small nodes' ``split_tables`` of every kind, of
+    which ``rows`` (B,) are the tiles'; coarse (B, C) errors; boxes (B, 6, blocks + C) as (hi, lo) corners in world
+    metres, coordinates first; root (B,). ``inside`` (B,) marks tiles wholly inside the frustum, whose boxes need
+    no test. A node splits when E * k_tau exceeds its block's (or, large, its own box's) distance: a block's count
+    of each kind is one look-up in its table, errors rounded to 1/32 octave (``split_tables``)."""
+    b, nb = len(rows), tables.blocks
     if not b:
         return np.zeros(0, np.int64), np.zeros(0)
     eye = np.asarray(eye, dtype=np.float64)
-    boxes = boxes.reshape(-1, 6)
-    d = box_distances(eye, boxes[:, 3:], boxes[:, :3]).reshape(b, -1)
-    thr = d[:, :nb] / k_tau
-    blocks = rows[:, None] * nb + np.arange(nb)                 # the tiles' blocks' numbers in the keys
-    counts = kind_splits(keys.flat, keys.starts, keys.nodes, blocks, np.stack([thr, beta * thr, thr]))
-    per_box = np.concatenate([counts[0], coarse * k_tau > d[:, nb:]], axis=1)
+    e = eye[:, None]
+    d = np.maximum(np.maximum(boxes[:, 3:] - e, e - boxes[:, :3]), 0.0)            # (B, 3, boxes) per axis
+    d = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])            # as box_distances sums
+    counts = kind_splits(tables, rows, (d[:, None, :nb] / k_tau) * np.array([1.0, beta, 1.0]).reshape(3, 1))
+    large = coarse * k_tau > d[:, nb:]
+    per_box = np.concatenate([counts[:, 0], large], axis=1)                        # splits in each box (B, boxes)
     splits = per_box.sum(axis=1)
-    test = np.ones(b, bool) if inside is None else ~np.asarray(inside, bool)
-    if planes is None or not test.any():
+    if planes is None or (inside is not None and np.all(inside)):
         shown = splits
     else:                          # a box is outside when its corner farthest along some plane's normal is behind it
         w, bias = _corner_test(planes, eye)
-        seen = (boxes.reshape(b, -1, 6)[test] @ w >= bias).all(axis=2)
-        shown = splits.copy()
-        shown[test] = (per_box[test] * seen).sum(axis=1)
+        seen = (np.matmul(w.T, boxes) >= bias[:, None]).all(axis=1)              # (B, boxes)
+        if inside is not None:
+            seen |= np.asarray(inside, bool)[:, None]
+        shown = (per_box * seen).sum(axis=1)
     if not lean:
         triangles = 8 * (1 + 3 * (splits + root))
         return triangles, 8 * (1 + 3 * (shown + root)) / triangles
-    per_kind = counts[1:].sum(axis=2)
-    near = per_kind[0] - splits + (coarse * k_tau > beta * d[:, nb:]).sum(axis=1) \
-        + (4 * 4 / NEAR_TRIANGLES) * per_kind[1]                    # a split level-1 node: four leaves, four more each
+    per_kind = counts[:, 1:].sum(axis=2)
+    near = per_kind[:, 0] - splits + (coarse * k_tau > beta * d[:, nb:]).sum(axis=1) \
+        + (4 * 4 / NEAR_TRIANGLES) * per_kind[:, 1]                 # a split level-1 node: four leaves, four more each
     triangles = 4 * (1 + 3 * (splits + root)) + NEAR_TRIANGLES * near
     return triangles, np.minimum(1.0, (1 + 3 * (shown + root)) / (1 + 3 * (splits + root)))
 
@@ -218,13 +242,13 @@ class _Rows:
     hand: ``lookup`` stamps its rows with the call's tick)."""
 
     FIELDS = ("coarse_error", "boxes", "root")      # as TileNodes has them; the small nodes' errors of each of
-                                                    # KINDS as sort keys in ``node_keys``
+                                                    # KINDS as ``split_tables`` in ``tables``
 
     def __init__(self, limit: int):
         self.limit, self.row = limit, {}                       # key -> row
         self.keys: list = []                                   # row -> key
-        self.arrays: dict = {}                                 # FIELDS, and per kind its (rows, blocks, nodes) keys,
-        self.node_keys: NodeKeys | None = None                 # views into node_keys.flat
+        self.arrays: dict = {}                                 # FIELDS, (rows, ...) each
+        self.tables: SplitTables | None = None
         self.stamp = np.zeros(0, np.int64)                     # row -> tick of its last use
         self.tick = 0
 
@@ -247,9 +271,7 @@ class _Rows:
             self.keys.append(key)
             if r >= len(self.stamp):
                 self._grow(nodes)
-        nb = nodes.fine.shape[0]
-        for k, kind in enumerate(KINDS):
-            self.arrays[kind][r] = fine_keys(getattr(nodes, kind), r * nb, k)
+        self.tables.base[r], self.tables.tables[r] = split_tables([getattr(nodes, kind) for kind in KINDS])
         for f in self.FIELDS:
             self.arrays[f][r] = getattr(nodes, f)
         self.stamp[r] = self.tick
@@ -257,24 +279,19 @@ class _Rows:
         return r
 
     def _grow(self, nodes: TileNodes) -> None:
-        """Double the rows (at least 16, at most ``limit``); rows not yet filled hold keys of errors 0, so the keys
-        stay sorted."""
+        """Double the rows (at least 16, at most ``limit``); rows not yet filled count no splits."""
         cap = len(self.stamp)
         new = min(max(2 * cap, 16), self.limit)          # the call's own rows fit: limit >= its tiles
         vals = {f: np.asarray(getattr(nodes, f)) for f in self.FIELDS}
         grown = {f: np.zeros((new, *v.shape), v.dtype if f != "root" else np.int64) for f, v in vals.items()}
-        nb = nodes.fine.shape[0]
-        per_block = np.array([getattr(nodes, kind).shape[1] for kind in KINDS], dtype=np.int64)
-        starts = np.concatenate([[0], np.cumsum(per_block * new * nb)[:-1]])
-        flat = np.empty(int(per_block.sum()) * new * nb, np.int64)
-        for k, kind in enumerate(KINDS):
-            grown[kind] = flat[starts[k]:starts[k] + per_block[k] * new * nb].reshape(new, nb, per_block[k])
-            grown[kind][:] = (((k << _KIND_SHIFT) | (np.arange(new * nb, dtype=np.int64) << 32))
-                              .reshape(new, nb, 1))
-        for f in grown if self.arrays else ():
-            grown[f][:cap] = self.arrays[f]
-        self.arrays = grown
-        self.node_keys = NodeKeys(flat, starts, per_block, nb)
+        most = max(getattr(nodes, kind).shape[1] for kind in KINDS)       # a block's nodes of one kind
+        tables = SplitTables(np.zeros(new, np.int64), np.zeros((new, len(KINDS), nodes.fine.shape[0], TABLE_BINS),
+                                                               np.uint16 if most < 1 << 16 else np.uint32))
+        if self.arrays:
+            for f in grown:
+                grown[f][:cap] = self.arrays[f]
+            tables.base[:cap], tables.tables[:cap] = self.tables.base, self.tables.tables
+        self.arrays, self.tables = grown, tables
         self.stamp = np.concatenate([self.stamp, np.zeros(new - cap, np.int64)])
 
 
@@ -360,7 +377,7 @@ class TileletTriangleEstimator:
         a, r = self._rows.arrays, rows[ok]
         if not len(r):
             return np.full(len(rows), np.nan), np.full(len(rows), np.nan)
-        est = estimate_rows(self._rows.node_keys, r, a["coarse_error"][r], a["boxes"][r], a["root"][r], view.eye,
+        est = estimate_rows(self._rows.tables, r, a["coarse_error"][r], a["boxes"][r], a["root"][r], view.eye,
                             float(view.pixels_per_radian) / tau, view.frustum_planes_rel(),
                             None if inside is None else inside[ok], self.lean, self.beta)
         if len(r) == len(rows):

@@ -58,9 +58,10 @@ def best_assignment_table(table: np.ndarray, overhead: np.ndarray,
     else:
         priced = np.where(masks[:, :, None], table, np.inf)                         # (K, S, B)
         pick = priced.argmin(axis=1)                                                 # (K, B), first on ties
-        used = (pick[:, None, :] == np.arange(s)[:, None]).any(axis=2)               # (K, S)
+        used = np.zeros(masks.shape, bool)                                           # (K, S)
+        used[np.arange(len(masks))[:, None], pick] = True
         tiles = priced.min(axis=1).sum(axis=1)
-    total = tiles + used @ overhead + mixed * (_sizes(s) > 1)
+    total = tiles + np.where(used, overhead, 0.0).sum(axis=1) + mixed * (_sizes(s) > 1)
     if pure_ms is not None:
         measured = ~np.isnan(pure_ms)                   # the first s subsets are the one-strategy ones, in order
         total[:s][measured] = pure_ms[measured]

@@ -10,8 +10,9 @@ clipped to the viewport and its area summed per box. Vertices are the reference'
 crossings of the box edges (within rounding: a crossing is found along the face's edge as it runs), projected
 the same way and rounded to 1e-6 px.
 
-A frame has a few dozen tiles, so the time is set by the number of array operations, not their size: each
-step works on every polygon at once, and the viewport clip is a clamp (``clipped_signed_areas``).
+A frame has a few dozen tiles, so the time is set by the number of array operations more than their size:
+each step works on every polygon at once, coordinates leading every array so that a step runs over all
+vertices contiguously, and the viewport clip is a clamp integrated in closed form (``clipped_signed_areas_xy``).
 """
 from __future__ import annotations
 
@@ -57,15 +58,12 @@ def _silhouettes() -> tuple[np.ndarray, np.ndarray]:
     return table, ok
 
 
-def box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """(B, 8, 3) world corners of B boxes given their (B, 3) min and max corners, in footprint order."""
-    return np.where(_CORNER_BITS[None], hi[:, None, :], lo[:, None, :])
-
-
-def _eye_space(view: View, corners: np.ndarray) -> np.ndarray:
-    """Corners (B, 8, 3) in eye space (metres, the camera looking down -z)."""
-    b = corners.shape[0]
-    return ((corners - view.eye).reshape(-1, 3) @ view.rotation().T).reshape(b, 8, 3)
+def _eye_space(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """The corners of B boxes ((B, 3) min and max, world metres) in eye space (metres, the camera looking down
+    -z), coordinates first: (3, B, 8), corner c = 4 (x is hi) + 2 (y is hi) + (z is hi)."""
+    corners = np.where(_CORNER_BITS.T[:, None, :], hi.T[:, :, None], lo.T[:, :, None])
+    corners -= np.asarray(view.eye, dtype=np.float64)[:, None, None]
+    return (view.rotation() @ corners.reshape(3, -1)).reshape(3, -1, 8)
 
 
 def _near(view: View) -> float:
@@ -75,15 +73,22 @@ def _near(view: View) -> float:
 
 def near_cut(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """(B,) whether each box (world metres) reaches behind the near plane."""
-    return np.any(-_eye_space(view, box_corners(lo, hi))[..., 2] < _near(view), axis=1)
+    return np.any(-_eye_space(view, np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))[2]
+                  < _near(view), axis=1)
 
 
-def _project(view: View, pts: np.ndarray) -> np.ndarray:
-    """Eye-space points (..., 3) in front of the near plane to pixels (..., 2), rounded to 1e-6 px."""
+def _project(view: View, p: np.ndarray) -> np.ndarray:
+    """Eye-space points (3, ...) (coordinates first) in front of the near plane to pixels (2, ...), x then y,
+    rounded to 1e-6 px."""
     tan = view.tan_half_fov
-    scale = np.array([-0.5 * view.width / (tan * view.aspect), 0.5 * view.height / tan])
-    out = pts[..., :2] / pts[..., 2:3] * scale + np.array([0.5 * view.width, 0.5 * view.height])
+    out = p[:2] / p[2] * _column(-0.5 * view.width / (tan * view.aspect), 0.5 * view.height / tan, p.ndim) \
+        + _column(0.5 * view.width, 0.5 * view.height, p.ndim)
     return out.round(6, out=out)
+
+
+def _column(x: float, y: float, ndim: int) -> np.ndarray:
+    """(2, 1, ...) of x and y, broadcasting against (2, ...) coordinates of ``ndim`` axes."""
+    return np.array([x, y]).reshape((2,) + (1,) * (ndim - 1))
 
 
 class _Next(dict):
@@ -101,59 +106,65 @@ _PAD = {k: np.minimum(np.arange(8), k - 1) for k in (4, 6, 8)}            # k ve
 
 def clipped_signed_areas(poly: np.ndarray, w: float, h: float) -> np.ndarray:
     """Signed areas (N,) of convex padded polygons (N, m, 2) clipped to the rectangle [0, w] x [0, h] (pixels),
-    with the sign of each polygon's own orientation.
+    with the sign of each polygon's own orientation (``clipped_signed_areas_xy`` of their coordinates)."""
+    return clipped_signed_areas_xy(np.moveaxis(np.asarray(poly, dtype=np.float64), -1, 0), w, h)
 
-    Clamping (x, y) to the rectangle is the nearest-point projection onto it, affine on each of the nine regions
-    the lines x = 0, x = w, y = 0, y = h cut the plane into. Every edge is split where it crosses those lines
-    (its crossings in order along it), so each piece lies in one region and clamps to a segment: the clamped
-    boundary is a closed polygon. It winds once around every point of the intersection and never around a
-    point outside the rectangle (the straight path from a point outside to its projection never enters the
-    rectangle's interior), so its shoelace area is the clipped area. Repeated vertices (padding) are edges of
-    no length and add nothing.
+
+def clipped_signed_areas_xy(p: np.ndarray, w: float, h: float) -> np.ndarray:
+    """Signed areas (N,) of convex padded polygons given as (2, N, m) x and y pixel coordinates, clipped to the
+    rectangle [0, w] x [0, h], with the sign of each polygon's own orientation.
+
+    Clamping (x, y) to the rectangle is the nearest-point projection onto it. It maps the polygon's boundary to
+    a closed path that winds once around every point of the intersection and never around a point outside the
+    rectangle (the straight path from a point outside to its projection never enters the rectangle's interior),
+    so the intersection's signed area is that path's -integral of y dx: per edge, the integral of the clamped y
+    over the part of the edge whose x lies in [0, w] (x is monotone along an edge, so that part runs from the
+    clamped x of its start to that of its end). Along it y is linear, so the integral is the x span times the
+    mean of y clamped to [0, h] between the part's end values, a closed form. Repeated vertices (padding) are
+    edges of no span and add nothing; so do vertical edges.
     """
-    n, m = poly.shape[:2]
-    d = poly[:, _NEXT[m]] - poly                                               # edges a -> a + d, (N, m, 2)
-    with np.errstate(divide="ignore", invalid="ignore"):                       # (N, m, 4) line crossings
-        t = ((np.array([[0.0, 0.0], [w, h]]) - poly[:, :, None, :]) / d[:, :, None, :]).reshape(n, m, 4)
-    # a crossing off the edge (or of a parallel line, or a zero-length edge's NaN) becomes one of the edge's ends
-    t = np.fmin(np.fmax(t, 0.0), 1.0)
-    t.sort(axis=-1)                                                            # in order along the edge
-    pts = np.empty((n, m, 5, 2))
-    pts[:, :, 0] = poly
-    pts[:, :, 1:] = poly[:, :, None, :] + t[..., None] * d[:, :, None, :]
-    pts = pts.reshape(n, 5 * m, 2)
-    x = np.minimum(np.maximum(pts[..., 0], 0.0), w)
-    y = np.minimum(np.maximum(pts[..., 1], 0.0), h)
-    nxt = _NEXT[5 * m]
-    return 0.5 * (x * y[:, nxt] - x[:, nxt] * y).sum(axis=1)
+    m = p.shape[2]
+    q = p[:, :, _NEXT[m]]                                                      # each edge's end
+    cx = np.minimum(np.maximum(np.stack([p[0], q[0]]), 0.0), w)               # the edge's x span over [0, w]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (cx - p[0]) / (q[0] - p[0])
+    t = np.fmin(np.fmax(t, 0.0), 1.0)                                         # a vertical edge (0 / 0): its start
+    y = p[1] + t * (q[1] - p[1])                                              # y at the span's ends (2, N, m)
+    lo, hi = np.minimum(y[0], y[1]), np.maximum(y[0], y[1])
+    a, b = np.minimum(np.maximum(lo, 0.0), h), np.minimum(np.maximum(hi, 0.0), h)
+    span = hi - lo
+    with np.errstate(divide="ignore", invalid="ignore"):                      # mean of clamp(y) for y in [lo, hi]
+        mean = ((b - a) * (a + b) * 0.5 + h * np.maximum(hi - np.maximum(lo, h), 0.0)) / span
+    mean = np.where(span > 0, mean, a)
+    return -np.einsum("ij,ij->i", cx[1] - cx[0], mean)
 
 
 def _cut_faces(face: np.ndarray, near: float) -> np.ndarray:
-    """Faces (N, 4, 3) in eye space cut at depth >= near: (N, 8, 3) closed polygons whose projections have the
-    cut faces' signed areas.
+    """Faces (3, N, 4) in eye space (coordinates first) cut at depth >= near: (3, N, 8) closed polygons whose
+    projections have the cut faces' signed areas.
 
     Each edge k yields vertex k and the point where the edge crosses the plane (vertex k again if it does not).
     Points behind the plane are then replaced by one crossing of their face: the face meets the plane in a line,
     so what replaced them runs along that line and back, which adds no area to the projection (the clipped
     face is what is left). A face wholly behind becomes a point in front of the eye (no area)."""
-    n = len(face)
-    nxt = face[:, _NEXT[4]]
-    depth = -face[..., 2]
+    n = face.shape[1]
+    nxt = face[:, :, _NEXT[4]]
+    depth = -face[2]
     front = depth >= near
     cross = front != front[:, _NEXT[4]]
     step = depth - depth[:, _NEXT[4]]
     t = (depth - near) / np.where(cross, step, 1.0)                            # along edge k where it crosses
-    hit = face + t[..., None] * (nxt - face)
-    pts = np.empty((n, 4, 2, 3))
-    pts[:, :, 0] = face
-    pts[:, :, 1] = np.where(cross[..., None], hit, face)
+    hit = face + t * (nxt - face)
+    pts = np.empty((3, n, 4, 2))
+    pts[..., 0] = face
+    pts[..., 1] = np.where(cross, hit, face)
     keep = np.empty((n, 4, 2), bool)
     keep[..., 0], keep[..., 1] = front, front | cross
-    anchor = np.where(cross.any(axis=1)[:, None], hit[np.arange(n), cross.argmax(axis=1)], _AHEAD)
-    return np.where(keep.reshape(n, 8, 1), pts.reshape(n, 8, 3), anchor[:, None, :])
+    anchor = np.where(cross.any(axis=1), hit[:, np.arange(n), cross.argmax(axis=1)], _AHEAD)
+    return np.where(keep.reshape(n, 8), pts.reshape(3, n, 8), anchor[:, :, None])
 
 
-_AHEAD = np.array([0.0, 0.0, -1.0])                                         # a point in front of the eye
+_AHEAD = np.array([0.0, 0.0, -1.0])[:, None]                                # a point in front of the eye
 
 
 def footprints(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -166,28 +177,29 @@ def footprints(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     are projected and clipped to the viewport in one pass; a box's areas are then summed."""
     lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
     b = lo.shape[0]
-    rel = _eye_space(view, box_corners(lo, hi))
+    rel = _eye_space(view, lo, hi)                             # (3, B, 8)
     near = _near(view)
     eye = np.asarray(view.eye, dtype=np.float64)
     side = np.concatenate([eye > lo, eye < hi], axis=1)        # (B, 6): per axis the low, then the high face is back
     code = side @ _CODE_WEIGHTS
-    cut = (rel[..., 2] > -near).any(axis=1)
+    cut = (rel[2] > -near).any(axis=1)
     spans = (hi - lo) > 0
     flat = spans[:, 0] & spans[:, 1] & ~spans[:, 2]             # a rectangle at one height: its outline is itself
     outline = (_HAS_OUTLINE[code] | flat) & ~cut
     sbox = np.flatnonzero(outline)
-    sil = rel[sbox[:, None], np.where(flat[sbox, None], _FLAT_OUTLINE, _OUTLINE[code[sbox]])]   # (S, 6, 3)
+    corner = np.where(flat[sbox, None], _FLAT_OUTLINE, _OUTLINE[code[sbox]])
+    sil = np.take(rel.reshape(3, -1), sbox[:, None] * 8 + corner, axis=1)                   # (3, S, 6)
     if len(sbox) == b:                                          # every box one polygon (in box order): no faces
-        return np.abs(clipped_signed_areas(_project(view, sil), float(view.width), float(view.height)))
+        return np.abs(clipped_signed_areas_xy(_project(view, sil), float(view.width), float(view.height)))
     back = side[:, _FACE_SIDE] & spans[:, _FACE_SPAN[:, 0]] & spans[:, _FACE_SPAN[:, 1]]
     back[outline] = False
     box, fid = np.nonzero(back)
-    face = rel[box[:, None], _FACES[fid]]                                      # (N, 4, 3)
+    face = np.take(rel.reshape(3, -1), box[:, None] * 8 + _FACES[fid], axis=1)             # (3, N, 4)
     if cut.any():
         face = _cut_faces(face, near)
-    m = max(6, face.shape[1])
-    poly = _project(view, np.concatenate([sil[:, _PAD[6][:m]], face[:, _PAD[face.shape[1]][:m]]]))
-    area = clipped_signed_areas(poly, float(view.width), float(view.height))
+    m = max(6, face.shape[2])
+    poly = _project(view, np.concatenate([sil[:, :, _PAD[6][:m]], face[:, :, _PAD[face.shape[2]][:m]]], axis=1))
+    area = clipped_signed_areas_xy(poly, float(view.width), float(view.height))
     return np.abs(np.bincount(np.concatenate([sbox, box]), area, minlength=b))
 
 

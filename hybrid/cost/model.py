@@ -120,8 +120,9 @@ class CostModel:
         terms = all_term_values(columns)
         shape, terms = terms.shape[:-1], terms.reshape(-1, len(ALL_TERMS))
         cands = self.candidates
-        coef = np.array([[getattr(self, s).get(t, 0.0) if t in TERMS[s] else 0.0 for t in ALL_TERMS] for s in cands],
-                        dtype=np.float64)
+        coef = self._memo("coef", lambda: np.array(
+            [[getattr(self, s).get(t, 0.0) if t in TERMS[s] else 0.0 for t in ALL_TERMS] for s in cands],
+            dtype=np.float64))
         nan = np.isnan(terms[:, 1])
         unknown_any = bool(nan.any())
         if unknown_any:
@@ -131,6 +132,24 @@ class CostModel:
         if unknown_any:
             table[np.ix_(["triangles" in TERMS[s] for s in cands], nan)] = unknown
         return table.reshape(len(cands), *shape)
+
+    def choice_arrays(self, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per strategy of ``names`` (S,): per-frame overhead (ms), held-out frame error and per-tile error (the
+        frame error where no tile error was fitted), as the choice reads them."""
+        return self._memo(("choice", tuple(names)), lambda: (
+            np.array([self.overhead.get(n, 0.0) for n in names], dtype=np.float64),
+            np.array([self.fit_error.get(n, 0.0) for n in names], dtype=np.float64),
+            np.array([self.tile_error.get(n, self.fit_error.get(n, 0.0)) for n in names], dtype=np.float64)))
+
+    def _memo(self, key, build):
+        """``build()`` made once while the model's coefficient and error dicts stay as they were (compared with the
+        copies kept beside it at every call: a dict edited in place makes it anew)."""
+        now = (self.raster, self.raycast, self.raster_gs, self.overhead, self.fit_error, self.tile_error)
+        memo = self.__dict__.setdefault("_memos", {})
+        hit = memo.get(key)
+        if hit is None or hit[0] != now:
+            hit = memo[key] = (tuple(dict(d) for d in now), build())
+        return hit[1]
 
     def explain(self) -> str:
         """The formulas with their coefficients, and the held-out error."""

@@ -133,9 +133,7 @@ def hedged_choices(predicted: dict, model: CostModel) -> list[str]:
 
 def hedged_picks(table: np.ndarray, names: list[str], model: CostModel) -> np.ndarray:
     """``hedged_choices`` as indices into ``names`` (B,), from an (S, B) table of predicted ms in ``names`` order."""
-    overhead = np.array([model.overhead.get(n, 0.0) for n in names], dtype=np.float64)
-    err = np.array([model.fit_error.get(n, 0.0) for n in names], dtype=np.float64)
-    tile_err = np.array([model.tile_error.get(n, model.fit_error.get(n, 0.0)) for n in names], dtype=np.float64)
+    overhead, err, tile_err = model.choice_arrays(tuple(names))
     known = np.isfinite(table).all(axis=0)                          # tiles every strategy can draw
     base = int((np.where(known, table, 0.0).sum(axis=1) + overhead).argmin())
     order = np.array([base] + [i for i in range(len(names)) if i != base])   # ties stay with the base
