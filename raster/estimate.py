@@ -205,8 +205,8 @@ def estimate_rows(tables: SplitTables, rows: np.ndarray, coarse: np.ndarray, box
     eye = np.asarray(eye, dtype=np.float64)
     e = eye[:, None]
     d = np.maximum(np.maximum(boxes[:, 3:] - e, e - boxes[:, :3]), 0.0)            # (B, 3, boxes) per axis
-    d = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])            # as box_distances sums
-    counts = kind_splits(tables, rows, (d[:, None, :nb] / k_tau) * np.array([1.0, beta, 1.0]).reshape(3, 1))
+    d = np.sqrt(np.einsum("bkn,bkn->bn", d, d))                                     # (B, boxes) metres
+    counts = kind_splits(tables, rows, d[:, None, :nb] * (np.array([1.0, beta, 1.0]) / k_tau)[:, None])
     large = coarse * k_tau > d[:, nb:]
     per_box = np.concatenate([counts[:, 0], large], axis=1)                        # splits in each box (B, boxes)
     splits = per_box.sum(axis=1)
@@ -222,7 +222,7 @@ def estimate_rows(tables: SplitTables, rows: np.ndarray, coarse: np.ndarray, box
         triangles = 8 * (1 + 3 * (splits + root))
         return triangles, 8 * (1 + 3 * (shown + root)) / triangles
     per_kind = counts[:, 1:].sum(axis=2)
-    near = per_kind[:, 0] - splits + (coarse * k_tau > beta * d[:, nb:]).sum(axis=1) \
+    near = per_kind[:, 0] - splits + (coarse * (k_tau / beta) > d[:, nb:]).sum(axis=1) \
         + (4 * 4 / NEAR_TRIANGLES) * per_kind[:, 1]                 # a split level-1 node: four leaves, four more each
     triangles = 4 * (1 + 3 * (splits + root)) + NEAR_TRIANGLES * near
     return triangles, np.minimum(1.0, (1 + 3 * (shown + root)) / (1 + 3 * (splits + root)))

@@ -54,12 +54,8 @@ def all_term_values(f) -> np.ndarray:
     columns as from ``hybrid.cost.features.feature_columns``, all of one shape: shape (B, 6))."""
     g = f if isinstance(f, dict) else vars(f)
     tri, px = np.asarray(g["triangles"], dtype=np.float64), np.asarray(g["pixels"], dtype=np.float64)
-    out = np.empty((*px.shape, len(ALL_TERMS)))
-    out[..., 0] = 1.0
-    out[..., 1], out[..., 2], out[..., 3] = tri, tri * np.asarray(g["visible"], dtype=np.float64), px
-    out[..., 4] = np.asarray(g["surface_pixels"], dtype=np.float64)
-    out[..., 5] = px * np.log2(1.0 + np.asarray(g["slab_cells"], dtype=np.float64))
-    return out
+    return np.stack([np.ones_like(px), tri, tri * g["visible"], px, np.asarray(g["surface_pixels"], dtype=np.float64),
+                     px * np.log2(1.0 + np.asarray(g["slab_cells"], dtype=np.float64))], axis=-1)
 
 
 def term_values(f, strategy: str) -> np.ndarray:
@@ -135,11 +131,15 @@ class CostModel:
 
     def choice_arrays(self, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per strategy of ``names`` (S,): per-frame overhead (ms), held-out frame error and per-tile error (the
-        frame error where no tile error was fitted), as the choice reads them."""
-        return self._memo(("choice", tuple(names)), lambda: (
-            np.array([self.overhead.get(n, 0.0) for n in names], dtype=np.float64),
-            np.array([self.fit_error.get(n, 0.0) for n in names], dtype=np.float64),
-            np.array([self.tile_error.get(n, self.fit_error.get(n, 0.0)) for n in names], dtype=np.float64)))
+        frame error where no tile error was fitted), as the choice reads them; read-only."""
+        def build():
+            out = (np.array([self.overhead.get(n, 0.0) for n in names], dtype=np.float64),
+                   np.array([self.fit_error.get(n, 0.0) for n in names], dtype=np.float64),
+                   np.array([self.tile_error.get(n, self.fit_error.get(n, 0.0)) for n in names], dtype=np.float64))
+            for a in out:
+                a.setflags(write=False)
+            return out
+        return self._memo(("choice", tuple(names)), build)
 
     def _memo(self, key, build):
         """``build()`` made once while the model's coefficient and error dicts stay as they were (compared with the
