@@ -210,22 +210,22 @@ def estimate_rows(tables: SplitTables, rows: np.ndarray, coarse: np.ndarray, box
     large = coarse * k_tau > d[:, nb:]
     per_box = np.concatenate([counts[:, 0], large], axis=1)                        # splits in each box (B, boxes)
     splits = per_box.sum(axis=1)
-    if planes is None or (inside is not None and np.all(inside)):
+    if planes is None:
         shown = splits
     else:                          # a box is outside when its corner farthest along some plane's normal is behind it
         w, bias = _corner_test(planes, eye)
         seen = (np.matmul(w.T, boxes) >= bias[:, None]).all(axis=1)              # (B, boxes)
         if inside is not None:
             seen |= np.asarray(inside, bool)[:, None]
-        shown = (per_box * seen).sum(axis=1)
+        shown = np.einsum("bn,bn->b", per_box, seen)
+    leaves = 1 + 3 * (splits + root)
+    visible = np.minimum(1.0, (1 + 3 * (shown + root)) / leaves)
     if not lean:
-        triangles = 8 * (1 + 3 * (splits + root))
-        return triangles, 8 * (1 + 3 * (shown + root)) / triangles
+        return 8 * leaves, visible
     per_kind = counts[:, 1:].sum(axis=2)
     near = per_kind[:, 0] - splits + (coarse * (k_tau / beta) > d[:, nb:]).sum(axis=1) \
         + (4 * 4 / NEAR_TRIANGLES) * per_kind[:, 1]                 # a split level-1 node: four leaves, four more each
-    triangles = 4 * (1 + 3 * (splits + root)) + NEAR_TRIANGLES * near
-    return triangles, np.minimum(1.0, (1 + 3 * (shown + root)) / (1 + 3 * (splits + root)))
+    return 4 * leaves + NEAR_TRIANGLES * near, visible
 
 
 def _corner_test(planes: np.ndarray, eye: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
