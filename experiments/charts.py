@@ -224,7 +224,7 @@ def crossover_chart(tiles: pd.DataFrame, folder: Path) -> list[Path]:
     tpp = np.maximum(t["f_triangles"].to_numpy(float) / px, 1e-4)
     ms = {s: t[f"meas_{s}_ms"].to_numpy(float) for s in (*raster, "raycast")}
     ras = np.min([ms[s] for s in raster], axis=0)
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), layout="constrained")
     for s, colour in zip(ms, ("C0", "C2", "C1")):
         c = "C1" if s == "raycast" else colour
         axes[0].scatter(tpp, 1e3 * ms[s] / px, s=8, alpha=0.5, label=f"{s} (tile timed inside its frame)", color=c)
