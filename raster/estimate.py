@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import functools
 import time
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,7 +22,7 @@ import numpy as np
 from hybrid.camera.view import View
 from hybrid.terrain.stored import StoredTerrain
 from hybrid.tiles.pyramid import TileKey, TilePyramid
-from hybrid.tiles.tiletree import SelectedTile, box_distances
+from hybrid.tiles.tiletree import SelectedTile
 
 from .nodes import nodes_for, pending_cut, tile_node_block
 from .quadtree import GPU_BETA, error_pyramid
