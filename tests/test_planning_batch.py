@@ -1,6 +1,8 @@
 """Batched planning: features, predictions and choices of a whole frame equal the tile-by-tile reference."""
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from hybrid.camera.flight import preset
 from hybrid.camera.view import View
@@ -118,6 +120,44 @@ def test_clipped_areas_equal_the_clipped_hulls():
     assert np.allclose(np.abs(got), want, rtol=1e-9, atol=1e-8)
     assert np.all(got[:300:2] <= 1e-8) and np.all(got[1:300:2] >= -1e-8)       # each polygon's own orientation
     assert np.sum(np.array(want) == 0) > 10 and np.sum((np.array(want) > 0) & (np.array(want) < w * h)) > 100
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 2 ** 32 - 1), st.integers(1, 12), st.booleans())
+def test_clipped_areas_of_polygons_on_the_viewport_grid(seed, k, clockwise):
+    """The clip's degenerate cases: convex polygons whose vertices lie on a coarse grid that includes the
+    viewport's edges, so that edges run along the border, vertical and horizontal edges lie outside it, vertices
+    repeat (padding) and polygons collapse to segments or points; against the Sutherland-Hodgman reference."""
+    rng = np.random.default_rng(seed)
+    w, h = 320.0, 200.0
+    grid = np.array([-160.0, 0.0, 80.0, 160.0, 200.0, 320.0, 480.0])
+    hull = _convex_hull(rng.choice(grid, (k, 2)))            # x and y on the grid: 0, w and h among its values
+    poly = hull[::-1] if clockwise else hull
+    padded = np.concatenate([poly, np.repeat(poly[-1:], 3, axis=0)])
+    want = _hull_area_clipped(poly, w, h) if len(poly) >= 3 else 0.0
+    got = clipped_signed_areas(padded[None], w, h)[0]
+    assert np.isclose(abs(got), want, rtol=1e-9, atol=1e-8), (poly, got, want)
+    assert (got <= 1e-8) if clockwise else (got >= -1e-8)
+
+
+def _convex_hull(pts: np.ndarray) -> np.ndarray:
+    """Counter-clockwise convex hull of 2-D points (monotone chain), collinear points dropped."""
+    p = sorted(set(map(tuple, pts)))
+    if len(p) < 3:
+        return np.array(p).reshape(-1, 2)
+
+    def cross(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+    lower, upper = [], []
+    for q in p:
+        while len(lower) >= 2 and cross(lower[-2], lower[-1], q) <= 0:
+            lower.pop()
+        lower.append(q)
+    for q in reversed(p):
+        while len(upper) >= 2 and cross(upper[-2], upper[-1], q) <= 0:
+            upper.pop()
+        upper.append(q)
+    return np.array(lower[:-1] + upper[:-1]).reshape(-1, 2)
 
 
 def test_slab_cells_batch_equals_the_scalar_at_its_edge_cases():
