@@ -213,7 +213,7 @@ def estimate_rows(tables: SplitTables, rows: np.ndarray, coarse: np.ndarray, box
         shown = splits
     else:                          # a box is outside when its corner farthest along some plane's normal is behind it
         w, bias = _corner_test(planes, eye)
-        seen = (np.matmul(w.T, boxes) >= bias[:, None]).all(axis=1)              # (B, boxes)
+        seen = (w.T @ boxes.transpose(1, 0, 2).reshape(6, -1) >= bias[:, None]).all(axis=0).reshape(b, -1)
         if inside is not None:
             seen |= np.asarray(inside, bool)[:, None]
         shown = np.einsum("bn,bn->b", per_box, seen)
