@@ -6,7 +6,8 @@ from hypothesis import strategies as st
 
 from hybrid.camera.flight import preset
 from hybrid.camera.view import View
-from hybrid.cost.features import _hull_area_clipped, feature_columns, footprint_pixels, tile_features, tile_features_batch
+from hybrid.cost.features import (_convex_hull, _hull_area_clipped, feature_columns, footprint_pixels, tile_features,
+                                  tile_features_batch)
 from hybrid.cost.footprint import clipped_signed_areas, footprints, near_cut
 from hybrid.cost.model import load_cost_model
 from hybrid.cost.planner import plan_frame
@@ -131,33 +132,13 @@ def test_clipped_areas_of_polygons_on_the_viewport_grid(seed, k, clockwise):
     rng = np.random.default_rng(seed)
     w, h = 320.0, 200.0
     grid = np.array([-160.0, 0.0, 80.0, 160.0, 200.0, 320.0, 480.0])
-    hull = _convex_hull(rng.choice(grid, (k, 2)))            # x and y on the grid: 0, w and h among its values
+    hull = np.array(_convex_hull(rng.choice(grid, (k, 2)))).reshape(-1, 2)   # x, y on the grid: 0, w, h among them
     poly = hull[::-1] if clockwise else hull
     padded = np.concatenate([poly, np.repeat(poly[-1:], 3, axis=0)])
     want = _hull_area_clipped(poly, w, h) if len(poly) >= 3 else 0.0
     got = clipped_signed_areas(padded[None], w, h)[0]
     assert np.isclose(abs(got), want, rtol=1e-9, atol=1e-8), (poly, got, want)
     assert (got <= 1e-8) if clockwise else (got >= -1e-8)
-
-
-def _convex_hull(pts: np.ndarray) -> np.ndarray:
-    """Counter-clockwise convex hull of 2-D points (monotone chain), collinear points dropped."""
-    p = sorted(set(map(tuple, pts)))
-    if len(p) < 3:
-        return np.array(p).reshape(-1, 2)
-
-    def cross(o, a, b):
-        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
-    lower, upper = [], []
-    for q in p:
-        while len(lower) >= 2 and cross(lower[-2], lower[-1], q) <= 0:
-            lower.pop()
-        lower.append(q)
-    for q in reversed(p):
-        while len(upper) >= 2 and cross(upper[-2], upper[-1], q) <= 0:
-            upper.pop()
-        upper.append(q)
-    return np.array(lower[:-1] + upper[:-1]).reshape(-1, 2)
 
 
 def test_slab_cells_batch_equals_the_scalar_at_its_edge_cases():

@@ -47,11 +47,12 @@ class TileFeatures:
         return cls(**{f.name: row["level"] if f.name == "level" else row[f"f_{f.name}"] for f in fields(cls)})
 
 
-def _hull_area_clipped(pts: np.ndarray, w: float, h: float) -> float:
-    """Area of the convex hull of 2-D points clipped to the rectangle [0, w] x [0, h]."""
-    pts = sorted(set(map(tuple, np.round(pts, 6))))
+def _convex_hull(pts) -> list[tuple[float, float]]:
+    """Counter-clockwise convex hull of 2-D points (monotone chain), collinear points dropped; fewer than three
+    distinct points are returned as they are, sorted."""
+    pts = sorted(set(map(tuple, pts)))
     if len(pts) < 3:
-        return 0.0
+        return pts
 
     def cross(o, a, b):
         return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
@@ -64,7 +65,14 @@ def _hull_area_clipped(pts: np.ndarray, w: float, h: float) -> float:
         while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
             upper.pop()
         upper.append(p)
-    poly = lower[:-1] + upper[:-1]
+    return lower[:-1] + upper[:-1]
+
+
+def _hull_area_clipped(pts: np.ndarray, w: float, h: float) -> float:
+    """Area of the convex hull of 2-D points clipped to the rectangle [0, w] x [0, h]."""
+    poly = _convex_hull(np.round(pts, 6))
+    if len(poly) < 3:
+        return 0.0
     for axis, bound, keep_less in ((0, 0.0, False), (0, w, True), (1, 0.0, False), (1, h, True)):
         out = []
         for i, cur in enumerate(poly):
