@@ -128,10 +128,12 @@ BIN_SHIFT = 18                       # float32 bits below the bin: 32 bins an oc
 TABLE_BINS = 640                     # a tile's tables span 20 octaves up to its largest error
 
 
-def _bins(x: np.ndarray) -> np.ndarray:
-    """Bin of each value >= 0 (metres): its float32 bits without the lowest ``BIN_SHIFT`` (the bins' lower edges
-    are the float32 values with those bits zero: 32 an octave, in equal steps within it)."""
-    return x.astype(np.float32).view(np.int32) >> BIN_SHIFT
+def _bins(x: np.ndarray, nearest: bool = False) -> np.ndarray:
+    """Bin of each value >= 0 (metres), int64: its float32 bits without the lowest ``BIN_SHIFT`` (the bins' lower
+    edges are the float32 values with those bits zero: 32 an octave, in equal steps within it); with ``nearest``,
+    the bin whose lower edge is nearest the value."""
+    bits = x.astype(np.float32).view(np.int32).astype(np.int64)
+    return (bits + (1 << (BIN_SHIFT - 1)) if nearest else bits) >> BIN_SHIFT
 
 
 def split_tables(errors: list[np.ndarray]) -> tuple[int, np.ndarray]:
@@ -142,8 +144,7 @@ def split_tables(errors: list[np.ndarray]) -> tuple[int, np.ndarray]:
     counted; one more than 20 octaves below the tile's largest is counted as that floor (only a threshold
     below it sees the difference)."""
     nb = errors[0].shape[0]
-    rounded = [(np.maximum(e, 0.0).astype(np.float32).view(np.int32).astype(np.int64)
-                + (1 << (BIN_SHIFT - 1))) >> BIN_SHIFT for e in errors]
+    rounded = [_bins(np.maximum(e, 0.0), nearest=True) for e in errors]
     positive = [e > 0 for e in errors]
     top = max((int(r[p].max()) for r, p in zip(rounded, positive) if p.any()), default=0)
     low = top + 2 - TABLE_BINS                                   # the table's first bin; its last counts nothing

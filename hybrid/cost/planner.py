@@ -12,7 +12,6 @@ Policies:
 """
 from __future__ import annotations
 
-import functools
 import weakref
 from dataclasses import fields
 
@@ -136,14 +135,13 @@ def hedged_picks(table: np.ndarray, names: list[str], model: CostModel) -> np.nd
     """``hedged_choices`` as indices into ``names`` (B,), from an (S, B) table of predicted ms in ``names`` order."""
     overhead, err, tile_err = model.choice_arrays(tuple(names))
     known = np.isfinite(table).all(axis=0)                          # tiles every strategy can draw
-    every = bool(known.all())
-    base = int(((table if every else np.where(known, table, 0.0)).sum(axis=1) + overhead).argmin())
-    order = _base_first(base, len(names))                           # ties stay with the base
+    base = int((np.where(known, table, 0.0).sum(axis=1) + overhead).argmin())
+    order = np.array([base] + [i for i in range(len(names)) if i != base])   # ties stay with the base
     factor = 1.0 + tile_err + tile_err[base]
     factor[base] = 1.0
     pick, _ = best_assignment_table((table * factor[:, None])[order], overhead[order], mixed=model.mix_overhead)
     picks = order[pick]
-    pure = np.full_like(picks, base) if every else np.where(known, base, picks)
+    pure = np.where(known, base, picks)
     margin = max(err[base], model.mix_error)
     if margin > 0 and np.any(picks != pure):
         cols = np.arange(table.shape[1])
@@ -151,14 +149,6 @@ def hedged_picks(table: np.ndarray, names: list[str], model: CostModel) -> np.nd
         if pure_ms - mixed_ms < margin * pure_ms:
             return pure
     return picks
-
-
-@functools.lru_cache(maxsize=None)
-def _base_first(base: int, s: int) -> np.ndarray:
-    """Strategy indices 0..s-1 with ``base`` first, the others in order (read-only)."""
-    order = np.array([base] + [i for i in range(s) if i != base])
-    order.setflags(write=False)
-    return order
 
 
 _ESTIMATORS: "weakref.WeakKeyDictionary[TilePyramid, TriangleEstimator]" = weakref.WeakKeyDictionary()
