@@ -52,6 +52,7 @@ def test_straight_down_view_is_defined():
     (dict(fov_y=0), "fov_y"), (dict(fov_y=180), "fov_y"), (dict(width=0), "width"),
     (dict(height=100000), "height"), (dict(near=0), "near"), (dict(near=10, far=5), "far"),
     (dict(target=[0, 0, 0]), "target must differ"), (dict(eye=[0, np.nan, 0]), "eye"),
+    (dict(near=6.6e-247, far=1.0), "far / near is 1.52e\\+246"),
 ])
 def test_bad_views(kw, match):
     args = dict(eye=[0, 0, 0], target=[0, 10, 0], fov_y=60, width=10, height=10, near=1, far=100)

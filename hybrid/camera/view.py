@@ -14,6 +14,7 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError, check_positive, check_range
 
+MAX_DEPTH_RATIO = 1e12          # far / near at most: beyond it the far plane's normal underflows
 MAX_VIEWPORT = 16384
 MAX_COORDINATE = 1.0e9             # metres: |eye|, |target| and terrain origins stay within (float64 ~1e-7 m steps)
 DEPTH_CHUNK_PIXELS = 1 << 22        # pixels converted at a time from depth to distance (bounded temporaries)
@@ -77,6 +78,9 @@ class View:
         check_positive("far (metres)", self.far)
         if not self.far > self.near:
             raise TerrabenchError(f"far ({self.far}) must be greater than near ({self.near})")
+        if self.far > MAX_DEPTH_RATIO * self.near:
+            raise TerrabenchError(f"far / near is {self.far / self.near:.3g}, above {MAX_DEPTH_RATIO:g}: the frustum's "
+                                  f"planes and a depth buffer cannot resolve that; raise near ({self.near}) or lower far")
         d = self.target - self.eye
         if np.linalg.norm(d) <= 1e-9 * max(1.0, np.linalg.norm(self.eye)):
             raise TerrabenchError("target must differ from eye")
