@@ -13,7 +13,6 @@ missed the cache at nearly every step); a frame's tiles are then estimated toget
 """
 from __future__ import annotations
 
-import functools
 import time
 from dataclasses import dataclass
 
@@ -24,13 +23,19 @@ from hybrid.terrain.stored import StoredTerrain
 from hybrid.tiles.pyramid import TileKey, TilePyramid
 from hybrid.tiles.tiletree import SelectedTile
 
-from .nodes import nodes_for, pending_cut, tile_node_block
+from .nodes import SIDE_BIAS, SIDE_BITS, SIDE_STEPS, nodes_for, pending_cut, tile_node_block
+from .split_tables import TABLE_BINS, SplitTables, kind_splits, split_tables
 from .quadtree import GPU_BETA, error_pyramid
 
 BLOCKS = 4                      # blocks a tile side for the small nodes' distances
 MAX_TILES = 4096                # tiles whose TileNodes are kept (least recently used first out)
 NEAR_TRIANGLES = 7              # a lean leaf near its split draws this many more than 4 (fitted to Puget flights:
                                 # 0.86-1.31x the drawn count a frame; 8 if no neighbour shared its midpoints)
+NEAR_SIDE_TRIANGLES = 1.5       # with side errors: a leaf side near its midpoint's need draws 1 (own) to 2 (and the
+SPLIT1_TRIANGLES = 8            # neighbour's) more, and a split level-1 node of a full-resolution tile 4 leaves that
+                                # keep their midpoints; both fitted to Puget's flyover, orbit and dolly (tiles of
+                                # 128, 320x180, 2/3 px, eight views): 0.98-1.14x the drawn count a frame, per-tile
+                                # median 0.98x (coarser levels' tiles 0.95x)
 
 
 @dataclass(frozen=True)
@@ -42,7 +47,10 @@ class TileNodes:
     midpoints near their own split), but 0 in a full-resolution tile, whose level-0 leaves keep every midpoint;
     split1: there, the level-1 nodes' errors (a split one makes four such leaves), else zeros; coarse_error: the
     larger nodes below the root; box_lo/hi: the blocks' boxes, then the larger nodes' grown boxes (BLOCKS² +
-    coarse, 3); root: 1 where the tile's root can split.
+    coarse, 3); root: 1 where the tile's root can split. With side errors (``sides`` 4), lean holds each small
+    node's four sides instead, as min(side error, beta times the parent's effective error), so that a side
+    counts where its midpoint is near (side error above beta times the tolerance) and the parent splits (0 for a
+    full-resolution tile's level 0, as above).
     """
 
     fine: np.ndarray
@@ -52,6 +60,7 @@ class TileNodes:
     box_lo: np.ndarray
     box_hi: np.ndarray
     root: int
+    sides: int = 1
 
     @property
     def boxes(self) -> np.ndarray:
@@ -59,27 +68,48 @@ class TileNodes:
         return np.concatenate([self.box_hi, self.box_lo], axis=1).T
 
 
-def tile_nodes(tile, beta: float = GPU_BETA, full_res: bool = False) -> TileNodes:
+def tile_nodes(tile, beta: float = GPU_BETA, full_res: bool = False, side_errors: bool = False) -> TileNodes:
     """The estimate's data of one pyramid tile (``hybrid.tiles.pyramid.Tile``: heights, origin, spacing), from
-    its own heights' error pyramid; ``full_res``: a level-0 tile."""
-    pyr = error_pyramid(tile.heights, beta)
+    its own heights' error pyramid (with side errors, or both fans in one as a store's nodes); ``full_res``: a
+    level-0 tile."""
+    pyr = error_pyramid(tile.heights, beta, side_errors)
+    sides = [np.maximum(d, e) for d, e in zip(pyr.sides, pyr.effective)] if side_errors else None
     return _tile_nodes(pyr.effective, pyr.zmin, pyr.zmax, tile.n, tile.origin, (tile.spacing_x, tile.spacing_y),
-                       full_res)
+                       full_res, sides, beta)
 
 
 def block_tile_nodes(data: np.ndarray, offsets: np.ndarray, n: int, origin, spacing,
-                     full_res: bool = False) -> TileNodes:
+                     full_res: bool = False, beta: float = GPU_BETA) -> TileNodes:
     """The estimate's data of an n-cell tile at world ``origin`` with ``spacing`` (x, y) metres, from its node
     block (``raster.nodes.tile_node_block``): the saturated errors and grown box ranges the GPU selection reads
     (from a tile store, one read and no error pyramid)."""
     grids = [data[offsets[m]:offsets[m + 1]].reshape((n >> (m + 1)) + 2, (n >> (m + 1)) + 2, 4)[1:-1, 1:-1]
              for m in range(len(offsets) - 1)]
-    return _tile_nodes([g[..., 0].astype(np.float64) for g in grids], [g[..., 1] for g in grids],
-                       [g[..., 2] for g in grids], n, origin, spacing, full_res)
+    effective = [g[..., 0].astype(np.float64) for g in grids]
+    sides = None
+    if any(np.any(g[..., 3] > 1.0) for g in grids):          # side codes (``raster.nodes.side_codes``)
+        parents = [data[offsets[m + 1]:offsets[m + 2]].reshape((n >> (m + 2)) + 2, -1, 4)[1:-1, 1:-1, 0]
+                   if m + 1 < len(grids) else None for m in range(len(grids))]
+        sides = [_decoded_sides(g[..., 3], p) for g, p in zip(grids, parents)]
+    return _tile_nodes(effective, [g[..., 1] for g in grids], [g[..., 2] for g in grids], n, origin, spacing,
+                       full_res, sides, beta)
 
 
-def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing, full_res: bool = False) -> TileNodes:
-    """TileNodes from per local level effective errors and height ranges (metres above the origin z)."""
+def _decoded_sides(w: np.ndarray, parent) -> np.ndarray:
+    """(4, ...) side errors (metres) W, E, S, N of nodes from their block's fourth column and their parents'
+    effective errors (None: no parent), as the GPU reads them (inf: the midpoint always stays)."""
+    top = (1 << SIDE_BITS) - 1
+    code = (w.astype(np.int64) - 1)[None] >> (SIDE_BITS * np.arange(4))[:, None, None] & top
+    if parent is None:
+        return np.full(code.shape, np.inf)
+    P = np.repeat(np.repeat(parent.astype(np.float64), 2, axis=0), 2, axis=1)[None]
+    return np.where(code == top, np.inf, P * np.exp2((code - SIDE_BIAS) / SIDE_STEPS))
+
+
+def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing, full_res: bool = False, sides=None,
+                beta: float = GPU_BETA) -> TileNodes:
+    """TileNodes from per local level effective errors, height ranges (metres above the origin z) and, where the
+    nodes have them, side errors ((4, ...) per level, metres, at least the effective error)."""
     top = len(effective) - 1
     nb = max(1, min(BLOCKS, n // 8))
     cells = n // nb                                              # block side, tile cells
@@ -118,81 +148,43 @@ def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing, full_res: bool =
     level1 = rest[0] if rest else empty
     lean = np.concatenate([np.zeros_like(level0) if full_res else level0, above], axis=1)   # errors 0 never count
     split1 = level1 if full_res else np.zeros_like(level1)
+    if sides is not None:
+        lean = _lean_sides(effective, sides, len(fine) - 1, nb, beta)
+        if full_res:                                             # level-0 leaves keep every midpoint: split1's
+            lean[:, :4 * level0.shape[1]] = 0.0
     return TileNodes(above, lean, split1, cat(coarse_e, np.float64),
                      np.concatenate([block_lo, cat(coarse_lo, np.float64, 3)]),
-                     np.concatenate([block_hi, cat(coarse_hi, np.float64, 3)]), int(top >= 1))
+                     np.concatenate([block_hi, cat(coarse_hi, np.float64, 3)]), int(top >= 1),
+                     1 if sides is None else 4)
+
+
+def _lean_sides(effective, sides, levels: int, nb: int, beta: float) -> np.ndarray:
+    """(blocks, 4 x small nodes) of min(side error, beta E of the parent) for the small levels 0 .. levels-1."""
+    out = []
+    for m in range(levels):
+        parent = effective[m + 1] if m + 1 < len(effective) else np.full((1, 1), np.inf)
+        v = np.minimum(sides[m], beta * np.repeat(np.repeat(parent, 2, axis=0), 2, axis=1)[None])
+        v[np.isinf(v)] = 0.0                                     # a tile's root: split by the tile tree
+        per = v.shape[1] // nb
+        out.append(v.reshape(4, nb, per, nb, per).transpose(1, 3, 0, 2, 4).reshape(nb * nb, -1))
+    return np.concatenate(out, axis=1)
 
 
 KINDS = ("fine", "lean", "split1")   # the small-node error sets a tile keeps (``TileNodes`` fields), one table each
-BIN_SHIFT = 18                       # float32 bits below the bin: 32 bins an octave, 1.6-3.1 % apart
-TABLE_BINS = 640                     # a tile's tables span 20 octaves up to its largest error
-
-
-def _bins(x: np.ndarray, nearest: bool = False) -> np.ndarray:
-    """Bin of each value >= 0 (metres), int64: its float32 bits without the lowest ``BIN_SHIFT`` (the bins' lower
-    edges are the float32 values with those bits zero: 32 an octave, in equal steps within it); with ``nearest``,
-    the bin whose lower edge is nearest the value."""
-    bits = x.astype(np.float32).view(np.int32).astype(np.int64)
-    return (bits + (1 << (BIN_SHIFT - 1)) if nearest else bits) >> BIN_SHIFT
-
-
-def split_tables(errors: list[np.ndarray]) -> tuple[int, np.ndarray]:
-    """(base bin, (kinds, blocks, ``TABLE_BINS``) int64 table) of a tile's small-node errors, one (blocks, nodes)
-    array (metres) per kind of ``KINDS``: entry i of a block's row counts its nodes whose error, rounded to the
-    nearest bin edge, is at least the edge of bin base + 1 + i, so that for a threshold t in bin j = base + i
-    (``kind_splits``) it counts the nodes whose rounded error exceeds t. An error <= 0 never splits and is not
-    counted; one more than 20 octaves below the tile's largest is counted as that floor (only a threshold
-    below it sees the difference)."""
-    nb = errors[0].shape[0]
-    rounded = [_bins(np.maximum(e, 0.0), nearest=True) for e in errors]
-    positive = [e > 0 for e in errors]
-    top = max((int(r[p].max()) for r, p in zip(rounded, positive) if p.any()), default=0)
-    low = top + 2 - TABLE_BINS                                   # the table's first bin; its last counts nothing
-    hist = np.stack([np.bincount((np.arange(nb)[:, None] * TABLE_BINS + np.maximum(r - low, 0))[p],
-                                 minlength=nb * TABLE_BINS) for r, p in zip(rounded, positive)])
-    return low - 1, np.cumsum(hist.reshape(-1, nb, TABLE_BINS)[..., ::-1], axis=-1)[..., ::-1]
-
-
-@dataclass(frozen=True)
-class SplitTables:
-    """Stacked tiles' ``split_tables``: per row (tile) its base bin (rows,) and its tables (rows, kinds, blocks,
-    ``TABLE_BINS``), looked up by flat index."""
-
-    base: np.ndarray
-    tables: np.ndarray
-
-    @property
-    def blocks(self) -> int:
-        """Blocks a tile."""
-        return self.tables.shape[2]
-
-
-def kind_splits(tables: SplitTables, rows: np.ndarray, threshold: np.ndarray) -> np.ndarray:
-    """Per tile row, kind and block ((B, kinds, blocks)): the block's nodes of that kind whose error (rounded to a
-    bin edge) exceeds its ``threshold`` (metres, (B, kinds, blocks)), one table look-up each (int64 counts)."""
-    _, kinds, nb, width = tables.tables.shape
-    i = _bins(threshold) - tables.base[rows][:, None, None]
-    np.minimum(np.maximum(i, 0, out=i), width - 1, out=i)                  # the ends count all and none: exact
-    i += rows[:, None, None] * (kinds * nb * width) + _table_offsets(kinds, nb, width)
-    return tables.tables.reshape(-1).take(i).astype(np.int64)
-
-
-@functools.lru_cache(maxsize=None)
-def _table_offsets(kinds: int, nb: int, width: int) -> np.ndarray:
-    """(kinds, blocks) flat offsets of each kind's and block's table within a row of ``SplitTables.tables``."""
-    return (np.arange(kinds)[:, None] * nb + np.arange(nb)) * width
 
 
 def estimate_rows(tables: SplitTables, rows: np.ndarray, coarse: np.ndarray, boxes: np.ndarray, root: np.ndarray, eye,
                   k_tau: float, planes=None, inside=None, lean: bool = True,
-                  beta: float = GPU_BETA) -> tuple[np.ndarray, np.ndarray]:
+                  beta: float = GPU_BETA, sides=1) -> tuple[np.ndarray, np.ndarray]:
     """(triangles (B,), visible share (B,)) of B tiles' quadtrees for an eye (world metres) and K / tau (pixels per
     radian over tau), and the share in [0, 1] of their splits in blocks or large nodes inside the frustum
     ``planes`` (eye-relative, as View's; None: all). Without ``lean``: 8 triangles a leaf (a split adds 3
     leaves). With it (the small nodes' lean tables, level 0 included), as lean leaves draw: 4 a leaf, and
     ``NEAR_TRIANGLES`` more for each leaf near its own split (its tolerance below E / beta): it keeps its edge
     midpoints, each a triangle on both sides, and near leaves lie together, sharing some; the split1 tables count
-    full-resolution tiles' split level-1 nodes, whose four leaves draw 8 each.
+    full-resolution tiles' split level-1 nodes, whose four leaves draw 8 each. Rows whose nodes have side errors
+    (``sides`` (B,) 4, else 1) count their leaves' near sides instead, ``NEAR_SIDE_TRIANGLES`` each, and a split
+    level-1 node of a full-resolution tile ``SPLIT1_TRIANGLES``.
 
     The tiles are rows of stacked ``TileNodes``: ``tables`` the small nodes' ``split_tables`` of every kind, of
     which ``rows`` (B,) are the tiles'; coarse (B, C) errors; boxes (B, 6, blocks + C) as (hi, lo) corners in world
@@ -223,9 +215,12 @@ def estimate_rows(tables: SplitTables, rows: np.ndarray, coarse: np.ndarray, box
     if not lean:
         return 8 * leaves, visible
     per_kind = counts[:, 1:].sum(axis=2)
-    near = per_kind[:, 0] - splits + (coarse * (k_tau / beta) > d[:, nb:]).sum(axis=1) \
-        + (4 * 4 / NEAR_TRIANGLES) * per_kind[:, 1]                 # a split level-1 node: four leaves, four more each
-    return 4 * leaves + NEAR_TRIANGLES * near, visible
+    near = per_kind[:, 0] / sides - splits + (coarse * (k_tau / beta) > d[:, nb:]).sum(axis=1)   # near leaves
+    weight = np.where(np.asarray(sides) == 4, 4 * NEAR_SIDE_TRIANGLES, NEAR_TRIANGLES)
+    # a split level-1 node of a full-resolution tile: four leaves that keep their midpoints, four more each (fitted
+    # with side errors)
+    split1 = np.where(np.asarray(sides) == 4, SPLIT1_TRIANGLES, 16)
+    return np.rint(4 * leaves + weight * near + split1 * per_kind[:, 1]).astype(np.int64), visible
 
 
 def _corner_test(planes: np.ndarray, eye: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -241,7 +236,7 @@ class _Rows:
     indexing per field; beyond ``limit`` tiles the least recently used row is reused (never one of the call at
     hand: ``lookup`` stamps its rows with the call's tick)."""
 
-    FIELDS = ("coarse_error", "boxes", "root")      # as TileNodes has them; the small nodes' errors of each of
+    FIELDS = ("coarse_error", "boxes", "root", "sides")     # as TileNodes has them; the small nodes' errors of
                                                     # KINDS as ``split_tables`` in ``tables``
 
     def __init__(self, limit: int):
@@ -283,7 +278,8 @@ class _Rows:
         cap = len(self.stamp)
         new = min(max(2 * cap, 16), self.limit)          # the call's own rows fit: limit >= its tiles
         vals = {f: np.asarray(getattr(nodes, f)) for f in self.FIELDS}
-        grown = {f: np.zeros((new, *v.shape), v.dtype if f != "root" else np.int64) for f, v in vals.items()}
+        grown = {f: np.zeros((new, *v.shape), v.dtype if f not in ("root", "sides") else np.int64)
+                 for f, v in vals.items()}
         most = max(getattr(nodes, kind).shape[1] for kind in KINDS)       # a block's nodes of one kind
         tables = SplitTables(np.zeros(new, np.int64), np.zeros((new, len(KINDS), nodes.fine.shape[0], TABLE_BINS),
                                                                np.uint16 if most < 1 << 16 else np.uint32))
@@ -336,7 +332,8 @@ class TileletTriangleEstimator:
         source = self._blocks if ready is not None else self._global_nodes()
         if source is not None:                                  # the block the GPU reads (cut here if need be)
             data, offsets = tile_node_block(source, key.level, key.tx, key.ty, self.pyramid.n)
-            nodes = block_tile_nodes(data, offsets, self.pyramid.n, *self.pyramid.placement(key), key.level == 0)
+            nodes = block_tile_nodes(data, offsets, self.pyramid.n, *self.pyramid.placement(key), key.level == 0,
+                                     self.beta)
         else:
             nodes = tile_nodes(self.pyramid.tile(key), self.beta, key.level == 0)
         r = self._rows.put(key, nodes)
@@ -379,7 +376,7 @@ class TileletTriangleEstimator:
             return np.full(len(rows), np.nan), np.full(len(rows), np.nan)
         est = estimate_rows(self._rows.tables, r, a["coarse_error"][r], a["boxes"][r], a["root"][r], view.eye,
                             float(view.pixels_per_radian) / tau, view.frustum_planes_rel(),
-                            None if inside is None else inside[ok], self.lean, self.beta)
+                            None if inside is None else inside[ok], self.lean, self.beta, a["sides"][r])
         if len(r) == len(rows):
             return est[0].astype(np.float64), est[1]
         tri, vis = np.full(len(rows), np.nan), np.full(len(rows), np.nan)

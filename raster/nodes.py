@@ -58,24 +58,54 @@ class GlobalNodes:
     zlo: tuple
     zhi: tuple
     blocks: object = None           # a store's per-tile blocks, [level][ty, tx] (hybrid.tiles.store_blocks)
+    sides: tuple | None = None      # the blocks' fourth column per level (``side_codes``); None: 1 (store nodes)
 
 
-def global_nodes(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
+def global_nodes(hf, tile_size: int, beta: float = GPU_BETA, side_errors: bool = True) -> GlobalNodes:
     """The whole grid's node errors and boxes, over the pyramid's padded grid (cached per height field,
-    tile size and beta: about 2.5 s for 1025² samples)."""
-    key = (id(hf), int(tile_size), float(beta))
+    tile size, beta and form: about 3 s for 1025² samples); ``side_errors``: split on the full fans' errors with
+    side codes (``raster.quadtree``), else both fans in one error as a tile store's node arrays hold them."""
+    key = (id(hf), int(tile_size), float(beta), bool(side_errors))
     hit = _CACHE.get(key)
     if hit is not None and hit[0]() is hf:
         return hit[1]
     grid = hf.load() if isinstance(hf, StoredTerrain) else hf     # a store without usable node arrays, if it fits
     pyramid = TilePyramid(grid, tile_size)
-    pyr = error_pyramid(pyramid.padded, beta)
+    pyr = error_pyramid(pyramid.padded, beta, side_errors)
     zlo = tuple(_grow(z, np.minimum).astype(np.float32) for z in pyr.zmin)
     zhi = tuple(_grow(z, np.maximum).astype(np.float32) for z in pyr.zmax)
-    nodes = GlobalNodes(pyr.n, float(beta), tuple(e.astype(np.float32) for e in pyr.effective), zlo, zhi)
+    effective = tuple(e.astype(np.float32) for e in pyr.effective)
+    sides = tuple(side_codes(d, e, effective[g + 1] if g + 1 < len(effective) else None)
+                  for g, (d, e) in enumerate(zip(pyr.sides, effective))) if side_errors else None
+    nodes = GlobalNodes(pyr.n, float(beta), effective, zlo, zhi, sides=sides)
     ref = weakref.ref(hf, lambda _r, k=key: _CACHE.pop(k, None))
     _CACHE[key] = (ref, nodes)
     return nodes
+
+
+SIDE_STEPS = 8                  # side-error codes an octave of side error / the parent's effective error
+SIDE_BITS = 6                   # bits a side: codes 0 .. 62 a ratio 2^((code - SIDE_BIAS) / 8), 63 any larger
+SIDE_BIAS = 56                  # code 0: 2^-7 of the parent's error or less
+
+
+def side_codes(sides: np.ndarray, effective: np.ndarray, parent: np.ndarray | None) -> np.ndarray:
+    """Nodes' four side errors (W, E, S, N, metres; at least their effective errors) as the float32
+    1 + sum(code << 6 side): code = 8 log2(side / parent's effective error) + 56, rounded up, so the GPU reads a
+    side's error as the parent's 2^((code - 56)/8), never below the measured one. A leaf's parent splits, so only
+    sides below it matter: 63 stands for any larger ratio (the midpoint stays), 0 for 2^-7 or less; a node
+    without a parent (``parent`` None: the grid's root) gets 63. Exact integers below 2^24."""
+    top = (1 << SIDE_BITS) - 1
+    S = np.maximum(sides, effective.astype(np.float64)[None])
+    if parent is None:
+        code = np.full(S.shape, top)
+    else:
+        P = np.repeat(np.repeat(parent.astype(np.float64), 2, axis=0), 2, axis=1)[None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(P > 0, S / np.where(P > 0, P, 1.0), np.where(S > 0, np.inf, 0.0))
+            code = np.ceil(SIDE_STEPS * np.log2(ratio) + SIDE_BIAS - 1e-9)
+        code = np.where(code > top - 1, top, np.maximum(code, 0))
+    packed = (code.astype(np.int64) << (SIDE_BITS * np.arange(4))[:, None, None]).sum(axis=0) + 1
+    return packed.astype(np.float32)
 
 
 def nodes_for(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
@@ -146,5 +176,5 @@ def tile_node_block(nodes: GlobalNodes, level: int, tx: int, ty: int, n: int) ->
     if nodes.blocks is not None:
         data = np.asarray(nodes.blocks[level][ty, tx], dtype=np.float32)
     else:
-        data = band_blocks(nodes.effective, nodes.zlo, nodes.zhi, level, ty, n, tx, tx + 1)[0]
+        data = band_blocks(nodes.effective, nodes.zlo, nodes.zhi, level, ty, n, tx, tx + 1, nodes.sides)[0]
     return np.ascontiguousarray(data), block_offsets(n)

@@ -6,14 +6,23 @@ centre post (paper §3.2). Levels run 0 (posts = every tile sample) .. top = log
 the whole tile). Node (a, b) of level m has its south-west post at tile sample (row a*2^(m+1), col b*2^(m+1)).
 
 Error pyramid (view-independent, computed once per tile):
-- ``errors[m]``: the largest vertical distance in metres between a node's drawn surface and the tile's
-  samples it covers, over both the full fan and the fully stitched fan (all four edge midpoints dropped;
-  any mix of dropped edges lies piecewise on one of the two), made monotone (a parent's error is at least
-  its children's).
-- ``effective[m]``: ``errors`` raised so that a node's value is at least 1/beta times that of its children
-  and of every level-(m-1) node touching its edges from outside. Splitting on it ("split while
-  effective > tolerance") gives a quadtree that is restricted inside the tile by construction and lets
-  the morph factors of raster.morph reach 0 before any neighbour splits (so no vertex ever jumps).
+- ``errors[m]``: the largest vertical distance in metres between a node's full fan and the tile's samples it
+  covers, made monotone (a parent's error is at least its children's), and at least the side errors (below) of
+  the level-(m-1) nodes outside it that face it (their midpoint toward it needs it split).
+- ``sides[m]``: (4, N, N) per node, the largest vertical distance under each triangle of its stitched fan (sides
+  W, E, S, N: the edge's midpoint dropped). A leaf keeps an edge's midpoint while the side error on either side
+  of the edge is above the tolerance (a leaf's error is bounded by the full fan's where a midpoint stays, by
+  the side's where it is dropped, and by the larger of the two while it morphs), so a node whose full fan meets
+  the tolerance is a leaf even where dropping a midpoint would not (the half level of a 4-8 mesh: 4 to 8
+  triangles a leaf, as the error asks, not 4 or 16).
+- ``effective[m]``: ``errors`` raised so that a node's value is at least 1/beta times that of its children and of
+  every level-(m-1) node touching its edges from outside, and 1/beta times those outside nodes' side errors
+  toward it. Splitting on it ("split while effective > tolerance") gives a quadtree that is restricted inside
+  the tile by construction, lets the morph factors of raster.morph reach 0 before any neighbour splits (so no
+  vertex ever jumps), and drops a midpoint toward a coarser neighbour only where its side meets the tolerance
+  by the factor beta (the midpoint is then on its edge already).
+With ``side_errors=False`` the errors are those of the full and the stitched fan together and ``sides`` are
+zero (a leaf may drop any midpoint): the form a tile store's node arrays hold (``hybrid.tiles.store_nodes``).
 
 Leaf levels are kept as a map over level-0 tilelets ("units", (n/2) x (n/2)): the level of the leaf
 covering each unit. Restriction: edge-adjacent units differ by at most one level; caps (max level per
@@ -27,6 +36,7 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 from hybrid.tiles.fans import GPU_BETA, fans_at  # noqa: F401  (GPU_BETA: the strategies' beta, defined with the fans)
+from hybrid.tiles.fans import cell_max, facing_side_errors, side_maxima
 from hybrid.tiles.fans import dilate4 as _dilate4
 
 DEFAULT_BETA = 0.7
@@ -82,7 +92,8 @@ def fan_surfaces(heights: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
 class ErrorPyramid:
     """Per-node vertical errors (metres vs the tile's samples) of one tile, levels 0..top.
 
-    errors[m] and effective[m] have shape (n >> (m+1))² with row a from the south, column b from the west.
+    errors[m] and effective[m] have shape (n >> (m+1))² with row a from the south, column b from the west;
+    sides[m] (4, ...) the same per stitched-fan side W, E, S, N (empty: none measured, as zeros).
     zmin/zmax[m]: range of the tile's sample heights under each node (metres, relative to terrain origin z).
     """
 
@@ -92,6 +103,7 @@ class ErrorPyramid:
     effective: tuple
     zmin: tuple
     zmax: tuple
+    sides: tuple = ()
 
     @property
     def top(self) -> int:
@@ -104,8 +116,9 @@ class ErrorPyramid:
         return self.n // 2
 
 
-def error_pyramid(heights: np.ndarray, beta: float = DEFAULT_BETA) -> ErrorPyramid:
-    """Error pyramid (metres) of a tile's (n+1)² heights; beta in (0, 1) sets the morph-safe error growth."""
+def error_pyramid(heights: np.ndarray, beta: float = DEFAULT_BETA, side_errors: bool = True) -> ErrorPyramid:
+    """Error pyramid (metres) of a tile's (n+1)² heights; beta in (0, 1) sets the morph-safe error growth;
+    side_errors: split on the full fan's errors with per-side stitched errors (False: both fans in one error)."""
     h = np.asarray(heights)
     if h.ndim != 2 or h.shape[0] != h.shape[1]:
         raise TerrabenchError(f"tile heights must be a square (n+1)x(n+1) array, got shape {h.shape}")
@@ -116,23 +129,52 @@ def error_pyramid(heights: np.ndarray, beta: float = DEFAULT_BETA) -> ErrorPyram
     top = int(np.log2(n)) - 1
     cmax = np.maximum(np.maximum(h[:-1, :-1], h[:-1, 1:]), np.maximum(h[1:, :-1], h[1:, 1:]))
     cmin = np.minimum(np.minimum(h[:-1, :-1], h[:-1, 1:]), np.minimum(h[1:, :-1], h[1:, 1:]))
-    errors, effective, zmin, zmax = [], [], [], []
+    errors, effective, sides, zmin, zmax = [], [], [], [], []
     for m in range(top + 1):
         full, stitched = fan_surfaces(h, m)
-        dev = np.maximum(np.abs(full - h), np.abs(stitched - h))
-        dcell = np.maximum(np.maximum(dev[:-1, :-1], dev[:-1, 1:]), np.maximum(dev[1:, :-1], dev[1:, 1:]))
         b = 2 << m
-        e = _block(dcell, b, np.max)
+        if side_errors:
+            e = _block(cell_max(np.abs(full - h)), b, np.max)
+            sides.append(side_maxima(np.abs(stitched - h), m))
+            if m == 0:
+                sides[0] = _with_cell_centres(h, sides[0])
+        else:
+            e = _block(cell_max(np.maximum(np.abs(full - h), np.abs(stitched - h))), b, np.max)
+            sides.append(np.zeros((4,) + e.shape))          # toward coarser neighbours: within e already
+        del full, stitched
         zmin.append(_block(cmin, b, np.min))
         zmax.append(_block(cmax, b, np.max))
         if m > 0:
-            e = np.maximum(e, _block(errors[-1], 2, np.max))
-            eff = np.maximum(e, _block(_dilate4(effective[-1]), 2, np.max) / beta)
+            facing = _block(facing_side_errors(sides[-2]), 2, np.max)
+            e = np.maximum(np.maximum(e, _block(errors[-1], 2, np.max)), facing)
+            eff = np.maximum(e, np.maximum(_block(_dilate4(effective[-1]), 2, np.max), facing) / beta)
         else:
             eff = e
         errors.append(e)
         effective.append(eff)
-    return ErrorPyramid(n, float(beta), tuple(errors), tuple(effective), tuple(zmin), tuple(zmax))
+    return ErrorPyramid(n, float(beta), tuple(errors), tuple(effective), tuple(zmin), tuple(zmax),
+                        tuple(sides) if side_errors else ())
+
+
+def _with_cell_centres(h: np.ndarray, sides: np.ndarray) -> np.ndarray:
+    """Level-0 side errors (metres) raised where dropping a midpoint changes the SE and NW cells (whose fan
+    diagonal runs from the centre post to the corner, where the reference's runs SW-NE): by the distance at the
+    cell's centre between the two diagonals with the midpoints at their heights (a leaf keeping every midpoint
+    draws the reference's cells; where a side's error is 0 the leaf dropping it equals the reference: samples and
+    these crossings are every vertex of the overlay), and by that distance with the midpoints on their edges
+    (|centre post - mean of SW and NE corners| / 2), which a drop makes jump (by at most beta times the bound,
+    as the drop waits until the side meets it by beta)."""
+    c = h[1::2, 1::2]
+    se = np.abs(0.5 * (c + h[0:-1:2, 2::2]) - 0.5 * (h[0:-1:2, 1::2] + h[1::2, 2::2]))
+    nw = np.abs(0.5 * (c + h[2::2, 0:-1:2]) - 0.5 * (h[1::2, 0:-1:2] + h[2::2, 1::2]))
+    flip = 0.5 * np.abs(c - 0.5 * (h[0:-1:2, 0:-1:2] + h[2::2, 2::2]))
+    se, nw = np.maximum(se, flip), np.maximum(nw, flip)
+    out = sides.copy()
+    out[0] = np.maximum(out[0], nw)       # W
+    out[1] = np.maximum(out[1], se)       # E
+    out[2] = np.maximum(out[2], se)       # S
+    out[3] = np.maximum(out[3], nw)       # N
+    return out
 
 
 def leaf_levels(pyr: ErrorPyramid, tolerance: float, cap: np.ndarray | None = None,

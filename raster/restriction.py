@@ -140,8 +140,27 @@ class _Frame:
                 out[lo - a0:hi - a0] = prof[lo - s0:hi - s0]
         return out
 
+    def cap_profile(self, key, edge: int) -> np.ndarray:
+        """The finest global level this tile's border leaves allow across an edge, at level-0 cells: one coarser
+        than theirs, or theirs where a leaf's side error toward the edge needs its midpoint (above its
+        tolerance, by beta where splits follow the effective errors: the side then morphs as the GPU's)."""
+        t = self.tiles[key]
+        levels = self.levels[key]
+        need = np.zeros(levels.shape[0], bool)
+        if t.pyramid.sides:
+            U = levels.shape[0]
+            r = np.arange(U)
+            ua, ub = ((r, np.zeros_like(r)), (r, np.full_like(r, U - 1)), (np.zeros_like(r), r),
+                      (np.full_like(r, U - 1), r))[edge]
+            m = levels[ua, ub].astype(np.int64)
+            side = _errors_at([d[edge] for d in t.pyramid.sides], ua, ub, m)
+            need = side > t.tolerance * (t.pyramid.beta if self.use_effective else 1.0)
+        return self.profile(key, edge) + 1 - np.repeat(need, 2 << key[0])
+
     def border_caps(self, key) -> bool:
-        """Lower this tile's border caps from its neighbours; True if any cap changed."""
+        """Lower this tile's border caps from its neighbours; True if any cap changed. A neighbour's leaf that
+        needs its midpoint toward this tile caps it at the leaf's own level, or this tile's finest where that is
+        finer (a tile of the finer pyramid level: its midpoint is then dropped beyond its tolerance)."""
         l = key[0]
         cap = self.caps[key]
         U = cap.shape[0]
@@ -155,6 +174,9 @@ class _Frame:
             if local.min() < 0:
                 raise TerrabenchError(f"tile {key} borders a tile two or more levels finer on edge {'WESN'[edge]}; "
                                  "the tiles of a frame must be restricted")
+            allow = self.neighbour_profile(key, edge, values=self.cap_profile)
+            allow = np.where(allow < 0, 1 << 20, allow).reshape(U, 2 << l).min(axis=1)
+            local = np.minimum(local, np.maximum(np.where(allow >= 1 << 20, 1 << 14, allow - l), 0))
             idx = (np.s_[:, 0], np.s_[:, -1], np.s_[0, :], np.s_[-1, :])[edge]
             new = np.minimum(cap[idx], local.astype(np.int16))
             if np.any(new < cap[idx]):
@@ -164,14 +186,16 @@ class _Frame:
 
 
 def restrict_frame(tiles: list[TileLod], morph: bool = True, use_effective: bool | None = None,
-                   lean: bool = False) -> dict:
+                   lean: bool = False, exact_full_resolution: bool = True) -> dict:
     """Restricted leaf sets of all tiles of a frame: {key tuple: TileletSet}; morph=False gives zero morph.
 
     use_effective (default: same as morph) splits on the morph-safe effective errors instead of the plain ones.
     lean drops, as the GPU selection's lean leaves (raster/select.comp.glsl), the edge midpoints between leaves
     of one tile that are both far from their own split (tolerance >= E / beta; with morph=False, >= E: the
-    error bounds a leaf's fan with its midpoints dropped), and toward the terrain's edge; midpoints on tile
-    borders and of full-resolution leaves are kept.
+    error bounds a leaf's fan with its midpoints dropped; with side errors, the larger of E and the side's
+    error on either side), and toward the terrain's edge; midpoints on tile borders and of full-resolution leaves
+    are kept (``exact_full_resolution`` False: those leaves drop theirs as others do, which is not what the GPU
+    draws: their SE and NW cells would flip diagonals in one frame).
     """
     use_effective = morph if use_effective is None else use_effective
     fr = _Frame(list(tiles), use_effective)
@@ -187,10 +211,12 @@ def restrict_frame(tiles: list[TileLod], morph: bool = True, use_effective: bool
                 nxt.update(_neighbour_keys(fr, k))
         pending = nxt
     sets = {k: _tilelet_set(fr, k, morph) for k in fr.tiles}
-    return {k: _lean_set(fr, k, ts, morph) for k, ts in sets.items()} if lean else sets
+    if not lean:
+        return sets
+    return {k: _lean_set(fr, k, ts, morph, exact_full_resolution) for k, ts in sets.items()}
 
 
-def _lean_set(fr: _Frame, key, ts: TileletSet, morph: bool) -> TileletSet:
+def _lean_set(fr: _Frame, key, ts: TileletSet, morph: bool, exact_full_resolution: bool = True) -> TileletSet:
     """The set with its lean drops (``restrict_frame``): midpoints of edges whose leaves' lean factors are 1."""
     t = fr.tiles[key]
     E = t.pyramid.effective if fr.use_effective else t.pyramid.errors
@@ -199,23 +225,27 @@ def _lean_set(fr: _Frame, key, ts: TileletSet, morph: bool) -> TileletSet:
     m = lv.level.astype(np.int64)
     ua, ub = lv.i0 // 2, lv.j0 // 2
 
-    def factor(a, b, level):
+    def factor(a, b, level, side):
         e = _errors_at(E, a, b, level)
+        if t.pyramid.sides:                             # the side's own stitched error, where larger
+            e = np.maximum(e, _errors_at([d[side] for d in t.pyramid.sides], a, b, level))
         with np.errstate(divide="ignore"):
             r = np.where(e > 0, t.tolerance / np.where(e > 0, e, 1.0), np.inf)
         if not morph:                                   # level-0 leaves may exceed the tolerance: kept
             f = (r >= 1.0).astype(np.float64)
         else:
             f = np.clip((r - 1.0) / (1.0 / beta - 1.0), 0.0, 1.0)
+        if not exact_full_resolution:
+            return f
         return np.where((level == 0) & (key[0] == 0), 0.0, f)     # full resolution keeps the reference's cells
-    own = factor(ua, ub, m)
     dropped = ts.coarser.copy()
     for edge, (inside, na, nb_, along) in enumerate(_edge_neighbours(lv, U)):
         bit = EDGE_BITS[edge]
+        own = factor(ua, ub, m, edge)
         na_c, nb_c = np.clip(na, 0, U - 1), np.clip(nb_, 0, U - 1)
         same = inside & (ts.level_map[na_c, nb_c] == m)
         le = np.zeros(len(lv))
-        le[same] = np.minimum(own[same], factor(na_c[same], nb_c[same], m[same]))
+        le[same] = np.minimum(own[same], factor(na_c[same], nb_c[same], m[same], _OPPOSITE[edge]))
         edge_of_terrain = ~inside & ((ts.finer & bit) == 0) & \
             (fr.neighbour_profile(key, edge)[along.astype(np.int64) << key[0]] < 0)
         le[edge_of_terrain] = own[edge_of_terrain]

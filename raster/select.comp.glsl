@@ -9,7 +9,8 @@
 #extension GL_ARB_gpu_shader_int64 : enable
 #include "raster/tile_block"
 layout(local_size_x = 64) in;
-layout(std430, binding = 0) readonly buffer Nodes { vec4 node[]; };   // E, zlo, zhi, inside; one apron
+layout(std430, binding = 0) readonly buffer Nodes { vec4 node[]; };   // E, zlo, zhi, inside (0 beyond the grid,
+                                                                      // else 1 + side codes); one apron
 layout(std430, binding = 1) writeonly buffer Leaves { uint leaf[]; }; // arena: 13 words a leaf: j0 i0 m drop, h[9]
 layout(std430, binding = 2) buffer Commands { uint cmd[]; };          // indirect draws, 5 words each, then the
                                                                       // tile's arena base and pass-0 groups done
@@ -33,6 +34,7 @@ uniform vec4 planes[6];         // eye-relative frustum planes, inside where dot
 uniform uint arena_capacity;    // leaves the frame's arena holds (raster.arena)
 uniform vec3 eye_terrain;       // eye minus the terrain's origin, metres
 uniform vec2 cell_metres;       // the terrain's level-0 spacing (x, y), metres
+uniform bool side_errors;       // nodes carry side codes and split on their full fans' errors (raster.quadtree)
 
 const int CMD_POINTS_ = 0, CMD_TEMPLATE_ = 1;   // indirect commands (raster.selection CMD_*)
 const int BASE_WORD = 15;       // cmd[]: the tile's first leaf in the arena
@@ -82,19 +84,29 @@ int split_state(int m, int a, int b, out float E, out float d) {
     return E * k_tau > d ? 1 : 0;
 }
 
-// Lean factor of a same-pyramid-level node that does not split: 1 while its tolerance (d / k_tau) is at least
-// E / beta, falling to 0 as the tolerance falls to E, where it splits; 0 where it splits or has no data. An
-// edge midpoint between two such leaves lies on their edge by the smaller of their two factors (a leaf's
-// error bounds its fan with any midpoints dropped, raster.quadtree), so it is dropped while that is 1 and
-// has reached its own height when either leaf splits. Every node whose split makes a leaf has E at least
-// 1 / beta times the leaf's, so a leaf starts lean and a coarser neighbour's leaves see it lean.
-float lean_of(int m, int a, int b) {
-    if (m == 0 && tile_level == 0) return 0.0;   // full resolution: the reference's cells, as tau -> 0
+// Lean factor of side e (W, E, S, N) of a same-pyramid-level node that does not split: 1 while its tolerance
+// (d / k_tau) is at least S / beta, falling to 0 as the tolerance falls to S, where S is the larger of E and
+// the side's stitched error (decoded from its code against the parent's E, never below the measured one:
+// raster.nodes.side_codes);
+// 0 where it splits or has no data. An edge midpoint between two such leaves lies on their edge by the
+// smaller of their two factors, so it is dropped while that is 1 (both sides' triangles meet the tolerance
+// by beta) and has reached its own height when either side's triangle needs it or either leaf splits (S >= E).
+// Every node whose split makes a leaf has E at least 1 / beta times the leaf's and than the side errors of
+// the leaves outside it that face it, so a leaf starts lean and a coarser neighbour's leaves see it lean.
+// Without side codes (a tile store's nodes) E bounds both fans. Full-resolution leaves keep every midpoint but
+// toward coarser neighbours: a drop there would flip their SE and NW cells' diagonals in one frame.
+float lean_of(int m, int a, int b, int e) {
+    if (m == 0 && tile_level == 0) return 0.0;   // full resolution: the reference's cells
     float E, d;
     if (split_state(m, a, b, E, d) != 0) return 0.0;
     vec4 nd = node_at(m, a, b);
     if (nd.w == 0.0) return 0.0;
     E = nd.x;
+    if (side_errors) {                           // the side's error, coded against the parent's E
+        uint code = (uint(nd.w) - 1u) >> (6 * e) & 63u;
+        if (code == 63u || m >= top) return 0.0; // at or above the parent's E: the midpoint stays
+        E = node_at(m + 1, a >> 1, b >> 1).x * exp2((float(code) - 56.0) / 8.0);
+    }
     if (E <= 0.0) return 1.0;
     float r = box_distance(m, a, b, nd) / (E * k_tau);
     if (!morph) return r >= 1.0 / beta ? 1.0 : 0.0;
@@ -251,19 +263,31 @@ void emit_leaf(int m, int a, int b) {
     float ap = alpha_of(split_state(m + 1, a >> 1, b >> 1, E, d), E, d);
     int drop = 0;
     float am[4];
-    float own_lean = lean ? lean_of(m, a, b) : 0.0;
+    const int opposite[4] = int[4](1, 0, 3, 2);
+    int skirts = 0;
+    if (skirt_edges != 0) {
+        if (b == 0) skirts |= skirt_edges & 1;
+        if (b == s - 1) skirts |= skirt_edges & 2;
+        if (a == 0) skirts |= skirt_edges & 4;
+        if (a == s - 1) skirts |= skirt_edges & 8;
+    }
     for (int e = 0; e < 4; ++e) {
         int na = a + nb[e].x, nbb = b + nb[e].y;
+        float own_lean = lean ? lean_of(m, a, b, e) : 0.0;
         am[e] = ap;
         float le = 0.0;
         if ((na >> 1) == (a >> 1) && (nbb >> 1) == (b >> 1)) {          // a sibling: same parent
-            if (lean) le = min(own_lean, lean_of(m, na, nbb));
+            if (lean) le = min(own_lean, lean_of(m, na, nbb, opposite[e]));
         } else {
             int st = split_state(m + 1, na >> 1, nbb >> 1, E, d);
+            if ((skirts & bit[e]) != 0) {                        // a ray-cast tile's exact edge: no stitch, no
+                am[e] = ap;                                      // lean drop; the midpoint morphs with the
+                continue;                                        // leaf's own parent only (skirts close the gap)
+            }
             if (st == 0) { if (stitch) drop |= bit[e]; }
             else {
                 am[e] = max(ap, alpha_of(st, E, d));
-                if (lean) le = min(own_lean, lean_of(m, na, nbb));
+                if (lean) le = min(own_lean, lean_of(m, na, nbb, opposite[e]));
             }
             // on a border with a tile of another pyramid level the two sides cannot see each other's forced
             // (tile root) morphs: the shared posts stay at their own heights on both sides
@@ -286,13 +310,6 @@ void emit_leaf(int m, int a, int b) {
     h[7] = mix(h[7], 0.5 * (h[6] + h[8]), am[3]);
     float diag = ((b & 1) == (a & 1)) ? 0.5 * (h[0] + h[8]) : 0.5 * (h[2] + h[6]);
     h[4] = mix(h[4], diag, ap);
-    int skirts = 0;
-    if (skirt_edges != 0) {
-        if (b == 0) skirts |= skirt_edges & 1;
-        if (b == s - 1) skirts |= skirt_edges & 2;
-        if (a == 0) skirts |= skirt_edges & 4;
-        if (a == s - 1) skirts |= skirt_edges & 8;
-    }
     uint idx = cmd[BASE_WORD] + reserve(0, 5, 1);
     if (write_mesh) put_mesh(idx, m, j0, i0, k, drop, h);
     add_total(0, uint(8 - bitCount(drop)));

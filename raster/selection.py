@@ -130,6 +130,7 @@ class SelectedTileletTile:
         self.key = tile.key
         nodes = nodes_for(strategy.hf, self.n, strategy.beta)
         data, self.offsets = tile_node_block(nodes, int(tile.key.level), int(tile.key.tx), int(tile.key.ty), self.n)
+        self.side_errors = nodes.sides is not None          # the terrain's nodes carry side codes
         self.starts = level_starts(self.n)
         self.level_error, self.level_lo, self.level_hi = level_bounds(data, self.offsets, self.n, tile.spacing_xy)
         self.heights = ctx.buffer(h.tobytes())
@@ -236,6 +237,7 @@ class TileletSelection:
         self.set_selection("arena_capacity", int(self.arena.capacity))
         self.set_selection("eye_terrain", tuple(float(e - o) for e, o in zip(view.eye, self.hf.origin)))
         self.set_selection("cell_metres", (float(self.hf.spacing_x), float(self.hf.spacing_y)))
+        self.set_selection("side_errors", bool(items) and items[0][0].side_errors)
         self.frame.write(np.zeros(len(FRAME_FIELDS), np.uint32).tobytes())
         self.frame.bind_to_storage_buffer(4)
         self.arena.bind()

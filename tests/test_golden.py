@@ -33,22 +33,34 @@ def test_error_pyramid_golden():
     for m in range(p.top + 1):
         assert_close(p.errors[m], g[f"errors{m}"])
         assert_close(p.effective[m], g[f"effective{m}"])
-    # Level 0: the full fan's posts are all nine samples, so its only error is where the stitched fan drops
-    # an edge midpoint: |midpoint - mean of the edge's corners|. Node (0, 0) by hand: samples (south row
-    # first) 9 10 15 / 6 18 8 / 1 0 18 give S |10 - 12| = 2, N |0 - 9.5| = 9.5, W |6 - 5| = 1,
-    # E |8 - 16.5| = 8.5, so 9.5.
-    assert g["errors0"][0, 0] == 9.5
-    want = np.zeros((4, 4))
+        assert_close(p.sides[m], g[f"sides{m}"])
+    # Level 0: the full fan's posts are all nine samples, so it has no error; a side's error is where the
+    # stitched fan drops that edge's midpoint, |midpoint - mean of the edge's corners|, or where the fan edge
+    # from the centre post to the SE (NW) corner crosses that cell's SW-NE diagonal, |mean(centre, corner) -
+    # mean of the diagonal's ends|, and that with the midpoints on their edges, |centre - mean(SW, NE)| / 2, for
+    # sides S and E (W and N). Node (0, 0) by hand: samples (south row first) 9 10 15 / 6 18 8 / 1 0 18 give
+    # W max(|6 - 5|, |9.5 - 3|, 2.25) = 6.5, E max(|8 - 16.5|, |16.5 - 9|) = 8.5, S max(|10 - 12|, 7.5) = 7.5,
+    # N max(|0 - 9.5|, 6.5) = 9.5.
+    assert not g["errors0"].any()
+    assert list(g["sides0"][:, 0, 0]) == [6.5, 8.5, 7.5, 9.5]
+    want = np.zeros((4, 4, 4))
     for a in range(4):
         for b in range(4):
             s = h[2 * a:2 * a + 3, 2 * b:2 * b + 3]
-            want[a, b] = max(abs(s[0, 1] - (s[0, 0] + s[0, 2]) / 2), abs(s[2, 1] - (s[2, 0] + s[2, 2]) / 2),
-                             abs(s[1, 0] - (s[0, 0] + s[2, 0]) / 2), abs(s[1, 2] - (s[0, 2] + s[2, 2]) / 2))
-    assert np.array_equal(g["errors0"], want)
-    # a parent's error is at least its children's; the effective error at least the error
+            flip = abs(s[1, 1] - (s[0, 0] + s[2, 2]) / 2) / 2
+            se = max(abs((s[1, 1] + s[0, 2]) / 2 - (s[0, 1] + s[1, 2]) / 2), flip)
+            nw = max(abs((s[1, 1] + s[2, 0]) / 2 - (s[1, 0] + s[2, 1]) / 2), flip)
+            want[:, a, b] = (max(abs(s[1, 0] - (s[0, 0] + s[2, 0]) / 2), nw), max(abs(s[1, 2] - (s[0, 2] + s[2, 2]) / 2), se),
+                             max(abs(s[0, 1] - (s[0, 0] + s[0, 2]) / 2), se), max(abs(s[2, 1] - (s[2, 0] + s[2, 2]) / 2), nw))
+    assert np.array_equal(g["sides0"], want)
+    # a parent's error is at least its children's and the side errors facing it from outside (the W
+    # neighbour's E side, ...); the effective error at least the error
     for m in range(1, p.top + 1):
         kids = g[f"errors{m - 1}"].reshape(g[f"errors{m}"].shape[0], 2, -1, 2).max(axis=(1, 3))
         assert np.all(g[f"errors{m}"] >= kids) and np.all(g[f"effective{m}"] >= g[f"errors{m}"])
+    W, E = g["sides0"][0], g["sides0"][1]
+    assert g["errors1"][0, 1] >= max(E[0, 1], E[1, 1])         # node (0, 1)'s W edge faces level-0 nodes (0..1, 1)
+    assert g["errors1"][0, 0] >= max(W[0, 2], W[1, 2])
 
 
 def test_leaf_set_golden():

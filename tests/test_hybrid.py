@@ -93,60 +93,48 @@ def test_no_hole_at_strategy_borders(frames):
         assert coverage_errors(h, ref)["hole_px"] <= coverage_errors(f["raster"], ref)["hole_px"] + 5
 
 
-# Strategy borders against the rest of the image: mean error in a band of 2 px either side of a raster / ray-cast
-# border over the mean error of pixels 8 px or more from any border, at the same distance. The pure raster and
-# ray-cast frames over the same pixels reach 1.0-1.75 (the band lies on rougher ground than the average); the
-# mixed frame may exceed the worse of them by SEAM_MARGIN at most.
-SEAM_BAND_PX, SEAM_AWAY_PX, SEAM_MARGIN = 2, 8, 1.2
+# Strategy borders: in a band of 2 px either side of a raster / ray-cast border, the mixed frame's mean error
+# against the reference over that of the pure frame of the strategy that drew each pixel, over the same pixels
+# (so the band's ground and its mixture of strategies cancel). Without a seam it is 1: only skirts where a raster
+# tile's edge stands above its ray-cast neighbour's differ (1.14 in colour, 1.00 in depth on these frames).
+SEAM_BAND_PX, SEAM_MARGIN = 2, 1.2
 
 
-def seam_ratios(frames, key: str) -> tuple[int, float, float]:
-    """(band pixels, colour error ratio, relative depth error ratio) of frame ``key`` against the reference,
-    band along the hybrid frames' strategy borders over pixels away from them, matched in distance.
+def seam_ratios(frames) -> tuple[int, float, float]:
+    """(band pixels, colour error ratio, relative depth error ratio) of the hybrid frames' strategy-border bands:
+    the mixed frame's error over that of the drawing strategy's pure frame, pixel for pixel, summed over frames.
 
-    Only pixels that both the frame and the reference cover and that lie away from silhouettes count (at a
-    silhouette a pixel's error is the silhouette's, whatever draws it). Away pixels are weighted to the band's
-    distribution over 8 quantile bins of the reference's log distance.
-    """
+    Only pixels that every frame and the reference cover and that lie away from silhouettes count (at a
+    silhouette a pixel's error is the silhouette's, whatever draws it)."""
     sums, n = np.zeros(4), 0
     for f in frames:
-        frame, ref, smap = f[key], f["ref"], f["hybrid"].maps["strategy"]
+        ref, smap = f["ref"], f["hybrid"].maps["strategy"]
         a, b = smap == 1, smap == 2
-        border = (grow(a, 1) & b) | (grow(b, 1) & a)
-        ok = np.isfinite(frame.distance) & np.isfinite(ref.distance) & ~near_silhouettes(ref.distance) \
-            & ~near_silhouettes(frame.distance)
-        band = grow(border, SEAM_BAND_PX) & ok
-        away = ~grow(border, SEAM_AWAY_PX) & ok
-        if not band.any():
-            continue
+        ok = np.isfinite(ref.distance) & ~near_silhouettes(ref.distance)
+        for key in ("hybrid", "raster", "raycast"):
+            ok &= np.isfinite(f[key].distance) & ~near_silhouettes(f[key].distance)
+        band = grow((grow(a, 1) & b) | (grow(b, 1) & a), SEAM_BAND_PX) & ok
         rd = np.where(ok, ref.distance, 1.0).astype(np.float64)
-        colour = np.abs(frame.colour.astype(np.float64) - ref.colour).mean(axis=2)
-        depth = np.abs(np.where(ok, frame.distance, 1.0) - rd) / rd
-        logd = np.log(rd)
-        edges = np.quantile(logd[band], np.linspace(0, 1, 9))
-        bins = np.digitize(logd, edges[1:-1])
-        for k in range(8):
-            inside, outside = band & (bins == k), away & (bins == k) & (logd >= edges[0]) & (logd <= edges[-1])
-            if inside.any() and outside.sum() >= 20:
-                w = int(inside.sum())
-                sums += w * np.array([colour[inside].mean(), colour[outside].mean(), depth[inside].mean(),
-                                      depth[outside].mean()])
-                n += w
+        colour = {k: np.abs(f[k].colour.astype(np.float64) - ref.colour).mean(axis=2) for k in ("hybrid", "raster", "raycast")}
+        depth = {k: np.abs(np.where(ok, f[k].distance, 1.0) - rd) / rd for k in ("hybrid", "raster", "raycast")}
+        drew = {k: np.where(a, v["raster"], v["raycast"]) for k, v in (("colour", colour), ("depth", depth))}
+        sums += [colour["hybrid"][band].sum(), drew["colour"][band].sum(), depth["hybrid"][band].sum(),
+                 drew["depth"][band].sum()]
+        n += int(band.sum())
     return n, sums[0] / sums[1], sums[2] / sums[3]
 
 
 def test_no_seam_along_strategy_borders(frames):
-    """The band along strategy borders is no worse in the mixed frame than in the pure frames over the same
-    pixels (the band lies on rougher ground than the average, so the pure frames' own ratio is the bound).
+    """Along strategy borders the mixed frame is as good as the pure frames of the strategies that drew each
+    pixel, over the same pixels.
 
     Raster skirts drawn before the ray-cast tiles sat inside their boxes, so the ray caster's pre-pass skipped
-    pixels it should have cast: 2.45x colour and 3.3x depth error in the band against 1.4x and 1.2x for the
-    pure frames. They now go last."""
-    n, colour, depth = seam_ratios(frames, "hybrid")
-    pure = [seam_ratios(frames, key) for key in ("raster", "raycast")]
-    assert n >= 200 and all(p[0] >= 200 for p in pure)
-    assert colour <= SEAM_MARGIN * max(p[1] for p in pure), (colour, pure)
-    assert depth <= SEAM_MARGIN * max(p[2] for p in pure), (depth, pure)
+    pixels it should have cast: 2.45x colour and 3.3x depth error in the band (against the band's pixels away
+    from borders) where the pure frames gave 1.4x and 1.2x. They now go last. Raster edges facing a ray-cast
+    tile keep their midpoints (no lean or stitching drop), so its skirts stay short."""
+    n, colour, depth = seam_ratios(frames)
+    assert n >= 200
+    assert colour <= SEAM_MARGIN and depth <= SEAM_MARGIN, (colour, depth)
 
 
 def test_depth_agrees_across_strategies(frames):

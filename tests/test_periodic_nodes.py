@@ -38,7 +38,7 @@ def _far_from_seams(total, T, real):
 def _check_against_exact(ext, n, P, exact_levels):
     """Every node's effective error >= the exact one, boxes containing the exact ones, equal away from the seams
     (bit for bit up to nodes of ``exact_levels``), saturated and nested; returns the exact and served nodes."""
-    ref, got = global_nodes(ext.load(), n), nodes_for(ext, n)
+    ref, got = global_nodes(ext.load(), n, side_errors=False), nodes_for(ext, n)
     assert got.cells == ref.cells and len(got.effective) == len(ref.effective) and got.beta == ref.beta
     periods = (ext.cols - 1) // P
     for g in range(len(ref.effective)):
@@ -95,7 +95,7 @@ def test_seam_corner_pits_and_peaks_are_in_the_boxes(tmp_path):
 def test_every_tile_block_reads_bounds_of_the_exact_block(tmp_path, periods):
     prepare_store(_rough(seed=2), tmp_path / "s", 16)
     ext = open_periodic(tmp_path / "s", 128 * periods + 1)
-    ref, got = global_nodes(ext.load(), 16), nodes_for(ext, 16)
+    ref, got = global_nodes(ext.load(), 16, side_errors=False), nodes_for(ext, 16)
     pyr = TilePyramid(ext.load(), 16)
     for level in range(pyr.max_level + 1):
         for key in pyr.keys(level):

@@ -161,7 +161,9 @@ def test_triangle_estimate_follows_the_drawn_count(ctx, puget_full):
     assert all(0.85 <= f <= 1.15 for f in frames), frames       # lean leaves' kept midpoints follow their
     assert 0.9 <= np.median(ratios) <= 1.15, sorted(ratios)      # neighbours, which the counts do not see
     # coarser pyramid levels' tiles too: their nodes are the level-0 quadtree's, errors saturated across borders
-    assert len(coarse) >= 5 and 0.9 <= np.median(coarse) <= 1.1, sorted(coarse)
+    # (0.73-0.88 when they were not); a little under the level-0 tiles', as their leaves keep every midpoint
+    # toward tiles of another pyramid level, which the counts do not see
+    assert len(coarse) >= 5 and 0.85 <= np.median(coarse) <= 1.1, sorted(coarse)
     assert min(nearest) > max(frames), (nearest, frames)         # the per-node distances are what the fit sees
     assert all(0.95 <= f <= 1.4 for f in shown), shown            # blocks reaching into the frustum count whole
 

@@ -1,4 +1,4 @@
-"""The triangle estimate's split tables (raster.estimate.split_tables, kind_splits) against brute-force counts:
+"""The triangle estimate's split tables (raster.split_tables: split_tables, kind_splits) against brute-force counts:
 exact for the errors rounded to their bin edge, and off the exact count only by nodes whose error lies within
 half a bin of the threshold (bins split each octave in 32 equal steps: half a bin is at most 1/64 of the value),
 or below the tables' floor 20 octaves under a tile's largest error."""
@@ -6,7 +6,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from raster.estimate import BIN_SHIFT, KINDS, TABLE_BINS, SplitTables, kind_splits, split_tables
+from raster.estimate import KINDS
+from raster.split_tables import BIN_SHIFT, TABLE_BINS, SplitTables, kind_splits, split_tables
 
 HALF_BIN = 1 + 1 / 64                   # the largest relative move of rounding to a bin edge
 

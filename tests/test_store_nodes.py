@@ -1,10 +1,12 @@
-"""The raster strategies' node arrays in a tile store: equal to ``global_nodes`` of the grid in memory (bit for bit
-where measured, never below where bounded), resumable, read a tile at a time, and drawn as the grid is; a store
-prepared without them is refused by path."""
+"""The raster strategies' node arrays in a tile store: equal to ``global_nodes`` of the grid in memory in the form
+stores hold (both fans in one error, no side codes; bit for bit where measured, never below where bounded),
+resumable, read a tile at a time, and drawn as the grid is in that form; a store prepared without them is refused
+by path."""
 import numpy as np
 import pytest
 import rasterio
 from rasterio.transform import from_origin
+from raster_helpers import nodes_as_stores_hold
 from test_store import ArraySource
 
 from hybrid.errors import TerrabenchError
@@ -35,7 +37,7 @@ def open_store_attrs(path):
 def _compare(store_path, hf, n, exact_span):
     """Assert the store's node arrays against global_nodes of hf: equal up to nodes of exact_span cells, the
     errors above never below the exact ones (ranges always equal); returns the largest bound / exact ratio."""
-    ref = global_nodes(hf, n)
+    ref = global_nodes(hf, n, side_errors=False)
     got = nodes_for(open_store(store_path), n)
     assert got.cells == ref.cells and len(got.effective) == len(ref.effective)
     loose = 1.0
@@ -57,7 +59,7 @@ def test_node_arrays_equal_global_nodes_bit_for_bit(tmp_path, shape):
     prepare_store(ArraySource(h, SP), tmp_path / "s", 64)
     hf = HeightField(h, SP)
     assert _compare(tmp_path / "s", hf, 64, 1 << 30) == 1.0        # every level measured: squares of 512, 1024
-    stored, ref = nodes_for(open_store(tmp_path / "s"), 64), global_nodes(hf, 64)
+    stored, ref = nodes_for(open_store(tmp_path / "s"), 64), global_nodes(hf, 64, side_errors=False)
     pyr = TilePyramid(hf, 64)
     for level in range(pyr.max_level + 1):                          # every tile's block, apron included
         for key in pyr.keys(level):
@@ -158,6 +160,7 @@ def test_raster_frames_from_the_store_equal_the_grid_without_loading_it(ctx, pug
     monkeypatch.setattr(stored_mod, "MAX_LOAD_SAMPLES", 1000)       # nothing may gather the grid
     with pytest.raises(TerrabenchError, match="out of core"):
         stored.load()
+    nodes_as_stores_hold(monkeypatch)
     for k in (2, 5):
         v = preset("flyover", whole, 6, 160, 90).view(k)
         for policy in ("raster", "raster_gs"):

@@ -73,6 +73,36 @@ def fan_deviation(h: np.ndarray, r0: int, c0: int, rows: np.ndarray, cols: np.nd
     return np.maximum(np.abs(full - own), np.abs(stitched - own))
 
 
+def side_maxima(dev: np.ndarray, m: int) -> np.ndarray:
+    """(4, N, N): per level-m node of an n-cell grid, the max of a sample array (n+1)² over each triangle of the
+    stitched fan, sides W, E, S, N (each triangle with its border samples)."""
+    n = dev.shape[0] - 1
+    k, s = 1 << m, 2 << m
+    N = n // s
+    out = np.zeros((4, N, N))
+    p = np.arange(s)
+    for di in (0, 1):
+        for dj in (0, 1):
+            v, u = ((p + di) / k)[:, None], ((p + dj) / k)[None, :]      # the corner's local coordinates
+            corner = dev[di:di + n, dj:dj + n].reshape(N, s, N, s)
+            for i, mask in enumerate(((v >= u) & (v <= 2.0 - u), (v <= u) & (v >= 2.0 - u),
+                                      (v <= u) & (v <= 2.0 - u), (v >= u) & (v >= 2.0 - u))):
+                np.maximum(out[i], corner.max(axis=(1, 3), where=mask[None, :, None, :], initial=0.0), out=out[i])
+    return out
+
+
+def facing_side_errors(sides: np.ndarray) -> np.ndarray:
+    """(N, N): per node, the largest side error (``side_maxima``) of the same-size nodes outside its parent that
+    face it across the parent's border (W neighbour's E side, and so on); 0 where none."""
+    W, E, S, N = sides
+    out = np.zeros_like(W)
+    out[:, 2::2] = E[:, 1:-1:2]
+    out[:, 1:-1:2] = np.maximum(out[:, 1:-1:2], W[:, 2::2])
+    out[2::2, :] = np.maximum(out[2::2, :], N[1:-1:2, :])
+    out[1:-1:2, :] = np.maximum(out[1:-1:2, :], S[2::2, :])
+    return out
+
+
 def cell_max(dev: np.ndarray) -> np.ndarray:
     """Per cell: the max of a sample array over the cell's four corners ((r-1) x (c-1))."""
     return np.maximum(np.maximum(dev[:-1, :-1], dev[:-1, 1:]), np.maximum(dev[1:, :-1], dev[1:, 1:]))

@@ -4,7 +4,8 @@ the GPU, and a tile store's copy of them, one chunk a tile (``nodes/blocks/<leve
 A tile of n cells at pyramid level l holds, for each local level m (nodes of 2^(m+1) tile cells, global level
 l + m of the node arrays), its (n >> (m+1))² nodes with a one-node apron on every side, row by row from the
 south: columns E (effective error, metres), zlo, zhi (box height range, metres above the origin z) and inside
-(1 for a node of the node square, 0 for an apron node beyond it). Cut from the store's node arrays
+(0 for an apron node beyond the node square; inside it 1, or for an in-memory terrain 1 plus the node's side
+error codes, ``raster.nodes.side_codes``). Cut from the store's node arrays
 (``hybrid.tiles.store_nodes``), a block needs one read per local level and array, each of a window that
 spans many small chunks; the stored blocks make a tile's upload one read of one chunk.
 """
@@ -21,9 +22,10 @@ def block_offsets(n: int) -> np.ndarray:
     return np.concatenate([[0], np.cumsum(np.square(sides))]).astype(np.int32)
 
 
-def band_blocks(effective, zlo, zhi, level: int, ty: int, n: int, tx0: int, tx1: int) -> np.ndarray:
+def band_blocks(effective, zlo, zhi, level: int, ty: int, n: int, tx0: int, tx1: int, inside=None) -> np.ndarray:
     """Blocks (tx1 - tx0, nodes, 4) float32 of the level-``level`` tiles tx0..tx1-1 of tile row ty, from the
-    node arrays by global level (numpy or Zarr arrays: one window read per local level and array)."""
+    node arrays by global level (numpy or Zarr arrays: one window read per local level and array); ``inside``:
+    arrays by global level of the fourth column's value inside the node square (None: 1)."""
     count = tx1 - tx0
     parts = []
     for m in range(int(np.log2(n))):
@@ -39,7 +41,7 @@ def band_blocks(effective, zlo, zhi, level: int, ty: int, n: int, tx0: int, tx1:
         if rb > ra and cb > ca:
             for k, arr in enumerate((effective[g], zlo[g], zhi[g])):
                 band[win + (k,)] = np.asarray(arr[ra:rb, ca:cb])
-            band[win + (3,)] = 1.0
+            band[win + (3,)] = 1.0 if inside is None else np.asarray(inside[g][ra:rb, ca:cb])
         # each tile's window of side + 2 columns starts every side columns
         tiles = np.lib.stride_tricks.sliding_window_view(band, side + 2, axis=1)[:, ::side]
         parts.append(tiles.transpose(1, 0, 3, 2).reshape(count, (side + 2) ** 2, COLUMNS))

@@ -42,7 +42,8 @@ def error_pyramid_case() -> dict:
     h = heights(8, seed=1)
     p = error_pyramid(h)
     return {"heights": h, **{f"errors{m}": p.errors[m] for m in range(p.top + 1)},
-            **{f"effective{m}": p.effective[m] for m in range(p.top + 1)}}
+            **{f"effective{m}": p.effective[m] for m in range(p.top + 1)},
+            **{f"sides{m}": p.sides[m] for m in range(p.top + 1)}}
 
 
 def leaves_case() -> dict:
