@@ -13,7 +13,9 @@ outside neighbour-child's box lie inside the parent's), so d never grows from a 
 it must follow, and every node decides alone, on the GPU, with a crack-free (restricted) result.
 
 Per tile the GPU holds, for each local level m (node side 2^(m+1) tile cells), a grid of the tile's nodes with
-a one-node apron on every side: (E, zlo, zhi, inside) float32, zlo/zhi relative to the terrain origin z.
+a one-node apron on every side: (E, zlo, zhi, inside) float32, zlo/zhi relative to the terrain origin z, inside 0
+beyond the node square, else 1 plus the node's four side-error codes (``side_codes``; an in-memory terrain's
+nodes split on their full fans' errors and carry them, a tile store's hold one error over both fans and 1).
 
 An in-memory height field gets its arrays from ``global_nodes``; a tile store has them on disk, written by
 prepare (``hybrid.tiles.store_nodes``: the same values for nodes up to 1024 cells, an upper bound of the

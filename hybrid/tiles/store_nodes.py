@@ -1,6 +1,8 @@
 """The raster strategies' node arrays of a tile store, built out of core (``prepare_store`` calls ``build_nodes``).
 
-They are the arrays ``raster.nodes.GlobalNodes`` holds, over the same padded square of R = N * 2^L cells (the
+They are the arrays ``raster.nodes.GlobalNodes`` holds in its combined form (``global_nodes(side_errors=False)``:
+one error over a node's full and stitched fans, no side codes; an in-memory terrain's split on the full fan's
+error with side codes, ``raster.quadtree``), over the same padded square of R = N * 2^L cells (the
 grid's edge samples repeated): per global level g (nodes of 2^(g+1) level-0 cells, (R >> (g+1))² of them)
 ``nodes/effective/<g>`` (saturated effective error, metres), ``nodes/zlo/<g>`` and ``nodes/zhi/<g>`` (height range
 of the node's box, its square grown by its side, metres relative to the origin z), float32, chunked.
