@@ -95,7 +95,7 @@ def side_codes(sides: np.ndarray, effective: np.ndarray, parent: np.ndarray | No
     1 + sum(code << 6 side): code = 8 log2(side / parent's effective error) + 56, rounded up, so the GPU reads a
     side's error as the parent's 2^((code - 56)/8), never below the measured one. A leaf's parent splits, so only
     sides below it matter: 63 stands for any larger ratio (the midpoint stays), 0 for 2^-7 or less; a node
-    without a parent (``parent`` None: the grid's root) gets 63. Exact integers below 2^24."""
+    without a parent (``parent`` None: the grid's root) gets 63. Exact integers up to 2^24."""
     top = (1 << SIDE_BITS) - 1
     S = np.maximum(sides, effective.astype(np.float64)[None])
     if parent is None:
