@@ -23,7 +23,7 @@ from hybrid.terrain.stored import StoredTerrain
 from hybrid.tiles.pyramid import TileKey, TilePyramid
 from hybrid.tiles.tiletree import SelectedTile
 
-from .nodes import SIDE_BIAS, SIDE_BITS, SIDE_STEPS, nodes_for, pending_cut, tile_node_block
+from .nodes import decoded_sides, nodes_for, pending_cut, per_child, tile_node_block
 from .split_tables import TABLE_BINS, SplitTables, kind_splits, split_tables
 from .quadtree import GPU_BETA, error_pyramid
 
@@ -68,14 +68,13 @@ class TileNodes:
         return np.concatenate([self.box_hi, self.box_lo], axis=1).T
 
 
-def tile_nodes(tile, beta: float = GPU_BETA, full_res: bool = False, side_errors: bool = False) -> TileNodes:
+def tile_nodes(tile, beta: float = GPU_BETA, full_res: bool = False) -> TileNodes:
     """The estimate's data of one pyramid tile (``hybrid.tiles.pyramid.Tile``: heights, origin, spacing), from
-    its own heights' error pyramid (with side errors, or both fans in one as a store's nodes); ``full_res``: a
-    level-0 tile."""
-    pyr = error_pyramid(tile.heights, beta, side_errors)
-    sides = [np.maximum(d, e) for d, e in zip(pyr.sides, pyr.effective)] if side_errors else None
+    its own heights' error pyramid in the form a tile store's nodes hold (both fans in one error: the tiles
+    built this way are a store's without node blocks); ``full_res``: a level-0 tile."""
+    pyr = error_pyramid(tile.heights, beta, side_errors=False)
     return _tile_nodes(pyr.effective, pyr.zmin, pyr.zmax, tile.n, tile.origin, (tile.spacing_x, tile.spacing_y),
-                       full_res, sides, beta)
+                       full_res)
 
 
 def block_tile_nodes(data: np.ndarray, offsets: np.ndarray, n: int, origin, spacing,
@@ -90,20 +89,9 @@ def block_tile_nodes(data: np.ndarray, offsets: np.ndarray, n: int, origin, spac
     if any(np.any(g[..., 3] > 1.0) for g in grids):          # side codes (``raster.nodes.side_codes``)
         parents = [data[offsets[m + 1]:offsets[m + 2]].reshape((n >> (m + 2)) + 2, -1, 4)[1:-1, 1:-1, 0]
                    if m + 1 < len(grids) else None for m in range(len(grids))]
-        sides = [_decoded_sides(g[..., 3], p) for g, p in zip(grids, parents)]
+        sides = [decoded_sides(g[..., 3], p) for g, p in zip(grids, parents)]
     return _tile_nodes(effective, [g[..., 1] for g in grids], [g[..., 2] for g in grids], n, origin, spacing,
                        full_res, sides, beta)
-
-
-def _decoded_sides(w: np.ndarray, parent) -> np.ndarray:
-    """(4, ...) side errors (metres) W, E, S, N of nodes from their block's fourth column and their parents'
-    effective errors (None: no parent), as the GPU reads them (inf: the midpoint always stays)."""
-    top = (1 << SIDE_BITS) - 1
-    code = (w.astype(np.int64) - 1)[None] >> (SIDE_BITS * np.arange(4))[:, None, None] & top
-    if parent is None:
-        return np.full(code.shape, np.inf)
-    P = np.repeat(np.repeat(parent.astype(np.float64), 2, axis=0), 2, axis=1)[None]
-    return np.where(code == top, np.inf, P * np.exp2((code - SIDE_BIAS) / SIDE_STEPS))
 
 
 def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing, full_res: bool = False, sides=None,
@@ -163,7 +151,7 @@ def _lean_sides(effective, sides, levels: int, nb: int, beta: float) -> np.ndarr
     out = []
     for m in range(levels):
         parent = effective[m + 1] if m + 1 < len(effective) else np.full((1, 1), np.inf)
-        v = np.minimum(sides[m], beta * np.repeat(np.repeat(parent, 2, axis=0), 2, axis=1)[None])
+        v = np.minimum(sides[m], beta * per_child(parent))
         v[np.isinf(v)] = 0.0                                     # a tile's root: split by the tile tree
         per = v.shape[1] // nb
         out.append(v.reshape(4, nb, per, nb, per).transpose(1, 3, 0, 2, 4).reshape(nb * nb, -1))

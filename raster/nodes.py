@@ -90,6 +90,11 @@ SIDE_BITS = 6                   # bits a side: codes 0 .. 62 a ratio 2^((code - 
 SIDE_BIAS = 56                  # code 0: 2^-7 of the parent's error or less
 
 
+def per_child(parent: np.ndarray) -> np.ndarray:
+    """(1, 2N, 2N) float64: each of an (N, N) level's node values over its four children, for sides (4, ...)."""
+    return np.repeat(np.repeat(np.asarray(parent, np.float64), 2, axis=0), 2, axis=1)[None]
+
+
 def side_codes(sides: np.ndarray, effective: np.ndarray, parent: np.ndarray | None) -> np.ndarray:
     """Nodes' four side errors (W, E, S, N, metres; at least their effective errors) as the float32
     1 + sum(code << 6 side): code = 8 log2(side / parent's effective error) + 56, rounded up, so the GPU reads a
@@ -101,13 +106,23 @@ def side_codes(sides: np.ndarray, effective: np.ndarray, parent: np.ndarray | No
     if parent is None:
         code = np.full(S.shape, top)
     else:
-        P = np.repeat(np.repeat(parent.astype(np.float64), 2, axis=0), 2, axis=1)[None]
+        P = per_child(parent)
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.where(P > 0, S / np.where(P > 0, P, 1.0), np.where(S > 0, np.inf, 0.0))
             code = np.ceil(SIDE_STEPS * np.log2(ratio) + SIDE_BIAS - 1e-9)
         code = np.where(code > top - 1, top, np.maximum(code, 0))
     packed = (code.astype(np.int64) << (SIDE_BITS * np.arange(4))[:, None, None]).sum(axis=0) + 1
     return packed.astype(np.float32)
+
+
+def decoded_sides(w: np.ndarray, parent: np.ndarray | None) -> np.ndarray:
+    """(4, ...) side errors (metres) W, E, S, N of nodes from their fourth column (``side_codes``) and their parents'
+    effective errors (None: no parent), as the GPU selection reads them (inf: the midpoint always stays)."""
+    top = (1 << SIDE_BITS) - 1
+    code = (np.asarray(w).astype(np.int64) - 1)[None] >> (SIDE_BITS * np.arange(4))[:, None, None] & top
+    if parent is None:
+        return np.full(code.shape, np.inf)
+    return np.where(code == top, np.inf, per_child(parent) * np.exp2((code - SIDE_BIAS) / SIDE_STEPS))
 
 
 def nodes_for(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:

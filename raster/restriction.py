@@ -148,10 +148,7 @@ class _Frame:
         levels = self.levels[key]
         need = np.zeros(levels.shape[0], bool)
         if t.pyramid.sides:
-            U = levels.shape[0]
-            r = np.arange(U)
-            ua, ub = ((r, np.zeros_like(r)), (r, np.full_like(r, U - 1)), (np.zeros_like(r), r),
-                      (np.full_like(r, U - 1), r))[edge]
+            ua, ub = _border_units(levels.shape[0], edge)
             m = levels[ua, ub].astype(np.int64)
             side = _errors_at([d[edge] for d in t.pyramid.sides], ua, ub, m)
             need = side > t.tolerance * (t.pyramid.beta if self.use_effective else 1.0)
@@ -296,12 +293,16 @@ def _own_alpha(fr: _Frame, key, levels: np.ndarray, ua: np.ndarray, ub: np.ndarr
     return out
 
 
+def _border_units(U: int, edge: int) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, columns) of the U units along a tile's edge W, E, S or N (0..3), in order along it."""
+    r = np.arange(U)
+    return ((r, np.zeros_like(r)), (r, np.full_like(r, U - 1)), (np.zeros_like(r), r), (np.full_like(r, U - 1), r))[edge]
+
+
 def _alpha_profile(fr: _Frame, key, edge: int) -> np.ndarray:
     """Own-side morph factor of the border leaves' edge midpoints along an edge, at level-0 cells."""
     levels = fr.levels[key]
-    U = levels.shape[0]
-    r = np.arange(U)
-    ua, ub = ((r, np.zeros_like(r)), (r, np.full_like(r, U - 1)), (np.zeros_like(r), r), (np.full_like(r, U - 1), r))[edge]
+    ua, ub = _border_units(levels.shape[0], edge)
     return np.repeat(_own_alpha(fr, key, levels, ua, ub), 2 << key[0])
 
 

@@ -6,8 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from raster.estimate import _decoded_sides
-from raster.nodes import SIDE_BIAS, SIDE_STEPS, side_codes
+from raster.nodes import SIDE_BIAS, SIDE_STEPS, decoded_sides, side_codes
 
 STEP = 2.0 ** (1.0 / SIDE_STEPS)
 
@@ -15,7 +14,7 @@ STEP = 2.0 ** (1.0 / SIDE_STEPS)
 def _round_trip(sides, effective, parent):
     w = side_codes(sides, effective, parent)
     assert w.dtype == np.float32 and np.all(w >= 1) and np.all(w <= 2 ** 24) and np.all(w == np.round(w))
-    return _decoded_sides(w, parent)
+    return decoded_sides(w, parent)
 
 
 @settings(max_examples=60, deadline=None)
