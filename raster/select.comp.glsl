@@ -84,33 +84,40 @@ int split_state(int m, int a, int b, out float E, out float d) {
     return E * k_tau > d ? 1 : 0;
 }
 
-// Lean factor of side e (W, E, S, N) of a same-pyramid-level node that does not split: 1 while its tolerance
-// (d / k_tau) is at least S / beta, falling to 0 as the tolerance falls to S, where S is the larger of E and
-// the side's stitched error (decoded from its code against the parent's E, never below the measured one:
-// raster.nodes.side_codes);
-// 0 where it splits or has no data. An edge midpoint between two such leaves lies on their edge by the
-// smaller of their two factors, so it is dropped while that is 1 (both sides' triangles meet the tolerance
-// by beta) and has reached its own height when either side's triangle needs it or either leaf splits (S >= E).
-// Every node whose split makes a leaf has E at least 1 / beta times the leaf's and than the side errors of
-// the leaves outside it that face it, so a leaf starts lean and a coarser neighbour's leaves see it lean.
-// Without side codes (a tile store's nodes) E bounds both fans. Full-resolution leaves keep every midpoint but
-// toward coarser neighbours: a drop there would flip their SE and NW cells' diagonals in one frame.
-float lean_of(int m, int a, int b, int e) {
-    if (m == 0 && tile_level == 0) return 0.0;   // full resolution: the reference's cells
+// Lean factors of the sides W, E, S, N of a same-pyramid-level node that does not split: side e's is 1 while
+// the node's tolerance (d / k_tau) is at least S / beta, falling to 0 as the tolerance falls to S, where S is
+// the larger of E and the side's stitched error (decoded from its code against the parent's E, never below the
+// measured one: raster.nodes.side_codes); all 0 where it splits or has no data. An edge midpoint between two
+// such leaves lies on their edge by the smaller of their two factors, so it is dropped while that is 1 (both
+// sides' triangles meet the tolerance by beta) and has reached its own height when either side's triangle
+// needs it or either leaf splits (S >= E). Every node whose split makes a leaf has E at least 1 / beta times
+// the leaf's and than the side errors of the leaves outside it that face it, so a leaf starts lean and a
+// coarser neighbour's leaves see it lean. Without side codes (a tile store's nodes) E bounds both fans and
+// every side's S is E. Full-resolution leaves keep every midpoint but toward coarser neighbours: a drop there
+// would flip their SE and NW cells' diagonals in one frame.
+vec4 lean_of(int m, int a, int b) {
+    if (m == 0 && tile_level == 0) return vec4(0.0);    // full resolution: the reference's cells
     float E, d;
-    if (split_state(m, a, b, E, d) != 0) return 0.0;
+    if (split_state(m, a, b, E, d) != 0) return vec4(0.0);
     vec4 nd = node_at(m, a, b);
-    if (nd.w == 0.0) return 0.0;
-    E = nd.x;
-    if (side_errors) {                           // the side's error, coded against the parent's E
-        uint code = (uint(nd.w) - 1u) >> (6 * e) & 63u;
-        if (code == 63u || m >= top) return 0.0; // at or above the parent's E: the midpoint stays
-        E = node_at(m + 1, a >> 1, b >> 1).x * exp2((float(code) - 56.0) / 8.0);
+    if (nd.w == 0.0) return vec4(0.0);
+    vec4 S = vec4(nd.x);
+    bvec4 keep = bvec4(false);
+    if (side_errors) {                                  // each side's error, coded against the parent's E
+        if (m >= top) return vec4(0.0);
+        uvec4 code = (uvec4(uint(nd.w) - 1u) >> uvec4(0u, 6u, 12u, 18u)) & 63u;
+        keep = equal(code, uvec4(63u));                 // at or above the parent's E: the midpoint stays
+        S = node_at(m + 1, a >> 1, b >> 1).x * exp2((vec4(code) - 56.0) / 8.0);
     }
-    if (E <= 0.0) return 1.0;
-    float r = box_distance(m, a, b, nd) / (E * k_tau);
-    if (!morph) return r >= 1.0 / beta ? 1.0 : 0.0;
-    return clamp((r - 1.0) / (1.0 / beta - 1.0), 0.0, 1.0);
+    float dist = box_distance(m, a, b, nd);
+    vec4 f;
+    for (int e = 0; e < 4; ++e) {
+        if (keep[e]) { f[e] = 0.0; continue; }
+        if (S[e] <= 0.0) { f[e] = 1.0; continue; }
+        float r = dist / (S[e] * k_tau);
+        f[e] = !morph ? (r >= 1.0 / beta ? 1.0 : 0.0) : clamp((r - 1.0) / (1.0 / beta - 1.0), 0.0, 1.0);
+    }
+    return f;
 }
 
 bool splits(int m, int a, int b) { float E, d; return split_state(m, a, b, E, d) != 0; }
@@ -264,6 +271,7 @@ void emit_leaf(int m, int a, int b) {
     int drop = 0;
     float am[4];
     const int opposite[4] = int[4](1, 0, 3, 2);
+    vec4 own = lean ? lean_of(m, a, b) : vec4(0.0);
     int skirts = 0;
     if (skirt_edges != 0) {
         if (b == 0) skirts |= skirt_edges & 1;
@@ -273,11 +281,11 @@ void emit_leaf(int m, int a, int b) {
     }
     for (int e = 0; e < 4; ++e) {
         int na = a + nb[e].x, nbb = b + nb[e].y;
-        float own_lean = lean ? lean_of(m, a, b, e) : 0.0;
+        float own_lean = own[e];
         am[e] = ap;
         float le = 0.0;
         if ((na >> 1) == (a >> 1) && (nbb >> 1) == (b >> 1)) {          // a sibling: same parent
-            if (lean) le = min(own_lean, lean_of(m, na, nbb, opposite[e]));
+            if (lean) le = min(own_lean, lean_of(m, na, nbb)[opposite[e]]);
         } else {
             int st = split_state(m + 1, na >> 1, nbb >> 1, E, d);
             if ((skirts & bit[e]) != 0) {                        // a ray-cast tile's exact edge: no stitch, no
@@ -287,7 +295,7 @@ void emit_leaf(int m, int a, int b) {
             if (st == 0) { if (stitch) drop |= bit[e]; }
             else {
                 am[e] = max(ap, alpha_of(st, E, d));
-                if (lean) le = min(own_lean, lean_of(m, na, nbb, opposite[e]));
+                if (lean) le = min(own_lean, lean_of(m, na, nbb)[opposite[e]]);
             }
             // on a border with a tile of another pyramid level the two sides cannot see each other's forced
             // (tile root) morphs: the shared posts stay at their own heights on both sides
