@@ -3,7 +3,7 @@
 1. Triangles against max vertical error on Puget tiles: restricted quadtree (plain errors with full fans, and
    lean: every midpoint no finer neighbour or side error needs dropped; morph-safe errors at beta 0.7; at the GPU
    strategies' beta with lean leaves, what raster and raster_gs draw; the same with both fans in one error, as a
-   tile store's nodes hold them; the same with full-resolution leaves lean too, which the GPU does not draw)
+   periodic extension's nodes hold them near its seams; the same with full-resolution leaves lean too, which the GPU does not draw)
    vs pymartini (RTIN), pydelatin and fast-simplification, every max error measured the same way.
 2. Per-view leaf selection + restriction time of a 257² tile.
 3. GPU bytes per tile and representation, next to the paper's 96 bits (12 bytes) per triangle.
@@ -62,12 +62,12 @@ def triangles_vs_error(tiles, errors=(5.0, 10.0, 20.0, 40.0, 80.0)):
     pyrs["quadtree-lean"] = pyrs["quadtree-morph"] = pyrs["quadtree"]
     pyrs["quadtree-gpu"] = [error_pyramid(t.heights, GPU_BETA) for t in tiles]   # what raster, raster_gs draw
     pyrs["gpu-lean-full-res"] = pyrs["quadtree-gpu"]
-    pyrs["gpu-store-nodes"] = [error_pyramid(t.heights, GPU_BETA, side_errors=False) for t in tiles]
+    pyrs["gpu-combined"] = [error_pyramid(t.heights, GPU_BETA, side_errors=False) for t in tiles]
     n = tiles[0].n
     martini = Martini(n + 1)
     for e in errors:
         res = {}
-        for name in ("quadtree", "quadtree-lean", "quadtree-morph", "quadtree-gpu", "gpu-store-nodes",
+        for name in ("quadtree", "quadtree-lean", "quadtree-morph", "quadtree-gpu", "gpu-combined",
                      "gpu-lean-full-res", "martini", "delatin", "fast-simpl"):
             tri, err = 0, 0.0
             for i, t in enumerate(tiles):

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hybrid.camera.view import View
+from hybrid.errors import TerrabenchError
 from hybrid.terrain.stored import StoredTerrain
 from hybrid.tiles.pyramid import TileKey, TilePyramid
 from hybrid.tiles.tiletree import SelectedTile
@@ -70,8 +71,8 @@ class TileNodes:
 
 def tile_nodes(tile, beta: float = GPU_BETA, full_res: bool = False) -> TileNodes:
     """The estimate's data of one pyramid tile (``hybrid.tiles.pyramid.Tile``: heights, origin, spacing), from
-    its own heights' error pyramid in the form a tile store's nodes hold (both fans in one error: the tiles
-    built this way are a store's without node blocks); ``full_res``: a level-0 tile."""
+    its own heights' error pyramid in the combined form (both fans in one error: the tiles built this way are a
+    store's prepared before side errors); ``full_res``: a level-0 tile."""
     pyr = error_pyramid(tile.heights, beta, side_errors=False)
     return _tile_nodes(pyr.effective, pyr.zmin, pyr.zmax, tile.n, tile.origin, (tile.spacing_x, tile.spacing_y),
                        full_res)
@@ -334,9 +335,18 @@ class TileletTriangleEstimator:
         height field): errors saturated across tile borders and, for a coarser pyramid level's tile, from the
         level-0 quadtree, where the tile's own heights' error pyramid misses what its neighbours and the finer data
         force (on Puget's orbit, level-1 tiles drew 1.09x the leaves and 1.14x the triangles that estimate
-        counted); None for a store without blocks (built from its heights)."""
+        counted); for a store without blocks, its node arrays read a tile's window at a time, as its GPU upload
+        reads them; None (built from its heights then) for a store whose nodes hold the combined form (prepared
+        before side codes), or whose node arrays do not serve this tile size."""
         hf = self.pyramid.hf
-        return None if isinstance(hf, StoredTerrain) else nodes_for(hf, self.pyramid.n, self.beta)
+        if not isinstance(hf, StoredTerrain):
+            return nodes_for(hf, self.pyramid.n, self.beta)
+        if dict(hf.store.attrs.get("nodes") or {}).get("form") != "sides":
+            return None
+        try:
+            return nodes_for(hf, self.pyramid.n, self.beta)
+        except TerrabenchError:
+            return None
 
     def _block_ready(self, key: TileKey) -> bool | None:
         """Whether the tile's node block is one read (None: the store has no blocks; built from heights)."""

@@ -14,8 +14,9 @@ it must follow, and every node decides alone, on the GPU, with a crack-free (res
 
 Per tile the GPU holds, for each local level m (node side 2^(m+1) tile cells), a grid of the tile's nodes with
 a one-node apron on every side: (E, zlo, zhi, inside) float32, zlo/zhi relative to the terrain origin z, inside 0
-beyond the node square, else 1 plus the node's four side-error codes (``side_codes``; an in-memory terrain's
-nodes split on their full fans' errors and carry them, a tile store's hold one error over both fans and 1).
+beyond the node square, else 1 plus the node's four side-error codes (``side_codes``): nodes split on their
+full fans' errors and carry their stitched triangles' errors as codes (a store prepared before side errors holds
+one error over both fans, and 1).
 
 An in-memory height field gets its arrays from ``global_nodes``; a tile store has them on disk, written by
 prepare (``hybrid.tiles.store_nodes``: the same values for nodes up to 1024 cells, an upper bound of the
@@ -23,8 +24,8 @@ effective error above; and ``hybrid.tiles.store_blocks``: each tile's block of t
 their Zarr arrays to ``tile_node_block``, which reads the tile's block (or one window per level of a store
 without blocks), so the grid is never loaded. A periodic extension of a store serves arrays of the same shape
 and slicing, computed window by window from its source's (``hybrid.tiles.periodic_nodes``: the source's values
-away from the seams, never below the exact ones near them), and its tiles' blocks are the source's blocks away
-from the seams (``hybrid.tiles.periodic_blocks``).
+away from the seams, never below the exact ones near them, where its nodes hold the combined form's bounds),
+and its tiles' blocks are the source's blocks away from the seams (``hybrid.tiles.periodic_blocks``).
 """
 from __future__ import annotations
 
@@ -37,6 +38,7 @@ from hybrid.errors import TerrabenchError
 from hybrid.terrain.stored import MAX_LOAD_SAMPLES, StoredTerrain
 from hybrid.tiles.fans import grow3 as _grow
 from hybrid.tiles.pyramid import TilePyramid
+from hybrid.tiles.sidecodes import SIDE_BIAS, SIDE_BITS, SIDE_STEPS, decoded_sides, per_child, side_codes  # noqa: F401
 from hybrid.tiles.periodic_blocks import PeriodicBlocks
 from hybrid.tiles.store_blocks import band_blocks, block_offsets
 
@@ -60,7 +62,8 @@ class GlobalNodes:
     zlo: tuple
     zhi: tuple
     blocks: object = None           # a store's per-tile blocks, [level][ty, tx] (hybrid.tiles.store_blocks)
-    sides: tuple | None = None      # the blocks' fourth column per level (``side_codes``); None: 1 (store nodes)
+    sides: tuple | None = None      # the blocks' fourth column per level (``side_codes``); None: 1 (a store
+                                    # prepared before side errors: one error over both fans)
 
 
 def global_nodes(hf, tile_size: int, beta: float = GPU_BETA, side_errors: bool = True) -> GlobalNodes:
@@ -83,46 +86,6 @@ def global_nodes(hf, tile_size: int, beta: float = GPU_BETA, side_errors: bool =
     ref = weakref.ref(hf, lambda _r, k=key: _CACHE.pop(k, None))
     _CACHE[key] = (ref, nodes)
     return nodes
-
-
-SIDE_STEPS = 8                  # side-error codes an octave of side error / the parent's effective error
-SIDE_BITS = 6                   # bits a side: codes 0 .. 62 a ratio 2^((code - SIDE_BIAS) / 8), 63 any larger
-SIDE_BIAS = 56                  # code 0: 2^-7 of the parent's error or less
-
-
-def per_child(parent: np.ndarray) -> np.ndarray:
-    """(1, 2N, 2N) float64: each of an (N, N) level's node values over its four children, for sides (4, ...)."""
-    return np.repeat(np.repeat(np.asarray(parent, np.float64), 2, axis=0), 2, axis=1)[None]
-
-
-def side_codes(sides: np.ndarray, effective: np.ndarray, parent: np.ndarray | None) -> np.ndarray:
-    """Nodes' four side errors (W, E, S, N, metres; at least their effective errors) as the float32
-    1 + sum(code << 6 side): code = 8 log2(side / parent's effective error) + 56, rounded up, so the GPU reads a
-    side's error as the parent's 2^((code - 56)/8), never below the measured one. A leaf's parent splits, so only
-    sides below it matter: 63 stands for any larger ratio (the midpoint stays), 0 for 2^-7 or less; a node
-    without a parent (``parent`` None: the grid's root) gets 63. Exact integers up to 2^24."""
-    top = (1 << SIDE_BITS) - 1
-    S = np.maximum(sides, effective.astype(np.float64)[None])
-    if parent is None:
-        code = np.full(S.shape, top)
-    else:
-        P = per_child(parent)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.where(P > 0, S / np.where(P > 0, P, 1.0), np.where(S > 0, np.inf, 0.0))
-            code = np.ceil(SIDE_STEPS * np.log2(ratio) + SIDE_BIAS - 1e-9)
-        code = np.where(code > top - 1, top, np.maximum(code, 0))
-    packed = (code.astype(np.int64) << (SIDE_BITS * np.arange(4))[:, None, None]).sum(axis=0) + 1
-    return packed.astype(np.float32)
-
-
-def decoded_sides(w: np.ndarray, parent: np.ndarray | None) -> np.ndarray:
-    """(4, ...) side errors (metres) W, E, S, N of nodes from their fourth column (``side_codes``) and their parents'
-    effective errors (None: no parent), as the GPU selection reads them (inf: the midpoint always stays)."""
-    top = (1 << SIDE_BITS) - 1
-    code = (np.asarray(w).astype(np.int64) - 1)[None] >> (SIDE_BITS * np.arange(4))[:, None, None] & top
-    if parent is None:
-        return np.full(code.shape, np.inf)
-    return np.where(code == top, np.inf, per_child(parent) * np.exp2((code - SIDE_BIAS) / SIDE_STEPS))
 
 
 def nodes_for(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
@@ -154,16 +117,17 @@ def nodes_for(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
     levels = range(int(info["levels"]))
     g = hf.store
     arrays = tuple(tuple(g[f"nodes/{k}/{lev}"] for lev in levels) for k in ("effective", "zlo", "zhi"))
+    codes = tuple(g[f"nodes/sides/{lev}"] for lev in levels) if info.get("form") == "sides" else None
     blocks = None
     if hf.store.attrs.get("node_blocks"):
         tiers = range(int(hf.store.attrs["max_level"]) + 1)
         if periodic:                            # the source's blocks away from the seams, cut near them
             src, src_levels = g.source, range(int(g.source.attrs["max_level"]) + 1)
             blocks = PeriodicBlocks(tuple(src[f"nodes/blocks/{lev}"] for lev in src_levels), arrays, int(tile_size),
-                                    int(periodic["period_cells"]), int(periodic["size"]) - 1, len(tiers))
+                                    int(periodic["period_cells"]), int(periodic["size"]) - 1, len(tiers), codes)
         else:
             blocks = tuple(g[f"nodes/blocks/{lev}"] for lev in tiers)
-    nodes = GlobalNodes(int(info["square"]), float(beta), *arrays, blocks)
+    nodes = GlobalNodes(int(info["square"]), float(beta), *arrays, blocks, codes)
     _CACHE[key] = (weakref.ref(hf, lambda _r, k=key: _CACHE.pop(k, None)), nodes)
     return nodes
 

@@ -21,8 +21,9 @@ Error pyramid (view-independent, computed once per tile):
   the tile by construction, lets the morph factors of raster.morph reach 0 before any neighbour splits (so no
   vertex ever jumps), and drops a midpoint toward a coarser neighbour only where its side meets the tolerance
   by the factor beta (the midpoint is then on its edge already).
-With ``side_errors=False`` the errors are those of the full and the stitched fan together and ``sides`` are
-zero (a leaf may drop any midpoint): the form a tile store's node arrays hold (``hybrid.tiles.store_nodes``).
+With ``side_errors=False`` the errors are those of the full and the stitched fan together (level 0's with the
+cell-centre terms of its sides) and ``sides`` are zero (a leaf may drop any midpoint): the form a periodic
+extension's nodes near its seams hold (``hybrid.tiles.periodic_nodes``).
 
 Leaf levels are kept as a map over level-0 tilelets ("units", (n/2) x (n/2)): the level of the leaf
 covering each unit. Restriction: edge-adjacent units differ by at most one level; caps (max level per
@@ -36,7 +37,7 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 from hybrid.tiles.fans import GPU_BETA, fans_at  # noqa: F401  (GPU_BETA: the strategies' beta, defined with the fans)
-from hybrid.tiles.fans import cell_max, facing_side_errors, side_maxima
+from hybrid.tiles.fans import cell_centre_error, cell_max, facing_side_errors, side_maxima, with_cell_centres
 from hybrid.tiles.fans import dilate4 as _dilate4
 
 DEFAULT_BETA = 0.7
@@ -137,9 +138,11 @@ def error_pyramid(heights: np.ndarray, beta: float = DEFAULT_BETA, side_errors: 
             e = _block(cell_max(np.abs(full - h)), b, np.max)
             sides.append(side_maxima(np.abs(stitched - h), m))
             if m == 0:
-                sides[0] = _with_cell_centres(h, sides[0])
+                sides[0] = with_cell_centres(h, sides[0])
         else:
             e = _block(cell_max(np.maximum(np.abs(full - h), np.abs(stitched - h))), b, np.max)
+            if m == 0:                                      # a drop's turn of the SE and NW cells' diagonals
+                e = np.maximum(e, cell_centre_error(h))
             sides.append(np.zeros((4,) + e.shape))          # toward coarser neighbours: within e already
         del full, stitched
         zmin.append(_block(cmin, b, np.min))
@@ -154,27 +157,6 @@ def error_pyramid(heights: np.ndarray, beta: float = DEFAULT_BETA, side_errors: 
         effective.append(eff)
     return ErrorPyramid(n, float(beta), tuple(errors), tuple(effective), tuple(zmin), tuple(zmax),
                         tuple(sides) if side_errors else ())
-
-
-def _with_cell_centres(h: np.ndarray, sides: np.ndarray) -> np.ndarray:
-    """Level-0 side errors (metres) raised where dropping a midpoint changes the SE and NW cells (whose fan
-    diagonal runs from the centre post to the corner, where the reference's runs SW-NE): by the distance at the
-    cell's centre between the two diagonals with the midpoints at their heights (a leaf keeping every midpoint
-    draws the reference's cells; where a side's error is 0 the leaf dropping it equals the reference: samples and
-    these crossings are every vertex of the overlay), and by that distance with the midpoints on their edges
-    (|centre post - mean of SW and NE corners| / 2), which a drop makes jump (by at most beta times the bound,
-    as the drop waits until the side meets it by beta)."""
-    c = h[1::2, 1::2]
-    se = np.abs(0.5 * (c + h[0:-1:2, 2::2]) - 0.5 * (h[0:-1:2, 1::2] + h[1::2, 2::2]))
-    nw = np.abs(0.5 * (c + h[2::2, 0:-1:2]) - 0.5 * (h[1::2, 0:-1:2] + h[2::2, 1::2]))
-    flip = 0.5 * np.abs(c - 0.5 * (h[0:-1:2, 0:-1:2] + h[2::2, 2::2]))
-    se, nw = np.maximum(se, flip), np.maximum(nw, flip)
-    out = sides.copy()
-    out[0] = np.maximum(out[0], nw)       # W
-    out[1] = np.maximum(out[1], se)       # E
-    out[2] = np.maximum(out[2], se)       # S
-    out[3] = np.maximum(out[3], nw)       # N
-    return out
 
 
 def leaf_levels(pyr: ErrorPyramid, tolerance: float, cap: np.ndarray | None = None,

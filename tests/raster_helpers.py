@@ -38,12 +38,3 @@ def holes(result, reference, view, hf) -> int:
     c = (p[:, :2] - np.array(hf.origin[:2])) / np.array([hf.spacing_x, hf.spacing_y])
     inner = (c[:, 0] > 1) & (c[:, 1] > 1) & (c[:, 0] < hf.cols - 2) & (c[:, 1] < hf.rows - 2)
     return int(inner.sum())
-
-
-def nodes_as_stores_hold(monkeypatch) -> None:
-    """Give in-memory terrains the node form a tile store's arrays hold (both fans in one error, no side codes),
-    so a store's frames can be compared with its grid's."""
-    import functools
-
-    import raster.nodes as nodes
-    monkeypatch.setattr(nodes, "global_nodes", functools.partial(nodes.global_nodes, side_errors=False))

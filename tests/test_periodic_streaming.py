@@ -35,9 +35,9 @@ def _cuts(monkeypatch) -> list:
     """Spy on block cuts: (thread name, level, tx, ty) of each."""
     seen, real = [], periodic_blocks.band_blocks
 
-    def spy(effective, zlo, zhi, level, ty, n, tx0, tx1):
+    def spy(effective, zlo, zhi, level, ty, n, tx0, tx1, inside=None):
         seen.append((threading.current_thread().name, level, tx0, ty))
-        return real(effective, zlo, zhi, level, ty, n, tx0, tx1)
+        return real(effective, zlo, zhi, level, ty, n, tx0, tx1, inside)
     monkeypatch.setattr(periodic_blocks, "band_blocks", spy)
     return seen
 

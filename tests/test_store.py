@@ -231,12 +231,9 @@ def test_synthetic_terrain_is_window_independent_and_prepare_stays_small(tmp_pat
 
 
 @pytest.mark.gl
-def test_a_store_renders_as_its_grid_does(ctx, grid, tmp_path, monkeypatch):
-    from raster_helpers import nodes_as_stores_hold
-
+def test_a_store_renders_as_its_grid_does(ctx, grid, tmp_path):
     from hybrid.camera.flight import preset
     from hybrid.renderer import Renderer
-    nodes_as_stores_hold(monkeypatch)
     h, sp = grid
     prepare_store(ArraySource(h, sp), tmp_path / "s", 32)
     stored, mem = open_store(tmp_path / "s"), HeightField(h, sp)

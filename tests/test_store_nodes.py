@@ -1,12 +1,11 @@
-"""The raster strategies' node arrays in a tile store: equal to ``global_nodes`` of the grid in memory in the form
-stores hold (both fans in one error, no side codes; bit for bit where measured, never below where bounded),
-resumable, read a tile at a time, and drawn as the grid is in that form; a store prepared without them is refused
-by path."""
+"""The raster strategies' node arrays in a tile store: equal to ``global_nodes`` of the grid in memory (nodes split on
+their full fans' errors, with side codes; bit for bit where measured, never below where bounded), the combined form
+(both fans in one error, for periodic extensions' seams) likewise, resumable, read a tile at a time, and drawn as the
+grid is; a store prepared without them is refused by path."""
 import numpy as np
 import pytest
 import rasterio
 from rasterio.transform import from_origin
-from raster_helpers import nodes_as_stores_hold
 from test_store import ArraySource
 
 from hybrid.errors import TerrabenchError
@@ -19,7 +18,8 @@ from hybrid.terrain.stored import open_store
 from hybrid.tiles import store_nodes
 from hybrid.tiles.pyramid import TilePyramid
 from hybrid.tiles.store import prepare_store
-from raster.nodes import global_nodes, nodes_for, tile_node_block
+from raster.nodes import decoded_sides, global_nodes, nodes_for, tile_node_block
+from raster.quadtree import error_pyramid
 
 SP = (30.0, 40.0)
 
@@ -35,20 +35,30 @@ def open_store_attrs(path):
 
 
 def _compare(store_path, hf, n, exact_span):
-    """Assert the store's node arrays against global_nodes of hf: equal up to nodes of exact_span cells, the
-    errors above never below the exact ones (ranges always equal); returns the largest bound / exact ratio."""
-    ref = global_nodes(hf, n, side_errors=False)
+    """Assert the store's node arrays against global_nodes of hf: effective errors, combined errors and side codes
+    equal up to nodes of exact_span cells (codes where the parent is too), the errors above never below the exact
+    ones and the codes read back never below the exact side errors (ranges always equal); returns the largest
+    bound / exact ratio."""
+    import zarr
+    ref, combined = global_nodes(hf, n), global_nodes(hf, n, side_errors=False)
     got = nodes_for(open_store(store_path), n)
-    assert got.cells == ref.cells and len(got.effective) == len(ref.effective)
-    loose = 1.0
-    for lev in range(len(ref.effective)):
+    stored = zarr.open_group(str(store_path), mode="r")
+    sides = error_pyramid(TilePyramid(hf, n).padded, got.beta).sides
+    assert got.cells == ref.cells and len(got.effective) == len(ref.effective) and got.sides is not None
+    loose, top = 1.0, len(ref.effective) - 1
+    for lev in range(top + 1):
         (e, lo, hi), (re, rlo, rhi) = _arrays(got, lev), _arrays(ref, lev)
-        assert e.dtype == np.float32 and e.shape == re.shape, lev
+        c, rc = np.asarray(stored[f"nodes/combined/{lev}"][:, :]), combined.effective[lev]
+        w = np.asarray(got.sides[lev][:, :])
+        assert e.dtype == c.dtype == w.dtype == np.float32 and e.shape == re.shape == c.shape == w.shape, lev
         assert np.array_equal(lo, rlo) and np.array_equal(hi, rhi), lev
+        assert np.all(decoded_sides(w, _arrays(got, lev + 1)[0] if lev < top else None) >= sides[lev]), lev
         if (2 << lev) <= exact_span:
-            assert np.array_equal(e, re), lev
+            assert np.array_equal(e, re) and np.array_equal(c, rc), lev
+            if lev == top or (4 << lev) <= exact_span:
+                assert np.array_equal(w, ref.sides[lev]), lev
         else:
-            assert np.all(e >= re), lev
+            assert np.all(e >= re) and np.all(c >= rc), lev
             loose = max(loose, float((e / np.maximum(re, 1e-6)).max()))
     return loose
 
@@ -59,7 +69,7 @@ def test_node_arrays_equal_global_nodes_bit_for_bit(tmp_path, shape):
     prepare_store(ArraySource(h, SP), tmp_path / "s", 64)
     hf = HeightField(h, SP)
     assert _compare(tmp_path / "s", hf, 64, 1 << 30) == 1.0        # every level measured: squares of 512, 1024
-    stored, ref = nodes_for(open_store(tmp_path / "s"), 64), global_nodes(hf, 64, side_errors=False)
+    stored, ref = nodes_for(open_store(tmp_path / "s"), 64), global_nodes(hf, 64)
     pyr = TilePyramid(hf, 64)
     for level in range(pyr.max_level + 1):                          # every tile's block, apron included
         for key in pyr.keys(level):
@@ -129,7 +139,7 @@ def test_prepare_memory_stays_band_sized(tmp_path, monkeypatch):
         prepare_store(FractalSource(2049, seed=0), tmp_path / "s", 128)
     finally:
         tracemalloc.stop()
-    # measured here: levels 157 MiB, node arrays 72 MiB (the grid as float64 is 32 MiB, its square of nodes
+    # measured here: levels 157 MiB, node arrays 86 MiB (the grid as float64 is 32 MiB, its square of nodes
     # 16 MiB a level); the node build never holds more than one block of 1024² cells and one band a level
     assert peaks["nodes"] < 100 * 2**20 and peaks["nodes"] <= peaks["levels"], peaks
 
@@ -160,7 +170,6 @@ def test_raster_frames_from_the_store_equal_the_grid_without_loading_it(ctx, pug
     monkeypatch.setattr(stored_mod, "MAX_LOAD_SAMPLES", 1000)       # nothing may gather the grid
     with pytest.raises(TerrabenchError, match="out of core"):
         stored.load()
-    nodes_as_stores_hold(monkeypatch)
     for k in (2, 5):
         v = preset("flyover", whole, 6, 160, 90).view(k)
         for policy in ("raster", "raster_gs"):
@@ -172,8 +181,8 @@ def test_raster_frames_from_the_store_equal_the_grid_without_loading_it(ctx, pug
 
 
 def test_stored_blocks_are_the_node_arrays_around_each_tile(tmp_path):
-    """Every tile's stored block holds, node by node, the node arrays' values over the tile and its one-node
-    apron (zeros and inside 0 beyond the node square): checked against the arrays element by element."""
+    """Every tile's stored block holds, node by node, the node arrays' values (side codes in the fourth column) over
+    the tile and its one-node apron (zeros and inside 0 beyond the node square): checked element by element."""
     h = puget(size=129).heights
     n = 16
     prepare_store(ArraySource(h, SP), tmp_path / "s", n)
@@ -183,18 +192,18 @@ def test_stored_blocks_are_the_node_arrays_around_each_tile(tmp_path):
     assert nodes.blocks is not None
     pyr = TilePyramid(HeightField(h, SP), n)
     for level in range(pyr.max_level + 1):
-        arrays = {lev: _arrays(nodes, lev) for lev in range(len(nodes.effective))}
+        arrays = {lev: _arrays(nodes, lev) + [np.asarray(nodes.sides[lev][:, :])] for lev in range(len(nodes.effective))}
         for key in pyr.keys(level):
             data, offsets = tile_node_block(nodes, level, key.tx, key.ty, n)
             for m in range(len(offsets) - 1):
                 side = n >> (m + 1)
                 grid = data[offsets[m]:offsets[m + 1]].reshape(side + 2, side + 2, 4)
-                e, lo, hi = arrays[level + m]
+                e, lo, hi, w = arrays[level + m]
                 for a in range(-1, side + 1):
                     for b in range(-1, side + 1):
                         i, j = key.ty * side + a, key.tx * side + b
                         inside = 0 <= i < e.shape[0] and 0 <= j < e.shape[1]
-                        want = (e[i, j], lo[i, j], hi[i, j], 1.0) if inside else (0.0, 0.0, 0.0, 0.0)
+                        want = (e[i, j], lo[i, j], hi[i, j], w[i, j]) if inside else (0.0, 0.0, 0.0, 0.0)
                         assert tuple(grid[a + 1, b + 1]) == want, (key, m, a, b)
 
 
@@ -221,3 +230,20 @@ def test_a_store_without_blocks_gets_them_from_prepare_and_draws_the_same(tmp_pa
         for key in pyr.keys(level):
             a, b = (tile_node_block(x, level, key.tx, key.ty, 32) for x in (windows, blocks))
             assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]), key
+
+
+@pytest.mark.parametrize("m", [0, 2, 4])
+def test_side_maxima_over_row_windows_equal_the_whole_grid(m):
+    """A store measures side errors in windows of a few sample rows, parts of a node row where the node is taller:
+    put together they are the whole grid's, node by node and side by side."""
+    from hybrid.tiles.fans import side_maxima
+    rng = np.random.default_rng(m)
+    dev = rng.random((65, 65))
+    whole = side_maxima(dev, m)
+    s, rows = 2 << m, 8
+    got = np.zeros_like(whole)
+    for r0 in range(0, 64, rows):
+        part = side_maxima(dev[r0:r0 + rows + 1], m, r0 % s if rows < s else 0)
+        a = r0 // s
+        np.maximum(got[:, a:a + part.shape[1]], part, out=got[:, a:a + part.shape[1]])
+    assert np.array_equal(got, whole)

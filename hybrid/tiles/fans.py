@@ -73,22 +73,57 @@ def fan_deviation(h: np.ndarray, r0: int, c0: int, rows: np.ndarray, cols: np.nd
     return np.maximum(np.abs(full - own), np.abs(stitched - own))
 
 
-def side_maxima(dev: np.ndarray, m: int) -> np.ndarray:
-    """(4, N, N): per level-m node of an n-cell grid, the max of a sample array (n+1)² over each triangle of the
-    stitched fan, sides W, E, S, N (each triangle with its border samples)."""
-    n = dev.shape[0] - 1
+def side_maxima(dev: np.ndarray, m: int, row_offset: int = 0) -> np.ndarray:
+    """(4, Nr, Nc): per level-m node, the max of a sample array over each triangle of the stitched fan, sides W, E,
+    S, N (each triangle with its border samples). ``dev`` holds (rows + 1) x (n + 1) samples of whole node columns:
+    whole node rows (Nr = rows / node side), or, fewer rows than a node's side, a part of one node row starting
+    ``row_offset`` samples into it (Nr = 1; its maxima cover that part)."""
+    rows, n = dev.shape[0] - 1, dev.shape[1] - 1
     k, s = 1 << m, 2 << m
-    N = n // s
-    out = np.zeros((4, N, N))
-    p = np.arange(s)
+    sr = min(s, rows)
+    Nr, Nc = rows // sr, n // s
+    out = np.zeros((4, Nr, Nc))
+    pr, pc = np.arange(sr) + row_offset, np.arange(s)
     for di in (0, 1):
         for dj in (0, 1):
-            v, u = ((p + di) / k)[:, None], ((p + dj) / k)[None, :]      # the corner's local coordinates
-            corner = dev[di:di + n, dj:dj + n].reshape(N, s, N, s)
+            v, u = ((pr + di) / k)[:, None], ((pc + dj) / k)[None, :]    # the corner's local coordinates
+            corner = dev[di:di + rows, dj:dj + n].reshape(Nr, sr, Nc, s)
             for i, mask in enumerate(((v >= u) & (v <= 2.0 - u), (v <= u) & (v >= 2.0 - u),
                                       (v <= u) & (v <= 2.0 - u), (v >= u) & (v >= 2.0 - u))):
                 np.maximum(out[i], corner.max(axis=(1, 3), where=mask[None, :, None, :], initial=0.0), out=out[i])
     return out
+
+
+def with_cell_centres(h: np.ndarray, sides: np.ndarray) -> np.ndarray:
+    """Level-0 side errors (4, N, N) (metres) of a (2N + 1)² sample window raised where dropping a midpoint changes
+    the SE and NW cells (whose fan diagonal runs from the centre post to the corner, where the reference's runs
+    SW-NE): by the distance at the cell's centre between the two diagonals with the midpoints at their heights (a
+    leaf keeping every midpoint draws the reference's cells; where a side's error is 0 the leaf dropping it equals
+    the reference: samples and these crossings are every vertex of the overlay), and by that distance with the
+    midpoints on their edges (|centre post - mean of SW and NE corners| / 2), which a drop makes jump (by at most
+    beta times the bound, as the drop waits until the side meets it by beta)."""
+    se, nw = _centre_terms(h)
+    out = sides.copy()
+    out[0] = np.maximum(out[0], nw)       # W
+    out[1] = np.maximum(out[1], se)       # E
+    out[2] = np.maximum(out[2], se)       # S
+    out[3] = np.maximum(out[3], nw)       # N
+    return out
+
+
+def _centre_terms(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(SE, NW) per level-0 node of a (2N + 1)² sample window: ``with_cell_centres``' terms of its SE and NW cells."""
+    c = h[1::2, 1::2]
+    se = np.abs(0.5 * (c + h[0:-1:2, 2::2]) - 0.5 * (h[0:-1:2, 1::2] + h[1::2, 2::2]))
+    nw = np.abs(0.5 * (c + h[2::2, 0:-1:2]) - 0.5 * (h[1::2, 0:-1:2] + h[2::2, 1::2]))
+    flip = 0.5 * np.abs(c - 0.5 * (h[0:-1:2, 0:-1:2] + h[2::2, 2::2]))
+    return np.maximum(se, flip), np.maximum(nw, flip)
+
+
+def cell_centre_error(h: np.ndarray) -> np.ndarray:
+    """(N, N) per level-0 node of a (2N + 1)² sample window: the larger of its cell-centre terms (metres), which a
+    level-0 node's error in the combined form (both fans in one error) includes, so that it bounds every side."""
+    return np.maximum(*_centre_terms(h))
 
 
 def facing_side_errors(sides: np.ndarray) -> np.ndarray:

@@ -23,7 +23,7 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.stored import LazyGrid, StoredTerrain, open_store
 
-from .periodic_nodes import KINDS, PeriodicNodes, _spans, seam_profiles
+from .periodic_nodes import PeriodicNodes, _spans, seam_profiles
 from .pyramid import _block_reduce, interpolate_clamped
 from .store_prepare import _levels
 
@@ -143,7 +143,7 @@ class PeriodicStore:
         nodes = PeriodicNodes(self.source, self.P, (self.size - 1) // self.P, square, seams, float(info["beta"]),
                               height_range)
         self.attrs["nodes"] = {**info, "levels": nodes.levels, "square": square, "periodic": True}
-        for kind in KINDS:
+        for kind in nodes.kinds:
             for lev in range(nodes.levels):
                 self.arrays[f"nodes/{kind}/{lev}"] = nodes.level(kind, lev)
 

@@ -65,15 +65,15 @@ class _LevelBlocks:
         if at is not None:
             return np.asarray(o.source_blocks[self.level][at[1], at[0]], dtype=np.float32)
         key = o.cut_key(self.level, tx, ty)       # cut before, or a tile at this place in another period
-        return o.cut.get(key, lambda: band_blocks(*o.arrays, self.level, ty, o.n, tx, tx + 1)[0])
+        return o.cut.get(key, lambda: band_blocks(*o.arrays, self.level, ty, o.n, tx, tx + 1, o.codes)[0])
 
 
 class PeriodicBlocks:
     """Node blocks of an extension by pyramid level: the source's where they are equal, else cut (see module)."""
 
     def __init__(self, source_blocks: tuple, arrays: tuple, n: int, period: int, cells: int, levels: int,
-                 budget: int = CUT_BYTES):
-        self.source_blocks, self.arrays = source_blocks, arrays
+                 codes: tuple | None = None, budget: int = CUT_BYTES):
+        self.source_blocks, self.arrays, self.codes = source_blocks, arrays, codes
         self.n, self.period, self.cells = int(n), int(period), int(cells)
         self.cut = ByteLRU(budget)                          # blocks cut near seams, by ``cut_key``
         self._levels = tuple(_LevelBlocks(self, lev) for lev in range(levels))

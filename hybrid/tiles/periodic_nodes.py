@@ -30,6 +30,15 @@ Levels whose nodes are larger than a period: a node's error is at most the terra
 samples), so the saturated error is at most max(E, beta (H + mu)) / beta^(g - G), E the largest flat bound of the
 source's top node level G; their boxes span the source's heights.
 Bounds are rounded up to float32 with a little headroom (``_UP``) for the float32 rounding of the source's values.
+
+A source whose nodes carry side codes (its nodes split on their full fans' errors: ``hybrid.tiles.sidecodes``)
+keeps the combined form beside them (one error over both fans: at least every side, the level-0 diagonal terms
+included). The bounds above are then taken from the combined errors, so a node near a seam holds a combined bound,
+and its side codes are those of that bound (every side read as at least it); every other node is its source node,
+codes included. That mix keeps the selection's rules: a node away from the seams has no child or edge neighbour's
+child near one (so its saturation and the sides facing it are the source's), a node near one bounds the combined
+errors of all of them over beta (which bound their sides and their side-form errors), and a source code read
+against a parent whose error became a bound reads larger, never smaller.
 """
 from __future__ import annotations
 
@@ -39,15 +48,15 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 
-from .byte_lru import ByteLRU
 from .fans import block2, dilate4
 from .pyramid import _block_reduce
+from .sidecodes import side_codes_each
+from .source_chunks import SourceChunks, gather
 
 KINDS = ("effective", "zlo", "zhi")
 _UP = 1.0 + 2.0 ** -21          # relative headroom over float32 rounding (2^-24 per rounded value)
 MAX_WHOLE_NODES = 1 << 26       # a level may be read whole (np.asarray) up to this many nodes
 DEPTH = 2                       # levels below a near-seam node whose bounds tighten its own (``_effective``)
-CHUNK_BYTES = 64 << 20          # decoded chunks of the source's node arrays kept (``SourceChunks``)
 
 
 def _spans(profile: np.ndarray, span: int, fn) -> np.ndarray:
@@ -87,65 +96,6 @@ def _up32(x) -> np.ndarray:
     return np.where(y < x, np.nextafter(y, np.float32(np.inf)), y)
 
 
-def _runs(u: np.ndarray) -> list[tuple[int, int, int, int]]:
-    """Runs of consecutive integers in a sorted unique array: (first, stop, position, position stop)."""
-    cut = np.nonzero(np.diff(u) != 1)[0] + 1
-    starts, stops = np.r_[0, cut], np.r_[cut, len(u)]
-    return [(int(u[a]), int(u[b - 1]) + 1, int(a), int(b)) for a, b in zip(starts, stops)]
-
-
-def _gather(read, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """arr[rows x cols] (float32) of a 2-D array, read as a few rectangular windows: ``read(r0, r1, c0, c1)``."""
-    ur, ir = np.unique(rows, return_inverse=True)
-    uc, ic = np.unique(cols, return_inverse=True)
-    block = np.empty((len(ur), len(uc)), np.float32)
-    for r0, r1, a0, a1 in _runs(ur):
-        for c0, c1, b0, b1 in _runs(uc):
-            block[a0:a1, b0:b1] = read(r0, r1, c0, c1)
-    return block[np.ix_(ir.ravel(), ic.ravel())]
-
-
-class SourceChunks:
-    """Windows of the source store's node arrays (float32 metres), served from their decoded chunks, each read
-    once and kept, least recent out past ``budget`` bytes: a block cut near a seam reads the same few chunks for
-    every local level, kind and tightening level, and neighbouring cuts share them. Thread-safe (a loader thread
-    cuts blocks ahead of the renderer)."""
-
-    def __init__(self, group, budget: int = CHUNK_BYTES):
-        self.group = group
-        self._arrays: dict = {}
-        self.chunks = ByteLRU(budget)                       # decoded chunks by (kind, g, chunk row, chunk column)
-
-    def array(self, kind: str, g: int):
-        """The source's array of a kind at global level g (its handle looked up once)."""
-        key = (kind, g)
-        if key not in self._arrays:
-            self._arrays[key] = self.group[f"nodes/{kind}/{g}"]
-        return self._arrays[key]
-
-    def _chunk(self, kind: str, g: int, cy: int, cx: int) -> np.ndarray:
-        arr = self.array(kind, g)
-        ch, cw = arr.chunks
-        return self.chunks.get((kind, g, cy, cx), lambda: np.asarray(arr[cy * ch:(cy + 1) * ch, cx * cw:(cx + 1) * cw],
-                                                                       dtype=np.float32))
-
-    def window(self, kind: str, g: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
-        """Rows r0..r1-1, columns c0..c1-1 (inside the array) of a kind's level-g array (float32)."""
-        ch, cw = self.array(kind, g).chunks
-        out = np.empty((r1 - r0, c1 - c0), np.float32)
-        for cy in range(r0 // ch, (r1 - 1) // ch + 1):
-            ya, yb = max(r0, cy * ch), min(r1, (cy + 1) * ch)
-            for cx in range(c0 // cw, (c1 - 1) // cw + 1):
-                xa, xb = max(c0, cx * cw), min(c1, (cx + 1) * cw)
-                c = self._chunk(kind, g, cy, cx)
-                out[ya - r0:yb - r0, xa - c0:xb - c0] = c[ya - cy * ch:yb - cy * ch, xa - cx * cw:xb - cx * cw]
-        return out
-
-    def reader(self, kind: str, g: int):
-        """``read(r0, r1, c0, c1)`` of a kind's level-g array, for ``_gather``."""
-        return lambda r0, r1, c0, c1: self.window(kind, g, r0, r1, c0, c1)
-
-
 def _nbr3(v: np.ndarray, fn) -> np.ndarray:
     """fn over each inner element's 3x3 neighbourhood of a (h + 2, w + 2) array: (h, w)."""
     h, w = v.shape[0] - 2, v.shape[1] - 2
@@ -179,11 +129,16 @@ class PeriodicNodes:
         self._spans: dict = {}
         self._top: tuple | None = None
         self.source_chunks = SourceChunks(source)
+        # a source with side codes: near the seams its nodes take bounds of the combined form (one error over both
+        # fans, which bounds every side) from its ``combined`` arrays, and codes from those bounds
+        self.sides = dict(source.attrs.get("nodes") or {}).get("form") == "sides"
+        self.bounds = "combined" if self.sides else "effective"
+        self.kinds = KINDS + (("sides",) if self.sides else ())
 
     def level(self, kind: str, g: int) -> "NodeLevel":
         """The lazy array of kind ``effective``, ``zlo`` or ``zhi`` (metres, float32) at global level g."""
-        if kind not in KINDS or not 0 <= g < self.levels:
-            raise TerrabenchError(f"no periodic node array {kind!r} at level {g} (kinds {KINDS}, levels "
+        if kind not in self.kinds or not 0 <= g < self.levels:
+            raise TerrabenchError(f"no periodic node array {kind!r} at level {g} (kinds {self.kinds}, levels "
                                   f"0..{self.levels - 1})")
         return NodeLevel(self, kind, g)
 
@@ -201,7 +156,7 @@ class PeriodicNodes:
         """(base error, zlo, zhi) of the levels above the source's: base / beta^(g - G) bounds level g's errors."""
         if self._top is None:
             G = self.src_levels - 1
-            eff = float(np.asarray(self.source[f"nodes/effective/{G}"][:, :], dtype=np.float64).max())
+            eff = float(np.asarray(self.source[f"nodes/{self.bounds}/{G}"][:, :], dtype=np.float64).max())
             zlo = float(np.asarray(self.source[f"nodes/zlo/{G}"][:, :]).min())
             zhi = float(np.asarray(self.source[f"nodes/zhi/{G}"][:, :]).max())
             step = float(self.profiles.row_step.max() + self.profiles.col_step.max())
@@ -240,7 +195,7 @@ class PeriodicNodes:
             lo = None if wrap == "below" else 0
             rr, rc = (self._rho(np.clip(i, lo, total - 1), T, False) for i in (ri, ci))
             ok_r, ok_c = ((i < total) & ((i >= 0) | (lo is None)) for i in (ri, ci))
-        vals = _gather(self.source_chunks.reader(kind, g), rr, rc).astype(np.float64)
+        vals = gather(self.source_chunks.reader(kind, g), rr, rc).astype(np.float64)
         return vals, ri, ci, rr, rc, ok_r, ok_c
 
     def _flat(self, g: int, r0: int, r1: int, c0: int, c1: int, wrap) -> np.ndarray:
@@ -248,7 +203,7 @@ class PeriodicNodes:
         do not count, as ``_read``): the source's value, or near a seam the largest over the 3x3 neighbourhood
         plus (2 D + mu) / beta^g."""
         T = self.P >> (g + 1)
-        vals, ri, ci, rr, rc, ok_r, ok_c = self._read("effective", g, r0 - 1, r1 + 1, c0 - 1, c1 + 1, wrap)
+        vals, ri, ci, rr, rc, ok_r, ok_c = self._read(self.bounds, g, r0 - 1, r1 + 1, c0 - 1, c1 + 1, wrap)
         vals[~ok_r, :] = -np.inf
         vals[:, ~ok_c] = -np.inf
         near_r, near_c = (self._near(i[1:-1], T, g, "effective", wrap is True) for i in (ri, ci))
@@ -270,7 +225,7 @@ class PeriodicNodes:
         if g and not depth:
             return self._flat(g, r0, r1, c0, c1, True)
         T = self.P >> (g + 1)
-        vals, ri, ci, rr, rc, _, _ = self._read("effective", g, r0, r1, c0, c1, True)
+        vals, ri, ci, rr, rc, _, _ = self._read(self.bounds, g, r0, r1, c0, c1, True)
         near_r, near_c = (self._near(i, T, g, "effective", True) for i in (ri, ci))
         sp = self._level_spans(g)
         seam_r, seam_c = ri % T == T - 1, ci % T == T - 1               # touching a row / column seam
@@ -289,7 +244,7 @@ class PeriodicNodes:
         whose nodes that pattern does not describe."""
         T = self.P >> (g + 1)
         ri, ci = np.arange(r0, r1), np.arange(c0, c1)
-        out = _gather(self.source_chunks.reader("effective", g), self._rho(ri, T, False), self._rho(ci, T, False))
+        out = gather(self.source_chunks.reader("effective", g), self._rho(ri, T, False), self._rho(ci, T, False))
         near_r, near_c = self._near(ri, T, g, "effective"), self._near(ci, T, g, "effective")
         locs = [T - 1, T] if g else [T - 1]                          # near a seam: local T-1, and 0 from level 1
         if near_c.any():
@@ -310,9 +265,40 @@ class PeriodicNodes:
                 out = np.where(pad_r[:, None] | pad_c[None, :], flat, out)
         return out
 
+    def _near_window(self, g: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
+        """Which nodes of a window of level g (s <= P) ``_effective_window`` gives bounds, not the source's value."""
+        T, total = self.P >> (g + 1), self.square >> (g + 1)
+        ri, ci = np.arange(r0, r1), np.arange(c0, c1)
+        near = self._near(ri, T, g, "effective")[:, None] | self._near(ci, T, g, "effective")[None, :]
+        if self.k * T < total:
+            near |= (ri >= self.k * T - 1)[:, None] | (ci >= self.k * T - 1)[None, :]
+        return near
+
+    def _codes_window(self, g: int, r0: int, r1: int, c0: int, c1: int, shape) -> np.ndarray:
+        """Side codes (``hybrid.tiles.sidecodes``) of a window of level g: the source's where the node is the
+        source's, else codes of the node's own error bound (the combined form's: at least every side error) against
+        its parent's served error; a source code read against a parent whose error became a bound reads larger."""
+        if not shape[0] or not shape[1]:
+            return np.zeros(shape, np.float32)
+        own = self.window("effective", g, r0, r1, c0, c1)
+        parent = None
+        if g + 1 < self.levels:
+            pr0, pc0 = r0 // 2, c0 // 2
+            p = self.window("effective", g + 1, pr0, (r1 - 1) // 2 + 1, pc0, (c1 - 1) // 2 + 1)
+            parent = p[np.ix_(np.arange(r0, r1) // 2 - pr0, np.arange(c0, c1) // 2 - pc0)]
+        coded = side_codes_each(np.broadcast_to(own, (4,) + own.shape), own, parent)
+        if g >= self.src_levels:
+            return coded
+        T = self.P >> (g + 1)
+        src = gather(self.source_chunks.reader("sides", g), self._rho(np.arange(r0, r1), T, False),
+                      self._rho(np.arange(c0, c1), T, False))
+        return np.where(self._near_window(g, r0, r1, c0, c1), coded, src)
+
     def window(self, kind: str, g: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
         """Nodes rows r0..r1-1, columns c0..c1-1 of a level (float32, metres)."""
         shape = (max(r1 - r0, 0), max(c1 - c0, 0))
+        if kind == "sides":
+            return self._codes_window(g, r0, r1, c0, c1, shape)
         if g >= self.src_levels:
             base, zlo, zhi = self._top_values()
             value = {"zlo": zlo, "zhi": zhi}.get(kind)

@@ -4,8 +4,8 @@ the GPU, and a tile store's copy of them, one chunk a tile (``nodes/blocks/<leve
 A tile of n cells at pyramid level l holds, for each local level m (nodes of 2^(m+1) tile cells, global level
 l + m of the node arrays), its (n >> (m+1))² nodes with a one-node apron on every side, row by row from the
 south: columns E (effective error, metres), zlo, zhi (box height range, metres above the origin z) and inside
-(0 for an apron node beyond the node square; inside it 1, or for an in-memory terrain 1 plus the node's side
-error codes, ``raster.nodes.side_codes``). Cut from the store's node arrays
+(0 for an apron node beyond the node square; inside it 1 plus the node's side error codes,
+``hybrid.tiles.sidecodes``, or 1 in a store prepared before they were). Cut from the store's node arrays
 (``hybrid.tiles.store_nodes``), a block needs one read per local level and array, each of a window that
 spans many small chunks; the stored blocks make a tile's upload one read of one chunk.
 """
@@ -51,8 +51,10 @@ def band_blocks(effective, zlo, zhi, level: int, ty: int, n: int, tx0: int, tx1:
 def build_blocks(g, n: int, max_level: int, mark) -> None:
     """Write ``nodes/blocks/<level>`` (tiles y, tiles x, nodes, 4) of a store group whose node arrays are written,
     one chunk a tile, a tile row a band; ``mark(key, count, what)`` records each band (and may interrupt)."""
-    levels = int(dict(g.attrs["nodes"])["levels"])
+    info = dict(g.attrs["nodes"])
+    levels = int(info["levels"])
     arrays = tuple(tuple(g[f"nodes/{k}/{lev}"] for lev in range(levels)) for k in ("effective", "zlo", "zhi"))
+    codes = tuple(g[f"nodes/sides/{lev}"] for lev in range(levels)) if info.get("form") == "sides" else None
     length = int(block_offsets(n)[-1])
     for level in range(max_level + 1):
         ty_n, tx_n = g[f"zmin/{level}"].shape
@@ -61,7 +63,7 @@ def build_blocks(g, n: int, max_level: int, mark) -> None:
                                                        chunks=(1, 1, length, COLUMNS), dtype="f4", fill_value=0.0)
         key = f"blocks:{level}"
         for ty in range(int(dict(g.attrs["progress"]).get(key, 0)), ty_n):
-            out[ty] = band_blocks(*arrays, level, ty, n, 0, tx_n)
+            out[ty] = band_blocks(*arrays, level, ty, n, 0, tx_n, codes)
             mark(key, ty + 1, f"node blocks, level {level} row {ty + 1}")
     g.attrs.update({"node_blocks": True})
 

@@ -1,40 +1,49 @@
 """The raster strategies' node arrays of a tile store, built out of core (``prepare_store`` calls ``build_nodes``).
 
-They are the arrays ``raster.nodes.GlobalNodes`` holds in its combined form (``global_nodes(side_errors=False)``:
-one error over a node's full and stitched fans, no side codes; an in-memory terrain's split on the full fan's
-error with side codes, ``raster.quadtree``), over the same padded square of R = N * 2^L cells (the
-grid's edge samples repeated): per global level g (nodes of 2^(g+1) level-0 cells, (R >> (g+1))² of them)
-``nodes/effective/<g>`` (saturated effective error, metres), ``nodes/zlo/<g>`` and ``nodes/zhi/<g>`` (height range
-of the node's box, its square grown by its side, metres relative to the origin z), float32, chunked.
+They are the arrays ``raster.nodes.GlobalNodes`` holds (``global_nodes``: nodes split on their full fans' errors,
+with their stitched triangles' errors as side codes, ``hybrid.tiles.sidecodes``), over the same padded square of
+R = N * 2^L cells (the grid's edge samples repeated): per global level g (nodes of 2^(g+1) level-0 cells,
+(R >> (g+1))² of them) ``nodes/effective/<g>`` (saturated effective error, metres), ``nodes/sides/<g>`` (the
+side codes against level g+1's effective errors), ``nodes/zlo/<g>`` and ``nodes/zhi/<g>`` (height range of the
+node's box, its square grown by its side, metres relative to the origin z), float32, chunked; and
+``nodes/combined/<g>``, the saturated error of the combined form (``global_nodes(side_errors=False)``: one error
+over both fans, which bounds every side), from which a periodic extension takes the bounds of its nodes near its
+seams (``hybrid.tiles.periodic_nodes``).
 
 How, band by band:
 - Direct errors, levels whose nodes span at most NODE_EXACT_SPAN cells: blocks of that many cells of the padded
   square are read from level 0 (clamped at the grid's edges) and every fan deviation is measured at every
-  sample (``hybrid.tiles.fans``: the same floating-point operations as over the whole square), so these errors
-  are exactly those of ``global_nodes``.
+  sample (``hybrid.tiles.fans``: the same floating-point operations as over the whole square), the full fan's,
+  both fans' and each stitched triangle's, so these errors and codes are exactly those of ``global_nodes``.
 - Larger nodes are bounded, not measured: for x in child C of node P, |F_P(x) - h(x)| <= |F_P(x) - F_C(x)| +
   |F_C(x) - h(x)|. C's full fan refines both of P's fans on C (its eight triangles are cut by C's diagonals
   and midlines, and P's fans are linear on each of them), so |F_P - F_C| peaks at C's 3x3 posts, where F_C is
   the samples: the bound is P's fan deviation at the level-(g-1) posts plus the child's error (exact or bound),
   plus 16 ulps of the largest height for float64 rounding, rounded up to float32. It is never below the exact
   value (tested), so a node never splits later than it should; it may split earlier. These levels hold at most
-  (R / 2048)² nodes, so each is computed whole, from the posts of the stored level nearest below.
-- Then per level, from the level below: errors made monotone, effective errors saturated (``dilate4``, 1/beta),
-  height ranges min/max of the children, boxes the 3x3 range (``grow3``), each band reading its rows plus one
-  node of apron. Intermediate float64 arrays live in ``nodes/tmp`` until the last level is written.
+  (R / 2048)² nodes, so each is computed whole, from the posts of the stored level nearest below. With the
+  child's full-fan error the bound is one of both of P's fans, so of every side too (its four side errors).
+- Then per level, from the level below: errors made monotone and raised to the side errors facing the node,
+  effective errors saturated (``dilate4``, 1/beta, the facing sides too), each form in turn, height ranges
+  min/max of the children, boxes the 3x3 range (``grow3``), each band reading its rows plus an apron; a level's
+  side codes once its parents' float32 errors are written. Intermediate float64 arrays live in ``nodes/tmp``
+  until the last level is written.
 
 Progress is recorded after every band (attribute ``progress``), so an interrupted build resumes; the store's
-``nodes`` attribute (beta, levels, square, exact span) is written when all levels are.
+``nodes`` attribute (beta, levels, square, exact span, form "sides") is written when all levels are.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .fans import block2, cell_max, dilate4, fan_deviation, grow3
+from .fans import (block2, cell_centre_error, cell_max, dilate4, facing_side_errors, fan_deviation, fans_at, grow3,
+                   side_maxima, with_cell_centres)
+from .sidecodes import side_codes
 
 NODE_EXACT_SPAN = 1024          # node sides (level-0 cells) up to which node errors are measured exactly
 SLICE_ROWS = 128                # sample rows measured at once inside a block (memory bound)
-NODE_BAND = 1 << 20             # nodes per band of a level's pass (memory bound)
+NODE_BAND = 1 << 19             # nodes per band of a level's pass (memory bound)
+SIDE_NODES = 1 << 17            # nodes whose side errors are worked on at once (memory bound: 4 float64 each)
 CHUNK = 512                     # chunk side of the build's working arrays (nodes)
 MIN_CHUNK = 8                   # smallest chunk side of the final node arrays (nodes)
 
@@ -64,7 +73,7 @@ def node_bands(R: int) -> int:
     for g in range(levels):
         total = R >> (g + 1)
         out += 2 * -(-total // _band_rows(total, g <= gx))
-    return out
+    return out + 1                                  # the top level's side codes
 
 
 def _window(lv0, rows: int, cols: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
@@ -88,33 +97,39 @@ def tile_chunk(n: int, level: int) -> int:
     return max(MIN_CHUNK, n >> (level + 1))
 
 
-def _direct_band(lv0, rows, cols, R, B, gx, br) -> tuple[list, np.ndarray, np.ndarray]:
-    """One band of B cell rows: direct errors of every exact level ((B / s) x (R / s) per level) and level 0's
-    node height ranges."""
+def _direct_block(lv0, rows, cols, R, B, gx, br, c0) -> tuple[list, list, list, np.ndarray, np.ndarray]:
+    """One block of B x B cells (band br, first column c0): per exact level ((B / s)² nodes) the direct errors of
+    both fans together, of the full fan alone and of the stitched fan's four triangles ((4, B / s, B / s), level
+    0's with the cell centres' terms), and level 0's node height ranges."""
     r0 = br * B
-    direct = [np.zeros((B >> (g + 1), R >> (g + 1))) for g in range(gx + 1)]
-    zmin = np.empty((B // 2, R // 2), np.float32)
-    zmax = np.empty((B // 2, R // 2), np.float32)
+    shape = [(B >> (g + 1), B >> (g + 1)) for g in range(gx + 1)]
+    direct, full = [np.zeros(sh) for sh in shape], [np.zeros(sh) for sh in shape]
+    sides = [np.zeros((4,) + sh) for sh in shape]
     S = min(SLICE_ROWS, B)
-    for c0 in range(0, R, B):
-        w = _window(lv0, rows, cols, r0, r0 + B + 1, c0, c0 + B + 1)
-        cols_idx = np.arange(c0, c0 + B + 1)
-        cmin = np.minimum(np.minimum(w[:-1, :-1], w[:-1, 1:]), np.minimum(w[1:, :-1], w[1:, 1:]))
-        cmax = np.maximum(np.maximum(w[:-1, :-1], w[:-1, 1:]), np.maximum(w[1:, :-1], w[1:, 1:]))
-        zmin[:, c0 // 2:(c0 + B) // 2] = block2(cmin, np.min)
-        zmax[:, c0 // 2:(c0 + B) // 2] = block2(cmax, np.max)
-        del cmin, cmax
-        for g in range(gx + 1):
-            s = 2 << g
-            out = direct[g][:, c0 // s:(c0 + B) // s]
-            for i0 in range(0, B, S):
-                rows_idx = np.arange(r0 + i0, r0 + i0 + S + 1)
-                dcell = cell_max(fan_deviation(w, r0, c0, rows_idx, cols_idx, g, R))
-                sr = min(s, S)
-                part = dcell.reshape(S // sr, sr, B // s, s).max(axis=(1, 3))
-                a = i0 // s
+    w = _window(lv0, rows, cols, r0, r0 + B + 1, c0, c0 + B + 1)
+    cols_idx = np.arange(c0, c0 + B + 1)
+    cmin = np.minimum(np.minimum(w[:-1, :-1], w[:-1, 1:]), np.minimum(w[1:, :-1], w[1:, 1:]))
+    cmax = np.maximum(np.maximum(w[:-1, :-1], w[:-1, 1:]), np.maximum(w[1:, :-1], w[1:, 1:]))
+    zmin, zmax = block2(cmin, np.min).astype(np.float32), block2(cmax, np.max).astype(np.float32)
+    del cmin, cmax
+    for g in range(gx + 1):
+        s = 2 << g
+        for i0 in range(0, B, S):
+            rows_idx = np.arange(r0 + i0, r0 + i0 + S + 1)
+            f, st = fans_at(w, r0, c0, rows_idx, cols_idx, g, R)
+            own = w[np.ix_(rows_idx - r0, cols_idx - c0)]
+            df, ds = np.abs(f - own), np.abs(st - own)
+            del f, st, own
+            sr = min(s, S)
+            a = i0 // s
+            for out, dev in ((direct[g], np.maximum(df, ds)), (full[g], df)):
+                part = cell_max(dev).reshape(S // sr, sr, B // s, s).max(axis=(1, 3))
                 np.maximum(out[a:a + part.shape[0]], part, out=out[a:a + part.shape[0]])
-    return direct, zmin, zmax
+            part = side_maxima(ds, g, i0 % s if S < s else 0)
+            np.maximum(sides[g][:, a:a + part.shape[1]], part, out=sides[g][:, a:a + part.shape[1]])
+    sides[0] = with_cell_centres(w, sides[0])
+    direct[0] = np.maximum(direct[0], cell_centre_error(w))
+    return direct, full, sides, zmin, zmax
 
 
 def _bound(levels_of, R: int, L: int, lev: int, kids_err: np.ndarray, margin: float) -> np.ndarray:
@@ -130,6 +145,20 @@ def _bound(levels_of, R: int, L: int, lev: int, kids_err: np.ndarray, margin: fl
     return block2(post + kids_err, np.max) + margin
 
 
+def _facing(sides_below, a0: int, a1: int, total: int) -> np.ndarray:
+    """Per node of rows a0..a1-1 of a level (``total`` rows), the largest facing side error of the level below
+    (``facing_side_errors``, its 2 x 2 maximum), from that level's (4, 2 total, cols) side errors read with an even
+    apron of two rows, so each row's neighbours are those of the whole level; a few rows at a time (memory)."""
+    step = max(1, SIDE_NODES // max(sides_below.shape[2], 1) // 2)
+    out = []
+    for b0 in range(a0, a1, step):
+        b1 = min(b0 + step, a1)
+        lo, hi = max(2 * b0 - 2, 0), min(2 * b1 + 2, 2 * total)
+        f = facing_side_errors(np.asarray(sides_below[:, lo:hi, :]))[2 * b0 - lo:2 * b1 - lo]
+        out.append(block2(f, np.max))
+    return np.concatenate(out, axis=0)
+
+
 def build_nodes(g, rows: int, cols: int, n: int, max_level: int, beta: float, mark) -> None:
     """Write the node arrays of a store group ``g`` whose levels are written; ``mark(key, count, what)`` records
     a band's progress (and may raise KeyboardInterrupt)."""
@@ -140,13 +169,26 @@ def build_nodes(g, rows: int, cols: int, n: int, max_level: int, beta: float, ma
     hr = g.attrs["height_range"]
     margin = 16 * np.finfo(np.float64).eps * max(abs(float(hr[0])), abs(float(hr[1])), 1.0)
     tmp = lambda kind, lev: f"nodes/tmp/{kind}/{lev}"  # noqa: E731
+
+    def side_array(lev):
+        name, total = tmp("sides", lev), R >> (lev + 1)
+        if name in g:
+            return g[name]
+        c = min(total, CHUNK)
+        return g.create_array(name, shape=(4, total, total), chunks=(4, c, c), dtype="f8", fill_value=np.nan)
+
     for br in range(progress("nodes:direct"), R // B):
-        direct, zmin, zmax = _direct_band(lv0, rows, cols, R, B, gx, br)
-        for lev, d in enumerate(direct):
-            _array(g, tmp("direct", lev), R >> (lev + 1), "f8")[br * d.shape[0]:(br + 1) * d.shape[0], :] = d
-        for kind, z in (("zmin", zmin), ("zmax", zmax)):
-            _array(g, tmp(kind, 0), R // 2, "f4")[br * (B // 2):(br + 1) * (B // 2), :] = z
+        for c0 in range(0, R, B):                             # a block of B x B cells at a time
+            direct, full, sides, zmin, zmax = _direct_block(lv0, rows, cols, R, B, gx, br, c0)
+            for lev, (d, f, sd) in enumerate(zip(direct, full, sides)):
+                at = (slice(br * d.shape[0], (br + 1) * d.shape[0]), slice(c0 >> (lev + 1), (c0 + B) >> (lev + 1)))
+                _array(g, tmp("direct", lev), R >> (lev + 1), "f8")[at] = d
+                _array(g, tmp("full", lev), R >> (lev + 1), "f8")[at] = f
+                side_array(lev)[(slice(None),) + at] = sd
+            for kind, z in (("zmin", zmin), ("zmax", zmax)):
+                _array(g, tmp(kind, 0), R // 2, "f4")[br * (B // 2):(br + 1) * (B // 2), c0 // 2:(c0 + B) // 2] = z
         mark("nodes:direct", br + 1, f"node errors, band {br + 1}")
+    kinds = ("error", "eff", "serror", "seff", "zmin", "zmax")
     for lev in range(levels):
         total = R >> (lev + 1)
         exact = lev <= gx
@@ -156,49 +198,77 @@ def build_nodes(g, rows: int, cols: int, n: int, max_level: int, beta: float, ma
         done = progress(key)
         if done >= 2 * len(starts):
             continue
-        arr = {k: _array(g, tmp(k, lev), total, "f4" if k.startswith("z") else "f8")
-               for k in ("error", "eff", "zmin", "zmax")}
-        below = {k: g[tmp(k, lev - 1)] for k in ("error", "eff", "zmin", "zmax")} if lev else None
+        arr = {k: _array(g, tmp(k, lev), total, "f4" if k.startswith("z") else "f8") for k in kinds}
+        below = {k: g[tmp(k, lev - 1)] for k in kinds} if lev else None
         for i, a0 in enumerate(starts):                       # pass 1: errors, effective errors, ranges
             if i < done:
                 continue
             a1 = min(a0 + hb, total)
             if lev == 0:
-                e = np.asarray(g[tmp("direct", 0)][a0:a1, :])
-                eff = e
-            else:
-                kids = np.asarray(below["error"][2 * a0:2 * a1, :])
-                if exact:
-                    e = np.maximum(np.asarray(g[tmp("direct", lev)][a0:a1, :]), block2(kids, np.max))
-                else:
-                    e = _bound(lambda l: g[f"levels/{l}"], R, max_level, lev, kids, margin)
-                lo, hi = max(2 * a0 - 1, 0), min(2 * a1 + 1, 2 * total)
-                d = dilate4(np.asarray(below["eff"][lo:hi, :]))[2 * a0 - lo:2 * a1 - lo]
-                eff = np.maximum(e, block2(d, np.max) / beta)
-                arr["zmin"][a0:a1, :] = block2(np.asarray(below["zmin"][2 * a0:2 * a1, :]), np.min)
-                arr["zmax"][a0:a1, :] = block2(np.asarray(below["zmax"][2 * a0:2 * a1, :]), np.max)
-            if lev == 0:
+                for k, src in (("error", "direct"), ("eff", "direct"), ("serror", "full"), ("seff", "full")):
+                    arr[k][a0:a1, :] = np.asarray(g[tmp(src, 0)][a0:a1, :])
                 arr["zmin"][a0:a1, :] = np.asarray(g[tmp("zmin", 0)][a0:a1, :])
                 arr["zmax"][a0:a1, :] = np.asarray(g[tmp("zmax", 0)][a0:a1, :])
-            arr["error"][a0:a1, :] = e
-            arr["eff"][a0:a1, :] = eff
+            else:
+                facing = _facing(side_array(lev - 1), a0, a1, total)
+                lo, hi = max(2 * a0 - 1, 0), min(2 * a1 + 1, 2 * total)
+                # the combined form (both fans in one error), then the side-error form (full fans, sides facing)
+                for err, eff, direct, with_sides in (("error", "eff", "direct", False), ("serror", "seff", "full", True)):
+                    kids = np.asarray(below[err][2 * a0:2 * a1, :])
+                    if exact:
+                        e = np.maximum(np.asarray(g[tmp(direct, lev)][a0:a1, :]), block2(kids, np.max))
+                    else:                                     # a bound of both fans, so of every side too
+                        e = _bound(lambda l: g[f"levels/{l}"], R, max_level, lev, kids, margin)
+                        if with_sides:
+                            side_array(lev)[:, a0:a1, :] = np.broadcast_to(e, (4,) + e.shape)
+                    del kids
+                    d = block2(dilate4(np.asarray(below[eff][lo:hi, :]))[2 * a0 - lo:2 * a1 - lo], np.max)
+                    if with_sides:
+                        e = np.maximum(e, facing)
+                        d = np.maximum(d, facing)
+                    arr[err][a0:a1, :] = e
+                    arr[eff][a0:a1, :] = np.maximum(e, d / beta)
+                    del e, d
+                arr["zmin"][a0:a1, :] = block2(np.asarray(below["zmin"][2 * a0:2 * a1, :]), np.min)
+                arr["zmax"][a0:a1, :] = block2(np.asarray(below["zmax"][2 * a0:2 * a1, :]), np.max)
             mark(key, i + 1, f"node level {lev}, band {i + 1}")
-        final = {k: _array(g, f"nodes/{k}/{lev}", total, "f4", tile_chunk(n, lev)) for k in ("effective", "zlo", "zhi")}
-        for i, a0 in enumerate(starts):                       # pass 2: float32 errors, 3x3 box ranges
+        final = {k: _array(g, f"nodes/{k}/{lev}", total, "f4", tile_chunk(n, lev))
+                 for k in ("effective", "combined", "zlo", "zhi")}
+        for i, a0 in enumerate(starts):                       # pass 2: float32 errors, 3x3 box ranges, codes
             if len(starts) + i < done:
                 continue
             a1 = min(a0 + hb, total)
-            e64 = np.asarray(arr["eff"][a0:a1, :])
-            e32 = e64.astype(np.float32)
-            if not exact:                                     # a bound stays a bound in float32
-                e32 = np.where(e32 < e64, np.nextafter(e32, np.float32(np.inf)), e32)
-            final["effective"][a0:a1, :] = e32
+            e32 = {}
+            for kind, src in (("effective", "seff"), ("combined", "eff")):
+                e64 = np.asarray(arr[src][a0:a1, :])
+                e32[kind] = e64.astype(np.float32)
+                if not exact:                                 # a bound stays a bound in float32
+                    e32[kind] = np.where(e32[kind] < e64, np.nextafter(e32[kind], np.float32(np.inf)), e32[kind])
+                final[kind][a0:a1, :] = e32[kind]
             lo, hi = max(a0 - 1, 0), min(a1 + 1, total)
             for kind, src, fn in (("zlo", "zmin", np.minimum), ("zhi", "zmax", np.maximum)):
                 # the slab's own edges repeat only where they are the square's; other rows are the apron
                 final[kind][a0:a1, :] = grow3(np.asarray(arr[src][lo:hi, :]), fn)[a0 - lo:a1 - lo]
+            if lev:                                           # the level below's side codes, against these errors
+                _write_codes(g, side_array(lev - 1), lev - 1, 2 * a0, 2 * a1, e32["effective"], tile_chunk(n, lev - 1))
             mark(key, len(starts) + i + 1, f"node boxes {lev}, band {i + 1}")
-    g.attrs.update({"nodes": {"beta": float(beta), "levels": levels, "square": R,
-                              "exact_span": B}})
+    if not progress("nodes:codes"):                           # the root level's: no parent
+        top = levels - 1
+        _write_codes(g, side_array(top), top, 0, 1, None, tile_chunk(n, top))
+        mark("nodes:codes", 1, "side codes")
+    g.attrs.update({"nodes": {"beta": float(beta), "levels": levels, "square": R, "exact_span": B, "form": "sides"}})
     if "nodes/tmp" in g:
         del g["nodes/tmp"]
+
+
+def _write_codes(g, sides, lev: int, r0: int, r1: int, parent, chunk: int) -> None:
+    """Rows r0..r1-1 (r0 even) of level ``lev``'s side codes (``nodes/sides/<lev>``, float32) from its side errors,
+    its float32 effective errors and its parents' (rows r0/2.., float32; None: the root, no parent), a few rows at a
+    time (memory)."""
+    total = g[f"nodes/effective/{lev}"].shape[0]
+    out = _array(g, f"nodes/sides/{lev}", total, "f4", chunk)
+    step = 2 * max(1, SIDE_NODES // total // 2)
+    for b0 in range(r0, r1, step):
+        b1 = min(b0 + step, r1)
+        p = None if parent is None else parent[(b0 - r0) // 2:(b1 - r0 + 1) // 2]
+        out[b0:b1, :] = side_codes(np.asarray(sides[:, b0:b1, :]), np.asarray(g[f"nodes/effective/{lev}"][b0:b1, :]), p)

@@ -1,0 +1,68 @@
+"""Windows of a tile store's node arrays read through their decoded chunks, kept in a byte-bounded LRU: what a periodic
+extension (``hybrid.tiles.periodic_nodes``) reads of its source's arrays, a few small chunks many times over."""
+from __future__ import annotations
+
+import numpy as np
+
+from .byte_lru import ByteLRU
+
+CHUNK_BYTES = 64 << 20          # decoded chunks of the source's node arrays kept (``SourceChunks``)
+
+
+def _runs(u: np.ndarray) -> list[tuple[int, int, int, int]]:
+    """Runs of consecutive integers in a sorted unique array: (first, stop, position, position stop)."""
+    cut = np.nonzero(np.diff(u) != 1)[0] + 1
+    starts, stops = np.r_[0, cut], np.r_[cut, len(u)]
+    return [(int(u[a]), int(u[b - 1]) + 1, int(a), int(b)) for a, b in zip(starts, stops)]
+
+
+def gather(read, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """arr[rows x cols] (float32) of a 2-D array, read as a few rectangular windows: ``read(r0, r1, c0, c1)``."""
+    ur, ir = np.unique(rows, return_inverse=True)
+    uc, ic = np.unique(cols, return_inverse=True)
+    block = np.empty((len(ur), len(uc)), np.float32)
+    for r0, r1, a0, a1 in _runs(ur):
+        for c0, c1, b0, b1 in _runs(uc):
+            block[a0:a1, b0:b1] = read(r0, r1, c0, c1)
+    return block[np.ix_(ir.ravel(), ic.ravel())]
+
+
+class SourceChunks:
+    """Windows of the source store's node arrays (float32 metres), served from their decoded chunks, each read
+    once and kept, least recent out past ``budget`` bytes: a block cut near a seam reads the same few chunks for
+    every local level, kind and tightening level, and neighbouring cuts share them. Thread-safe (a loader thread
+    cuts blocks ahead of the renderer)."""
+
+    def __init__(self, group, budget: int = CHUNK_BYTES):
+        self.group = group
+        self._arrays: dict = {}
+        self.chunks = ByteLRU(budget)                       # decoded chunks by (kind, g, chunk row, chunk column)
+
+    def array(self, kind: str, g: int):
+        """The source's array of a kind at global level g (its handle looked up once)."""
+        key = (kind, g)
+        if key not in self._arrays:
+            self._arrays[key] = self.group[f"nodes/{kind}/{g}"]
+        return self._arrays[key]
+
+    def _chunk(self, kind: str, g: int, cy: int, cx: int) -> np.ndarray:
+        arr = self.array(kind, g)
+        ch, cw = arr.chunks
+        return self.chunks.get((kind, g, cy, cx), lambda: np.asarray(arr[cy * ch:(cy + 1) * ch, cx * cw:(cx + 1) * cw],
+                                                                       dtype=np.float32))
+
+    def window(self, kind: str, g: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
+        """Rows r0..r1-1, columns c0..c1-1 (inside the array) of a kind's level-g array (float32)."""
+        ch, cw = self.array(kind, g).chunks
+        out = np.empty((r1 - r0, c1 - c0), np.float32)
+        for cy in range(r0 // ch, (r1 - 1) // ch + 1):
+            ya, yb = max(r0, cy * ch), min(r1, (cy + 1) * ch)
+            for cx in range(c0 // cw, (c1 - 1) // cw + 1):
+                xa, xb = max(c0, cx * cw), min(c1, (cx + 1) * cw)
+                c = self._chunk(kind, g, cy, cx)
+                out[ya - r0:yb - r0, xa - c0:xb - c0] = c[ya - cy * ch:yb - cy * ch, xa - cx * cw:xb - cx * cw]
+        return out
+
+    def reader(self, kind: str, g: int):
+        """``read(r0, r1, c0, c1)`` of a kind's level-g array, for ``gather``."""
+        return lambda r0, r1, c0, c1: self.window(kind, g, r0, r1, c0, c1)
