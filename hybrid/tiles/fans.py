@@ -82,15 +82,15 @@ def side_maxima(dev: np.ndarray, m: int, row_offset: int = 0) -> np.ndarray:
     k, s = 1 << m, 2 << m
     sr = min(s, rows)
     Nr, Nc = rows // sr, n // s
-    out = np.zeros((4, Nr, Nc))
-    pr, pc = np.arange(sr) + row_offset, np.arange(s)
-    for di in (0, 1):
-        for dj in (0, 1):
-            v, u = ((pr + di) / k)[:, None], ((pc + dj) / k)[None, :]    # the corner's local coordinates
-            corner = dev[di:di + rows, dj:dj + n].reshape(Nr, sr, Nc, s)
-            for i, mask in enumerate(((v >= u) & (v <= 2.0 - u), (v <= u) & (v >= 2.0 - u),
-                                      (v <= u) & (v <= 2.0 - u), (v >= u) & (v >= 2.0 - u))):
-                np.maximum(out[i], corner.max(axis=(1, 3), where=mask[None, :, None, :], initial=0.0), out=out[i])
+    # each node's samples, its borders included (shared with its neighbours): (Nr, sr + 1, Nc, s + 1)
+    ri = (np.arange(Nr)[:, None] * sr + np.arange(sr + 1)[None, :]).ravel()
+    ci = (np.arange(Nc)[:, None] * s + np.arange(s + 1)[None, :]).ravel()
+    win = dev[np.ix_(ri, ci)].reshape(Nr, sr + 1, Nc, s + 1)
+    v, u = ((np.arange(sr + 1) + row_offset) / k)[:, None], (np.arange(s + 1) / k)[None, :]   # local coordinates
+    out = np.empty((4, Nr, Nc))
+    for i, mask in enumerate(((v >= u) & (v <= 2.0 - u), (v <= u) & (v >= 2.0 - u),
+                              (v <= u) & (v <= 2.0 - u), (v >= u) & (v >= 2.0 - u))):
+        out[i] = win.max(axis=(1, 3), where=mask[None, :, None, :], initial=0.0)
     return out
 
 

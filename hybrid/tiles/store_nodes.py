@@ -88,7 +88,11 @@ def _array(g, name: str, total: int, dtype: str, chunk: int = CHUNK):
     if name in g:
         return g[name]
     c = min(total, chunk)
-    return g.create_array(name, shape=(total, total), chunks=(c, c), dtype=dtype, fill_value=np.nan)
+    return g.create_array(name, shape=(total, total), chunks=(c, c), dtype=dtype, fill_value=np.nan,
+                          **_TMP if name.startswith("nodes/tmp/") else {})
+
+
+_TMP = {"compressors": None}    # intermediate arrays, read back once or twice and deleted: not worth compressing
 
 
 def tile_chunk(n: int, level: int) -> int:
@@ -175,7 +179,7 @@ def build_nodes(g, rows: int, cols: int, n: int, max_level: int, beta: float, ma
         if name in g:
             return g[name]
         c = min(total, CHUNK)
-        return g.create_array(name, shape=(4, total, total), chunks=(4, c, c), dtype="f8", fill_value=np.nan)
+        return g.create_array(name, shape=(4, total, total), chunks=(4, c, c), dtype="f8", fill_value=np.nan, **_TMP)
 
     for br in range(progress("nodes:direct"), R // B):
         for c0 in range(0, R, B):                             # a block of B x B cells at a time
