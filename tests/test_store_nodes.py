@@ -247,3 +247,30 @@ def test_side_maxima_over_row_windows_equal_the_whole_grid(m):
         a = r0 // s
         np.maximum(got[:, a:a + part.shape[1]], part, out=got[:, a:a + part.shape[1]])
     assert np.array_equal(got, whole)
+
+
+def test_a_store_prepared_before_side_codes_keeps_its_form_and_gets_blocks_of_it(tmp_path):
+    """A store whose node arrays hold one error over both fans (no ``form``, no side codes) stays so when prepared
+    again: its missing blocks are cut in that form (fourth column 1), and it reads without side codes."""
+    import zarr
+    h = puget(size=129).heights
+    prepare_store(ArraySource(h, SP), tmp_path / "s", 32)
+    g = zarr.open_group(str(tmp_path / "s"), mode="r+")
+    combined = [np.asarray(g[f"nodes/combined/{lev}"][:, :]) for lev in range(int(g.attrs["nodes"]["levels"]))]
+    for lev, c in enumerate(combined):                        # the earlier form: its errors, no codes, no blocks
+        g[f"nodes/effective/{lev}"][:, :] = c
+    for name in ("nodes/sides", "nodes/combined", "nodes/blocks"):
+        del g[name]
+    attrs = dict(g.attrs)
+    attrs.pop("node_blocks")
+    attrs["nodes"] = {k: v for k, v in attrs["nodes"].items() if k != "form"}
+    attrs["progress"] = {k: v for k, v in attrs["progress"].items() if not k.startswith("blocks:")}
+    g.attrs.clear()
+    g.attrs.update(attrs)
+    prepare_store(ArraySource(h, SP), tmp_path / "s", 32)
+    nodes = nodes_for(open_store(tmp_path / "s"), 32)
+    assert nodes.blocks is not None and nodes.sides is None
+    for lev, c in enumerate(combined):
+        assert np.array_equal(np.asarray(nodes.effective[lev][:, :]), c), lev
+    block = tile_node_block(nodes, 0, 1, 1, 32)[0]
+    assert set(np.unique(block[:, 3]).tolist()) <= {0.0, 1.0} and (block[:, 3] == 1.0).any()

@@ -168,11 +168,18 @@ def build_nodes(g, rows: int, cols: int, n: int, max_level: int, beta: float, ma
     a band's progress (and may raise KeyboardInterrupt)."""
     R, levels = node_square(n, max_level)
     B, gx = _plan(R)
+    info = g.attrs.get("nodes")
+    if info and dict(info).get("form") != "sides":
+        return                      # complete arrays of the combined form (prepared before side codes): kept
     progress = lambda key: int(dict(g.attrs["progress"]).get(key, 0))  # noqa: E731
+    tmp = lambda kind, lev: f"nodes/tmp/{kind}/{lev}"  # noqa: E731
+    if progress("nodes:direct") and tmp("full", 0) not in g:      # a build begun before side codes: begin again
+        g.attrs.update({"progress": {k: v for k, v in dict(g.attrs["progress"]).items() if not k.startswith("nodes")}})
+        if "nodes/tmp" in g:
+            del g["nodes/tmp"]
     lv0 = g["levels/0"]
     hr = g.attrs["height_range"]
     margin = 16 * np.finfo(np.float64).eps * max(abs(float(hr[0])), abs(float(hr[1])), 1.0)
-    tmp = lambda kind, lev: f"nodes/tmp/{kind}/{lev}"  # noqa: E731
 
     def side_array(lev):
         name, total = tmp("sides", lev), R >> (lev + 1)
