@@ -22,6 +22,7 @@ from hybrid.camera.view import View
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.stored import StoredTerrain
 from hybrid.tiles.pyramid import TileKey, TilePyramid
+from hybrid.tiles.sidecodes import holds_side_codes
 from hybrid.tiles.tiletree import SelectedTile
 
 from .nodes import decoded_sides, nodes_for, pending_cut, per_child, tile_node_block
@@ -341,7 +342,7 @@ class TileletTriangleEstimator:
         hf = self.pyramid.hf
         if not isinstance(hf, StoredTerrain):
             return nodes_for(hf, self.pyramid.n, self.beta)
-        if dict(hf.store.attrs.get("nodes") or {}).get("form") != "sides":
+        if not holds_side_codes(hf.store):
             return None
         try:
             return nodes_for(hf, self.pyramid.n, self.beta)

@@ -39,6 +39,7 @@ from hybrid.terrain.stored import MAX_LOAD_SAMPLES, StoredTerrain
 from hybrid.tiles.fans import grow3 as _grow
 from hybrid.tiles.pyramid import TilePyramid
 from hybrid.tiles.sidecodes import SIDE_BIAS, SIDE_BITS, SIDE_STEPS, decoded_sides, per_child, side_codes  # noqa: F401
+from hybrid.tiles.sidecodes import stored_codes
 from hybrid.tiles.periodic_blocks import PeriodicBlocks
 from hybrid.tiles.store_blocks import band_blocks, block_offsets
 
@@ -69,7 +70,8 @@ class GlobalNodes:
 def global_nodes(hf, tile_size: int, beta: float = GPU_BETA, side_errors: bool = True) -> GlobalNodes:
     """The whole grid's node errors and boxes, over the pyramid's padded grid (cached per height field,
     tile size, beta and form: about 3 s for 1025² samples); ``side_errors``: split on the full fans' errors with
-    side codes (``raster.quadtree``), else both fans in one error as a tile store's node arrays hold them."""
+    side codes (``raster.quadtree``), else both fans in one error (the combined form: a store prepared before side
+    codes holds it, a periodic extension's nodes near its seams take bounds of it)."""
     key = (id(hf), int(tile_size), float(beta), bool(side_errors))
     hit = _CACHE.get(key)
     if hit is not None and hit[0]() is hf:
@@ -117,7 +119,7 @@ def nodes_for(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
     levels = range(int(info["levels"]))
     g = hf.store
     arrays = tuple(tuple(g[f"nodes/{k}/{lev}"] for lev in levels) for k in ("effective", "zlo", "zhi"))
-    codes = tuple(g[f"nodes/sides/{lev}"] for lev in levels) if info.get("form") == "sides" else None
+    codes = stored_codes(g, len(levels))
     blocks = None
     if hf.store.attrs.get("node_blocks"):
         tiers = range(int(hf.store.attrs["max_level"]) + 1)

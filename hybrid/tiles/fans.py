@@ -66,11 +66,17 @@ def fans_at(h: np.ndarray, r0: int, c0: int, rows: np.ndarray, cols: np.ndarray,
     return full, stitched
 
 
-def fan_deviation(h: np.ndarray, r0: int, c0: int, rows: np.ndarray, cols: np.ndarray, m: int, n: int) -> np.ndarray:
-    """max(|full - h|, |stitched - h|) in metres of level-m nodes at samples (rows x cols), as ``fans_at``."""
+def fan_deviations(h: np.ndarray, r0: int, c0: int, rows: np.ndarray, cols: np.ndarray, m: int,
+                   n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(|full - h|, |stitched - h|) in metres of level-m nodes at samples (rows x cols), as ``fans_at``."""
     full, stitched = fans_at(h, r0, c0, rows, cols, m, n)
     own = h[np.ix_(rows - r0, cols - c0)]
-    return np.maximum(np.abs(full - own), np.abs(stitched - own))
+    return np.abs(full - own), np.abs(stitched - own)
+
+
+def fan_deviation(h: np.ndarray, r0: int, c0: int, rows: np.ndarray, cols: np.ndarray, m: int, n: int) -> np.ndarray:
+    """max(|full - h|, |stitched - h|) in metres of level-m nodes at samples (rows x cols), as ``fans_at``."""
+    return np.maximum(*fan_deviations(h, r0, c0, rows, cols, m, n))
 
 
 def side_maxima(dev: np.ndarray, m: int, row_offset: int = 0) -> np.ndarray:

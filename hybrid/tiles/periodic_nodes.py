@@ -50,7 +50,7 @@ from hybrid.errors import TerrabenchError
 
 from .fans import block2, dilate4
 from .pyramid import _block_reduce
-from .sidecodes import side_codes_each
+from .sidecodes import holds_side_codes, side_codes_each
 from .source_chunks import SourceChunks, gather
 
 KINDS = ("effective", "zlo", "zhi")
@@ -131,7 +131,7 @@ class PeriodicNodes:
         self.source_chunks = SourceChunks(source)
         # a source with side codes: near the seams its nodes take bounds of the combined form (one error over both
         # fans, which bounds every side) from its ``combined`` arrays, and codes from those bounds
-        self.sides = dict(source.attrs.get("nodes") or {}).get("form") == "sides"
+        self.sides = holds_side_codes(source)
         self.bounds = "combined" if self.sides else "effective"
         self.kinds = KINDS + (("sides",) if self.sides else ())
 
@@ -280,6 +280,14 @@ class PeriodicNodes:
         its parent's served error; a source code read against a parent whose error became a bound reads larger."""
         if not shape[0] or not shape[1]:
             return np.zeros(shape, np.float32)
+        near = None
+        if g < self.src_levels:
+            near = self._near_window(g, r0, r1, c0, c1)
+            T = self.P >> (g + 1)
+            src = gather(self.source_chunks.reader("sides", g), self._rho(np.arange(r0, r1), T, False),
+                         self._rho(np.arange(c0, c1), T, False))
+            if not near.any():
+                return src
         own = self.window("effective", g, r0, r1, c0, c1)
         parent = None
         if g + 1 < self.levels:
@@ -287,12 +295,7 @@ class PeriodicNodes:
             p = self.window("effective", g + 1, pr0, (r1 - 1) // 2 + 1, pc0, (c1 - 1) // 2 + 1)
             parent = p[np.ix_(np.arange(r0, r1) // 2 - pr0, np.arange(c0, c1) // 2 - pc0)]
         coded = side_codes_each(np.broadcast_to(own, (4,) + own.shape), own, parent)
-        if g >= self.src_levels:
-            return coded
-        T = self.P >> (g + 1)
-        src = gather(self.source_chunks.reader("sides", g), self._rho(np.arange(r0, r1), T, False),
-                      self._rho(np.arange(c0, c1), T, False))
-        return np.where(self._near_window(g, r0, r1, c0, c1), coded, src)
+        return coded if near is None else np.where(near, coded, src)
 
     def window(self, kind: str, g: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
         """Nodes rows r0..r1-1, columns c0..c1-1 of a level (float32, metres)."""

@@ -14,6 +14,17 @@ SIDE_STEPS = 8                  # side-error codes an octave of side error / the
 SIDE_BITS = 6                   # bits a side: codes 0 .. 62 a ratio 2^((code - SIDE_BIAS) / 8), 63 any larger
 SIDE_BIAS = 56                  # code 0: 2^-7 of the parent's error or less
 ALWAYS = (1 << SIDE_BITS) - 1   # the code of a midpoint that always stays
+SIDE_FORM = "sides"             # a store's ``nodes`` attribute "form" when its node arrays carry side codes
+
+
+def holds_side_codes(group) -> bool:
+    """Whether a tile store group's node arrays carry side codes (else one error over both fans, no codes)."""
+    return dict(group.attrs.get("nodes") or {}).get("form") == SIDE_FORM
+
+
+def stored_codes(group, levels: int) -> tuple | None:
+    """A store group's side-code arrays by global level (``nodes/sides/<g>``), None where it holds none."""
+    return tuple(group[f"nodes/sides/{lev}"] for lev in range(levels)) if holds_side_codes(group) else None
 
 
 def per_child(parent: np.ndarray) -> np.ndarray:

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .sidecodes import stored_codes
+
 COLUMNS = 4                     # E, zlo, zhi, inside
 
 
@@ -51,10 +53,9 @@ def band_blocks(effective, zlo, zhi, level: int, ty: int, n: int, tx0: int, tx1:
 def build_blocks(g, n: int, max_level: int, mark) -> None:
     """Write ``nodes/blocks/<level>`` (tiles y, tiles x, nodes, 4) of a store group whose node arrays are written,
     one chunk a tile, a tile row a band; ``mark(key, count, what)`` records each band (and may interrupt)."""
-    info = dict(g.attrs["nodes"])
-    levels = int(info["levels"])
+    levels = int(dict(g.attrs["nodes"])["levels"])
     arrays = tuple(tuple(g[f"nodes/{k}/{lev}"] for lev in range(levels)) for k in ("effective", "zlo", "zhi"))
-    codes = tuple(g[f"nodes/sides/{lev}"] for lev in range(levels)) if info.get("form") == "sides" else None
+    codes = stored_codes(g, levels)
     length = int(block_offsets(n)[-1])
     for level in range(max_level + 1):
         ty_n, tx_n = g[f"zmin/{level}"].shape

@@ -36,9 +36,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .fans import (block2, cell_centre_error, cell_max, dilate4, facing_side_errors, fan_deviation, fans_at, grow3,
-                   side_maxima, with_cell_centres)
-from .sidecodes import side_codes
+from .fans import (block2, cell_centre_error, cell_max, dilate4, facing_side_errors, fan_deviation, fan_deviations,
+                   grow3, side_maxima, with_cell_centres)
+from .sidecodes import SIDE_FORM, holds_side_codes, side_codes
 
 NODE_EXACT_SPAN = 1024          # node sides (level-0 cells) up to which node errors are measured exactly
 SLICE_ROWS = 128                # sample rows measured at once inside a block (memory bound)
@@ -84,11 +84,13 @@ def _window(lv0, rows: int, cols: int, r0: int, r1: int, c0: int, c1: int) -> np
     return w[np.ix_(ri - a0, ci - c_0)]
 
 
-def _array(g, name: str, total: int, dtype: str, chunk: int = CHUNK):
+def _array(g, name: str, total: int, dtype: str, chunk: int = CHUNK, planes: int = 0):
+    """The store's (total, total) array ``name`` ((planes, total, total) with ``planes``), made if missing."""
     if name in g:
         return g[name]
     c = min(total, chunk)
-    return g.create_array(name, shape=(total, total), chunks=(c, c), dtype=dtype, fill_value=np.nan,
+    lead = (planes,) if planes else ()
+    return g.create_array(name, shape=lead + (total, total), chunks=lead + (c, c), dtype=dtype, fill_value=np.nan,
                           **_TMP if name.startswith("nodes/tmp/") else {})
 
 
@@ -120,10 +122,7 @@ def _direct_block(lv0, rows, cols, R, B, gx, br, c0) -> tuple[list, list, list, 
         s = 2 << g
         for i0 in range(0, B, S):
             rows_idx = np.arange(r0 + i0, r0 + i0 + S + 1)
-            f, st = fans_at(w, r0, c0, rows_idx, cols_idx, g, R)
-            own = w[np.ix_(rows_idx - r0, cols_idx - c0)]
-            df, ds = np.abs(f - own), np.abs(st - own)
-            del f, st, own
+            df, ds = fan_deviations(w, r0, c0, rows_idx, cols_idx, g, R)
             sr = min(s, S)
             a = i0 // s
             for out, dev in ((direct[g], np.maximum(df, ds)), (full[g], df)):
@@ -136,17 +135,17 @@ def _direct_block(lv0, rows, cols, R, B, gx, br, c0) -> tuple[list, list, list, 
     return direct, full, sides, zmin, zmax
 
 
-def _bound(levels_of, R: int, L: int, lev: int, kids_err: np.ndarray, margin: float) -> np.ndarray:
-    """Upper bound of level ``lev``'s monotone errors (metres, float64) from the level-(lev-1) posts, read from
-    the stored level ``levels_of(l)`` nearest below (every 2^l-th sample, the last row and column kept)."""
+def _post_deviation(levels_of, R: int, L: int, lev: int) -> np.ndarray:
+    """Per level-(lev-1) node: level ``lev``'s fan deviation (both fans, metres, float64) at its 3x3 posts, read
+    from the stored level ``levels_of(l)`` nearest below (every 2^l-th sample, the last row and column kept)."""
     l = min(lev - 1, L)
     arr = np.asarray(levels_of(l)[:, :], dtype=np.float64)
     P = (R >> (lev - 1)) + 1
     p = np.arange(P)
     q = p << (lev - 1 - l)
     H = arr[np.ix_(np.minimum(q, arr.shape[0] - 1), np.minimum(q, arr.shape[1] - 1))]
-    post = block2(cell_max(fan_deviation(H, 0, 0, p, p, 1, P - 1)), np.max)          # per child: its 3x3 posts
-    return block2(post + kids_err, np.max) + margin
+    return block2(cell_max(fan_deviation(H, 0, 0, p, p, 1, P - 1)), np.max)          # per child: its 3x3 posts
+
 
 
 def _facing(sides_below, a0: int, a1: int, total: int) -> np.ndarray:
@@ -168,8 +167,7 @@ def build_nodes(g, rows: int, cols: int, n: int, max_level: int, beta: float, ma
     a band's progress (and may raise KeyboardInterrupt)."""
     R, levels = node_square(n, max_level)
     B, gx = _plan(R)
-    info = g.attrs.get("nodes")
-    if info and dict(info).get("form") != "sides":
+    if g.attrs.get("nodes") and not holds_side_codes(g):
         return                      # complete arrays of the combined form (prepared before side codes): kept
     progress = lambda key: int(dict(g.attrs["progress"]).get(key, 0))  # noqa: E731
     tmp = lambda kind, lev: f"nodes/tmp/{kind}/{lev}"  # noqa: E731
@@ -180,13 +178,7 @@ def build_nodes(g, rows: int, cols: int, n: int, max_level: int, beta: float, ma
     lv0 = g["levels/0"]
     hr = g.attrs["height_range"]
     margin = 16 * np.finfo(np.float64).eps * max(abs(float(hr[0])), abs(float(hr[1])), 1.0)
-
-    def side_array(lev):
-        name, total = tmp("sides", lev), R >> (lev + 1)
-        if name in g:
-            return g[name]
-        c = min(total, CHUNK)
-        return g.create_array(name, shape=(4, total, total), chunks=(4, c, c), dtype="f8", fill_value=np.nan, **_TMP)
+    side_array = lambda lev: _array(g, tmp("sides", lev), R >> (lev + 1), "f8", planes=4)  # noqa: E731
 
     for br in range(progress("nodes:direct"), R // B):
         for c0 in range(0, R, B):                             # a block of B x B cells at a time
@@ -222,6 +214,7 @@ def build_nodes(g, rows: int, cols: int, n: int, max_level: int, beta: float, ma
                 arr["zmax"][a0:a1, :] = np.asarray(g[tmp("zmax", 0)][a0:a1, :])
             else:
                 facing = _facing(side_array(lev - 1), a0, a1, total)
+                post = None if exact else _post_deviation(lambda l: g[f"levels/{l}"], R, max_level, lev)
                 lo, hi = max(2 * a0 - 1, 0), min(2 * a1 + 1, 2 * total)
                 # the combined form (both fans in one error), then the side-error form (full fans, sides facing)
                 for err, eff, direct, with_sides in (("error", "eff", "direct", False), ("serror", "seff", "full", True)):
@@ -229,7 +222,7 @@ def build_nodes(g, rows: int, cols: int, n: int, max_level: int, beta: float, ma
                     if exact:
                         e = np.maximum(np.asarray(g[tmp(direct, lev)][a0:a1, :]), block2(kids, np.max))
                     else:                                     # a bound of both fans, so of every side too
-                        e = _bound(lambda l: g[f"levels/{l}"], R, max_level, lev, kids, margin)
+                        e = block2(post + kids, np.max) + margin
                         if with_sides:
                             side_array(lev)[:, a0:a1, :] = np.broadcast_to(e, (4,) + e.shape)
                     del kids
@@ -267,7 +260,7 @@ def build_nodes(g, rows: int, cols: int, n: int, max_level: int, beta: float, ma
         top = levels - 1
         _write_codes(g, side_array(top), top, 0, 1, None, tile_chunk(n, top))
         mark("nodes:codes", 1, "side codes")
-    g.attrs.update({"nodes": {"beta": float(beta), "levels": levels, "square": R, "exact_span": B, "form": "sides"}})
+    g.attrs.update({"nodes": {"beta": float(beta), "levels": levels, "square": R, "exact_span": B, "form": SIDE_FORM}})
     if "nodes/tmp" in g:
         del g["nodes/tmp"]
 
