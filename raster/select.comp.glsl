@@ -351,7 +351,9 @@ void list_node(uint gid) {
     int id = first_id + int(gid);
     if (id >= starts(top + 1)) return;
     int m = min(1, top);
-    while (m < top && id >= starts(m + 1)) ++m;          // at most 12 levels
+    // the node's level: a for with a fixed cap (12 levels), as NVIDIA's GLSL compiler (H200, driver of 2026-12)
+    // lost every node of level >= 2 with the equivalent while loop on a uniform-block array
+    for (int k = 2; k <= 12; ++k) { if (k > top || id < starts(k)) break; m = k; }
     int s = side_of(m);
     int local = id - starts(m);
     int a = local / s, b = local % s;

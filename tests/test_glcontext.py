@@ -46,3 +46,16 @@ def test_gl_errors_are_seen_and_cleared(ctx):
     bind(0x8D40, 987654)                                   # GL_FRAMEBUFFER
     assert gl_errors(ctx) == ["GL_INVALID_OPERATION"]
     assert gl_errors(ctx) == []
+
+
+def test_timed_with_a_timer_query_returns_the_gpu_time(ctx, monkeypatch):
+    # the branch GPUs take (llvmpipe's queries are untrusted, so it is forced here): the query is read and freed
+    from hybrid.gl.timing import timed, timer_queries_valid
+    timer_queries_valid(ctx)
+    monkeypatch.setitem(ctx.extra, "timer_queries", True)
+    fbo = ctx.simple_framebuffer((64, 64))
+    out, wall, gpu = timed(ctx, lambda: fbo.clear(0.2, 0.4, 0.6, 1.0) or "drawn")
+    assert out == "drawn" and wall >= 0.0
+    assert isinstance(gpu, float) and np.isfinite(gpu) and gpu >= 0.0
+    assert np.frombuffer(fbo.read(components=4), np.uint8)[:4].tolist() == [51, 102, 153, 255]
+    fbo.release()
