@@ -166,6 +166,15 @@ def test_save_load_by_renderer(tmp_path):
     assert "llvmpipe" in shipped.source
     other = load_cost_model("Some Unknown GPU", p)
     assert "fallback" in other.source
+    # saved under a part of the renderer string (calibrate --key), as the shipped file keys its models: found
+    # for the full string whatever its case, the longest such key first, in the user's file before the shipped
+    save_cost_model(CostModel("NVIDIA H200", TRUE.raster, TRUE.raycast, mix_overhead=0.5), p)
+    save_cost_model(CostModel("NVIDIA", TRUE.raster, TRUE.raycast, mix_overhead=0.25), p)
+    gpu = load_cost_model("NVIDIA H200/PCIe/SSE2", p)
+    assert gpu.mix_overhead == 0.5 and "'NVIDIA H200'" in gpu.source
+    assert load_cost_model("nvidia h200/pcie/sse2", p).mix_overhead == 0.5
+    assert load_cost_model("NVIDIA H100/PCIe/SSE2", p).mix_overhead == 0.25
+    assert "llvmpipe" in load_cost_model("llvmpipe (LLVM 15.0.6, 256 bits)", p).source
     p.write_text("{broken")
     with pytest.raises(TerrabenchError, match="not valid JSON"):
         load_cost_model("test", p)

@@ -17,8 +17,8 @@ for the copy of the raster pass's depth that rays stop at, skirts and switching 
 random, and the frames' tiles one call each, and fits the coefficients, the per-frame overheads and a per-call
 overhead to both together (``hybrid.cost.fit.fit_frames``), then
 saves the model keyed by the GL renderer string. ``load_cost_model`` finds it again: the user's file ($TERRABENCH_COSTS or
-~/.config/terrabench/costs.json), then the defaults shipped in hybrid/cost/costs_default.json (matched by a
-key contained in the renderer string, e.g. 'llvmpipe').
+~/.config/terrabench/costs.json), then the defaults shipped in hybrid/cost/costs_default.json; in either, the
+renderer string itself or else the longest key contained in it, ignoring case ('llvmpipe', 'NVIDIA H200').
 """
 from __future__ import annotations
 
@@ -232,16 +232,27 @@ def cost_model_from_dict(d: dict, source: str) -> CostModel:
         raise TerrabenchError(f"{source}: malformed cost model ({exc})") from None
 
 
+def matching_key(keys, renderer: str) -> str | None:
+    """The key of a costs file that names this GL renderer: the renderer string itself, else the longest key
+    contained in it ignoring case ('NVIDIA H200' for 'NVIDIA H200/PCIe/SSE2'); None if none does."""
+    keys = [k for k in keys if k != "fallback"]
+    if renderer in keys:
+        return renderer
+    low = renderer.lower()
+    inside = [k for k in keys if k and k.lower() in low]
+    return max(inside, key=len) if inside else None
+
+
 def load_cost_model(renderer: str, path: Path | None = None) -> CostModel:
-    """The calibrated model for a GL renderer: the user's file first, then the shipped defaults."""
+    """The calibrated model for a GL renderer (matching_key): the user's file first, then the shipped defaults."""
     path = Path(path) if path else user_costs_path()
     if path.exists():
         data = read_costs_file(path)
-        if renderer in data:
-            return cost_model_from_dict(data[renderer], str(path))
+        key = matching_key(data, renderer)
+        if key is not None:
+            return cost_model_from_dict(data[key], str(path) if key == renderer else f"{path} '{key}'")
     shipped = json.loads((resources.files("hybrid.cost") / "costs_default.json").read_text())
-    low = renderer.lower()
-    for key, d in shipped.items():
-        if key != "fallback" and key in low:
-            return cost_model_from_dict(d, f"shipped default '{key}'")
+    key = matching_key(shipped, renderer)
+    if key is not None:
+        return cost_model_from_dict(shipped[key], f"shipped default '{key}'")
     return cost_model_from_dict(shipped["fallback"], "shipped fallback (uncalibrated; run terrabench calibrate)")
