@@ -221,8 +221,8 @@ class TileletSelection:
     def select_leaves(self, view, items, tau: float, culling: bool = True, skirts: dict | None = None) -> None:
         """Run the leaf selection of every item for the view at tau pixels; fills each tile's commands.
 
-        Per tile: pass 0 over its nodes lists the leaves, pass 1 (dispatched from their count) emits them.
-        The frame's tile blocks stay uploaded for the draw.
+        Per tile: pass 0 over its nodes lists the leaves, pass 1 (dispatched from their count) emits them; all
+        tiles' pass 0 run before any pass 1. The frame's tile blocks stay uploaded for the draw.
         """
         if not (np.isfinite(tau) and tau > 0):
             raise TerrabenchError(f"tau must be finite and > 0 pixels, got {tau!r}")
@@ -243,16 +243,24 @@ class TileletSelection:
         self.arena.bind()
         list_pass, emit_pass = self.passes
         self.slots = self.draw_slots([g for g, _, _ in items])
-        for i, ((g, tile, sel), slot) in enumerate(zip(items, self.slots)):
+        # every tile's listing, one barrier, every tile's emission: a tile's passes touch only its own buffers,
+        # its arena range and the frame's counters (atomics), so the tiles' dispatches need no barrier between
+        # them and a GPU may run them together
+        for i, ((g, _, _), slot) in enumerate(zip(items, self.slots)):
             self.blocks.bind(i)
             slot.control.write(CONTROL_BLANK)
-            for binding, buf in ((0, g.nodes), (3, slot.segments), (5, g.heights)):
-                buf.bind_to_storage_buffer(binding)
+            g.nodes.bind_to_storage_buffer(0)
             slot.control.bind_to_storage_buffer(2, size=FOUND_OFFSET)
             slot.control.bind_to_storage_buffer(6, offset=FOUND_OFFSET)
             first = int(blocks[i]["shape"][2])
             list_pass.run(group_x=(int(g.starts[-1]) - first + _LOCAL - 1) // _LOCAL)
-            self.ctx.memory_barrier()
+        self.ctx.memory_barrier()
+        for i, ((g, _, _), slot) in enumerate(zip(items, self.slots)):
+            self.blocks.bind(i)
+            for binding, buf in ((0, g.nodes), (3, slot.segments), (5, g.heights)):
+                buf.bind_to_storage_buffer(binding)
+            slot.control.bind_to_storage_buffer(2, size=FOUND_OFFSET)
+            slot.control.bind_to_storage_buffer(6, offset=FOUND_OFFSET)
             emit_pass.run_indirect(slot.control, offset=FOUND_OFFSET)
         self.ctx.memory_barrier()
 
