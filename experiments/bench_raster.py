@@ -217,12 +217,20 @@ def culling_rows(ctx, repeats=5):
     return rows
 
 
+def triangle_tables() -> dict[str, pd.DataFrame]:
+    """The triangle counts against max vertical error (metres) of every mesh method: CPU only, the same on every
+    device (`terrabench bench --which triangles`)."""
+    _, tiles = puget_tiles()
+    return {"1. triangles vs max vertical error, 4 Puget tiles of 257² (160 m spacing); error in metres":
+            pd.DataFrame(triangles_vs_error(tiles),
+                         columns=["target", "method", "triangles", "max err", "x delatin", "x martini"])}
+
+
 def run(ctx) -> dict[str, pd.DataFrame]:
-    """Every raster benchmark table keyed by its title (times in ms, errors in metres, memory in bytes)."""
+    """The raster strategies' GPU tables keyed by title (times in ms, memory in bytes); the triangle counts are
+    triangle_tables."""
     hf, tiles = puget_tiles()
     tables = (
-        ("1. triangles vs max vertical error, 4 Puget tiles of 257² (160 m spacing); error in metres",
-         ["target", "method", "triangles", "max err", "x delatin", "x martini"], triangles_vs_error(tiles)),
         ("2. GPU leaf selection alone and the whole frame (Puget flyover frame 3, tiles of 128, 640x360)",
          ["strategy", "tiles", "selection ms", "frame ms", "triangles"], selection_rows(ctx)),
         ("3. GPU bytes per 257² tile", ["representation", "bytes", "triangles", "bytes/tri"],
@@ -244,7 +252,7 @@ def main() -> None:
     ctx = shared_context()
     info = gl_info(ctx)
     print(f"terrabench raster benchmark on {info.renderer} ({info.version})\n")
-    print(text_tables(run(ctx)))
+    print(text_tables({**triangle_tables(), **run(ctx)}))
 
 
 if __name__ == "__main__":

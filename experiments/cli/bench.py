@@ -13,8 +13,9 @@ from hybrid.atomic import write_text
 from ..folders import writable_folder
 from . import argtypes
 
-HELP = "the raster, ray-cast, hybrid and planning benchmarks in one run, with the device named"
-BENCHES = ("raycast", "raster", "hybrid", "planning")
+HELP = "the ray-cast, triangle-count, raster, hybrid and planning benchmarks in one run, with the device named"
+BENCHES = ("raycast", "triangles", "raster", "hybrid", "planning")
+"""In the order they run: triangles (mesh triangle counts against error) and planning use the CPU alone."""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -26,10 +27,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def benchmark(ctx, name: str, frames: int = 8) -> dict[str, pd.DataFrame]:
-    """One benchmark's tables keyed by title; frames per flight (the raster benchmark has none)."""
+    """One benchmark's tables keyed by title; frames per flight (the triangle and raster benchmarks have none)."""
     if name == "raycast":
         from ..bench_raycast import run
         return run(ctx, frames=frames)
+    if name == "triangles":
+        from ..bench_raster import triangle_tables
+        return triangle_tables()
     if name == "raster":
         from ..bench_raster import run
         return run(ctx)
