@@ -22,10 +22,10 @@ from hybrid.camera.view import View
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.stored import StoredTerrain
 from hybrid.tiles.pyramid import TileKey, TilePyramid
-from hybrid.tiles.sidecodes import holds_side_codes
+from hybrid.tiles.sidecodes import decoded_sides, holds_side_codes, per_child
 from hybrid.tiles.tiletree import SelectedTile
 
-from .nodes import decoded_sides, nodes_for, pending_cut, per_child, tile_node_block
+from .nodes import nodes_for, pending_cut, tile_node_block
 from .split_tables import TABLE_BINS, SplitTables, kind_splits, split_tables
 from .quadtree import GPU_BETA, error_pyramid
 
@@ -88,7 +88,7 @@ def block_tile_nodes(data: np.ndarray, offsets: np.ndarray, n: int, origin, spac
              for m in range(len(offsets) - 1)]
     effective = [g[..., 0].astype(np.float64) for g in grids]
     sides = None
-    if any(np.any(g[..., 3] > 1.0) for g in grids):          # side codes (``raster.nodes.side_codes``)
+    if any(np.any(g[..., 3] > 1.0) for g in grids):          # side codes (``hybrid.tiles.sidecodes``)
         parents = [data[offsets[m + 1]:offsets[m + 2]].reshape((n >> (m + 2)) + 2, -1, 4)[1:-1, 1:-1, 0]
                    if m + 1 < len(grids) else None for m in range(len(grids))]
         sides = [decoded_sides(g[..., 3], p) for g, p in zip(grids, parents)]

@@ -14,7 +14,7 @@ it must follow, and every node decides alone, on the GPU, with a crack-free (res
 
 Per tile the GPU holds, for each local level m (node side 2^(m+1) tile cells), a grid of the tile's nodes with
 a one-node apron on every side: (E, zlo, zhi, inside) float32, zlo/zhi relative to the terrain origin z, inside 0
-beyond the node square, else 1 plus the node's four side-error codes (``side_codes``): nodes split on their
+beyond the node square, else 1 plus the node's four side-error codes (``hybrid.tiles.sidecodes.side_codes``): nodes split on their
 full fans' errors and carry their stitched triangles' errors as codes (a store prepared before side errors holds
 one error over both fans, and 1).
 
@@ -38,8 +38,7 @@ from hybrid.errors import TerrabenchError
 from hybrid.terrain.stored import MAX_LOAD_SAMPLES, StoredTerrain
 from hybrid.tiles.fans import grow3 as _grow
 from hybrid.tiles.pyramid import TilePyramid
-from hybrid.tiles.sidecodes import SIDE_BIAS, SIDE_BITS, SIDE_STEPS, decoded_sides, per_child, side_codes  # noqa: F401
-from hybrid.tiles.sidecodes import stored_codes
+from hybrid.tiles.sidecodes import side_codes, stored_codes
 from hybrid.tiles.periodic_blocks import PeriodicBlocks
 from hybrid.tiles.store_blocks import band_blocks, block_offsets
 

@@ -247,22 +247,25 @@ class TileletSelection:
         # its arena range and the frame's counters (atomics), so the tiles' dispatches need no barrier between
         # them and a GPU may run them together
         for i, ((g, _, _), slot) in enumerate(zip(items, self.slots)):
-            self.blocks.bind(i)
             slot.control.write(CONTROL_BLANK)
-            g.nodes.bind_to_storage_buffer(0)
-            slot.control.bind_to_storage_buffer(2, size=FOUND_OFFSET)
-            slot.control.bind_to_storage_buffer(6, offset=FOUND_OFFSET)
+            self._bind_item(i, g, slot)
             first = int(blocks[i]["shape"][2])
             list_pass.run(group_x=(int(g.starts[-1]) - first + _LOCAL - 1) // _LOCAL)
         self.ctx.memory_barrier()
         for i, ((g, _, _), slot) in enumerate(zip(items, self.slots)):
-            self.blocks.bind(i)
-            for binding, buf in ((0, g.nodes), (3, slot.segments), (5, g.heights)):
-                buf.bind_to_storage_buffer(binding)
-            slot.control.bind_to_storage_buffer(2, size=FOUND_OFFSET)
-            slot.control.bind_to_storage_buffer(6, offset=FOUND_OFFSET)
+            self._bind_item(i, g, slot)
+            slot.segments.bind_to_storage_buffer(3)
+            g.heights.bind_to_storage_buffer(5)
             emit_pass.run_indirect(slot.control, offset=FOUND_OFFSET)
         self.ctx.memory_barrier()
+
+    def _bind_item(self, i: int, g, slot) -> None:
+        """Bind what both selection passes read of item i: its tile block, its tile's nodes, its slot's commands and
+        leaf list."""
+        self.blocks.bind(i)
+        g.nodes.bind_to_storage_buffer(0)
+        slot.control.bind_to_storage_buffer(2, size=FOUND_OFFSET)
+        slot.control.bind_to_storage_buffer(6, offset=FOUND_OFFSET)
 
     def draw_slots(self, gs: list) -> list:
         """Where each item's selection goes: its tile's own buffers the first time the tile is in the list,

@@ -14,10 +14,11 @@ from hybrid.tiles.fans import block2, dilate4
 from hybrid.tiles.periodic import open_periodic
 from hybrid.tiles.periodic_blocks import PeriodicBlocks, period_residue, source_block_tile
 from hybrid.tiles.pyramid import TilePyramid
+from hybrid.tiles.sidecodes import decoded_sides
 from hybrid.tiles.store import prepare_store
 from hybrid.tiles.store_blocks import band_blocks
 from raster import nodes as nodes_mod
-from raster.nodes import decoded_sides, global_nodes, nodes_for, tile_node_block
+from raster.nodes import global_nodes, nodes_for, tile_node_block
 from raster.quadtree import error_pyramid
 
 

@@ -1,4 +1,4 @@
-"""Side-error codes (raster.nodes.side_codes) as the GPU and the triangle estimate read them back: never below the
+"""Side-error codes (hybrid.tiles.sidecodes.side_codes) as the GPU and the triangle estimate read them back: never below the
 measured side error (a midpoint is never dropped that the bound needs), at most one code step (2^(1/8)) above it
 inside the coded range, 2^-7 of the parent's error at the floor, and 'always keep' above the range, without a
 parent or with a parent error of 0."""
@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from raster.nodes import SIDE_BIAS, SIDE_STEPS, decoded_sides, side_codes
+from hybrid.tiles.sidecodes import SIDE_BIAS, SIDE_STEPS, decoded_sides, side_codes
 
 STEP = 2.0 ** (1.0 / SIDE_STEPS)
 

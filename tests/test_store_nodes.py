@@ -17,8 +17,9 @@ from hybrid.terrain.loaders import load_terrain
 from hybrid.terrain.stored import open_store
 from hybrid.tiles import store_nodes
 from hybrid.tiles.pyramid import TilePyramid
+from hybrid.tiles.sidecodes import decoded_sides
 from hybrid.tiles.store import prepare_store
-from raster.nodes import decoded_sides, global_nodes, nodes_for, tile_node_block
+from raster.nodes import global_nodes, nodes_for, tile_node_block
 from raster.quadtree import error_pyramid
 
 SP = (30.0, 40.0)

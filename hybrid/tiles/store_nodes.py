@@ -147,7 +147,6 @@ def _post_deviation(levels_of, R: int, L: int, lev: int) -> np.ndarray:
     return block2(cell_max(fan_deviation(H, 0, 0, p, p, 1, P - 1)), np.max)          # per child: its 3x3 posts
 
 
-
 def _facing(sides_below, a0: int, a1: int, total: int) -> np.ndarray:
     """Per node of rows a0..a1-1 of a level (``total`` rows), the largest facing side error of the level below
     (``facing_side_errors``, its 2 x 2 maximum), from that level's (4, 2 total, cols) side errors read with an even
