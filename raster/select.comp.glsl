@@ -1,5 +1,8 @@
 #version 430
-// GPU leaf selection of one tile's tilelet quadtree (raster.nodes), in two passes (PASS 0 lists, PASS 1 emits).
+// GPU leaf selection of every tile of a frame's tilelet quadtree (raster.nodes), in two passes (PASS 0 lists,
+// PASS 1 emits), each one dispatch over all the frame's items (tile drawings): a work group finds its item and
+// its place in the item's work in the work table (raster.frame_items), and its tile's data in the heaps
+// (raster.heap) through the item's tile block.
 // A node is a leaf when its parent splits and it does not; its edge midpoint is dropped where the same-size
 // neighbour's parent does not split (that side is one level coarser), and where neither the leaf nor its
 // same-size neighbour is near its own split (lean leaves, below). The leaf's nine post heights are
@@ -12,17 +15,25 @@ layout(local_size_x = 64) in;
 layout(std430, binding = 0) readonly buffer Nodes { vec4 node[]; };   // E, zlo, zhi, inside (0 beyond the grid,
                                                                       // else 1 + side codes); one apron
 layout(std430, binding = 1) writeonly buffer Leaves { uint leaf[]; }; // arena: 13 words a leaf: j0 i0 m drop, h[9]
-layout(std430, binding = 2) buffer Commands { uint cmd[]; };          // indirect draws, 5 words each, then the
-                                                                      // tile's arena base and pass-0 groups done
-layout(std430, binding = 3) writeonly buffer Skirts { float seg[]; };  // 6 words a skirt segment
+layout(std430, binding = 2) buffer Commands { uint cmd[]; };          // per item CONTROL_WORDS: indirect draws,
+                                                                      // 5 words each, then the item's arena base,
+                                                                      // pass-0 groups done, its pass-0 groups
+                                                                      // and its leaf count
+layout(std430, binding = 3) writeonly buffer Skirts { float seg[]; };  // 6 words a skirt segment, per item from
+                                                                       // segments_base
 layout(std430, binding = 4) buffer Frame { uint frame_count[]; };     // triangles, leaves, culled, segments,
                                                                       // arena leaves reserved, overflow
 
 layout(std430, binding = 7) writeonly buffer MeshVerts { vec4 mesh_vertex[]; }; // arena: 9 a leaf: x y z level
 layout(std430, binding = 8) writeonly buffer MeshIndex { uint mesh_index[]; };  // arena: 24 a leaf
-layout(std430, binding = 6) buffer Found { uint found[]; };          // groups x, 1, 1, leaves, leaves[]
-layout(std430, binding = 5) readonly buffer Heights { float height[]; };  // (n+1)^2 tile samples, row from
-                                                                         // south, metres from the origin z
+layout(std430, binding = 6) buffer Found { uint found[]; };          // per item from found_base: its leaves
+layout(std430, binding = 5) readonly buffer Heights { float height[]; };  // per tile from heights_base: (n+1)^2
+                                                                         // samples, row from south, metres from
+                                                                         // the origin z
+layout(std430, binding = 10) buffer Work { uint work[]; };           // pass 1's dispatch (x, 1, 1), 1 unused,
+                                                                      // then pass 0's work table (item | group
+                                                                      // << 16 per work group), then pass 1's
+                                                                      // from table1_start (written by pass 0)
 uniform float k_tau;            // K / tau: a node splits when E * k_tau > distance to its box
 uniform float beta;             // morph-safe error growth (raster.quadtree)
 uniform bool stitch;            // drop midpoints toward coarser neighbours (off: cracks, for tests)
@@ -35,10 +46,16 @@ uniform uint arena_capacity;    // leaves the frame's arena holds (raster.arena)
 uniform vec3 eye_terrain;       // eye minus the terrain's origin, metres
 uniform vec2 cell_metres;       // the terrain's level-0 spacing (x, y), metres
 uniform bool side_errors;       // nodes carry side codes and split on their full fans' errors (raster.quadtree)
+uniform uint table1_start;      // work[]: where pass 1's work table starts
 
 const int CMD_POINTS_ = 0, CMD_TEMPLATE_ = 1;   // indirect commands (raster.selection CMD_*)
-const int BASE_WORD = 15;       // cmd[]: the tile's first leaf in the arena
-const int DONE_WORD = 16;       // cmd[]: pass-0 work groups finished
+const int CONTROL_WORDS = 20;   // cmd[] words per item (raster.frame_items)
+const int BASE_WORD = 15;       // cmd[]: the item's first leaf in the arena
+const int DONE_WORD = 16;       // cmd[]: the item's pass-0 work groups finished
+const int GROUPS_WORD = 17;     // cmd[]: the item's pass-0 work groups
+const int FOUND_WORD = 18;      // cmd[]: the item's leaves listed by pass 0
+#define CMD0 (tile_item * CONTROL_WORDS)
+#define FOUND0 uint(found_base)
 const int ARENA_FIELD = 4;      // frame_count[]: arena leaves reserved this frame
 const int OVERFLOW_FIELD = 5;   // frame_count[]: leaves of tiles that did not fit (drawn nothing)
 
@@ -145,26 +162,24 @@ bool leads(uint64_t live) {
 // This invocation's slot from the base the leader reserved: its rank among the live invocations.
 uint slot(uint64_t live, uint base) { return readFirstInvocationARB(base) + live_count(live & gl_SubGroupLtMaskARB); }
 
-// A slot in counter cmd[word] for every live invocation; ``also`` (>= 0) gets 24 indices a slot added.
+// A slot in the item's counter cmd[word] for every live invocation (a work group is one item's); ``also``
+// (>= 0) gets 24 indices a slot added.
 uint reserve(int word, int also, int total) {
     uint64_t live = ballotARB(true);
     uint n = live_count(live), base = 0u;
     if (leads(live)) {
-        base = atomicAdd(cmd[word], n);
-        if (also >= 0) atomicAdd(cmd[also], 24u * n);     // the indexed draw: 24 indices a leaf
+        base = atomicAdd(cmd[CMD0 + word], n);
+        if (also >= 0) atomicAdd(cmd[CMD0 + also], 24u * n);     // the indexed draw: 24 indices a leaf
         if (total >= 0) atomicAdd(frame_count[total], n);
     }
     return slot(live, base);
 }
 
-// A slot in the leaf list for every live invocation; keeps the pass-1 work group count (x) up to date.
+// A slot in the item's leaf list for every live invocation.
 uint reserve_found() {
     uint64_t live = ballotARB(true);
     uint n = live_count(live), base = 0u;
-    if (leads(live)) {
-        base = atomicAdd(found[3], n);
-        atomicMax(found[0], (base + n + 63u) / 64u);
-    }
+    if (leads(live)) base = atomicAdd(cmd[CMD0 + FOUND_WORD], n);
     return slot(live, base);
 }
 
@@ -180,26 +195,23 @@ void add_total(int word, uint v) {
 }
 #else
 uint reserve(int word, int also, int total) {
-    if (also >= 0) atomicAdd(cmd[also], 24u);
+    if (also >= 0) atomicAdd(cmd[CMD0 + also], 24u);
     if (total >= 0) atomicAdd(frame_count[total], 1u);
-    return atomicAdd(cmd[word], 1u);
+    return atomicAdd(cmd[CMD0 + word], 1u);
 }
 
 void add_total(int word, uint v) { atomicAdd(frame_count[word], v); }
 
-uint reserve_found() {
-    uint base = atomicAdd(found[3], 1u);
-    atomicMax(found[0], (base + 64u) / 64u);
-    return base;
-}
+uint reserve_found() { return atomicAdd(cmd[CMD0 + FOUND_WORD], 1u); }
 #endif
 
-float H(int i, int j) { return height[i * (n_cells + 1) + j]; }
+float H(int i, int j) { return height[heights_base + i * (n_cells + 1) + j]; }
 
 void put_segment(vec2 p, float hp, vec2 q, float hq) {
     uint k = reserve(11, -1, 3);
-    seg[6 * k + 0] = p.x; seg[6 * k + 1] = p.y; seg[6 * k + 2] = hp;
-    seg[6 * k + 3] = q.x; seg[6 * k + 4] = q.y; seg[6 * k + 5] = hq;
+    uint w = uint(segments_base) + 6u * k;
+    seg[w + 0u] = p.x; seg[w + 1u] = p.y; seg[w + 2u] = hp;
+    seg[w + 3u] = q.x; seg[w + 4u] = q.y; seg[w + 5u] = hq;
 }
 
 // true if node (m, a, b)'s box (its square, the height range of its grown box, the skirts) is wholly
@@ -318,7 +330,7 @@ void emit_leaf(int m, int a, int b) {
     h[7] = mix(h[7], 0.5 * (h[6] + h[8]), am[3]);
     float diag = ((b & 1) == (a & 1)) ? 0.5 * (h[0] + h[8]) : 0.5 * (h[2] + h[6]);
     h[4] = mix(h[4], diag, ap);
-    uint idx = cmd[BASE_WORD] + reserve(0, 5, 1);
+    uint idx = cmd[CMD0 + BASE_WORD] + reserve(0, 5, 1);
     if (write_mesh) put_mesh(idx, m, j0, i0, k, drop, h);
     add_total(0, uint(8 - bitCount(drop)));
     if (write_records) {
@@ -363,7 +375,7 @@ void list_node(uint gid) {
             if (outside_clip(0, ca, cb)) continue;
             if (cull && outside(0, ca, cb)) { add_total(2, 1u); continue; }
             uint i = reserve_found();
-            found[4u + i] = uint(ca << 4) | (uint(cb) << 18);
+            found[FOUND0 + i] = uint(ca << 4) | (uint(cb) << 18);
         }
         return;
     }
@@ -371,37 +383,56 @@ void list_node(uint gid) {
     if (outside_clip(m, a, b)) return;
     if (cull && outside(m, a, b)) { add_total(2, 1u); return; }
     uint i = reserve_found();
-    found[4u + i] = uint(m) | (uint(a) << 4) | (uint(b) << 18);
+    found[FOUND0 + i] = uint(m) | (uint(a) << 4) | (uint(b) << 18);
 }
 
-// Run by the last pass-0 work group of the tile, when every leaf is listed: the tile's leaves get their
-// place in the frame's arena and the draw commands start there; a tile that does not fit emits nothing.
+shared bool s_last;             // this work group is the item's last to finish pass 0
+shared uint s_groups, s_first;  // the item's pass-1 work groups and where they start in pass 1's table
+
+// Run by the last pass-0 work group of the item, when every leaf is listed: the item's leaves get their
+// place in the frame's arena, the draw commands start there and its pass-1 work groups are reserved; an item
+// that does not fit emits nothing.
 void reserve_arena() {
-    uint count = atomicAdd(found[3], 0u);
+    uint count = atomicAdd(cmd[CMD0 + FOUND_WORD], 0u);
     uint base = atomicAdd(frame_count[ARENA_FIELD], count);
     if (base + count > arena_capacity) {
         atomicAdd(frame_count[OVERFLOW_FIELD], count);
-        found[0] = 0u;
-        found[3] = 0u;
+        cmd[CMD0 + FOUND_WORD] = 0u;
+        count = 0u;
         base = 0u;
     }
-    cmd[BASE_WORD] = base;
-    cmd[5 * CMD_POINTS_ + 2] = base;           // DrawArraysIndirect: first
-    cmd[5 * CMD_TEMPLATE_ + 2] = 24u * base;   // DrawElementsIndirect: first index
+    cmd[CMD0 + BASE_WORD] = base;
+    cmd[CMD0 + 5 * CMD_POINTS_ + 2] = base;           // DrawArraysIndirect: first
+    cmd[CMD0 + 5 * CMD_TEMPLATE_ + 2] = 24u * base;   // DrawElementsIndirect: first index
+    s_groups = (count + 63u) / 64u;
+    s_first = atomicAdd(work[0], s_groups);
 }
 #endif
 
 void main() {
-    uint gid = gl_GlobalInvocationID.x;
+#if PASS == 0
+    uint entry = work[4u + gl_WorkGroupID.x];
+#else
+    uint entry = work[table1_start + gl_WorkGroupID.x];
+#endif
+    use_tile_item(int(entry & 65535u));
+    uint gid = (entry >> 16) * 64u + gl_LocalInvocationID.x;
 #if PASS == 0
     list_node(gid);
     memoryBarrierBuffer();
     barrier();
-    if (gl_LocalInvocationIndex == 0u && atomicAdd(cmd[DONE_WORD], 1u) == gl_NumWorkGroups.x - 1u)
-        reserve_arena();
+    if (gl_LocalInvocationIndex == 0u) {
+        s_last = atomicAdd(cmd[CMD0 + DONE_WORD], 1u) == cmd[CMD0 + GROUPS_WORD] - 1u;
+        if (s_last) reserve_arena();
+    }
+    barrier();
+    // the item's pass-1 work groups into pass 1's table, shared by the work group (at most 2^16 a tile)
+    if (s_last)
+        for (uint j = gl_LocalInvocationIndex; j < min(s_groups, 65536u); j += 64u)
+            work[table1_start + s_first + j] = uint(tile_item) | (j << 16);
 #else
-    if (gid >= found[3]) return;
-    uint w = found[4u + gid];
+    if (gid >= cmd[CMD0 + FOUND_WORD]) return;
+    uint w = found[FOUND0 + gid];
     emit_leaf(int(w & 15u), int((w >> 4) & 16383u), int(w >> 18));
 #endif
 }

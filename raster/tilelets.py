@@ -4,7 +4,7 @@
 Leaves come from the GPU selection (raster.selection): one point per leaf, drawn with an indirect command,
 expanded by the geometry shader into its 8-triangle fan (stitched where the neighbour is coarser, four
 SW-NE cells at full resolution) with skirts on edges that face ray-cast tiles. Nothing about the mesh is
-computed on the CPU per frame; the CPU sets uniforms and issues one dispatch and one draw per tile.
+computed on the CPU per frame; the CPU sets uniforms and issues two dispatches a frame and one draw per tile.
 """
 from __future__ import annotations
 
@@ -15,17 +15,19 @@ from hybrid.gl.programs import program, set_uniform
 from hybrid.gl.shading import resolve_mode
 
 from .arena import INDEX_BYTES, RECORD_BYTES, VERTEX_BYTES
-from .selection import BASE_WORD, CMD_POINTS, LEAF_FORMAT, LEAF_WORDS, SelectedTileletTile, TileletSelection
+from .frame_items import BASE_WORD, CMD_POINTS
+from .selection import LEAF_FORMAT, LEAF_WORDS, SelectedTileletTile, TileletSelection
 from .shading import MODES
 
 GL_CLIP_DISTANCE0 = 0x3000
 
 
 def read_leaves(strategy, g: SelectedTileletTile) -> dict:
-    """The leaves the last selection of a tilelet strategy drew for its tile g (for tests): level and triangles
-    (non-degenerate) of each, with j0, i0, dropped-edge bits and post heights where it wrote leaf records."""
-    words = np.frombuffer(g.control.read(size=(BASE_WORD + 1) * 4), dtype=np.uint32)
-    count, base = int(words[0]), int(words[BASE_WORD])
+    """The leaves the last selection of a tilelet strategy drew for its tile g (its first drawing in the frame;
+    for tests): level and triangles (non-degenerate) of each, with j0, i0, dropped-edge bits and post heights
+    where it wrote leaf records."""
+    words = strategy.control_words(strategy.item_of[id(g)])
+    count, base = int(words[5 * CMD_POINTS]), int(words[BASE_WORD])
     a = strategy.arena
 
     def read(buf, nbytes: int, dtype) -> np.ndarray:
@@ -51,7 +53,7 @@ class TileletDrawing(TileletSelection):
 
     def __init__(self, ctx, hf, **options):
         super().__init__(ctx, hf, **options)
-        self._skirted: list = []          # (block index, tile) of the last draw_tiles call that hang skirts
+        self._skirted: list = []          # items of the last draw_tiles call that hang skirts
         self.edges = TerrainEdges(ctx, hf)   # skirts are not drawn for rays from under the sheet
         self.skirt_prog = None                # the program that draws skirts (subclasses)
         self._arena_vaos = (0, {})            # (arena version, vertex arrays over the arena's buffers)
@@ -65,8 +67,8 @@ class TileletDrawing(TileletSelection):
         """Every program whose uniforms follow the frame (subclasses)."""
         raise NotImplementedError
 
-    def draw_tile(self, g, tile, view, wireframe: bool = False) -> None:
-        """Issue one tile's indirect draw from the control buffer of g, its draw slot (subclasses)."""
+    def draw_tile(self, item: int, wireframe: bool = False) -> None:
+        """Issue item ``item``'s indirect draw from the frame's control buffer (subclasses)."""
         raise NotImplementedError
 
     def arena_arrays(self) -> dict:
@@ -83,8 +85,8 @@ class TileletDrawing(TileletSelection):
             self._arena_vaos = (self.arena.version, vaos)
         return vaos
 
-    def draw_tile_skirts(self, g) -> None:
-        """Issue one tile's skirt draw from g, its draw slot (subclasses)."""
+    def draw_tile_skirts(self, item: int) -> None:
+        """Issue item ``item``'s skirt draw from the frame's control buffer (subclasses)."""
         raise NotImplementedError
 
     def draw_skirts(self, target, view) -> None:
@@ -99,9 +101,9 @@ class TileletDrawing(TileletSelection):
         for i in range(4):
             ctx.enable_direct(GL_CLIP_DISTANCE0 + i)
         try:
-            for i, g in items:
+            for i in items:
                 self.blocks.bind(i)
-                self.draw_tile_skirts(g)
+                self.draw_tile_skirts(i)
         finally:
             for i in range(4):
                 ctx.disable_direct(GL_CLIP_DISTANCE0 + i)
@@ -153,11 +155,10 @@ class TileletDrawing(TileletSelection):
         for i in range(4):
             ctx.enable_direct(GL_CLIP_DISTANCE0 + i)
         try:
-            for i, ((g, tile, sel), slot) in enumerate(zip(items, self.slots)):
+            for i in range(len(items)):
                 self.blocks.bind(i)
-                self.draw_tile(slot, tile, view, wireframe)
-            self._skirted = [(i, slot) for i, ((g, tile, sel), slot) in enumerate(zip(items, self.slots))
-                             if (skirts or {}).get(sel.key, 0)]
+                self.draw_tile(i, wireframe)
+            self._skirted = [i for i, (_, _, sel) in enumerate(items) if (skirts or {}).get(sel.key, 0)]
         finally:
             for i in range(4):
                 ctx.disable_direct(GL_CLIP_DISTANCE0 + i)
@@ -187,22 +188,19 @@ class TileletStrategy(TileletDrawing):
         """The geometry-shader program and its skirt-pass variant."""
         return (self.prog, self.skirt_prog)
 
-    def tile_arrays(self, g: SelectedTileletTile) -> dict:
-        """None per tile: the leaves are drawn from the arena."""
-        return {}
-
     def arena_arrays(self) -> dict:
         """Two vertex arrays of the arena's leaf records as points: for the mesh and for the skirt program."""
         attrs = [(self.arena.records, LEAF_FORMAT, "a_node", "a_h0", "a_h1", "a_h8")]
         return {"points": self.ctx.vertex_array(self.prog, attrs),
                 "skirt_points": self.ctx.vertex_array(self.skirt_prog, attrs)}
 
-    def draw_tile(self, g, tile, view, wireframe: bool = False) -> None:
-        """The tile's leaves as points through the geometry shader (count and first leaf from the selection)."""
+    def draw_tile(self, item: int, wireframe: bool = False) -> None:
+        """The item's leaves as points through the geometry shader (count and first leaf from the selection)."""
         self.prog["skirt_pass"].value = False
-        self.arena_vaos()["points"].render_indirect(g.control, mode=self.ctx.POINTS, count=1, first=CMD_POINTS)
+        self.arena_vaos()["points"].render_indirect(self.items.control, mode=self.ctx.POINTS, count=1,
+                                                    first=self.command(item, CMD_POINTS))
 
-    def draw_tile_skirts(self, g) -> None:
-        """The tile's leaves again through the geometry shader's skirt program, emitting only their skirts."""
-        self.arena_vaos()["skirt_points"].render_indirect(g.control, mode=self.ctx.POINTS, count=1,
-                                                          first=CMD_POINTS)
+    def draw_tile_skirts(self, item: int) -> None:
+        """The item's leaves again through the geometry shader's skirt program, emitting only their skirts."""
+        self.arena_vaos()["skirt_points"].render_indirect(self.items.control, mode=self.ctx.POINTS, count=1,
+                                                          first=self.command(item, CMD_POINTS))

@@ -1,0 +1,138 @@
+"""Resident tiles' heights and node data in two shared GPU buffers per cell count, one fixed-size slot a tile.
+
+The leaf selection (select.comp.glsl) runs as one dispatch over every tile of a frame, so it cannot bind a
+tile's own buffers: each tile's data lies in a slot of its cell count's heap instead, and the tile's block
+carries where (raster.tileblock). A heap grows by doubling (a GPU copy of the used slots), and when eviction
+leaves it under a quarter full it is made again for twice what it holds, its tiles moved down to the first
+slots. Bytes: a tile counts its slot's; what the heaps hold unused is shared (``spare_nbytes``).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from hybrid.gl.context import gl_bytes
+
+MIN_SLOTS = 4                   # smallest heap, tiles
+SHRINK_BELOW = 0.25             # remake a heap whose tiles fill less than this share of it ...
+
+
+class HeapSlot:
+    """Where one tile's data lies in its heap; ``index`` changes when the heap is compacted."""
+
+    __slots__ = ("heap", "index")
+
+    def __init__(self, heap: "TileHeap", index: int):
+        self.heap, self.index = heap, index
+
+    @property
+    def heights_base(self) -> int:
+        """First float of the tile's heights in the heights buffer."""
+        return self.index * self.heap.height_words
+
+    @property
+    def nodes_base(self) -> int:
+        """First vec4 of the tile's nodes in the node buffer."""
+        return self.index * self.heap.node_rows
+
+    @property
+    def nbytes(self) -> int:
+        """GPU bytes of the slot (heights and nodes)."""
+        return self.heap.slot_bytes
+
+    def release(self) -> None:
+        """Give the slot back to its heap."""
+        self.heap.free(self)
+
+
+class TileHeap:
+    """Heights ((n+1)² float32) and node rows (``node_rows`` vec4) of every resident n-cell tile of a strategy."""
+
+    def __init__(self, ctx, n: int, node_rows: int):
+        self.ctx, self.n, self.node_rows = ctx, int(n), int(node_rows)
+        self.height_words = (self.n + 1) ** 2
+        self.slot_bytes = 4 * self.height_words + 16 * self.node_rows
+        self.capacity = 0
+        self.heights = self.nodes = None
+        self.owners: list[HeapSlot | None] = []
+        self._allocate(MIN_SLOTS)
+
+    def _allocate(self, capacity: int) -> None:
+        """New buffers for ``capacity`` slots, the used slots copied to the same indices."""
+        heights = self.ctx.buffer(reserve=capacity * 4 * self.height_words)
+        nodes = self.ctx.buffer(reserve=capacity * 16 * self.node_rows)
+        for s in self.owners:
+            if s is not None:
+                self._copy(s.index, s.index, heights, nodes)
+        self._free_buffers()
+        self.heights, self.nodes, self.capacity = heights, nodes, capacity
+        self.owners += [None] * (capacity - len(self.owners))
+
+    def _copy(self, src: int, dst: int, heights, nodes) -> None:
+        """GPU copy of slot ``src`` of the current buffers to slot ``dst`` of ``heights`` and ``nodes``."""
+        hb, nb = 4 * self.height_words, 16 * self.node_rows
+        self.ctx.copy_buffer(heights, self.heights, hb, read_offset=src * hb, write_offset=dst * hb)
+        self.ctx.copy_buffer(nodes, self.nodes, nb, read_offset=src * nb, write_offset=dst * nb)
+
+    def alloc(self, heights: np.ndarray, nodes: np.ndarray) -> HeapSlot:
+        """A slot holding one tile's heights ((n+1)² float32) and node rows ((node_rows, 4) float32)."""
+        if heights.size != self.height_words or nodes.shape != (self.node_rows, 4):
+            raise ValueError(f"a {self.n}-cell tile's heap slot holds {self.height_words} heights and "
+                             f"{self.node_rows} node rows, got {heights.size} and {nodes.shape[0]}")
+        free = [i for i, s in enumerate(self.owners) if s is None]
+        if not free:
+            free = [self.capacity]
+            self._allocate(2 * self.capacity)
+        slot = HeapSlot(self, free[0])
+        self.owners[slot.index] = slot
+        self.heights.write(np.ascontiguousarray(heights, dtype=np.float32).tobytes(), offset=slot.heights_base * 4)
+        self.nodes.write(np.ascontiguousarray(nodes, dtype=np.float32).tobytes(), offset=slot.nodes_base * 16)
+        return slot
+
+    def free(self, slot: HeapSlot) -> None:
+        """Give a slot back; a heap left under SHRINK_BELOW full is remade for twice its tiles (at least
+        MIN_SLOTS), its tiles moved to the first slots."""
+        if slot.index >= len(self.owners) or self.owners[slot.index] is not slot:
+            return
+        self.owners[slot.index] = None
+        used = [s for s in self.owners if s is not None]
+        if self.capacity > MIN_SLOTS and len(used) < SHRINK_BELOW * self.capacity:
+            self._compact(max(MIN_SLOTS, 2 * len(used)))
+
+    def _compact(self, capacity: int) -> None:
+        """Remake the buffers for ``capacity`` slots with the used slots first (their indices updated)."""
+        used = [s for s in self.owners if s is not None]
+        heights = self.ctx.buffer(reserve=capacity * 4 * self.height_words)
+        nodes = self.ctx.buffer(reserve=capacity * 16 * self.node_rows)
+        for i, s in enumerate(used):
+            self._copy(s.index, i, heights, nodes)
+            s.index = i
+        self._free_buffers()
+        self.heights, self.nodes, self.capacity = heights, nodes, capacity
+        self.owners = used + [None] * (capacity - len(used))
+
+    @property
+    def used(self) -> int:
+        """Slots holding a tile."""
+        return sum(s is not None for s in self.owners)
+
+    @property
+    def spare_nbytes(self) -> int:
+        """GPU bytes of the heap's buffers (as the driver reports them) less its tiles' slots."""
+        return gl_bytes(self.heights, self.nodes) - self.used * self.slot_bytes
+
+    def bind(self) -> None:
+        """Bind the node buffer at storage binding 0 and the heights at 5 (select.comp.glsl)."""
+        self.nodes.bind_to_storage_buffer(0)
+        self.heights.bind_to_storage_buffer(5)
+
+    def _free_buffers(self) -> None:
+        for b in (self.heights, self.nodes):
+            if b is not None:
+                b.release()
+        self.heights = self.nodes = None
+
+    def release(self) -> None:
+        """Free the buffers (the slots still handed out become invalid)."""
+        self._free_buffers()
+        self.owners = []
+        self.capacity = 0

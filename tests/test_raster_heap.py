@@ -1,0 +1,73 @@
+"""The raster strategies' resident tiles in shared heaps (raster.heap) and their one-dispatch selection: each
+tile's slot holds its heights and node block as uploaded, also after the heap grew and after eviction made it
+smaller and moved its tiles; frames drawn after that are the frames drawn before. (One tile drawn as many items
+of a frame, each clipped to a missing tile's rectangle: test_uploads' first frames, all drawn from the root.)"""
+import numpy as np
+import pytest
+
+from hybrid.camera.flight import preset
+from hybrid.renderer import Renderer
+from raster.heap import MIN_SLOTS
+from raster.indexed import IndexedTileletStrategy
+from raster.nodes import nodes_for, tile_node_block
+
+SIZE = (160, 96)
+
+
+def slot_contents(g) -> tuple[np.ndarray, np.ndarray]:
+    """(heights, node rows) read back from a tile's heap slot."""
+    heap, s = g.slot.heap, g.slot
+    h = np.frombuffer(heap.heights.read(size=4 * heap.height_words, offset=4 * s.heights_base), np.float32)
+    nd = np.frombuffer(heap.nodes.read(size=16 * heap.node_rows, offset=16 * s.nodes_base), np.float32)
+    return h.reshape(g.n + 1, g.n + 1), nd.reshape(-1, 4)
+
+
+def test_slots_hold_their_tiles_through_growth_and_compaction(ctx, puget257):
+    from hybrid.tiles.pyramid import TilePyramid
+    pyr = TilePyramid(puget257, 32)
+    s = IndexedTileletStrategy(ctx, puget257)
+    try:
+        keys = pyr.keys(0)[:20]
+        tiles = {k: pyr.tile(k) for k in keys}
+        gs = {k: s.upload(t) for k, t in tiles.items()}
+        heap = s.heaps[32]
+        assert heap.capacity >= 20 > MIN_SLOTS                  # grew from MIN_SLOTS by copies on the GPU
+        nodes = nodes_for(puget257, 32, s.beta)
+
+        def check(k):
+            h, nd = slot_contents(gs[k])
+            np.testing.assert_array_equal(h, np.asarray(tiles[k].heights, np.float32))
+            np.testing.assert_array_equal(nd, tile_node_block(nodes, k.level, k.tx, k.ty, 32)[0])
+        for k in keys:
+            check(k)
+        before = heap.capacity
+        for k in keys[:17]:
+            gs.pop(k).release()
+        assert heap.capacity < before and heap.used == 3        # compacted: fewer slots, tiles moved down
+        assert sorted(g.slot.index for g in gs.values()) == [0, 1, 2]
+        for k in gs:
+            check(k)
+        assert heap.spare_nbytes == (heap.capacity - 3) * heap.slot_bytes
+    finally:
+        s.release()
+
+
+@pytest.mark.parametrize("strategy", ["raster", "raster_gs"])
+def test_frames_after_eviction_equal_frames_before(ctx, puget257, strategy):
+    fly = preset("flyover", puget257, 6, *SIZE)
+    runs = [(fly.view(1), 0.5), (fly.view(2), 60.0), (fly.view(1), 0.5)]
+    with Renderer(ctx, puget257, strategy, tile_size=32) as full:
+        want = full.render(*runs[0])
+    need = []
+    for v, tau in runs[:2]:
+        with Renderer(ctx, puget257, strategy, tile_size=32) as probe:
+            probe.render(v, tau)
+            need.append(probe.cache.bytes)
+    budget = int(max(need) * 1.05)
+    with Renderer(ctx, puget257, strategy, tile_size=32, budget_bytes=budget) as r:
+        out = [r.render(v, tau) for v, tau in runs]
+        assert r.cache.stats.evictions > 0
+    assert np.isfinite(want.distance).sum() > 0.5 * want.distance.size
+    np.testing.assert_array_equal(out[0].colour, want.colour)
+    np.testing.assert_array_equal(out[2].colour, want.colour)       # drawn again from moved and new slots
+    np.testing.assert_array_equal(out[2].distance, want.distance)
