@@ -5,7 +5,9 @@
    strategies' beta with lean leaves, what raster and raster_gs draw; the same with both fans in one error, as a
    periodic extension's nodes hold them near its seams; the same with full-resolution leaves lean too, which the GPU does not draw)
    vs pymartini (RTIN), pydelatin and fast-simplification, every max error measured the same way.
-2. Per-view leaf selection + restriction time of a 257² tile.
+2. The GPU leaf selection of a frame's tiles (issued, and finished) and the whole frame with its CPU share:
+   planning plus issuing the draw (waits for the GL excluded); on llvmpipe issuing includes the compute
+   dispatches, which run inside the call.
 3. GPU bytes per tile and representation, next to the paper's 96 bits (12 bytes) per triangle.
 4. Geometry-shader tilelet throughput against an indexed triangle list of the same triangles.
 5. Tilelet culling gain on a low view.
@@ -115,8 +117,23 @@ def triangles_vs_error(tiles, errors=(5.0, 10.0, 20.0, 40.0, 80.0)):
     return rows
 
 
+def _issue_and_total_ms(fn, repeats, ctx):
+    """Medians (ms) of the wall clock until fn returns (its commands issued) and until the GL has finished them."""
+    issue, total = [], []
+    for _ in range(repeats):
+        ctx.finish()
+        t0 = time.perf_counter()
+        fn()
+        issue.append((time.perf_counter() - t0) * 1e3)
+        ctx.finish()
+        total.append((time.perf_counter() - t0) * 1e3)
+    return float(np.median(issue)), float(np.median(total))
+
+
 def selection_rows(ctx, repeats=5):
-    """Rows (strategy, tiles, selection ms, frame ms, triangles): GPU leaf selection alone and the whole frame."""
+    """Rows (strategy, tiles, selection issue ms, selection ms, frame ms, plan ms, issue ms, CPU ms, triangles):
+    the GPU leaf selection alone (issued, and finished), and the whole frame with its CPU share (planning plus
+    issuing the draw, its waits for the GL excluded: ``FrameStats.issue_ms``)."""
     from hybrid.camera.flight import preset
     from hybrid.renderer import Renderer
     from hybrid.terrain.datasets import puget
@@ -127,10 +144,12 @@ def selection_rows(ctx, repeats=5):
         with Renderer(ctx, hf, name, tile_size=128) as r:
             r.render(view)
             items = r._items(name, r.plan(view), set())
-            sel = _median_ms(lambda: r.strategies[name].select_leaves(view, items, 2 / 3), repeats, ctx)
-            res = [r.render(view) for _ in range(repeats)]
-            rows.append((name, len(items), f"{sel:.1f}", f"{np.median([x.stats.wall_ms for x in res]):.1f}",
-                         res[-1].stats.counters["triangles"]))
+            issue, sel = _issue_and_total_ms(lambda: r.strategies[name].select_leaves(view, items, 2 / 3), repeats, ctx)
+            res = [r.render(view).stats for _ in range(repeats)]
+            plan, draw_issue = np.median([x.plan_ms for x in res]), np.median([x.issue_ms for x in res])
+            cpu = np.median([x.plan_ms + x.issue_ms for x in res])
+            rows.append((name, len(items), f"{issue:.2f}", f"{sel:.1f}", f"{np.median([x.wall_ms for x in res]):.1f}",
+                         f"{plan:.2f}", f"{draw_issue:.2f}", f"{cpu:.2f}", res[-1].counters["triangles"]))
     return rows
 
 
@@ -232,7 +251,8 @@ def run(ctx) -> dict[str, pd.DataFrame]:
     hf, tiles = puget_tiles()
     tables = (
         ("2. GPU leaf selection alone and the whole frame (Puget flyover frame 3, tiles of 128, 640x360)",
-         ["strategy", "tiles", "selection ms", "frame ms", "triangles"], selection_rows(ctx)),
+         ["strategy", "tiles", "selection issue ms", "selection ms", "frame ms", "plan ms", "draw issue ms",
+          "CPU ms (plan + draw issue; target <= 1)", "triangles"], selection_rows(ctx)),
         ("3. GPU bytes per 257² tile", ["representation", "bytes", "triangles", "bytes/tri"],
          memory_rows(ctx, hf, tiles)),
         ("4. geometry shader vs indexed triangles, same leaves (Puget 513², top view, 320x180)",

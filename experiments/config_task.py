@@ -11,7 +11,8 @@ renders never run between timed draws. The configurations of a group (the same p
 policy) are timed interleaved, frame by frame and repeat by repeat, so that a drift of the machine over the
 run falls on all of them alike (``run_group``). Each configuration first draws one untimed warm-up frame
 (shader compiles, first uploads: one-off costs that are not a frame's); every frame is drawn ``repeats``
-times, all kept in ``wall_ms_repeats`` and their median in ``wall_ms``. Maps for the report's images come
+times, all kept in ``wall_ms_repeats`` and their median in ``wall_ms``; ``cpu_ms`` is the median of their CPU
+shares (planning plus issuing the draw: ``FrameStats.issue_ms``). Maps for the report's images come
 from one more, untimed, draw. A configuration resumed part-way first replays its earlier frames untimed, so
 that its GPU tile cache is in the state an uninterrupted run would have.
 """
@@ -234,7 +235,8 @@ def _time_frame(spec: Spec, live: list[_ConfigRun], k: int, views, fail_fast: bo
             r.attempt(lambda r=r: mapped.append(r.renderer.render(views[k], r.c["tau"], maps=True)), fail_fast)
         if r.out.error is not None:
             continue
-        r.timed[k] = ((mapped or results)[-1], [x.stats.wall_ms for x in results], results[-1].stats)
+        cpu = [x.stats.plan_ms + x.stats.issue_ms for x in results if x.stats.issue_ms is not None]
+        r.timed[k] = ((mapped or results)[-1], [x.stats.wall_ms for x in results], results[-1].stats, cpu)
         if step:
             step(f"{r.c['config']} frame {k}")
 
@@ -254,8 +256,9 @@ def _measure(spec: Spec, r: _ConfigRun, state: TaskState, views, extra: dict | N
         return state.reference(spec, c, j, out.images)
 
     for k in r.todo:
-        res, walls, timed_stats = r.timed[k]                   # counters of a timed draw, not the maps draw
+        res, walls, timed_stats, cpu = r.timed[k]              # counters of a timed draw, not the maps draw
         row = {**c, "frame": k, **timed_stats.row(), **(extra or {}), "wall_ms": float(np.median(walls)),
+               "cpu_ms": float(np.median(cpu)) if cpu else float("nan"),
                "wall_ms_min": float(np.min(walls)), "wall_ms_max": float(np.max(walls)),
                "wall_ms_repeats": [float(w) for w in walls], **frame_accuracy(res, ref(k), flip=spec.flip)}
         if k > 0:

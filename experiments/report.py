@@ -23,12 +23,13 @@ from .tables import md_table
 
 
 def summary_table(frames: pd.DataFrame) -> pd.DataFrame:
-    """Per scene and method: median and p95 frame ms, the repeats' spread (noise, %), mean and peak GPU MiB,
+    """Per scene and method: median and p95 frame ms, the repeats' spread (noise, %), CPU ms, mean and peak GPU MiB,
     accuracy over terrain pixels, cracks, silhouette differences, reference terrain drawn as sky, popping."""
     from .noise import repeat_matrix, repeat_spread
     f = label_columns(frames)
     agg = {"frames": ("frame", "count"), "median_ms": ("wall_ms", "median"),
            "p95_ms": ("wall_ms", lambda s: float(np.percentile(s, 95))),
+           **({"cpu_ms": ("cpu_ms", "median")} if "cpu_ms" in f else {}),
            "mean_MiB": ("gpu_bytes", lambda s: float(s.mean()) / 2**20),
            "peak_MiB": ("gpu_bytes", lambda s: float(s.max()) / 2**20)}
     for col, name, fn in (("psnr", "psnr_dB", "mean"), ("ssim", "ssim", "mean"), ("flip", "flip", "mean"),
@@ -48,7 +49,9 @@ def summary_table(frames: pd.DataFrame) -> pd.DataFrame:
 MEASURES = [
     "median_ms: median over frames of each frame's median of repeats; noise_%: the median spread (max - min) / "
     "median of a frame's repeats, the noise the reading weighs differences against (with a bootstrap interval of "
-    "the ratio over frames and repeats).",
+    "the ratio over frames and repeats); cpu_ms: median over frames of the CPU's share of a frame, planning plus "
+    "issuing its GL commands (waits for the GL left out; on llvmpipe issuing includes vertex, geometry and "
+    "compute work, which run inside the calls).",
     "psnr_dB, ssim, flip: over the pixels where the method or the reference shows terrain (identical sky left "
     "out); depth_rel_med: relative hit-distance error over the pixels both cover.",
     "cracks_px (most in a frame): sky enclosed by the method's own terrain (within 3 px both sides, across or "

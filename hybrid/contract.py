@@ -105,7 +105,9 @@ class FrameStats:
     """What one frame cost and drew; the same fields from every renderer (milliseconds, bytes, counts).
 
     wall_ms is what a user waits for: planning plus drawing, wall clock around ctx.finish(); gpu_ms is the
-    GL timer query on GPUs and None on software rasterizers. tiles_raster and tiles_raycast count tiles by kind
+    GL timer query on GPUs and None on software rasterizers; issue_ms is the drawing's CPU share, the wall clock
+    until its GL commands are issued less its waits for the GL inside (``hybrid.gl.timing``), so the frame's
+    CPU time is plan_ms + issue_ms. tiles_raster and tiles_raycast count tiles by kind
     (raster kinds: raster, raster_gs, fullres, tin); tiles_gs counts those of them drawn by raster_gs.
     gpu_bytes counts resident tiles plus what the strategies hold for all tiles (shared_bytes); uploads and
     evictions are those of this frame. prep_ms is one-time CPU work for tiles seen for the first time (the
@@ -118,6 +120,7 @@ class FrameStats:
     plan_ms: float
     draw_ms: float
     gpu_ms: float | None = None
+    issue_ms: float | None = None
     tiles: int = 0
     tiles_raster: int = 0
     tiles_raycast: int = 0

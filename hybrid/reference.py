@@ -87,8 +87,8 @@ class ReferenceRenderer:
         target = FrameTarget(self.ctx, view.width, view.height)
         try:
             target.clear()
-            _, wall, gpu = timed(self.ctx, lambda: self.draw(target, view, mode))
-            stats = FrameStats(wall_ms=wall, plan_ms=0.0, draw_ms=wall, gpu_ms=gpu, tiles=1, gpu_bytes=self.nbytes,
+            _, wall, gpu, issue = timed(self.ctx, lambda: self.draw(target, view, mode))
+            stats = FrameStats(wall_ms=wall, plan_ms=0.0, draw_ms=wall, gpu_ms=gpu, issue_ms=issue, tiles=1, gpu_bytes=self.nbytes,
                                shared_bytes=self.nbytes,
                                counters={"triangles": self.triangles, "supersample": supersample})
             result = target.read(view, stats)

@@ -205,7 +205,7 @@ class Renderer:
     def _timed_call(self, target: FrameTarget, view: View, name: str, items: list[TileItem], tau: float) -> float:
         """ms of one draw call of ``items`` with strategy ``name`` into the target as it stands (``time_draw``'s
         clock)."""
-        _, wall, gpu = timed(self.ctx, lambda: self.strategies[name].draw_tiles(target, view, items, tau,
+        _, wall, gpu, _ = timed(self.ctx, lambda: self.strategies[name].draw_tiles(target, view, items, tau,
                                                                                 **self.options[name]))
         return wall if gpu is None else gpu
 
@@ -299,11 +299,11 @@ class Renderer:
             target.clear()
             target.use()
             try:
-                counters, draw, gpu = timed(self.ctx, lambda: self._draw(target, view, plans, pinned, tau, opts))
+                counters, draw, gpu, issue = timed(self.ctx, lambda: self._draw(target, view, plans, pinned, tau, opts))
             finally:
                 self._fallbacks = {}
             stats = self._stats(plans, plan_ms, draw, gpu, counters, together)
-            stats.prep_ms = prep_ms
+            stats.prep_ms, stats.issue_ms = prep_ms, issue
             if streamed is not None:
                 stats.upload_ms, stats.fallback_tiles, stats.pending_uploads = \
                     streamed.upload_ms, streamed.fallback_tiles, streamed.fallback_tiles

@@ -28,8 +28,8 @@ def two_groups():
 
 
 # columns that depend on timing or on where a frame ran; every other column must match the serial run
-TIMED = {"wall_ms", "wall_ms_min", "wall_ms_max", "wall_ms_repeats", "plan_ms", "draw_ms", "gpu_ms", "upload_ms",
-         "worker", "device"}
+TIMED = {"wall_ms", "wall_ms_min", "wall_ms_max", "wall_ms_repeats", "plan_ms", "draw_ms", "gpu_ms", "issue_ms",
+         "cpu_ms", "upload_ms", "worker", "device"}
 
 
 def frames(folder):

@@ -10,6 +10,7 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import os
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -128,10 +129,21 @@ def shared_context(device: int | None = None):
     return _SHARED[device]
 
 
+_WAITED = [0.0]                 # ms spent in gl_finish by this process (the GL runs on one thread)
+
+
 def gl_finish(ctx) -> None:
     """glFinish on the current context, through ctypes, which lets other Python threads run while the GL works
-    (moderngl's ctx.finish() and buffer reads hold the interpreter lock while they wait)."""
+    (moderngl's ctx.finish() and buffer reads hold the interpreter lock while they wait); the wait is added to
+    ``gl_waited_ms``."""
+    t0 = time.perf_counter()
     _gl_function(b"glFinish")()
+    _WAITED[0] += (time.perf_counter() - t0) * 1e3
+
+
+def gl_waited_ms() -> float:
+    """Milliseconds this process has spent waiting in ``gl_finish`` (for the GL to finish its work)."""
+    return _WAITED[0]
 
 
 def _gl_function(name: bytes, *argtypes):

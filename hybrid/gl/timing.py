@@ -1,13 +1,16 @@
 """Timing a draw: wall clock around ctx.finish() everywhere, and a GL timer query on real GPUs.
 
 On Mesa's CPU rasterizers GL timer queries are wrong (they see only part of the work), so there the wall
-clock is the only measure; on a GPU the timer query gives the GPU's own elapsed time as well.
+clock is the only measure; on a GPU the timer query gives the GPU's own elapsed time as well. The issue time is
+the CPU's share: the wall clock until the drawing function returns, less what it waited inside for the GL
+(``gl_finish``, as before a read of counters); on llvmpipe it includes compute dispatches, which run inside
+the call, but not rasterization, which runs at the wait.
 """
 from __future__ import annotations
 
 import time
 
-from hybrid.gl.context import gl_finish, gl_info
+from hybrid.gl.context import gl_finish, gl_info, gl_waited_ms
 
 
 def timer_queries_valid(ctx) -> bool:
@@ -22,18 +25,21 @@ def timer_queries_valid(ctx) -> bool:
 
 
 def timed(ctx, fn):
-    """(fn(), wall ms, GPU ms or None): fn runs between two ctx.finish(); GPU ms from a timer query on GPUs."""
+    """(fn(), wall ms, GPU ms or None, issue ms): fn runs between two ctx.finish(); GPU ms from a timer query on
+    GPUs; issue ms the wall clock until fn returns less its waits for the GL."""
     query = ctx.query(time=True) if timer_queries_valid(ctx) else None
     ctx.finish()
+    waited = gl_waited_ms()
     t0 = time.perf_counter()
     if query is not None:
         with query:
             out = fn()
     else:
         out = fn()
+    issue = (time.perf_counter() - t0) * 1e3 - (gl_waited_ms() - waited)
     gl_finish(ctx)                          # other threads (the tile loader) run while the GL works
     wall = (time.perf_counter() - t0) * 1e3
     gpu = None
     if query is not None:
         gpu = query.elapsed / 1e6          # moderngl frees a query with its Python object
-    return out, wall, gpu
+    return out, wall, gpu, issue
