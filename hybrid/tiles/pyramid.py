@@ -139,6 +139,7 @@ class TilePyramid:
         self.size = self.n * (1 << self.max_level) + 1      # samples a side of the addressing square
         self._boxes: dict = {}
         self._qerr: dict = {}               # level -> quantisation error bounds, made on first use
+        self._tables: dict = {}             # level -> level_table
         self._on_step = None                # per cell: corners on the source step (hybrid.tiles.quantize)
         self._build_bounds()
 
@@ -217,6 +218,17 @@ class TilePyramid:
                                        for a in self.aabbs(np.full(rows * cols, level), tx_all, ty_all))
         lo, hi = self._boxes[level]
         return lo[ty, tx], hi[ty, tx]
+
+    def level_table(self, level: int) -> np.ndarray:
+        """(rows, cols, 7) float64 per tile of a level: its box's world min and max corners (metres) and the error
+        tile selection refines by (geometric plus the 16-bit quantisation bound, metres); made on first use."""
+        if level not in self._tables:
+            rows, cols = self.tile_counts(level)
+            ty, tx = np.divmod(np.arange(rows * cols), cols)
+            lo, hi = self.boxes_at(level, tx, ty)
+            err = self.errors_at(level, tx, ty) + self.quantization_errors_at(level, tx, ty)
+            self._tables[level] = np.concatenate([lo, hi, err[:, None]], axis=1).reshape(rows, cols, 7)
+        return self._tables[level]
 
     def errors_at(self, level: int, tx: np.ndarray, ty: np.ndarray) -> np.ndarray:
         """Geometric errors (metres, float64) of the level's existing tiles (tx, ty), given as integer arrays."""

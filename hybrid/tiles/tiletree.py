@@ -60,18 +60,6 @@ def covering_tile(selected, key: TileKey, max_level: int) -> TileKey | None:
     return None
 
 
-def box_classes(planes: np.ndarray, lo_rel: np.ndarray, hi_rel: np.ndarray) -> np.ndarray:
-    """Frustum classes of (B, 3) eye-relative boxes: (B,) int8 of -1 outside, 1 wholly inside, 0 crossing a plane."""
-    n, off = planes[:, :3].T, planes[:, 3]
-    npos, nneg = np.maximum(n, 0.0), np.minimum(n, 0.0)
-    far = hi_rel @ npos + lo_rel @ nneg + off              # the corner farthest along each normal
-    near = lo_rel @ npos + hi_rel @ nneg + off
-    out = np.zeros(len(lo_rel), np.int8)
-    out[(near >= 0).all(axis=1)] = 1
-    out[(far < 0).any(axis=1)] = -1
-    return out
-
-
 def box_distances(eye: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Euclidean distances (metres) from a point to (B, 3) axis-aligned boxes; 0 inside.
 
@@ -97,25 +85,52 @@ def _member(sorted_codes: np.ndarray, cand: np.ndarray) -> np.ndarray:
     return sorted_codes[pos] == cand
 
 
+def corner_planes(planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(M (6, 12), offsets (12,)) with which ``box_classes`` is one product: for eye-relative boxes X = [lo | hi]
+    (B, 6), X @ M + offsets holds each plane's value at the box corner farthest along its normal (6 columns), then
+    at the nearest (6)."""
+    n, off = planes[:, :3].T, planes[:, 3]
+    npos, nneg = np.maximum(n, 0.0), np.minimum(n, 0.0)
+    m = np.empty((6, 12))
+    m[:3, :6], m[:3, 6:], m[3:, :6], m[3:, 6:] = nneg, npos, npos, nneg
+    return m, np.concatenate([off, off])
+
+
+def box_classes(planes: np.ndarray, lo_rel: np.ndarray, hi_rel: np.ndarray) -> np.ndarray:
+    """Frustum classes of (B, 3) eye-relative boxes: (B,) int8 of -1 outside, 1 wholly inside, 0 crossing a plane."""
+    return _classes(np.concatenate([lo_rel, hi_rel], axis=1), *corner_planes(planes))
+
+
+def _classes(x: np.ndarray, m: np.ndarray, off: np.ndarray) -> np.ndarray:
+    """``box_classes`` of eye-relative boxes x = [lo | hi] (B, 6) under ``corner_planes``."""
+    v = x @ m + off
+    out = (v[:, 6:] >= 0).all(axis=1).astype(np.int8)           # the nearest corner inside every plane
+    out[(v[:, :6] < 0).any(axis=1)] = -1                        # the farthest corner outside one
+    return out
+
+
 class _Selection:
     """The selected tiles of one view as parallel arrays, with what each needs (distance, projected error, class)."""
 
     def __init__(self, pyramid: TilePyramid, view: View, tau: float):
         self.pyramid, self.eye, self.tau = pyramid, np.asarray(view.eye, dtype=np.float64), tau
         self.planes, self.K = view.frustum_planes_rel(), view.pixels_per_radian
+        self.corners = corner_planes(self.planes)
+        self.eye2 = np.tile(self.eye, 2)
         self.parts = []                                   # (level, tx, ty, d, pe, c, lo, hi) arrays of selected tiles
 
     def measure(self, level: int, tx: np.ndarray, ty: np.ndarray):
         """Existing, not culled tiles of a level among (tx, ty), with distance, projected error and class."""
-        p = self.pyramid
-        ok = p.exists_at(level, tx, ty)
-        tx, ty = tx[ok], ty[ok]
-        lo, hi = p.boxes_at(level, tx, ty)
-        c = box_classes(self.planes, lo - self.eye, hi - self.eye)
+        ok = self.pyramid.exists_at(level, tx, ty)
+        if not ok.all():
+            tx, ty = tx[ok], ty[ok]
+        t = self.pyramid.level_table(level)[ty, tx]             # lo, hi, error: (B, 7)
+        c = _classes(t[:, :6] - self.eye2, *self.corners)
         keep = c >= 0
-        tx, ty, lo, hi, c = tx[keep], ty[keep], lo[keep], hi[keep], c[keep]
+        if not keep.all():
+            tx, ty, t, c = tx[keep], ty[keep], t[keep], c[keep]
+        lo, hi, err = t[:, :3], t[:, 3:6], t[:, 6]
         d = box_distances(self.eye, lo, hi)
-        err = p.errors_at(level, tx, ty) + p.quantization_errors_at(level, tx, ty)   # ray-cast tiles' 16-bit heights
         with np.errstate(divide="ignore", invalid="ignore"):
             pe = np.where(d > 0, err * self.K / d, np.where(err > 0, np.inf, 0.0))
         return tx, ty, d, pe, c, lo, hi
