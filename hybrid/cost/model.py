@@ -99,7 +99,8 @@ class CostModel:
         """Predicted frame time (ms): the tiles' costs plus the overhead of each strategy used, and the mixed
         frame's own overhead where more than one is used."""
         mixed = self.mix_overhead if len(strategies) > 1 else 0.0
-        return float(sum(tile_costs) + sum(self.overhead.get(s, 0.0) for s in strategies) + mixed)
+        tiles = tile_costs.sum() if isinstance(tile_costs, np.ndarray) else sum(tile_costs)
+        return float(tiles + sum(self.overhead.get(s, 0.0) for s in strategies) + mixed)
 
     def predict(self, f: TileFeatures) -> dict[str, float]:
         """Predicted milliseconds each strategy adds to a frame for one tile (overhead not included)."""
