@@ -51,7 +51,7 @@ MEASURES = [
     "median of a frame's repeats, the noise the reading weighs differences against (with a bootstrap interval of "
     "the ratio over frames and repeats); cpu_ms: median over frames of the CPU's share of a frame, planning plus "
     "issuing its GL commands (waits for the GL left out; on llvmpipe issuing includes vertex, geometry and "
-    "compute work, which run inside the calls).",
+    "compute work, which run inside the calls, but not fragment work).",
     "psnr_dB, ssim, flip: over the pixels where the method or the reference shows terrain (identical sky left "
     "out); depth_rel_med: relative hit-distance error over the pixels both cover.",
     "cracks_px (most in a frame): sky enclosed by the method's own terrain (within 3 px both sides, across or "

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from hybrid.errors import TerrabenchError
-from hybrid.gl.context import gl_bytes, gl_finish
+from hybrid.gl.context import gl_bytes, gl_finish, gl_memory_barrier
 from hybrid.gl.programs import compute_shader, set_uniform, write_uniform
 from hybrid.gl.textures import terrain_texture
 
@@ -218,9 +218,9 @@ class TileletSelection:
             raise TerrabenchError(f"a frame's raster tiles must have one cell count, got {ns}")
         self.heaps[ns[0]].bind()
         list_pass.run(group_x=int(groups0.sum()))
-        self.ctx.memory_barrier()
+        gl_memory_barrier(self.ctx)
         emit_pass.run_indirect(self.items.work)
-        self.ctx.memory_barrier()
+        gl_memory_barrier(self.ctx)
 
     def command(self, item: int, which: int) -> int:
         """Index of item ``item``'s indirect command ``which`` (CMD_*) in the control buffer."""

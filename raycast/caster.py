@@ -19,7 +19,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from hybrid.errors import TerrabenchError
-from hybrid.gl.context import depth32f_texture, gl_bytes, gl_finish, gl_info
+from hybrid.gl.context import depth32f_texture, gl_bytes, gl_finish, gl_info, gl_memory_barrier
 from hybrid.gl.edges import TerrainEdges
 from hybrid.gl.programs import program, register_include, set_uniform, write_uniform
 from hybrid.gl.shading import resolve_mode
@@ -312,7 +312,7 @@ class RaycastStrategy:
                 self._next_id += n_items
                 target.fbo.use()
                 id_fbo.release()
-        ctx.memory_barrier()
+        gl_memory_barrier(ctx)
         counters = {"rays": 0, "hits": 0, "steps": 0, "max_steps": 0, "capped": 0}
         if opts.stats and n_items:
             gl_finish(self.ctx)                 # the wait lets other threads (the tile loader) run

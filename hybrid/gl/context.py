@@ -129,7 +129,7 @@ def shared_context(device: int | None = None):
     return _SHARED[device]
 
 
-_WAITED = [0.0]                 # ms spent in gl_finish by this process (the GL runs on one thread)
+_WAITED = [0.0]                 # ms spent waiting for the GL by this process (the GL runs on one thread)
 
 
 def gl_finish(ctx) -> None:
@@ -141,8 +141,23 @@ def gl_finish(ctx) -> None:
     _WAITED[0] += (time.perf_counter() - t0) * 1e3
 
 
+def gl_memory_barrier(ctx) -> None:
+    """glMemoryBarrier (all bits). A CPU rasterizer finishes the queued work there, so on one the call's time is
+    added to ``gl_waited_ms``; on a GPU the call does not wait."""
+    t0 = time.perf_counter()
+    ctx.memory_barrier()
+    extra = getattr(ctx, "extra", None)
+    if not isinstance(extra, dict):
+        extra = ctx.extra = {}
+    if "software" not in extra:
+        extra["software"] = gl_info(ctx).is_software
+    if extra["software"]:
+        _WAITED[0] += (time.perf_counter() - t0) * 1e3
+
+
 def gl_waited_ms() -> float:
-    """Milliseconds this process has spent waiting in ``gl_finish`` (for the GL to finish its work)."""
+    """Milliseconds this process has spent waiting for the GL to finish its work (``gl_finish``, and
+    ``gl_memory_barrier`` on a CPU rasterizer)."""
     return _WAITED[0]
 
 

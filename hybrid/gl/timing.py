@@ -3,8 +3,9 @@
 On Mesa's CPU rasterizers GL timer queries are wrong (they see only part of the work), so there the wall
 clock is the only measure; on a GPU the timer query gives the GPU's own elapsed time as well. The issue time is
 the CPU's share: the wall clock until the drawing function returns, less what it waited inside for the GL
-(``gl_finish``, as before a read of counters); on llvmpipe it includes compute dispatches, which run inside
-the call, but not rasterization, which runs at the wait.
+(``gl_finish``, as before a read of counters, and on a CPU rasterizer ``gl_memory_barrier``, where it finishes
+the queued work); on llvmpipe it still includes the vertex, geometry and compute work, which run inside the
+draw and dispatch calls, but not rasterization and fragment work, which run at the waits.
 """
 from __future__ import annotations
 
