@@ -36,6 +36,7 @@ class StorePyramid(TilePyramid):
         self.size = self.n * (1 << self.max_level) + 1
         self._boxes: dict = {}
         self._qerr: dict = {}
+        self._tables: dict = {}
         self._zmin = {l: np.asarray(g[f"zmin/{l}"][:]) for l in range(self.max_level + 1)}
         self._zmax = {l: np.asarray(g[f"zmax/{l}"][:]) for l in range(self.max_level + 1)}
         self._err = {l: np.asarray(g[f"error/{l}"][:]) for l in range(self.max_level + 1)}
