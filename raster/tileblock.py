@@ -17,10 +17,11 @@ assert BLOCK.itemsize == BLOCK_BYTES
 
 
 def register_tile_block(ctx) -> None:
-    """Make ``#include "raster/tile_block"`` and ``"raster/tile_clip"`` resolve on ctx (the raster strategies
-    call it before compiling)."""
+    """Make ``#include "raster/tile_block"``, ``"raster/tile_clip"`` and ``"raster/select_append"`` resolve on ctx
+    (the raster strategies call it before compiling)."""
     register_include(ctx, "raster/tile_block", "raster", "tile_block.glsl")
     register_include(ctx, "raster/tile_clip", "raster", "tile_clip.glsl")
+    register_include(ctx, "raster/select_append", "raster", "select_append.glsl")
 
 
 def tile_blocks(hf, view, items, skirts: dict | None = None, culling: bool = True, unit_spacing: bool = False,
