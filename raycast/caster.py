@@ -19,7 +19,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from hybrid.errors import TerrabenchError
-from hybrid.gl.context import depth32f_texture, gl_bytes, gl_finish, gl_info, gl_memory_barrier
+from hybrid.gl.context import depth32f_texture, gl_bytes, gl_finish, gl_memory_barrier, is_software
 from hybrid.gl.edges import TerrainEdges
 from hybrid.gl.programs import program, register_include, set_uniform, write_uniform
 from hybrid.gl.shading import resolve_mode
@@ -101,7 +101,7 @@ class RaycastStrategy:
         self.ctx, self.hf = ctx, hf
         register_include(ctx, "raycast/traverse", "raycast", "traverse.glsl")
         register_include(ctx, "raycast/tile_block", "raycast", "tile_block.glsl")
-        self._prepass = prepass_default(gl_info(ctx).is_software)
+        self._prepass = prepass_default(is_software(ctx))
         self.options = self._resolved(CastOptions().updated(**options))
         self._check_mode(self.options)
         self.builder = MaxMipBuilder(ctx)

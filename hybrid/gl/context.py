@@ -146,13 +146,24 @@ def gl_memory_barrier(ctx) -> None:
     added to ``gl_waited_ms``; on a GPU the call does not wait."""
     t0 = time.perf_counter()
     ctx.memory_barrier()
+    if is_software(ctx):
+        _WAITED[0] += (time.perf_counter() - t0) * 1e3
+
+
+def context_extra(ctx) -> dict:
+    """The dict a context carries for the project's per-context facts (``ctx.extra``), made if missing."""
     extra = getattr(ctx, "extra", None)
     if not isinstance(extra, dict):
         extra = ctx.extra = {}
+    return extra
+
+
+def is_software(ctx) -> bool:
+    """True on a CPU rasterizer (llvmpipe, softpipe); cached on the context."""
+    extra = context_extra(ctx)
     if "software" not in extra:
         extra["software"] = gl_info(ctx).is_software
-    if extra["software"]:
-        _WAITED[0] += (time.perf_counter() - t0) * 1e3
+    return extra["software"]
 
 
 def gl_waited_ms() -> float:

@@ -11,17 +11,14 @@ from __future__ import annotations
 
 import time
 
-from hybrid.gl.context import gl_finish, gl_info, gl_waited_ms
+from hybrid.gl.context import context_extra, gl_finish, gl_waited_ms, is_software
 
 
 def timer_queries_valid(ctx) -> bool:
     """True where GL timer queries can be trusted (not llvmpipe/softpipe); cached on the context."""
-    extra = getattr(ctx, "extra", None)
-    if not isinstance(extra, dict):
-        extra = {}
-        ctx.extra = extra
+    extra = context_extra(ctx)
     if "timer_queries" not in extra:
-        extra["timer_queries"] = not gl_info(ctx).is_software
+        extra["timer_queries"] = not is_software(ctx)
     return extra["timer_queries"]
 
 
