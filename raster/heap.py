@@ -54,18 +54,7 @@ class TileHeap:
         self.capacity = 0
         self.heights = self.nodes = None
         self.owners: list[HeapSlot | None] = []
-        self._allocate(MIN_SLOTS)
-
-    def _allocate(self, capacity: int) -> None:
-        """New buffers for ``capacity`` slots, the used slots copied to the same indices."""
-        heights = self.ctx.buffer(reserve=capacity * 4 * self.height_words)
-        nodes = self.ctx.buffer(reserve=capacity * 16 * self.node_rows)
-        for s in self.owners:
-            if s is not None:
-                self._copy(s.index, s.index, heights, nodes)
-        self._free_buffers()
-        self.heights, self.nodes, self.capacity = heights, nodes, capacity
-        self.owners += [None] * (capacity - len(self.owners))
+        self._remake(MIN_SLOTS)
 
     def _copy(self, src: int, dst: int, heights, nodes) -> None:
         """GPU copy of slot ``src`` of the current buffers to slot ``dst`` of ``heights`` and ``nodes``."""
@@ -79,9 +68,9 @@ class TileHeap:
             raise ValueError(f"a {self.n}-cell tile's heap slot holds {self.height_words} heights and "
                              f"{self.node_rows} node rows, got {heights.size} and {nodes.shape[0]}")
         free = [i for i, s in enumerate(self.owners) if s is None]
-        if not free:
+        if not free:                        # full: its tiles keep their slots in a heap twice the size
             free = [self.capacity]
-            self._allocate(2 * self.capacity)
+            self._remake(2 * self.capacity)
         slot = HeapSlot(self, free[0])
         self.owners[slot.index] = slot
         self.heights.write(np.ascontiguousarray(heights, dtype=np.float32).tobytes(), offset=slot.heights_base * 4)
@@ -96,10 +85,11 @@ class TileHeap:
         self.owners[slot.index] = None
         used = [s for s in self.owners if s is not None]
         if self.capacity > MIN_SLOTS and len(used) < SHRINK_BELOW * self.capacity:
-            self._compact(max(MIN_SLOTS, 2 * len(used)))
+            self._remake(max(MIN_SLOTS, 2 * len(used)))
 
-    def _compact(self, capacity: int) -> None:
-        """Remake the buffers for ``capacity`` slots with the used slots first (their indices updated)."""
+    def _remake(self, capacity: int) -> None:
+        """Make the buffers again for ``capacity`` slots, the used slots copied to the first ones in slot order
+        (their indices updated; a full heap's keep theirs)."""
         used = [s for s in self.owners if s is not None]
         heights = self.ctx.buffer(reserve=capacity * 4 * self.height_words)
         nodes = self.ctx.buffer(reserve=capacity * 16 * self.node_rows)
