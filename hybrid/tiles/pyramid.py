@@ -137,11 +137,15 @@ class TilePyramid:
         tiles0 = -(-cells // self.n)
         self.max_level = int(np.ceil(np.log2(tiles0))) if tiles0 > 1 else 0
         self.size = self.n * (1 << self.max_level) + 1      # samples a side of the addressing square
-        self._boxes: dict = {}
-        self._qerr: dict = {}               # level -> quantisation error bounds, made on first use
-        self._tables: dict = {}             # level -> level_table
+        self._new_caches()
         self._on_step = None                # per cell: corners on the source step (hybrid.tiles.quantize)
         self._build_bounds()
+
+    def _new_caches(self) -> None:
+        """Empty the per-level arrays made on first use (every pyramid's constructor calls this)."""
+        self._boxes: dict = {}              # level -> boxes_at's arrays of every tile
+        self._qerr: dict = {}               # level -> quantisation error bounds
+        self._tables: dict = {}             # level -> level_table
 
     @property
     def padded(self) -> np.ndarray:

@@ -34,9 +34,7 @@ class StorePyramid(TilePyramid):
         self.n = int(g.attrs["tile_size"])
         self.max_level = int(g.attrs["max_level"])
         self.size = self.n * (1 << self.max_level) + 1
-        self._boxes: dict = {}
-        self._qerr: dict = {}
-        self._tables: dict = {}
+        self._new_caches()
         self._zmin = {l: np.asarray(g[f"zmin/{l}"][:]) for l in range(self.max_level + 1)}
         self._zmax = {l: np.asarray(g[f"zmax/{l}"][:]) for l in range(self.max_level + 1)}
         self._err = {l: np.asarray(g[f"error/{l}"][:]) for l in range(self.max_level + 1)}
