@@ -88,7 +88,7 @@ def _member(sorted_codes: np.ndarray, cand: np.ndarray) -> np.ndarray:
 def corner_planes(planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(M (6, 12), offsets (12,)) with which ``box_classes`` is one product: for eye-relative boxes X = [lo | hi]
     (B, 6), X @ M + offsets holds each plane's value at the box corner farthest along its normal (6 columns), then
-    at the nearest (6)."""
+    at the nearest (6). Made once a view."""
     n, off = planes[:, :3].T, planes[:, 3]
     npos, nneg = np.maximum(n, 0.0), np.minimum(n, 0.0)
     m = np.empty((6, 12))
@@ -96,13 +96,9 @@ def corner_planes(planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return m, np.concatenate([off, off])
 
 
-def box_classes(planes: np.ndarray, lo_rel: np.ndarray, hi_rel: np.ndarray) -> np.ndarray:
-    """Frustum classes of (B, 3) eye-relative boxes: (B,) int8 of -1 outside, 1 wholly inside, 0 crossing a plane."""
-    return _classes(np.concatenate([lo_rel, hi_rel], axis=1), *corner_planes(planes))
-
-
-def _classes(x: np.ndarray, m: np.ndarray, off: np.ndarray) -> np.ndarray:
-    """``box_classes`` of eye-relative boxes x = [lo | hi] (B, 6) under ``corner_planes``."""
+def box_classes(x: np.ndarray, m: np.ndarray, off: np.ndarray) -> np.ndarray:
+    """Frustum classes of eye-relative boxes x = [lo | hi] (B, 6) under ``corner_planes``' (m, off): (B,) int8 of
+    -1 outside, 1 wholly inside, 0 crossing a plane."""
     v = x @ m + off
     out = (v[:, 6:] >= 0).all(axis=1).astype(np.int8)           # the nearest corner inside every plane
     out[(v[:, :6] < 0).any(axis=1)] = -1                        # the farthest corner outside one
@@ -125,7 +121,7 @@ class _Selection:
         if not ok.all():
             tx, ty = tx[ok], ty[ok]
         t = self.pyramid.level_table(level)[ty, tx]             # lo, hi, error: (B, 7)
-        c = _classes(t[:, :6] - self.eye2, *self.corners)
+        c = box_classes(t[:, :6] - self.eye2, *self.corners)
         keep = c >= 0
         if not keep.all():
             tx, ty, t, c = tx[keep], ty[keep], t[keep], c[keep]
