@@ -23,12 +23,12 @@ from .frame_items import COMMANDS_PER_ITEM, CONTROL_WORDS, LOCAL, FrameItems
 from .heap import TileHeap
 from .nodes import nodes_for, pending_cut, tile_levels, tile_node_block
 from .quadtree import GPU_BETA
-from .tileblock import TileBlocks, register_tile_block, tile_blocks
+from .tileblock import MAX_STARTS, STARTS_FOUND, STARTS_HEIGHTS, STARTS_SEGMENTS, TileBlocks, register_tile_block, \
+    tile_blocks
 
 LEAF_WORDS = 13                 # j0, i0, level, dropped edges, nine post heights
 LEAF_FORMAT = "4i 4f 4f 1f"
 FRAME_FIELDS = ("triangles", "tilelets", "tilelets_culled", "skirt_segments", "arena_leaves", "arena_overflow")
-MAX_STARTS = 13                 # tile block entries of level starts (the last three hold buffer bases)
 
 
 def level_starts(n: int) -> np.ndarray:
@@ -159,23 +159,19 @@ class TileletSelection:
         groups0 = np.zeros(len(gs), np.int64)
 
         def selection_fields(blocks):
-            for n in {g.n for g in gs}:                   # one cell count per frame in practice
-                at = np.array([g.n == n for g in gs])
-                sub = [g for g in gs if g.n == n]
-                eye_local = np.asarray(view.eye, dtype=np.float64) - np.array([t.origin for _, t, _ in items])[at]
-                first = sub[0].starts[first_levels(sub, eye_local, k_tau)]
-                groups0[at] = (int(sub[0].starts[-1]) - first + LOCAL - 1) // LOCAL
-                b = blocks[at]
-                b["shape"][:, 0], b["shape"][:, 1], b["shape"][:, 2] = n, tile_levels(n) - 1, first
-                b["offsets"][:, :len(sub[0].offsets)] = sub[0].offsets[None] + \
-                    np.array([g.slot.nodes_base for g in sub])[:, None]
-                b["starts"][:, :len(sub[0].starts)] = sub[0].starts
-                b["starts"][:, 13] = [g.slot.heights_base for g in sub]
-                blocks[at] = b
+            g0 = gs[0]                                    # every item has g0's cell count (select_leaves)
+            eye_local = np.asarray(view.eye, dtype=np.float64) - np.array([t.origin for _, t, _ in items])
+            first = g0.starts[first_levels(gs, eye_local, k_tau)]
+            groups0[:] = (int(g0.starts[-1]) - first + LOCAL - 1) // LOCAL
+            blocks["shape"][:, 0], blocks["shape"][:, 1], blocks["shape"][:, 2] = g0.n, tile_levels(g0.n) - 1, first
+            nodes_base = np.array([g.slot.nodes_base for g in gs])
+            blocks["offsets"][:, :len(g0.offsets)] = g0.offsets[None] + nodes_base[:, None]
+            blocks["starts"][:, :len(g0.starts)] = g0.starts
+            blocks["starts"][:, STARTS_HEIGHTS] = [g.slot.heights_base for g in gs]
 
         blocks = tile_blocks(self.hf, view, items, skirts, culling, per_frame=selection_fields)
         found_base, seg_base, table1_start = self.items.prepare([g.n for g in gs], groups0, self.arena.capacity)
-        blocks["starts"][:, 14], blocks["starts"][:, 15] = found_base, seg_base
+        blocks["starts"][:, STARTS_FOUND], blocks["starts"][:, STARTS_SEGMENTS] = found_base, seg_base
         self.blocks.write(blocks)
         return blocks, groups0, table1_start
 
@@ -183,9 +179,9 @@ class TileletSelection:
         """Run the leaf selection of every item for the view at tau pixels; fills each item's commands.
 
         Pass 0 over every item's nodes lists the leaves and, as each item's are counted, places them in the arena
-        and writes pass 1's work table; pass 1 (dispatched from that table's length) emits them. One dispatch a
-        pass for the items of each cell count (one in practice). The frame's tile blocks stay uploaded for the
-        draw.
+        and writes pass 1's work table; pass 1 (dispatched from that table's length) emits them: one dispatch a
+        pass, so the items must share one cell count (a pyramid's tiles do). The frame's tile blocks stay uploaded
+        for the draw.
         """
         if not (np.isfinite(tau) and tau > 0):
             raise TerrabenchError(f"tau must be finite and > 0 pixels, got {tau!r}")
@@ -194,6 +190,9 @@ class TileletSelection:
             self.item_of.setdefault(id(g), i)
         if not items:
             return
+        ns = sorted({g.n for g, _, _ in items})
+        if len(ns) > 1:
+            raise TerrabenchError(f"a frame's raster tiles must have one cell count, got {ns}")
         blocks, groups0, table1_start = self.frame_blocks(view, items, tau, culling, skirts)
         planes = view.frustum_planes_rel().astype(np.float32).tobytes()
         for prog in self.passes:
@@ -213,9 +212,6 @@ class TileletSelection:
         self.arena.bind()
         self.items.bind()
         list_pass, emit_pass = self.passes
-        ns = sorted({g.n for g, _, _ in items})
-        if len(ns) > 1:
-            raise TerrabenchError(f"a frame's raster tiles must have one cell count, got {ns}")
         self.heaps[ns[0]].bind()
         list_pass.run(group_x=int(groups0.sum()))
         gl_memory_barrier(self.ctx)

@@ -14,6 +14,8 @@ BLOCK = np.dtype([("origin", "<f4", 4), ("spacing", "<f4", 4), ("clip_rel", "<f4
                   ("shape", "<i4", 4), ("nb_delta", "<i4", 4), ("flags", "<i4", 4), ("skirt", "<f4", 4),
                   ("offsets", "<i4", 16), ("starts", "<i4", 16)])
 assert BLOCK.itemsize == BLOCK_BYTES
+MAX_STARTS = 13                 # "starts" entries for level starts; the last three hold where the selection finds
+STARTS_HEIGHTS, STARTS_FOUND, STARTS_SEGMENTS = 13, 14, 15   # the tile's heights, its leaf list, its skirts
 
 
 def register_tile_block(ctx) -> None:

@@ -71,3 +71,22 @@ def test_frames_after_eviction_equal_frames_before(ctx, puget257, strategy):
     np.testing.assert_array_equal(out[0].colour, want.colour)
     np.testing.assert_array_equal(out[2].colour, want.colour)       # drawn again from moved and new slots
     np.testing.assert_array_equal(out[2].distance, want.distance)
+
+
+def test_one_selection_of_tiles_of_two_cell_counts_is_refused_by_name(ctx, puget257):
+    from hybrid.errors import TerrabenchError
+    from hybrid.tiles.pyramid import TilePyramid
+    from hybrid.tiles.tiletree import select_tiles
+    view = preset("flyover", puget257, 6, *SIZE).view(2)
+    s = IndexedTileletStrategy(ctx, puget257)
+    try:
+        items = []
+        for size in (32, 64):
+            pyr = TilePyramid(puget257, size)
+            sel = select_tiles(pyr, view)[0]
+            items.append((s.upload(pyr.tile(sel.key)), pyr.tile(sel.key), sel))
+        assert set(s.heaps) == {32, 64}
+        with pytest.raises(TerrabenchError, match="one cell count, got \\[32, 64\\]"):
+            s.select_leaves(view, items, 2 / 3)
+    finally:
+        s.release()
