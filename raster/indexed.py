@@ -23,28 +23,18 @@ class IndexedTileletStrategy(TileletDrawing):
         super().__init__(ctx, hf, **options)
         self.prog = program(ctx, "raster", "template.vert.glsl", "tilelet.frag.glsl")
         self.skirt_prog = program(ctx, "raster", "skirt.vert.glsl", "tilelet.frag.glsl", defines={"SKIRT_PROGRAM": 1})
-        self._skirt_vao = (-1, None)          # (item buffers' version, vertex array over their segments)
 
     def programs(self) -> tuple:
         """The mesh and skirt programs."""
         return (self.prog, self.skirt_prog)
 
     def arena_arrays(self) -> dict:
-        """The arena's leaf vertices with their index buffer."""
+        """The arena's leaf vertices with their index buffer, and the frame's skirt segments, one instance each
+        (an item's first instance is in its command)."""
         a = self.arena
         return {"mesh": self.ctx.vertex_array(self.prog, [(a.vertices, "4f", "a_vertex")], index_buffer=a.indices,
-                                              index_element_size=4)}
-
-    def skirt_array(self):
-        """The frame's skirt segments, one instance each (an item's first instance is in its command), made again
-        when the segment buffer was replaced."""
-        version, vao = self._skirt_vao
-        if version != self.items.version or vao is None:
-            if vao is not None:
-                vao.release()
-            vao = self.ctx.vertex_array(self.skirt_prog, [(self.items.segments, "3f 3f/i", "a_p", "a_q")])
-            self._skirt_vao = (self.items.version, vao)
-        return vao
+                                              index_element_size=4),
+                "skirts": self.ctx.vertex_array(self.skirt_prog, [(self.items.segments, "3f 3f/i", "a_p", "a_q")])}
 
     def draw_tile(self, item: int, wireframe: bool = False) -> None:
         """The item's leaves as indexed triangles (count and first index from the selection)."""
@@ -58,11 +48,5 @@ class IndexedTileletStrategy(TileletDrawing):
 
     def draw_tile_skirts(self, item: int) -> None:
         """The item's skirt quads (one instance a segment)."""
-        self.skirt_array().render_indirect(self.items.control, mode=self.ctx.TRIANGLES, count=1,
-                                           first=self.command(item, CMD_SKIRTS))
-
-    def release(self) -> None:
-        """Free the skirt array, then what every tilelet strategy holds."""
-        if self._skirt_vao[1] is not None:
-            self._skirt_vao[1].release()
-        super().release()
+        self.arena_vaos()["skirts"].render_indirect(self.items.control, mode=self.ctx.TRIANGLES, count=1,
+                                                    first=self.command(item, CMD_SKIRTS))

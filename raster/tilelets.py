@@ -56,7 +56,7 @@ class TileletDrawing(TileletSelection):
         self._skirted: list = []          # items of the last draw_tiles call that hang skirts
         self.edges = TerrainEdges(ctx, hf)   # skirts are not drawn for rays from under the sheet
         self.skirt_prog = None                # the program that draws skirts (subclasses)
-        self._arena_vaos = (0, {})            # (arena version, vertex arrays over the arena's buffers)
+        self._arena_vaos = (None, {})         # ((arena, item buffers) versions, vertex arrays over them)
 
     @property
     def shared_nbytes(self) -> int:
@@ -72,17 +72,20 @@ class TileletDrawing(TileletSelection):
         raise NotImplementedError
 
     def arena_arrays(self) -> dict:
-        """Vertex arrays over the arena's current buffers (subclasses)."""
+        """Vertex arrays over the frame's shared buffers as they are now: the arena's, and the item buffers'
+        (subclasses)."""
         raise NotImplementedError
 
     def arena_vaos(self) -> dict:
-        """The vertex arrays over the arena, made again when the arena's buffers were replaced."""
+        """The vertex arrays over the frame's shared buffers, made again when the arena's or the item buffers'
+        were replaced."""
         version, vaos = self._arena_vaos
-        if version != self.arena.version:
+        now = (self.arena.version, self.items.version)
+        if version != now:
             for v in vaos.values():
                 v.release()
             vaos = self.arena_arrays()
-            self._arena_vaos = (self.arena.version, vaos)
+            self._arena_vaos = (now, vaos)
         return vaos
 
     def draw_tile_skirts(self, item: int) -> None:
