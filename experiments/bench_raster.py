@@ -23,19 +23,6 @@ import pandas as pd
 from hybrid.errors import TerrabenchError
 
 
-def _median_ms(fn, repeats=5, ctx=None):
-    times = []
-    for _ in range(repeats):
-        if ctx is not None:
-            ctx.finish()
-        t0 = time.perf_counter()
-        fn()
-        if ctx is not None:
-            ctx.finish()
-        times.append((time.perf_counter() - t0) * 1e3)
-    return float(np.median(times))
-
-
 def puget_tiles(count=4):
     """A few 257² full-resolution tiles of the bundled Puget Sound model (tile size 256)."""
     from hybrid.terrain.datasets import puget

@@ -54,6 +54,7 @@ const int BASE_WORD = 15;       // cmd[]: the item's first leaf in the arena
 const int DONE_WORD = 16;       // cmd[]: the item's pass-0 work groups finished
 const int GROUPS_WORD = 17;     // cmd[]: the item's pass-0 work groups
 const int FOUND_WORD = 18;      // cmd[]: the item's leaves listed by pass 0
+const uint WORK_HEADER = 4u;     // work[]: pass 0's table starts here (raster.frame_items)
 #define CMD0 (tile_item * CONTROL_WORDS)
 #define FOUND0 uint(found_base)
 const int ARENA_FIELD = 4;      // frame_count[]: arena leaves reserved this frame
@@ -356,7 +357,7 @@ void reserve_arena() {
 
 void main() {
 #if PASS == 0
-    uint entry = work[4u + gl_WorkGroupID.x];
+    uint entry = work[WORK_HEADER + gl_WorkGroupID.x];
 #else
     uint entry = work[table1_start + gl_WorkGroupID.x];
 #endif
