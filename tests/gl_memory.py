@@ -41,12 +41,8 @@ def gl_objects(obj):
     """The moderngl buffers and textures among an object's attributes (and those of the project's own objects
     it holds, directly or as a dict's values, such as a dataclass of textures or a holder of a uniform
     buffer)."""
-    for v in vars(obj).values():
-        if isinstance(v, dict):                                   # e.g. a strategy's heaps by cell count
-            for w in v.values():
-                if type(w).__module__.split(".")[0] in ("raster", "raycast", "hybrid") and hasattr(w, "__dict__"):
-                    yield from gl_objects(w)
-            continue
+    held = (w for v in vars(obj).values() for w in (v.values() if isinstance(v, dict) else (v,)))
+    for v in held:                                                # a dict: e.g. a strategy's heaps by cell count
         if isinstance(v, (moderngl.Buffer, moderngl.Texture)):
             yield v
         elif isinstance(v, moderngl.Framebuffer):                  # a held render target: its attachments
