@@ -139,8 +139,9 @@ def test_tau_drives_refinement(puget_full, pyr):
         select_tiles(pyr, v, tau=0)
 
 
+@pytest.mark.parametrize("dense", [True, False])
 @pytest.mark.parametrize("name, size, tile", [("puget", 257, 32), ("fbm", 257, 16), ("spike", 129, 8), ("cliff", 129, 4)])
-def test_vectorised_selection_equals_the_per_tile_traversal(name, size, tile):
+def test_vectorised_selection_equals_the_per_tile_traversal(name, size, tile, dense):
     from tiletree_reference import select_tiles_by_traversal
 
     from hybrid.camera.flight import get_flight
@@ -151,11 +152,35 @@ def test_vectorised_selection_equals_the_per_tile_traversal(name, size, tile):
     for flight in ("flyover", "orbit", "dolly"):
         for view in get_flight(flight, hf, frames=6, width=240, height=135).views():
             for tau in (0.25, 2 / 3, 4.0):
-                fast, slow = select_tiles(pyr, view, tau), select_tiles_by_traversal(pyr, view, tau)
+                fast, slow = select_tiles(pyr, view, tau, dense=dense), select_tiles_by_traversal(pyr, view, tau)
                 assert fast == slow                  # the same tiles, order, distances, errors and edge levels
                 checked += 1
                 splits += len({s.level for s in fast}) > 1
     assert checked == 54 and splits > 10             # mixed-level selections (restriction, stitching) were seen
+
+
+@pytest.mark.parametrize("rows, cols, tile", [(190, 131, 16), (70, 301, 8), (33, 33, 64)])
+def test_dense_and_level_by_level_selections_agree_on_ragged_grids(rows, cols, tile):
+    """A rectangle that fills its addressing square only in part (and one tile alone): the selection over every
+    tile place at once gives what the level-by-level one and the per-tile traversal give."""
+    from tiletree_reference import select_tiles_by_traversal
+
+    from hybrid.camera.flight import get_flight
+    from hybrid.terrain.datasets import get_dataset
+    from hybrid.tiles.tile_table import square_tiles
+    h = get_dataset("fbm", size=513).heights[:rows, :cols] * 3.0
+    hf = HeightField(h, (20.0, 35.0))
+    pyr = TilePyramid(hf, tile)
+    assert sum(len(pyr.keys(lv)) for lv in range(pyr.max_level + 1)) < square_tiles(pyr) or pyr.max_level == 0
+    seen = 0
+    for flight in ("flyover", "orbit"):
+        for view in get_flight(flight, hf, frames=5, width=200, height=120).views():
+            for tau in (0.3, 2.0):
+                dense = select_tiles(pyr, view, tau, dense=True)
+                assert dense == select_tiles(pyr, view, tau, dense=False)
+                assert dense == select_tiles_by_traversal(pyr, view, tau)
+                seen += len({s.level for s in dense}) > 1
+    assert pyr.max_level == 0 or seen > 3
 
 
 def test_a_thin_grid_costs_what_its_samples_do():

@@ -17,6 +17,7 @@ import numpy as np
 from hybrid.camera.view import View
 from hybrid.errors import check_positive
 from hybrid.tiles.pyramid import EDGE_E, EDGE_N, EDGE_S, EDGE_W, TileKey, TilePyramid
+from hybrid.tiles.tile_table import DENSE_MAX_TILES, dense_selection, square_tiles
 
 DEFAULT_TAU = 2.0 / 3.0
 NO_NEIGHBOUR = 9
@@ -112,7 +113,7 @@ class _Selection:
         self.pyramid, self.eye, self.tau = pyramid, np.asarray(view.eye, dtype=np.float64), tau
         self.planes, self.K = view.frustum_planes_rel(), view.pixels_per_radian
         self.corners = corner_planes(self.planes)
-        self.eye2 = np.tile(self.eye, 2)
+        self.eye2 = np.concatenate([self.eye, self.eye])
         self.parts = []                                   # (level, tx, ty, d, pe, c, lo, hi) arrays of selected tiles
 
     def measure(self, level: int, tx: np.ndarray, ty: np.ndarray):
@@ -125,11 +126,20 @@ class _Selection:
         keep = c >= 0
         if not keep.all():
             tx, ty, t, c = tx[keep], ty[keep], t[keep], c[keep]
-        lo, hi, err = t[:, :3], t[:, 3:6], t[:, 6]
-        d = box_distances(self.eye, lo, hi)
+        d, pe = self.distances_errors(t)
+        return tx, ty, d, pe, c, t[:, :3], t[:, 3:6]
+
+    def distances_errors(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(distance (B,) metres, projected error (B,) pixels) of rows [lo | hi | error] of ``level_table``."""
+        d = box_distances(self.eye, t[:, :3], t[:, 3:6])
+        err = t[:, 6]
         with np.errstate(divide="ignore", invalid="ignore"):
             pe = np.where(d > 0, err * self.K / d, np.where(err > 0, np.inf, 0.0))
-        return tx, ty, d, pe, c, lo, hi
+        return d, pe
+
+    def measure_all(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(distance, projected error, class) of every row [lo | hi | error] (``dense_selection``'s measure)."""
+        return (*self.distances_errors(t), box_classes(t[:, :6] - self.eye2, *self.corners))
 
     def refine(self) -> None:
         """Split from the root down, one level at a time, while the projected error exceeds tau."""
@@ -225,22 +235,31 @@ class TileSelection(list):
     __slots__ = ("keys", "distance", "lo", "hi", "inside")
 
 
-def select_tiles(pyramid: TilePyramid, view: View, tau: float = DEFAULT_TAU) -> list[SelectedTile]:
+def select_tiles(pyramid: TilePyramid, view: View, tau: float = DEFAULT_TAU,
+                 dense: bool | None = None) -> list[SelectedTile]:
     """Tiles to draw for a view with screen-space error <= tau pixels: restricted, culled, front to back.
 
-    Vectorised over the tiles of each level: refinement level by level, restriction and edge levels by
-    looking up ancestors' codes, the front-to-back order as one sort key per tile.
+    A small pyramid (``hybrid.tiles.tile_table.DENSE_MAX_TILES`` tile places or fewer; ``dense`` forces either
+    way) is selected over all its tiles at once (``dense_selection``); a larger one level by level, vectorised
+    over each level's tiles, restriction and edge levels by looking up ancestors' codes. Both end in the
+    front-to-back order as one sort key per tile.
     """
     tau = check_positive("tau (pixels)", tau)
     sel = _Selection(pyramid, view, tau)
-    sel.refine()
-    cov = sel.restrict()
-    lv, tx, ty, d, pe, c, lo, hi = sel.arrays()
-    lv, tx, ty = lv.astype(np.int64), tx.astype(np.int64), ty.astype(np.int64)
-    deltas = np.where(cov >= 0, cov - lv[None, :], np.where(sel.finer_neighbours(lv, tx, ty), -1, NO_NEIGHBOUR)).T
+    if dense is None:
+        dense = square_tiles(pyramid) <= DENSE_MAX_TILES
+    if dense:
+        (lv, tx, ty, d, pe, c, lo, hi), cov, finer, order = dense_selection(pyramid, sel.measure_all, tau, sel.eye)
+    else:
+        sel.refine()
+        cov = sel.restrict()
+        lv, tx, ty, d, pe, c, lo, hi = sel.arrays()
+        lv, tx, ty = lv.astype(np.int64), tx.astype(np.int64), ty.astype(np.int64)
+        finer = sel.finer_neighbours(lv, tx, ty)
+        order = sel.front_to_back(lv, tx, ty)
+    deltas = np.where(cov >= 0, cov - lv[None, :], np.where(finer, -1, NO_NEIGHBOUR)).T
     bits = np.array([bit for bit, _, _ in _EDGES])
     masks = ((deltas == 1) * bits).sum(axis=1)
-    order = sel.front_to_back(lv, tx, ty)
     inside = c[order] == 1
     out = TileSelection(
         SelectedTile(TileKey(level, x, y), dist, err, mask, ins, tuple(delta))
