@@ -79,19 +79,18 @@ class FrameItems:
         setattr(self, name, self.ctx.buffer(reserve=2 * nbytes))
         return True
 
-    def prepare(self, ns: np.ndarray, groups0: np.ndarray, arena_capacity: int):
-        """Size and fill the buffers for a frame's items (cell counts ``ns``, pass-0 work groups ``groups0``);
+    def prepare(self, n: int, groups0: np.ndarray, arena_capacity: int):
+        """Size and fill the buffers for a frame's items (all of n cells a side, pass-0 work groups ``groups0``);
         (found base, segment base) words per item, and where pass 1's table starts in the work buffer."""
-        ns = np.asarray(ns, dtype=np.int64)
-        found = np.array([found_words(int(n)) for n in ns], dtype=np.int64)
-        seg = np.array([segment_words(int(n)) for n in ns], dtype=np.int64)
-        found_base, seg_base = np.cumsum(found) - found, np.cumsum(seg) - seg
+        items = len(groups0)
+        found_base = np.arange(items, dtype=np.int64) * found_words(int(n))
+        seg_base = np.arange(items, dtype=np.int64) * segment_words(int(n))
         table0 = work_table(groups0)
         table1_start = WORK_HEADER + len(table0)
-        table1 = -(-int(arena_capacity) // LOCAL) + len(ns)        # pass 1's groups at most
-        self._fit("control", max(len(ns), 1) * CONTROL_WORDS * 4)
-        self._fit("found", max(int(found.sum()), 1) * 4)
-        if self._fit("segments", max(int(seg.sum()), 1) * 4):
+        table1 = -(-int(arena_capacity) // LOCAL) + items          # pass 1's groups at most
+        self._fit("control", max(items, 1) * CONTROL_WORDS * 4)
+        self._fit("found", max(items * found_words(int(n)), 1) * 4)
+        if self._fit("segments", max(items * segment_words(int(n)), 1) * 4):
             self.version += 1
         self._fit("work", (table1_start + table1) * 4)
         self.control.write(control_blank(groups0, seg_base).tobytes())

@@ -24,7 +24,7 @@ from .heap import TileHeap
 from .nodes import nodes_for, pending_cut, tile_levels, tile_node_block
 from .quadtree import GPU_BETA
 from .tileblock import MAX_STARTS, STARTS_FOUND, STARTS_HEIGHTS, STARTS_SEGMENTS, TileBlocks, register_tile_block, \
-    tile_blocks
+    tile_blocks, tile_constants
 
 LEAF_WORDS = 13                 # j0, i0, level, dropped edges, nine post heights
 LEAF_FORMAT = "4i 4f 4f 1f"
@@ -58,9 +58,8 @@ def level_bounds(data: np.ndarray, offsets: np.ndarray, n: int, spacing_xy: tupl
 def first_levels(gs, eye_local: np.ndarray, k_tau: float) -> np.ndarray:
     """Per tile (all of one cell count), the finest local level that can hold a leaf in this view (below it no
     parent can split); ``eye_local`` (B, 3) is the eye minus each tile's origin, metres."""
-    lo = np.stack([g.level_lo for g in gs])
-    hi = np.stack([g.level_hi for g in gs])
-    err = np.stack([g.level_error for g in gs])
+    bounds = np.stack([g.level_bounds for g in gs])              # (B, levels, 7): lo, hi, error
+    lo, hi, err = bounds[..., 0:3], bounds[..., 3:6], bounds[..., 6]
     d = np.linalg.norm(np.maximum(np.maximum(lo - eye_local[:, None], eye_local[:, None] - hi), 0.0), axis=2)
     can = err * k_tau > d                                 # (B, levels): a parent at this level can split
     top = can.shape[1] - 1
@@ -88,7 +87,9 @@ class SelectedTileletTile:
         if len(self.starts) > MAX_STARTS:
             raise TerrabenchError(f"tiles of {self.n} cells have {len(self.starts) - 1} local levels; the raster "
                                   f"selection handles at most {MAX_STARTS - 1}")
-        self.level_error, self.level_lo, self.level_hi = level_bounds(data, self.offsets, self.n, tile.spacing_xy)
+        err, lo, hi = level_bounds(data, self.offsets, self.n, tile.spacing_xy)
+        self.level_bounds = np.concatenate([lo, hi, err[:, None]], axis=1)        # (levels, 7), tile-local metres
+        self.constants, self.clip = tile_constants(tile), tile.clip              # the tile block's own part
         self.slot = strategy.heap(self.n, len(data)).alloc(h, data)
         self.writes = strategy.writes
 
@@ -158,9 +159,12 @@ class TileletSelection:
         gs = [g for g, _, _ in items]
         groups0 = np.zeros(len(gs), np.int64)
 
+        # a tile drawn for a missing one (hybrid.uploads) has that one's clip: its constants are made here
+        constants = np.stack([g.constants if g.clip == t.clip else tile_constants(t) for g, t, _ in items])
+
         def selection_fields(blocks):
             g0 = gs[0]                                    # every item has g0's cell count (select_leaves)
-            eye_local = np.asarray(view.eye, dtype=np.float64) - np.array([t.origin for _, t, _ in items])
+            eye_local = np.asarray(view.eye, dtype=np.float64) - constants[:, 0:3]
             first = g0.starts[first_levels(gs, eye_local, k_tau)]
             groups0[:] = (int(g0.starts[-1]) - first + LOCAL - 1) // LOCAL
             blocks["shape"][:, 0], blocks["shape"][:, 1], blocks["shape"][:, 2] = g0.n, tile_levels(g0.n) - 1, first
@@ -169,8 +173,8 @@ class TileletSelection:
             blocks["starts"][:, :len(g0.starts)] = g0.starts
             blocks["starts"][:, STARTS_HEIGHTS] = [g.slot.heights_base for g in gs]
 
-        blocks = tile_blocks(self.hf, view, items, skirts, culling, per_frame=selection_fields)
-        found_base, seg_base, table1_start = self.items.prepare([g.n for g in gs], groups0, self.arena.capacity)
+        blocks = tile_blocks(self.hf, view, items, skirts, culling, per_frame=selection_fields, constants=constants)
+        found_base, seg_base, table1_start = self.items.prepare(gs[0].n, groups0, self.arena.capacity)
         blocks["starts"][:, STARTS_FOUND], blocks["starts"][:, STARTS_SEGMENTS] = found_base, seg_base
         self.blocks.write(blocks)
         return blocks, groups0, table1_start

@@ -26,35 +26,46 @@ def register_tile_block(ctx) -> None:
     register_include(ctx, "raster/select_append", "raster", "select_append.glsl")
 
 
+CONSTANT_WORDS = 13            # tile_constants: origin 3, spacing 2, clip 4, zmin, level, level-0 cell (column, row)
+
+
+def tile_constants(tile) -> np.ndarray:
+    """What a tile's block takes from the tile alone, made once per tile: (CONSTANT_WORDS,) float64 world origin
+    of sample [0, 0], spacing x and y, clip rectangle (metres), zmin (metres), pyramid level and the level-0 cell
+    (column, row) of sample [0, 0]."""
+    k = tile.key
+    return np.array([*tile.origin, tile.spacing_x, tile.spacing_y, *tile.clip, tile.zmin, k.level,
+                     k.tx * tile.n << k.level, k.ty * tile.n << k.level], dtype=np.float64)
+
+
 def tile_blocks(hf, view, items, skirts: dict | None = None, culling: bool = True, unit_spacing: bool = False,
-                per_frame=None) -> np.ndarray:
+                per_frame=None, constants: np.ndarray | None = None) -> np.ndarray:
     """The blocks of a frame's (gpu, tile, selected) items, built as arrays over all items; ``per_frame(blocks)``
     fills in selection fields (offsets, starts, first node); ``unit_spacing`` for meshes whose positions are
-    metres."""
+    metres; ``constants`` (B, CONSTANT_WORDS), the items' ``tile_constants`` where the caller keeps them."""
     out = np.zeros(len(items), BLOCK)
     if not len(items):
         return out
     eye = np.asarray(view.eye, dtype=np.float64)
-    tiles = [t for _, t, _ in items]
+    if constants is None:
+        constants = np.stack([tile_constants(t) for _, t, _ in items])
     sels = [s for _, _, s in items]
-    origin = np.array([t.origin for t in tiles], dtype=np.float64).reshape(-1, 3)
-    spacing = np.array([(t.spacing_x, t.spacing_y) for t in tiles], dtype=np.float64).reshape(-1, 2)
+    origin, spacing = constants[:, 0:3], constants[:, 3:5]
     sp = np.ones_like(spacing) if unit_spacing else spacing
     out["origin"][:, :3] = origin - eye
     out["spacing"][:, :2] = sp
-    out["clip_rel"] = np.array([t.clip for t in tiles], dtype=np.float64).reshape(-1, 4) - np.tile(eye[:2], 2)
+    out["clip_rel"] = constants[:, 5:9] - eye[[0, 1, 0, 1]]
     extent = np.asarray(hf.extent, dtype=np.float64)
     out["uv"][:, :2] = (origin[:, :2] - np.asarray(hf.origin[:2], dtype=np.float64)) / extent
     out["uv"][:, 2:] = sp / extent
-    out["shape"][:, 3] = [int(s.key.level) for s in sels]
-    out["nb_delta"] = [tuple(getattr(s, "edge_deltas", (9, 9, 9, 9))) for s in sels]
-    sk = skirts or {}
-    out["flags"][:, 0] = [int(sk.get(s.key, 0)) for s in sels]
-    out["flags"][:, 1] = [int(bool(culling) and not bool(s.inside)) for s in sels]
-    cells = np.array([(s.key.tx * t.n << s.key.level, s.key.ty * t.n << s.key.level) for s, t in zip(sels, tiles)])
-    out["flags"][:, 2:] = cells.reshape(-1, 2)
-    zmin = np.array([t.zmin for t in tiles], dtype=np.float64)
-    out["skirt"][:, 0] = zmin - eye[2] - 1.0 - 0.01 * spacing.max(axis=1)   # eye-relative skirt bottom: below zmin
+    out["shape"][:, 3] = constants[:, 10]
+    out["nb_delta"] = [s.edge_deltas for s in sels]
+    if skirts:
+        out["flags"][:, 0] = [skirts.get(s.key, 0) for s in sels]
+    if culling:
+        out["flags"][:, 1] = ~np.array([s.inside for s in sels], dtype=bool)
+    out["flags"][:, 2:] = constants[:, 11:13]
+    out["skirt"][:, 0] = constants[:, 9] - eye[2] - 1.0 - 0.01 * spacing.max(axis=1)   # eye-relative: below zmin
     if per_frame is not None:
         per_frame(out)
     return out
