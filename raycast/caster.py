@@ -29,7 +29,7 @@ from hybrid.tiles.quantize import quantize
 
 from .maxmip import MaxMipBuilder, bytes_per_sample, level_count, tile_nbytes
 from .options import MODES, RECONSTRUCTIONS, CastOptions, default_max_steps, prepass_default
-from .tile_params import TILE_BLOCK, block_stride, outer_bits, tile_params
+from .tile_params import TILE_BLOCK, block_stride, outer_bits, tile_params, tile_row
 
 STAT_FIELDS = ("rays", "hits", "steps", "max_steps", "capped", "shadow_rays", "shadow_steps", "shadow_capped")
 STAT_SLOTS = 64          # copies of each tile's counters (one per 64x64 screen bin, modulo), as in raycast.frag.glsl
@@ -63,6 +63,8 @@ class GpuTile:
     step: float = 1.0
     base: int = 0
     quant_error: float = 0.0
+    row: np.ndarray | None = None       # tile_row of the tile uploaded (None: a grid, not a tile)
+    bounds: tuple = ()                  # that tile's clip, zmin and zmax, to tell it from a tile drawn in its place
 
     @property
     def bytes_per_sample(self) -> float:
@@ -157,7 +159,9 @@ class RaycastStrategy:
 
     def upload(self, tile) -> GpuTile:
         """Put a tile's (N+1)² heights on the GPU as 16-bit codes and build their max mipmap there."""
-        return self.upload_grid(tile.heights, getattr(tile, "source_step", None))
+        g = self.upload_grid(tile.heights, getattr(tile, "source_step", None))
+        g.row, g.bounds = tile_row(g, tile), (tile.clip, tile.zmin, tile.zmax)
+        return g
 
     def _shadow_grid(self) -> _Grid:
         if self.grid is None:
@@ -288,7 +292,10 @@ class RaycastStrategy:
         ctx.cull_face = "front"
         try:
             lod_scale = K / float(opts.lod) if opts.lod else 0.0
-            blocks = tile_params(items, eye, hf, lod_scale, opts.max_steps, self._next_id, self._stride)
+            # a tile drawn for a missing one (hybrid.uploads) has that one's clip and heights: its row is made here
+            rows = np.stack([g.row if g.row is not None and g.bounds == (t.clip, t.zmin, t.zmax) else tile_row(g, t)
+                             for g, t, _ in items]) if n_items else None
+            blocks = tile_params(items, eye, hf, lod_scale, opts.max_steps, self._next_id, self._stride, rows)
             if self.tile_buf is None or self.tile_buf.size < blocks.nbytes:
                 if self.tile_buf is not None:
                     self.tile_buf.release()

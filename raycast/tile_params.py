@@ -42,18 +42,29 @@ def block_stride(alignment: int) -> int:
     return -(-TILE_BLOCK.itemsize // a) * a
 
 
-def tile_params(items, eye, hf, lod_k_scale: float, max_steps: int | None, first_id: int, stride: int) -> np.ndarray:
+ROW_WORDS = 17                 # tile_row: clip 4, origin 3, spacing 2, zmin, zmax, offset, step, error, n, base, level
+
+
+def tile_row(gt, tile) -> np.ndarray:
+    """What a tile's block takes from the tile and its GPU textures alone, made once per upload: (ROW_WORDS,)
+    float64 clip rectangle, origin of sample [0, 0] (world metres), spacing x and y, zmin, zmax (metres), the
+    codes' offset, step and largest error (metres), cells a side, code base and pyramid level."""
+    level = int(tile.key.level) if hasattr(tile, "key") else 0
+    return np.array([*tile.clip, *tile.origin, *tile.spacing_xy, tile.zmin, tile.zmax, gt.offset, gt.step,
+                     gt.quant_error, gt.n, gt.base, level], dtype=np.float64)
+
+
+def tile_params(items, eye, hf, lod_k_scale: float, max_steps: int | None, first_id: int, stride: int,
+                rows: np.ndarray | None = None) -> np.ndarray:
     """The TileParams blocks (bytes laid out ``stride`` apart, as a (B, stride) uint8 array) of the frame's
     (gpu_tile, tile, selected) items for an eye (world metres); ``lod_k_scale`` is K / lod (0: no LOD),
-    ``first_id`` the first tile's pre-pass ID."""
+    ``first_id`` the first tile's pre-pass ID; ``rows`` (B, ROW_WORDS), the items' ``tile_row`` where the caller
+    keeps them."""
     b = len(items)
-    clip = np.array([[float(v) for v in t.clip] for _, t, _ in items], dtype=np.float64).reshape(b, 4)
-    org = np.array([t.origin for _, t, _ in items], dtype=np.float64).reshape(b, 3)
-    sp = np.array([t.spacing_xy for _, t, _ in items], dtype=np.float64).reshape(b, 2)
-    z = np.array([(t.zmin, t.zmax) for _, t, _ in items], dtype=np.float64).reshape(b, 2)
-    g = np.array([(gt.offset, gt.step, gt.quant_error) for gt, _, _ in items], dtype=np.float64).reshape(b, 3)
-    ints = np.array([(gt.n, gt.base, int(t.key.level) if hasattr(t, "key") else 0) for gt, t, _ in items],
-                    dtype=np.int64).reshape(b, 3)
+    if rows is None:
+        rows = np.stack([tile_row(gt, t) for gt, t, _ in items]) if b else np.zeros((0, ROW_WORDS))
+    clip, org, sp, z, g = rows[:, 0:4], rows[:, 4:7], rows[:, 7:9], rows[:, 9:11], rows[:, 11:14]
+    ints = rows[:, 14:17].astype(np.int64)
     eye = np.asarray(eye, dtype=np.float64)
     ox, oy = float(hf.origin[0]), float(hf.origin[1])
     ext_w, ext_d = hf.extent
@@ -63,8 +74,9 @@ def tile_params(items, eye, hf, lod_k_scale: float, max_steps: int | None, first
     out["dq"] = g[:, :2]
     out["box_lo"] = np.stack([clip[:, 0] - pad, clip[:, 1] - pad, z[:, 0] - zq - pad], axis=1) - eye
     out["box_hi"] = np.stack([clip[:, 2] + pad, clip[:, 3] + pad, z[:, 1] + zq + pad], axis=1) - eye
-    out["dq_base"], out["n_cells"], out["tile_level"] = ints[:, 1], ints[:, 0], ints[:, 2]
-    out["n_levels"] = [level_count(int(n)) - 1 for n in ints[:, 0]]
+    out["n_cells"], out["dq_base"], out["tile_level"] = ints[:, 0], ints[:, 1], ints[:, 2]
+    per_n = {int(n): (level_count(int(n)) - 1, max_steps or default_max_steps(int(n))) for n in set(ints[:, 0].tolist())}
+    out["n_levels"] = [per_n[n][0] for n in ints[:, 0].tolist()]
     out["eye_tex"] = np.column_stack([(eye[0] - org[:, 0]) / sp[:, 0], (eye[1] - org[:, 1]) / sp[:, 1], eye[2] - org[:, 2]])
     out["origin_rel"] = org - eye
     out["ext_lo"] = (clip[:, :2] - org[:, :2]) / sp            # texels from the tile's origin
@@ -75,7 +87,7 @@ def tile_params(items, eye, hf, lod_k_scale: float, max_steps: int | None, first
     out["uv_scale"] = sp / np.array([ext_w, ext_d])
     out["g_tile_off"] = np.column_stack([(org[:, 0] - ox) / hf.spacing_x, (org[:, 1] - oy) / hf.spacing_y])
     out["lod_k"] = sp.max(axis=1) * lod_k_scale
-    out["max_steps"] = [max_steps or default_max_steps(int(n)) for n in ints[:, 0]]
+    out["max_steps"] = [per_n[n][1] for n in ints[:, 0].tolist()]
     out["outer"] = outer_bits(clip, hf)
     out["tile_index"] = np.arange(b)
     out["tile_id"] = first_id + np.arange(b)
