@@ -183,6 +183,18 @@ def test_dense_and_level_by_level_selections_agree_on_ragged_grids(rows, cols, t
     assert pyr.max_level == 0 or seen > 3
 
 
+def test_a_table_of_every_tile_place_is_refused_beyond_its_limit():
+    from hybrid.camera.view import View
+    from hybrid.tiles.tile_table import MAX_TABLE_TILES, square_tiles
+    hf = HeightField(np.zeros((2, 4097), np.float32), 10.0)
+    pyr = TilePyramid(hf, 2)
+    assert square_tiles(pyr) > MAX_TABLE_TILES
+    view = View(eye=(100.0, -500.0, 300.0), target=(2000.0, 5.0, 0.0))
+    with pytest.raises(TerrabenchError, match=f"would hold {square_tiles(pyr)} places, beyond {MAX_TABLE_TILES}"):
+        select_tiles(pyr, view, dense=True)
+    assert len(select_tiles(pyr, view)) > 0                   # the automatic choice walks it level by level
+
+
 def test_a_thin_grid_costs_what_its_samples_do():
     import tracemalloc
     h = np.random.default_rng(0).normal(100.0, 10.0, (2, 20000)).astype(np.float32)

@@ -15,9 +15,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hybrid.errors import TerrabenchError
 from hybrid.tiles.pyramid import TilePyramid
 
 DENSE_MAX_TILES = 4096
+MAX_TABLE_TILES = 1 << 20      # a table asked for beyond this is refused (it would cost ~0.2 GB)
 _STEPS = ((-1, 0), (1, 0), (0, -1), (0, 1))                # W, E, S, N
 
 
@@ -61,11 +63,11 @@ def _build(pyramid: TilePyramid) -> TileTable:
     ty, tx = local // side, local % side
 
     def index(lv, x, y):
-        """Flat index of places (lv, x, y), N where the level is above the root or the place off the square."""
-        lv_ok = lv <= top
-        s = np.array(sides + [1], dtype=np.int64)[np.minimum(lv, top + 1)]
+        """Flat index of places (lv, x, y), N where the level is outside 0..top or the place off the square."""
+        lv_ok = (lv >= 0) & (lv <= top)
+        s = np.array(sides, dtype=np.int64)[np.clip(lv, 0, top)]
         ok = lv_ok & (x >= 0) & (y >= 0) & (x < s) & (y < s)
-        return np.where(ok, base[np.minimum(lv, top)] + np.where(ok, y * s + x, 0), n)
+        return np.where(ok, base[np.clip(lv, 0, top)] + np.where(ok, y * s + x, 0), n)
 
     exists = np.zeros(n, bool)
     boxes = np.zeros((n, 7))
@@ -84,7 +86,7 @@ def _build(pyramid: TilePyramid) -> TileTable:
     neighbours = np.stack([index(level, tx + dx, ty + dy) for dx, dy in _STEPS], axis=1)
     children = np.full((n + 1, 4), n, dtype=np.int64)
     for c, (ox, oy) in enumerate(((0, 0), (1, 0), (0, 1), (1, 1))):
-        children[:n, c] = np.where(level > 0, index(level - 1, 2 * tx + ox, 2 * ty + oy), n)
+        children[:n, c] = index(level - 1, 2 * tx + ox, 2 * ty + oy)
     hf = pyramid.hf
     span = pyramid.n << level                              # level-0 cells a side of each place
     centre = np.stack([hf.origin[0] + (tx + 0.5) * (span * hf.spacing_x),
@@ -99,6 +101,10 @@ _TABLES: "weakref.WeakKeyDictionary[TilePyramid, TileTable]" = weakref.WeakKeyDi
 def tile_table(pyramid: TilePyramid) -> TileTable:
     """The pyramid's table of tile places, made on first use and kept as long as the pyramid."""
     if pyramid not in _TABLES:
+        places = square_tiles(pyramid)
+        if places > MAX_TABLE_TILES:
+            raise TerrabenchError(f"a table of every tile place of this pyramid would hold {places} places, beyond "
+                                  f"{MAX_TABLE_TILES}; select its tiles level by level (select_tiles(dense=False))")
         _TABLES[pyramid] = _build(pyramid)
     return _TABLES[pyramid]
 

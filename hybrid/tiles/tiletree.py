@@ -6,7 +6,8 @@ caster's heights, hybrid.tiles.quantize, so the bound holds whichever strategy d
 nearest point of the tile's AABB. Selected tiles are then made restricted (edge neighbours differ by at
 most one level) by splitting coarse tiles, and listed front to back by a quadtree traversal that visits
 the child quadrant on the eye's side first and the opposite one last, which is a visibility order for
-height-field columns.
+height-field columns. A pyramid of a few thousand tile places is selected over all of them at once
+(hybrid.tiles.tile_table), with the same result.
 """
 from __future__ import annotations
 
