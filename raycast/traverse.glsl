@@ -161,11 +161,18 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
         if (min(ta, tb) > t0) { t0 = min(ta, tb); face = D.y > 0.0 ? 4 : 8; }
         t1 = min(t1, max(ta, tb));
     } else if (O.y < elo.y || O.y > ext.y) return RC_MISS;
+    float t1_side = t1;
     if (D.z != 0.0) {
         float ta = (zr.x - O.z) / D.z, tb = (zr.y - O.z) / D.z;
         if (min(ta, tb) > t0) { t0 = min(ta, tb); face = 0; zentry = true; }
         t1 = min(t1, max(ta, tb));
     } else if (O.z < zr.x || O.z > zr.y) return RC_MISS;
+    // A descending ray that reaches an interior side below the whole box went under the surface on that edge,
+    // which both tiles share: the neighbour's surface is nearer, and where the neighbour left the pixel empty
+    // (a raster edge rounds to 1/256 px and can miss a pixel whose ray meets the surface just before it) the
+    // wall there fills it, as it does above the box's bottom.
+    if (t0 > t1 && !under && D.z < 0.0 && face != 0 && (face & outer) == 0 && t0 <= t1_side && O.z + t0 * D.z < zr.x)
+        t1 = t0;
     if (t0 > t1) return RC_MISS;
     bool no_entry_hit = (face & outer) != 0 || (under && face == 0 && !(zentry && D.z > 0.0));
     bool moved = false;
