@@ -134,7 +134,7 @@ def selection_rows(ctx, repeats=5):
             issue, sel = _issue_and_total_ms(lambda: r.strategies[name].select_leaves(view, items, 2 / 3), repeats, ctx)
             res = [r.render(view).stats for _ in range(repeats)]
             plan, draw_issue = np.median([x.plan_ms for x in res]), np.median([x.issue_ms for x in res])
-            cpu = np.median([x.plan_ms + x.issue_ms for x in res])
+            cpu = np.median([x.cpu_ms for x in res])
             rows.append((name, len(items), f"{issue:.2f}", f"{sel:.1f}", f"{np.median([x.wall_ms for x in res]):.1f}",
                          f"{plan:.2f}", f"{draw_issue:.2f}", f"{cpu:.2f}", res[-1].counters["triangles"]))
     return rows

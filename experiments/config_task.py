@@ -235,7 +235,7 @@ def _time_frame(spec: Spec, live: list[_ConfigRun], k: int, views, fail_fast: bo
             r.attempt(lambda r=r: mapped.append(r.renderer.render(views[k], r.c["tau"], maps=True)), fail_fast)
         if r.out.error is not None:
             continue
-        cpu = [x.stats.plan_ms + x.stats.issue_ms for x in results if x.stats.issue_ms is not None]
+        cpu = [x.stats.cpu_ms for x in results if x.stats.cpu_ms is not None]
         r.timed[k] = ((mapped or results)[-1], [x.stats.wall_ms for x in results], results[-1].stats, cpu)
         if step:
             step(f"{r.c['config']} frame {k}")

@@ -140,6 +140,11 @@ class FrameStats:
     together_ms: dict[str, float] = field(default_factory=dict)
     tile_rows: list[dict] = field(default_factory=list)
 
+    @property
+    def cpu_ms(self) -> float | None:
+        """The frame's CPU time, ms: plan_ms + issue_ms (None where the issue time was not measured)."""
+        return None if self.issue_ms is None else self.plan_ms + self.issue_ms
+
     def row(self) -> dict[str, Any]:
         """One flat table row: every scalar field, the counters and ``together_<strategy>_ms``."""
         d = asdict(self)
