@@ -83,9 +83,9 @@ class TileHeap:
         if slot.index >= len(self.owners) or self.owners[slot.index] is not slot:
             return
         self.owners[slot.index] = None
-        used = [s for s in self.owners if s is not None]
-        if self.capacity > MIN_SLOTS and len(used) < SHRINK_BELOW * self.capacity:
-            self._remake(max(MIN_SLOTS, 2 * len(used)))
+        used = self.used
+        if self.capacity > MIN_SLOTS and used < SHRINK_BELOW * self.capacity:
+            self._remake(max(MIN_SLOTS, 2 * used))
 
     def _remake(self, capacity: int) -> None:
         """Make the buffers again for ``capacity`` slots, the used slots copied to the first ones in slot order

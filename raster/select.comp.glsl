@@ -48,7 +48,7 @@ uniform vec2 cell_metres;       // the terrain's level-0 spacing (x, y), metres
 uniform bool side_errors;       // nodes carry side codes and split on their full fans' errors (raster.quadtree)
 uniform uint table1_start;      // work[]: where pass 1's work table starts
 
-const int CMD_POINTS_ = 0, CMD_TEMPLATE_ = 1;   // indirect commands (raster.selection CMD_*)
+const int CMD_POINTS_ = 0, CMD_TEMPLATE_ = 1;   // indirect commands (raster.frame_items CMD_*)
 const int CONTROL_WORDS = 20;   // cmd[] words per item (raster.frame_items)
 const int BASE_WORD = 15;       // cmd[]: the item's first leaf in the arena
 const int DONE_WORD = 16;       // cmd[]: the item's pass-0 work groups finished
