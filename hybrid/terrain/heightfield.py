@@ -60,6 +60,7 @@ class HeightField:
     source_step: tuple[float, float] | None = None
     spacing_x: float = field(init=False, default=0.0)
     spacing_y: float = field(init=False, default=0.0)
+    _range: tuple = field(init=False, default=(None, None), repr=False, compare=False)   # (heights array, its range)
 
     def __post_init__(self):
         h = np.asarray(self.heights)
@@ -116,8 +117,13 @@ class HeightField:
 
     @property
     def height_range(self) -> tuple[float, float]:
-        """Minimum and maximum height in metres (relative to origin z)."""
-        return float(self.heights.min()), float(self.heights.max())
+        """Minimum and maximum height in metres (relative to origin z); computed once per heights array (which,
+        like the GPU copies made of it, is not changed in place), since renderers read it every frame."""
+        array, value = self._range
+        if array is not self.heights:
+            value = (float(self.heights.min()), float(self.heights.max()))
+            self._range = (self.heights, value)
+        return value
 
     def world_of(self, i, j) -> np.ndarray:
         """World position(s) (float64, metres) of sample(s) at row i, column j (may be fractional)."""
