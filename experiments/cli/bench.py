@@ -1,4 +1,4 @@
-"""`terrabench bench`: the ray-cast, raster, hybrid and planning benchmarks in one process, tables printed and saved."""
+"""`terrabench bench`: the ray-cast, raster, hybrid, planning and CPU benchmarks in one process, tables printed and saved."""
 from __future__ import annotations
 
 import argparse
@@ -13,9 +13,10 @@ from hybrid.atomic import write_text
 from ..folders import writable_folder
 from . import argtypes
 
-HELP = "the ray-cast, triangle-count, raster, hybrid and planning benchmarks in one run, with the device named"
-BENCHES = ("raycast", "triangles", "raster", "hybrid", "planning")
-"""In the order they run: triangles (mesh triangle counts against error) and planning use the CPU alone."""
+HELP = "the ray-cast, triangle-count, raster, hybrid, planning and CPU benchmarks in one run, with the device named"
+BENCHES = ("raycast", "triangles", "raster", "hybrid", "planning", "cpu")
+"""In the order they run: triangles (mesh triangle counts against error) and planning use the CPU alone; cpu draws
+in a child process on Mesa's no-op driver (``experiments.bench_cpu``)."""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -39,6 +40,9 @@ def benchmark(ctx, name: str, frames: int = 8) -> dict[str, pd.DataFrame]:
         return run(ctx)
     if name == "planning":
         from ..bench_planning import run
+        return run(ctx, frames=frames)
+    if name == "cpu":
+        from ..bench_cpu import run
         return run(ctx, frames=frames)
     from ..bench_hybrid import run
     return run(ctx, frames=frames)

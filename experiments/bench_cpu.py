@@ -1,0 +1,131 @@
+"""CPU benchmark: each policy's CPU time a frame with the GPU's work taken away, the policies interleaved in one run.
+
+    python -m experiments.bench_cpu [--frames 8] [--size 640x360] [--repeats 5]
+
+On llvmpipe the time a draw call takes to return includes the vertex, geometry and compute work, which run
+inside it, so a frame's ``issue_ms`` there cannot tell the CPU's share. The frames are therefore drawn by a child
+process on Mesa's no-op driver (``GALLIUM_NOOP=1``): every GL call is made and passes through Mesa's GL front end
+(validation, state, uniform and buffer uploads), but nothing is drawn or computed, so the frame's wall time is its
+CPU time: planning (tile selection and, for the mixed policies, features and choices) and issuing (Python,
+moderngl, the GL front end). What a GPU's own driver spends on the same calls may differ; on a GPU (whose driver
+ignores the variable) the child draws for real, and its ``issue_ms`` is the CPU's share, waits for the GPU left
+out. The hybrid uses the cost model of the device the benchmark runs for, not the no-op driver's (which has none).
+The images of the no-op driver are meaningless, and are not read.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+
+from hybrid.errors import TerrabenchError
+
+POLICIES = ("raster", "raster_gs", "raycast", "hybrid")
+FLIGHTS = ("flyover", "orbit", "dolly")
+CHILD_TIMEOUT_S = 900
+TARGET = "CPU ms (plan + issue; raster target <= 1)"
+
+
+def measure(model_for: str, frames: int = 8, size: str = "640x360", repeats: int = 5, tile_size: int = 128,
+            tau: float = 2 / 3) -> dict:
+    """In this process (the child): per flight, policy and frame, the median over repeats of plan, issue and wall ms
+    on Puget's default flights, with the renderer's name; the hybrid with ``model_for``'s cost model."""
+    import warnings
+
+    from hybrid.camera.flight import preset
+    from hybrid.camera.view import parse_size
+    from hybrid.cost.model import load_cost_model
+    from hybrid.gl.context import gl_info, shared_context
+    from hybrid.renderer import make_renderer
+    from hybrid.terrain.datasets import puget
+    warnings.simplefilter("ignore", RuntimeWarning)          # the no-op driver's read-backs hold no image
+    ctx = shared_context()
+    w, h = parse_size(size, "size")
+    hf = puget()
+    model = load_cost_model(model_for)
+    rows = []
+    for fname in FLIGHTS:
+        views = preset(fname, hf, frames, w, h).views()
+        renderers = {}
+        try:
+            for p in POLICIES:
+                opts = {"cost_model": model} if p == "hybrid" else {}
+                renderers[p] = make_renderer(ctx, hf, p, tile_size=tile_size, **opts)
+                for v in views:                                # warm: uploads, estimates, shader compiles
+                    renderers[p].render(v, tau)
+            got = {(p, k): [] for p in POLICIES for k in range(len(views))}
+            for _ in range(repeats):
+                for k, v in enumerate(views):
+                    for p, r in renderers.items():
+                        st = r.render(v, tau).stats
+                        got[(p, k)].append((st.plan_ms, st.issue_ms, st.wall_ms))
+            for (p, k), x in got.items():
+                plan, issue, wall = np.median(np.array(x, dtype=np.float64), axis=0)
+                rows.append({"flight": fname, "policy": p, "frame": k, "plan_ms": plan, "issue_ms": issue,
+                             "wall_ms": wall})
+        finally:
+            for r in renderers.values():
+                r.release()
+    return {"renderer": gl_info(ctx).renderer, "rows": rows}
+
+
+def run_child(model_for: str, frames: int, size: str, repeats: int) -> dict:
+    """``measure`` in a child process on Mesa's no-op driver (the same EGL device as this process's)."""
+    env = {**os.environ, "GALLIUM_NOOP": "1"}
+    cmd = [sys.executable, "-m", "experiments.bench_cpu", "--child", "--model-for", model_for, "--frames", str(frames),
+           "--size", size, "--repeats", str(repeats)]
+    try:
+        done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=CHILD_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        raise TerrabenchError(f"the CPU benchmark's child process ran over {CHILD_TIMEOUT_S} s") from None
+    lines = done.stdout.strip().splitlines()
+    if done.returncode != 0 or not lines:
+        raise TerrabenchError(f"the CPU benchmark's child process failed (exit {done.returncode}): "
+                              f"{done.stderr.strip()[-2000:]}")
+    return json.loads(lines[-1])
+
+
+def summarize(result: dict) -> dict[str, pd.DataFrame]:
+    """Per flight and policy, the median over frames of plan, issue and CPU (plan + issue) ms."""
+    df = pd.DataFrame(result["rows"])
+    df["cpu_ms"] = df["plan_ms"] + df["issue_ms"]
+    t = df.groupby(["flight", "policy"], sort=False)[["plan_ms", "issue_ms", "cpu_ms", "wall_ms"]].median()
+    t = t.rename(columns={"plan_ms": "plan ms", "issue_ms": "issue ms", "cpu_ms": TARGET, "wall_ms": "wall ms"})
+    renderer = result["renderer"]
+    how = ("Mesa's no-op driver: every GL call made, no GPU work" if renderer == "NOOP" else
+           f"{renderer}, drawing for real (issue without the waits for the GPU)")
+    return {f"CPU time a frame on Puget, median of frames ({how})": t.reset_index()}
+
+
+def run(ctx=None, frames: int = 8, size: str = "640x360", repeats: int = 5) -> dict[str, pd.DataFrame]:
+    """The benchmark's table keyed by title; the frames drawn in a child process (``run_child``), the hybrid with the
+    cost model of ``ctx``'s device (the default process context when None)."""
+    from hybrid.gl.context import gl_info, shared_context
+    renderer = gl_info(ctx if ctx is not None else shared_context()).renderer
+    return summarize(run_child(renderer, frames, size, repeats))
+
+
+def main(argv=None) -> int:
+    """Run the CPU benchmark and print its table (``--child``: measure here and print the rows as JSON)."""
+    from .tables import text_tables
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=8)
+    ap.add_argument("--size", default="640x360")
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--model-for", default=None, help=argparse.SUPPRESS)
+    a = ap.parse_args(argv)
+    if a.child:
+        print(json.dumps(measure(a.model_for, a.frames, a.size, a.repeats)))
+        return 0
+    print(text_tables(run(None, a.frames, a.size, a.repeats)))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
