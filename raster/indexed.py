@@ -36,13 +36,14 @@ class IndexedTileletStrategy(TileletDrawing):
                                               index_element_size=4),
                 "skirts": self.ctx.vertex_array(self.skirt_prog, [(self.items.segments, "3f 3f/i", "a_p", "a_q")])}
 
-    def draw_tile(self, item: int, wireframe: bool = False) -> None:
-        """The item's leaves as indexed triangles (count and first index from the selection)."""
-        ctx = self.ctx
+    def draw_items(self, items: int, wireframe: bool = False) -> None:
+        """Each item's leaves as indexed triangles (count and first index from the selection)."""
+        ctx, vao, control = self.ctx, self.arena_vaos()["mesh"], self.items.control
         ctx.wireframe = bool(wireframe)
         try:
-            self.arena_vaos()["mesh"].render_indirect(self.items.control, mode=ctx.TRIANGLES, count=1,
-                                                      first=self.command(item, CMD_TEMPLATE))
+            for i in range(items):
+                self.blocks.bind(i)
+                vao.render_indirect(control, mode=ctx.TRIANGLES, count=1, first=self.command(i, CMD_TEMPLATE))
         finally:
             ctx.wireframe = False
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 from hybrid.gl.context import gl_bytes, gl_finish, gl_memory_barrier
-from hybrid.gl.programs import compute_shader, set_uniform, write_uniform
+from hybrid.gl.programs import UniformCache, compute_shader, write_uniform
 from hybrid.gl.textures import terrain_texture
 
 from .arena import LeafArena
@@ -23,8 +23,8 @@ from .frame_items import COMMANDS_PER_ITEM, CONTROL_WORDS, LOCAL, FrameItems
 from .heap import TileHeap
 from .nodes import nodes_for, pending_cut, tile_levels, tile_node_block
 from .quadtree import GPU_BETA
-from .tileblock import MAX_STARTS, STARTS_FOUND, STARTS_HEIGHTS, STARTS_SEGMENTS, TileBlocks, register_tile_block, \
-    tile_blocks, tile_constants
+from .tileblock import BLOCK, CONSTANT_WORDS, MAX_STARTS, STARTS_FOUND, STARTS_HEIGHTS, STARTS_SEGMENTS, TileBlocks, register_tile_block, \
+    static_blocks, tile_constants, view_fields
 
 LEAF_WORDS = 13                 # j0, i0, level, dropped edges, nine post heights
 LEAF_FORMAT = "4i 4f 4f 1f"
@@ -55,16 +55,16 @@ def level_bounds(data: np.ndarray, offsets: np.ndarray, n: int, spacing_xy: tupl
     return err, lo, hi
 
 
-def first_levels(gs, eye_local: np.ndarray, k_tau: float) -> np.ndarray:
+def first_levels(bounds: np.ndarray, eye_local: np.ndarray, k_tau: float) -> np.ndarray:
     """Per tile (all of one cell count), the finest local level that can hold a leaf in this view (below it no
-    parent can split); ``eye_local`` (B, 3) is the eye minus each tile's origin, metres."""
-    bounds = np.stack([g.level_bounds for g in gs])              # (B, levels, 7): lo, hi, error
+    parent can split); ``bounds`` (B, levels, 7) are the tiles' ``level_bounds`` rows (lo, hi, error), ``eye_local``
+    (B, 3) is the eye minus each tile's origin, metres."""
     lo, hi, err = bounds[..., 0:3], bounds[..., 3:6], bounds[..., 6]
-    d = np.linalg.norm(np.maximum(np.maximum(lo - eye_local[:, None], eye_local[:, None] - hi), 0.0), axis=2)
-    can = err * k_tau > d                                 # (B, levels): a parent at this level can split
+    gap = np.maximum(np.maximum(lo - eye_local[:, None], eye_local[:, None] - hi), 0.0)
+    can = err * k_tau > np.sqrt(np.einsum("bmk,bmk->bm", gap, gap))    # (B, levels): a parent here can split
     top = can.shape[1] - 1
     if top <= 0:
-        return np.zeros(len(gs), dtype=np.int64)
+        return np.zeros(len(bounds), dtype=np.int64)
     inner = can[:, 1:top]                                 # level m + 1 for m = 0 .. top - 2
     hit = inner.any(axis=1)
     return np.where(hit, np.argmax(inner, axis=1) if inner.shape[1] else 0, top - 1)
@@ -90,6 +90,12 @@ class SelectedTileletTile:
         err, lo, hi = level_bounds(data, self.offsets, self.n, tile.spacing_xy)
         self.level_bounds = np.concatenate([lo, hi, err[:, None]], axis=1)        # (levels, 7), tile-local metres
         self.constants, self.clip = tile_constants(tile), tile.clip              # the tile block's own part
+        block = static_blocks(strategy.hf, self.constants[None])                # ... and what the view leaves
+        block["shape"][:, 0], block["shape"][:, 1] = self.n, tile_levels(self.n) - 1   # as it is (node offsets
+        block["offsets"][:, :len(self.offsets)] = self.offsets                  # within the slot's)
+        block["starts"][:, :len(self.starts)] = self.starts
+        self.block = block.tobytes()                  # joined per frame: concatenating structured arrays is slow
+        self.numbers = np.concatenate([self.constants, self.level_bounds.ravel()]).tobytes()   # the same
         self.slot = strategy.heap(self.n, len(data)).alloc(h, data)
         self.writes = strategy.writes
 
@@ -124,6 +130,7 @@ class TileletSelection:
         self.items = FrameItems(ctx)
         self.heaps: dict[int, TileHeap] = {}                 # cell count -> heap of resident tiles
         self.item_of: dict[int, int] = {}                    # id(tile) -> its first item in the last selection
+        self.uniforms = UniformCache()                        # the selection passes' and the draw programs'
 
     def heap(self, n: int, node_rows: int) -> TileHeap:
         """The heap of n-cell tiles (made at the first)."""
@@ -148,33 +155,31 @@ class TileletSelection:
         return pending_cut(self.hf, n, self.beta, key)
 
     def set_selection(self, name: str, value) -> None:
-        """Set a uniform of both selection passes (where the pass uses it)."""
+        """Set a uniform of both selection passes (where the pass uses it; not sent again while unchanged)."""
         for prog in self.passes:
-            set_uniform(prog, name, value)
+            self.uniforms.set(prog, name, value)
 
     def frame_blocks(self, view, items, tau: float, culling: bool = True, skirts: dict | None = None):
         """The frame's per-item shader blocks (raster.tileblock) with the selection's fields, uploaded; and each
-        item's pass-0 work groups."""
-        k_tau = float(view.pixels_per_radian) / float(tau)
+        item's pass-0 work groups. What a tile's block holds whatever the view was made at its upload."""
         gs = [g for g, _, _ in items]
-        groups0 = np.zeros(len(gs), np.int64)
-
-        # a tile drawn for a missing one (hybrid.uploads) has that one's clip: its constants are made here
-        constants = np.stack([g.constants if g.clip == t.clip else tile_constants(t) for g, t, _ in items])
-
-        def selection_fields(blocks):
-            g0 = gs[0]                                    # every item has g0's cell count (select_leaves)
-            eye_local = np.asarray(view.eye, dtype=np.float64) - constants[:, 0:3]
-            first = g0.starts[first_levels(gs, eye_local, k_tau)]
-            groups0[:] = (int(g0.starts[-1]) - first + LOCAL - 1) // LOCAL
-            blocks["shape"][:, 0], blocks["shape"][:, 1], blocks["shape"][:, 2] = g0.n, tile_levels(g0.n) - 1, first
-            nodes_base = np.array([g.slot.nodes_base for g in gs])
-            blocks["offsets"][:, :len(g0.offsets)] = g0.offsets[None] + nodes_base[:, None]
-            blocks["starts"][:, :len(g0.starts)] = g0.starts
-            blocks["starts"][:, STARTS_HEIGHTS] = [g.slot.heights_base for g in gs]
-
-        blocks = tile_blocks(self.hf, view, items, skirts, culling, per_frame=selection_fields, constants=constants)
-        found_base, seg_base, table1_start = self.items.prepare(gs[0].n, groups0, self.arena.capacity)
+        g0 = gs[0]                                        # every item has g0's cell count (select_leaves)
+        numbers = np.frombuffer(bytearray(b"".join([g.numbers for g in gs])), np.float64).reshape(len(gs), -1)
+        constants = numbers[:, :CONSTANT_WORDS]
+        for i, (g, t, _) in enumerate(items):
+            if g.clip != t.clip:        # a tile drawn for a missing one (hybrid.uploads) has that one's clip
+                constants[i] = tile_constants(t)
+        blocks = view_fields(np.frombuffer(bytearray(b"".join([g.block for g in gs])), BLOCK), view, constants,
+                             [s for _, _, s in items], skirts, culling)
+        eye_local = np.asarray(view.eye, dtype=np.float64) - constants[:, 0:3]
+        bounds = numbers[:, CONSTANT_WORDS:].reshape(len(gs), -1, 7)
+        first = g0.starts[first_levels(bounds, eye_local, float(view.pixels_per_radian) / float(tau))]
+        groups0 = (int(g0.starts[-1]) - first + LOCAL - 1) // LOCAL
+        blocks["shape"][:, 2] = first
+        bases = np.array([(g.slot.nodes_base, g.slot.heights_base) for g in gs])     # slots move when heaps do
+        blocks["offsets"][:, :len(g0.offsets)] += bases[:, :1]
+        blocks["starts"][:, STARTS_HEIGHTS] = bases[:, 1]
+        found_base, seg_base, table1_start = self.items.prepare(g0.n, groups0, self.arena.capacity)
         blocks["starts"][:, STARTS_FOUND], blocks["starts"][:, STARTS_SEGMENTS] = found_base, seg_base
         self.blocks.write(blocks)
         return blocks, groups0, table1_start

@@ -38,37 +38,48 @@ def tile_constants(tile) -> np.ndarray:
                      k.tx * tile.n << k.level, k.ty * tile.n << k.level], dtype=np.float64)
 
 
-def tile_blocks(hf, view, items, skirts: dict | None = None, culling: bool = True, unit_spacing: bool = False,
-                per_frame=None, constants: np.ndarray | None = None) -> np.ndarray:
-    """The blocks of a frame's (gpu, tile, selected) items, built as arrays over all items; ``per_frame(blocks)``
-    fills in selection fields (offsets, starts, first node); ``unit_spacing`` for meshes whose positions are
-    metres; ``constants`` (B, CONSTANT_WORDS), the items' ``tile_constants`` where the caller keeps them."""
-    out = np.zeros(len(items), BLOCK)
-    if not len(items):
-        return out
-    eye = np.asarray(view.eye, dtype=np.float64)
-    if constants is None:
-        constants = np.stack([tile_constants(t) for _, t, _ in items])
-    sels = [s for _, _, s in items]
-    origin, spacing = constants[:, 0:3], constants[:, 3:5]
+def static_blocks(hf, constants: np.ndarray, unit_spacing: bool = False) -> np.ndarray:
+    """(B,) blocks holding only what B tiles' ``tile_constants`` (B, CONSTANT_WORDS) fix whatever the view: sample
+    spacing (1 with ``unit_spacing``, for meshes whose positions are metres), texture coordinates of sample [0, 0]
+    and per sample, pyramid level and level-0 cell; the rest zero."""
+    out = np.zeros(len(constants), BLOCK)
+    spacing = constants[:, 3:5]
     sp = np.ones_like(spacing) if unit_spacing else spacing
-    out["origin"][:, :3] = origin - eye
-    out["spacing"][:, :2] = sp
-    out["clip_rel"] = constants[:, 5:9] - eye[[0, 1, 0, 1]]
     extent = np.asarray(hf.extent, dtype=np.float64)
-    out["uv"][:, :2] = (origin[:, :2] - np.asarray(hf.origin[:2], dtype=np.float64)) / extent
+    out["spacing"][:, :2] = sp
+    out["uv"][:, :2] = (constants[:, 0:2] - np.asarray(hf.origin[:2], dtype=np.float64)) / extent
     out["uv"][:, 2:] = sp / extent
     out["shape"][:, 3] = constants[:, 10]
-    out["nb_delta"] = [s.edge_deltas for s in sels]
-    if skirts:
-        out["flags"][:, 0] = [skirts.get(s.key, 0) for s in sels]
-    if culling:
-        out["flags"][:, 1] = ~np.array([s.inside for s in sels], dtype=bool)
     out["flags"][:, 2:] = constants[:, 11:13]
-    out["skirt"][:, 0] = constants[:, 9] - eye[2] - 1.0 - 0.01 * spacing.max(axis=1)   # eye-relative: below zmin
-    if per_frame is not None:
-        per_frame(out)
     return out
+
+
+def view_fields(blocks: np.ndarray, view, constants: np.ndarray, sels, skirts: dict | None = None,
+                culling: bool = True) -> np.ndarray:
+    """Fill in the view's fields of a frame's blocks (in place; returned): origin, clip rectangle and skirt bottom
+    relative to the eye (metres), from the items' ``tile_constants`` (B, CONSTANT_WORDS); neighbour level deltas,
+    skirt edges and culling from their selections ``sels`` (B ``SelectedTile``s)."""
+    eye = np.asarray(view.eye, dtype=np.float64)
+    blocks["origin"][:, :3] = constants[:, 0:3] - eye
+    blocks["clip_rel"] = constants[:, 5:9] - eye[[0, 1, 0, 1]]
+    blocks["nb_delta"] = [s.edge_deltas for s in sels]
+    if skirts:
+        blocks["flags"][:, 0] = [skirts.get(s.key, 0) for s in sels]
+    if culling:
+        blocks["flags"][:, 1] = ~np.array([s.inside for s in sels], dtype=bool)
+    blocks["skirt"][:, 0] = constants[:, 9] - eye[2] - 1.0 - 0.01 * constants[:, 3:5].max(axis=1)  # below zmin
+    return blocks
+
+
+def tile_blocks(hf, view, items, skirts: dict | None = None, culling: bool = True,
+                unit_spacing: bool = False) -> np.ndarray:
+    """The blocks of a frame's (gpu, tile, selected) items, built as arrays over all items (``static_blocks`` and
+    ``view_fields``); ``unit_spacing`` for meshes whose positions are metres."""
+    if not len(items):
+        return np.zeros(0, BLOCK)
+    constants = np.stack([tile_constants(t) for _, t, _ in items])
+    return view_fields(static_blocks(hf, constants, unit_spacing), view, constants, [s for _, _, s in items],
+                       skirts, culling)
 
 
 class TileBlocks:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from hybrid.gl.edges import TerrainEdges
-from hybrid.gl.programs import program, set_uniform
+from hybrid.gl.programs import program
 from hybrid.gl.shading import resolve_mode
 
 from .arena import INDEX_BYTES, RECORD_BYTES, VERTEX_BYTES
@@ -67,8 +67,9 @@ class TileletDrawing(TileletSelection):
         """Every program whose uniforms follow the frame (subclasses)."""
         raise NotImplementedError
 
-    def draw_tile(self, item: int, wireframe: bool = False) -> None:
-        """Issue item ``item``'s indirect draw from the frame's control buffer (subclasses)."""
+    def draw_items(self, items: int, wireframe: bool = False) -> None:
+        """Issue the indirect draws of items 0 .. items - 1 from the frame's control buffer, each with its tile
+        block bound (subclasses)."""
         raise NotImplementedError
 
     def arena_arrays(self) -> dict:
@@ -148,19 +149,17 @@ class TileletDrawing(TileletSelection):
         vp = view.view_proj_rel.T.astype(np.float32).tobytes()
         for prog in self.programs():
             prog["view_proj_rel"].write(vp)
-            set_uniform(prog, "mode", MODES[mode])
-            set_uniform(prog, "wireframe", bool(wireframe))
-            set_uniform(prog, "hrange", tuple(float(v) for v in self.hf.height_range))
-            set_uniform(prog, "tex", 1)
+            self.uniforms.set(prog, "mode", MODES[mode])
+            self.uniforms.set(prog, "wireframe", bool(wireframe))
+            self.uniforms.set(prog, "hrange", tuple(float(v) for v in self.hf.height_range))
+            self.uniforms.set(prog, "tex", 1)
         if self.texture is not None:
             self.texture.use(1)
         target.use()
         for i in range(4):
             ctx.enable_direct(GL_CLIP_DISTANCE0 + i)
         try:
-            for i in range(len(items)):
-                self.blocks.bind(i)
-                self.draw_tile(i, wireframe)
+            self.draw_items(len(items), wireframe)
             self._skirted = [i for i, (_, _, sel) in enumerate(items) if (skirts or {}).get(sel.key, 0)]
         finally:
             for i in range(4):
@@ -185,6 +184,7 @@ class TileletStrategy(TileletDrawing):
         self.prog = program(ctx, "raster", "leaf.vert.glsl", "tilelet.frag.glsl", "tilelet.geom.glsl")
         self.skirt_prog = program(ctx, "raster", "leaf.vert.glsl", "tilelet.frag.glsl", "tilelet.geom.glsl",
                                   defines={"SKIRT_PROGRAM": 1})
+        self.prog["skirt_pass"].value = False
         self.skirt_prog["skirt_pass"].value = True
 
     def programs(self) -> tuple:
@@ -197,11 +197,12 @@ class TileletStrategy(TileletDrawing):
         return {"points": self.ctx.vertex_array(self.prog, attrs),
                 "skirt_points": self.ctx.vertex_array(self.skirt_prog, attrs)}
 
-    def draw_tile(self, item: int, wireframe: bool = False) -> None:
-        """The item's leaves as points through the geometry shader (count and first leaf from the selection)."""
-        self.prog["skirt_pass"].value = False
-        self.arena_vaos()["points"].render_indirect(self.items.control, mode=self.ctx.POINTS, count=1,
-                                                    first=self.command(item, CMD_POINTS))
+    def draw_items(self, items: int, wireframe: bool = False) -> None:
+        """Each item's leaves as points through the geometry shader (count and first leaf from the selection)."""
+        vao, control = self.arena_vaos()["points"], self.items.control
+        for i in range(items):
+            self.blocks.bind(i)
+            vao.render_indirect(control, mode=self.ctx.POINTS, count=1, first=self.command(i, CMD_POINTS))
 
     def draw_tile_skirts(self, item: int) -> None:
         """The item's leaves again through the geometry shader's skirt program, emitting only their skirts."""

@@ -63,3 +63,22 @@ def write_uniform(prog, name: str, data: bytes) -> None:
     u = prog.get(name, None)
     if u is not None:
         u.write(data)
+
+
+_UNSET = object()
+
+
+class UniformCache:
+    """The uniform values last sent to programs through it. A program keeps its uniforms between draws, so a value
+    it already holds is not sent again: the per-frame uniforms that rarely change cost no GL call. Every write to
+    those uniforms must go through the cache (one per owner of the programs)."""
+
+    def __init__(self):
+        self._held: dict = {}
+
+    def set(self, prog, name: str, value) -> None:
+        """``set_uniform(prog, name, value)`` unless prog already holds that value."""
+        key = (id(prog), name)
+        if self._held.get(key, _UNSET) != value:
+            set_uniform(prog, name, value)
+            self._held[key] = value
