@@ -49,7 +49,7 @@ def ancestors(key: TileKey, max_level: int):
 
 def fallback_selection(sel, key: TileKey):
     """The selection record of a missing tile redirected to its ancestor ``key``: no neighbour to stitch to."""
-    return replace(sel, key=key, coarser_edges=0, edge_deltas=(NO_NEIGHBOUR,) * 4)
+    return sel._replace(key=key, coarser_edges=0, edge_deltas=(NO_NEIGHBOUR,) * 4)
 
 
 def fallback_tile(ancestor_tile, clip, zrange=None):

@@ -100,6 +100,11 @@ class TileHeap:
         self.heights, self.nodes, self.capacity = heights, nodes, capacity
         self.owners = used + [None] * (capacity - len(used))
 
+    def bases(self, slots) -> tuple[np.ndarray, np.ndarray]:
+        """(nodes_base, heights_base) of the heap's slots as (len(slots),) arrays (``HeapSlot``'s, at once)."""
+        index = np.array([s.index for s in slots], dtype=np.int64)
+        return index * self.node_rows, index * self.height_words
+
     @property
     def used(self) -> int:
         """Slots holding a tile."""

@@ -176,9 +176,9 @@ class TileletSelection:
         first = g0.starts[first_levels(bounds, eye_local, float(view.pixels_per_radian) / float(tau))]
         groups0 = (int(g0.starts[-1]) - first + LOCAL - 1) // LOCAL
         blocks["shape"][:, 2] = first
-        bases = np.array([(g.slot.nodes_base, g.slot.heights_base) for g in gs])     # slots move when heaps do
-        blocks["offsets"][:, :len(g0.offsets)] += bases[:, :1]
-        blocks["starts"][:, STARTS_HEIGHTS] = bases[:, 1]
+        nodes_base, heights_base = g0.slot.heap.bases([g.slot for g in gs])       # slots move when heaps do
+        blocks["offsets"][:, :len(g0.offsets)] += nodes_base[:, None]
+        blocks["starts"][:, STARTS_HEIGHTS] = heights_base
         found_base, seg_base, table1_start = self.items.prepare(g0.n, groups0, self.arena.capacity)
         blocks["starts"][:, STARTS_FOUND], blocks["starts"][:, STARTS_SEGMENTS] = found_base, seg_base
         self.blocks.write(blocks)
@@ -211,7 +211,7 @@ class TileletSelection:
         self.set_selection("write_records", self.writes == "records")
         self.set_selection("write_mesh", self.writes == "mesh")
         self.set_selection("arena_capacity", int(self.arena.capacity))
-        self.set_selection("eye_terrain", tuple(float(e - o) for e, o in zip(view.eye, self.hf.origin)))
+        self.set_selection("eye_terrain", tuple((np.asarray(view.eye, dtype=np.float64) - self.hf.origin).tolist()))
         self.set_selection("cell_metres", (float(self.hf.spacing_x), float(self.hf.spacing_y)))
         self.set_selection("side_errors", items[0][0].side_errors)
         self.set_selection("table1_start", int(table1_start))

@@ -11,7 +11,7 @@ height-field columns. A pyramid of a few thousand tile places is selected over a
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -26,9 +26,9 @@ _EDGES = ((EDGE_W, -1, 0), (EDGE_E, 1, 0), (EDGE_S, 0, -1), (EDGE_N, 0, 1))
 _STEPS = np.array([(dx, dy) for _, dx, dy in _EDGES])      # (4, 2) tile steps to the W, E, S, N neighbours
 
 
-@dataclass(frozen=True)
-class SelectedTile:
-    """A tile chosen for a view, with what the renderers and the cost model need to know about it.
+class SelectedTile(NamedTuple):
+    """A tile chosen for a view, with what the renderers and the cost model need to know about it (a named tuple:
+    one is made for every selected tile of every frame).
 
     distance: metres from the eye to the nearest point of the AABB (0 if the eye is inside it).
     projected_error: the tile's geometric error in pixels at that distance.
