@@ -34,8 +34,9 @@ def square_tiles(pyramid: TilePyramid) -> int:
 class TileTable:
     """Every tile place of a pyramid (N of them), flat; index N is a sentinel (no tile, never selected).
 
-    level, tx, ty: (N,) int64 address; exists: (N,) bool, the place covers real terrain; boxes: (N, 7) float64
-    world box corners and refinement error as ``TilePyramid.level_table`` (zeros where no tile exists);
+    level, tx, ty: (N,) int64 address, and keys (N, 3) the three side by side; exists: (N,) bool, the place
+    covers real terrain; boxes: (N, 7) float64 world box corners and refinement error as
+    ``TilePyramid.level_table`` (zeros where no tile exists);
     chain: (N + 1, top + 1) the place itself then its ancestors coarsest last (N beyond the root);
     neighbours: (N, 4) the same level's place across the W, E, S, N edges (N off the square);
     children: (N + 1, 4) SW, SE, NW, NE children (N at level 0);
@@ -44,6 +45,7 @@ class TileTable:
     level: np.ndarray
     tx: np.ndarray
     ty: np.ndarray
+    keys: np.ndarray
     exists: np.ndarray
     boxes: np.ndarray
     chain: np.ndarray
@@ -94,7 +96,8 @@ def _build(pyramid: TilePyramid) -> TileTable:
     centre = np.stack([hf.origin[0] + (tx + 0.5) * (span * hf.spacing_x),
                        hf.origin[1] + (ty + 0.5) * (span * hf.spacing_y)], axis=1)
     quadrant = np.stack([tx & 1, ty & 1], axis=1)
-    return TileTable(level, tx, ty, exists, boxes, chain, neighbours, children, centre, quadrant)
+    return TileTable(level, tx, ty, np.stack([level, tx, ty], axis=1), exists, boxes, chain, neighbours, children,
+                     centre, quadrant)
 
 
 _TABLES: "weakref.WeakKeyDictionary[TilePyramid, TileTable]" = weakref.WeakKeyDictionary()
@@ -112,10 +115,10 @@ def tile_table(pyramid: TilePyramid) -> TileTable:
 
 
 def dense_selection(pyramid: TilePyramid, measure, tau: float, eye: np.ndarray):
-    """The selected tiles of a view over every tile place at once: ((level, tx, ty, distance, projected error,
-    class, lo, hi) arrays of the selected tiles, their edge levels (4, M) as the level-by-level selection's
-    ``restrict`` returns them, (4, M) whether a selected tile one level finer lies across each edge, and their
-    front-to-back order); ``eye`` is the view's eye, world metres.
+    """The selected tiles of a view over every tile place at once, front to back: ((keys (M, 3) level, tx, ty;
+    distance, projected error, class, lo, hi) arrays of the selected tiles, their edge levels (4, M) as the
+    level-by-level selection's ``restrict`` returns them, and (4, M) whether a selected tile one level finer lies
+    across each edge); ``eye`` is the view's eye, world metres.
 
     ``measure(rows)`` gives (distance, projected error, class) of world rows [lo | hi | error] of tiles
     (the level-by-level selection's formulas, so both give the same bits)."""
@@ -139,9 +142,11 @@ def dense_selection(pyramid: TilePyramid, measure, tau: float, eye: np.ndarray):
         selected[parents] = False                                       # split: their children replace them
         kids = t.children[parents].reshape(-1)
         selected[kids[kids < n][live[kids[kids < n]]]] = True
+    order = _order(t, idx, eye)
+    idx, cov = idx[order], cov[:, order]
     finer = (selected[t.children[t.neighbours[idx]]].any(axis=2)).T     # (4, M)
-    lo, hi = t.boxes[idx, :3], t.boxes[idx, 3:6]
-    return (t.level[idx], t.tx[idx], t.ty[idx], d[idx], pe[idx], c[idx], lo, hi), cov, finer, _order(t, idx, eye)
+    box = t.boxes[idx]
+    return (t.keys[idx], d[idx], pe[idx], c[idx], box[:, :3], box[:, 3:6]), cov, finer
 
 
 def _order(t: TileTable, idx: np.ndarray, eye: np.ndarray) -> np.ndarray:

@@ -24,6 +24,7 @@ DEFAULT_TAU = 2.0 / 3.0
 NO_NEIGHBOUR = 9
 _EDGES = ((EDGE_W, -1, 0), (EDGE_E, 1, 0), (EDGE_S, 0, -1), (EDGE_N, 0, 1))
 _STEPS = np.array([(dx, dy) for _, dx, dy in _EDGES])      # (4, 2) tile steps to the W, E, S, N neighbours
+_EDGE_BITS = np.array([bit for bit, _, _ in _EDGES])
 
 
 class SelectedTile(NamedTuple):
@@ -250,7 +251,7 @@ def select_tiles(pyramid: TilePyramid, view: View, tau: float = DEFAULT_TAU,
     if dense is None:
         dense = square_tiles(pyramid) <= DENSE_MAX_TILES
     if dense:
-        (lv, tx, ty, d, pe, c, lo, hi), cov, finer, order = dense_selection(pyramid, sel.measure_all, tau, sel.eye)
+        (keys, d, pe, c, lo, hi), cov, finer = dense_selection(pyramid, sel.measure_all, tau, sel.eye)
     else:
         sel.refine()
         cov = sel.restrict()
@@ -258,18 +259,18 @@ def select_tiles(pyramid: TilePyramid, view: View, tau: float = DEFAULT_TAU,
         lv, tx, ty = lv.astype(np.int64), tx.astype(np.int64), ty.astype(np.int64)
         finer = sel.finer_neighbours(lv, tx, ty)
         order = sel.front_to_back(lv, tx, ty)
-    deltas = np.where(cov >= 0, cov - lv[None, :], np.where(finer, -1, NO_NEIGHBOUR)).T
-    bits = np.array([bit for bit, _, _ in _EDGES])
-    masks = ((deltas == 1) * bits).sum(axis=1)
-    inside = c[order] == 1
+        keys = np.stack([lv, tx, ty], axis=1)[order]
+        d, pe, c, lo, hi = d[order], pe[order], c[order], lo[order], hi[order]
+        cov, finer = cov[:, order], finer[:, order]
+    deltas = np.where(cov >= 0, cov - keys[:, 0][None, :], np.where(finer, -1, NO_NEIGHBOUR)).T
+    masks = ((deltas == 1) * _EDGE_BITS).sum(axis=1)
+    inside = c == 1
     out = TileSelection(
         SelectedTile(TileKey(level, x, y), dist, err, mask, ins, tuple(delta))
-        for level, x, y, dist, err, mask, ins, delta in zip(
-            lv[order].tolist(), tx[order].tolist(), ty[order].tolist(), d[order].tolist(), pe[order].tolist(),
-            masks[order].tolist(), inside.tolist(), deltas[order].tolist()))
-    out.inside = inside
-    out.keys = np.stack([lv, tx, ty], axis=1)[order]
-    out.distance, out.lo, out.hi = d[order].astype(np.float64), lo[order], hi[order]
+        for (level, x, y), dist, err, mask, ins, delta in zip(
+            keys.tolist(), d.tolist(), pe.tolist(), masks.tolist(), inside.tolist(), deltas.tolist()))
+    out.inside, out.keys = inside, keys
+    out.distance, out.lo, out.hi = d.astype(np.float64, copy=False), lo, hi
     return out
 
 
