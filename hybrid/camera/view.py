@@ -155,10 +155,16 @@ class View:
 
     @property
     def view_proj_rel(self) -> np.ndarray:
-        """4x4 float64 matrix from eye-relative world coordinates (world - eye) to clip space."""
-        m = np.eye(4)
-        m[:3, :3] = self.rotation()
-        return self.projection() @ m
+        """4x4 float64 matrix from eye-relative world coordinates (world - eye) to clip space; computed once per
+        view (read-only)."""
+        vp = self.__dict__.get("_view_proj_rel")
+        if vp is None:
+            m = np.eye(4)
+            m[:3, :3] = self.rotation()
+            vp = self.projection() @ m
+            vp.setflags(write=False)
+            self.__dict__["_view_proj_rel"] = vp
+        return vp
 
     def view_proj(self) -> np.ndarray:
         """4x4 float64 matrix from absolute world coordinates to clip space."""
