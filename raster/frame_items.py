@@ -41,7 +41,8 @@ def control_blank(groups0: np.ndarray, segment_base: np.ndarray) -> np.ndarray:
     fills in (draws, leaves) 0, each skirt command's first instance at its item's segments, each item's pass-0 work groups."""
     words = np.zeros((len(groups0), CONTROL_WORDS), np.uint32)
     words[:, 5 * CMD_POINTS + 1] = 1                    # leaf points: one instance of (leaf count) points
-    words[:, 5 * CMD_TEMPLATE + 1] = 1                  # mesh: one instance of (24 x leaf count) indices
+    words[:, 5 * CMD_TEMPLATE + 1] = 1                  # mesh: one instance of (24 x leaf count) indices,
+    words[:, 5 * CMD_TEMPLATE + 4] = np.arange(len(groups0))   # its base instance the item (raster.indexed)
     words[:, 5 * CMD_SKIRTS] = 6                        # skirts: (segment count) instances of a 6-vertex quad
     words[:, 5 * CMD_SKIRTS + 3] = np.asarray(segment_base) // SEGMENT_WORDS     # first instance
     words[:, GROUPS_WORD] = groups0

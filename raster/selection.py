@@ -23,8 +23,8 @@ from .frame_items import COMMANDS_PER_ITEM, CONTROL_WORDS, LOCAL, FrameItems
 from .heap import TileHeap
 from .nodes import nodes_for, pending_cut, tile_levels, tile_node_block
 from .quadtree import GPU_BETA
-from .tileblock import BLOCK, CONSTANT_WORDS, MAX_STARTS, STARTS_FOUND, STARTS_HEIGHTS, STARTS_SEGMENTS, TileBlocks, \
-    register_tile_block, static_blocks, tile_constants, view_fields
+from .tileblock import BLOCK, CONSTANT_WORDS, MAX_STARTS, STARTS_FOUND, STARTS_HEIGHTS, STARTS_SEGMENTS, \
+    TILE_BLOCKS_BINDING, TileBlocks, register_tile_block, static_blocks, tile_constants, view_fields
 
 LEAF_WORDS = 13                 # j0, i0, level, dropped edges, nine post heights
 LEAF_FORMAT = "4i 4f 4f 1f"
@@ -217,7 +217,7 @@ class TileletSelection:
         self.set_selection("table1_start", int(table1_start))
         self.frame.write(np.zeros(len(FRAME_FIELDS), np.uint32).tobytes())
         self.frame.bind_to_storage_buffer(4)
-        self.blocks.buffer.bind_to_storage_buffer(9)
+        self.blocks.buffer.bind_to_storage_buffer(TILE_BLOCKS_BINDING)
         self.arena.bind()
         self.items.bind()
         list_pass, emit_pass = self.passes

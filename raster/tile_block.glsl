@@ -1,7 +1,8 @@
 // Everything a raster shader needs to know about the tile it draws, one std140 block per tile written once a
 // frame for all tiles (raster.tileblock); eye-relative metres, tile-local cells. A draw binds one tile's block
 // as the uniform block TileBlock; the selection (a compute shader over every tile of the frame, defining
-// TILE_BLOCKS_STORAGE) reads them all as a storage buffer and picks its tile's with ``tile_item``.
+// TILE_BLOCKS_STORAGE) reads them all as a storage buffer and picks its tile's with ``tile_item``; a multi-draw's
+// vertex stage (TILE_BLOCK_ATTRIBUTES) gets its draw's block's first fields as instanced attributes.
 struct TileData {
     vec4 t_origin;            // tile sample [0, 0] minus eye (z: terrain origin z minus eye z); w unused
     vec4 t_spacing;           // xy: metres per tile cell east-west and north-south (1, 1 for metre meshes)
@@ -22,6 +23,8 @@ int tile_item = 0;            // the frame item (tile drawing) this invocation s
 TileData TB;                  // its block, read once (use_tile_item)
 
 void use_tile_item(int item) { tile_item = item; TB = tile_blocks[item]; }
+#elif defined(TILE_BLOCK_ATTRIBUTES)
+TileData TB;                  // its first fields set from instanced attributes (a multi-draw: raster.indexed)
 #else
 layout(std140, binding = 0) uniform TileBlock { TileData TB; };
 #endif

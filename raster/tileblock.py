@@ -10,6 +10,7 @@ import numpy as np
 from hybrid.gl.programs import register_include
 
 BLOCK_BYTES = 256              # one block per tile, at a range offset every GL implementation accepts
+TILE_BLOCKS_BINDING = 9        # the storage binding of a frame's blocks (tile_block.glsl TILE_BLOCKS_STORAGE)
 BLOCK = np.dtype([("origin", "<f4", 4), ("spacing", "<f4", 4), ("clip_rel", "<f4", 4), ("uv", "<f4", 4),
                   ("shape", "<i4", 4), ("nb_delta", "<i4", 4), ("flags", "<i4", 4), ("skirt", "<f4", 4),
                   ("offsets", "<i4", 16), ("starts", "<i4", 16)])
@@ -83,11 +84,13 @@ def tile_blocks(hf, view, items, skirts: dict | None = None, culling: bool = Tru
 
 
 class TileBlocks:
-    """The uniform buffer holding a frame's tile blocks (grown as needed)."""
+    """The buffer holding a frame's tile blocks (grown as needed): a uniform block per draw, storage for the
+    selection, instanced attributes for a multi-draw."""
 
     def __init__(self, ctx):
         self.ctx = ctx
         self.buffer = ctx.buffer(reserve=BLOCK_BYTES * 16)
+        self.version = 0                # counts reallocations (vertex arrays over the buffer are stale then)
 
     def write(self, blocks: np.ndarray) -> None:
         """Upload a frame's blocks."""
@@ -95,6 +98,7 @@ class TileBlocks:
         if self.buffer.size < need:
             self.buffer.release()
             self.buffer = self.ctx.buffer(reserve=need)
+            self.version += 1
         if len(blocks):
             self.buffer.write(blocks.tobytes())
 

@@ -1,5 +1,10 @@
 #version 430
+#ifdef SURFACE_FROM_VERTEX
+in vec2 v_uv;                  // texture coordinate and height above the origin (metres), from the vertex stage
+in float v_h;
+#else
 #include "raster/tile_block"
+#endif
 in vec3 v_rel;                 // eye-relative position (metres)
 flat in int v_level;
 noperspective in vec3 v_bary;
@@ -25,8 +30,10 @@ void main() {
     // a skirt closes a crack for rays from above the sheet; to a ray from under it, it would be a wall
     if (ray_starts_under(v_rel)) discard;
 #endif
+#ifndef SURFACE_FROM_VERTEX
     vec2 v_uv = uv_origin + (v_rel.xy - origin_rel.xy) / spacing * uv_per_cell;
     float v_h = v_rel.z - origin_rel.z;
+#endif
     vec3 n = cross(dFdx(v_rel), dFdy(v_rel));
     if (n.z < 0.0) n = -n;
     // a skirt (negative level) fills the step to a neighbouring ray-cast tile's edge: shade it as the ground

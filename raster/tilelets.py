@@ -81,7 +81,7 @@ class TileletDrawing(TileletSelection):
         """The vertex arrays over the frame's shared buffers, made again when the arena's or the item buffers'
         were replaced."""
         version, vaos = self._arena_vaos
-        now = (self.arena.version, self.items.version)
+        now = (self.arena.version, self.items.version, self.blocks.version)
         if version != now:
             for v in vaos.values():
                 v.release()

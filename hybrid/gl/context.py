@@ -182,6 +182,22 @@ def _gl_function(name: bytes, *argtypes):
     return _FUNCTIONS[key]
 
 
+GL_DRAW_INDIRECT_BUFFER, GL_UNSIGNED_INT = 0x8F3F, 0x1405
+
+
+def multi_draw_indirect(vao, commands, mode: int, first_byte: int, count: int, stride: int) -> None:
+    """glMultiDrawElementsIndirect: ``count`` indexed draws (32-bit indices) of vertex array ``vao`` with its
+    program, their commands ``stride`` bytes apart from byte ``first_byte`` of buffer ``commands`` (moderngl's
+    render_indirect reads commands 20 bytes apart only). moderngl binds the program, vertex array and indirect
+    buffer again at each of its own draws, so these raw bindings do not leak into them."""
+    u = ctypes.c_uint
+    _gl_function(b"glUseProgram", u)(vao.program.glo)
+    _gl_function(b"glBindVertexArray", u)(vao.glo)
+    _gl_function(b"glBindBuffer", u, u)(GL_DRAW_INDIRECT_BUFFER, commands.glo)
+    _gl_function(b"glMultiDrawElementsIndirect", u, u, ctypes.c_void_p, ctypes.c_int, ctypes.c_int)(
+        mode, GL_UNSIGNED_INT, first_byte, count, stride)
+
+
 def depth32f_texture(ctx, size: tuple[int, int]):
     """A depth texture with 32-bit float storage (GL_DEPTH_COMPONENT32F), usable as depth attachment.
 
