@@ -75,3 +75,46 @@ def test_hedged_choices_leave_the_base_only_beyond_the_model_error():
     assert hedged_choices(pred, m) == ["raster", "raster", "raycast"]
     m.mix_overhead = 2.7
     assert hedged_choices(pred, m) == ["raycast", "raycast", "raycast"]
+
+
+def test_hedged_picks_shortcut_agrees_with_pricing_every_subset():
+    """A frame whose tiles all stay with the base is recognised without pricing the subsets; on 3000 random small
+    frames (costs, overheads, errors from a few values, so that ties and near-ties are common, half of them with
+    one strategy cheapest everywhere) the picks are those of the full computation (the shortcut turned off)."""
+    import hybrid.cost.planner as planner
+    from hybrid.cost.model import CostModel
+    rng = np.random.default_rng(7)
+    original, taken = planner._pure_base_wins, 0
+    for _ in range(3000):
+        s, b = int(rng.integers(2, 4)), int(rng.integers(0, 7))
+        names = ["raster", "raycast", "raster_gs"][:s]
+        table = rng.choice([1.0, 1.05, 2.0, 5.0], size=(s, b))
+        if rng.random() < 0.5:
+            table[0] = table.min(axis=0)
+        errs = {n: float(rng.choice([0.0, 0.1])) for n in names}
+        model = CostModel("test", {"const": 0.0}, {"const": 0.0}, fit_error=dict(errs), tile_error=dict(errs),
+                          overhead={n: float(rng.choice([0.0, 1.0, 3.0])) for n in names},
+                          raster_gs={"const": 0.0} if s > 2 else {}, mix_overhead=float(rng.choice([0.0, 0.5])),
+                          mix_error=float(rng.choice([0.0, 0.05])))
+        calls = []
+        planner._pure_base_wins = lambda *a: calls.append(original(*a)) or calls[-1]
+        try:
+            fast = planner.hedged_picks(table, names, model).tolist()
+            planner._pure_base_wins = lambda *a: False
+            full = planner.hedged_picks(table, names, model).tolist()
+        finally:
+            planner._pure_base_wins = original
+        assert fast == full, (table, model.overhead, model.mix_overhead)
+        taken += any(calls)
+    assert 500 < taken < 2500                  # the shortcut is taken often, and often not
+
+
+def test_hedged_picks_shortcut_needs_the_base_overhead_least():
+    """Ray casting is cheapest on every tile but carries the largest overhead; raster and raster_gs tie with it on
+    half the tiles each and cost no overhead: their mix is the cheapest frame, which the shortcut must not hide."""
+    from hybrid.cost.model import CostModel
+    from hybrid.cost.planner import hedged_picks
+    table = np.array([[1.0, 1.0, 9.0, 9.0], [1.0, 1.0, 1.0, 1.0], [9.0, 9.0, 1.0, 1.0]])
+    model = CostModel("test", {"const": 0.0}, {"const": 0.0}, raster_gs={"const": 0.0},
+                      overhead={"raster": 0.0, "raycast": 5.0, "raster_gs": 0.0})
+    assert hedged_picks(table, ["raster", "raycast", "raster_gs"], model).tolist() == [0, 0, 2, 2]

@@ -136,10 +136,13 @@ def hedged_picks(table: np.ndarray, names: list[str], model: CostModel) -> np.nd
     overhead, err, tile_err = model.choice_arrays(tuple(names))
     known = np.isfinite(table).all(axis=0)                          # tiles every strategy can draw
     base = int((np.where(known, table, 0.0).sum(axis=1) + overhead).argmin())
-    order = np.array([base] + [i for i in range(len(names)) if i != base])   # ties stay with the base
     factor = 1.0 + tile_err + tile_err[base]
     factor[base] = 1.0
-    pick, _ = best_assignment_table((table * factor[:, None])[order], overhead[order], mixed=model.mix_overhead)
+    scaled = table * factor[:, None]
+    if known.all() and _pure_base_wins(scaled, base, overhead, model.mix_overhead):
+        return np.full(table.shape[1], base, dtype=np.int64)
+    order = np.array([base] + [i for i in range(len(names)) if i != base])   # ties stay with the base
+    pick, _ = best_assignment_table(scaled[order], overhead[order], mixed=model.mix_overhead)
     picks = order[pick]
     pure = np.where(known, base, picks)
     margin = max(err[base], model.mix_error)
@@ -149,6 +152,20 @@ def hedged_picks(table: np.ndarray, names: list[str], model: CostModel) -> np.nd
         if pure_ms - mixed_ms < margin * pure_ms:
             return pure
     return picks
+
+
+def _pure_base_wins(scaled: np.ndarray, base: int, overhead: np.ndarray, mixed: float) -> bool:
+    """Whether ``best_assignment_table`` gives every tile of the (S, B) finite table ``scaled`` to strategy ``base``
+    (ordered first), known without pricing the subsets. Let g_s be what strategy s saves over the base on the
+    tiles where it is cheaper: a subset's tiles cost at least the base's less the g_s of its other strategies,
+    and it pays their overheads (and a mix's, none negative). So where g_s plus the base's overhead is at most
+    s's overhead for every other s, no subset costs less than the pure base frame, and ties go to the base's
+    subset, the first. A frame whose tiles stay with the base (every frame of the orbit here) takes this path."""
+    ov = overhead.tolist()
+    if mixed < 0 or min(ov) < 0:
+        return False
+    gain = np.maximum(scaled[base] - scaled, 0.0).sum(axis=1).tolist()
+    return all(g + ov[base] <= o for i, (g, o) in enumerate(zip(gain, ov)) if i != base)
 
 
 _ESTIMATORS: "weakref.WeakKeyDictionary[TilePyramid, TriangleEstimator]" = weakref.WeakKeyDictionary()
