@@ -270,3 +270,30 @@ def test_lean_leaves_drop_midpoints_only(renderers, strategy):
         fewer.append(lean.stats.counters["triangles"] / paper.stats.counters["triangles"])
         assert holes(lean, ref.render(view, mode="shaded"), view, hf) == 0
     assert max(fewer) <= 1.0 and min(fewer) < 0.9, fewer
+
+
+def test_one_multi_draw_shades_as_the_per_tile_draws(ctx, puget257):
+    """The indexed strategy draws a frame's tiles in one multi-draw, each reading its block as instanced
+    attributes; the geometry-shader strategy binds each tile's block for its own draw. Their texture and height
+    shading agree pixel for pixel over the same surface, first on a view of few tiles and then on one of many
+    (the blocks buffer grown past its first size, so the multi-draw's vertex arrays are made again)."""
+    rs = {s: Renderer(ctx, puget257, s, tile_size=16) for s in STRATEGIES}
+    try:
+        w, d = puget257.extent
+        ox, oy, oz = puget257.origin
+        hi = puget257.height_range[1]
+        far = View([ox + 0.5 * w, oy - 0.8 * d, oz + hi + 2 * w], [ox + 0.5 * w, oy + 0.5 * d, oz], 50, 160, 90)
+        near = View([ox + 0.5 * w, oy + 0.1 * d, oz + hi + 0.05 * w], [ox + 0.5 * w, oy + 0.6 * d, oz], 60, 160, 90)
+        tiles = []
+        for view in (far, near):
+            for mode in ("texture", "height"):
+                a, b = (rs[s].render(view, mode=mode) for s in STRATEGIES)
+                both = a.mask & b.mask
+                assert (a.mask == b.mask).mean() > 0.999 and both.mean() > 0.05
+                diff = np.abs(a.colour[both].astype(int) - b.colour[both].astype(int))
+                assert np.median(diff) == 0 and np.percentile(diff, 99) <= 2, (mode, np.percentile(diff, 99))
+            tiles.append(a.stats.tiles)
+        assert tiles[0] < 16 < tiles[1]
+    finally:
+        for r in rs.values():
+            r.release()
