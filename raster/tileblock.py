@@ -1,7 +1,9 @@
 """Per-tile shader parameters of the raster strategies as one std140 uniform block per tile (tile_block.glsl).
 
-A frame's blocks are built as one numpy array and written with one buffer write; drawing a tile binds its
-256-byte range. This keeps the CPU's per-frame work to a few calls per tile however many uniforms change.
+A frame's blocks are built as one numpy array (what the view leaves unchanged made once per tile:
+``static_blocks``; the view's fields per frame: ``view_fields``) and written with one buffer write. A draw of one
+tile binds its 256-byte range (the geometry-shader path, skirts); the selection reads all of them as storage;
+the indexed path's one multi-draw reads each tile's first fields as instanced attributes.
 """
 from __future__ import annotations
 
