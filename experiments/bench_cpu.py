@@ -44,6 +44,8 @@ def measure(model_for: str, frames: int = 8, size: str = "640x360", repeats: int
     from hybrid.gl.context import gl_info, shared_context
     from hybrid.renderer import make_renderer
     from hybrid.terrain.datasets import puget
+
+    from .bench_hybrid import interleaved_stats
     warnings.simplefilter("ignore", RuntimeWarning)          # the no-op driver's read-backs hold no image
     ctx = shared_context()
     w, h = parse_size(size, "size")
@@ -59,14 +61,8 @@ def measure(model_for: str, frames: int = 8, size: str = "640x360", repeats: int
                 renderers[p] = make_renderer(ctx, hf, p, tile_size=tile_size, **opts)
                 for v in views:                                # warm: uploads, estimates, shader compiles
                     renderers[p].render(v, tau)
-            got = {(p, k): [] for p in POLICIES for k in range(len(views))}
-            for _ in range(repeats):
-                for k, v in enumerate(views):
-                    for p, r in renderers.items():
-                        st = r.render(v, tau).stats
-                        got[(p, k)].append((st.plan_ms, st.issue_ms, st.wall_ms))
-            for (p, k), x in got.items():
-                plan, issue, wall = np.median(np.array(x, dtype=np.float64), axis=0)
+            for (p, k), x in interleaved_stats(renderers, views, tau, repeats).items():
+                plan, issue, wall = np.median([(s.plan_ms, s.issue_ms, s.wall_ms) for s in x], axis=0)
                 rows.append({"flight": fname, "policy": p, "frame": k, "plan_ms": plan, "issue_ms": issue,
                              "wall_ms": wall})
         finally:

@@ -17,6 +17,17 @@ import pandas as pd
 POLICIES = ("raster", "raster_gs", "raycast", "heuristic", "hybrid", "oracle")
 
 
+def interleaved_stats(renderers: dict, views, tau: float, repeats: int) -> dict:
+    """{(policy, frame index): the FrameStats of each repeat}: every repeat draws each frame with every renderer in
+    turn, so that a slow spell of the machine falls on all of them alike."""
+    got = {(p, k): [] for p in renderers for k in range(len(views))}
+    for _ in range(repeats):
+        for k, v in enumerate(views):
+            for p, r in renderers.items():
+                got[(p, k)].append(r.render(v, tau).stats)
+    return got
+
+
 def run_benchmark(ctx, hf, flights: dict, tau: float = 2 / 3, repeats: int = 5, tile_size: int = 128) -> tuple:
     """(frames table, per-tile table): wall ms per policy and frame; predicted vs measured per tile.
 
@@ -31,17 +42,10 @@ def run_benchmark(ctx, hf, flights: dict, tau: float = 2 / 3, repeats: int = 5, 
             for pol in POLICIES:
                 renderers[pol] = make_renderer(ctx, hf, pol, tile_size=tile_size)
                 renderers[pol].render(views[0], tau)             # warm: uploads, shader compiles
-            walls = {(pol, k): [] for pol in POLICIES for k in range(len(views))}
-            last = {}
-            for _ in range(repeats):
-                for k, v in enumerate(views):
-                    for pol, r in renderers.items():
-                        st = r.render(v, tau).stats
-                        walls[(pol, k)].append(st.wall_ms)
-                        last[(pol, k)] = st
+            stats = interleaved_stats(renderers, views, tau, repeats)
             for pol in POLICIES:
                 for k in range(len(views)):
-                    w, st = walls[(pol, k)], last[(pol, k)]
+                    w, st = [x.wall_ms for x in stats[(pol, k)]], stats[(pol, k)][-1]
                     rows.append({"flight": fname, "policy": pol, "frame": k, "wall_ms": float(np.median(w)),
                                  "wall_ms_repeats": [float(x) for x in w],
                                  "spread": float((max(w) - min(w)) / np.median(w)),
