@@ -88,14 +88,15 @@ class SelectedTileletTile:
             raise TerrabenchError(f"tiles of {self.n} cells have {len(self.starts) - 1} local levels; the raster "
                                   f"selection handles at most {MAX_STARTS - 1}")
         err, lo, hi = level_bounds(data, self.offsets, self.n, tile.spacing_xy)
-        self.level_bounds = np.concatenate([lo, hi, err[:, None]], axis=1)        # (levels, 7), tile-local metres
-        self.constants, self.clip = tile_constants(tile), tile.clip              # the tile block's own part
-        block = static_blocks(strategy.hf, self.constants[None])                # ... and what the view leaves
+        constants, self.clip = tile_constants(tile), tile.clip                  # the tile block's own part ...
+        block = static_blocks(strategy.hf, constants[None])                     # ... and what the view leaves
         block["shape"][:, 0], block["shape"][:, 1] = self.n, tile_levels(self.n) - 1   # as it is (node offsets
         block["offsets"][:, :len(self.offsets)] = self.offsets                  # within the slot's)
         block["starts"][:, :len(self.starts)] = self.starts
-        self.block = block.tobytes()                  # joined per frame: concatenating structured arrays is slow
-        self.numbers = np.concatenate([self.constants, self.level_bounds.ravel()]).tobytes()   # the same
+        # both joined as bytes per frame (concatenating structured arrays is slow): the block, and the constants
+        # followed by the level bounds (levels, 7: lo, hi, error, tile-local metres) that first_levels reads
+        self.block = block.tobytes()
+        self.numbers = np.concatenate([constants, np.concatenate([lo, hi, err[:, None]], axis=1).ravel()]).tobytes()
         self.slot = strategy.heap(self.n, len(data)).alloc(h, data)
         self.writes = strategy.writes
 

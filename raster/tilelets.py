@@ -68,8 +68,8 @@ class TileletDrawing(TileletSelection):
         raise NotImplementedError
 
     def draw_items(self, items: int, wireframe: bool = False) -> None:
-        """Issue the indirect draws of items 0 .. items - 1 from the frame's control buffer, each with its tile
-        block bound (subclasses)."""
+        """Issue the indirect draws of items 0 .. items - 1 from the frame's control buffer, each reading its own
+        tile block (subclasses)."""
         raise NotImplementedError
 
     def arena_arrays(self) -> dict:
@@ -78,8 +78,8 @@ class TileletDrawing(TileletSelection):
         raise NotImplementedError
 
     def arena_vaos(self) -> dict:
-        """The vertex arrays over the frame's shared buffers, made again when the arena's or the item buffers'
-        were replaced."""
+        """The vertex arrays over the frame's shared buffers, made again when the arena's, the item buffers' or the
+        tile blocks' were replaced."""
         version, vaos = self._arena_vaos
         now = (self.arena.version, self.items.version, self.blocks.version)
         if version != now:
