@@ -255,9 +255,10 @@ class Renderer:
         return together
 
     def render(self, view: View, tau: float = DEFAULT_TAU, *, measure: bool = False, maps: bool = False,
-               plans: list[TilePlan] | None = None, **options) -> RenderResult:
+               plans: list[TilePlan] | None = None, read: bool = True, **options) -> RenderResult:
         """Draw the view and read it back: colour, distance (m) and FrameStats; ``plans`` (from ``plan``, choices
-        possibly changed, as calibration does) are drawn instead of the view's own.
+        possibly changed, as calibration does) are drawn instead of the view's own; ``read=False`` leaves the image
+        on the GPU (colour and distance None), as an application's frame loop does.
 
         With ``measure`` (always for the oracle; mixed policies only) every tile is also timed inside frames
         every candidate way (``time_in_frame``); with ``maps`` the result carries the per-pixel strategy map (extra untimed renders). Per-call
@@ -266,6 +267,8 @@ class Renderer:
         self._check_live()
         if measure and not self.mixed:
             raise TerrabenchError(f"measure=True needs a mixed policy ({', '.join(MIXED_POLICIES)}), not {self.policy!r}")
+        if maps and not read:
+            raise TerrabenchError("maps=True reads the frame back; it cannot go with read=False")
         opts = {n: {**self.options[n], **o} for n, o in route_options(self.strategies, options).items()}
         prep0 = self.triangles.build_ms if self.triangles is not None else 0.0
         t_plan = time.perf_counter()
@@ -310,6 +313,8 @@ class Renderer:
                 stats.wall_ms += streamed.upload_ms + prep_ms
             stats.uploads = self.cache.stats.uploads - uploads0
             stats.evictions = self.cache.stats.evictions - evictions0
+            if not read:
+                return RenderResult(None, None, stats)
             result = target.read(view, stats)
             if "triangles" in counters:          # drawn triangles per pixel that shows terrain
                 counters["triangles_per_pixel"] = counters["triangles"] / max(int(result.mask.sum()), 1)

@@ -284,6 +284,23 @@ def test_in_frame_timing_interleaves_the_strategies(ctx, puget257):
         assert per.shape == (b,) and (per > 0).all() and together > 0
 
 
+def test_a_frame_drawn_without_read_back_draws_the_same_tiles(ctx, puget_full):
+    v = _views(puget_full)[0]
+    h = Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT)
+    h.model = median_split(h.pyramid, v)
+    try:
+        read, back = h.render(v), h.render(v, read=False)
+        assert back.colour is None and back.distance is None
+        assert back.stats.tiles_raster == read.stats.tiles_raster > 0
+        assert back.stats.tiles_raycast == read.stats.tiles_raycast > 0
+        assert back.stats.counters["triangles"] == read.stats.counters["triangles"] > 0
+        assert back.stats.wall_ms > 0 and back.stats.issue_ms > 0
+        with pytest.raises(TerrabenchError, match="read=False"):
+            h.render(v, maps=True, read=False)
+    finally:
+        h.release()
+
+
 def test_shading_mode_reaches_both_strategies(ctx, puget_full):
     v = _views(puget_full)[0]                               # a view the split model draws both ways
     frames = {}

@@ -29,11 +29,12 @@ def check_png_path(path, what: str = "output") -> Path:
 class RenderResult:
     """One rendered frame: colour (H, W, 3 uint8, top row first), hit distance in metres (inf = no terrain).
 
-    ``stats`` is the renderer's ``hybrid.contract.FrameStats``; ``maps`` holds optional per-pixel maps.
+    ``stats`` is the renderer's ``hybrid.contract.FrameStats``; ``maps`` holds optional per-pixel maps. A frame drawn
+    without reading it back (``Renderer.render(read=False)``) has colour and distance None.
     """
 
-    colour: np.ndarray
-    distance: np.ndarray
+    colour: np.ndarray | None
+    distance: np.ndarray | None
     stats: Any = None
     maps: dict = field(default_factory=dict)
 
