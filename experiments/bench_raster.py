@@ -3,7 +3,8 @@
 1. Triangles against max vertical error on Puget tiles: restricted quadtree (plain errors with full fans, and
    lean: every midpoint no finer neighbour or side error needs dropped; morph-safe errors at beta 0.7; at the GPU
    strategies' beta with lean leaves, what raster and raster_gs draw; the same with both fans in one error, as a
-   periodic extension's nodes hold them near its seams; the same with full-resolution leaves lean too, which the GPU does not draw)
+   periodic extension's nodes hold them near its seams; and what they draw with full_res "lean": full-resolution
+   leaves lean too, turning cells' two triangles more counted)
    vs pymartini (RTIN), pydelatin and fast-simplification, every max error measured the same way.
 2. The GPU leaf selection of a frame's tiles (issued, and finished) and the whole frame with its CPU share:
    planning plus issuing the draw (waits for the GL excluded); on llvmpipe issuing includes the compute
@@ -50,14 +51,14 @@ def triangles_vs_error(tiles, errors=(5.0, 10.0, 20.0, 40.0, 80.0)):
     pyrs = {"quadtree": [error_pyramid(t.heights) for t in tiles]}
     pyrs["quadtree-lean"] = pyrs["quadtree-morph"] = pyrs["quadtree"]
     pyrs["quadtree-gpu"] = [error_pyramid(t.heights, GPU_BETA) for t in tiles]   # what raster, raster_gs draw
-    pyrs["gpu-lean-full-res"] = pyrs["quadtree-gpu"]
+    pyrs["gpu-full-res-lean"] = pyrs["quadtree-gpu"]
     pyrs["gpu-combined"] = [error_pyramid(t.heights, GPU_BETA, side_errors=False) for t in tiles]
     n = tiles[0].n
     martini = Martini(n + 1)
     for e in errors:
         res = {}
         for name in ("quadtree", "quadtree-lean", "quadtree-morph", "quadtree-gpu", "gpu-combined",
-                     "gpu-lean-full-res", "martini", "delatin", "fast-simpl"):
+                     "gpu-full-res-lean", "martini", "delatin", "fast-simpl"):
             tri, err = 0, 0.0
             for i, t in enumerate(tiles):
                 h = np.asarray(t.heights, dtype=np.float32)
@@ -65,7 +66,7 @@ def triangles_vs_error(tiles, errors=(5.0, 10.0, 20.0, 40.0, 80.0)):
                     morph = name in ("quadtree-morph", "quadtree-gpu") or name.startswith("gpu")
                     ts = restrict_frame([TileLod((0, 0, 0), pyrs[name][i], e)], morph=morph, use_effective=morph,
                                         lean=name not in ("quadtree", "quadtree-morph"),
-                                        exact_full_resolution=name != "gpu-lean-full-res")[(0, 0, 0)]
+                                        exact_full_resolution=name != "gpu-full-res-lean")[(0, 0, 0)]
                     tri += ts.triangles
                     err = max(err, float(drawn_max_error(h, ts.leaves, ts.drop).max()))
                     continue

@@ -61,9 +61,10 @@ def make_strategy(name: str, ctx, hf: HeightField, **options) -> TileStrategy:
     return strategy_entry(name).cls(ctx, hf, **options)
 
 
-def triangle_estimator(pyramid: TilePyramid, name: str = "raster") -> TriangleEstimator:
-    """The CPU triangle estimate of a raster strategy over a pyramid (no GL context needed)."""
+def triangle_estimator(pyramid: TilePyramid, name: str = "raster", **options) -> TriangleEstimator:
+    """The CPU triangle estimate of a raster strategy over a pyramid (no GL context needed); ``options`` as the
+    strategy's draw options that shape its mesh (``full_res``)."""
     entry = strategy_entry(name)
     if entry.triangle_estimator is None:
         raise TerrabenchError(f"strategy {name!r} has no CPU triangle estimate")
-    return entry.triangle_estimator(pyramid)
+    return entry.triangle_estimator(pyramid, **options)

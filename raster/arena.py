@@ -7,7 +7,9 @@ grows the arena and draws the frame again (raster.tilelets), so no frame it retu
 draw calls the arena is made again for twice the last call's leaves when they filled over three quarters of it
 (so that a frame rarely overflows), and for twice the largest of 64 calls in a row that all filled under a
 quarter of it (single tiles drawn by a timing pass do not shrink it under the frames around them). Capacity is
-in leaves: a leaf is one 13-word record (geometry-shader path) or 9 vertices and 24 indices (indexed path).
+in leaves: a leaf is one 13-word record (geometry-shader path) or 9 vertices and 24 indices (indexed path); with
+lean full-resolution leaves (``full_res`` "lean", raster.tilelets) a 15-word record (the SE and NW cells' turns
+added) or 11 vertices and 36 indices (their centre posts and 4 triangles each).
 """
 from __future__ import annotations
 
@@ -22,6 +24,9 @@ SHRINK_BELOW = 0.25             # shrink when the calls' leaves fill less than t
 SHRINK_AFTER = 64               # ... in this many draw calls in a row
 RECORD_BYTES = 13 * 4           # raster.selection.LEAF_WORDS words a leaf record
 VERTEX_BYTES, INDEX_BYTES = 9 * 16, 24 * 4
+LAYOUTS = {"exact": (RECORD_BYTES, VERTEX_BYTES, INDEX_BYTES), "lean": (15 * 4, 11 * 16, 36 * 4)}
+"""Bytes a leaf of (record, vertices, indices) by full-resolution rule (select.comp.glsl LEAF_RECORD_WORDS,
+LEAF_VERTICES, LEAF_INDICES)."""
 
 
 def arena_leaves(need: int) -> int:
@@ -30,11 +35,12 @@ def arena_leaves(need: int) -> int:
 
 
 class LeafArena:
-    """Output buffers shared by a frame's raster tiles; ``writes`` is "records" or "mesh". ``version`` counts
-    allocations: vertex arrays made over the buffers are stale when it has changed."""
+    """Output buffers shared by a frame's raster tiles; ``writes`` is "records" or "mesh", ``full_res`` the leaves'
+    layout (``LAYOUTS``). ``version`` counts allocations: vertex arrays made over the buffers are stale when it has
+    changed."""
 
-    def __init__(self, ctx, writes: str, capacity: int = MIN_LEAVES):
-        self.ctx, self.writes = ctx, writes
+    def __init__(self, ctx, writes: str, capacity: int = MIN_LEAVES, full_res: str = "exact"):
+        self.ctx, self.writes, self.full_res = ctx, writes, full_res
         self.capacity = 0
         self.records = self.vertices = self.indices = None
         self.version = 0
@@ -45,10 +51,22 @@ class LeafArena:
         self._free()
         mesh = self.writes == "mesh"          # only the output the strategy's draw reads is allocated
         self.capacity = capacity
-        self.records = self.ctx.buffer(reserve=(1 if mesh else capacity) * RECORD_BYTES)
-        self.vertices = self.ctx.buffer(reserve=(capacity if mesh else 1) * VERTEX_BYTES)
-        self.indices = self.ctx.buffer(reserve=(capacity if mesh else 1) * INDEX_BYTES)
+        record, vertex, index = self.leaf_bytes
+        self.records = self.ctx.buffer(reserve=(1 if mesh else capacity) * record)
+        self.vertices = self.ctx.buffer(reserve=(capacity if mesh else 1) * vertex)
+        self.indices = self.ctx.buffer(reserve=(capacity if mesh else 1) * index)
         self.version += 1
+
+    @property
+    def leaf_bytes(self) -> tuple[int, int, int]:
+        """Bytes a leaf takes of (records, vertices, indices) in this arena's layout."""
+        return LAYOUTS[self.full_res]
+
+    def use_layout(self, full_res: str) -> None:
+        """Hold leaves laid out for the full-resolution rule ``full_res`` (made again, same capacity, on a change)."""
+        if full_res != self.full_res:
+            self.full_res = full_res
+            self._allocate(self.capacity)
 
     def note(self, leaves: int) -> None:
         """Record a draw call's leaves (every call: whole frames, and the single tiles a timing pass draws)."""

@@ -27,7 +27,7 @@ from hybrid.tiles.tiletree import SelectedTile
 
 from .nodes import nodes_for, pending_cut, tile_node_block
 from .split_tables import TABLE_BINS, SplitTables, kind_splits, split_tables
-from .quadtree import GPU_BETA, error_pyramid
+from .quadtree import GPU_BETA, check_full_res, error_pyramid
 
 BLOCKS = 4                      # blocks a tile side for the small nodes' distances
 MAX_TILES = 4096                # tiles whose TileNodes are kept (least recently used first out)
@@ -287,12 +287,13 @@ class TileletTriangleEstimator:
     Per tile, its ``TileNodes`` are built once; ``build_ms`` adds up the wall time spent building them: one-time
     work per tile, which renderers count apart from planning. With ``background`` (a store's loader thread cuts
     blocks), a tile whose node block still needs cutting is left unknown (NaN) rather than cut in the caller's
-    thread, and the cut is in ``waiting`` for the loader to run.
+    thread, and the cut is in ``waiting`` for the loader to run. ``full_res``: the strategies' full-resolution rule
+    (raster.quadtree.FULL_RES; "lean": level-0 tiles' leaves counted as every other tile's).
     """
 
-    def __init__(self, pyramid: TilePyramid, beta: float = GPU_BETA, lean: bool = True):
+    def __init__(self, pyramid: TilePyramid, beta: float = GPU_BETA, lean: bool = True, full_res: str = "exact"):
         self.pyramid = pyramid
-        self.beta, self.lean = float(beta), bool(lean)
+        self.beta, self.lean, self.exact = float(beta), bool(lean), check_full_res(full_res) == "exact"
         self._rows = _Rows(MAX_TILES)
         self.build_ms, self.builds = 0.0, 0
         self.background = False
@@ -322,10 +323,10 @@ class TileletTriangleEstimator:
         source = self._blocks if ready is not None else self._global_nodes()
         if source is not None:                                  # the block the GPU reads (cut here if need be)
             data, offsets = tile_node_block(source, key.level, key.tx, key.ty, self.pyramid.n)
-            nodes = block_tile_nodes(data, offsets, self.pyramid.n, *self.pyramid.placement(key), key.level == 0,
-                                     self.beta)
+            nodes = block_tile_nodes(data, offsets, self.pyramid.n, *self.pyramid.placement(key),
+                                     self.exact and key.level == 0, self.beta)
         else:
-            nodes = tile_nodes(self.pyramid.tile(key), self.beta, key.level == 0)
+            nodes = tile_nodes(self.pyramid.tile(key), self.beta, self.exact and key.level == 0)
         r = self._rows.put(key, nodes)
         self.builds += 1
         self.build_ms += (time.perf_counter() - t0) * 1e3

@@ -42,7 +42,9 @@ class TileletSet:
     coarser, finer: per leaf bit masks W=1, E=2, S=4, N=8. morph: (count, 5) float32 morph factors in
     [0, 1] of the edge midpoints W, E, S, N and of the centre (0 = own height, 1 = on the coarser surface).
     level_map: (n/2)² local leaf levels. global_level: tile level + leaf level per leaf. dropped: the edges
-    drawn without their midpoint, where lean leaves drop more than ``coarser`` (None: just those).
+    drawn without their midpoint, where lean leaves drop more than ``coarser`` (None: just those). turns: (count, 2)
+    the SE and NW cells' turns of level-0 leaves whose full-resolution midpoints are lean (select.comp.glsl
+    LEAN_FULL_RES; None: no cell turns), each cell drawn as 4 triangles while its turn is above 0.
     """
 
     leaves: Leaves
@@ -52,6 +54,7 @@ class TileletSet:
     level_map: np.ndarray
     tile_level: int
     dropped: np.ndarray | None = None
+    turns: np.ndarray | None = None
 
     @property
     def drop(self) -> np.ndarray:
@@ -65,8 +68,9 @@ class TileletSet:
 
     @property
     def triangles(self) -> int:
-        """Triangles drawn with stitching: 8 a leaf, one fewer per dropped edge midpoint."""
-        return int(8 * len(self.leaves) - np.unpackbits(self.drop.astype(np.uint8)[:, None], axis=1).sum())
+        """Triangles drawn with stitching: 8 a leaf, one fewer per dropped edge midpoint, two more per turning cell."""
+        turning = 0 if self.turns is None else 2 * int(np.count_nonzero(self.turns > 0))
+        return int(8 * len(self.leaves) - np.unpackbits(self.drop.astype(np.uint8)[:, None], axis=1).sum()) + turning
 
 
 def _edge_profile(levels: np.ndarray, edge: int) -> np.ndarray:
@@ -191,8 +195,8 @@ def restrict_frame(tiles: list[TileLod], morph: bool = True, use_effective: bool
     of one tile that are both far from their own split (tolerance >= E / beta; with morph=False, >= E: the
     error bounds a leaf's fan with its midpoints dropped; with side errors, the larger of E and the side's
     error on either side), and toward the terrain's edge; midpoints on tile borders and of full-resolution leaves
-    are kept (``exact_full_resolution`` False: those leaves drop theirs as others do, which is not what the GPU
-    draws: their SE and NW cells would flip diagonals in one frame).
+    are kept (``exact_full_resolution`` False: those leaves drop theirs as others do, and level-0 leaves' SE and NW
+    cells turn diagonal as their midpoints morph: the GPU's full_res "lean").
     """
     use_effective = morph if use_effective is None else use_effective
     fr = _Frame(list(tiles), use_effective)
@@ -236,6 +240,7 @@ def _lean_set(fr: _Frame, key, ts: TileletSet, morph: bool, exact_full_resolutio
             return f
         return np.where((level == 0) & (key[0] == 0), 0.0, f)     # full resolution keeps the reference's cells
     dropped = ts.coarser.copy()
+    am = np.zeros((len(lv), 4))
     for edge, (inside, na, nb_, along) in enumerate(_edge_neighbours(lv, U)):
         bit = EDGE_BITS[edge]
         own = factor(ua, ub, m, edge)
@@ -246,8 +251,14 @@ def _lean_set(fr: _Frame, key, ts: TileletSet, morph: bool, exact_full_resolutio
         edge_of_terrain = ~inside & ((ts.finer & bit) == 0) & \
             (fr.neighbour_profile(key, edge)[along.astype(np.int64) << key[0]] < 0)
         le[edge_of_terrain] = own[edge_of_terrain]
+        am[:, edge] = np.maximum(ts.morph[:, edge], le)
         dropped[np.maximum(ts.morph[:, edge], le) >= 1.0] |= bit
-    return replace(ts, dropped=dropped)
+    if exact_full_resolution:
+        return replace(ts, dropped=dropped)
+    level0 = m == 0                                     # edges W, E, S, N: the SE cell's are E and S, the NW's W and N
+    turns = np.column_stack([np.where(level0 & (dropped & 6 == 0), np.maximum(am[:, 1], am[:, 2]), 0.0),
+                             np.where(level0 & (dropped & 9 == 0), np.maximum(am[:, 0], am[:, 3]), 0.0)])
+    return replace(ts, dropped=dropped, turns=turns)
 
 
 def _errors_at(E, a: np.ndarray, b: np.ndarray, level: np.ndarray) -> np.ndarray:

@@ -14,7 +14,8 @@
 layout(local_size_x = 64) in;
 layout(std430, binding = 0) readonly buffer Nodes { vec4 node[]; };   // E, zlo, zhi, inside (0 beyond the grid,
                                                                       // else 1 + side codes); one apron
-layout(std430, binding = 1) writeonly buffer Leaves { uint leaf[]; }; // arena: 13 words a leaf: j0 i0 m drop, h[9]
+layout(std430, binding = 1) writeonly buffer Leaves { uint leaf[]; }; // arena: LEAF_RECORD_WORDS a leaf: j0 i0 m drop,
+                                                                      // h[9] (LEAN_FULL_RES: and the turns)
 layout(std430, binding = 2) buffer Commands { uint cmd[]; };          // per item CONTROL_WORDS: indirect draws,
                                                                       // 5 words each, then the item's arena base,
                                                                       // pass-0 groups done, its pass-0 groups
@@ -24,8 +25,8 @@ layout(std430, binding = 3) writeonly buffer Skirts { float seg[]; };  // 6 word
 layout(std430, binding = 4) buffer Frame { uint frame_count[]; };     // triangles, leaves, culled, segments,
                                                                       // arena leaves reserved, overflow
 
-layout(std430, binding = 7) writeonly buffer MeshVerts { vec4 mesh_vertex[]; }; // arena: 9 a leaf: x y z level
-layout(std430, binding = 8) writeonly buffer MeshIndex { uint mesh_index[]; };  // arena: 24 a leaf
+layout(std430, binding = 7) writeonly buffer MeshVerts { vec4 mesh_vertex[]; }; // arena: LEAF_VERTICES a leaf
+layout(std430, binding = 8) writeonly buffer MeshIndex { uint mesh_index[]; };  // arena: LEAF_INDICES a leaf
 layout(std430, binding = 6) buffer Found { uint found[]; };          // per item from found_base: its leaves
 layout(std430, binding = 5) readonly buffer Heights { float height[]; };  // per tile from heights_base: (n+1)^2
                                                                          // samples, row from south, metres from
@@ -47,6 +48,20 @@ uniform vec3 eye_terrain;       // eye minus the terrain's origin, metres
 uniform vec2 cell_metres;       // the terrain's level-0 spacing (x, y), metres
 uniform bool side_errors;       // nodes carry side codes and split on their full fans' errors (raster.quadtree)
 uniform uint table1_start;      // work[]: where pass 1's work table starts
+#ifdef LEAN_FULL_RES
+// Lean full resolution (raster.tilelets, full_res "lean"): full-resolution leaves drop edge midpoints by their
+// side errors as every other leaf does, and a level-0 leaf's SE and NW cells turn from the reference's diagonal
+// to the fan's through a post at the cell's centre, morphed from the mean of the one diagonal's ends to the
+// other's as the cell's midpoints morph (its turn: the larger of their morph factors), so that a drop never moves
+// the surface in one frame: 4 triangles a turning cell, at most 12 a leaf.
+#define LEAF_VERTICES 11u
+#define LEAF_INDICES 36u
+#define LEAF_RECORD_WORDS 15u
+#else
+#define LEAF_VERTICES 9u
+#define LEAF_INDICES 24u
+#define LEAF_RECORD_WORDS 13u
+#endif
 
 const int CMD_POINTS_ = 0, CMD_TEMPLATE_ = 1;   // indirect commands (raster.frame_items CMD_*)
 const int CONTROL_WORDS = 20;   // cmd[] words per item (raster.frame_items)
@@ -114,7 +129,9 @@ int split_state(int m, int a, int b, out float E, out float d) {
 // every side's S is E. Full-resolution leaves keep every midpoint but toward coarser neighbours: a drop there
 // would flip their SE and NW cells' diagonals in one frame.
 vec4 lean_of(int m, int a, int b) {
+#ifndef LEAN_FULL_RES
     if (m == 0 && tile_level == 0) return vec4(0.0);    // full resolution: the reference's cells
+#endif
     float E, d;
     if (split_state(m, a, b, E, d) != 0) return vec4(0.0);
     vec4 nd = node_at(m, a, b);
@@ -195,19 +212,38 @@ const int EDGE_BIT[4] = int[4](4, 2, 8, 1);         // fan triangle pairs: S, E,
 const int EDGE_END[4] = int[4](2, 8, 6, 0);         // each edge's second corner
 
 // The leaf as 9 vertices (tile-local metres, local level) and 24 indices: the fan around its centre, where
-// a dropped edge's two triangles become one and a degenerate one (stitching); in full-resolution leaves the
+// a dropped edge's two triangles become one and a degenerate one (stitching); in level-0 leaves the
 // south-east and north-west cells (fan diagonal NW-SE) are split SW-NE as the reference wherever their two
-// outer edges keep their midpoints (the other two cells' fan diagonal is SW-NE already).
-void put_mesh(uint idx, int m, int j0, int i0, int k, int drop, float h[9]) {
-    uint vb = idx * 9u;
+// outer edges keep their midpoints (the other two cells' fan diagonal is SW-NE already). With LEAN_FULL_RES
+// such a cell that is turning (turn.x: SE, turn.y: NW, > 0) is 4 triangles around its centre post (vertices 9
+// and 10), two in the fan's slots and two in the leaf's last 12 indices (degenerate where no cell turns).
+const int SE_TURN[12] = int[12](1, 2, 9, 2, 5, 9,  5, 4, 9, 4, 1, 9);
+const int NW_TURN[12] = int[12](3, 4, 10, 4, 7, 10,  7, 6, 10, 6, 3, 10);
+void put_mesh(uint idx, int m, int j0, int i0, int k, int drop, float h[9], vec2 turn) {
+    uint vb = idx * LEAF_VERTICES;
     for (int q = 0; q < 9; ++q)
         mesh_vertex[vb + uint(q)] = vec4(vec2(j0 + (q % 3) * k, i0 + (q / 3) * k) * spacing, h[q], float(m));
-    uint ib = idx * 24u;
+    bool se_turn = turn.x > 0.0, nw_turn = turn.y > 0.0;
+    bool se_ref = m == 0 && (drop & 6) == 0 && !se_turn, nw_ref = m == 0 && (drop & 9) == 0 && !nw_turn;
+#ifdef LEAN_FULL_RES
+    mesh_vertex[vb + 9u] = vec4(vec2(float(j0) + 1.5 * float(k), float(i0) + 0.5 * float(k)) * spacing,
+                                mix(0.5 * (h[1] + h[5]), 0.5 * (h[4] + h[2]), turn.x), float(m));
+    mesh_vertex[vb + 10u] = vec4(vec2(float(j0) + 0.5 * float(k), float(i0) + 1.5 * float(k)) * spacing,
+                                 mix(0.5 * (h[3] + h[7]), 0.5 * (h[4] + h[6]), turn.y), float(m));
+    uint xb = idx * LEAF_INDICES + 24u;
+    for (int v = 0; v < 6; ++v) {
+        mesh_index[xb + uint(v)] = vb + uint(se_turn ? SE_TURN[v + 6] : 4);
+        mesh_index[xb + 6u + uint(v)] = vb + uint(nw_turn ? NW_TURN[v + 6] : 4);
+    }
+#endif
+    uint ib = idx * LEAF_INDICES;
     for (int v = 0; v < 24; ++v) {
         int t = v / 3, e = t / 2;
         int post = FAN[v];
-        if (m == 0 && (t == 1 || t == 2) && (drop & 6) == 0) post = SE_CELL[v - 3];
-        else if (m == 0 && (t == 5 || t == 6) && (drop & 9) == 0) post = NW_CELL[v - 15];
+        if (se_turn && (t == 1 || t == 2)) post = SE_TURN[v - 3];
+        else if (nw_turn && (t == 5 || t == 6)) post = NW_TURN[v - 15];
+        else if (se_ref && (t == 1 || t == 2)) post = SE_CELL[v - 3];
+        else if (nw_ref && (t == 5 || t == 6)) post = NW_CELL[v - 15];
         else if ((drop & EDGE_BIT[e]) != 0) {
             if ((t & 1) == 0 && (post & 1) == 1) post = EDGE_END[e];    // (C, a, m) -> (C, a, b)
             else if ((t & 1) == 1) post = 4;                             // (C, m, b) -> degenerate
@@ -277,12 +313,19 @@ void emit_leaf(int m, int a, int b) {
     float diag = ((b & 1) == (a & 1)) ? 0.5 * (h[0] + h[8]) : 0.5 * (h[2] + h[6]);
     h[4] = mix(h[4], diag, ap);
     uint idx = cmd[CMD0 + BASE_WORD] + reserve(0, 5, 1);
-    if (write_mesh) put_mesh(idx, m, j0, i0, k, drop, h);
-    add_total(0, uint(8 - bitCount(drop)));
+    vec2 turn = vec2(0.0);          // LEAN_FULL_RES: the SE and NW cells' turns (0: the reference's diagonal)
+#ifdef LEAN_FULL_RES
+    if (m == 0) turn = vec2((drop & 6) == 0 ? max(am[1], am[2]) : 0.0, (drop & 9) == 0 ? max(am[0], am[3]) : 0.0);
+#endif
+    if (write_mesh) put_mesh(idx, m, j0, i0, k, drop, h, turn);
+    add_total(0, uint(8 - bitCount(drop) + 2 * int(turn.x > 0.0) + 2 * int(turn.y > 0.0)));
     if (write_records) {
-        uint w = idx * 13u;
+        uint w = idx * LEAF_RECORD_WORDS;
         leaf[w + 0] = uint(j0); leaf[w + 1] = uint(i0); leaf[w + 2] = uint(m); leaf[w + 3] = uint(drop);
         for (int q = 0; q < 9; ++q) leaf[w + 4u + uint(q)] = floatBitsToUint(h[q]);
+#ifdef LEAN_FULL_RES
+        leaf[w + 13u] = floatBitsToUint(turn.x); leaf[w + 14u] = floatBitsToUint(turn.y);
+#endif
     }
     // skirts below the tile edges that face ray-cast tiles, one segment per drawn edge piece
     const ivec4 EDGE_POSTS[4] = ivec4[4](ivec4(0, 3, 6, 1), ivec4(2, 5, 8, 2), ivec4(0, 1, 2, 4), ivec4(6, 7, 8, 8));
@@ -349,7 +392,7 @@ void reserve_arena() {
     }
     cmd[CMD0 + BASE_WORD] = base;
     cmd[CMD0 + 5 * CMD_POINTS_ + 2] = base;           // DrawArraysIndirect: first
-    cmd[CMD0 + 5 * CMD_TEMPLATE_ + 2] = 24u * base;   // DrawElementsIndirect: first index
+    cmd[CMD0 + 5 * CMD_TEMPLATE_ + 2] = LEAF_INDICES * base;   // DrawElementsIndirect: first index
     s_groups = (count + 63u) / 64u;
     s_first = atomicAdd(work[0], s_groups);
 }

@@ -22,12 +22,13 @@ from .arena import LeafArena
 from .frame_items import COMMANDS_PER_ITEM, CONTROL_WORDS, LOCAL, FrameItems
 from .heap import TileHeap
 from .nodes import nodes_for, pending_cut, tile_levels, tile_node_block
-from .quadtree import GPU_BETA
+from .quadtree import GPU_BETA, check_full_res
 from .tileblock import BLOCK, CONSTANT_WORDS, MAX_STARTS, STARTS_FOUND, STARTS_HEIGHTS, STARTS_SEGMENTS, \
     TILE_BLOCKS_BINDING, TileBlocks, register_tile_block, static_blocks, tile_constants, view_fields
 
 LEAF_WORDS = 13                 # j0, i0, level, dropped edges, nine post heights
 LEAF_FORMAT = "4i 4f 4f 1f"
+LEAN_LEAF_FORMAT = "4i 4f 4f 1f 2f"     # full_res "lean": and the SE and NW cells' turns (15 words)
 FRAME_FIELDS = ("triangles", "tilelets", "tilelets_culled", "skirt_segments", "arena_leaves", "arena_overflow")
 
 
@@ -122,8 +123,9 @@ class TileletSelection:
             raise TerrabenchError(f"beta must lie in (0, 1), got {beta!r}")
         self.ctx, self.hf, self.beta = ctx, hf, float(beta)
         register_tile_block(ctx)
-        self.passes = tuple(compute_shader(ctx, "raster", "select.comp.glsl", {"PASS": k, "TILE_BLOCKS_STORAGE": 1})
-                            for k in (0, 1))
+        self.full_res = "exact"
+        self._passes = {"exact": self._compile_passes("exact")}
+        self.passes = self._passes["exact"]
         self.texture = terrain_texture(ctx, hf)
         self.frame = ctx.buffer(reserve=4 * len(FRAME_FIELDS))
         self.blocks = TileBlocks(ctx)
@@ -132,6 +134,21 @@ class TileletSelection:
         self.heaps: dict[int, TileHeap] = {}                 # cell count -> heap of resident tiles
         self.item_of: dict[int, int] = {}                    # id(tile) -> its first item in the last selection
         self.uniforms = UniformCache()                        # the selection passes' and the draw programs'
+
+    def _compile_passes(self, full_res: str) -> tuple:
+        """The selection's two passes for a full-resolution rule."""
+        lean = {"LEAN_FULL_RES": 1} if full_res == "lean" else {}
+        return tuple(compute_shader(self.ctx, "raster", "select.comp.glsl", {"PASS": k, "TILE_BLOCKS_STORAGE": 1, **lean})
+                     for k in (0, 1))
+
+    def use_full_res(self, full_res: str) -> None:
+        """Select and lay out leaves by the full-resolution rule ``full_res`` (raster.quadtree.FULL_RES) from now on."""
+        if check_full_res(full_res) == self.full_res:
+            return
+        if full_res not in self._passes:
+            self._passes[full_res] = self._compile_passes(full_res)
+        self.passes, self.full_res = self._passes[full_res], full_res
+        self.arena.use_layout(full_res)
 
     def heap(self, n: int, node_rows: int) -> TileHeap:
         """The heap of n-cell tiles (made at the first)."""
@@ -252,6 +269,6 @@ class TileletSelection:
         self.arena.release()
         self.items.release()
         self.blocks.release()
-        for o in (*self.passes, self.texture, self.frame):
+        for o in (*(q for ps in self._passes.values() for q in ps), self.texture, self.frame):
             if o is not None:
                 o.release()

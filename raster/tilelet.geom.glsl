@@ -9,6 +9,9 @@ in Tilelet {
     flat ivec4 node;
     flat int culled;
     float h[9];
+#ifdef LEAN_FULL_RES
+    vec2 turn;
+#endif
 } gs_in[];
 uniform mat4 view_proj_rel;    // (world - eye) -> clip, reversed Z
 uniform bool skirt_pass;        // emit only the skirts (a second pass, after the ray-cast tiles)
@@ -90,8 +93,18 @@ void main() {
         if ((drop & 2) != 0) tri(C, SE, NE); else { if (!se) tri(C, SE, E); tri(C, E, NE); }
         if ((drop & 8) != 0) tri(C, NE, NW); else { tri(C, NE, N); if (!nw) tri(C, N, NW); }
         if ((drop & 1) != 0) tri(C, NW, SW); else { if (!nw) tri(C, NW, W); tri(C, W, SW); }
-        if (se) { tri(S, SE, E); tri(S, E, C); }
-        if (nw) { tri(W, C, N); tri(W, N, NW); }
+        vec2 turn = vec2(0.0);
+#ifdef LEAN_FULL_RES
+        turn = gs_in[0].turn;     // a turning cell: 4 triangles around its centre post (raster/select.comp.glsl)
+#endif
+        if (se && turn.x > 0.0) {
+            vec3 X = vec3(0.5 * (S.xy + E.xy), mix(0.5 * (S.z + E.z), 0.5 * (C.z + SE.z), turn.x));
+            pair(S, SE, X, E); pair(E, C, X, S);
+        } else if (se) { tri(S, SE, E); tri(S, E, C); }
+        if (nw && turn.y > 0.0) {
+            vec3 X = vec3(0.5 * (W.xy + N.xy), mix(0.5 * (W.z + N.z), 0.5 * (C.z + NW.z), turn.y));
+            pair(W, C, X, N); pair(N, NW, X, W);
+        } else if (nw) { tri(W, C, N); tri(W, N, NW); }
     } else {
         if ((drop & 4) != 0) tri(C, SW, SE); else pair(SW, S, C, SE);
         if ((drop & 2) != 0) tri(C, SE, NE); else pair(SE, E, C, NE);

@@ -14,9 +14,8 @@ from hybrid.gl.edges import TerrainEdges
 from hybrid.gl.programs import program
 from hybrid.gl.shading import resolve_mode
 
-from .arena import INDEX_BYTES, RECORD_BYTES, VERTEX_BYTES
 from .frame_items import BASE_WORD, CMD_POINTS
-from .selection import LEAF_FORMAT, LEAF_WORDS, SelectedTileletTile, TileletSelection
+from .selection import LEAF_FORMAT, LEAN_LEAF_FORMAT, SelectedTileletTile, TileletSelection
 from .shading import MODES
 
 GL_CLIP_DISTANCE0 = 0x3000
@@ -25,31 +24,38 @@ GL_CLIP_DISTANCE0 = 0x3000
 def read_leaves(strategy, g: SelectedTileletTile) -> dict:
     """The leaves the last selection of a tilelet strategy drew for its tile g (its first drawing in the frame;
     for tests): level and triangles (non-degenerate) of each, with j0, i0, dropped-edge bits and post heights
-    where it wrote leaf records."""
+    (and with lean full-resolution leaves the SE and NW cells' turns) where it wrote leaf records."""
     words = strategy.control_words(strategy.item_of[id(g)])
     count, base = int(words[5 * CMD_POINTS]), int(words[BASE_WORD])
     a = strategy.arena
+    record_bytes, vertex_bytes, index_bytes = a.leaf_bytes
 
     def read(buf, nbytes: int, dtype) -> np.ndarray:
         if not count:
             return np.zeros(0, dtype)
         return np.frombuffer(buf.read(size=count * nbytes, offset=base * nbytes), dtype)
     if g.writes == "mesh":
-        v, i = read(a.vertices, VERTEX_BYTES, np.float32), read(a.indices, INDEX_BYTES, np.uint32)
-        tri = i.reshape(count, 8, 3)
+        v, i = read(a.vertices, vertex_bytes, np.float32), read(a.indices, index_bytes, np.uint32)
+        tri = i.reshape(count, index_bytes // 12, 3)
         solid = (tri[..., 0] != tri[..., 1]) & (tri[..., 1] != tri[..., 2]) & (tri[..., 0] != tri[..., 2])
-        return {"level": v.reshape(count, 9, 4)[:, 0, 3].astype(np.int32), "triangles": solid.sum(axis=1)}
-    raw = read(a.records, RECORD_BYTES, np.uint32).reshape(count, LEAF_WORDS)
+        return {"level": v.reshape(count, vertex_bytes // 16, 4)[:, 0, 3].astype(np.int32),
+                "triangles": solid.sum(axis=1)}
+    raw = read(a.records, record_bytes, np.uint32).reshape(count, record_bytes // 4)
     drop = raw[:, 3].astype(np.int32)
-    return {"j0": raw[:, 0].astype(np.int32), "i0": raw[:, 1].astype(np.int32), "level": raw[:, 2].astype(np.int32),
-            "drop": drop, "heights": raw[:, 4:].view(np.float32).copy(),
-            "triangles": 8 - np.unpackbits(drop.astype(np.uint8)[:, None], axis=1).sum(axis=1)}
+    out = {"j0": raw[:, 0].astype(np.int32), "i0": raw[:, 1].astype(np.int32), "level": raw[:, 2].astype(np.int32),
+           "drop": drop, "heights": raw[:, 4:13].view(np.float32).copy(),
+           "triangles": 8 - np.unpackbits(drop.astype(np.uint8)[:, None], axis=1).sum(axis=1)}
+    if raw.shape[1] > 13:
+        out["turns"] = raw[:, 13:15].view(np.float32).copy()
+        out["triangles"] = out["triangles"] + 2 * (out["turns"] > 0).sum(axis=1)
+    return out
 
 
 class TileletDrawing(TileletSelection):
     """Uniforms and state shared by both tilelet draws; subclasses issue the draw of one tile."""
 
-    draw_options = frozenset({"mode", "wireframe", "morph", "stitching", "lean", "culling", "leaf_tau", "skirts"})
+    draw_options = frozenset({"mode", "wireframe", "morph", "stitching", "lean", "culling", "leaf_tau", "skirts",
+                              "full_res"})
 
     def __init__(self, ctx, hf, **options):
         super().__init__(ctx, hf, **options)
@@ -114,17 +120,20 @@ class TileletDrawing(TileletSelection):
 
     def draw_tiles(self, target, view, items, tau: float | None = None, mode: str | None = None,
                    wireframe: bool = False, morph: bool = True, stitching: bool = True, lean: bool = True,
-                   culling: bool = True, leaf_tau: float | None = None, skirts: dict | None = None) -> dict:
+                   culling: bool = True, leaf_tau: float | None = None, skirts: dict | None = None,
+                   full_res: str = "exact") -> dict:
         """Select and draw (gpu_tile, tile, selected) items into target at tau px (``leaf_tau`` overrides it).
 
         ``skirts`` {tile key: edge bits} are selected here and drawn by ``draw_skirts``, which the renderer
         calls after the ray-cast tiles. ``lean`` drops the edge midpoints that neither a finer neighbour nor a near
-        split needs (off: a leaf drops only those toward coarser neighbours). Counters: triangles (drawn, stitched), tilelets, tilelets_culled,
+        split needs (off: a leaf drops only those toward coarser neighbours); ``full_res`` is the full-resolution
+        leaves' rule (raster.quadtree.FULL_RES: "exact" keeps their midpoints, "lean" drops them as others). Counters: triangles (drawn, stitched), tilelets, tilelets_culled,
         skirt_segments, arena_leaves (leaves the arena held), arena_overflow (0: the frame drawn missed no leaf),
         arena_regrown (1 if the arena grew and the frame was drawn again).
         """
         mode = resolve_mode(self.hf, mode, MODES)
         tau = leaf_tau if leaf_tau is not None else tau
+        self.use_full_res(full_res)
         self.set_selection("morph", bool(morph))
         self.set_selection("stitch", bool(stitching))
         self.set_selection("lean", bool(lean))
@@ -181,19 +190,42 @@ class TileletStrategy(TileletDrawing):
 
     def __init__(self, ctx, hf, **options):
         super().__init__(ctx, hf, **options)
-        self.prog = program(ctx, "raster", "leaf.vert.glsl", "tilelet.frag.glsl", "tilelet.geom.glsl")
-        self.skirt_prog = program(ctx, "raster", "leaf.vert.glsl", "tilelet.frag.glsl", "tilelet.geom.glsl",
-                                  defines={"SKIRT_PROGRAM": 1})
-        self.prog["skirt_pass"].value = False
-        self.skirt_prog["skirt_pass"].value = True
+        self._programs = {"exact": self._compile("exact")}
+        self.prog, self.skirt_prog = self._programs["exact"]
+
+    def _compile(self, full_res: str) -> tuple:
+        """The geometry-shader program and its skirt-pass variant for a full-resolution rule's leaf records."""
+        lean = {"LEAN_FULL_RES": 1} if full_res == "lean" else {}
+        progs = tuple(program(self.ctx, "raster", "leaf.vert.glsl", "tilelet.frag.glsl", "tilelet.geom.glsl",
+                              defines={**lean, **skirt}) for skirt in ({}, {"SKIRT_PROGRAM": 1}))
+        progs[0]["skirt_pass"].value = False
+        progs[1]["skirt_pass"].value = True
+        return progs
+
+    def use_full_res(self, full_res: str) -> None:
+        """The selection's and the programs' full-resolution rule (``TileletSelection.use_full_res``)."""
+        super().use_full_res(full_res)
+        if full_res not in self._programs:
+            self._programs[full_res] = self._compile(full_res)
+        self.prog, self.skirt_prog = self._programs[full_res]
 
     def programs(self) -> tuple:
         """The geometry-shader program and its skirt-pass variant."""
         return (self.prog, self.skirt_prog)
 
+    def release(self) -> None:
+        """Free every full-resolution rule's programs, then what the drawing holds."""
+        for progs in self._programs.values():
+            if progs[0] is not self.prog:
+                for p in progs:
+                    p.release()
+        super().release()
+
     def arena_arrays(self) -> dict:
         """Two vertex arrays of the arena's leaf records as points: for the mesh and for the skirt program."""
         attrs = [(self.arena.records, LEAF_FORMAT, "a_node", "a_h0", "a_h1", "a_h8")]
+        if self.full_res == "lean":
+            attrs = [(self.arena.records, LEAN_LEAF_FORMAT, "a_node", "a_h0", "a_h1", "a_h8", "a_turn")]
         return {"points": self.ctx.vertex_array(self.prog, attrs),
                 "skirt_points": self.ctx.vertex_array(self.skirt_prog, attrs)}
 

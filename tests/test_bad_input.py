@@ -18,6 +18,7 @@ UNWRITABLE = "/proc/terrabench-out"          # not writable, even for root
     (["render", "--out", "OUT/a.png", "--method", "raster", "--shadows"], "--method raycast only"),
     (["render", "--out", "OUT/a.png", "--method", "raycast", "--wireframe"], "raster methods"),
     (["render", "--out", "OUT/a.png", "--method", "raycast", "--no-lean"], "--no-lean applies"),
+    (["render", "--out", "OUT/a.png", "--method", "raycast", "--full-res", "lean"], "--full-res applies"),
     (["render", "--out", "OUT/a.png", "--method", "raster", "--show-strategy"], "mixed policy"),
     (["render", "--out", "OUT/a.png", "--tile-size", "100"], "power of two"),
     (["render", "--out", "OUT/a.png", "--dataset", "fbm", "--size-samples", "2"], "dataset size"),
@@ -85,6 +86,11 @@ def test_api_bad_input(ctx, puget257):
         HeightField(np.zeros((4, 4)), spacing=None)
     with pytest.raises(TerrabenchError, match="beyond the world limit"):
         HeightField(np.zeros((4, 4)), 30.0, origin=(1e20, 0, 0))
+    with pytest.raises(TerrabenchError, match="full_res must be one of exact, lean, got 'half'"):
+        Renderer(ctx, puget257, "hybrid", tile_size=64, full_res="half")
+    with make_renderer(ctx, puget257, "raster", tile_size=64) as r:
+        with pytest.raises(TerrabenchError, match="full_res must be one of exact, lean, got 'half'"):
+            r.render(default_view(puget257, 32, 18), full_res="half")
     r = make_renderer(ctx, puget257, "raycast", tile_size=64)
     with pytest.raises(TerrabenchError, match="tau"):
         r.render(default_view(puget257, 32, 18), tau=-1.0)

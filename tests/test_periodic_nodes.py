@@ -206,7 +206,8 @@ def test_an_extension_of_a_store_without_node_arrays_is_loaded_or_refused_by_the
 
 
 @pytest.mark.parametrize("period", [128, None])
-def test_a_periodic_extension_draws_with_the_raster_strategies_without_holes(ctx, tmp_path, monkeypatch, period):
+@pytest.mark.parametrize("full_res", ["exact", "lean"])
+def test_a_periodic_extension_draws_with_the_raster_strategies_without_holes(ctx, tmp_path, monkeypatch, period, full_res):
     # seamless, and with seam cliffs (rough borders between tiles of different levels: morph on and off)
     from hybrid.reference import ReferenceRenderer
     from hybrid.renderer import Renderer
@@ -217,12 +218,12 @@ def test_a_periodic_extension_draws_with_the_raster_strategies_without_holes(ctx
     with ReferenceRenderer(ctx, whole) as ref:
         refs = [ref.render(v, mode="shaded") for v in views]
     with Renderer(ctx, whole, "raster", 16) as mem:
-        counts = [mem.render(v, morph=False).stats.counters["triangles"] for v in views]
+        counts = [mem.render(v, morph=False, full_res=full_res).stats.counters["triangles"] for v in views]
     monkeypatch.setattr(stored_mod, "MAX_LOAD_SAMPLES", 1000)            # nothing may gather the grid now
     for policy in ("raster", "raster_gs"):
         with Renderer(ctx, ext, policy, 16) as r:
             for v, rf, count in zip(views, refs, counts):
                 for morph in (True, False):
-                    res = r.render(v, mode="shaded", morph=morph)
+                    res = r.render(v, mode="shaded", morph=morph, full_res=full_res)
                     assert holes(res, rf, v, whole) == 0, (policy, morph)
                     assert res.stats.counters["triangles"] >= count > 0   # nodes split no later than exact ones

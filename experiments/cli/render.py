@@ -47,11 +47,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-lean", dest="lean", action="store_false",
                    help="raster, raster_gs (and their tiles in mixed policies): every leaf keeps the edge midpoints "
                         "that only lean leaves drop (those no finer neighbour and no near split needs)")
+    p.add_argument("--full-res", choices=("exact", "lean"), default="exact",
+                   help="raster, raster_gs (and their tiles in mixed policies): full-resolution leaves keep every "
+                        "midpoint, cells split as the reference's (exact), or drop them by their errors as other "
+                        "leaves do (lean: fewer triangles, slower convergence to the reference as tau falls)")
     p.add_argument("--show-strategy", action="store_true", help="hybrid: also write PATH.strategy.png")
 
 
 def draw_options(method: str, tau: float, shading=None, reconstruction="triangles", traversal="maxmip",
-                 prepass=None, lod=False, shadows=False, wireframe=False, lean=True) -> dict:
+                 prepass=None, lod=False, shadows=False, wireframe=False, lean=True, full_res="exact") -> dict:
     """Strategy draw options for a method (only those asked for, so the rest stay the strategy's defaults)."""
     opts = {}
     if shading:
@@ -78,6 +82,11 @@ def draw_options(method: str, tau: float, shading=None, reconstruction="triangle
             raise TerrabenchError("--no-lean applies to raster, raster_gs and the mixed policies (hybrid, heuristic, "
                                   "oracle)")
         opts["lean"] = False
+    if full_res != "exact":
+        if method not in ("raster", "raster_gs", *MIXED):
+            raise TerrabenchError("--full-res applies to raster, raster_gs and the mixed policies (hybrid, heuristic, "
+                                  "oracle)")
+        opts["full_res"] = full_res
     return opts
 
 
@@ -86,7 +95,7 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
         tile_size: int = 256, reconstruction: str = "triangles", traversal: str = "maxmip",
         prepass: bool | None = None,
         lod: bool = False, shadows: bool = False, wireframe: bool = False, show_strategy: bool = False,
-        device: int | None = None, lean: bool = True):
+        device: int | None = None, lean: bool = True, full_res: str = "exact"):
     """Render one view with a method; write out (.png) and its .depth.npy; returns the RenderResult."""
     from hybrid.gl.context import shared_context
     from hybrid.gl.target import check_png_path
@@ -103,7 +112,8 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
             result = r.render(v, mode=shading, supersample=supersample)
     else:
         from hybrid.renderer import Renderer
-        opts = draw_options(method, tau, shading, reconstruction, traversal, prepass, lod, shadows, wireframe, lean)
+        opts = draw_options(method, tau, shading, reconstruction, traversal, prepass, lod, shadows, wireframe, lean,
+                            full_res)
         with Renderer(ctx, hf, method, tile_size, **opts) as r:
             result = r.render(v, tau, maps=show_strategy)
     png, depth = result.save(out)
@@ -123,7 +133,7 @@ def run_from_args(args: argparse.Namespace) -> int:
     """The render command from parsed arguments; returns the exit code."""
     run(args.out, args.method, from_args(TerrainOptions, args), from_args(ViewOptions, args), args.shading,
         args.supersample, args.tau, args.tile_size, args.reconstruction, args.traversal, args.prepass, args.lod,
-        args.shadows, args.wireframe, args.show_strategy, args.device, args.lean)
+        args.shadows, args.wireframe, args.show_strategy, args.device, args.lean, args.full_res)
     return 0
 
 
