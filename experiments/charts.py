@@ -26,16 +26,21 @@ MAX_COLS = 4             # panels a row
 
 
 def label_columns(frames: pd.DataFrame) -> pd.DataFrame:
-    """Add 'method' (policy, plus tau / reconstruction where the run varies them) and 'scene' columns; a run
+    """Add 'method' (policy, plus tau / reconstruction / full-resolution rule where the run varies them) and 'scene'
+    columns; a run
     timed on several devices (a cluster) gets the device in its scene, so no chart or sentence compares frame
     times across devices."""
     f = frames.copy()
     many_tau = f["tau"].nunique() > 1
     many_rec = f["reconstruction"].nunique() > 1
+    many_fr = "full_res" in f and f["full_res"].nunique() > 1
+
     def method(r):
         s = r["policy"]
         if many_rec and r["policy"] not in ("raster", "reference", "fullres", "tin"):
             s += f"/{r['reconstruction']}"
+        if many_fr and r["full_res"] != "exact":
+            s += f"/{r['full_res']}"
         if many_tau and r["policy"] != "reference":
             s += f" tau={r['tau']:.3g}"
         return s

@@ -58,11 +58,13 @@ def mixed_sentences(g: pd.DataFrame) -> list[str]:
     """Per mixed policy and tau: its choices against the pure methods' at the same tau, and its time against
     theirs (and the oracle's), ties called within noise."""
     out = []
-    for (tau, rec), sub in g.groupby(["tau", "reconstruction"]):
+    g = g if "full_res" in g else g.assign(full_res="exact")
+    for (tau, rec, fr), sub in g.groupby(["tau", "reconstruction", "full_res"]):
         pure = {p: sub[sub["policy"] == p] for p in ("raster", "raster_gs", "raycast")}
-        for p in ("raster", "raster_gs"):            # raster runs once, with the first reconstruction
-            if pure[p].empty:
-                pure[p] = g[(g["policy"] == p) & (g["tau"] == tau)]
+        for p in ("raster", "raster_gs", "raycast"):  # raster runs once, with the first reconstruction; ray
+            if pure[p].empty:                          # casting once, with the exact full-resolution rule
+                same = (g["policy"] == p) & (g["tau"] == tau)
+                pure[p] = g[same & (g["full_res"] == fr)] if p != "raycast" else g[same & (g["reconstruction"] == rec)]
         pure = {p: r for p, r in pure.items() if not r.empty}
         for pol in MIXED:
             rows = sub[sub["policy"] == pol]

@@ -9,6 +9,7 @@
     taus = [0.6667]
     sizes = ["640x360"]
     reconstructions = ["triangles"]   # ray-cast surface reconstructions
+    full_res = ["exact"]              # raster full-resolution rules: "exact" (the reference's cells), "lean"
     repeats = 3                       # timed repeats a frame, at least 3 (median kept, spread = noise)
     seeds = [0]
     tile_size = 256
@@ -48,6 +49,8 @@ from .spec_datasets import check_dataset_entry, dataset_label, terrain_source
 
 POLICIES = get_args(Method)
 RECONSTRUCTIONS = ("planes", "linear", "triangles", "bilinear")
+FULL_RES = ("exact", "lean")            # raster.quadtree.FULL_RES
+TILELET_POLICIES = ("raster", "raster_gs", "hybrid", "heuristic", "oracle")   # those the rule applies to
 
 
 @dataclass
@@ -63,6 +66,7 @@ class Spec:
     taus: list = field(default_factory=lambda: [2 / 3])
     sizes: list = field(default_factory=lambda: ["640x360"])
     reconstructions: list = field(default_factory=lambda: ["triangles"])
+    full_res: list = field(default_factory=lambda: ["exact"])
     repeats: int = 3
     seeds: list = field(default_factory=lambda: [0])
     tile_size: int = 256
@@ -77,15 +81,20 @@ class Spec:
         """Every combination, one dict each, with a stable id; frames of one (dataset, seed, flight, size) are paired."""
         out = []
         labels = [dataset_label(d) for d in self.datasets]
-        for ds, seed, fl, size, tau, rec, pol in itertools.product(labels, self.seeds, self.flights, self.sizes,
-                                                                   self.taus, self.reconstructions, self.policies):
+        for ds, seed, fl, size, tau, rec, fr, pol in itertools.product(
+                labels, self.seeds, self.flights, self.sizes, self.taus, self.reconstructions, self.full_res,
+                self.policies):
             if pol not in ("raycast", "hybrid", "heuristic", "oracle") and rec != self.reconstructions[0]:
                 continue                      # reconstruction only matters where rays are cast
+            if pol not in TILELET_POLICIES and fr != self.full_res[0]:
+                continue                      # the full-resolution rule only where tilelets are drawn
             if pol == "reference" and tau != self.taus[0]:
                 continue
-            cid = f"{Path(str(ds)).stem}-s{seed}-{Path(str(fl)).stem}-{size}-tau{tau:.4g}-{rec}-{pol}"
+            fr = fr if pol in TILELET_POLICIES else "exact"
+            cid = f"{Path(str(ds)).stem}-s{seed}-{Path(str(fl)).stem}-{size}-tau{tau:.4g}-{rec}-{pol}" + \
+                ("" if fr == "exact" else f"-{fr}")
             out.append({"config": cid, "dataset": ds, "seed": seed, "flight": fl, "size": size, "tau": tau,
-                        "reconstruction": rec, "policy": pol})
+                        "reconstruction": rec, "full_res": fr, "policy": pol})
         return out
 
     def source(self, label: str) -> TerrainSource:
@@ -191,6 +200,10 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None):
         if r not in RECONSTRUCTIONS:
             raise TerrabenchError(f"{source}: unknown reconstruction {r!r}; choose from {', '.join(RECONSTRUCTIONS)}")
 
+    def full_res_ok(r):
+        if r not in FULL_RES:
+            raise TerrabenchError(f"{source}: unknown full_res {r!r}; choose from {', '.join(FULL_RES)}")
+
     def tau_ok(t):
         if not (t > 0 and t < 1e3):
             raise TerrabenchError(f"{source}: tau must lie in (0, 1000) pixels, got {t!r}")
@@ -216,7 +229,8 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None):
             raise TerrabenchError(f"{source}: datasets {twice} appear twice; give each a distinct 'name'")
     for key, kind, check in (("flights", str, None), ("policies", str, policy_ok),
                              ("taus", (int, float), tau_ok), ("sizes", str, size_ok),
-                             ("reconstructions", str, rec_ok), ("seeds", int, seed_ok), ("image_frames", int, None)):
+                             ("reconstructions", str, rec_ok), ("full_res", str, full_res_ok), ("seeds", int, seed_ok),
+                             ("image_frames", int, None)):
         v = _list(d, key, kind, check)
         if v is not None:
             kw[key] = [float(x) for x in v] if key == "taus" else v

@@ -131,7 +131,7 @@ def test_pyramids_cover_the_grid_and_bound_its_heights(rows, cols, tile_size, se
 spec_values = st.one_of(st.integers(-5, 5), st.floats(allow_nan=True), st.text(max_size=6), st.booleans(),
                         st.lists(st.one_of(st.integers(-2, 3), st.text(max_size=5)), max_size=3))
 spec_keys = st.sampled_from(["name", "datasets", "dataset_size", "flights", "frames", "policies", "taus", "sizes",
-                             "reconstructions", "repeats", "seeds", "tile_size", "supersample", "flip",
+                             "reconstructions", "full_res", "repeats", "seeds", "tile_size", "supersample", "flip",
                              "image_frames", "video", "colour"])
 
 

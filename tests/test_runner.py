@@ -116,6 +116,8 @@ def test_other_spec_refuses_existing_folder(run, ctx):
     ("repeats = 2", r"'repeats' must be an integer in \[3,"),
     ("tile_size = 100", "power of two"),
     ('reconstructions = ["cubic"]', "unknown reconstruction"),
+    ('full_res = ["half"]', "unknown full_res 'half'; choose from exact, lean"),
+    ('full_res = ["lean", "lean"]', "'full_res' lists 'lean' more than once"),
     ("image_frames = [99]", "outside"),
     ('name = "a/b"', "name must be"),
     ("seeds = [-1]", "seeds must lie in"),
@@ -128,6 +130,29 @@ def test_other_spec_refuses_existing_folder(run, ctx):
 def test_bad_specs(text, match):
     with pytest.raises(TerrabenchError, match=match):
         parse_spec(text)
+
+
+def test_full_resolution_rules_vary_only_tilelet_policies():
+    spec = parse_spec('policies = ["raster", "raster_gs", "raycast", "hybrid", "reference"]\nfull_res = ["exact", "lean"]')
+    rules = {}
+    for c in spec.configs():
+        rules.setdefault(c["policy"], []).append(c["full_res"])
+    assert rules == {"raster": ["exact", "lean"], "raster_gs": ["exact", "lean"], "hybrid": ["exact", "lean"],
+                     "raycast": ["exact"], "reference": ["exact"]}
+    ids = [c["config"] for c in spec.configs()]
+    assert len(set(ids)) == len(ids) and sum(i.endswith("-lean") for i in ids) == 3
+    assert all(c["full_res"] == "exact" for c in parse_spec("").configs())
+
+
+def test_a_run_compares_both_full_resolution_rules(ctx, tmp_path):
+    spec = parse_spec(TINY.replace('name = "t"', 'name = "fr"') + 'full_res = ["exact", "lean"]\n')
+    folder = run_spec(spec, tmp_path / "runs", ctx, progress=False)
+    frames = pd.read_parquet(folder / "frames.parquet")
+    tri = frames[frames["policy"] == "raster"].groupby("full_res")["triangles"].sum()
+    assert set(frames[frames["policy"] == "raycast"]["full_res"]) == {"exact"}
+    assert 0 < tri["lean"] < tri["exact"]                     # full-resolution leaves drop midpoints too
+    text = write_report(folder, tmp_path / "reports").read_text()
+    assert "raster/lean" in text and "hybrid/lean" in text
 
 
 def test_bundled_specs_parse():
