@@ -22,7 +22,7 @@ GROW = 2.0                      # a grown or shrunk arena holds this many times 
 GROW_ABOVE = 0.75               # grow before the next frame when the frame's leaves fill more than this share
 SHRINK_BELOW = 0.25             # shrink when the calls' leaves fill less than this share ...
 SHRINK_AFTER = 64               # ... in this many draw calls in a row
-RECORD_BYTES = 13 * 4           # raster.selection.LEAF_WORDS words a leaf record
+RECORD_BYTES = 13 * 4           # a leaf record (raster.selection.LEAF_FORMAT)
 VERTEX_BYTES, INDEX_BYTES = 9 * 16, 24 * 4
 LAYOUTS = {"exact": (RECORD_BYTES, VERTEX_BYTES, INDEX_BYTES), "lean": (15 * 4, 11 * 16, 36 * 4)}
 """Bytes a leaf of (record, vertices, indices) by full-resolution rule (select.comp.glsl LEAF_RECORD_WORDS,

@@ -26,8 +26,7 @@ from .quadtree import GPU_BETA, check_full_res
 from .tileblock import BLOCK, CONSTANT_WORDS, MAX_STARTS, STARTS_FOUND, STARTS_HEIGHTS, STARTS_SEGMENTS, \
     TILE_BLOCKS_BINDING, TileBlocks, register_tile_block, static_blocks, tile_constants, view_fields
 
-LEAF_WORDS = 13                 # j0, i0, level, dropped edges, nine post heights
-LEAF_FORMAT = "4i 4f 4f 1f"
+LEAF_FORMAT = "4i 4f 4f 1f"             # a leaf record: j0, i0, level, dropped edges, nine post heights
 LEAN_LEAF_FORMAT = "4i 4f 4f 1f 2f"     # full_res "lean": and the SE and NW cells' turns (15 words)
 FRAME_FIELDS = ("triangles", "tilelets", "tilelets_culled", "skirt_segments", "arena_leaves", "arena_overflow")
 
