@@ -187,6 +187,8 @@ def test_a_terrain_point_at_the_centre_of_view_is_drawn(ctx, seed, fx, fy, elev_
     from hybrid.camera.clearance import eye_clearance
     clear = eye_clearance(hf, eye)
     assume(np.isfinite(clear) and clear > 5.0)          # an eye over the terrain, above the ground
+    beyond = eye + (r + 5.0) * (target - eye) / r        # the ray enters the ground at the target: 5 m on it is
+    assume(float(hf.ground_height(beyond[0], beyond[1])) > beyond[2] + 0.05)   # under the surface (not grazing a crest)
     view = View(eye, target, 40.0, 33, 33, 1.0, 1e6)
     from hybrid.reference import ReferenceRenderer
     with make_renderer(ctx, hf, policy, tile_size=16) as renderer:
