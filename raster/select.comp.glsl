@@ -126,8 +126,8 @@ int split_state(int m, int a, int b, out float E, out float d) {
 // needs it or either leaf splits (S >= E). Every node whose split makes a leaf has E at least 1 / beta times
 // the leaf's and than the side errors of the leaves outside it that face it, so a leaf starts lean and a
 // coarser neighbour's leaves see it lean. Without side codes (a tile store's nodes) E bounds both fans and
-// every side's S is E. Full-resolution leaves keep every midpoint but toward coarser neighbours: a drop there
-// would flip their SE and NW cells' diagonals in one frame.
+// every side's S is E. Full-resolution leaves keep every midpoint but toward coarser neighbours (a drop there
+// turns their SE and NW cells' diagonals), unless LEAN_FULL_RES, where those cells turn gradually (put_mesh).
 vec4 lean_of(int m, int a, int b) {
 #ifndef LEAN_FULL_RES
     if (m == 0 && tile_level == 0) return vec4(0.0);    // full resolution: the reference's cells

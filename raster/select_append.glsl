@@ -22,7 +22,7 @@ uint reserve(int word, int also, int total) {
     uint n = live_count(live), base = 0u;
     if (leads(live)) {
         base = atomicAdd(cmd[CMD0 + word], n);
-        if (also >= 0) atomicAdd(cmd[CMD0 + also], LEAF_INDICES * n);     // the indexed draw: 24 indices a leaf
+        if (also >= 0) atomicAdd(cmd[CMD0 + also], LEAF_INDICES * n);     // the indexed draw: LEAF_INDICES a leaf
         if (total >= 0) atomicAdd(frame_count[total], n);
     }
     return slot(live, base);
