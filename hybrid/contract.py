@@ -30,6 +30,14 @@ POLICIES: tuple[str, ...] = get_args(Policy)
 METHODS: tuple[str, ...] = get_args(Method)
 CANDIDATES: tuple[str, ...] = ("raster", "raster_gs", "raycast")
 """The strategies a mixed policy chooses between: both restricted-quadtree raster paths and the ray caster."""
+TILELET_POLICIES: tuple[str, ...] = ("raster", "raster_gs", *MIXED_POLICIES)
+"""The policies that draw restricted-quadtree tilelets (alone, or among a mixed policy's candidates)."""
+FullRes = Literal["exact", "lean"]
+"""Full-resolution rules of the tilelet strategies: "exact" draws every full-resolution leaf with all its
+midpoints, its cells split SW-NE as the reference's (the image converges to the reference's as tau falls); "lean"
+lets those leaves drop midpoints by their side errors as all others do (fewer triangles at the same bound), their
+SE and NW cells turning diagonal through a morphed centre post (raster/select.comp.glsl LEAN_FULL_RES)."""
+FULL_RES: tuple[str, ...] = get_args(FullRes)
 
 
 @runtime_checkable

@@ -36,11 +36,11 @@ def arena_leaves(need: int) -> int:
 
 class LeafArena:
     """Output buffers shared by a frame's raster tiles; ``writes`` is "records" or "mesh", ``full_res`` the leaves'
-    layout (``LAYOUTS``). ``version`` counts allocations: vertex arrays made over the buffers are stale when it has
-    changed."""
+    layout (``LAYOUTS``; "exact" until ``use_layout``). ``version`` counts allocations: vertex arrays made over the
+    buffers are stale when it has changed."""
 
-    def __init__(self, ctx, writes: str, capacity: int = MIN_LEAVES, full_res: str = "exact"):
-        self.ctx, self.writes, self.full_res = ctx, writes, full_res
+    def __init__(self, ctx, writes: str, capacity: int = MIN_LEAVES):
+        self.ctx, self.writes, self.full_res = ctx, writes, "exact"
         self.capacity = 0
         self.records = self.vertices = self.indices = None
         self.version = 0

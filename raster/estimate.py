@@ -288,7 +288,7 @@ class TileletTriangleEstimator:
     work per tile, which renderers count apart from planning. With ``background`` (a store's loader thread cuts
     blocks), a tile whose node block still needs cutting is left unknown (NaN) rather than cut in the caller's
     thread, and the cut is in ``waiting`` for the loader to run. ``full_res``: the strategies' full-resolution rule
-    (raster.quadtree.FULL_RES; "lean": level-0 tiles' leaves counted as every other tile's).
+    (hybrid.contract.FULL_RES; "lean": level-0 tiles' leaves counted as every other tile's).
     """
 
     def __init__(self, pyramid: TilePyramid, beta: float = GPU_BETA, lean: bool = True, full_res: str = "exact"):

@@ -35,21 +35,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hybrid.contract import FULL_RES
 from hybrid.errors import TerrabenchError
 from hybrid.tiles.fans import GPU_BETA, fans_at  # noqa: F401  (GPU_BETA: the strategies' beta, defined with the fans)
 from hybrid.tiles.fans import cell_centre_error, cell_max, facing_side_errors, side_maxima, with_cell_centres
 from hybrid.tiles.fans import dilate4 as _dilate4
 
 DEFAULT_BETA = 0.7
-FULL_RES = ("exact", "lean")
-"""Full-resolution rules of the GPU strategies: "exact" draws every full-resolution leaf with all its midpoints, its
-cells split SW-NE as the reference's (the image converges to the reference's as tau falls); "lean" lets those
-leaves drop midpoints by their side errors as all others do (fewer triangles at the same bound), their SE and NW
-cells turning diagonal through a morphed centre post (raster/select.comp.glsl LEAN_FULL_RES)."""
 
 
 def check_full_res(full_res) -> str:
-    """The full-resolution rule, checked against ``FULL_RES``."""
+    """The full-resolution rule, checked against ``hybrid.contract.FULL_RES``."""
     if full_res not in FULL_RES:
         raise TerrabenchError(f"full_res must be one of {', '.join(FULL_RES)}, got {full_res!r}")
     return full_res

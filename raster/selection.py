@@ -31,6 +31,11 @@ LEAN_LEAF_FORMAT = "4i 4f 4f 1f 2f"     # full_res "lean": and the SE and NW cel
 FRAME_FIELDS = ("triangles", "tilelets", "tilelets_culled", "skirt_segments", "arena_leaves", "arena_overflow")
 
 
+def full_res_defines(full_res: str) -> dict:
+    """The shader defines of a full-resolution rule (select.comp.glsl, leaf.vert.glsl, tilelet.geom.glsl)."""
+    return {"LEAN_FULL_RES": 1} if full_res == "lean" else {}
+
+
 def level_starts(n: int) -> np.ndarray:
     """Invocation index of the first node of each local level in the listing pass (levels + 1 entries): level 0
     is listed by its split parents (levels 0 and 1 both start at 0), except in a 2-cell tile."""
@@ -136,12 +141,12 @@ class TileletSelection:
 
     def _compile_passes(self, full_res: str) -> tuple:
         """The selection's two passes for a full-resolution rule."""
-        lean = {"LEAN_FULL_RES": 1} if full_res == "lean" else {}
-        return tuple(compute_shader(self.ctx, "raster", "select.comp.glsl", {"PASS": k, "TILE_BLOCKS_STORAGE": 1, **lean})
+        return tuple(compute_shader(self.ctx, "raster", "select.comp.glsl",
+                                    {"PASS": k, "TILE_BLOCKS_STORAGE": 1, **full_res_defines(full_res)})
                      for k in (0, 1))
 
     def use_full_res(self, full_res: str) -> None:
-        """Select and lay out leaves by the full-resolution rule ``full_res`` (raster.quadtree.FULL_RES) from now on."""
+        """Select and lay out leaves by the full-resolution rule ``full_res`` (hybrid.contract.FULL_RES) from now on."""
         if check_full_res(full_res) == self.full_res:
             return
         if full_res not in self._passes:

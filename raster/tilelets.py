@@ -15,7 +15,7 @@ from hybrid.gl.programs import program
 from hybrid.gl.shading import resolve_mode
 
 from .frame_items import BASE_WORD, CMD_POINTS
-from .selection import LEAF_FORMAT, LEAN_LEAF_FORMAT, SelectedTileletTile, TileletSelection
+from .selection import LEAF_FORMAT, LEAN_LEAF_FORMAT, SelectedTileletTile, TileletSelection, full_res_defines
 from .shading import MODES
 
 GL_CLIP_DISTANCE0 = 0x3000
@@ -127,7 +127,7 @@ class TileletDrawing(TileletSelection):
         ``skirts`` {tile key: edge bits} are selected here and drawn by ``draw_skirts``, which the renderer
         calls after the ray-cast tiles. ``lean`` drops the edge midpoints that neither a finer neighbour nor a near
         split needs (off: a leaf drops only those toward coarser neighbours); ``full_res`` is the full-resolution
-        leaves' rule (raster.quadtree.FULL_RES: "exact" keeps their midpoints, "lean" drops them as others). Counters: triangles (drawn, stitched), tilelets, tilelets_culled,
+        leaves' rule (hybrid.contract.FULL_RES: "exact" keeps their midpoints, "lean" drops them as others). Counters: triangles (drawn, stitched), tilelets, tilelets_culled,
         skirt_segments, arena_leaves (leaves the arena held), arena_overflow (0: the frame drawn missed no leaf),
         arena_regrown (1 if the arena grew and the frame was drawn again).
         """
@@ -195,9 +195,8 @@ class TileletStrategy(TileletDrawing):
 
     def _compile(self, full_res: str) -> tuple:
         """The geometry-shader program and its skirt-pass variant for a full-resolution rule's leaf records."""
-        lean = {"LEAN_FULL_RES": 1} if full_res == "lean" else {}
         progs = tuple(program(self.ctx, "raster", "leaf.vert.glsl", "tilelet.frag.glsl", "tilelet.geom.glsl",
-                              defines={**lean, **skirt}) for skirt in ({}, {"SKIRT_PROGRAM": 1}))
+                              defines={**full_res_defines(full_res), **skirt}) for skirt in ({}, {"SKIRT_PROGRAM": 1}))
         progs[0]["skirt_pass"].value = False
         progs[1]["skirt_pass"].value = True
         return progs

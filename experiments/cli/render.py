@@ -7,7 +7,7 @@ from typing import get_args
 
 import numpy as np
 
-from hybrid.contract import Method
+from hybrid.contract import FULL_RES, TILELET_POLICIES, Method
 from hybrid.errors import TerrabenchError
 from hybrid.strategies import STRATEGIES
 
@@ -47,7 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-lean", dest="lean", action="store_false",
                    help="raster, raster_gs (and their tiles in mixed policies): every leaf keeps the edge midpoints "
                         "that only lean leaves drop (those no finer neighbour and no near split needs)")
-    p.add_argument("--full-res", choices=("exact", "lean"), default="exact",
+    p.add_argument("--full-res", choices=FULL_RES, default="exact",
                    help="raster, raster_gs (and their tiles in mixed policies): full-resolution leaves keep every "
                         "midpoint, cells split as the reference's (exact), or drop them by their errors as other "
                         "leaves do (lean: fewer triangles, slower convergence to the reference as tau falls)")
@@ -78,12 +78,12 @@ def draw_options(method: str, tau: float, shading=None, reconstruction="triangle
             raise TerrabenchError("--wireframe applies to the raster methods (raster, fullres, tin)")
         opts["wireframe"] = True
     if not lean:
-        if method not in ("raster", "raster_gs", *MIXED):
+        if method not in TILELET_POLICIES:
             raise TerrabenchError("--no-lean applies to raster, raster_gs and the mixed policies (hybrid, heuristic, "
                                   "oracle)")
         opts["lean"] = False
     if full_res != "exact":
-        if method not in ("raster", "raster_gs", *MIXED):
+        if method not in TILELET_POLICIES:
             raise TerrabenchError("--full-res applies to raster, raster_gs and the mixed policies (hybrid, heuristic, "
                                   "oracle)")
         opts["full_res"] = full_res
