@@ -58,7 +58,6 @@ def mixed_sentences(g: pd.DataFrame) -> list[str]:
     """Per mixed policy and tau: its choices against the pure methods' at the same tau, and its time against
     theirs (and the oracle's), ties called within noise."""
     out = []
-    g = g if "full_res" in g else g.assign(full_res="exact")
     for (tau, rec, fr), sub in g.groupby(["tau", "reconstruction", "full_res"]):
         pure = {p: sub[sub["policy"] == p] for p in ("raster", "raster_gs", "raycast")}
         for p in ("raster", "raster_gs", "raycast"):  # raster runs once, with the first reconstruction; ray

@@ -47,7 +47,7 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
         raise TerrabenchError(f"cannot create run folder {folder}: {exc.strerror or exc}") from None
     with RunLock(folder):
         old = folder / "spec.json"
-        if old.exists() and json.loads(old.read_text()) != json.loads(json.dumps(spec.to_dict())):
+        if old.exists() and not spec.same_as(json.loads(old.read_text())):
             raise TerrabenchError(f"{folder} holds a run of a different spec; choose another name or folder")
         write_json(old, spec.to_dict())
         if client is not None:

@@ -35,13 +35,14 @@ Relative paths are relative to the spec file's folder.
 from __future__ import annotations
 
 import itertools
+import json
 import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import get_args
 
 from hybrid.camera.view import parse_size
-from hybrid.contract import Method
+from hybrid.contract import FULL_RES, TILELET_POLICIES, Method
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.sources import TerrainSource
 
@@ -49,8 +50,6 @@ from .spec_datasets import check_dataset_entry, dataset_label, terrain_source
 
 POLICIES = get_args(Method)
 RECONSTRUCTIONS = ("planes", "linear", "triangles", "bilinear")
-FULL_RES = ("exact", "lean")            # raster.quadtree.FULL_RES
-TILELET_POLICIES = ("raster", "raster_gs", "hybrid", "heuristic", "oracle")   # those the rule applies to
 
 
 @dataclass
@@ -107,6 +106,13 @@ class Spec:
     def to_dict(self) -> dict:
         """Plain form."""
         return asdict(self)
+
+    def same_as(self, stored: dict) -> bool:
+        """Whether a stored plain form (a run folder's spec.json) is this spec; keys it lacks (added to specs since
+        it was written) count as their defaults."""
+        here = json.loads(json.dumps(self.to_dict()))
+        defaults = json.loads(json.dumps(Spec(name=self.name).to_dict()))
+        return {**defaults, **stored} == here
 
 
 def _list(d, key, kind, check=None):

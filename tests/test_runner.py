@@ -100,6 +100,22 @@ def test_failed_configuration_is_recorded(ctx, tmp_path):
     assert len(pd.read_parquet(folder / "frames.parquet")) == 3 * 2      # the rest went on
 
 
+def test_a_run_from_before_full_res_resumes_and_reports(run, ctx, tmp_path):
+    import json
+    import shutil
+    base, folder = run
+    old = tmp_path / "runs" / folder.name
+    shutil.copytree(folder, old)
+    stored = json.loads((old / "spec.json").read_text())
+    del stored["full_res"]                                   # as runs wrote it before specs had the key
+    (old / "spec.json").write_text(json.dumps(stored))
+    assert run_spec(parse_spec(TINY), tmp_path / "runs", ctx, progress=False) == old
+    frames = pd.read_parquet(old / "frames.parquet")
+    frames.drop(columns=["full_res"]).to_parquet(old / "frames.parquet")
+    text = write_report(old, tmp_path / "reports").read_text()
+    assert "raster" in text and "/nan" not in text and "/exact" not in text
+
+
 def test_other_spec_refuses_existing_folder(run, ctx):
     base, _ = run
     with pytest.raises(TerrabenchError, match="different spec"):
