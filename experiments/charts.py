@@ -107,7 +107,9 @@ def method_colours(f: pd.DataFrame) -> dict:
 
 
 def _per_scene(f: pd.DataFrame, folder: Path, name: str, ycol: str, ylabel: str, scale=1.0, band=None,
-               counts: bool = False) -> list[Path]:
+               counts: bool = False, dashed: str | None = None) -> list[Path]:
+    """One panel per scene of ``ycol`` over the frames, a line per method (``dashed``: a second column, drawn
+    dashed in the method's colour)."""
     scenes = sorted(f["scene"].unique())
     fig, axes = panel_grid(len(scenes))
     colours = method_colours(f)
@@ -117,6 +119,8 @@ def _per_scene(f: pd.DataFrame, folder: Path, name: str, ycol: str, ylabel: str,
         for m, g in sub.groupby("method"):
             g = g.sort_values("frame")
             ax.plot(g["frame"], g[ycol] * scale, marker=".", label=m, color=colours[m])
+            if dashed and dashed in g and g[dashed].notna().any():
+                ax.plot(g["frame"], g[dashed] * scale, ls="--", lw=1, color=colours[m])
             if band and all(c in g and g[c].notna().all() for c in band):
                 ax.fill_between(g["frame"], g[band[0]] * scale, g[band[1]] * scale, color=colours[m], alpha=0.15,
                                 lw=0)
@@ -144,11 +148,14 @@ def memory_chart(f, folder) -> list[Path]:
 
 
 def popping_chart(f, folder) -> list[Path]:
-    """Popping over the flight per method: pixels whose depth error steps in one frame (experiments.popping)."""
+    """Popping over the flight per method: pixels whose depth error steps in one frame, and (dashed) as many with
+    the frame's level of detail held (experiments.popping)."""
     if "pop_px" not in f or not f["pop_px"].notna().any():
         return []
     measured = f.groupby("scene")["pop_px"].transform(lambda s: s.notna().any())    # slow flights only
-    return _per_scene(f[measured], folder, "popping", "pop_px", "pixels popping around the frame", counts=True)
+    return _per_scene(f[measured], folder, "popping", "pop_px",
+                      "pixels popping around the frame\n(dashed: level of detail held)", counts=True,
+                      dashed="pop_static_px")
 
 
 def pareto_front(points: np.ndarray) -> np.ndarray:

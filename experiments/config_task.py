@@ -29,7 +29,7 @@ from hybrid.camera.view import parse_size
 from hybrid.errors import TerrabenchError
 
 from .metrics import frame_accuracy
-from .popping import popping, temporal_errors
+from .popping import popping, static_pop_pixels, temporal_errors
 from .spec import Spec
 
 SETTLE_S = 0.3   # seconds of idle before a configuration's timed frames
@@ -265,8 +265,10 @@ def _measure(spec: Spec, r: _ConfigRun, state: TaskState, views, extra: dict | N
         if k > 0:
             row.update(temporal_errors(frame(k - 1), res, ref(k - 1), ref(k)))
         if 0 < k < spec.frames - 1:
-            row.update(popping((frame(k - 1), res, frame(k + 1)), (ref(k - 1), ref(k), ref(k + 1)),
-                               views[k - 1:k + 2]))
+            refs = (ref(k - 1), ref(k), ref(k + 1))
+            row.update(popping((frame(k - 1), res, frame(k + 1)), refs, views[k - 1:k + 2]))
+            row["pop_static_px"] = (static_pop_pixels(r.renderer, views[k - 1:k + 2], refs, c["tau"], res)
+                                    if np.isfinite(row["pop_px"]) else np.nan)
         tiles = [{"config": c["config"], "frame": k, "policy": c["policy"], **t} for t in timed_stats.tile_rows]
         out.frames.append((row, tiles))
         if k in spec.image_frames or spec.video:

@@ -12,6 +12,11 @@ cancels it, while a switch between k-1 and k (or k and k+1) leaves a step as lar
 Creases the camera slides over leave thin lines; a 5 x 5 median filter keeps only patches (a switched
 tilelet covers many pixels). ``pop_px`` counts pixels whose filtered value exceeds POP_STEP.
 
+A mesh can flag pixels without any switch: where the camera slides along a crease at a grazing angle the
+error's change is not linear over three frames. ``static_pop_pixels`` measures that floor: the same three
+views drawn with the middle frame's tiles and level of detail held (the leaves selected from its eye), so
+that nothing switches; pixels a method flags beyond its static floor are level-of-detail popping.
+
 The cancellation needs a slow camera: where the terrain moves across the image by more than POP_MAX_FLOW_PX
 a frame (``image_flow``, 90th percentile over the reference's terrain pixels) every pixel sees another part
 of the surface each frame, and pop_px is left out (NaN). The dolly flight moves the image by about a pixel
@@ -91,3 +96,16 @@ def temporal_errors(prev, cur, ref_prev, ref_cur) -> dict:
     r0, r1 = ref_prev.colour.astype(np.float64), ref_cur.colour.astype(np.float64)
     ch, rch = np.abs(a1 - a0).mean(), np.abs(r1 - r0).mean()
     return {"change_ratio": _ratio(ch, rch), "error_flicker": float(np.abs((a1 - r1) - (a0 - r0)).mean())}
+
+
+def static_frames(renderer, views, tau: float, middle) -> list:
+    """The three views drawn as ``middle`` (the result of drawing views[1]) was: its tiles, strategies and the
+    leaves selected from its eye held (``lod_eye``), so no level of detail changes between them."""
+    eye = tuple(float(x) for x in views[1].eye)
+    return [renderer.render(v, tau, plans=middle.plans, lod_eye=eye) for v in views]
+
+
+def static_pop_pixels(renderer, views, refs, tau: float, middle) -> int:
+    """``pop_pixels`` of the three views drawn with the middle frame's level of detail held (``static_frames``):
+    what the metric flags on a mesh that does not switch."""
+    return pop_pixels(*static_frames(renderer, views, tau, middle), *refs)

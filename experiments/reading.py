@@ -98,6 +98,23 @@ def mixed_sentences(g: pd.DataFrame) -> list[str]:
     return out
 
 
+def _popping_sentence(g: pd.DataFrame) -> str:
+    """Pixels each method flags as popping over the flight, beside what it flags with its level of detail held
+    (``pop_static_px``, where measured): a method flagging no more than that has no level-of-detail popping."""
+    pops = g.groupby("method")["pop_px"].sum()
+    static = g.groupby("method")["pop_static_px"].sum(min_count=1) if "pop_static_px" in g else None
+    parts = []
+    for m, v in pops[pops > 0].sort_values(ascending=False).items():
+        st = static.get(m) if static is not None else None
+        if st is None or not np.isfinite(st):
+            parts.append(f"{m} {int(v)} px")
+        else:
+            parts.append(f"{m} {int(v)} px ({int(st)} with its level of detail held"
+                         + (": no more than without switching" if v <= st else "") + ")")
+    return ("Popping (pixels whose depth error steps by more than 0.1 % of the distance in one frame, on a camera "
+            "slow enough to tell): " + (", ".join(parts) + " over the flight" if parts else "none") + ".")
+
+
 def accuracy_sentences(g: pd.DataFrame) -> list[str]:
     """Most and least accurate methods by mean FLIP over terrain pixels (equal values named together); cracks,
     silhouette differences and popping where any method has them."""
@@ -122,11 +139,7 @@ def accuracy_sentences(g: pd.DataFrame) -> list[str]:
                    (f"at most {100 * miss[worst]:.3g} % of its terrain pixels in a frame ({worst})" if miss[worst] > 0
                     else "none") + ".")
     if "pop_px" in g and g["pop_px"].notna().any():
-        pops = g.groupby("method")["pop_px"].sum()
-        out.append("Popping (pixels whose depth error steps by more than 0.1 % of the distance in one frame, on a "
-                   "camera slow enough to tell): " +
-                   (", ".join(f"{m} {int(v)} px" for m, v in pops[pops > 0].sort_values(ascending=False).items())
-                    + " over the flight" if (pops > 0).any() else "none") + ".")
+        out.append(_popping_sentence(g))
     for col, what in (("capped_rays", "capped rays"), ("nan_px", "NaN pixels")):
         if col in g and g[col].fillna(0).max() > 0:
             s = g.groupby("method")[col].max()

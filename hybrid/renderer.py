@@ -255,15 +255,17 @@ class Renderer:
                 p.choice = c
         return together
 
-    def render(self, view: View, tau: float = DEFAULT_TAU, *, measure: bool = False, maps: bool = False,
+    def render(self, view: View, tau: float = DEFAULT_TAU, *, measure: bool | None = None, maps: bool = False,
                plans: list[TilePlan] | None = None, read: bool = True, **options) -> RenderResult:
-        """Draw the view and read it back: colour, distance (m) and FrameStats; ``plans`` (from ``plan``, choices
-        possibly changed, as calibration does) are drawn instead of the view's own; ``read=False`` leaves the image
-        on the GPU (colour and distance None), as an application's frame loop does.
+        """Draw the view and read it back: colour, distance (m), FrameStats and the plans drawn; ``plans`` (from
+        ``plan`` or an earlier result, choices possibly changed, as calibration does) are drawn instead of the
+        view's own, with their choices; ``read=False`` leaves the image on the GPU (colour and distance None), as an
+        application's frame loop does.
 
-        With ``measure`` (always for the oracle; mixed policies only) every tile is also timed inside frames
-        every candidate way (``time_in_frame``); with ``maps`` the result carries the per-pixel strategy map (extra untimed renders). Per-call
-        ``options`` override the renderer's draw options.
+        With ``measure`` (mixed policies only; the oracle's default when it plans the view itself) every tile is
+        also timed inside frames every candidate way (``time_in_frame``) and the oracle takes the cheapest; with
+        ``maps`` the result carries the per-pixel strategy map (extra untimed renders). Per-call ``options``
+        override the renderer's draw options.
         """
         self._check_live()
         if measure and not self.mixed:
@@ -272,6 +274,8 @@ class Renderer:
             raise TerrabenchError("maps=True reads the frame back; it cannot go with read=False")
         opts = {n: {**self.options[n], **o} for n, o in route_options(self.strategies, options).items()}
         prep0 = self.triangles.build_ms if self.triangles is not None else 0.0
+        if measure is None:
+            measure = self.policy == "oracle" and plans is None
         t_plan = time.perf_counter()
         plans = self.plan(view, tau) if plans is None else plans
         prep_ms = (self.triangles.build_ms if self.triangles is not None else 0.0) - prep0
@@ -281,7 +285,7 @@ class Renderer:
         target = FrameTarget(self.ctx, view.width, view.height)
         try:
             together = {}
-            if measure or self.policy == "oracle":
+            if measure:
                 together = self._measure(view, plans, target, pinned, tau)
             self._fallbacks = {}
             streamed = None
@@ -315,8 +319,9 @@ class Renderer:
             stats.uploads = self.cache.stats.uploads - uploads0
             stats.evictions = self.cache.stats.evictions - evictions0
             if not read:
-                return RenderResult(None, None, stats)
+                return RenderResult(None, None, stats, plans=plans)
             result = target.read(view, stats)
+            result.plans = plans
             if "triangles" in counters:          # drawn triangles per pixel that shows terrain
                 counters["triangles_per_pixel"] = counters["triangles"] / max(int(result.mask.sum()), 1)
             if maps:

@@ -181,9 +181,11 @@ class TileletSelection:
         for prog in self.passes:
             self.uniforms.set(prog, name, value)
 
-    def frame_blocks(self, view, items, tau: float, culling: bool = True, skirts: dict | None = None):
+    def frame_blocks(self, view, items, tau: float, culling: bool = True, skirts: dict | None = None,
+                     lod_eye: np.ndarray | None = None):
         """The frame's per-item shader blocks (raster.tileblock) with the selection's fields, uploaded; and each
-        item's pass-0 work groups. What a tile's block holds whatever the view was made at its upload."""
+        item's pass-0 work groups (from ``lod_eye``, world metres, default the view's eye). What a tile's block
+        holds whatever the view was made at its upload."""
         gs = [g for g, _, _ in items]
         g0 = gs[0]                                        # every item has g0's cell count (select_leaves)
         numbers = np.frombuffer(bytearray(b"".join([g.numbers for g in gs])), np.float64).reshape(len(gs), -1)
@@ -193,7 +195,7 @@ class TileletSelection:
                 constants[i] = tile_constants(t)
         blocks = view_fields(np.frombuffer(bytearray(b"".join([g.block for g in gs])), BLOCK), view, constants,
                              [s for _, _, s in items], skirts, culling)
-        eye_local = np.asarray(view.eye, dtype=np.float64) - constants[:, 0:3]
+        eye_local = (np.asarray(view.eye if lod_eye is None else lod_eye, dtype=np.float64)) - constants[:, 0:3]
         bounds = numbers[:, CONSTANT_WORDS:].reshape(len(gs), -1, 7)
         first = g0.starts[first_levels(bounds, eye_local, float(view.pixels_per_radian) / float(tau))]
         groups0 = (int(g0.starts[-1]) - first + LOCAL - 1) // LOCAL
@@ -206,8 +208,11 @@ class TileletSelection:
         self.blocks.write(blocks)
         return blocks, groups0, table1_start
 
-    def select_leaves(self, view, items, tau: float, culling: bool = True, skirts: dict | None = None) -> None:
+    def select_leaves(self, view, items, tau: float, culling: bool = True, skirts: dict | None = None,
+                      lod_eye=None) -> None:
         """Run the leaf selection of every item for the view at tau pixels; fills each item's commands.
+        ``lod_eye`` (world metres; default the view's eye) is where the leaves' distances, and so their levels
+        and morph factors, are measured from: another eye holds a level of detail while the view moves.
 
         Pass 0 over every item's nodes lists the leaves and, as each item's are counted, places them in the arena
         and writes pass 1's work table; pass 1 (dispatched from that table's length) emits them: one dispatch a
@@ -224,7 +229,10 @@ class TileletSelection:
         ns = sorted({g.n for g, _, _ in items})
         if len(ns) > 1:
             raise TerrabenchError(f"a frame's raster tiles must have one cell count, got {ns}")
-        blocks, groups0, table1_start = self.frame_blocks(view, items, tau, culling, skirts)
+        lod_eye = np.asarray(view.eye if lod_eye is None else lod_eye, dtype=np.float64).reshape(3)
+        if not np.isfinite(lod_eye).all():
+            raise TerrabenchError(f"lod_eye must be three finite metres, got {lod_eye.tolist()}")
+        blocks, groups0, table1_start = self.frame_blocks(view, items, tau, culling, skirts, lod_eye)
         planes = view.frustum_planes_rel().astype(np.float32).tobytes()
         for prog in self.passes:
             write_uniform(prog, "planes", planes)
@@ -233,7 +241,7 @@ class TileletSelection:
         self.set_selection("write_records", self.writes == "records")
         self.set_selection("write_mesh", self.writes == "mesh")
         self.set_selection("arena_capacity", int(self.arena.capacity))
-        self.set_selection("eye_terrain", tuple((np.asarray(view.eye, dtype=np.float64) - self.hf.origin).tolist()))
+        self.set_selection("eye_terrain", tuple((lod_eye - self.hf.origin).tolist()))
         self.set_selection("cell_metres", (float(self.hf.spacing_x), float(self.hf.spacing_y)))
         self.set_selection("side_errors", items[0][0].side_errors)
         self.set_selection("table1_start", int(table1_start))

@@ -55,7 +55,7 @@ class TileletDrawing(TileletSelection):
     """Uniforms and state shared by both tilelet draws; subclasses issue the draw of one tile."""
 
     draw_options = frozenset({"mode", "wireframe", "morph", "stitching", "lean", "culling", "leaf_tau", "skirts",
-                              "full_res"})
+                              "full_res", "lod_eye"})
 
     def __init__(self, ctx, hf, **options):
         super().__init__(ctx, hf, **options)
@@ -121,13 +121,14 @@ class TileletDrawing(TileletSelection):
     def draw_tiles(self, target, view, items, tau: float | None = None, mode: str | None = None,
                    wireframe: bool = False, morph: bool = True, stitching: bool = True, lean: bool = True,
                    culling: bool = True, leaf_tau: float | None = None, skirts: dict | None = None,
-                   full_res: str = "exact") -> dict:
+                   full_res: str = "exact", lod_eye=None) -> dict:
         """Select and draw (gpu_tile, tile, selected) items into target at tau px (``leaf_tau`` overrides it).
 
         ``skirts`` {tile key: edge bits} are selected here and drawn by ``draw_skirts``, which the renderer
         calls after the ray-cast tiles. ``lean`` drops the edge midpoints that neither a finer neighbour nor a near
         split needs (off: a leaf drops only those toward coarser neighbours); ``full_res`` is the full-resolution
-        leaves' rule (hybrid.contract.FULL_RES: "exact" keeps their midpoints, "lean" drops them as others). Counters: triangles (drawn, stitched), tilelets, tilelets_culled,
+        leaves' rule (hybrid.contract.FULL_RES: "exact" keeps their midpoints, "lean" drops them as others);
+        ``lod_eye`` (world metres) selects the leaves as seen from there (a held level of detail). Counters: triangles (drawn, stitched), tilelets, tilelets_culled,
         skirt_segments, arena_leaves (leaves the arena held), arena_overflow (0: the frame drawn missed no leaf),
         arena_regrown (1 if the arena grew and the frame was drawn again).
         """
@@ -138,12 +139,12 @@ class TileletDrawing(TileletSelection):
         self.set_selection("stitch", bool(stitching))
         self.set_selection("lean", bool(lean))
         self.arena.prepare()                # sized for the recent calls' leaves, with room to grow
-        counters = self._select_draw(target, view, items, tau, mode, wireframe, culling, skirts)
+        counters = self._select_draw(target, view, items, tau, mode, wireframe, culling, skirts, lod_eye)
         regrown = 0
         if counters["arena_overflow"]:       # some tiles did not fit and drew nothing: grow, draw them
             self.arena.remake(counters["arena_leaves"])
             regrown = 1
-            counters = self._select_draw(target, view, items, tau, mode, wireframe, culling, skirts)
+            counters = self._select_draw(target, view, items, tau, mode, wireframe, culling, skirts, lod_eye)
             if counters["arena_overflow"]:
                 raise RuntimeError(f"leaf arena of {self.arena.capacity} leaves overflowed after growing for "
                                    f"{counters['arena_leaves']}")
@@ -151,9 +152,9 @@ class TileletDrawing(TileletSelection):
         counters["arena_regrown"] = regrown
         return counters
 
-    def _select_draw(self, target, view, items, tau, mode, wireframe, culling, skirts) -> dict:
+    def _select_draw(self, target, view, items, tau, mode, wireframe, culling, skirts, lod_eye) -> dict:
         """One selection and draw of the items (the depth test keeps a repeated draw's pixels as they were)."""
-        self.select_leaves(view, items, tau, culling, skirts)
+        self.select_leaves(view, items, tau, culling, skirts, lod_eye)
         ctx = self.ctx
         vp = view.view_proj_rel.T.astype(np.float32).tobytes()
         for prog in self.programs():

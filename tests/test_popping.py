@@ -1,9 +1,11 @@
 """Popping: constructed depth sequences (steady sliding, a switched patch, a crease), the image-flow gate, and
-on a slow dolly flight the raster strategy without geomorphing against the same with it."""
+on a slow dolly flight the raster strategy without geomorphing against the same with it, each beside its floor
+with the level of detail held."""
 import numpy as np
 import pytest
 
-from experiments.popping import POP_MAX_FLOW_PX, image_flow, pop_pixels, popping, temporal_errors
+from experiments.popping import (POP_MAX_FLOW_PX, image_flow, pop_pixels, popping, static_pop_pixels,
+                                 temporal_errors)
 from hybrid.camera.view import View
 from hybrid.gl.target import RenderResult
 
@@ -84,20 +86,70 @@ def dolly(ctx):
 
 
 def test_raster_without_geomorphing_pops_on_a_slow_dolly(ctx, dolly):
+    """Each configuration's flagged pixels beside its static floor: the same three views drawn with the middle
+    frame's tiles and leaves held (``static_pop_pixels``), which no level-of-detail switch can reach."""
     from hybrid.renderer import Renderer
     hf, views, refs = dolly
-    pops = {}
+    pops, static = {}, {}
     for morph, full_res in ((True, "exact"), (False, "exact"), (True, "lean")):
         with Renderer(ctx, hf, "raster", tile_size=32, morph=morph, full_res=full_res) as r:
             frames = [r.render(v, 2.0) for v in views]
-        rows = [popping(frames[k - 1:k + 2], refs[k - 1:k + 2], views[k - 1:k + 2]) for k in range(1, len(views) - 1)]
+            rows = [popping(frames[k - 1:k + 2], refs[k - 1:k + 2], views[k - 1:k + 2]) for k in range(1, len(views) - 1)]
+            held = [static_pop_pixels(r, views[k - 1:k + 2], refs[k - 1:k + 2], 2.0, frames[k])
+                    for k in range(1, len(views) - 1)]
         assert all(row["flow_px"] <= POP_MAX_FLOW_PX for row in rows)          # slow enough to measure
         pops[morph, full_res] = sum(row["pop_px"] for row in rows)
+        static[morph, full_res] = sum(held)
     assert pops[False, "exact"] >= 100, pops                 # level switches move whole tilelets in one frame
+    assert static[False, "exact"] * 10 <= pops[False, "exact"], static   # held, the same leaves do not
     assert pops[True, "exact"] * 10 <= pops[False, "exact"], pops     # geomorphing spreads them over many frames
     # full-resolution leaves dropping midpoints turn their SE and NW cells' diagonals through a morphed centre
-    # post: no switch in one frame (without it, 342 px popped here)
+    # post: no switch in one frame (without it, 342 px popped here); what the lean mesh flags, creases of its
+    # coarser near field sliding by, it flags as much with its level of detail held
     assert pops[True, "lean"] * 10 <= pops[False, "exact"], pops
+    assert pops[True, "lean"] <= static[True, "lean"] + 4, (pops, static)
+
+
+def test_a_held_level_of_detail_draws_the_middle_frames_leaves(ctx, dolly):
+    """``static_frames``: the middle frame redrawn with its own eye as the held one is the same image; the outer
+    views keep its tiles and triangles, where the frames around it drawn freely do not."""
+    from experiments.popping import static_frames
+    from hybrid.renderer import Renderer
+    hf, views, _ = dolly
+    with Renderer(ctx, hf, "raster", tile_size=32, full_res="lean", culling=False) as r:     # every leaf counted
+        middle = r.render(views[5], 2.0)
+        held = static_frames(r, views[4:7], 2.0, middle)
+        free = [f.stats.counters["triangles"] for f in (r.render(views[4], 2.0), r.render(views[6], 2.0))]
+    assert np.array_equal(held[1].distance, middle.distance) and np.array_equal(held[1].colour, middle.colour)
+    tris = {f.stats.counters["triangles"] for f in held}
+    assert tris == {middle.stats.counters["triangles"]}
+    assert all([p.key for p in f.plans] == [p.key for p in middle.plans] for f in held)
+    assert not np.array_equal(held[0].distance, middle.distance)            # drawn from its own view
+    assert set(free) != tris, free
+
+
+def test_an_oracle_frame_redrawn_from_its_plans_keeps_its_measured_choices(ctx, dolly):
+    """The oracle measures the tiles of a view it plans itself; given a frame's plans (as the static floor gives
+    them) it draws their choices as they are, measuring nothing again."""
+    from hybrid.renderer import make_renderer
+    hf, views, _ = dolly
+    with make_renderer(ctx, hf, "oracle", tile_size=64, oracle_repeats=1) as o:
+        first = o.render(views[5], 2.0)
+        choices = [(p.key, p.choice) for p in first.plans]
+        again = o.render(views[6], 2.0, plans=first.plans)
+    assert set(first.stats.together_ms) == {"raster", "raster_gs", "raycast"}
+    assert again.stats.together_ms == {}
+    assert [(p.key, p.choice) for p in again.plans] == choices
+    assert again.stats.tiles == len(choices) and np.isfinite(again.distance).any()
+
+
+def test_a_held_eye_that_is_not_finite_is_refused(ctx, dolly):
+    from hybrid.errors import TerrabenchError
+    from hybrid.renderer import Renderer
+    hf, views, _ = dolly
+    with Renderer(ctx, hf, "raster_gs", tile_size=32) as r:
+        with pytest.raises(TerrabenchError, match="lod_eye"):
+            r.render(views[0], 2.0, lod_eye=(0.0, float("nan"), 100.0))
 
 
 @pytest.mark.parametrize("size", [(320, 180), (640, 360)])

@@ -171,6 +171,21 @@ def test_a_run_compares_both_full_resolution_rules(ctx, tmp_path):
     assert "raster/lean" in text and "hybrid/lean" in text
 
 
+def test_a_slow_flight_measures_popping_beside_its_held_floor(ctx, tmp_path):
+    """On the dolly every method's middle frames get pop_px and pop_static_px (its level of detail held over the
+    three frames); the report's table and chart show both."""
+    spec = parse_spec(TINY.replace('name = "t"', 'name = "pop"').replace('"flyover"', '"dolly"')
+                      .replace('["raster", "raycast", "hybrid"]', '["raster", "raycast"]'))
+    folder = run_spec(spec, tmp_path / "runs", ctx, progress=False)
+    f = pd.read_parquet(folder / "frames.parquet")
+    mid = f[f["frame"] == 1]
+    assert mid["flow_px"].le(2).all() and mid["pop_px"].notna().all() and mid["pop_static_px"].notna().all()
+    assert f.loc[f["frame"] != 1, "pop_static_px"].isna().all()
+    text = write_report(folder, tmp_path / "reports").read_text()
+    assert "pop_static_px" in text and "Popping" in text
+    assert list((tmp_path / "reports").rglob("popping*.png"))
+
+
 def test_bundled_specs_parse():
     for name in ("default", "tiny"):
         assert load_spec(name).configs()

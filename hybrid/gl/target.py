@@ -29,7 +29,8 @@ def check_png_path(path, what: str = "output") -> Path:
 class RenderResult:
     """One rendered frame: colour (H, W, 3 uint8, top row first), hit distance in metres (inf = no terrain).
 
-    ``stats`` is the renderer's ``hybrid.contract.FrameStats``; ``maps`` holds optional per-pixel maps. A frame drawn
+    ``stats`` is the renderer's ``hybrid.contract.FrameStats``; ``maps`` holds optional per-pixel maps;
+    ``plans`` the tiles drawn with their strategies (``hybrid.cost.planner.TilePlan``). A frame drawn
     without reading it back (``Renderer.render(read=False)``) has colour and distance None.
     """
 
@@ -37,6 +38,7 @@ class RenderResult:
     distance: np.ndarray | None
     stats: Any = None
     maps: dict = field(default_factory=dict)
+    plans: list = field(default_factory=list)
 
     @property
     def mask(self) -> np.ndarray:
