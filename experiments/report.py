@@ -33,7 +33,8 @@ def summary_table(frames: pd.DataFrame) -> pd.DataFrame:
            "mean_MiB": ("gpu_bytes", lambda s: float(s.mean()) / 2**20),
            "peak_MiB": ("gpu_bytes", lambda s: float(s.max()) / 2**20)}
     for col, name, fn in (("psnr", "psnr_dB", "mean"), ("ssim", "ssim", "mean"), ("flip", "flip", "mean"),
-                          ("depth_rel_median", "depth_rel_med", "mean"), ("crack_px", "cracks_px", "max"),
+                          ("depth_rel_median", "depth_rel_med", "mean"), ("depth_rel_p99", "depth_rel_p99", "max"),
+                          ("crack_px", "cracks_px", "max"),
                           ("silhouette_px", "silhouette_px", "mean"), ("terrain_as_sky", "sky_for_terrain_%", "mean"),
                           ("pop_px", "pop_px", lambda s: s.sum(min_count=1)),
                           ("pop_static_px", "pop_static_px", lambda s: s.sum(min_count=1)),
@@ -55,7 +56,8 @@ MEASURES = [
     "issuing its GL commands (waits for the GL left out; on llvmpipe issuing includes vertex, geometry and "
     "compute work, which run inside the calls, but not fragment work).",
     "psnr_dB, ssim, flip: over the pixels where the method or the reference shows terrain (identical sky left "
-    "out); depth_rel_med: relative hit-distance error over the pixels both cover.",
+    "out); depth_rel_med: relative hit-distance error over the pixels both cover, mean over frames of its median; "
+    "depth_rel_p99: the largest of the frames' 99th percentiles.",
     "cracks_px (most in a frame): sky enclosed by the method's own terrain (within 3 px both sides, across or "
     "along) where the reference has terrain more than 2 px from its sky; silhouette_px (mean a frame): every other "
     "pixel where method and reference disagree on terrain; sky_for_terrain_%: the reference's terrain pixels the "

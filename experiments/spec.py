@@ -266,11 +266,11 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None):
     return spec
 
 
-BUNDLED = {"default": "default.toml", "tiny": "tiny.toml", "stress": "stress.toml"}
+BUNDLED = {"default": "default.toml", "tiny": "tiny.toml", "stress": "stress.toml", "full-res": "full-res.toml"}
 
 
 def load_spec(path) -> Spec:
-    """Read and check a spec file, or a bundled spec by name (default, tiny, stress)."""
+    """Read and check a spec file, or a bundled spec by name (default, tiny, stress, full-res)."""
     if str(path) in BUNDLED:
         from importlib import resources
         return parse_spec((resources.files("experiments") / BUNDLED[str(path)]).read_text(), str(path))

@@ -187,9 +187,11 @@ def test_a_slow_flight_measures_popping_beside_its_held_floor(ctx, tmp_path):
 
 
 def test_bundled_specs_parse():
-    for name in ("default", "tiny"):
+    for name in ("default", "tiny", "full-res"):
         assert load_spec(name).configs()
         assert load_spec(name).gpu_budget_mib == 256 and load_spec(name).upload_budget_ms is None
+    rules = {(c["policy"], c["full_res"]) for c in load_spec("full-res").configs()}
+    assert {("raster", "lean"), ("hybrid", "lean"), ("raster", "exact")} <= rules
     with pytest.raises(TerrabenchError, match="no such spec"):
         load_spec("nowhere.toml")
 

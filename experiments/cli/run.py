@@ -13,7 +13,7 @@ HELP = "run an experiment spec (TOML): paired flights, tables, images"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The run options: the spec, where runs and reports go, and --quiet."""
-    p.add_argument("spec", help="experiment spec file (.toml) or a bundled one: default, tiny, stress")
+    p.add_argument("spec", help="experiment spec file (.toml) or a bundled one: default, tiny, stress, full-res")
     p.add_argument("--runs", default="runs", help="folder that holds run folders")
     p.add_argument("--name", default=None, help="run name (default: the spec's)")
     p.add_argument("--report", action="store_true", help="write the report when done")
