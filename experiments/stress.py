@@ -23,7 +23,7 @@ from hybrid.terrain.heightfield import HeightField
 SCENES = ("spike", "cliff", "staircase", "ridges", "flat", "puget", "puget_x100")
 VIEWS = ("grazing", "down", "inside_aabb", "below", "axis_x", "axis_y", "origin", "offset_1e6", "offset_1e7",
          "near_far")
-METHODS = ("raster", "raycast/planes", "raycast/linear", "raycast/triangles", "raycast/bilinear", "hybrid",
+METHODS = ("raster", "raster_gs", "raster/lean", "raycast/planes", "raycast/linear", "raycast/triangles", "raycast/bilinear", "hybrid",
            "fullres", "tin")
 
 
@@ -99,9 +99,13 @@ def stress_view(hf: HeightField, kind: str, width: int = 320, height: int = 180,
 
 
 def _renderer(ctx, hf, method: str, tile_size: int):
+    """A method's renderer: POLICY, raycast/RECONSTRUCTION, or raster/FULL_RES (a full-resolution rule)."""
+    from hybrid.contract import FULL_RES
     from hybrid.renderer import make_renderer
-    policy, _, rec = method.partition("/")
-    return make_renderer(ctx, hf, policy, tile_size=tile_size, reconstruction=rec or "triangles")
+    policy, _, variant = method.partition("/")
+    if variant in FULL_RES:
+        return make_renderer(ctx, hf, policy, tile_size=tile_size, full_res=variant)
+    return make_renderer(ctx, hf, policy, tile_size=tile_size, reconstruction=variant or "triangles")
 
 
 @dataclass

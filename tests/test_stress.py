@@ -1,5 +1,6 @@
 """Stability where methods fail: on every stress view, no NaN, no hang, no hole, few capped rays, and no
-precision loss far from the origin, for stitched raster, ray-cast and hybrid frames."""
+precision loss far from the origin, for stitched raster (both strategies, both full-resolution rules), ray-cast and
+hybrid frames."""
 import pandas as pd
 import pytest
 
@@ -8,7 +9,7 @@ from experiments.stress import SCENES, VIEWS, make_scene, run_stress, stress_rea
 from hybrid.reference import ReferenceRenderer
 from hybrid.renderer import make_renderer
 
-METHODS = ("raster", "raycast/triangles", "raycast/planes", "hybrid")
+METHODS = ("raster", "raster_gs", "raster/lean", "raycast/triangles", "raycast/planes", "hybrid")
 WIDTH, HEIGHT = 160, 90
 
 
