@@ -195,7 +195,7 @@ class TileletSelection:
                 constants[i] = tile_constants(t)
         blocks = view_fields(np.frombuffer(bytearray(b"".join([g.block for g in gs])), BLOCK), view, constants,
                              [s for _, _, s in items], skirts, culling)
-        eye_local = (np.asarray(view.eye if lod_eye is None else lod_eye, dtype=np.float64)) - constants[:, 0:3]
+        eye_local = np.asarray(view.eye if lod_eye is None else lod_eye, dtype=np.float64) - constants[:, 0:3]
         bounds = numbers[:, CONSTANT_WORDS:].reshape(len(gs), -1, 7)
         first = g0.starts[first_levels(bounds, eye_local, float(view.pixels_per_radian) / float(tau))]
         groups0 = (int(g0.starts[-1]) - first + LOCAL - 1) // LOCAL
@@ -229,9 +229,9 @@ class TileletSelection:
         ns = sorted({g.n for g, _, _ in items})
         if len(ns) > 1:
             raise TerrabenchError(f"a frame's raster tiles must have one cell count, got {ns}")
-        lod_eye = np.asarray(view.eye if lod_eye is None else lod_eye, dtype=np.float64).reshape(3)
-        if not np.isfinite(lod_eye).all():
-            raise TerrabenchError(f"lod_eye must be three finite metres, got {lod_eye.tolist()}")
+        lod_eye = np.asarray(view.eye if lod_eye is None else lod_eye, dtype=np.float64)
+        if lod_eye.shape != (3,) or not np.isfinite(lod_eye).all():
+            raise TerrabenchError(f"lod_eye must be three finite metres (x, y, z), got {lod_eye.tolist()}")
         blocks, groups0, table1_start = self.frame_blocks(view, items, tau, culling, skirts, lod_eye)
         planes = view.frustum_planes_rel().astype(np.float32).tobytes()
         for prog in self.passes:

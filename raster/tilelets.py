@@ -128,9 +128,10 @@ class TileletDrawing(TileletSelection):
         calls after the ray-cast tiles. ``lean`` drops the edge midpoints that neither a finer neighbour nor a near
         split needs (off: a leaf drops only those toward coarser neighbours); ``full_res`` is the full-resolution
         leaves' rule (hybrid.contract.FULL_RES: "exact" keeps their midpoints, "lean" drops them as others);
-        ``lod_eye`` (world metres) selects the leaves as seen from there (a held level of detail). Counters: triangles (drawn, stitched), tilelets, tilelets_culled,
-        skirt_segments, arena_leaves (leaves the arena held), arena_overflow (0: the frame drawn missed no leaf),
-        arena_regrown (1 if the arena grew and the frame was drawn again).
+        ``lod_eye`` (world metres) selects the leaves as seen from there (a held level of detail). Counters:
+        triangles (drawn, stitched), tilelets, tilelets_culled, skirt_segments, arena_leaves (leaves the arena
+        held), arena_overflow (0: the frame drawn missed no leaf), arena_regrown (1 if the arena grew and the frame
+        was drawn again).
         """
         mode = resolve_mode(self.hf, mode, MODES)
         tau = leaf_tau if leaf_tau is not None else tau

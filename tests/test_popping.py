@@ -150,6 +150,8 @@ def test_a_held_eye_that_is_not_finite_is_refused(ctx, dolly):
     with Renderer(ctx, hf, "raster_gs", tile_size=32) as r:
         with pytest.raises(TerrabenchError, match="lod_eye"):
             r.render(views[0], 2.0, lod_eye=(0.0, float("nan"), 100.0))
+        with pytest.raises(TerrabenchError, match="lod_eye"):
+            r.render(views[0], 2.0, lod_eye=(0.0, 100.0))
 
 
 @pytest.mark.parametrize("size", [(320, 180), (640, 360)])
