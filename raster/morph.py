@@ -18,6 +18,11 @@ from __future__ import annotations
 
 import numpy as np
 
+# A turning cell (lean full-resolution leaves, select.comp.glsl LEAN_FULL_RES) turns while the larger morph factor
+# of its two edge midpoints runs from TURN_FROM to 1, where the midpoint drops: the same continuity as over the
+# whole range, with fewer cells turning at a time (each draws 4 triangles instead of 2).
+TURN_FROM = 0.5
+
 
 def morph_factor(tolerance: float, error, beta: float) -> np.ndarray:
     """alpha in [0, 1] for tolerance (metres) against node error(s) (metres); 1 = fully on the coarser surface."""
@@ -44,3 +49,9 @@ def morphed_posts(posts: np.ndarray, i0: np.ndarray, j0: np.ndarray, level: np.n
     diag = np.where(qx == qy, 0.5 * (P[:, 0, 0] + P[:, 2, 2]), 0.5 * (P[:, 0, 2] + P[:, 2, 0]))
     out[:, 1, 1] = lerp(P[:, 1, 1], diag, a[:, 4])
     return out
+
+
+def turn_factor(alpha) -> np.ndarray:
+    """A cell's turn in [0, 1] (0: the reference's SW-NE diagonal, 1: the fan's) from the larger morph factor of
+    its two edge midpoints: 0 up to TURN_FROM, then linear to 1 at 1."""
+    return np.clip((np.asarray(alpha, dtype=np.float64) - TURN_FROM) / (1.0 - TURN_FROM), 0.0, 1.0)

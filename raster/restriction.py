@@ -18,7 +18,7 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 
-from .morph import morph_factor
+from .morph import morph_factor, turn_factor
 from .quadtree import ErrorPyramid, Leaves, leaf_levels, leaves_from_levels
 
 EDGE_W, EDGE_E, EDGE_S, EDGE_N = 1, 2, 4, 8
@@ -256,8 +256,8 @@ def _lean_set(fr: _Frame, key, ts: TileletSet, morph: bool, exact_full_resolutio
     if exact_full_resolution:
         return replace(ts, dropped=dropped)
     level0 = m == 0                                     # edges W, E, S, N: the SE cell's are E and S, the NW's W and N
-    turns = np.column_stack([np.where(level0 & (dropped & 6 == 0), np.maximum(am[:, 1], am[:, 2]), 0.0),
-                             np.where(level0 & (dropped & 9 == 0), np.maximum(am[:, 0], am[:, 3]), 0.0)])
+    turns = np.column_stack([np.where(level0 & (dropped & 6 == 0), turn_factor(np.maximum(am[:, 1], am[:, 2])), 0.0),
+                             np.where(level0 & (dropped & 9 == 0), turn_factor(np.maximum(am[:, 0], am[:, 3])), 0.0)])
     return replace(ts, dropped=dropped, turns=turns)
 
 

@@ -52,8 +52,9 @@ uniform uint table1_start;      // work[]: where pass 1's work table starts
 // Lean full resolution (raster.tilelets, full_res "lean"): full-resolution leaves drop edge midpoints by their
 // side errors as every other leaf does, and a level-0 leaf's SE and NW cells turn from the reference's diagonal
 // to the fan's through a post at the cell's centre, morphed from the mean of the one diagonal's ends to the
-// other's as the cell's midpoints morph (its turn: the larger of their morph factors), so that a drop never moves
-// the surface in one frame: 4 triangles a turning cell, at most 12 a leaf.
+// other's as the cell's midpoints morph (its turn: the larger of their morph factors from TURN_FROM to 1, where
+// the midpoint drops; raster.morph.turn_factor), so that a drop never moves the surface in one frame: 4 triangles
+// a turning cell, at most 12 a leaf.
 #define LEAF_VERTICES 11u
 #define LEAF_INDICES 36u
 #define LEAF_RECORD_WORDS 15u
@@ -315,7 +316,8 @@ void emit_leaf(int m, int a, int b) {
     uint idx = cmd[CMD0 + BASE_WORD] + reserve(0, 5, 1);
     vec2 turn = vec2(0.0);          // LEAN_FULL_RES: the SE and NW cells' turns (0: the reference's diagonal)
 #ifdef LEAN_FULL_RES
-    if (m == 0) turn = vec2((drop & 6) == 0 ? max(am[1], am[2]) : 0.0, (drop & 9) == 0 ? max(am[0], am[3]) : 0.0);
+    if (m == 0) turn = clamp((vec2((drop & 6) == 0 ? max(am[1], am[2]) : 0.0, (drop & 9) == 0 ? max(am[0], am[3]) : 0.0)
+                              - TURN_FROM) / (1.0 - TURN_FROM), 0.0, 1.0);
 #endif
     if (write_mesh) put_mesh(idx, m, j0, i0, k, drop, h, turn);
     add_total(0, uint(8 - bitCount(drop) + 2 * int(turn.x > 0.0) + 2 * int(turn.y > 0.0)));

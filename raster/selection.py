@@ -21,6 +21,7 @@ from hybrid.gl.textures import terrain_texture
 from .arena import LeafArena
 from .frame_items import COMMANDS_PER_ITEM, CONTROL_WORDS, LOCAL, FrameItems
 from .heap import TileHeap
+from .morph import TURN_FROM
 from .nodes import nodes_for, pending_cut, tile_levels, tile_node_block
 from .quadtree import GPU_BETA, check_full_res
 from .tileblock import BLOCK, CONSTANT_WORDS, MAX_STARTS, STARTS_FOUND, STARTS_HEIGHTS, STARTS_SEGMENTS, \
@@ -33,7 +34,7 @@ FRAME_FIELDS = ("triangles", "tilelets", "tilelets_culled", "skirt_segments", "a
 
 def full_res_defines(full_res: str) -> dict:
     """The shader defines of a full-resolution rule (select.comp.glsl, leaf.vert.glsl, tilelet.geom.glsl)."""
-    return {"LEAN_FULL_RES": 1} if full_res == "lean" else {}
+    return {"LEAN_FULL_RES": 1, "TURN_FROM": f"{TURN_FROM!r}"} if full_res == "lean" else {}
 
 
 def level_starts(n: int) -> np.ndarray:

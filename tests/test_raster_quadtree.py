@@ -122,6 +122,25 @@ def test_morph_off_gives_zero_alpha_and_bad_input(puget257):
         error_pyramid(np.zeros((5, 5), np.float32), beta=1.5)
 
 
+def test_a_cell_turns_late_in_its_midpoints_morph_and_completes_at_the_drop(puget257):
+    """Lean full-resolution leaves: a cell's turn is 0 until the larger morph factor of its midpoints passes
+    TURN_FROM and reaches 1 exactly where the midpoint drops (morph 1), rising steadily between; a Puget frame's
+    full-resolution tiles in the CPU mirror have cells turning, each turn within [0, 1]."""
+    from raster.morph import TURN_FROM, turn_factor
+    a = np.linspace(0.0, 1.0, 201)
+    t = turn_factor(a)
+    assert np.all(t[a <= TURN_FROM] == 0.0) and t[-1] == 1.0 and np.all(np.diff(t[a >= TURN_FROM]) > 0)
+    assert np.abs(np.diff(t)).max() <= 1.01 * (a[1] - a[0]) / (1.0 - TURN_FROM)       # no step
+    view = border_views(puget257)[0]
+    pyr = TilePyramid(puget257, 64)
+    sel = [s for s in select_tiles(pyr, view) if s.key.level == 0]
+    lods = [TileLod(s.key, error_pyramid(pyr.tile(s.key).heights, 0.5), 2 / 3 * s.distance / view.pixels_per_radian)
+            for s in sel]
+    sets = restrict_frame(lods, morph=True, use_effective=True, lean=True, exact_full_resolution=False)
+    turns = np.concatenate([ts.turns.ravel() for ts in sets.values()])
+    assert turns.min() >= 0.0 and turns.max() <= 1.0 and (turns > 0).any()
+
+
 def test_triangle_estimate_follows_the_drawn_count(ctx, puget_full):
     """The cost model's triangle estimate (small nodes at their block's distance, large ones at their own box's)
     follows what the GPU selection draws (a distance per node) per frame and per tile, near tiles included, and
