@@ -99,7 +99,7 @@ def test_converges_to_the_reference(renderers):
         res = rs["raster"].render(view, tau=0.05, mode="shaded")
         assert p99(res, rf) <= 1e-4, (name, p99(res, rf))
         # lean full-resolution leaves drop midpoints within the bound: fewer triangles, and the same convergence
-        # reached at a smaller tau (here 1.7-2.4e-4 at 0.05 px, 5e-7-6.2e-5 at 0.02)
+        # reached at a smaller tau (here 1.7-2.4e-4 at 0.05 px, 4e-7-6.1e-5 at 0.02)
         lean = rs["raster"].render(view, tau=0.05, mode="shaded", full_res="lean")
         assert lean.stats.counters["triangles"] < res.stats.counters["triangles"]
         assert p99(res, rf) < p99(lean, rf) <= 1e-3
