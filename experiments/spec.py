@@ -42,7 +42,7 @@ from pathlib import Path
 from typing import get_args
 
 from hybrid.camera.view import parse_size
-from hybrid.contract import FULL_RES, TILELET_POLICIES, Method
+from hybrid.contract import DEFAULT_FULL_RES, FULL_RES, TILELET_POLICIES, Method
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.sources import TerrainSource
 
@@ -65,7 +65,7 @@ class Spec:
     taus: list = field(default_factory=lambda: [2 / 3])
     sizes: list = field(default_factory=lambda: ["640x360"])
     reconstructions: list = field(default_factory=lambda: ["triangles"])
-    full_res: list = field(default_factory=lambda: ["exact"])
+    full_res: list = field(default_factory=lambda: [DEFAULT_FULL_RES])
     repeats: int = 3
     seeds: list = field(default_factory=lambda: [0])
     tile_size: int = 256
@@ -109,10 +109,14 @@ class Spec:
 
     def same_as(self, stored: dict) -> bool:
         """Whether a stored plain form (a run folder's spec.json) is this spec; keys it lacks (added to specs since
-        it was written) count as their defaults."""
+        it was written) count as what runs did before them (``BEFORE_KEYS``), else as their defaults."""
         here = json.loads(json.dumps(self.to_dict()))
         defaults = json.loads(json.dumps(Spec(name=self.name).to_dict()))
-        return {**defaults, **stored} == here
+        return {**defaults, **BEFORE_KEYS, **stored} == here
+
+
+BEFORE_KEYS = {"full_res": ["exact"]}
+"""Spec keys added since runs were first written, with what those runs did: a spec.json without the key."""
 
 
 def _list(d, key, kind, check=None):

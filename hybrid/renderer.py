@@ -24,7 +24,7 @@ from collections import OrderedDict
 import numpy as np
 
 from hybrid.camera.view import View
-from hybrid.contract import CANDIDATES, MIXED_POLICIES, POLICIES, FrameStats, TileItem
+from hybrid.contract import CANDIDATES, DEFAULT_FULL_RES, MIXED_POLICIES, POLICIES, FrameStats, TileItem
 from hybrid.cost.choice import best_assignment
 from hybrid.cost.fit import estimate_overhead
 from hybrid.cost.model import CostModel, load_cost_model
@@ -77,7 +77,7 @@ class Renderer:
         self.strategies = {n: make_strategy(n, ctx, hf) for n in (CANDIDATES if self.mixed else (policy,))}
         self.options = route_options(self.strategies, options)
         self.model = cost_model or (load_cost_model(gl_info(ctx).renderer) if self.mixed else None)
-        self.triangles = triangle_estimator(self.pyramid, full_res=options.get("full_res", "exact")) \
+        self.triangles = triangle_estimator(self.pyramid, full_res=options.get("full_res", DEFAULT_FULL_RES)) \
             if self.mixed else None
         if self.triangles is not None and upload_budget_ms is not None and hasattr(self.pyramid, "request"):
             self.triangles.background = True             # blocks still to cut: the store's loader thread cuts them

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hybrid.camera.view import View
+from hybrid.contract import DEFAULT_FULL_RES
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.stored import StoredTerrain
 from hybrid.tiles.pyramid import TileKey, TilePyramid
@@ -291,7 +292,8 @@ class TileletTriangleEstimator:
     (hybrid.contract.FULL_RES; "lean": level-0 tiles' leaves counted as every other tile's).
     """
 
-    def __init__(self, pyramid: TilePyramid, beta: float = GPU_BETA, lean: bool = True, full_res: str = "exact"):
+    def __init__(self, pyramid: TilePyramid, beta: float = GPU_BETA, lean: bool = True,
+                 full_res: str = DEFAULT_FULL_RES):
         self.pyramid = pyramid
         self.beta, self.lean, self.exact = float(beta), bool(lean), check_full_res(full_res) == "exact"
         self._rows = _Rows(MAX_TILES)

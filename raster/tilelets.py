@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from hybrid.contract import DEFAULT_FULL_RES
 from hybrid.gl.edges import TerrainEdges
 from hybrid.gl.programs import program
 from hybrid.gl.shading import resolve_mode
@@ -121,7 +122,7 @@ class TileletDrawing(TileletSelection):
     def draw_tiles(self, target, view, items, tau: float | None = None, mode: str | None = None,
                    wireframe: bool = False, morph: bool = True, stitching: bool = True, lean: bool = True,
                    culling: bool = True, leaf_tau: float | None = None, skirts: dict | None = None,
-                   full_res: str = "exact", lod_eye=None) -> dict:
+                   full_res: str = DEFAULT_FULL_RES, lod_eye=None) -> dict:
         """Select and draw (gpu_tile, tile, selected) items into target at tau px (``leaf_tau`` overrides it).
 
         ``skirts`` {tile key: edge bits} are selected here and drawn by ``draw_skirts``, which the renderer

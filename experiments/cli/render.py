@@ -7,7 +7,7 @@ from typing import get_args
 
 import numpy as np
 
-from hybrid.contract import FULL_RES, TILELET_POLICIES, Method
+from hybrid.contract import DEFAULT_FULL_RES, FULL_RES, TILELET_POLICIES, Method
 from hybrid.errors import TerrabenchError
 from hybrid.strategies import STRATEGIES
 
@@ -47,7 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-lean", dest="lean", action="store_false",
                    help="raster, raster_gs (and their tiles in mixed policies): every leaf keeps the edge midpoints "
                         "that only lean leaves drop (those no finer neighbour and no near split needs)")
-    p.add_argument("--full-res", choices=FULL_RES, default="exact",
+    p.add_argument("--full-res", choices=FULL_RES, default=DEFAULT_FULL_RES,
                    help="raster, raster_gs (and their tiles in mixed policies): full-resolution leaves keep every "
                         "midpoint, cells split as the reference's (exact), or drop them by their errors as other "
                         "leaves do (lean: fewer triangles, slower convergence to the reference as tau falls)")
