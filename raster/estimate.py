@@ -14,7 +14,6 @@ missed the cache at nearly every step); a frame's tiles are then estimated toget
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -23,14 +22,14 @@ from hybrid.contract import DEFAULT_FULL_RES
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.stored import StoredTerrain
 from hybrid.tiles.pyramid import TileKey, TilePyramid
-from hybrid.tiles.sidecodes import decoded_sides, holds_side_codes, per_child
+from hybrid.tiles.sidecodes import holds_side_codes
 from hybrid.tiles.tiletree import SelectedTile
 
 from .nodes import nodes_for, pending_cut, tile_node_block
 from .split_tables import TABLE_BINS, SplitTables, kind_splits, split_tables
-from .quadtree import GPU_BETA, check_full_res, error_pyramid
+from .quadtree import GPU_BETA, check_full_res
+from .tile_nodes import KINDS, TileNodes, block_tile_nodes, tile_nodes
 
-BLOCKS = 4                      # blocks a tile side for the small nodes' distances
 MAX_TILES = 4096                # tiles whose TileNodes are kept (least recently used first out)
 NEAR_TRIANGLES = 7              # a lean leaf near its split draws this many more than 4 (fitted to Puget flights:
                                 # 0.86-1.31x the drawn count a frame; 8 if no neighbour shared its midpoints)
@@ -38,144 +37,26 @@ NEAR_SIDE_TRIANGLES = 1.5       # with side errors: a leaf side near its midpoin
 SPLIT1_TRIANGLES = 8            # neighbour's) more, and a split level-1 node of a full-resolution tile 4 leaves that
                                 # keep their midpoints; both fitted to Puget's flyover, orbit and dolly (tiles of
                                 # 128, 320x180, 2/3 px, eight views): 0.98-1.14x the drawn count a frame, per-tile
-                                # median 0.98x (coarser levels' tiles 0.95x)
+                                # median 0.98x (coarser levels' tiles 0.95x). 8 below the 16 drawn: level-1 nodes
+LEAN_SPLIT1_TRIANGLES = -8      # tested at their block's nearest distance split more often than drawn, in the lean
+                                # rule too, whose split level-1 nodes add none (least squares over 24 such views at
+                                # 2/3 and 2 px: -7.5; its full-resolution tiles' median error 0.16 -> 0.08)
 
 
-@dataclass(frozen=True)
-class TileNodes:
-    """What the estimate needs of one tile's quadtree (metres, world frame): errors and where the nodes are.
-
-    fine: effective errors of the nodes no larger than a block, one row per block (row-major, BLOCKS² blocks;
-    every block holds as many); lean: the same with the level-0 nodes (which never split, but keep their edge
-    midpoints near their own split), but 0 in a full-resolution tile, whose level-0 leaves keep every midpoint;
-    split1: there, the level-1 nodes' errors (a split one makes four such leaves), else zeros; coarse_error: the
-    larger nodes below the root; box_lo/hi: the blocks' boxes, then the larger nodes' grown boxes (BLOCKS² +
-    coarse, 3); root: 1 where the tile's root can split. With side errors (``sides`` 4), lean holds each small
-    node's four sides instead, as min(side error, beta times the parent's effective error), so that a side
-    counts where its midpoint is near (side error above beta times the tolerance) and the parent splits (0 for a
-    full-resolution tile's level 0, as above).
-    """
-
-    fine: np.ndarray
-    lean: np.ndarray
-    split1: np.ndarray
-    coarse_error: np.ndarray
-    box_lo: np.ndarray
-    box_hi: np.ndarray
-    root: int
-    sides: int = 1
-
-    @property
-    def boxes(self) -> np.ndarray:
-        """The boxes as (6, blocks + coarse): (hi, lo) corners' coordinates, as ``estimate_rows`` reads them."""
-        return np.concatenate([self.box_hi, self.box_lo], axis=1).T
-
-
-def tile_nodes(tile, beta: float = GPU_BETA, full_res: bool = False) -> TileNodes:
-    """The estimate's data of one pyramid tile (``hybrid.tiles.pyramid.Tile``: heights, origin, spacing), from
-    its own heights' error pyramid in the combined form (both fans in one error: the tiles built this way are a
-    store's prepared before side errors); ``full_res``: a level-0 tile."""
-    pyr = error_pyramid(tile.heights, beta, side_errors=False)
-    return _tile_nodes(pyr.effective, pyr.zmin, pyr.zmax, tile.n, tile.origin, (tile.spacing_x, tile.spacing_y),
-                       full_res)
-
-
-def block_tile_nodes(data: np.ndarray, offsets: np.ndarray, n: int, origin, spacing,
-                     full_res: bool = False, beta: float = GPU_BETA) -> TileNodes:
-    """The estimate's data of an n-cell tile at world ``origin`` with ``spacing`` (x, y) metres, from its node
-    block (``raster.nodes.tile_node_block``): the saturated errors and grown box ranges the GPU selection reads
-    (from a tile store, one read and no error pyramid)."""
-    grids = [data[offsets[m]:offsets[m + 1]].reshape((n >> (m + 1)) + 2, (n >> (m + 1)) + 2, 4)[1:-1, 1:-1]
-             for m in range(len(offsets) - 1)]
-    effective = [g[..., 0].astype(np.float64) for g in grids]
-    sides = None
-    if any(np.any(g[..., 3] > 1.0) for g in grids):          # side codes (``hybrid.tiles.sidecodes``)
-        parents = [data[offsets[m + 1]:offsets[m + 2]].reshape((n >> (m + 2)) + 2, -1, 4)[1:-1, 1:-1, 0]
-                   if m + 1 < len(grids) else None for m in range(len(grids))]
-        sides = [decoded_sides(g[..., 3], p) for g, p in zip(grids, parents)]
-    return _tile_nodes(effective, [g[..., 1] for g in grids], [g[..., 2] for g in grids], n, origin, spacing,
-                       full_res, sides, beta)
-
-
-def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing, full_res: bool = False, sides=None,
-                beta: float = GPU_BETA) -> TileNodes:
-    """TileNodes from per local level effective errors, height ranges (metres above the origin z) and, where the
-    nodes have them, side errors ((4, ...) per level, metres, at least the effective error)."""
-    top = len(effective) - 1
-    nb = max(1, min(BLOCKS, n // 8))
-    cells = n // nb                                              # block side, tile cells
-    org = np.asarray(origin, dtype=np.float64)
-    sp = np.asarray(spacing, dtype=np.float64)
-    fine, coarse_e, coarse_lo, coarse_hi = [np.zeros((nb * nb, 0))], [], [], []
-    for m in range(0, top):
-        side = 2 << m                                            # node side, tile cells
-        e = effective[m]
-        a, b = np.indices(e.shape)
-        if side <= cells:                                        # (block, node in block): blocks hold equal shares
-            per = cells // side
-            fine.append(np.asarray(e, np.float64).reshape(nb, per, nb, per).transpose(0, 2, 1, 3).reshape(nb * nb, -1))
-        else:
-            lo_xy = org[:2] + np.stack([(b - 1) * side, (a - 1) * side], -1).reshape(-1, 2) * sp
-            hi_xy = org[:2] + np.stack([(b + 2) * side, (a + 2) * side], -1).reshape(-1, 2) * sp
-            coarse_e.append(e.ravel())
-            coarse_lo.append(np.column_stack([lo_xy, org[2] + zmin[m].ravel()]))
-            coarse_hi.append(np.column_stack([hi_xy, org[2] + zmax[m].ravel()]))
-    by, bx = np.divmod(np.arange(nb * nb), nb)
-    # block heights: the level-1 nodes' ranges reduced over each block (level 1 covers every sample)
-    z1lo, z1hi = zmin[min(1, top)], zmax[min(1, top)]
-    per = z1lo.shape[0] // nb
-    zlo = z1lo.reshape(nb, per, nb, per).min(axis=(1, 3)).ravel()
-    zhi = z1hi.reshape(nb, per, nb, per).max(axis=(1, 3)).ravel()
-    block_lo = np.column_stack([org[0] + bx * cells * sp[0], org[1] + by * cells * sp[1], org[2] + zlo])
-    block_hi = np.column_stack([org[0] + (bx + 1) * cells * sp[0], org[1] + (by + 1) * cells * sp[1], org[2] + zhi])
-
-    def cat(parts, dtype, width=None):
-        if parts:
-            return np.concatenate(parts).astype(dtype)
-        return np.zeros((0,) if width is None else (0, width), dtype)
-    empty = np.zeros((nb * nb, 0))
-    level0, rest = (fine[1], fine[2:]) if len(fine) > 1 else (empty, [])
-    above = np.concatenate([empty, *rest], axis=1)
-    level1 = rest[0] if rest else empty
-    lean = np.concatenate([np.zeros_like(level0) if full_res else level0, above], axis=1)   # errors 0 never count
-    split1 = level1 if full_res else np.zeros_like(level1)
-    if sides is not None:
-        lean = _lean_sides(effective, sides, len(fine) - 1, nb, beta)
-        if full_res:                                             # level-0 leaves keep every midpoint: split1's
-            lean[:, :4 * level0.shape[1]] = 0.0
-    return TileNodes(above, lean, split1, cat(coarse_e, np.float64),
-                     np.concatenate([block_lo, cat(coarse_lo, np.float64, 3)]),
-                     np.concatenate([block_hi, cat(coarse_hi, np.float64, 3)]), int(top >= 1),
-                     1 if sides is None else 4)
-
-
-def _lean_sides(effective, sides, levels: int, nb: int, beta: float) -> np.ndarray:
-    """(blocks, 4 x small nodes) of min(side error, beta E of the parent) for the small levels 0 .. levels-1."""
-    out = []
-    for m in range(levels):
-        parent = effective[m + 1] if m + 1 < len(effective) else np.full((1, 1), np.inf)
-        v = np.minimum(sides[m], beta * per_child(parent))
-        v[np.isinf(v)] = 0.0                                     # a tile's root: split by the tile tree
-        per = v.shape[1] // nb
-        out.append(v.reshape(4, nb, per, nb, per).transpose(1, 3, 0, 2, 4).reshape(nb * nb, -1))
-    return np.concatenate(out, axis=1)
-
-
-KINDS = ("fine", "lean", "split1")   # the small-node error sets a tile keeps (``TileNodes`` fields), one table each
 
 
 def estimate_rows(tables: SplitTables, rows: np.ndarray, coarse: np.ndarray, boxes: np.ndarray, root: np.ndarray, eye,
-                  k_tau: float, planes=None, inside=None, lean: bool = True,
-                  beta: float = GPU_BETA, sides=1) -> tuple[np.ndarray, np.ndarray]:
+                  k_tau: float, planes=None, inside=None, lean: bool = True, beta: float = GPU_BETA, sides=1,
+                  split1_triangles=(SPLIT1_TRIANGLES, 16)) -> tuple[np.ndarray, np.ndarray]:
     """(triangles (B,), visible share (B,)) of B tiles' quadtrees for an eye (world metres) and K / tau (pixels per
     radian over tau), and the share in [0, 1] of their splits in blocks or large nodes inside the frustum
     ``planes`` (eye-relative, as View's; None: all). Without ``lean``: 8 triangles a leaf (a split adds 3
     leaves). With it (the small nodes' lean tables, level 0 included), as lean leaves draw: 4 a leaf, and
     ``NEAR_TRIANGLES`` more for each leaf near its own split (its tolerance below E / beta): it keeps its edge
     midpoints, each a triangle on both sides, and near leaves lie together, sharing some; the split1 tables count
-    full-resolution tiles' split level-1 nodes, whose four leaves draw 8 each. Rows whose nodes have side errors
-    (``sides`` (B,) 4, else 1) count their leaves' near sides instead, ``NEAR_SIDE_TRIANGLES`` each, and a split
-    level-1 node of a full-resolution tile ``SPLIT1_TRIANGLES``.
+    full-resolution tiles' split level-1 nodes, each ``split1_triangles`` more (with side errors, without: the
+    exact rule's four leaves draw 8 each, 16; the lean rule's ``LEAN_SPLIT1_TRIANGLES``, 0). Rows whose nodes have
+    side errors (``sides`` (B,) 4, else 1) count their leaves' near sides instead, ``NEAR_SIDE_TRIANGLES`` each.
 
     The tiles are rows of stacked ``TileNodes``: ``tables`` the small nodes' ``split_tables`` of every kind, of
     which ``rows`` (B,) are the tiles'; coarse (B, C) errors; boxes (B, 6, blocks + C) as (hi, lo) corners in world
@@ -210,7 +91,7 @@ def estimate_rows(tables: SplitTables, rows: np.ndarray, coarse: np.ndarray, box
     weight = np.where(np.asarray(sides) == 4, 4 * NEAR_SIDE_TRIANGLES, NEAR_TRIANGLES)
     # a split level-1 node of a full-resolution tile: four leaves that keep their midpoints, four more each (fitted
     # with side errors)
-    split1 = np.where(np.asarray(sides) == 4, SPLIT1_TRIANGLES, 16)
+    split1 = np.where(np.asarray(sides) == 4, *split1_triangles)
     return np.rint(4 * leaves + weight * near + split1 * per_kind[:, 1]).astype(np.int64), visible
 
 
@@ -295,7 +176,7 @@ class TileletTriangleEstimator:
     def __init__(self, pyramid: TilePyramid, beta: float = GPU_BETA, lean: bool = True,
                  full_res: str = DEFAULT_FULL_RES):
         self.pyramid = pyramid
-        self.beta, self.lean, self.exact = float(beta), bool(lean), check_full_res(full_res) == "exact"
+        self.beta, self.lean, self.full_res = float(beta), bool(lean), check_full_res(full_res)
         self._rows = _Rows(MAX_TILES)
         self.build_ms, self.builds = 0.0, 0
         self.background = False
@@ -326,9 +207,9 @@ class TileletTriangleEstimator:
         if source is not None:                                  # the block the GPU reads (cut here if need be)
             data, offsets = tile_node_block(source, key.level, key.tx, key.ty, self.pyramid.n)
             nodes = block_tile_nodes(data, offsets, self.pyramid.n, *self.pyramid.placement(key),
-                                     self.exact and key.level == 0, self.beta)
+                                     self.full_res if key.level == 0 else None, self.beta)
         else:
-            nodes = tile_nodes(self.pyramid.tile(key), self.beta, self.exact and key.level == 0)
+            nodes = tile_nodes(self.pyramid.tile(key), self.beta, self.full_res if key.level == 0 else None)
         r = self._rows.put(key, nodes)
         self.builds += 1
         self.build_ms += (time.perf_counter() - t0) * 1e3
@@ -378,7 +259,8 @@ class TileletTriangleEstimator:
             return np.full(len(rows), np.nan), np.full(len(rows), np.nan)
         est = estimate_rows(self._rows.tables, r, a["coarse_error"][r], a["boxes"][r], a["root"][r], view.eye,
                             float(view.pixels_per_radian) / tau, view.frustum_planes_rel(),
-                            None if inside is None else inside[ok], self.lean, self.beta, a["sides"][r])
+                            None if inside is None else inside[ok], self.lean, self.beta, a["sides"][r],
+                            (SPLIT1_TRIANGLES, 16) if self.full_res == "exact" else (LEAN_SPLIT1_TRIANGLES, 0))
         if len(r) == len(rows):
             return est[0].astype(np.float64), est[1]
         tri, vis = np.full(len(rows), np.nan), np.full(len(rows), np.nan)

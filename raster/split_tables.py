@@ -21,11 +21,11 @@ def _bins(x: np.ndarray, nearest: bool = False) -> np.ndarray:
 
 def split_tables(errors: list[np.ndarray]) -> tuple[int, np.ndarray]:
     """(base bin, (kinds, blocks, ``TABLE_BINS``) int64 table) of a tile's small-node errors, one (blocks, nodes)
-    array (metres) per kind (``raster.estimate.KINDS``): entry i of a block's row counts its nodes whose error, rounded to the
-    nearest bin edge, is at least the edge of bin base + 1 + i, so that for a threshold t in bin j = base + i
-    (``kind_splits``) it counts the nodes whose rounded error exceeds t. An error <= 0 never splits and is not
-    counted; one more than 20 octaves below the tile's largest is counted as that floor (only a threshold
-    below it sees the difference)."""
+    array (metres) per kind (``raster.tile_nodes.KINDS``): entry i of a block's row counts its nodes whose error,
+    rounded to the nearest bin edge, is at least the edge of bin base + 1 + i, so that for a threshold t in bin
+    j = base + i (``kind_splits``) it counts the nodes whose rounded error exceeds t. An error <= 0 never splits
+    and is not counted; one more than 20 octaves below the tile's largest is counted as that floor (only a
+    threshold below it sees the difference)."""
     nb = errors[0].shape[0]
     rounded = [_bins(np.maximum(e, 0.0), nearest=True) for e in errors]
     positive = [e > 0 for e in errors]
