@@ -27,10 +27,11 @@ MAX_COLS = 4             # panels a row
 
 def label_columns(frames: pd.DataFrame) -> pd.DataFrame:
     """Add 'method' (policy, plus tau / reconstruction / full-resolution rule where the run varies them; 'full_res'
-    "exact" where a run's rows lack it) and 'scene' columns; a run timed on several devices (a cluster) gets the device in its scene, so no chart or sentence
-    compares frame times across devices."""
+    "exact" where a run's rows lack it) and 'scene' columns; a run timed on several devices (a cluster) gets the
+    device in its scene, so no chart or sentence compares frame times across devices."""
     f = frames.copy()
-    # runs from before specs had full_res (and their rows in a resumed run) drew by the exact rule
+    # runs from before specs had full_res (and their rows in a resumed run) drew by the exact rule, as
+    # experiments.spec.BEFORE_KEYS says (not imported: spec imports stress, which imports this module)
     f["full_res"] = f["full_res"].fillna("exact") if "full_res" in f else "exact"
     many_tau = f["tau"].nunique() > 1
     many_rec = f["reconstruction"].nunique() > 1

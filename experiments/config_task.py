@@ -209,7 +209,7 @@ def _open(spec: Spec, r: _ConfigRun, state: TaskState, hf, views) -> None:
     c, model = r.c, state.cost_model
     r.renderer = make_renderer(state.ctx, hf, c["policy"], tile_size=spec.tile_size,
                                reconstruction=c["reconstruction"], budget_bytes=spec.gpu_budget_mib << 20,
-                               full_res=c.get("full_res", "exact"),
+                               full_res=c["full_res"],
                                upload_budget_ms=spec.upload_budget_ms,
                                **({"cost_model": model} if model is not None and c["policy"] in MIXED else {}))
     for k in range(r.todo[0]):

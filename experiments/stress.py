@@ -23,8 +23,8 @@ from hybrid.terrain.heightfield import HeightField
 SCENES = ("spike", "cliff", "staircase", "ridges", "flat", "puget", "puget_x100")
 VIEWS = ("grazing", "down", "inside_aabb", "below", "axis_x", "axis_y", "origin", "offset_1e6", "offset_1e7",
          "near_far")
-METHODS = ("raster", "raster_gs", "raster/lean", "raycast/planes", "raycast/linear", "raycast/triangles", "raycast/bilinear", "hybrid",
-           "fullres", "tin")
+METHODS = ("raster", "raster_gs", "raster/lean", "raycast/planes", "raycast/linear", "raycast/triangles",
+           "raycast/bilinear", "hybrid", "fullres", "tin")
 
 
 def make_scene(name: str, size: int = 257) -> HeightField:
@@ -98,7 +98,7 @@ def stress_view(hf: HeightField, kind: str, width: int = 320, height: int = 180,
     raise TerrabenchError(f"unknown stress view {kind!r}; choose from {', '.join(VIEWS)}")
 
 
-def _renderer(ctx, hf, method: str, tile_size: int):
+def method_renderer(ctx, hf, method: str, tile_size: int):
     """A method's renderer: POLICY, raycast/RECONSTRUCTION, or raster/FULL_RES (a full-resolution rule)."""
     from hybrid.contract import FULL_RES
     from hybrid.renderer import make_renderer
@@ -166,7 +166,7 @@ def run_stress(ctx, scenes=SCENES, views=VIEWS, methods=METHODS, size: int = 257
                 row = {"scene": sc, "view": vk, "method": m, "eye_clearance_m": clear,
                        "user_refused": eye_too_low(clear, view)}
                 try:
-                    r = _renderer(ctx, hf, m, tile_size)
+                    r = method_renderer(ctx, hf, m, tile_size)
                     try:
                         row.update(measure(r.render(view), ref))
                     finally:

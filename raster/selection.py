@@ -182,11 +182,10 @@ class TileletSelection:
         for prog in self.passes:
             self.uniforms.set(prog, name, value)
 
-    def frame_blocks(self, view, items, tau: float, culling: bool = True, skirts: dict | None = None,
-                     lod_eye: np.ndarray | None = None):
+    def frame_blocks(self, view, items, tau: float, culling: bool, skirts: dict | None, lod_eye: np.ndarray):
         """The frame's per-item shader blocks (raster.tileblock) with the selection's fields, uploaded; and each
-        item's pass-0 work groups (from ``lod_eye``, world metres, default the view's eye). What a tile's block
-        holds whatever the view was made at its upload."""
+        item's pass-0 work groups (from ``lod_eye``, world metres). What a tile's block holds whatever the view was
+        made at its upload."""
         gs = [g for g, _, _ in items]
         g0 = gs[0]                                        # every item has g0's cell count (select_leaves)
         numbers = np.frombuffer(bytearray(b"".join([g.numbers for g in gs])), np.float64).reshape(len(gs), -1)
@@ -196,7 +195,7 @@ class TileletSelection:
                 constants[i] = tile_constants(t)
         blocks = view_fields(np.frombuffer(bytearray(b"".join([g.block for g in gs])), BLOCK), view, constants,
                              [s for _, _, s in items], skirts, culling)
-        eye_local = np.asarray(view.eye if lod_eye is None else lod_eye, dtype=np.float64) - constants[:, 0:3]
+        eye_local = lod_eye - constants[:, 0:3]
         bounds = numbers[:, CONSTANT_WORDS:].reshape(len(gs), -1, 7)
         first = g0.starts[first_levels(bounds, eye_local, float(view.pixels_per_radian) / float(tau))]
         groups0 = (int(g0.starts[-1]) - first + LOCAL - 1) // LOCAL

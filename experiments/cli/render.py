@@ -55,7 +55,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def draw_options(method: str, tau: float, shading=None, reconstruction="triangles", traversal="maxmip",
-                 prepass=None, lod=False, shadows=False, wireframe=False, lean=True, full_res="exact") -> dict:
+                 prepass=None, lod=False, shadows=False, wireframe=False, lean=True,
+                 full_res=DEFAULT_FULL_RES) -> dict:
     """Strategy draw options for a method (only those asked for, so the rest stay the strategy's defaults)."""
     opts = {}
     if shading:
@@ -82,7 +83,7 @@ def draw_options(method: str, tau: float, shading=None, reconstruction="triangle
             raise TerrabenchError("--no-lean applies to raster, raster_gs and the mixed policies (hybrid, heuristic, "
                                   "oracle)")
         opts["lean"] = False
-    if full_res != "exact":
+    if full_res != DEFAULT_FULL_RES:
         if method not in TILELET_POLICIES:
             raise TerrabenchError("--full-res applies to raster, raster_gs and the mixed policies (hybrid, heuristic, "
                                   "oracle)")
@@ -95,7 +96,7 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
         tile_size: int = 256, reconstruction: str = "triangles", traversal: str = "maxmip",
         prepass: bool | None = None,
         lod: bool = False, shadows: bool = False, wireframe: bool = False, show_strategy: bool = False,
-        device: int | None = None, lean: bool = True, full_res: str = "exact"):
+        device: int | None = None, lean: bool = True, full_res: str = DEFAULT_FULL_RES):
     """Render one view with a method; write out (.png) and its .depth.npy; returns the RenderResult."""
     from hybrid.gl.context import shared_context
     from hybrid.gl.target import check_png_path
