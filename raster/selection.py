@@ -229,9 +229,12 @@ class TileletSelection:
         ns = sorted({g.n for g, _, _ in items})
         if len(ns) > 1:
             raise TerrabenchError(f"a frame's raster tiles must have one cell count, got {ns}")
-        lod_eye = np.asarray(view.eye if lod_eye is None else lod_eye, dtype=np.float64)
-        if lod_eye.shape != (3,) or not np.isfinite(lod_eye).all():
-            raise TerrabenchError(f"lod_eye must be three finite metres (x, y, z), got {lod_eye.tolist()}")
+        if lod_eye is None:
+            lod_eye = np.asarray(view.eye, dtype=np.float64)
+        else:                                             # a view's eye is checked where the view is made
+            lod_eye = np.asarray(lod_eye, dtype=np.float64)
+            if lod_eye.shape != (3,) or not np.isfinite(lod_eye).all():
+                raise TerrabenchError(f"lod_eye must be three finite metres (x, y, z), got {lod_eye.tolist()}")
         blocks, groups0, table1_start = self.frame_blocks(view, items, tau, culling, skirts, lod_eye)
         planes = view.frustum_planes_rel().astype(np.float32).tobytes()
         for prog in self.passes:
