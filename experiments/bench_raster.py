@@ -2,9 +2,10 @@
 
 1. Triangles against max vertical error on Puget tiles: restricted quadtree (plain errors with full fans, and
    lean: every midpoint no finer neighbour or side error needs dropped; morph-safe errors at beta 0.7; at the GPU
-   strategies' beta with lean leaves, what raster and raster_gs draw; the same with both fans in one error, as a
-   periodic extension's nodes hold them near its seams; and what they draw with full_res "lean": full-resolution
-   leaves lean too, turning cells' two triangles more counted)
+   strategies' beta with lean leaves under full_res "exact" (full-resolution leaves keep every midpoint); the same
+   with both fans in one error, as a periodic extension's nodes hold them near its seams; and what raster and
+   raster_gs draw by default, full_res "lean": full-resolution leaves lean too, turning cells' two triangles more
+   counted)
    vs pymartini (RTIN), pydelatin and fast-simplification, every max error measured the same way.
 2. The GPU leaf selection of a frame's tiles (issued, and finished) and the whole frame with its CPU share:
    planning plus issuing the draw (waits for the GL excluded); on llvmpipe issuing includes the compute
@@ -50,20 +51,20 @@ def triangles_vs_error(tiles, errors=(5.0, 10.0, 20.0, 40.0, 80.0)):
     rows = []
     pyrs = {"quadtree": [error_pyramid(t.heights) for t in tiles]}
     pyrs["quadtree-lean"] = pyrs["quadtree-morph"] = pyrs["quadtree"]
-    pyrs["quadtree-gpu"] = [error_pyramid(t.heights, GPU_BETA) for t in tiles]   # what raster, raster_gs draw
-    pyrs["gpu-full-res-lean"] = pyrs["quadtree-gpu"]
+    pyrs["gpu-full-res-lean"] = [error_pyramid(t.heights, GPU_BETA) for t in tiles]   # what raster, raster_gs draw
+    pyrs["gpu-full-res-exact"] = pyrs["gpu-full-res-lean"]
     pyrs["gpu-combined"] = [error_pyramid(t.heights, GPU_BETA, side_errors=False) for t in tiles]
     n = tiles[0].n
     martini = Martini(n + 1)
     for e in errors:
         res = {}
-        for name in ("quadtree", "quadtree-lean", "quadtree-morph", "quadtree-gpu", "gpu-combined",
+        for name in ("quadtree", "quadtree-lean", "quadtree-morph", "gpu-full-res-exact", "gpu-combined",
                      "gpu-full-res-lean", "martini", "delatin", "fast-simpl"):
             tri, err = 0, 0.0
             for i, t in enumerate(tiles):
                 h = np.asarray(t.heights, dtype=np.float32)
                 if name.startswith(("quadtree", "gpu")):
-                    morph = name in ("quadtree-morph", "quadtree-gpu") or name.startswith("gpu")
+                    morph = name == "quadtree-morph" or name.startswith("gpu")
                     ts = restrict_frame([TileLod((0, 0, 0), pyrs[name][i], e)], morph=morph, use_effective=morph,
                                         lean=name not in ("quadtree", "quadtree-morph"),
                                         exact_full_resolution=name != "gpu-full-res-lean")[(0, 0, 0)]

@@ -18,6 +18,7 @@ from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from hybrid.atomic import atomic_path  # noqa: E402
+from hybrid.contract import TILELET_POLICIES  # noqa: E402
 
 from .noise import median_interval, repeat_matrix  # noqa: E402
 
@@ -41,7 +42,7 @@ def label_columns(frames: pd.DataFrame) -> pd.DataFrame:
         s = r["policy"]
         if many_rec and r["policy"] not in ("raster", "reference", "fullres", "tin"):
             s += f"/{r['reconstruction']}"
-        if many_fr and r["full_res"] != "exact":
+        if many_fr and r["policy"] in TILELET_POLICIES:
             s += f"/{r['full_res']}"
         if many_tau and r["policy"] != "reference":
             s += f" tau={r['tau']:.3g}"

@@ -23,7 +23,7 @@ from hybrid.terrain.heightfield import HeightField
 SCENES = ("spike", "cliff", "staircase", "ridges", "flat", "puget", "puget_x100")
 VIEWS = ("grazing", "down", "inside_aabb", "below", "axis_x", "axis_y", "origin", "offset_1e6", "offset_1e7",
          "near_far")
-METHODS = ("raster", "raster_gs", "raster/lean", "raycast/planes", "raycast/linear", "raycast/triangles",
+METHODS = ("raster", "raster_gs", "raster/exact", "raycast/planes", "raycast/linear", "raycast/triangles",
            "raycast/bilinear", "hybrid", "fullres", "tin")
 
 

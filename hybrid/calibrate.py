@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hybrid.camera.view import View
-from hybrid.contract import CANDIDATES
+from hybrid.contract import CANDIDATES, DEFAULT_FULL_RES
 from hybrid.cost.features import TileFeatures
 from hybrid.cost.fit import FrameSample, TileSample, fit_frames
 from hybrid.cost.model import CostModel, term_values
@@ -91,4 +91,5 @@ def calibrate(ctx, hf: HeightField, views: list[View], tau: float = DEFAULT_TAU,
     times = {n: np.array(t) for n, t in times.items()}
     model = fit_frames(samples, gl_info(ctx).renderer, holdout, seed, CANDIDATES, tile_samples(feats, times))
     model.tiles = len(feats)
+    model.full_res = DEFAULT_FULL_RES               # the rule the renderer above draws raster tiles by
     return Calibration(model, feats, times, frames, samples)

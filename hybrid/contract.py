@@ -38,7 +38,7 @@ midpoints, its cells split SW-NE as the reference's (the image converges to the 
 lets those leaves drop midpoints by their side errors as all others do (fewer triangles at the same bound), their
 SE and NW cells turning diagonal through a morphed centre post (raster/select.comp.glsl LEAN_FULL_RES)."""
 FULL_RES: tuple[str, ...] = get_args(FullRes)
-DEFAULT_FULL_RES: FullRes = "exact"
+DEFAULT_FULL_RES: FullRes = "lean"
 """The rule drawn where none is asked for (strategies, renderers, the estimate, ``render``, specs). Runs and spec
 files written before specs named a rule drew "exact", whatever this default."""
 

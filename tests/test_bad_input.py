@@ -18,7 +18,7 @@ UNWRITABLE = "/proc/terrabench-out"          # not writable, even for root
     (["render", "--out", "OUT/a.png", "--method", "raster", "--shadows"], "--method raycast only"),
     (["render", "--out", "OUT/a.png", "--method", "raycast", "--wireframe"], "raster methods"),
     (["render", "--out", "OUT/a.png", "--method", "raycast", "--no-lean"], "--no-lean applies"),
-    (["render", "--out", "OUT/a.png", "--method", "raycast", "--full-res", "lean"], "--full-res applies"),
+    (["render", "--out", "OUT/a.png", "--method", "raycast", "--full-res", "exact"], "--full-res applies"),
     (["render", "--out", "OUT/a.png", "--method", "raster", "--show-strategy"], "mixed policy"),
     (["render", "--out", "OUT/a.png", "--tile-size", "100"], "power of two"),
     (["render", "--out", "OUT/a.png", "--dataset", "fbm", "--size-samples", "2"], "dataset size"),

@@ -4,7 +4,7 @@ import pytest
 
 from hybrid.calibrate import calibrate
 from hybrid.camera.flight import preset
-from hybrid.contract import CANDIDATES, TileItem
+from hybrid.contract import CANDIDATES, DEFAULT_FULL_RES, TileItem
 from hybrid.cost.model import TERMS
 from hybrid.gl.context import gl_info
 from hybrid.gl.target import FrameTarget
@@ -53,6 +53,7 @@ def test_calibrate_fits_the_tiles_the_renderer_selects(ctx, fbm129, views):
             assert np.isclose(sum(sample.sums[k][0] for k in CANDIDATES), len(frame))
     m = cal.model
     assert m.tiles == n and m.frames == len(cal.samples) and m.renderer == gl_info(ctx).renderer
+    assert m.full_res == DEFAULT_FULL_RES                       # the rule its raster frames were drawn by
     for s in CANDIDATES:
         coef = getattr(m, s)
         assert set(coef) == set(TERMS[s])

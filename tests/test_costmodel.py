@@ -1,5 +1,7 @@
 """The cost model: the fit recovers known coefficients; the choice follows the predicted costs; files round-trip."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -158,10 +160,15 @@ def test_save_load_by_renderer(tmp_path):
     got = load_cost_model("test", p)
     assert got.raster == TRUE.raster and got.raycast == TRUE.raycast and got.raster_gs == TRUE.raster_gs
     fitted = CostModel("fitted", TRUE.raster, TRUE.raycast, raster_gs=TRUE.raster_gs, call_overhead=dict(CALL),
-                       tile_error={"raster": 0.1}, mix_overhead=1.25)
+                       tile_error={"raster": 0.1}, mix_overhead=1.25, full_res="lean")
     save_cost_model(fitted, p)
     again = load_cost_model("fitted", p)
     assert again.call_overhead == CALL and again.tile_error == {"raster": 0.1} and again.mix_overhead == 1.25
+    assert again.full_res == "lean" and "full_res 'lean'" in again.explain()
+    data = json.loads(p.read_text())
+    del data["fitted"]["full_res"]                              # saved before models named their rule
+    p.write_text(json.dumps(data))
+    assert load_cost_model("fitted", p).full_res == "exact"
     shipped = load_cost_model("llvmpipe (LLVM 15.0.6, 256 bits)", p)
     assert "llvmpipe" in shipped.source
     other = load_cost_model("Some Unknown GPU", p)

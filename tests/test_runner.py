@@ -7,6 +7,7 @@ import pytest
 from experiments.report import write_report
 from experiments.runner import run_spec
 from experiments.spec import load_spec, parse_spec
+from hybrid.contract import DEFAULT_FULL_RES, TILELET_POLICIES
 from hybrid.errors import TerrabenchError
 
 TINY = """
@@ -56,7 +57,7 @@ def test_tables_have_expected_rows_and_columns(run):
     assert len(t) == int(h["tiles"].sum())                     # one row per hybrid tile and frame
     assert set(t["strategy"]) <= {"raster", "raster_gs", "raycast"} and t["pred_raycast_ms"].notna().all()
     assert (folder / "images" / "ref-fbm-s0-flyover-160x90-f1.png").exists()
-    assert (folder / "images" / "fbm-s0-flyover-160x90-tau0.6667-triangles-hybrid-f1.strategy.npy").exists()
+    assert (folder / "images" / "fbm-s0-flyover-160x90-tau0.6667-triangles-hybrid-lean-f1.strategy.npy").exists()
 
 
 def test_report_and_charts(run, tmp_path):
@@ -109,7 +110,9 @@ def test_a_run_from_before_full_res_resumes_and_reports(run, ctx, tmp_path):
     stored = json.loads((old / "spec.json").read_text())
     del stored["full_res"]                                   # as runs wrote it before specs had the key
     (old / "spec.json").write_text(json.dumps(stored))
-    assert run_spec(parse_spec(TINY), tmp_path / "runs", ctx, progress=False) == old
+    with pytest.raises(TerrabenchError, match="different spec"):          # it drew by the exact rule
+        run_spec(parse_spec(TINY), tmp_path / "runs", ctx, progress=False)
+    assert run_spec(parse_spec(TINY + 'full_res = ["exact"]\n'), tmp_path / "runs", ctx, progress=False) == old
     frames = pd.read_parquet(old / "frames.parquet")
     frames.drop(columns=["full_res"]).to_parquet(old / "frames.parquet")
     text = write_report(old, tmp_path / "reports").read_text()
@@ -157,7 +160,7 @@ def test_full_resolution_rules_vary_only_tilelet_policies():
                      "raycast": ["exact"], "reference": ["exact"]}
     ids = [c["config"] for c in spec.configs()]
     assert len(set(ids)) == len(ids) and sum(i.endswith("-lean") for i in ids) == 3
-    assert all(c["full_res"] == "exact" for c in parse_spec("").configs())
+    assert {c["full_res"] for c in parse_spec("").configs() if c["policy"] in TILELET_POLICIES} == {DEFAULT_FULL_RES}
 
 
 def test_a_run_compares_both_full_resolution_rules(ctx, tmp_path):
@@ -168,7 +171,7 @@ def test_a_run_compares_both_full_resolution_rules(ctx, tmp_path):
     assert set(frames[frames["policy"] == "raycast"]["full_res"]) == {"exact"}
     assert 0 < tri["lean"] < tri["exact"]                     # full-resolution leaves drop midpoints too
     text = write_report(folder, tmp_path / "reports").read_text()
-    assert "raster/lean" in text and "hybrid/lean" in text
+    assert "raster/lean" in text and "hybrid/lean" in text and "raster/exact" in text
 
 
 def test_a_slow_flight_measures_popping_beside_its_held_floor(ctx, tmp_path):

@@ -9,7 +9,7 @@ from experiments.stress import SCENES, VIEWS, make_scene, run_stress, stress_rea
 from hybrid.reference import ReferenceRenderer
 from hybrid.renderer import make_renderer
 
-METHODS = ("raster", "raster_gs", "raster/lean", "raycast/triangles", "raycast/planes", "hybrid")
+METHODS = ("raster", "raster_gs", "raster/exact", "raycast/triangles", "raycast/planes", "hybrid")
 WIDTH, HEIGHT = 160, 90
 
 

@@ -48,9 +48,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="raster, raster_gs (and their tiles in mixed policies): every leaf keeps the edge midpoints "
                         "that only lean leaves drop (those no finer neighbour and no near split needs)")
     p.add_argument("--full-res", choices=FULL_RES, default=DEFAULT_FULL_RES,
-                   help="raster, raster_gs (and their tiles in mixed policies): full-resolution leaves keep every "
-                        "midpoint, cells split as the reference's (exact), or drop them by their errors as other "
-                        "leaves do (lean: fewer triangles, slower convergence to the reference as tau falls)")
+                   help="raster, raster_gs (and their tiles in mixed policies): full-resolution leaves drop "
+                        "midpoints by their errors as other leaves do (lean: no more triangles than the bound asks "
+                        "for), or keep every midpoint, cells split as the reference's (exact: more triangles, "
+                        "closer to the reference at a given tau)")
     p.add_argument("--show-strategy", action="store_true", help="hybrid: also write PATH.strategy.png")
 
 

@@ -89,6 +89,8 @@ class CostModel:
     call_overhead: dict = field(default_factory=dict)   # ms one tile drawn as its own call adds (fitted with the tiles)
     mix_error: float = 0.0          # held-out median relative error of the frames that use more than one strategy
     mix_overhead: float = 0.0       # ms a frame that uses more than one strategy adds (fitted with the frames)
+    full_res: str = "exact"         # the full-resolution rule its raster frames were drawn by (models saved without
+    #                                 the key were all fitted under "exact")
 
     @property
     def candidates(self) -> tuple[str, ...]:
@@ -162,7 +164,8 @@ class CostModel:
                  *(fmt(s) for s in self.candidates),
                  "  pixel_steps = pixels * log2(1 + slab_cells); visible_triangles = triangles * visible",
                  "  per-frame overhead: " + ", ".join(f"{s} {self.overhead.get(s, 0):.3g} ms" for s in self.candidates)
-                 + f"; a frame mixing strategies adds {self.mix_overhead:.3g} ms"]
+                 + f"; a frame mixing strategies adds {self.mix_overhead:.3g} ms",
+                 f"  raster frames drawn with full_res {self.full_res!r}"]
         if "raster_gs" not in self.candidates:
             lines.append("  raster_gs not calibrated: never chosen")
         what = f"of {self.frames} frames' times" if self.frames else "per tile"
@@ -223,7 +226,7 @@ def cost_model_from_dict(d: dict, source: str) -> CostModel:
                       int(d.get("tiles", 0)), source, {**{s: 0.0 for s in TERMS}, **d.get("overhead", {})},
                       dict(d.get("raster_gs") or {}), int(d.get("frames", 0)), dict(d.get("tile_error", {})),
                       {s: float(v) for s, v in (d.get("call_overhead") or {}).items()}, float(d.get("mix_error", 0.0)),
-                      float(d.get("mix_overhead", 0.0)))
+                      float(d.get("mix_overhead", 0.0)), str(d.get("full_res", "exact")))
         for s in m.candidates:
             for t in TERMS[s]:
                 getattr(m, s).setdefault(t, 0.0)     # a model saved before a term existed has it at 0
