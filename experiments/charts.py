@@ -36,7 +36,7 @@ def label_columns(frames: pd.DataFrame) -> pd.DataFrame:
     f["full_res"] = f["full_res"].fillna("exact") if "full_res" in f else "exact"
     many_tau = f["tau"].nunique() > 1
     many_rec = f["reconstruction"].nunique() > 1
-    many_fr = f["full_res"].nunique() > 1
+    many_fr = f.loc[f["policy"].isin(TILELET_POLICIES), "full_res"].nunique() > 1   # others record "exact"
 
     def method(r):
         s = r["policy"]

@@ -42,3 +42,14 @@ def test_strategy_mix_has_a_panel_per_mixed_method_and_scene(tmp_path):
         w, h = im.size
     assert w > h                                                  # 12 panels in rows of 4, not one tall column
     assert png.with_suffix(".svg").read_text().count("heuristic tau=2") == 2   # one title per flight
+
+
+def test_methods_name_the_full_resolution_rule_only_where_a_run_draws_both():
+    def methods(rules):
+        rows = [{"dataset": "puget", "flight": "orbit", "size": "640x360", "tau": 0.6667, "reconstruction": "triangles",
+                 "policy": pol, "full_res": fr} for pol in ("raster", "hybrid") for fr in rules]
+        rows.append({**rows[0], "policy": "raycast", "full_res": "exact"})    # ray casting records "exact"
+        return sorted(label_columns(pd.DataFrame(rows))["method"])
+    assert methods(["lean"]) == ["hybrid", "raster", "raycast"]
+    assert methods(["exact"]) == ["hybrid", "raster", "raycast"]
+    assert methods(["exact", "lean"]) == ["hybrid/exact", "hybrid/lean", "raster/exact", "raster/lean", "raycast"]
