@@ -9,7 +9,7 @@
     taus = [0.6667]
     sizes = ["640x360"]
     reconstructions = ["triangles"]   # ray-cast surface reconstructions
-    full_res = ["lean"]               # raster full-resolution rules: "lean" (midpoints within the bound dropped), "exact" (every cell)
+    full_res = ["lean"]               # raster full-resolution rules: "lean", "exact" (the reference's cells)
     repeats = 3                       # timed repeats a frame, at least 3 (median kept, spread = noise)
     seeds = [0]
     tile_size = 256

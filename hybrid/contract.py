@@ -34,9 +34,10 @@ TILELET_POLICIES: tuple[str, ...] = ("raster", "raster_gs", *MIXED_POLICIES)
 """The policies that draw restricted-quadtree tilelets (alone, or among a mixed policy's candidates)."""
 FullRes = Literal["exact", "lean"]
 """Full-resolution rules of the tilelet strategies: "exact" draws every full-resolution leaf with all its
-midpoints, its cells split SW-NE as the reference's (the image converges to the reference's as tau falls); "lean"
-lets those leaves drop midpoints by their side errors as all others do (fewer triangles at the same bound), their
-SE and NW cells turning diagonal through a morphed centre post (raster/select.comp.glsl LEAN_FULL_RES)."""
+midpoints, its cells split SW-NE as the reference's (more triangles than the bound asks for, closer to the
+reference at a given tau); "lean" lets those leaves drop midpoints by their side errors as all others do (no more
+triangles than the bound asks for), their SE and NW cells turning diagonal through a morphed centre post
+(raster/select.comp.glsl LEAN_FULL_RES). Both converge to the reference's image as tau falls."""
 FULL_RES: tuple[str, ...] = get_args(FullRes)
 DEFAULT_FULL_RES: FullRes = "lean"
 """The rule drawn where none is asked for (strategies, renderers, the estimate, ``render``, specs). Runs and spec
