@@ -40,7 +40,18 @@ def cost_model_fingerprint(renderer: str, sent: dict | None = None) -> dict:
     d = model.to_dict()
     d.pop("source", None)
     digest = hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:12]
-    return {"source": model.source, "sha256": digest}
+    return {"source": model.source, "sha256": digest, "full_res": model.full_res}
+
+
+def cost_model_line(env: dict) -> str:
+    """The hybrid's cost model as an env.json records it (one, or one per GL renderer of a cluster), in words."""
+    cm = env.get("cost_model") or {}
+    models = {"": cm} if "source" in cm else cm
+
+    def one(m: dict) -> str:
+        rule = f", its raster frames drawn with full_res {m['full_res']!r}" if "full_res" in m else ""
+        return f"{m.get('source', '?')} (sha256 {m.get('sha256', '?')}{rule})"
+    return "; ".join(f"{r + ': ' if r else ''}{one(m)}" for r, m in models.items()) or "not recorded"
 
 
 RESUME_KEYS = ("gl_renderer", "cost_model")

@@ -16,6 +16,7 @@ from hybrid.atomic import write_text
 from hybrid.errors import TerrabenchError
 
 from .charts import all_charts, label_columns
+from .environment import cost_model_line
 from .reading import reading
 from .spec import Spec
 from .spec_datasets import credit_lines
@@ -124,7 +125,8 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
           "## Environment", "",
           f"- GL renderer: {env['gl_renderer']} ({env['gl_version']})",
           f"- CPU: {env['cpu']} ({env['cpu_count']} cores); Python {env['python']}; {env['platform']}",
-          "- Packages: " + ", ".join(f"{k} {v}" for k, v in env["packages"].items()), "",
+          "- Packages: " + ", ".join(f"{k} {v}" for k, v in env["packages"].items()),
+          f"- Hybrid cost model: {cost_model_line(env)}", "",
           "## Spec", "", "```json", json.dumps(spec, indent=1), "```", "",
           "## Reading", ""] + [f"- {l}" if not l.startswith("  ") else f"  - {l.strip()}" for l in lines] + [
           "", "## Summary", "", md_table(table), ""] + [f"- {m}" for m in MEASURES] + [""]

@@ -8,6 +8,7 @@ from experiments.report import write_report
 from experiments.runner import run_spec
 from experiments.spec import load_spec, parse_spec
 from hybrid.contract import DEFAULT_FULL_RES, TILELET_POLICIES
+from hybrid.cost.model import load_cost_model
 from hybrid.errors import TerrabenchError
 
 TINY = """
@@ -72,6 +73,9 @@ def test_report_and_charts(run, tmp_path):
         assert (md.parent / f"{name}.png").stat().st_size > 5000 and (md.parent / f"{name}.svg").exists()
     assert (md.parent / "report.html").read_text().count("<img") >= 5
     assert "after one untimed warm-up frame" in text and "cracks_px" in text and "noise_%" in text
+    model = load_cost_model(json.loads((folder / "env.json").read_text())["gl_renderer"])
+    assert f"- Hybrid cost model: {model.source} (sha256 " in text
+    assert f"its raster frames drawn with full_res {model.full_res!r})" in text
     assert not (md.parent / "popping.png").exists()          # nothing measured on a fast flight, no empty chart
 
 
