@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from hybrid.errors import TerrabenchError
-from hybrid.terrain.stored import STORE_FORMAT, STORE_VERSION, _zarr, is_store, open_store
+from hybrid.terrain.stored import STORE_FORMAT, STORE_VERSION, _zarr, is_store
 
 from .fans import GPU_BETA
 from .pyramid import _block_reduce, interpolate_clamped
