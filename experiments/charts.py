@@ -18,7 +18,7 @@ from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from hybrid.atomic import atomic_path  # noqa: E402
-from hybrid.contract import TILELET_POLICIES  # noqa: E402
+from hybrid.contract import PRIOR_FULL_RES, TILELET_POLICIES  # noqa: E402
 
 from .noise import median_interval, repeat_matrix  # noqa: E402
 
@@ -28,15 +28,13 @@ MAX_COLS = 4             # panels a row
 
 def label_columns(frames: pd.DataFrame) -> pd.DataFrame:
     """Add 'method' (policy, plus tau / reconstruction / full-resolution rule where the run varies them; 'full_res'
-    "exact" where a run's rows lack it) and 'scene' columns; a run timed on several devices (a cluster) gets the
+    ``PRIOR_FULL_RES`` where a run's rows lack it) and 'scene' columns; a run timed on several devices (a cluster) gets the
     device in its scene, so no chart or sentence compares frame times across devices."""
     f = frames.copy()
-    # runs from before specs had full_res (and their rows in a resumed run) drew by the exact rule, as
-    # experiments.spec.BEFORE_KEYS says (not imported: spec imports stress, which imports this module)
-    f["full_res"] = f["full_res"].fillna("exact") if "full_res" in f else "exact"
+    f["full_res"] = f["full_res"].fillna(PRIOR_FULL_RES) if "full_res" in f else PRIOR_FULL_RES
     many_tau = f["tau"].nunique() > 1
     many_rec = f["reconstruction"].nunique() > 1
-    many_fr = f.loc[f["policy"].isin(TILELET_POLICIES), "full_res"].nunique() > 1   # others record "exact"
+    many_fr = f.loc[f["policy"].isin(TILELET_POLICIES), "full_res"].nunique() > 1   # others record the prior rule
 
     def method(r):
         s = r["policy"]

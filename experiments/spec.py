@@ -42,7 +42,7 @@ from pathlib import Path
 from typing import get_args
 
 from hybrid.camera.view import parse_size
-from hybrid.contract import DEFAULT_FULL_RES, FULL_RES, TILELET_POLICIES, Method
+from hybrid.contract import DEFAULT_FULL_RES, FULL_RES, PRIOR_FULL_RES, TILELET_POLICIES, Method
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.sources import TerrainSource
 
@@ -89,9 +89,9 @@ class Spec:
                 continue                      # the full-resolution rule only where tilelets are drawn
             if pol == "reference" and tau != self.taus[0]:
                 continue
-            fr = fr if pol in TILELET_POLICIES else "exact"
+            fr = fr if pol in TILELET_POLICIES else PRIOR_FULL_RES
             cid = f"{Path(str(ds)).stem}-s{seed}-{Path(str(fl)).stem}-{size}-tau{tau:.4g}-{rec}-{pol}" + \
-                ("" if fr == "exact" else f"-{fr}")
+                ("" if fr == PRIOR_FULL_RES else f"-{fr}")
             out.append({"config": cid, "dataset": ds, "seed": seed, "flight": fl, "size": size, "tau": tau,
                         "reconstruction": rec, "full_res": fr, "policy": pol})
         return out
@@ -115,7 +115,7 @@ class Spec:
         return {**defaults, **BEFORE_KEYS, **stored} == here
 
 
-BEFORE_KEYS = {"full_res": ["exact"]}
+BEFORE_KEYS = {"full_res": [PRIOR_FULL_RES]}
 """Spec keys added since runs were first written, with what those runs did: a spec.json without the key."""
 
 

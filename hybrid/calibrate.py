@@ -78,18 +78,20 @@ def tile_samples(feats: list[TileFeatures], times: dict) -> list[TileSample]:
 
 
 def calibrate(ctx, hf: HeightField, views: list[View], tau: float = DEFAULT_TAU, tile_size: int = 256,
-              repeats: int = 3, holdout: float = 0.3, seed: int = 0, mixes: int = 6) -> Calibration:
+              repeats: int = 3, holdout: float = 0.3, seed: int = 0, mixes: int = 6,
+              full_res: str = DEFAULT_FULL_RES) -> Calibration:
     """Time frames of the views and their tiles one call each, and fit the cost model for this context's GL
-    renderer to both. A view's frames and tiles are timed one after the other, so that a drift of the machine's
-    speed over the run falls on both alike."""
+    renderer to both, its raster tiles drawn by the full-resolution rule ``full_res`` (recorded in the model). A
+    view's frames and tiles are timed one after the other, so that a drift of the machine's speed over the run
+    falls on both alike."""
     rng = np.random.default_rng(seed)
     samples, feats, times, frames = [], [], {n: [] for n in CANDIDATES}, []
-    with Renderer(ctx, hf, "hybrid", tile_size, oracle_repeats=repeats) as r:
+    with Renderer(ctx, hf, "hybrid", tile_size, oracle_repeats=repeats, full_res=full_res) as r:
         for v in views:
             samples += time_view_frames(r, v, tau, repeats, mixes, rng)
             time_view_tiles(r, v, tau, feats, times, frames)
     times = {n: np.array(t) for n, t in times.items()}
     model = fit_frames(samples, gl_info(ctx).renderer, holdout, seed, CANDIDATES, tile_samples(feats, times))
     model.tiles = len(feats)
-    model.full_res = DEFAULT_FULL_RES               # the rule the renderer above draws raster tiles by
+    model.full_res = full_res
     return Calibration(model, feats, times, frames, samples)

@@ -40,8 +40,11 @@ triangles than the bound asks for), their SE and NW cells turning diagonal throu
 (raster/select.comp.glsl LEAN_FULL_RES). Both converge to the reference's image as tau falls."""
 FULL_RES: tuple[str, ...] = get_args(FullRes)
 DEFAULT_FULL_RES: FullRes = "lean"
-"""The rule drawn where none is asked for (strategies, renderers, the estimate, ``render``, specs). Runs and spec
-files written before specs named a rule drew "exact", whatever this default."""
+"""The rule drawn where none is asked for (strategies, renderers, the estimate, ``render``, specs)."""
+PRIOR_FULL_RES: FullRes = "exact"
+"""The rule drawn before rules were named, whatever the default: what run folders' spec.json and frames and cost
+models without the key drew. Config ids leave it unnamed (ids stay as such runs wrote them), and the rows of
+policies that draw no tilelets record it."""
 
 
 @runtime_checkable

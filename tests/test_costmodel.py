@@ -169,6 +169,10 @@ def test_save_load_by_renderer(tmp_path):
     del data["fitted"]["full_res"]                              # saved before models named their rule
     p.write_text(json.dumps(data))
     assert load_cost_model("fitted", p).full_res == "exact"
+    data["fitted"]["full_res"] = "half"
+    p.write_text(json.dumps(data))
+    with pytest.raises(TerrabenchError, match="malformed cost model .full_res must be one of exact, lean, got 'half'"):
+        load_cost_model("fitted", p)
     shipped = load_cost_model("llvmpipe (LLVM 15.0.6, 256 bits)", p)
     assert "llvmpipe" in shipped.source
     other = load_cost_model("Some Unknown GPU", p)

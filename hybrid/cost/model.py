@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from hybrid.atomic import write_json
+from hybrid.contract import FULL_RES, PRIOR_FULL_RES
 from hybrid.cost.features import TileFeatures
 from hybrid.errors import TerrabenchError
 
@@ -89,8 +90,7 @@ class CostModel:
     call_overhead: dict = field(default_factory=dict)   # ms one tile drawn as its own call adds (fitted with the tiles)
     mix_error: float = 0.0          # held-out median relative error of the frames that use more than one strategy
     mix_overhead: float = 0.0       # ms a frame that uses more than one strategy adds (fitted with the frames)
-    full_res: str = "exact"         # the full-resolution rule its raster frames were drawn by (models saved without
-    #                                 the key were all fitted under "exact")
+    full_res: str = PRIOR_FULL_RES  # the full-resolution rule its raster frames were drawn by
 
     @property
     def candidates(self) -> tuple[str, ...]:
@@ -226,7 +226,9 @@ def cost_model_from_dict(d: dict, source: str) -> CostModel:
                       int(d.get("tiles", 0)), source, {**{s: 0.0 for s in TERMS}, **d.get("overhead", {})},
                       dict(d.get("raster_gs") or {}), int(d.get("frames", 0)), dict(d.get("tile_error", {})),
                       {s: float(v) for s, v in (d.get("call_overhead") or {}).items()}, float(d.get("mix_error", 0.0)),
-                      float(d.get("mix_overhead", 0.0)), str(d.get("full_res", "exact")))
+                      float(d.get("mix_overhead", 0.0)), d.get("full_res", PRIOR_FULL_RES))
+        if m.full_res not in FULL_RES:
+            raise ValueError(f"full_res must be one of {', '.join(FULL_RES)}, got {m.full_res!r}")
         for s in m.candidates:
             for t in TERMS[s]:
                 getattr(m, s).setdefault(t, 0.0)     # a model saved before a term existed has it at 0
