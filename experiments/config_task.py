@@ -74,6 +74,7 @@ class TaskState:
         self._refs: dict = {}
         self._reference = None
         self.cost_model = None          # the device's calibrated model, when the client sends one
+        self.learned = None             # the adapted model of the hybrid that learned most, once it settled
 
     def views(self, spec: Spec, c: dict):
         """The group's terrain and views (checked: every eye above the ground); loads the terrain once."""
@@ -194,6 +195,7 @@ def run_group(spec: Spec, items: list[tuple[dict, list[int]]], state: TaskState,
             r.attempt(lambda r=r: _measure(spec, r, state, views, extra), fail_fast)
     finally:
         for r in runs:
+            _keep_learned(r, state)
             r.release()
     if extra:
         for r in runs:
@@ -202,16 +204,29 @@ def run_group(spec: Spec, items: list[tuple[dict, list[int]]], state: TaskState,
     return [r.out for r in runs]
 
 
+def _keep_learned(r: _ConfigRun, state: TaskState) -> None:
+    """Keep r's adapted cost model in ``state.learned`` when its predictions hold and it learned more frames than
+    the one kept (started from the device's model: a fallback's start is a demonstration, not this device's)."""
+    online = getattr(r.renderer, "online", None)
+    if online is None or not online.settled or r.c.get("start_model", "device") != "device":
+        return
+    if state.learned is None or online.model.adapted_frames > state.learned.adapted_frames:
+        state.learned = online.model
+
+
 def _open(spec: Spec, r: _ConfigRun, state: TaskState, hf, views) -> None:
     """Make r's renderer, replay the frames before its first one to do (a resumed configuration: its cache as
     an uninterrupted run's) and draw that frame once untimed (compiles, first uploads: one-off costs)."""
+    from hybrid.cost.model import fallback_cost_model
     from hybrid.renderer import make_renderer
     c, model = r.c, state.cost_model
+    if c.get("start_model", "device") == "fallback":
+        model = fallback_cost_model()
+    mixed = {"adapt": spec.adapt, **({"cost_model": model} if model is not None else {})} \
+        if c["policy"] in MIXED else {}
     r.renderer = make_renderer(state.ctx, hf, c["policy"], tile_size=spec.tile_size,
                                reconstruction=c["reconstruction"], budget_bytes=spec.gpu_budget_mib << 20,
-                               full_res=c["full_res"],
-                               upload_budget_ms=spec.upload_budget_ms,
-                               **({"cost_model": model} if model is not None and c["policy"] in MIXED else {}))
+                               full_res=c["full_res"], upload_budget_ms=spec.upload_budget_ms, **mixed)
     for k in range(r.todo[0]):
         r.renderer.render(views[k], c["tau"])
     r.renderer.render(views[r.todo[0]], c["tau"])

@@ -99,3 +99,6 @@ def _run_configs(spec: Spec, folder: Path, ctx, progress: bool, fail_fast: bool)
         state.release_group()
     bar.close()
     journal.write_tables()
+    if state.learned is not None:
+        from hybrid.cost.model import save_cost_model
+        print(f"learned cost model ({state.learned.adapted_frames} frames) saved to {save_cost_model(state.learned)}")

@@ -10,6 +10,9 @@
     sizes = ["640x360"]
     reconstructions = ["triangles"]   # ray-cast surface reconstructions
     full_res = ["lean"]               # raster full-resolution rules: "lean", "exact" (the reference's cells)
+    adapt = true                      # the hybrid refits its cost model from the frames it draws (false: frozen)
+    start_models = ["device"]         # the hybrid's starting cost model: "device" (this GL renderer's, as loaded),
+                                      # "fallback" (the shipped uncalibrated one): one hybrid config each
     repeats = 3                       # timed repeats a frame, at least 3 (median kept, spread = noise)
     seeds = [0]
     tile_size = 256
@@ -50,6 +53,9 @@ from .spec_datasets import check_dataset_entry, dataset_label, terrain_source
 
 POLICIES = get_args(Method)
 RECONSTRUCTIONS = ("planes", "linear", "triangles", "bilinear")
+START_MODELS = ("device", "fallback")
+"""The hybrid's starting cost models: this GL renderer's as loaded (``hybrid.cost.model.load_cost_model``: the
+user's file, the shipped default, else the fallback), or the shipped uncalibrated fallback."""
 
 
 @dataclass
@@ -75,25 +81,30 @@ class Spec:
     video: bool = False
     gpu_budget_mib: int = 256
     upload_budget_ms: float | None = None
+    adapt: bool = True
+    start_models: list = field(default_factory=lambda: ["device"])
 
     def configs(self) -> list[dict]:
         """Every combination, one dict each, with a stable id; frames of one (dataset, seed, flight, size) are paired."""
         out = []
         labels = [dataset_label(d) for d in self.datasets]
-        for ds, seed, fl, size, tau, rec, fr, pol in itertools.product(
+        for ds, seed, fl, size, tau, rec, fr, pol, sm in itertools.product(
                 labels, self.seeds, self.flights, self.sizes, self.taus, self.reconstructions, self.full_res,
-                self.policies):
+                self.policies, self.start_models):
             if pol not in ("raycast", "hybrid", "heuristic", "oracle") and rec != self.reconstructions[0]:
                 continue                      # reconstruction only matters where rays are cast
             if pol not in TILELET_POLICIES and fr != self.full_res[0]:
                 continue                      # the full-resolution rule only where tilelets are drawn
             if pol == "reference" and tau != self.taus[0]:
                 continue
+            if pol != "hybrid" and sm != self.start_models[0]:
+                continue                      # only the hybrid reads a cost model as it goes
             fr = fr if pol in TILELET_POLICIES else PRIOR_FULL_RES
+            sm = sm if pol == "hybrid" else START_MODELS[0]
             cid = f"{Path(str(ds)).stem}-s{seed}-{Path(str(fl)).stem}-{size}-tau{tau:.4g}-{rec}-{pol}" + \
-                ("" if fr == PRIOR_FULL_RES else f"-{fr}")
+                ("" if fr == PRIOR_FULL_RES else f"-{fr}") + ("" if sm == START_MODELS[0] else f"-from-{sm}")
             out.append({"config": cid, "dataset": ds, "seed": seed, "flight": fl, "size": size, "tau": tau,
-                        "reconstruction": rec, "full_res": fr, "policy": pol})
+                        "reconstruction": rec, "full_res": fr, "policy": pol, "start_model": sm})
         return out
 
     def source(self, label: str) -> TerrainSource:
@@ -115,7 +126,7 @@ class Spec:
         return {**defaults, **BEFORE_KEYS, **stored} == here
 
 
-BEFORE_KEYS = {"full_res": [PRIOR_FULL_RES]}
+BEFORE_KEYS = {"full_res": [PRIOR_FULL_RES], "adapt": False}
 """Spec keys added since runs were first written, with what those runs did: a spec.json without the key."""
 
 
@@ -210,6 +221,10 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None):
         if r not in RECONSTRUCTIONS:
             raise TerrabenchError(f"{source}: unknown reconstruction {r!r}; choose from {', '.join(RECONSTRUCTIONS)}")
 
+    def start_ok(m):
+        if m not in START_MODELS:
+            raise TerrabenchError(f"{source}: unknown start model {m!r}; choose from {', '.join(START_MODELS)}")
+
     def full_res_ok(r):
         if r not in FULL_RES:
             raise TerrabenchError(f"{source}: unknown full_res {r!r}; choose from {', '.join(FULL_RES)}")
@@ -240,6 +255,7 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None):
     for key, kind, check in (("flights", str, None), ("policies", str, policy_ok),
                              ("taus", (int, float), tau_ok), ("sizes", str, size_ok),
                              ("reconstructions", str, rec_ok), ("full_res", str, full_res_ok), ("seeds", int, seed_ok),
+                             ("start_models", str, start_ok),
                              ("image_frames", int, None)):
         v = _list(d, key, kind, check)
         if v is not None:
@@ -258,7 +274,7 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None):
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0 <= v <= 1e4):
             raise TerrabenchError(f"{source}: 'upload_budget_ms' must be a number of ms in [0, 10000], got {v!r}")
         kw["upload_budget_ms"] = float(v)
-    for key in ("flip", "video"):
+    for key in ("flip", "video", "adapt"):
         if key in d:
             if not isinstance(d[key], bool):
                 raise TerrabenchError(f"{source}: '{key}' must be true or false, got {d[key]!r}")

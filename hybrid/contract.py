@@ -128,7 +128,9 @@ class FrameStats:
     evictions are those of this frame. prep_ms is one-time CPU work for tiles seen for the first time (the
     raster mesh's node errors behind the triangle estimate), apart from plan_ms and, like uploads, outside
     wall_ms. With an upload budget, upload_ms and prep_ms are part of wall_ms, fallback_tiles counts the tiles
-    drawn from a resident ancestor and pending_uploads the jobs left waiting.
+    drawn from a resident ancestor and pending_uploads the jobs left waiting. adapt_ms is an adapting hybrid's
+    CPU time learning from the frame (exploration and refit, ``hybrid.cost.online``), part of wall_ms;
+    explored_tiles counts the tiles it gave to a strategy it is learning.
     """
 
     wall_ms: float
@@ -151,14 +153,16 @@ class FrameStats:
     fallback_tiles: int = 0
     pending_uploads: int = 0
     pred_ms: float | None = None
+    adapt_ms: float = 0.0
+    explored_tiles: int = 0
     counters: dict[str, float] = field(default_factory=dict)
     together_ms: dict[str, float] = field(default_factory=dict)
     tile_rows: list[dict] = field(default_factory=list)
 
     @property
     def cpu_ms(self) -> float | None:
-        """The frame's CPU time, ms: plan_ms + issue_ms (None where the issue time was not measured)."""
-        return None if self.issue_ms is None else self.plan_ms + self.issue_ms
+        """The frame's CPU time, ms: plan_ms + issue_ms + adapt_ms (None where the issue time was not measured)."""
+        return None if self.issue_ms is None else self.plan_ms + self.issue_ms + self.adapt_ms
 
     def row(self) -> dict[str, Any]:
         """One flat table row: every scalar field, the counters and ``together_<strategy>_ms``."""

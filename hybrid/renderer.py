@@ -25,14 +25,14 @@ import numpy as np
 
 from hybrid.camera.view import View
 from hybrid.contract import CANDIDATES, DEFAULT_FULL_RES, MIXED_POLICIES, POLICIES, FrameStats, TileItem
-from hybrid.cost.choice import best_assignment
-from hybrid.cost.fit import estimate_overhead
 from hybrid.cost.model import CostModel, load_cost_model
 from hybrid.cost.planner import TilePlan, plan_frame
 from hybrid.errors import TerrabenchError
 from hybrid.gl.context import gl_info
 from hybrid.gl.target import FrameTarget, RenderResult
 from hybrid.gl.timing import timed
+from hybrid import adaptive, oracle
+from hybrid.cost.online import AdaptOptions, OnlineModel
 from hybrid.reference import ReferenceRenderer
 from hybrid.residency import ResidencyCache
 from hybrid.strategies import STRATEGIES, make_strategy, triangle_estimator
@@ -66,7 +66,7 @@ class Renderer:
     def __init__(self, ctx, hf: HeightField, policy: str = "hybrid", tile_size: int = 256, *,
                  cost_model: CostModel | None = None, budget_bytes: int | None = None, threshold: float = 1.0,
                  oracle_repeats: int = 3, pyramid: TilePyramid | None = None, upload_budget_ms: float | None = None,
-                 **options):
+                 adapt: bool | AdaptOptions = True, **options):
         if policy not in POLICIES:
             raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
         self.ctx, self.hf, self.policy = ctx, hf, policy
@@ -76,7 +76,9 @@ class Renderer:
         self.cache = ResidencyCache(budget_bytes)
         self.strategies = {n: make_strategy(n, ctx, hf) for n in (CANDIDATES if self.mixed else (policy,))}
         self.options = route_options(self.strategies, options)
-        self.model = cost_model or (load_cost_model(gl_info(ctx).renderer) if self.mixed else None)
+        self._model = cost_model or (load_cost_model(gl_info(ctx).renderer) if self.mixed else None)
+        self.online = OnlineModel(self._model, adapt if isinstance(adapt, AdaptOptions) else None) \
+            if adapt and policy == "hybrid" else None
         self.triangles = triangle_estimator(self.pyramid, full_res=options.get("full_res", DEFAULT_FULL_RES)) \
             if self.mixed else None
         if self.triangles is not None and upload_budget_ms is not None and hasattr(self.pyramid, "request"):
@@ -95,6 +97,18 @@ class Renderer:
 
     def __exit__(self, *exc) -> None:
         self.release()
+
+    @property
+    def model(self) -> CostModel | None:
+        """The cost model the choices read now: the adapted one of an adapting hybrid, else the one given or loaded."""
+        return self.online.model if self.online is not None else self._model
+
+    @model.setter
+    def model(self, model: CostModel) -> None:
+        """Choose by ``model`` from now on; an adapting hybrid starts learning again from it."""
+        self._model = model
+        if self.online is not None:
+            self.online = OnlineModel(model, self.online.options)
 
     def _check_live(self) -> None:
         if self._released:
@@ -162,7 +176,8 @@ class Renderer:
         """Strategy names in drawing order: raster kinds first, ray casting last."""
         return sorted(self.strategies, key=lambda n: self.kind(n) == "raycast")
 
-    def _draw(self, target, view, plans: list[TilePlan], pinned, tau: float, options: dict) -> dict:
+    def _draw(self, target, view, plans: list[TilePlan], pinned, tau: float, options: dict,
+              clock: adaptive.PassClock | None = None) -> dict:
         counters: dict = {}
         skirts = self.skirts(plans)
         kinds = [self.kind(p.choice) for p in plans]
@@ -180,80 +195,38 @@ class Renderer:
             if behind and rasterized and "occluders" in self.strategies[name].draw_options and "occluders" not in opts:
                 opts = {**opts, "occluders": True}      # rays stop behind the raster tiles drawn before them
             rasterized |= self.kind(name) == "raster"
-            c = self.strategies[name].draw_tiles(target, view, self._items(name, sub, pinned), tau, **opts) or {}
+            items = self._items(name, sub, pinned)
+            c = self._pass(clock, name, lambda: self.strategies[name].draw_tiles(target, view, items, tau, **opts)) or {}
             for k, v in c.items():
                 if isinstance(v, (int, float, np.integer, np.floating)):
                     counters[k] = counters.get(k, 0) + v
         if skirts:          # last, so the ray caster's pre-pass sees no skirt inside a ray-cast tile's box
             for name in self._order():
                 if "skirts" in self.strategies[name].draw_options and any(p.choice == name for p in plans):
-                    self.strategies[name].draw_skirts(target, view)
+                    self._pass(clock, adaptive.SKIRTS, lambda: self.strategies[name].draw_skirts(target, view))
         return counters
+
+    @staticmethod
+    def _pass(clock, name: str, fn):
+        """fn() timed as a pass by the frame's clock, where there is one."""
+        return fn() if clock is None else clock.run(name, fn)
 
     def time_draw(self, view: View, plans: list[TilePlan], name: str, target: FrameTarget, pinned=frozenset(),
                   tau: float = DEFAULT_TAU) -> float:
-        """Median ms of drawing the plans' tiles with one strategy in one call: the GL timer query on real
-        GPUs, the wall clock around ctx.finish() on CPU rasterizers (where timer queries are wrong)."""
+        """Median ms of drawing the plans' tiles with one strategy in one call (``hybrid.oracle.time_draw``)."""
         self._check_live()
-        items = self._items(name, plans, pinned)
-        times = []
-        for _ in range(self.oracle_repeats):
-            target.clear()
-            target.use()
-            times.append(self._timed_call(target, view, name, items, tau))
-        return float(np.median(times))
-
-    def _timed_call(self, target: FrameTarget, view: View, name: str, items: list[TileItem], tau: float) -> float:
-        """ms of one draw call of ``items`` with strategy ``name`` into the target as it stands (``time_draw``'s
-        clock)."""
-        _, wall, gpu, _ = timed(self.ctx, lambda: self.strategies[name].draw_tiles(target, view, items, tau,
-                                                                                **self.options[name]))
-        return wall if gpu is None else gpu
+        return oracle.time_draw(self, view, plans, name, target, pinned, tau)
 
     def time_in_frame(self, view: View, plans: list[TilePlan], name: str, target: FrameTarget, pinned=frozenset(),
                       tau: float = DEFAULT_TAU) -> tuple[np.ndarray, float]:
-        """(per-tile ms, whole-frame ms): every plan's tile drawn with one strategy inside a real frame, front to
-        back, each in its own call timed as in ``time_draw`` (so each meets the depth its nearer tiles left, as
-        in the frame), and the same frame drawn in one call; medians over ``oracle_repeats``."""
+        """(per-tile ms, whole-frame ms) of one strategy inside a real frame (``hybrid.oracle.time_in_frames``)."""
         return self.time_in_frames(view, plans, [name], target, pinned, tau)[name]
 
     def time_in_frames(self, view: View, plans: list[TilePlan], names, target: FrameTarget, pinned=frozenset(),
                        tau: float = DEFAULT_TAU) -> dict[str, tuple[np.ndarray, float]]:
-        """``time_in_frame`` of several strategies, their passes interleaved (each repeat times every strategy in
-        turn), so that a drift of the machine's speed over the seconds this takes falls on all of them alike and
-        their ratios per tile, which the choice reads, stay comparable."""
+        """``time_in_frame`` of several strategies, their passes interleaved (``hybrid.oracle.time_in_frames``)."""
         self._check_live()
-        items = {n: self._items(n, plans, pinned) for n in names}
-        per = {n: np.empty((self.oracle_repeats, len(items[n]))) for n in names}
-        together = {n: [] for n in names}
-        for r in range(self.oracle_repeats):
-            for n in names:
-                target.clear()
-                target.use()
-                per[n][r] = [self._timed_call(target, view, n, [item], tau) for item in items[n]]
-        for _ in range(self.oracle_repeats):
-            for n in names:
-                target.clear()
-                target.use()
-                together[n].append(self._timed_call(target, view, n, items[n], tau))
-        return {n: (np.median(per[n], axis=0), float(np.median(together[n]))) for n in names}
-
-    def _measure(self, view, plans, target, pinned, tau) -> dict:
-        """Time every tile inside frames each candidate way (tile rows' meas_<strategy>_ms) and each pure frame;
-        the oracle takes the cheapest assignment, with per-strategy overheads from the same frames."""
-        pinned |= {(n, p.key) for p in plans for n in CANDIDATES}
-        if not plans:
-            return {}
-        runs = self.time_in_frames(view, plans, CANDIDATES, target, pinned, tau)
-        per, together = {n: t[0] for n, t in runs.items()}, {n: t[1] for n, t in runs.items()}
-        for i, p in enumerate(plans):
-            p.measured = {n: float(per[n][i]) for n in CANDIDATES}
-        if self.policy == "oracle":
-            overhead = {n: estimate_overhead([per[n]], [together[n]]) for n in CANDIDATES}
-            best, _ = best_assignment({n: per[n] - overhead[n] for n in CANDIDATES}, overhead, together)
-            for p, c in zip(plans, best):
-                p.choice = c
-        return together
+        return oracle.time_in_frames(self, view, plans, names, target, pinned, tau)
 
     def render(self, view: View, tau: float = DEFAULT_TAU, *, measure: bool | None = None, maps: bool = False,
                plans: list[TilePlan] | None = None, read: bool = True, **options) -> RenderResult:
@@ -265,7 +238,8 @@ class Renderer:
         With ``measure`` (mixed policies only; the oracle's default when it plans the view itself) every tile is
         also timed inside frames every candidate way (``time_in_frame``) and the oracle takes the cheapest; with
         ``maps`` the result carries the per-pixel strategy map (extra untimed renders). Per-call ``options``
-        override the renderer's draw options.
+        override the renderer's draw options. An adapting hybrid (``adapt``) learns from the frames it plans
+        itself and does not measure (``hybrid.adaptive``).
         """
         self._check_live()
         if measure and not self.mixed:
@@ -273,62 +247,89 @@ class Renderer:
         if maps and not read:
             raise TerrabenchError("maps=True reads the frame back; it cannot go with read=False")
         opts = {n: {**self.options[n], **o} for n, o in route_options(self.strategies, options).items()}
-        prep0 = self.triangles.build_ms if self.triangles is not None else 0.0
         if measure is None:
             measure = self.policy == "oracle" and plans is None
-        t_plan = time.perf_counter()
-        plans = self.plan(view, tau) if plans is None else plans
-        prep_ms = (self.triangles.build_ms if self.triangles is not None else 0.0) - prep0
-        plan_ms = (time.perf_counter() - t_plan) * 1e3 - prep_ms      # first-seen tiles' one-time work apart
+        learn = self.online is not None and plans is None and not measure
+        plans, plan_ms, prep_ms = self._planned(view, tau, plans)
+        t_adapt = time.perf_counter()
+        explored = adaptive.explore(self.online, plans) if learn else None
+        adapt_ms = (time.perf_counter() - t_adapt) * 1e3
         pinned = {(p.choice, p.key) for p in plans}
         uploads0, evictions0 = self.cache.stats.uploads, self.cache.stats.evictions
         target = FrameTarget(self.ctx, view.width, view.height)
         try:
-            together = {}
-            if measure:
-                together = self._measure(view, plans, target, pinned, tau)
-            self._fallbacks = {}
-            streamed = None
-            if self.upload_budget_ms is None:
-                for p in plans:                # upload first: the timed frame measures drawing only
-                    self._resident(p.choice, p.key, pinned)
-            else:                              # uploads within the frame's budget, the rest from ancestors
-                ready, deferred = (lambda key: True), (lambda plan: False)     # noqa: E731
-                if hasattr(self.pyramid, "request"):      # a store: its loader thread reads what is missing
-                    missing = [p for p in plans if (p.choice, p.key) not in self.cache.entries]
-                    work, waiting = host_jobs(self.strategies, self.triangles, missing, self.pyramid.n)
-                    self.pyramid.request([p.key for p in missing] + list(work), work)
-                    ready = self.pyramid.cached
-                    deferred = lambda p: (p.choice, p.key) in waiting and not self.pyramid.failed(p.key)  # noqa: E731
-                # the frame's budget covers the estimate's preparation and the uploads together
-                streamed = stream_uploads(self.cache, self.strategies, plans, pinned, self.tile, self.pyramid.max_level,
-                                          max(self.upload_budget_ms - prep_ms, 0.0), ready, deferred)
-                self._fallbacks = {plans[i].key: a for i, a in streamed.fallbacks.items()}
+            together = oracle.measure_plans(self, view, plans, target, pinned, tau) if measure else {}
+            streamed = self._uploads(plans, pinned, prep_ms)
+            clock = adaptive.PassClock(self.ctx, learn and len({p.choice for p in plans}) > 1)
             target.clear()
             target.use()
             try:
-                counters, draw, gpu, issue = timed(self.ctx, lambda: self._draw(target, view, plans, pinned, tau, opts))
+                counters, draw, gpu, issue = timed(self.ctx, lambda: self._draw(target, view, plans, pinned, tau, opts,
+                                                                                clock), query=not clock.gpu)
             finally:
                 self._fallbacks = {}
+            gpu = clock.gpu_ms if clock.gpu else gpu
+            if learn and not (streamed and streamed.fallback_tiles):
+                t_adapt = time.perf_counter()
+                passes = clock.passes() if clock.split else \
+                    {plans[0].choice: draw if gpu is None else max(gpu, issue)} if plans else {}
+                adaptive.observe(self.online, plans, passes, draw, explored)
+                adapt_ms += (time.perf_counter() - t_adapt) * 1e3
             stats = self._stats(plans, plan_ms, draw, gpu, counters, together)
-            stats.prep_ms, stats.issue_ms = prep_ms, issue
+            stats.prep_ms, stats.issue_ms, stats.adapt_ms = prep_ms, issue, adapt_ms
+            stats.explored_tiles = 0 if explored is None else len(explored.tiles)
+            stats.wall_ms += adapt_ms
             if streamed is not None:
                 stats.upload_ms, stats.fallback_tiles, stats.pending_uploads = \
                     streamed.upload_ms, streamed.fallback_tiles, streamed.fallback_tiles
                 stats.wall_ms += streamed.upload_ms + prep_ms
             stats.uploads = self.cache.stats.uploads - uploads0
             stats.evictions = self.cache.stats.evictions - evictions0
-            if not read:
-                return RenderResult(None, None, stats, plans=plans)
-            result = target.read(view, stats)
-            result.plans = plans
-            if "triangles" in counters:          # drawn triangles per pixel that shows terrain
-                counters["triangles_per_pixel"] = counters["triangles"] / max(int(result.mask.sum()), 1)
-            if maps:
-                result.maps = {"strategy": self.strategy_map(view, plans, tau, opts)}
-            return result
+            return self._result(target, view, plans, stats, counters, tau, opts, read, maps)
         finally:
             target.release()
+
+    def _planned(self, view: View, tau: float, plans: list[TilePlan] | None) -> tuple[list[TilePlan], float, float]:
+        """(plans, planning ms, one-time preparation ms): the view's own plans unless ``plans`` are given."""
+        prep0 = self.triangles.build_ms if self.triangles is not None else 0.0
+        t_plan = time.perf_counter()
+        plans = self.plan(view, tau) if plans is None else plans
+        prep_ms = (self.triangles.build_ms if self.triangles is not None else 0.0) - prep0
+        return plans, (time.perf_counter() - t_plan) * 1e3 - prep_ms, prep_ms   # first-seen tiles' work apart
+
+    def _uploads(self, plans: list[TilePlan], pinned: set, prep_ms: float):
+        """Make the frame's tiles resident: all before the timed draw without an upload budget (None back), else
+        within the budget less ``prep_ms`` (``hybrid.uploads.stream_uploads``; the rest drawn from ancestors)."""
+        self._fallbacks = {}
+        if self.upload_budget_ms is None:
+            for p in plans:                # upload first: the timed frame measures drawing only
+                self._resident(p.choice, p.key, pinned)
+            return None
+        ready, deferred = (lambda key: True), (lambda plan: False)     # noqa: E731
+        if hasattr(self.pyramid, "request"):      # a store: its loader thread reads what is missing
+            missing = [p for p in plans if (p.choice, p.key) not in self.cache.entries]
+            work, waiting = host_jobs(self.strategies, self.triangles, missing, self.pyramid.n)
+            self.pyramid.request([p.key for p in missing] + list(work), work)
+            ready = self.pyramid.cached
+            deferred = lambda p: (p.choice, p.key) in waiting and not self.pyramid.failed(p.key)  # noqa: E731
+        # the frame's budget covers the estimate's preparation and the uploads together
+        streamed = stream_uploads(self.cache, self.strategies, plans, pinned, self.tile, self.pyramid.max_level,
+                                  max(self.upload_budget_ms - prep_ms, 0.0), ready, deferred)
+        self._fallbacks = {plans[i].key: a for i, a in streamed.fallbacks.items()}
+        return streamed
+
+    def _result(self, target, view, plans, stats, counters, tau, opts, read: bool, maps: bool) -> RenderResult:
+        """The frame read back (or left on the GPU with ``read`` False), with its plans and, with ``maps``, the
+        strategy map."""
+        if not read:
+            return RenderResult(None, None, stats, plans=plans)
+        result = target.read(view, stats)
+        result.plans = plans
+        if "triangles" in counters:          # drawn triangles per pixel that shows terrain
+            counters["triangles_per_pixel"] = counters["triangles"] / max(int(result.mask.sum()), 1)
+        if maps:
+            result.maps = {"strategy": self.strategy_map(view, plans, tau, opts)}
+        return result
 
     def _stats(self, plans, plan_ms, draw, gpu, counters, together) -> FrameStats:
         by_kind = {"raster": 0, "raycast": 0}

@@ -30,6 +30,13 @@ def ctx():
 
 
 @pytest.fixture(autouse=True)
+def private_costs_file(tmp_path_factory, monkeypatch):
+    """No test reads or writes the user's costs file: each sees an empty one of its own (a run saves what its
+    hybrid learned there), so no test's learned model reaches another."""
+    monkeypatch.setenv("TERRABENCH_COSTS", str(tmp_path_factory.mktemp("costs") / "costs.json"))
+
+
+@pytest.fixture(autouse=True)
 def gl_error_check(request):
     """For ``gl`` tests: no GL error pending before the test (else fixture setup or an earlier teardown
     raised it, and this says so), and none raised by the test itself."""

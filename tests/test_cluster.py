@@ -18,9 +18,10 @@ from experiments.runner import run_spec  # noqa: E402
 from experiments.spec import parse_spec  # noqa: E402
 from hybrid.errors import TerrabenchError  # noqa: E402
 
-# the tiny spec at two taus: two groups of configurations, one task each, for the two workers
+# the tiny spec at two taus: two groups of configurations, one task each, for the two workers; the hybrid frozen,
+# as an adapting one's choices follow the times it measures, which no two runs share
 TWO_GROUPS = (Path(__file__).parents[1] / "experiments" / "tiny.toml").read_text().replace(
-    "taus = [0.6667]", "taus = [0.6667, 2.0]")
+    "taus = [0.6667]", "taus = [0.6667, 2.0]") + "adapt = false\n"
 
 
 def two_groups():
@@ -29,7 +30,7 @@ def two_groups():
 
 # columns that depend on timing or on where a frame ran; every other column must match the serial run
 TIMED = {"wall_ms", "wall_ms_min", "wall_ms_max", "wall_ms_repeats", "plan_ms", "draw_ms", "gpu_ms", "issue_ms",
-         "cpu_ms", "upload_ms", "worker", "device"}
+         "cpu_ms", "upload_ms", "adapt_ms", "worker", "device"}
 
 
 def frames(folder):

@@ -47,7 +47,7 @@ def frames(ctx, puget_full):
     ref = ReferenceRenderer(ctx, puget_full)
     out = []
     rs = {p: make_renderer(ctx, puget_full, p, tile_size=128) for p in ("raster", "raycast")}
-    hy = Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT)
+    hy = Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT, adapt=False)
     for v in _views(puget_full):
         hy.model = median_split(hy.pyramid, v)
         out.append({"ref": ref.render(v), "hybrid": hy.render(v, maps=True),
@@ -147,7 +147,7 @@ def test_depth_agrees_across_strategies(frames):
 
 @pytest.mark.parametrize("policy", ["fullres", "tin", "raster", "raycast", "hybrid"])
 def test_memory_accounting_is_what_was_allocated(ctx, puget257, policy):
-    r = Renderer(ctx, puget257, policy, tile_size=64, cost_model=SPLIT)
+    r = Renderer(ctx, puget257, policy, tile_size=64, cost_model=SPLIT, adapt=False)
     try:
         v = preset("flyover", puget257, 6, *SIZE).view(2)
         res = r.render(v)
@@ -185,19 +185,19 @@ def test_eviction_keeps_the_budget(ctx, puget257):
     runs = [(fly.view(1), 0.5), (fly.view(2), 60.0), (fly.view(3), 0.5), (fly.view(4), 60.0)]
     need = []
     for v, tau in runs:
-        probe = Renderer(ctx, puget257, "raycast", tile_size=64, cost_model=SPLIT)
+        probe = Renderer(ctx, puget257, "raycast", tile_size=64, cost_model=SPLIT, adapt=False)
         probe.render(v, tau)
         need.append(probe.cache.bytes)
         probe.release()
     budget = int(max(need) * 1.1)
     assert sum(need) > budget
-    hy = Renderer(ctx, puget257, "raycast", tile_size=64, cost_model=SPLIT, budget_bytes=budget)
+    hy = Renderer(ctx, puget257, "raycast", tile_size=64, cost_model=SPLIT, adapt=False, budget_bytes=budget)
     for v, tau in runs:
         res = hy.render(v, tau)
         assert hy.cache.bytes <= budget and res.stats.gpu_bytes - res.stats.shared_bytes <= budget
     assert hy.cache.stats.evictions > 0 and hy.cache.stats.peak_bytes <= budget
     hy.release()
-    tiny = Renderer(ctx, puget257, "raycast", tile_size=64, cost_model=SPLIT, budget_bytes=1000)
+    tiny = Renderer(ctx, puget257, "raycast", tile_size=64, cost_model=SPLIT, adapt=False, budget_bytes=1000)
     with pytest.raises(TerrabenchError, match="budget"):
         tiny.render(fly.view(0))
     tiny.release()
@@ -210,7 +210,7 @@ def test_pure_hybrid_and_heuristic_policies_follow_their_rules(ctx, puget_full):
             assert {p.choice for p in r.plan(v)} == {pol}
     # split_model(n) predicts 1e-3 ms a triangle for raster and 1e-3 n ms a tile for ray casting, without
     # per-frame overheads: ray casting wins exactly where a tile has more than n triangles
-    with Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT) as h:
+    with Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT, adapt=False) as h:
         h.model = model = median_split(h.pyramid, v)
         n = model.raycast["const"] / 1e-3
         plans = h.plan(v)
@@ -218,7 +218,7 @@ def test_pure_hybrid_and_heuristic_policies_follow_their_rules(ctx, puget_full):
     assert {p.choice for p in plans} == {"raster", "raycast"}
     # Dick et al.'s rule: ray cast where the tile's triangles outnumber threshold x its pixels
     for threshold in (1.0, 4.0):                            # both split this view's tiles
-        with Renderer(ctx, puget_full, "heuristic", tile_size=128, cost_model=SPLIT, threshold=threshold) as r:
+        with Renderer(ctx, puget_full, "heuristic", tile_size=128, cost_model=SPLIT, adapt=False, threshold=threshold) as r:
             plans = r.plan(v)
         for p in plans:
             f = p.features
@@ -233,7 +233,7 @@ def test_oracle_picks_the_strategy_that_is_faster_when_timed_apart(ctx, puget257
     whose faster strategy the oracle's frame does not use at all is left out too (its overhead can outweigh
     what one tile saves)."""
     v = preset("flyover", puget257, 6, 160, 90).view(2)
-    with Renderer(ctx, puget257, "oracle", tile_size=64, cost_model=SPLIT, oracle_repeats=5) as o:
+    with Renderer(ctx, puget257, "oracle", tile_size=64, cost_model=SPLIT, adapt=False, oracle_repeats=5) as o:
         rows = o.render(v).stats.tile_rows
     chosen = {(row["level"], row["tx"], row["ty"]): row["strategy"] for row in rows}
     for row in rows:                              # every tile timed inside frames every candidate way
@@ -265,7 +265,7 @@ def test_in_frame_timing_interleaves_the_strategies(ctx, puget257):
     target = FrameTarget(ctx, v.width, v.height)
     calls = []
     try:
-        with Renderer(ctx, puget257, "hybrid", tile_size=64, cost_model=SPLIT, oracle_repeats=2) as r:
+        with Renderer(ctx, puget257, "hybrid", tile_size=64, cost_model=SPLIT, adapt=False, oracle_repeats=2) as r:
             plans = r.plan(v)
             for name, strategy in r.strategies.items():
                 draw = strategy.draw_tiles
@@ -286,7 +286,7 @@ def test_in_frame_timing_interleaves_the_strategies(ctx, puget257):
 
 def test_a_frame_drawn_without_read_back_draws_the_same_tiles(ctx, puget_full):
     v = _views(puget_full)[0]
-    h = Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT)
+    h = Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT, adapt=False)
     h.model = median_split(h.pyramid, v)
     try:
         read, back = h.render(v), h.render(v, read=False)
@@ -305,7 +305,7 @@ def test_shading_mode_reaches_both_strategies(ctx, puget_full):
     v = _views(puget_full)[0]                               # a view the split model draws both ways
     frames = {}
     for mode in (None, "height"):
-        h = Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT, mode=mode)
+        h = Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT, adapt=False, mode=mode)
         h.model = median_split(h.pyramid, v)
         frames[mode] = h.render(v, maps=True)
         h.release()
@@ -323,7 +323,7 @@ def test_rays_stop_behind_the_raster_tiles_drawn_before_them(ctx, puget_full):
     the raster pass left (occluders): the same image and depths as casting every ray to its end, in fewer steps."""
     from hybrid.cost.planner import plan_frame
     v = preset("dolly", puget_full, 6, *SIZE).view(2)
-    with Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT) as r:
+    with Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT, adapt=False) as r:
         px = np.median([p.features.pixels for p in plan_frame(r.pyramid, v, SPLIT)])
         # raster a flat 1 ms a tile, ray casting 1 ms per px pixels: the big near tiles are rasterized
         r.model = CostModel("near-raster", {"const": 1.0, "triangles": 0.0, "visible_triangles": 0.0, "pixels": 0.0},
@@ -346,7 +346,7 @@ def test_a_ray_meeting_the_water_just_short_of_a_raster_edge_is_not_lost(ctx, pu
     from experiments.metrics import coverage_errors
     v = preset("flyover", puget_full, 8, 640, 360).view(2)
     raster = {(0, 2, 3), (0, 2, 4), (0, 3, 4), (0, 2, 5), (0, 3, 5)}
-    with Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT) as r, ReferenceRenderer(ctx, puget_full) as ref:
+    with Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT, adapt=False) as r, ReferenceRenderer(ctx, puget_full) as ref:
         plans = r.plan(v)
         assert raster <= {tuple(p.key) for p in plans}
         for p in plans:
@@ -380,7 +380,7 @@ def test_a_sea_at_a_strategy_border_seen_head_on_has_no_crack(ctx, height_m, pre
     t = -height_m / d[2]                                     # where the pixel's ray meets the sea
     metres_per_px = t / (view(0.0).pixels_per_radian * -d[2])
     v = view(edge_y - 6e-4 * metres_per_px - (view(0.0).eye[1] + t * d[1]))
-    with Renderer(ctx, hf, "hybrid", tile_size=32, cost_model=SPLIT, prepass=prepass) as r, \
+    with Renderer(ctx, hf, "hybrid", tile_size=32, cost_model=SPLIT, adapt=False, prepass=prepass) as r, \
             ReferenceRenderer(ctx, hf) as ref:
         plans = r.plan(v)
         for p in plans:                                      # raster south of the border, ray casting north of it

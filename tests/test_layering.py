@@ -22,6 +22,7 @@ LAYERS = [
     ("raster", "raycast"),
     ("hybrid.strategies",),
     ("hybrid.cost",),
+    ("hybrid.oracle", "hybrid.adaptive"),   # the renderer's in-frame timing and online adaptation
     ("hybrid.reference", "hybrid.residency", "hybrid.uploads", "hybrid.renderer"),
     ("hybrid.calibrate",),
     ("experiments",),

@@ -50,7 +50,7 @@ def test_near_seam_blocks_are_cut_in_the_loader_thread_not_in_frames(ctx, tmp_pa
     whole = open_periodic(tmp_path / "s", 385).load()
     with ReferenceRenderer(ctx, whole) as ref:
         rf = ref.render(v, mode="shaded")
-    with Renderer(ctx, open_periodic(tmp_path / "s", 385), policy, 16, cost_model=model) as full:
+    with Renderer(ctx, open_periodic(tmp_path / "s", 385), policy, 16, cost_model=model, adapt=False) as full:
         want = full.render(v, 2.0, mode="shaded")
         plans = full.plan(v, 2.0)
         choices = [p.choice for p in plans]
@@ -61,7 +61,7 @@ def test_near_seam_blocks_are_cut_in_the_loader_thread_not_in_frames(ctx, tmp_pa
     heights_built = []
     real_nodes = estimate_mod.tile_nodes
     monkeypatch.setattr(estimate_mod, "tile_nodes", lambda *a: heights_built.append(a) or real_nodes(*a))
-    with Renderer(ctx, ext, policy, 16, pyramid=pyramid, cost_model=model, upload_budget_ms=1e6) as r:
+    with Renderer(ctx, ext, policy, 16, pyramid=pyramid, cost_model=model, adapt=False, upload_budget_ms=1e6) as r:
         history, gaps, unknown, waited = [], [], [], []
         for _ in range(50):
             res = r.render(v, 2.0, mode="shaded")

@@ -100,7 +100,7 @@ def test_ray_caster_draws_no_phantom_walls(ctx, scene, tile_size):
 @pytest.mark.parametrize("tile_size", TILE_SIZES)
 def test_hybrid_draws_no_phantom_walls(ctx, scene, tile_size):
     hf, vs, refs = scene
-    with Renderer(ctx, hf, "hybrid", tile_size=tile_size, cost_model=SPLIT) as r:
+    with Renderer(ctx, hf, "hybrid", tile_size=tile_size, cost_model=SPLIT, adapt=False) as r:
         for name, v in vs.items():
             r.model = median_split(r.pyramid, v)
             kinds = {r.kind(p.choice) for p in r.plan(v)}

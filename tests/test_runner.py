@@ -288,3 +288,33 @@ def test_a_configuration_failing_in_its_measures_keeps_its_groups_reference_imag
     assert [e["policy"] for e in errors] == ["raster"] and "measure failed" in errors[0]["error"]
     assert len(pd.read_parquet(folder / "frames.parquet")) == 2 * 3          # the other two went on
     assert (folder / "images" / "ref-fbm-s0-flyover-160x90-f1.png").stat().st_size > 1000
+
+
+def test_start_models_vary_only_the_hybrid():
+    spec = parse_spec('policies = ["raster", "raycast", "hybrid"]\nstart_models = ["device", "fallback"]')
+    hy = [c for c in spec.configs() if c["policy"] == "hybrid"]
+    assert sorted(c["start_model"] for c in hy) == ["device", "fallback"]
+    assert sum(c["config"].endswith("-from-fallback") for c in spec.configs()) == 1
+    assert all(c["start_model"] == "device" for c in spec.configs() if c["policy"] != "hybrid")
+    with pytest.raises(TerrabenchError, match="unknown start model 'h200'"):
+        parse_spec('start_models = ["h200"]')
+    with pytest.raises(TerrabenchError, match="'adapt' must be true or false"):
+        parse_spec('adapt = "yes"')
+
+
+def test_a_frozen_hybrid_chooses_alike_in_two_runs_and_a_run_before_adapt_resumes_frozen(ctx, tmp_path):
+    import json
+    frozen = TINY.replace('policies = ["raster", "raycast", "hybrid"]', 'policies = ["hybrid"]') + \
+        'adapt = false\nstart_models = ["fallback"]\n'
+    tiles = []
+    for name in ("a", "b"):
+        folder = run_spec(parse_spec(frozen), tmp_path / name, ctx, progress=False)
+        tiles.append(pd.read_parquet(folder / "tiles.parquet").sort_values(["frame", "level", "tx", "ty"]))
+    assert len(tiles[0]) and list(tiles[0]["strategy"]) == list(tiles[1]["strategy"])
+    assert (tiles[0]["config"].str.endswith("-from-fallback")).all()
+    stored = json.loads((folder / "spec.json").read_text())
+    del stored["adapt"]                                      # as runs wrote it before the hybrid adapted
+    (folder / "spec.json").write_text(json.dumps(stored))
+    assert run_spec(parse_spec(frozen), tmp_path / "b", ctx, progress=False) == folder
+    with pytest.raises(TerrabenchError, match="different spec"):
+        run_spec(parse_spec(frozen.replace("adapt = false", "adapt = true")), tmp_path / "b", ctx, progress=False)

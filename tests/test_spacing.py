@@ -155,7 +155,7 @@ def test_every_method_draws_the_reference_surface(ctx, references, spacing, meth
     does (texel rows north, columns east); at tau 0.05 px all but the TIN draw the reference's surface with its
     shading (normals from x and y slopes in metres); the hybrid mixes both strategies in every frame."""
     hf = terrain(spacing)
-    r = Renderer(ctx, hf, method, tile_size=TILE, cost_model=split_model(1.0) if method == "hybrid" else None)
+    r = Renderer(ctx, hf, method, tile_size=TILE, cost_model=split_model(1.0) if method == "hybrid" else None, adapt=False)
     if method == "tin":
         r.strategies["tin"].max_error, r.strategies["tin"].preserve_border = 1.0, True   # a TIN within 1 m
     try:

@@ -25,7 +25,7 @@ def test_three_strategies_in_one_frame_leave_no_hole(ctx, puget_full):
     pure = {n: make_renderer(ctx, puget_full, n, tile_size=128) for n in CANDIDATES}
     mixed = Renderer(ctx, puget_full, "hybrid", tile_size=128,
                      cost_model=CostModel("flat", FLAT, {"const": 1.0, "pixels": 0.0, "surface_pixels": 0.0,
-                                                          "pixel_steps": 0.0}))
+                                                          "pixel_steps": 0.0}), adapt=False)
     plan = mixed.plan
     mixed.plan = lambda view, tau: cyclic(plan(view, tau))
     fly = preset("flyover", puget_full, 6, *SIZE)
@@ -56,7 +56,7 @@ def test_hybrid_chooses_the_geometry_shader_path_when_the_model_says_it_is_cheap
     cheap_gs = CostModel("gs", {**FLAT, "const": 2.0}, ray, raster_gs={**FLAT, "const": 0.5})
     no_gs = CostModel("old", {**FLAT, "const": 2.0}, ray)
     v = preset("flyover", puget257, 6, *SIZE).view(2)
-    with Renderer(ctx, puget257, "hybrid", tile_size=64, cost_model=cheap_gs) as h:
+    with Renderer(ctx, puget257, "hybrid", tile_size=64, cost_model=cheap_gs, adapt=False) as h:
         assert {p.choice for p in h.plan(v)} == {"raster_gs"}
         h.model = no_gs                       # a model without raster_gs coefficients never picks it
         assert {p.choice for p in h.plan(v)} == {"raycast"}

@@ -192,11 +192,11 @@ def test_hybrid_prepares_estimates_within_the_streaming_budget(ctx, puget257):
     from hybrid.tiles.pyramid import TilePyramid
     v = preset("orbit", puget257, 6, *SIZE).view(1)
     model = median_split(TilePyramid(puget257, 32), v)
-    with Renderer(ctx, puget257, "hybrid", 32, cost_model=model) as full:
+    with Renderer(ctx, puget257, "hybrid", 32, cost_model=model, adapt=False) as full:
         want = full.render(v, 2.0)
         choices = [p.choice for p in full.plan(v, 2.0)]
     assert "raster" in choices                                 # the check below needs tiles that want raster
-    with Renderer(ctx, puget257, "hybrid", 32, cost_model=model, upload_budget_ms=0.0) as r:
+    with Renderer(ctx, puget257, "hybrid", 32, cost_model=model, adapt=False, upload_budget_ms=0.0) as r:
         built = []
         for _ in range(3 * len(choices)):
             plans = r.plan(v, 2.0)

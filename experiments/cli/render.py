@@ -53,6 +53,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "for), or keep every midpoint, cells split as the reference's (exact: more triangles, "
                         "closer to the reference at a given tau)")
     p.add_argument("--show-strategy", action="store_true", help="hybrid: also write PATH.strategy.png")
+    p.add_argument("--freeze-model", action="store_true",
+                   help="hybrid: choose by the loaded cost model as it is (no online refit from the frames drawn)")
 
 
 def draw_options(method: str, tau: float, shading=None, reconstruction="triangles", traversal="maxmip",
@@ -97,7 +99,7 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
         tile_size: int = 256, reconstruction: str = "triangles", traversal: str = "maxmip",
         prepass: bool | None = None,
         lod: bool = False, shadows: bool = False, wireframe: bool = False, show_strategy: bool = False,
-        device: int | None = None, lean: bool = True, full_res: str = DEFAULT_FULL_RES):
+        device: int | None = None, lean: bool = True, full_res: str = DEFAULT_FULL_RES, freeze_model: bool = False):
     """Render one view with a method; write out (.png) and its .depth.npy; returns the RenderResult."""
     from hybrid.gl.context import shared_context
     from hybrid.gl.target import check_png_path
@@ -105,6 +107,8 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
     writable_folder(out.parent if str(out.parent) else Path("."), "--out folder")
     if show_strategy and method not in MIXED:
         raise TerrabenchError("--show-strategy needs a mixed policy: --method hybrid (or heuristic, oracle)")
+    if freeze_model and method != "hybrid":
+        raise TerrabenchError("--freeze-model applies to --method hybrid, the one policy that refits its cost model")
     hf = terrain.load()
     v = view.view(hf)
     ctx = shared_context(device)
@@ -116,7 +120,7 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
         from hybrid.renderer import Renderer
         opts = draw_options(method, tau, shading, reconstruction, traversal, prepass, lod, shadows, wireframe, lean,
                             full_res)
-        with Renderer(ctx, hf, method, tile_size, **opts) as r:
+        with Renderer(ctx, hf, method, tile_size, adapt=not freeze_model, **opts) as r:
             result = r.render(v, tau, maps=show_strategy)
     png, depth = result.save(out)
     if show_strategy:
@@ -135,7 +139,7 @@ def run_from_args(args: argparse.Namespace) -> int:
     """The render command from parsed arguments; returns the exit code."""
     run(args.out, args.method, from_args(TerrainOptions, args), from_args(ViewOptions, args), args.shading,
         args.supersample, args.tau, args.tile_size, args.reconstruction, args.traversal, args.prepass, args.lod,
-        args.shadows, args.wireframe, args.show_strategy, args.device, args.lean, args.full_res)
+        args.shadows, args.wireframe, args.show_strategy, args.device, args.lean, args.full_res, args.freeze_model)
     return 0
 
 

@@ -19,6 +19,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--report", action="store_true", help="write the report when done")
     add_reports_argument(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--freeze-model", action="store_true",
+                   help="the hybrid chooses by its starting cost model as it is (the spec's adapt = false)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--scheduler", default=None, metavar="ADDRESS",
                        help="run the configurations as tasks on the Dask cluster of this scheduler "
@@ -28,7 +30,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(spec, runs="runs", name: str | None = None, report: bool = False, reports="reports", quiet: bool = False,
-        device: int | None = None, scheduler: str | None = None, workers: str | None = None) -> Path:
+        device: int | None = None, scheduler: str | None = None, workers: str | None = None,
+        freeze_model: bool = False) -> Path:
     """Run a spec (a path, a bundled name or a parsed spec) into runs/<name>; returns the run folder. With a
     ``scheduler`` address or ``workers`` 'local:N' its configurations run on a Dask cluster."""
     from hybrid.errors import TerrabenchError
@@ -42,6 +45,10 @@ def run(spec, runs="runs", name: str | None = None, report: bool = False, report
         spec = load_spec(spec)
     if name:
         spec.name = name
+    if freeze_model:
+        if isinstance(spec, StressSpec):
+            raise TerrabenchError("--freeze-model applies to paired-flight specs (a stress spec has no hybrid model)")
+        spec.adapt = False
     writable_folder(Path(runs), "--runs")
     if report:
         writable_folder(Path(reports), "--reports")
@@ -69,7 +76,7 @@ def run_from_args(args: argparse.Namespace) -> int:
     """The run command from parsed arguments; returns the exit code: 1 when any configuration failed."""
     from ..journal import failed_configs
     folder = run(args.spec, args.runs, args.name, args.report, args.reports, args.quiet, args.device, args.scheduler,
-                 args.workers)
+                 args.workers, args.freeze_model)
     failed = failed_configs(folder)
     if failed:
         print(f"terrabench: {len(failed)} configuration(s) failed (details in {folder / 'errors.jsonl'}):",

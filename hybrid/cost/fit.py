@@ -26,9 +26,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import nnls
 
 from hybrid.cost.model import TERMS, CostModel
-from hybrid.cost.nnls import nnls
 from hybrid.errors import TerrabenchError
 
 
@@ -113,7 +113,7 @@ def fit_frames(samples: list[FrameSample], renderer: str, holdout: float = 0.3, 
         b.append(np.full(len(t_train), k))
     A = np.vstack(rows)
     scale = np.maximum(np.abs(A).max(axis=0), 1e-12)
-    x = nnls(A / scale, np.concatenate(b)) / scale
+    x = nnls(A / scale, np.concatenate(b), maxiter=50 * A.shape[1])[0] / scale
     coef, overhead = {}, {s: 0.0 for s in TERMS}
     for j, s in enumerate(names):
         overhead[s] = float(x[offsets[j]])

@@ -91,6 +91,7 @@ class CostModel:
     mix_error: float = 0.0          # held-out median relative error of the frames that use more than one strategy
     mix_overhead: float = 0.0       # ms a frame that uses more than one strategy adds (fitted with the frames)
     full_res: str = PRIOR_FULL_RES  # the full-resolution rule its raster frames were drawn by
+    adapted_frames: int = 0         # frames it learned from online after it was loaded (hybrid.cost.online)
 
     @property
     def candidates(self) -> tuple[str, ...]:
@@ -166,6 +167,8 @@ class CostModel:
                  "  per-frame overhead: " + ", ".join(f"{s} {self.overhead.get(s, 0):.3g} ms" for s in self.candidates)
                  + f"; a frame mixing strategies adds {self.mix_overhead:.3g} ms",
                  f"  raster frames drawn with full_res {self.full_res!r}"]
+        if self.adapted_frames:
+            lines.append(f"  adapted online over {self.adapted_frames} frames")
         if "raster_gs" not in self.candidates:
             lines.append("  raster_gs not calibrated: never chosen")
         what = f"of {self.frames} frames' times" if self.frames else "per tile"
@@ -199,9 +202,15 @@ def read_costs_file(path: Path | None = None) -> dict:
     if not path.exists():
         return {}
     try:
-        return json.loads(path.read_text())
-    except json.JSONDecodeError:
+        data = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError):
         raise TerrabenchError(f"{path}: costs file is not valid JSON; fix or move it away") from None
+    except OSError as exc:
+        raise TerrabenchError(f"{path}: cannot read costs file ({exc.strerror or exc})") from None
+    if not isinstance(data, dict) or not all(isinstance(k, str) and isinstance(v, dict) for k, v in data.items()):
+        raise TerrabenchError(f"{path}: not a terrabench costs file (a JSON object of cost models keyed by GL "
+                              "renderer); fix or move it away")
+    return data
 
 
 def save_cost_model(model: CostModel, path: Path | None = None) -> Path:
@@ -226,7 +235,8 @@ def cost_model_from_dict(d: dict, source: str) -> CostModel:
                       int(d.get("tiles", 0)), source, {**{s: 0.0 for s in TERMS}, **d.get("overhead", {})},
                       dict(d.get("raster_gs") or {}), int(d.get("frames", 0)), dict(d.get("tile_error", {})),
                       {s: float(v) for s, v in (d.get("call_overhead") or {}).items()}, float(d.get("mix_error", 0.0)),
-                      float(d.get("mix_overhead", 0.0)), d.get("full_res", PRIOR_FULL_RES))
+                      float(d.get("mix_overhead", 0.0)), d.get("full_res", PRIOR_FULL_RES),
+                      int(d.get("adapted_frames", 0)))
         if m.full_res not in FULL_RES:
             raise ValueError(f"full_res must be one of {', '.join(FULL_RES)}, got {m.full_res!r}")
         for s in m.candidates:
@@ -257,8 +267,17 @@ def load_cost_model(renderer: str, path: Path | None = None) -> CostModel:
         key = matching_key(data, renderer)
         if key is not None:
             return cost_model_from_dict(data[key], str(path) if key == renderer else f"{path} '{key}'")
-    shipped = json.loads((resources.files("hybrid.cost") / "costs_default.json").read_text())
+    shipped = _shipped()
     key = matching_key(shipped, renderer)
     if key is not None:
         return cost_model_from_dict(shipped[key], f"shipped default '{key}'")
-    return cost_model_from_dict(shipped["fallback"], "shipped fallback (uncalibrated; run terrabench calibrate)")
+    return fallback_cost_model()
+
+
+def _shipped() -> dict:
+    return json.loads((resources.files("hybrid.cost") / "costs_default.json").read_text())
+
+
+def fallback_cost_model() -> CostModel:
+    """The shipped uncalibrated model, for a GL renderer nobody calibrated (an adapting hybrid learns from it)."""
+    return cost_model_from_dict(_shipped()["fallback"], "shipped fallback (uncalibrated; run terrabench calibrate)")

@@ -91,6 +91,12 @@ class TilePlan:
                 **{f"meas_{s}_ms": self.measured.get(s) for s in CANDIDATES}}
 
 
+def frame_columns(plans: list[TilePlan]) -> FrameColumns | None:
+    """The feature columns and predictions the plans of one frame share (a mixed policy's batch plan), else None."""
+    frame = plans[0]._frame if plans else None
+    return frame if frame is not None and all(p._frame is frame for p in plans) else None
+
+
 def choices(policy: str, columns: dict, predicted: dict, threshold: float = 1.0) -> list[str]:
     """The strategy a policy picks for each of many tiles, from feature columns and predicted ms ((B,) arrays)."""
     if policy in PURE_POLICIES:

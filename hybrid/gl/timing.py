@@ -22,10 +22,11 @@ def timer_queries_valid(ctx) -> bool:
     return extra["timer_queries"]
 
 
-def timed(ctx, fn):
+def timed(ctx, fn, query: bool = True):
     """(fn(), wall ms, GPU ms or None, issue ms): fn runs between two ctx.finish(); GPU ms from a timer query on
-    GPUs; issue ms the wall clock until fn returns less its waits for the GL."""
-    query = ctx.query(time=True) if timer_queries_valid(ctx) else None
+    GPUs (not with ``query`` False: fn times its own parts, and GL time queries do not nest); issue ms the wall
+    clock until fn returns less its waits for the GL."""
+    query = ctx.query(time=True) if query and timer_queries_valid(ctx) else None
     ctx.finish()
     waited = gl_waited_ms()
     t0 = time.perf_counter()

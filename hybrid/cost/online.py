@@ -1,0 +1,256 @@
+"""Online refit of the cost model while the hybrid renders: each strategy's pass in every frame is a measured row.
+
+A frame drawn by the hybrid is one pass per strategy used. Each pass gives one row of that strategy's model,
+the same row ``hybrid.cost.fit.fit_frames`` fits: [1 (its per-frame overhead), the sums of its tiles' terms]
+against the pass's measured ms. The rows of the last ``AdaptOptions.window`` passes of a strategy are refitted
+with non-negative least squares on relative error (scipy's NNLS), pulled toward the starting model by a ridge
+(``prior_weight`` rows' worth) so that a few rows move the coefficients only where they say something: the
+starting model is first scaled by the median measured / predicted of the window, which corrects a model of
+another device or a uniformly wrong one from the first frames, and the ridge pulls toward that scaled model.
+Rows more than ``OUTLIER`` times the median relative residual off are dropped and the fit repeated once.
+
+A strategy the hybrid does not choose gives no rows, so it may be given a few tiles of a frame (exploration):
+at most ``explore_tiles`` tiles, those it is predicted to draw cheapest against the frame's choice, paid from a
+budget that earns ``explore_share`` of every observed frame's measured ms and is charged the exploration's
+measured cost (its pass, less the chosen strategy's predicted cost of those tiles). A strategy whose last
+``hold_rows`` predictions were within ``hold_error`` (median relative error of passes predicted before they
+were fitted) holds, and is explored no more while it holds.
+
+A mixed frame's own overhead is the median of (frame ms - its passes' ms) over the window's mixed frames less
+that of its one-strategy frames.
+"""
+from __future__ import annotations
+
+import copy
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import nnls
+
+from hybrid.cost.model import _TERM_INDEX, TERMS, CostModel, all_term_values
+from hybrid.errors import TerrabenchError
+
+def _median(values) -> float:
+    """Median of a short sequence (numpy's median costs more than the sort on a few dozen values)."""
+    v = sorted(values)
+    n = len(v)
+    return float(v[n // 2]) if n % 2 else 0.5 * float(v[n // 2 - 1] + v[n // 2])
+
+
+OUTLIER = 4.0
+"""Rows whose relative residual is over this many times the median one (and over 0.25) are refitted without."""
+
+
+@dataclass(frozen=True)
+class AdaptOptions:
+    """How the hybrid's cost model adapts online: rows kept, the ridge toward the starting model, the exploration
+    budget (share of frame time) and when a strategy's predictions hold."""
+
+    window: int = 48
+    prior_weight: float = 2.0
+    explore_share: float = 0.05
+    explore_tiles: int = 2
+    hold_rows: int = 6
+    hold_error: float = 0.15
+    refit_every: int = 8
+
+    def __post_init__(self):
+        if not (self.window >= 4 and self.hold_rows >= 1 and self.explore_tiles >= 1 and self.refit_every >= 1):
+            raise TerrabenchError("adapt options need window >= 4 and hold_rows, explore_tiles, refit_every >= 1")
+        for name in ("prior_weight", "explore_share", "hold_error"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise TerrabenchError(f"adapt option {name} must be a finite number >= 0, got {v!r}")
+
+
+@dataclass
+class Exploration:
+    """Tiles of one frame given to a strategy to learn it: their indices, and the predicted ms the chosen
+    strategies would have drawn them in."""
+
+    strategy: str
+    tiles: np.ndarray
+    base_ms: float
+
+
+@dataclass
+class AdaptStats:
+    """What adaptation did over a renderer's life: frames observed, refits, exploration (frames, tiles, measured
+    ms) against all observed frames' ms."""
+
+    frames: int = 0
+    refits: int = 0
+    explored_frames: int = 0
+    explored_tiles: int = 0
+    explore_ms: float = 0.0
+    frame_ms: float = 0.0
+    errors: dict = field(default_factory=dict)
+
+    @property
+    def explore_share(self) -> float:
+        """Measured exploration cost as a share of the observed frames' time."""
+        return self.explore_ms / self.frame_ms if self.frame_ms > 0 else 0.0
+
+
+class OnlineModel:
+    """A cost model refitted from the passes the hybrid draws (see the module docstring); ``model`` is current."""
+
+    def __init__(self, start: CostModel, options: AdaptOptions | None = None, seed: int = 0):
+        self.options = options or AdaptOptions()
+        self.start = copy.deepcopy(start)
+        self.model = copy.deepcopy(start)
+        self.model.source = f"{start.source or 'unsaved'}, adapted online"
+        names = self.model.candidates
+        self.rows = {s: RowWindow(self.options.window, 1 + len(TERMS[s])) for s in names}
+        self._fresh = {s: 0 for s in names}          # rows since the strategy's last refit
+        self._seen: set = set()                       # strategies whose first pass (compiles, first use) went by
+        self._spent: dict = {}                        # the last measured cost of exploring each strategy
+        self.errors = {s: deque(maxlen=self.options.hold_rows) for s in names}
+        self.residual = {"pure": deque(maxlen=self.options.window), "mixed": deque(maxlen=self.options.window)}
+        self.credit = 0.0
+        self.stats = AdaptStats()
+        self._rng = np.random.default_rng(seed)
+
+    def holds(self, strategy: str) -> bool:
+        """Whether the strategy's recent predictions held (``hold_rows`` passes within ``hold_error``)."""
+        e = self.errors[strategy]
+        return len(e) == e.maxlen and _median(e) <= self.options.hold_error
+
+    @property
+    def settled(self) -> bool:
+        """Whether every candidate's predictions hold."""
+        return all(self.holds(s) for s in self.model.candidates)
+
+    def explore(self, table: np.ndarray, picks: np.ndarray, names: tuple) -> Exploration | None:
+        """Give a few tiles to a candidate the frame does not use and whose predictions do not hold, when the
+        budget covers its predicted cost; ``picks`` (B,) indices into ``names`` are changed in place."""
+        used = set(picks.tolist())
+        todo = [i for i, s in enumerate(names) if i not in used and not self.holds(s) and np.isfinite(table[i]).any()]
+        if not todo or len(picks) == 0:
+            return None
+        i = todo[int(self._rng.integers(len(todo)))]
+        base = table[picks, np.arange(len(picks))]
+        ratio = np.where(np.isfinite(table[i]), table[i] / np.maximum(base, 1e-9), np.inf)
+        k = min(self.options.explore_tiles, int(np.isfinite(ratio).sum()))
+        pool = np.argsort(ratio, kind="stable")[:max(2 * k, 1)]
+        tiles = np.sort(self._rng.choice(pool, size=k, replace=False))
+        m = self.model
+        cost = (m.overhead.get(names[i], 0.0) + m.mix_overhead + float(table[i, tiles].sum() - base[tiles].sum()))
+        if max(cost, self._spent.get(names[i], 0.0)) > self.credit:
+            return None
+        picks[tiles] = i
+        return Exploration(names[i], tiles, float(base[tiles].sum()))
+
+    def observe(self, columns: dict, picks: list[str], pass_ms: dict, frame_ms: float,
+                explored: Exploration | None = None) -> None:
+        """Learn from one drawn frame: feature columns of its tiles ((B,) arrays), each tile's strategy, each
+        strategy's measured pass ms and the whole drawing's ms; refits the strategies drawn."""
+        if not np.isfinite(frame_ms) or frame_ms <= 0:
+            return
+        terms = all_term_values(columns)
+        picks = np.asarray(picks)
+        m = self.model
+        learnt = []
+        for s, ms in pass_ms.items():
+            if s not in self.rows or not (np.isfinite(ms) and ms > 0):
+                continue
+            if s not in self._seen:                   # a strategy's first pass pays one-off costs: not a row
+                self._seen.add(s)
+                continue
+            x = np.concatenate([[1.0], terms[picks == s][:, _TERM_INDEX[s]].sum(axis=0)])
+            if not np.all(np.isfinite(x)):
+                continue
+            predicted = float(x @ self._theta(m, s))
+            self.errors[s].append(abs(predicted - ms) / ms)
+            self.rows[s].add(x, float(ms))
+            self._fresh[s] += 1
+            if not self.holds(s) or self._fresh[s] >= self.options.refit_every:
+                learnt.append(s)
+        kind = "mixed" if len(pass_ms) > 1 else "pure"
+        self.residual[kind].append(frame_ms - sum(pass_ms.values()))
+        self.stats.frames += 1
+        m.adapted_frames += 1
+        self.stats.frame_ms += frame_ms
+        self.credit = min(self.credit + self.options.explore_share * frame_ms, 20 * self.options.explore_share * frame_ms)
+        if explored is not None and explored.strategy in pass_ms:
+            spent = self._spent[explored.strategy] = max(pass_ms[explored.strategy] - explored.base_ms, 0.0)
+            self.credit -= spent
+            self.stats.explored_frames += 1
+            self.stats.explored_tiles += len(explored.tiles)
+            self.stats.explore_ms += spent
+        if learnt:
+            self._refit(learnt)
+
+    @staticmethod
+    def _theta(m: CostModel, s: str) -> np.ndarray:
+        """[overhead, coefficients in TERMS order] of strategy s in model m."""
+        c = getattr(m, s)
+        return np.array([m.overhead.get(s, 0.0)] + [c.get(t, 0.0) for t in TERMS[s]], dtype=np.float64)
+
+    def _refit(self, names: list[str]) -> None:
+        m = copy.copy(self.model)
+        for s in names:
+            self._fresh[s] = 0
+            X, y = self.rows[s].arrays()
+            theta = fit_rows(X, y, self._theta(self.start, s), self.options.prior_weight)
+            m.overhead = {**m.overhead, s: float(theta[0])}
+            setattr(m, s, dict(zip(TERMS[s], map(float, theta[1:]))))
+        mixed, pure = self.residual["mixed"], self.residual["pure"]
+        if len(mixed) >= 3:
+            m.mix_overhead = max(_median(mixed) - (_median(pure) if pure else 0.0), 0.0)
+        m.fit_error = {**m.fit_error, **{s: _median(e) for s in names if len(e := self.errors[s]) == e.maxlen}}
+        m.__dict__.pop("_memos", None)
+        self.model = m
+        self.stats.refits += 1
+        self.stats.errors.update({s: _median(self.errors[s]) for s in names})
+
+
+class RowWindow:
+    """The last ``size`` rows of one strategy: terms (size, width) and measured ms (size,), in a ring."""
+
+    def __init__(self, size: int, width: int):
+        self.X = np.zeros((size, width))
+        self.y = np.zeros(size)
+        self.n = 0
+
+    def add(self, x: np.ndarray, ms: float) -> None:
+        """Keep a row, dropping the oldest once full."""
+        i = self.n % len(self.y)
+        self.X[i], self.y[i] = x, ms
+        self.n += 1
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """(terms, ms) of the rows kept (order not kept)."""
+        k = min(self.n, len(self.y))
+        return self.X[:k], self.y[:k]
+
+    def __len__(self) -> int:
+        return min(self.n, len(self.y))
+
+
+def fit_rows(X: np.ndarray, y: np.ndarray, prior: np.ndarray, prior_weight: float) -> np.ndarray:
+    """Non-negative [overhead, coefficients] of one strategy from rows of terms X (n, p) and measured ms y (n,),
+    on relative error, with a ridge of ``prior_weight`` rows toward ``prior`` scaled by the rows' median
+    measured / predicted; outliers (``OUTLIER``) dropped and refitted once. No rows: the prior."""
+    if len(y) == 0:
+        return prior.copy()
+    pred = X @ prior
+    ratio = y[pred > 0] / pred[pred > 0]
+    scaled = prior * (_median(ratio.tolist()) if len(ratio) else 1.0)
+    A = X / y[:, None]
+    col = np.sqrt(np.einsum("ij,ij->j", A, A) / len(y))
+    col = np.where(col > 0, col, 1.0)
+    keep = np.ones(len(y), dtype=bool)
+    for _ in range(2):
+        ridge = np.sqrt(prior_weight) * np.eye(len(prior))
+        M = np.vstack([A[keep] / col, ridge])
+        b = np.concatenate([np.ones(int(keep.sum())), ridge @ (scaled * col)])
+        u, _ = nnls(M, b, maxiter=50 * len(prior))
+        theta = u / col
+        res = np.abs(A @ theta - 1.0)
+        cut = max(OUTLIER * _median(res.tolist()), 0.25)
+        if keep.sum() < 4 or np.all(res[keep] <= cut):
+            break
+        keep = res <= cut
+    return theta

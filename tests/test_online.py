@@ -1,0 +1,162 @@
+"""Online adaptation of the cost model: refits move predictions toward measured times, exploration stays within
+its budget and stops once predictions hold, a frozen hybrid chooses the same every run, learned models round-trip."""
+
+import copy
+import json
+
+import numpy as np
+import pytest
+
+from hybrid.cost.model import TERMS, CostModel, all_term_values, load_cost_model, read_costs_file, save_cost_model
+from hybrid.cost.online import AdaptOptions, OnlineModel, fit_rows
+from hybrid.errors import TerrabenchError
+
+TRUE = CostModel("test", {"const": 0.3, "triangles": 5e-5, "visible_triangles": 1.5e-4, "pixels": 1e-5,
+                          "surface_pixels": 2e-5},
+                 {"const": 0.5, "pixels": 2e-5, "surface_pixels": 1e-5, "pixel_steps": 1e-5},
+                 overhead={"raster": 2.0, "raster_gs": 3.0, "raycast": 1.5},
+                 raster_gs={"const": 0.2, "triangles": 2e-4, "visible_triangles": 3e-4, "pixels": 1e-5,
+                            "surface_pixels": 2.5e-5}, mix_overhead=0.8)
+
+
+def columns(rng, n):
+    """Feature columns of n synthetic tiles."""
+    return {"pixels": rng.uniform(500, 40000, n), "triangles": rng.uniform(0, 100000, n),
+            "slab_cells": rng.uniform(0, 300, n), "level": rng.integers(0, 3, n).astype(float),
+            "distance": rng.uniform(1e3, 1e5, n), "visible": rng.uniform(0.1, 1.0, n),
+            "surface_pixels": rng.uniform(0, 30000, n)}
+
+
+def true_passes(cols, picks, rng, noise=0.03):
+    """Each strategy's pass ms under TRUE (its overhead and its tiles), with multiplicative noise."""
+    table = TRUE.predict_table(cols)
+    names = TRUE.candidates
+    out = {}
+    for i, s in enumerate(names):
+        sel = picks == s
+        if sel.any():
+            out[s] = (TRUE.overhead[s] + float(table[i, sel].sum())) * float(1 + noise * rng.standard_normal())
+    return out
+
+
+def scaled(model, strategy, factor):
+    """A copy of the model with one strategy's coefficients and overhead multiplied by factor."""
+    m = copy.deepcopy(model)
+    setattr(m, strategy, {k: v * factor for k, v in getattr(m, strategy).items()})
+    m.overhead = {**m.overhead, strategy: m.overhead[strategy] * factor}
+    return m
+
+
+def run_frames(online, rng, frames, explore=True):
+    """Frames of 8-30 tiles chosen by the online model's cheapest prediction per tile, drawn 'by' TRUE."""
+    errors = []
+    for _ in range(frames):
+        cols = columns(rng, int(rng.integers(8, 31)))
+        names = online.model.candidates
+        table = online.model.predict_table(cols)
+        picks = table.argmin(axis=0)
+        explored = online.explore(table, picks, names) if explore else None
+        chosen = np.array([names[i] for i in picks])
+        passes = true_passes(cols, chosen, rng)
+        predicted = sum(online.model.overhead[s] + float(table[names.index(s), chosen == s].sum()) for s in passes)
+        frame = sum(passes.values()) + (TRUE.mix_overhead if len(passes) > 1 else 0.0)
+        errors.append(abs(predicted - sum(passes.values())) / sum(passes.values()))
+        online.observe(cols, chosen.tolist(), passes, frame, explored)
+    return np.array(errors)
+
+
+def test_fit_rows_recovers_coefficients_from_a_wrong_prior():
+    rng = np.random.default_rng(1)
+    theta = np.r_[TRUE.overhead["raycast"], [TRUE.raycast[t] for t in TERMS["raycast"]]]
+    X = np.c_[np.ones(48), np.array([all_term_values(columns(rng, 20))[:, [0, 3, 4, 5]].sum(axis=0)
+                                      for _ in range(48)])]
+    y = X @ theta * (1 + 0.01 * rng.standard_normal(48))
+    fitted = fit_rows(X, y, theta / 5, prior_weight=2.0)
+    assert np.all(fitted >= 0)
+    rel = np.abs(X @ fitted - y) / y
+    assert np.median(rel) < 0.02                      # the prior was 5x off: 80 % error before the fit
+    assert np.median(np.abs(X @ (theta / 5) - y) / y) > 0.7
+
+
+def test_fit_rows_drops_an_outlier():
+    rng = np.random.default_rng(2)
+    theta = np.array([1.0, 0.2, 1e-4])
+    X = np.c_[np.ones(30), rng.uniform(5, 30, 30), rng.uniform(1e3, 5e4, 30)]
+    y = X @ theta
+    y[3] *= 8                                          # one frame stalled
+    fitted = fit_rows(X, y, theta * 2, prior_weight=1.0)
+    ok = np.arange(30) != 3
+    assert np.median(np.abs(X[ok] @ fitted - y[ok]) / y[ok]) < 0.02
+
+
+@pytest.mark.parametrize("wrong", ["raycast", "raster"])
+def test_adaptation_moves_predictions_toward_measured(wrong):
+    rng = np.random.default_rng(3)
+    online = OnlineModel(scaled(TRUE, wrong, 0.2))
+    errors = run_frames(online, rng, 60)
+    assert errors[0] > 0.5                             # the wrong strategy is chosen and mispredicted
+    assert np.median(errors[-20:]) < 0.08
+    m = online.model
+    for s in m.candidates:                              # every candidate learned, the unused ones by exploration
+        cols = columns(rng, 20)
+        t = TRUE.predict_table(cols)[TRUE.candidates.index(s)].sum() + TRUE.overhead[s]
+        p = m.predict_table(cols)[m.candidates.index(s)].sum() + m.overhead[s]
+        assert abs(p - t) / t < 0.2, s
+    assert m.adapted_frames == 60
+
+
+def test_exploration_stays_within_its_budget_and_stops_once_predictions_hold():
+    rng = np.random.default_rng(4)
+    online = OnlineModel(scaled(TRUE, "raster_gs", 3.0), AdaptOptions(explore_share=0.05))
+    run_frames(online, rng, 200)
+    st = online.stats
+    assert st.explored_frames > 0
+    assert st.explore_share <= 0.05 + 1e-9
+    assert online.settled
+    before = st.explored_frames
+    run_frames(online, rng, 40)
+    assert online.stats.explored_frames == before           # settled: no more exploration
+
+
+def test_no_exploration_without_budget():
+    rng = np.random.default_rng(5)
+    online = OnlineModel(TRUE, AdaptOptions(explore_share=0.0))
+    run_frames(online, rng, 30)
+    assert online.stats.explored_frames == 0
+
+
+def test_bad_adapt_options_are_refused():
+    with pytest.raises(TerrabenchError, match="explore_share"):
+        AdaptOptions(explore_share=float("nan"))
+    with pytest.raises(TerrabenchError, match="window"):
+        AdaptOptions(window=2)
+
+
+def test_learned_model_round_trips_through_the_costs_file(tmp_path):
+    rng = np.random.default_rng(6)
+    online = OnlineModel(scaled(TRUE, "raycast", 0.5))
+    run_frames(online, rng, 30)
+    path = tmp_path / "costs.json"
+    save_cost_model(online.model, path)
+    back = load_cost_model("test", path)
+    assert back.adapted_frames == 30
+    for s in back.candidates:
+        assert getattr(back, s) == pytest.approx(getattr(online.model, s))
+        assert back.overhead[s] == pytest.approx(online.model.overhead[s])
+
+
+@pytest.mark.parametrize("text", ["{not json", "[1, 2]", '{"llvmpipe": 3}', "\u00ff\u00fe"])
+def test_corrupt_or_foreign_costs_file_is_refused_by_name(tmp_path, text):
+    path = tmp_path / "costs.json"
+    path.write_bytes(text.encode("latin-1"))
+    with pytest.raises(TerrabenchError, match="costs.json"):
+        read_costs_file(path)
+    with pytest.raises(TerrabenchError, match="costs.json"):
+        load_cost_model("llvmpipe", path)
+
+
+def test_costs_file_model_of_wrong_shape_is_refused_by_name(tmp_path):
+    path = tmp_path / "costs.json"
+    path.write_text(json.dumps({"llvmpipe": {"renderer": "llvmpipe", "raster": []}}))
+    with pytest.raises(TerrabenchError, match="malformed cost model"):
+        load_cost_model("llvmpipe", path)
