@@ -12,8 +12,9 @@ policy) are timed interleaved, frame by frame and repeat by repeat, so that a dr
 run falls on all of them alike (``run_group``). Each configuration first draws one untimed warm-up frame
 (shader compiles, first uploads: one-off costs that are not a frame's); every frame is drawn ``repeats``
 times, all kept in ``wall_ms_repeats`` and their median in ``wall_ms``; ``cpu_ms`` is the median of their CPU
-shares (planning plus issuing the draw: ``FrameStats.issue_ms``). Maps for the report's images come
-from one more, untimed, draw. A configuration resumed part-way first replays its earlier frames untimed, so
+shares (planning plus issuing the draw: ``FrameStats.issue_ms``) and ``gpu_ms`` of their GPU times (the
+timer query; NaN where the GL has none, as on llvmpipe). Maps for the report's images come from one more,
+untimed, draw. A spec with ``accuracy = false`` draws no reference: its rows carry timing only, and no images. A configuration resumed part-way first replays its earlier frames untimed, so
 that its GPU tile cache is in the state an uninterrupted run would have.
 """
 from __future__ import annotations
@@ -80,20 +81,19 @@ class TaskState:
         """The group's terrain and views (checked: every eye above the ground); loads the terrain once."""
         from hybrid.camera.clearance import check_eye_above
         from hybrid.camera.flight import get_flight
-        from hybrid.reference import ReferenceRenderer
         key = (spec.name, group_id(c))
         if self._group != key:
             self.release_group()
             tkey = (c["dataset"], c["seed"], spec.dataset_size)
             if tkey not in self._terrain:
-                self._terrain = {tkey: spec.source(c["dataset"]).load(size=spec.dataset_size or None, seed=c["seed"])}
+                self._terrain = {tkey: spec.terrain(c["dataset"], c["seed"])}
             hf = self._terrain[tkey]
             w, h = parse_size(c["size"])
             views = get_flight(c["flight"], hf, frames=spec.frames, width=w, height=h).views()
             for k, v in enumerate(views):
                 check_eye_above(hf, v, f"flight {c['flight']} frame {k}")
             self._group, self._views = key, (hf, views)
-            self._reference = ReferenceRenderer(self.ctx, hf)
+            self._reference = reference_renderer(self.ctx, hf) if spec.accuracy else None
         return self._views
 
     def reference(self, spec: Spec, c: dict, k: int, images: list):
@@ -110,6 +110,20 @@ class TaskState:
         if self._reference is not None:
             self._reference.release()
         self._group, self._views, self._refs, self._reference = None, None, {}, None
+
+
+def reference_renderer(ctx, hf):
+    """The full-resolution reference renderer of a terrain; a tile store's grid is loaded whole for it, refused by
+    name where it does not fit (a spec that only times sets accuracy = false)."""
+    from hybrid.reference import ReferenceRenderer
+    from hybrid.terrain.stored import StoredTerrain
+    if isinstance(hf, StoredTerrain):
+        try:
+            hf = hf.load()
+        except TerrabenchError as exc:
+            raise TerrabenchError(f"the reference image that accuracy is measured against needs the whole grid: "
+                                  f"{exc}; set accuracy = false in the spec to time it without one") from None
+    return ReferenceRenderer(ctx, hf)
 
 
 def _image(stem: str, result, full: bool) -> ImageOut:
@@ -247,21 +261,41 @@ def _time_frame(spec: Spec, live: list[_ConfigRun], k: int, views, fail_fast: bo
             continue
         results = draws[id(r)]
         mapped: list = []
-        if k in spec.image_frames and r.c["policy"] in MIXED:       # untimed, for its maps
+        if spec.accuracy and k in spec.image_frames and r.c["policy"] in MIXED:       # untimed, for its maps
             r.attempt(lambda r=r: mapped.append(r.renderer.render(views[k], r.c["tau"], maps=True)), fail_fast)
         if r.out.error is not None:
             continue
         cpu = [x.stats.cpu_ms for x in results if x.stats.cpu_ms is not None]
-        r.timed[k] = ((mapped or results)[-1], [x.stats.wall_ms for x in results], results[-1].stats, cpu)
+        gpu = [x.stats.gpu_ms for x in results if x.stats.gpu_ms is not None]
+        r.timed[k] = ((mapped or results)[-1], [x.stats.wall_ms for x in results], results[-1].stats, cpu, gpu)
         if step:
             step(f"{r.c['config']} frame {k}")
 
 
 def _measure(spec: Spec, r: _ConfigRun, state: TaskState, views, extra: dict | None) -> None:
-    """Accuracy of r's timed frames against the references; neighbours a resumed run did not time are drawn
-    now (untimed) for the temporal measures."""
+    """Rows of r's timed frames, with their accuracy against the references unless the spec says accuracy =
+    false; neighbours a resumed run did not time are drawn now (untimed) for the temporal measures."""
     c, out = r.c, r.out
     drawn = {k: v[0] for k, v in r.timed.items()}
+    for k in r.todo:
+        res, walls, timed_stats, cpu, gpu = r.timed[k]         # counters of a timed draw, not the maps draw
+        row = {**c, "frame": k, **timed_stats.row(), **(extra or {}), "wall_ms": float(np.median(walls)),
+               "cpu_ms": float(np.median(cpu)) if cpu else float("nan"),
+               "gpu_ms": float(np.median(gpu)) if gpu else float("nan"),
+               "wall_ms_min": float(np.min(walls)), "wall_ms_max": float(np.max(walls)),
+               "wall_ms_repeats": [float(w) for w in walls]}
+        if spec.accuracy:
+            row.update(_accuracy(spec, r, state, views, k, res, drawn))
+        tiles = [{"config": c["config"], "frame": k, "policy": c["policy"], **t} for t in timed_stats.tile_rows]
+        out.frames.append((row, tiles))
+        if spec.accuracy and (k in spec.image_frames or spec.video):
+            out.images.append(_image(f"{c['config']}-f{k}", res, k in spec.image_frames))
+
+
+def _accuracy(spec: Spec, r: _ConfigRun, state: TaskState, views, k: int, res, drawn: dict) -> dict:
+    """Frame k's accuracy, temporal and popping measures against the group's references; ``drawn`` holds the
+    frames drawn so far (neighbours a resumed run did not time are added)."""
+    c = r.c
 
     def frame(j):
         if j not in drawn:
@@ -269,22 +303,14 @@ def _measure(spec: Spec, r: _ConfigRun, state: TaskState, views, extra: dict | N
         return drawn[j]
 
     def ref(j):
-        return state.reference(spec, c, j, out.images)
+        return state.reference(spec, c, j, r.out.images)
 
-    for k in r.todo:
-        res, walls, timed_stats, cpu = r.timed[k]              # counters of a timed draw, not the maps draw
-        row = {**c, "frame": k, **timed_stats.row(), **(extra or {}), "wall_ms": float(np.median(walls)),
-               "cpu_ms": float(np.median(cpu)) if cpu else float("nan"),
-               "wall_ms_min": float(np.min(walls)), "wall_ms_max": float(np.max(walls)),
-               "wall_ms_repeats": [float(w) for w in walls], **frame_accuracy(res, ref(k), flip=spec.flip)}
-        if k > 0:
-            row.update(temporal_errors(frame(k - 1), res, ref(k - 1), ref(k)))
-        if 0 < k < spec.frames - 1:
-            refs = (ref(k - 1), ref(k), ref(k + 1))
-            row.update(popping((frame(k - 1), res, frame(k + 1)), refs, views[k - 1:k + 2]))
-            row["pop_static_px"] = (static_pop_pixels(r.renderer, views[k - 1:k + 2], refs, c["tau"], res)
-                                    if np.isfinite(row["pop_px"]) else np.nan)
-        tiles = [{"config": c["config"], "frame": k, "policy": c["policy"], **t} for t in timed_stats.tile_rows]
-        out.frames.append((row, tiles))
-        if k in spec.image_frames or spec.video:
-            out.images.append(_image(f"{c['config']}-f{k}", res, k in spec.image_frames))
+    row = frame_accuracy(res, ref(k), flip=spec.flip)
+    if k > 0:
+        row.update(temporal_errors(frame(k - 1), res, ref(k - 1), ref(k)))
+    if 0 < k < spec.frames - 1:
+        refs = (ref(k - 1), ref(k), ref(k + 1))
+        row.update(popping((frame(k - 1), res, frame(k + 1)), refs, views[k - 1:k + 2]))
+        row["pop_static_px"] = (static_pop_pixels(r.renderer, views[k - 1:k + 2], refs, c["tau"], res)
+                                if np.isfinite(row["pop_px"]) else np.nan)
+    return row

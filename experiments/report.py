@@ -24,13 +24,15 @@ from .tables import md_table
 
 
 def summary_table(frames: pd.DataFrame) -> pd.DataFrame:
-    """Per scene and method: median and p95 frame ms, the repeats' spread (noise, %), CPU ms, mean and peak GPU MiB,
+    """Per scene and method: median and p95 frame ms, the repeats' spread (noise, %), CPU ms, GPU ms (where the GL
+    times it), mean and peak GPU MiB,
     accuracy over terrain pixels, cracks, silhouette differences, reference terrain drawn as sky, popping."""
     from .noise import repeat_matrix, repeat_spread
     f = label_columns(frames)
     agg = {"frames": ("frame", "count"), "median_ms": ("wall_ms", "median"),
            "p95_ms": ("wall_ms", lambda s: float(np.percentile(s, 95))),
            **({"cpu_ms": ("cpu_ms", "median")} if "cpu_ms" in f else {}),
+           **({"gpu_ms": ("gpu_ms", "median")} if "gpu_ms" in f and f["gpu_ms"].notna().any() else {}),
            "mean_MiB": ("gpu_bytes", lambda s: float(s.mean()) / 2**20),
            "peak_MiB": ("gpu_bytes", lambda s: float(s.max()) / 2**20)}
     for col, name, fn in (("psnr", "psnr_dB", "mean"), ("ssim", "ssim", "mean"), ("flip", "flip", "mean"),
@@ -55,7 +57,8 @@ MEASURES = [
     "median of a frame's repeats, the noise the reading weighs differences against (with a bootstrap interval of "
     "the ratio over frames and repeats); cpu_ms: median over frames of the CPU's share of a frame, planning plus "
     "issuing its GL commands (waits for the GL left out; on llvmpipe issuing includes vertex, geometry and "
-    "compute work, which run inside the calls, but not fragment work).",
+    "compute work, which run inside the calls, but not fragment work); gpu_ms: median over frames of the GL timer "
+    "query's time of a frame's drawing, a column only where the GL has the query (not on llvmpipe).",
     "psnr_dB, ssim, flip: over the pixels where the method or the reference shows terrain (identical sky left "
     "out); depth_rel_med: relative hit-distance error over the pixels both cover, mean over frames of its median; "
     "depth_rel_p99: the largest of the frames' 99th percentiles.",
@@ -70,6 +73,25 @@ MEASURES = [
     "as the middle frame drew them), what the measure flags on a mesh that does not switch: popping is pop_px "
     "beyond it.",
 ]
+
+
+NO_ACCURACY = "accuracy not measured (accuracy = false): no reference image, timing only"
+
+
+def measures(accuracy: bool) -> list[str]:
+    """The summary's column notes: the timing ones, and the accuracy ones where accuracy was measured."""
+    return MEASURES if accuracy else MEASURES[:1]
+
+
+def intro(spec: dict) -> str:
+    """The report's first paragraph: what is compared with what, and how frames are timed."""
+    accuracy = ("accuracy is measured against the full-resolution reference image (colour supersampled "
+                f"{spec.get('supersample', 1)}x)") if spec.get("accuracy", True) else NO_ACCURACY
+    return (f"Every method renders the same camera views (paired flights); {accuracy}. Frame time is the wall clock "
+            f"around `ctx.finish()`, median of {spec.get('repeats')} repeats after one untimed warm-up frame per "
+            "configuration; the methods of a scene and tau are timed interleaved, each repeat of a frame drawn by "
+            "every method in turn, so a drift of the machine falls on all alike; the reading calls a difference "
+            "within the noise of this run a tie.")
 
 
 def missing_frames(spec: dict, frames: pd.DataFrame) -> str:
@@ -113,15 +135,13 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
         charts["video"] = write_videos(run, frames, out)
     table = summary_table(frames)
     lines = reading(frames, errors)
+    measured = spec.get("accuracy", True)
+    if not measured:
+        lines.append(NO_ACCURACY)
     missing = missing_frames(spec, frames)
     title = f"terrabench report: {spec['name']}" + (" (INCOMPLETE RUN)" if missing else "")
     md = [f"# {title}", ""] + ([f"**Incomplete:** {missing}", ""] if missing else []) + [
-          "Every method renders the same camera views (paired flights); accuracy is measured against the "
-          f"full-resolution reference image (colour supersampled {spec.get('supersample', 1)}x). Frame time is "
-          f"the wall clock around `ctx.finish()`, median of {spec.get('repeats')} repeats after one untimed warm-up "
-          "frame per configuration; the methods of a scene and tau are timed interleaved, each repeat of a frame "
-          "drawn by every method in turn, so a drift of the machine falls on all alike; the reading calls a "
-          "difference within the noise of this run a tie.", "",
+          intro(spec), "",
           "## Environment", "",
           f"- GL renderer: {env['gl_renderer']} ({env['gl_version']})",
           f"- CPU: {env['cpu']} ({env['cpu_count']} cores); Python {env['python']}; {env['platform']}",
@@ -129,7 +149,7 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
           f"- Hybrid cost model: {cost_model_line(env)}", "",
           "## Spec", "", "```json", json.dumps(spec, indent=1), "```", "",
           "## Reading", ""] + [f"- {l}" if not l.startswith("  ") else f"  - {l.strip()}" for l in lines] + [
-          "", "## Summary", "", md_table(table), ""] + [f"- {m}" for m in MEASURES] + [""]
+          "", "## Summary", "", md_table(table), ""] + [f"- {m}" for m in measures(measured)] + [""]
     titles = {"frame_time": "Frame time over the flight", "gpu_memory": "GPU memory over the flight",
               "speed_vs_accuracy": "Speed against accuracy", "strategy_mix": "Strategy mix per frame",
               "popping": "Popping: pixels whose depth error steps in one frame",
@@ -150,8 +170,8 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
          f"<h1>{html.escape(title)}</h1>" + (f"<p><b>Incomplete:</b> {html.escape(missing)}</p>" if missing else ""),
          "<h2>Environment</h2><ul>" + "".join(f"<li>{html.escape(str(k))}: {html.escape(str(v))}</li>" for k, v in env.items()) + "</ul>",
          "<h2>Reading</h2><ul>" + "".join(f"<li>{html.escape(l.strip()).replace('**', '')}</li>" for l in lines) + "</ul>",
-         "<h2>Summary</h2>", table.to_html(index=False, float_format=lambda v: f"{v:.3g}"),
-         "<ul>" + "".join(f"<li>{html.escape(m)}</li>" for m in MEASURES) + "</ul>"]
+         "<h2>Summary</h2>", table.to_html(index=False, float_format=lambda v: f"{v:.3g}", na_rep="–"),
+         "<ul>" + "".join(f"<li>{html.escape(m)}</li>" for m in measures(measured)) + "</ul>"]
     for key, files in charts.items():
         pngs = [p for p in files if p.suffix in (".png", ".gif")]
         if pngs:

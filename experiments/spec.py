@@ -1,7 +1,7 @@
 """Experiment specs (TOML): which datasets, flights, policies, tau values, sizes and modes to pair.
 
     name = "puget-default"
-    datasets = ["puget"]              # bundled names, height-field files, or tables (below)
+    datasets = ["puget"]              # bundled names, files, tile stores, STORE@periodicSIZE, or tables (below)
     dataset_size = 0                  # samples a side for synthetic data / crop of puget (0 = as is)
     flights = ["flyover", "orbit"]    # presets or .json/.csv flight files
     frames = 12
@@ -20,6 +20,7 @@
     flip = true                       # compute mean FLIP (slower)
     image_frames = [0]                # frames whose images are kept for the report
     video = false                     # keep every frame's image for `terrabench report --video`
+    accuracy = true                   # false: no reference image, timing only (no accuracy columns, no images)
 
 A dataset entry can be a table giving a file and how to load it (every key but ``path`` optional), inline
 (``datasets = ["puget", {path = "dem.tif", spacing = 30.0}]``, one line) or, after every other key, as
@@ -33,7 +34,9 @@ A dataset entry can be a table giving a file and how to load it (every key but `
     crop = {row = 0, col = 0, rows = 513, cols = 513}   # samples, rows as stored in the file
     credit = "USGS 3DEP 1/3 arc-second DEM"              # the report's line for these data
 
-Relative paths are relative to the spec file's folder.
+Relative paths are relative to the spec file's folder. ``STORE@periodicSIZE`` is the virtual periodic extension
+of a tile store to SIZE samples a side, STORE a store's folder or ``puget`` (its store prepared once into the
+cache at the spec's tile size: ``experiments.store_datasets``); e.g. ``puget@periodic16385``.
 """
 from __future__ import annotations
 
@@ -79,6 +82,7 @@ class Spec:
     flip: bool = True
     image_frames: list = field(default_factory=lambda: [0])
     video: bool = False
+    accuracy: bool = True
     gpu_budget_mib: int = 256
     upload_budget_ms: float | None = None
     adapt: bool = True
@@ -113,6 +117,14 @@ class Spec:
             if dataset_label(entry) == label:
                 return terrain_source(entry)
         raise TerrabenchError(f"spec {self.name!r} has no dataset {label!r}")
+
+    def terrain(self, label: str, seed: int):
+        """The HeightField a dataset label names (a tile store's periodic extension stays on disk)."""
+        from .store_datasets import open_periodic_dataset, split_periodic
+        source = self.source(label)
+        if split_periodic(source.dataset):
+            return open_periodic_dataset(source.dataset, self.tile_size)
+        return source.load(size=self.dataset_size or None, seed=seed)
 
     def to_dict(self) -> dict:
         """Plain form."""
@@ -194,16 +206,18 @@ def parse_stress_spec(d: dict, source: str) -> StressSpec:
     return StressSpec(**kw)
 
 
-def parse_spec(text: str, source: str = "spec", base: Path | None = None):
+def parse_spec(text: str, source: str = "spec", base: Path | None = None, overrides: dict | None = None):
     """Parse and check TOML text (a paired-flight Spec, or a StressSpec when kind = "stress").
 
     ``base`` is the folder relative dataset paths are taken from (the spec file's); None keeps them as given.
+    ``overrides`` (the command line's ``frames``, ``sizes``) replace the text's keys before the checks.
     """
     try:
         d = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise TerrabenchError(f"{source}: not valid TOML ({exc})") from None
     kind = d.pop("kind", "flights")
+    d = _overridden(d, overrides or {}, kind, source)
     if kind == "stress":
         return parse_stress_spec(d, source)
     if kind != "flights":
@@ -274,26 +288,47 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None):
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0 <= v <= 1e4):
             raise TerrabenchError(f"{source}: 'upload_budget_ms' must be a number of ms in [0, 10000], got {v!r}")
         kw["upload_budget_ms"] = float(v)
-    for key in ("flip", "video", "adapt"):
+    for key in ("flip", "video", "accuracy", "adapt"):
         if key in d:
             if not isinstance(d[key], bool):
                 raise TerrabenchError(f"{source}: '{key}' must be true or false, got {d[key]!r}")
             kw[key] = d[key]
-    spec = Spec(**kw)
+    return _checked(Spec(**kw), source)
+
+
+def _checked(spec: Spec, source: str) -> Spec:
+    """The spec, refused by name where its keys disagree with each other."""
+    if spec.video and not spec.accuracy:
+        raise TerrabenchError(f"{source}: 'video' shows each method beside the reference, which accuracy = false "
+                              "leaves out; drop one of them")
     bad = [f for f in spec.image_frames if not (0 <= f < spec.frames)]
     if bad:
         raise TerrabenchError(f"{source}: image_frames {bad} outside [0, {spec.frames - 1}]")
     return spec
 
 
-BUNDLED = {"default": "default.toml", "tiny": "tiny.toml", "stress": "stress.toml", "full-res": "full-res.toml"}
+def _overridden(d: dict, overrides: dict, kind: str, source: str) -> dict:
+    """A spec's keys with overrides in place; fewer frames keep the image frames that still fall inside them."""
+    if overrides and kind == "stress":
+        raise TerrabenchError(f"{source}: a stress spec takes no {', '.join(sorted(overrides))} override")
+    out = {**d, **overrides}
+    if "frames" in overrides and "image_frames" not in overrides:
+        kept = [f for f in d.get("image_frames", [0]) if isinstance(f, int) and 0 <= f < overrides["frames"]]
+        out["image_frames"] = kept or [0]
+    return out
 
 
-def load_spec(path) -> Spec:
-    """Read and check a spec file, or a bundled spec by name (default, tiny, stress, full-res)."""
+BUNDLED = {"default": "default.toml", "tiny": "tiny.toml", "stress": "stress.toml", "full-res": "full-res.toml",
+           "gpu": "gpu.toml"}
+
+
+def load_spec(path, overrides: dict | None = None) -> Spec:
+    """Read and check a spec file, or a bundled spec by name (default, tiny, stress, full-res, gpu), with
+    ``overrides`` of its keys (parse_spec)."""
     if str(path) in BUNDLED:
         from importlib import resources
-        return parse_spec((resources.files("experiments") / BUNDLED[str(path)]).read_text(), str(path))
+        return parse_spec((resources.files("experiments") / BUNDLED[str(path)]).read_text(), str(path),
+                          overrides=overrides)
     p = Path(path)
     if not p.is_file():
         raise TerrabenchError(f"{path}: no such spec file")
@@ -301,4 +336,4 @@ def load_spec(path) -> Spec:
         text = p.read_text()
     except (OSError, UnicodeDecodeError) as exc:
         raise TerrabenchError(f"{path}: cannot read spec ({exc})") from None
-    return parse_spec(text, str(p), p.resolve().parent)
+    return parse_spec(text, str(p), p.resolve().parent, overrides)

@@ -3,6 +3,8 @@
 A table's keys: ``path`` (required), ``name`` (its label in runs and reports), ``spacing`` (ground metres: one
 number or [east-west, north-south]), ``vertical_scale`` (metres per stored unit), ``crs`` (overrides the file's),
 ``crop`` ({row, col, rows, cols} in samples, rows as stored in the file) and ``credit`` (the report's line).
+A name or path ``STORE@periodicSIZE`` is a tile store's virtual periodic extension (``experiments.store_datasets``):
+STORE a store's folder or ``puget``, whose store is prepared once into the cache.
 """
 from __future__ import annotations
 
@@ -11,6 +13,8 @@ from pathlib import Path
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.sources import TerrainSource
 from hybrid.terrain.window import Crop
+
+from .store_datasets import BUNDLED_STORES, PERIODIC, check_periodic, split_periodic
 
 DATASET_KEYS = ("path", "name", "spacing", "vertical_scale", "crs", "crop", "credit")
 CROP_KEYS = ("row", "col", "rows", "cols")
@@ -24,13 +28,21 @@ def dataset_label(entry) -> str:
 def terrain_source(entry) -> TerrainSource:
     """The TerrainSource of a checked dataset entry (a name or path, or a table)."""
     if isinstance(entry, str):
-        return TerrainSource(entry)
+        return TerrainSource(entry, credit=_periodic_credit(entry))
     spacing = entry.get("spacing")
     crop = entry.get("crop")
     return TerrainSource(entry["path"], spacing=tuple(spacing) if isinstance(spacing, list) else spacing,
                          vertical_scale=entry.get("vertical_scale"), crs=entry.get("crs"),
-                         crop=None if crop is None else Crop(**crop), credit=entry.get("credit"),
+                         crop=None if crop is None else Crop(**crop),
+                         credit=entry.get("credit") or _periodic_credit(entry["path"]),
                          name=entry.get("name"))
+
+
+def _periodic_credit(path: str) -> str | None:
+    """The credit of a bundled dataset's periodic extension (its data, repeated); None for any other entry."""
+    from hybrid.terrain.datasets import CREDITS
+    periodic = split_periodic(path)
+    return CREDITS.get(periodic[0]) if periodic else None
 
 
 def credit_lines(datasets: list, used) -> list[str]:
@@ -51,19 +63,30 @@ def _positive(value, what: str) -> float:
     return float(value)
 
 
+def _resolve(path: str, source: str, base: Path | None) -> str:
+    """A dataset path resolved against base where it is a relative file (a periodic extension's store folder, its
+    size kept); names as given."""
+    from hybrid.terrain.datasets import NAMES
+    periodic = split_periodic(path, f"{source}: ")
+    if periodic:
+        check_periodic(path, f"{source}: dataset {path!r}")
+        store = periodic[0]
+        if store in BUNDLED_STORES or base is None or Path(store).is_absolute():
+            return path
+        return f"{base / store}{PERIODIC}{periodic[1]}"
+    file = path not in NAMES and Path(path).suffix and not Path(path).is_absolute()
+    return str(base / path) if base is not None and file else path
+
+
 def check_dataset_entry(entry, source: str, base: Path | None):
     """A checked dataset entry: a name or path (relative paths resolved against base), or a table of loader options."""
     from hybrid.terrain.datasets import NAMES
     from hybrid.terrain.georef import parse_crs
 
-    def resolve(path: str) -> str:
-        file = path not in NAMES and Path(path).suffix and not Path(path).is_absolute()
-        return str(base / path) if base is not None and file else path
-
     if isinstance(entry, str):
         if not entry:
             raise TerrabenchError(f"{source}: a dataset entry is an empty string")
-        return resolve(entry)
+        return _resolve(entry, source, base)
     if not isinstance(entry, dict):
         raise TerrabenchError(f"{source}: 'datasets' entries must be names, paths or tables, got {entry!r}")
     unknown = set(entry) - set(DATASET_KEYS)
@@ -73,10 +96,11 @@ def check_dataset_entry(entry, source: str, base: Path | None):
     if not isinstance(path, str) or not path:
         raise TerrabenchError(f"{source}: a dataset table needs 'path' (a file or dataset name), got {entry!r}")
     what = f"{source}: dataset {entry.get('name') or path!r}"
-    out = {"path": resolve(path)}
+    out = {"path": _resolve(path, source, base)}
     given = [k for k in ("spacing", "vertical_scale", "crs", "crop") if k in entry]
-    if path in NAMES and given:
-        raise TerrabenchError(f"{what}: {', '.join(given)} apply to files, not the bundled or synthetic {path!r}")
+    if (path in NAMES or split_periodic(path)) and given:
+        raise TerrabenchError(f"{what}: {', '.join(given)} apply to files, not the bundled, synthetic or stored "
+                              f"{path!r}")
     for key in ("name", "credit", "crs"):
         if key in entry:
             if not isinstance(entry[key], str) or not entry[key].strip():

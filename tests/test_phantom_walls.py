@@ -168,3 +168,27 @@ def test_starts_under_follows_the_outer_edge_and_the_eye():
     assert eye_under(hf, [120.0, 220.0, 99.0]) and not eye_under(hf, [120.0, 220.0, 101.0])
     assert starts_under(hf, [120.0, 220.0, 99.0], np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])).all()
     assert not eye_under(hf, [90.0, 220.0, -1e3])                         # off the footprint: never
+
+
+def test_edge_profiles_wrap_at_the_texture_limit(ctx, scene):
+    """Edge profiles longer than the widest texture wrap onto more rows: the same images with the limit forced
+    to 50 texels (the canyon's profiles are 129 long) as without, for rays from under the sheet."""
+    from hybrid.gl.context import context_extra
+    from hybrid.gl.edges import fold_profiles
+    prof = np.arange(4 * 129, dtype=np.float32).reshape(4, 129)
+    folded = fold_profiles(prof, 50)
+    assert folded.shape == (12, 50)
+    for side in range(4):
+        for i in (0, 49, 50, 128):
+            assert folded[side * 3 + i // 50, i % 50] == prof[side, i]
+    hf, vs, refs = scene
+    images = []
+    for limit in (None, 50):
+        context_extra(ctx)["max_texture_size"] = limit
+        try:
+            with make_renderer(ctx, hf, "raycast", tile_size=32) as r:
+                images.append([r.render(v, mode="shaded").distance for v in vs.values()])
+        finally:
+            context_extra(ctx).pop("max_texture_size", None)
+    for a, b in zip(*images):
+        assert np.array_equal(a, b)

@@ -53,6 +53,19 @@ def size(option: str) -> Callable[[str], tuple[int, int]]:
     return lambda text: parse_size(text, option)
 
 
+def sizes(option: str) -> Callable[[str], list[str]]:
+    """A check for a comma-separated list of WIDTHxHEIGHT pixel sizes, giving the sizes as written."""
+    from hybrid.camera.view import parse_size
+    split = words(option)
+
+    def check(text: str) -> list[str]:
+        out = split(text)
+        for s in out:
+            parse_size(s, option)
+        return out
+    return check
+
+
 def rows_cols(option: str) -> Callable[[str], tuple[int, int]]:
     """A check for ROWSxCOLS (raw file shapes), giving (rows, cols)."""
     def check(text: str) -> tuple[int, int]:

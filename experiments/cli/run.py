@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 from ..folders import writable_folder
+from . import argtypes
 from .options import add_reports_argument
 
 HELP = "run an experiment spec (TOML): paired flights, tables, images"
@@ -13,9 +14,13 @@ HELP = "run an experiment spec (TOML): paired flights, tables, images"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The run options: the spec, where runs and reports go, and --quiet."""
-    p.add_argument("spec", help="experiment spec file (.toml) or a bundled one: default, tiny, stress, full-res")
+    p.add_argument("spec", help="experiment spec file (.toml) or a bundled one: default, tiny, stress, full-res, gpu")
     p.add_argument("--runs", default="runs", help="folder that holds run folders")
     p.add_argument("--name", default=None, help="run name (default: the spec's)")
+    p.add_argument("--frames", type=argtypes.int_in("--frames", 1, 100000), default=None,
+                   help="frames a flight, instead of the spec's (its image frames beyond them dropped)")
+    p.add_argument("--sizes", type=argtypes.sizes("--sizes"), default=None, metavar="WxH[,WxH...]",
+                   help="image sizes in pixels, instead of the spec's")
     p.add_argument("--report", action="store_true", help="write the report when done")
     add_reports_argument(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -31,9 +36,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(spec, runs="runs", name: str | None = None, report: bool = False, reports="reports", quiet: bool = False,
         device: int | None = None, scheduler: str | None = None, workers: str | None = None,
-        freeze_model: bool = False) -> Path:
+        frames: int | None = None, sizes: list[str] | None = None, freeze_model: bool = False) -> Path:
     """Run a spec (a path, a bundled name or a parsed spec) into runs/<name>; returns the run folder. With a
-    ``scheduler`` address or ``workers`` 'local:N' its configurations run on a Dask cluster."""
+    ``scheduler`` address or ``workers`` 'local:N' its configurations run on a Dask cluster; ``frames`` and
+    ``sizes`` (pixels, 'WxH') replace a spec file's or bundled spec's own."""
     from hybrid.errors import TerrabenchError
     from hybrid.gl.context import shared_context
 
@@ -41,8 +47,11 @@ def run(spec, runs="runs", name: str | None = None, report: bool = False, report
     from ..runner import run_spec
     from ..spec import StressSpec, load_spec
     from ..stress import run_stress_spec
+    overrides = {k: v for k, v in (("frames", frames), ("sizes", sizes)) if v is not None}
     if isinstance(spec, (str, Path)):
-        spec = load_spec(spec)
+        spec = load_spec(spec, overrides)
+    elif overrides:
+        raise TerrabenchError("frames and sizes override a spec file or a bundled spec's name, not a parsed spec")
     if name:
         spec.name = name
     if freeze_model:
@@ -76,7 +85,7 @@ def run_from_args(args: argparse.Namespace) -> int:
     """The run command from parsed arguments; returns the exit code: 1 when any configuration failed."""
     from ..journal import failed_configs
     folder = run(args.spec, args.runs, args.name, args.report, args.reports, args.quiet, args.device, args.scheduler,
-                 args.workers, args.freeze_model)
+                 args.workers, args.frames, args.sizes, args.freeze_model)
     failed = failed_configs(folder)
     if failed:
         print(f"terrabench: {len(failed)} configuration(s) failed (details in {folder / 'errors.jsonl'}):",

@@ -158,6 +158,14 @@ def context_extra(ctx) -> dict:
     return extra
 
 
+def max_texture_size(ctx) -> int:
+    """The widest 2-D texture this context takes (texels a side): GL_MAX_TEXTURE_SIZE, or less where a test set
+    ``context_extra(ctx)["max_texture_size"]`` to exercise layouts that wrap at the limit."""
+    limit = int(ctx.info["GL_MAX_TEXTURE_SIZE"])
+    forced = context_extra(ctx).get("max_texture_size")
+    return min(limit, int(forced)) if forced else limit
+
+
 def is_software(ctx) -> bool:
     """True on a CPU rasterizer (llvmpipe, softpipe); cached on the context."""
     extra = context_extra(ctx)

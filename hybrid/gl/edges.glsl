@@ -1,16 +1,23 @@
 // Whether a pixel's ray starts under the terrain sheet (numpy twin and conventions: hybrid/terrain/edges.py).
 // Terrain grid space: x, y in level-0 texels of the whole terrain, z metres relative to its origin z; the
 // footprint is [0, grid_cells.x] x [0, grid_cells.y]. Uniforms set by hybrid.gl.edges.TerrainEdges.
-uniform sampler2D edges;       // R32F (L, 4): heights along the S, N, W, E edges (rows 0-3), metres relative
+uniform sampler2D edges;       // R32F (w, 4k): heights along the S, N, W, E edges, metres relative to the origin
+                               // z, each side's L samples wrapped onto k rows of w texels (side s from row s k)
+uniform int edge_len;          // L: samples along each edge profile
 uniform vec2 grid_cells;       // footprint in level-0 texels: (cols - 1, rows - 1)
 uniform vec3 grid_eye;         // eye in terrain grid space
 uniform vec2 grid_per_m;       // level-0 texels per metre along x and y
 uniform bool eye_under;        // the eye lies over the footprint, below the ground
 
 // Height of the outer edge `side` (0 S, 1 N, 2 W, 3 E) at texel position p along it, linear between samples.
+float edge_sample(int side, int i) {
+    ivec2 size = textureSize(edges, 0);
+    return texelFetch(edges, ivec2(i % size.x, side * (size.y / 4) + i / size.x), 0).r;
+}
+
 float edge_height(int side, float p) {
-    int k = clamp(int(floor(p)), 0, textureSize(edges, 0).x - 2);
-    return mix(texelFetch(edges, ivec2(k, side), 0).r, texelFetch(edges, ivec2(k + 1, side), 0).r, p - float(k));
+    int k = clamp(int(floor(p)), 0, edge_len - 2);
+    return mix(edge_sample(side, k), edge_sample(side, k + 1), p - float(k));
 }
 
 // True if the ray from the eye along world direction d (metres) starts under the terrain sheet: from over

@@ -3,9 +3,10 @@
 A grid source has ``rows``, ``cols``, ``spacing`` (metres, one number or (x, y)), ``name``, ``notes`` and
 ``read_rows(r0, r1)``: rows r0..r1-1 (south to north, as every terrabench grid) as float32 metres, and may have
 ``source_step`` ((step, offset) metres when every height is float32(offset + step * k), k an integer, as
-``HeightField.source_step``; a tile store records it). Two kinds:
-a GDAL file through rasterio (windows of the file, never the whole grid), and a seeded fractal terrain whose
-every sample is a function of its own position and the seed, so any window gives the same samples.
+``HeightField.source_step``; a tile store records it). Three kinds:
+a GDAL file through rasterio (windows of the file, never the whole grid), a seeded fractal terrain whose
+every sample is a function of its own position and the seed, so any window gives the same samples, and a
+height field already in memory (a bundled dataset made into a store).
 """
 from __future__ import annotations
 
@@ -141,3 +142,16 @@ class FractalSource:
         level = 0.7 * self.relief
         h = np.where(h < level, level + 0.05 * (h - level), h)           # flat basins below the level
         return h.astype(np.float32)
+
+
+class HeightFieldSource:
+    """A height field held in memory (e.g. the bundled Puget model) read as a grid source, for a store of it."""
+
+    def __init__(self, hf):
+        self.hf, self.rows, self.cols = hf, hf.rows, hf.cols
+        self.spacing, self.name = (hf.spacing_x, hf.spacing_y), hf.name
+        self.notes, self.source_step = list(hf.notes), hf.source_step
+
+    def read_rows(self, r0: int, r1: int) -> np.ndarray:
+        """Rows r0..r1-1 (south to north) as float32 metres."""
+        return np.ascontiguousarray(self.hf.heights[r0:r1], dtype=np.float32)
