@@ -32,11 +32,13 @@ import pandas as pd
 
 from hybrid.errors import TerrabenchError
 
-POLICIES = ("raster", "raster_gs", "raycast", "hybrid")
+POLICIES = ("raster", "raster_gs", "raycast", "hybrid", "hybrid=raster", "hybrid=raycast")
+"""Policies drawn; ``hybrid=S`` is the hybrid with every candidate but S out of reach (``bench_choice.forced``): its
+choices equal S's, so its extra CPU time over S is what choosing costs."""
 FLIGHTS = ("flyover", "orbit", "dolly")
 CHILD_TIMEOUT_S = 900
 CHILD_ATTEMPTS = 3
-TARGET = "CPU ms back to back (plan + issue; raster target <= 1)"
+TARGET = "CPU ms back to back (plan + issue + adapt; raster target <= 1)"
 READ_BACK = "CPU ms with read-back"
 
 
@@ -64,15 +66,17 @@ def measure(model_for: str, frames: int = 8, size: str = "640x360", repeats: int
     ctx = shared_context()
     w, h = parse_size(size, "size")
     hf = puget()
+    from .bench_choice import forced
     model = load_cost_model(model_for)
-    rows = []
+    rows, mixed = [], []
     for fname in FLIGHTS:
         views = preset(fname, hf, frames, w, h).views()
         renderers = {}
         try:
             for p in POLICIES:
-                opts = {"cost_model": model} if p == "hybrid" else {}
-                renderers[p] = make_renderer(ctx, hf, p, tile_size=tile_size, **opts)
+                base, _, only = p.partition("=")
+                opts = {"cost_model": forced(model, only) if only else model} if base == "hybrid" else {}
+                renderers[p] = make_renderer(ctx, hf, base, tile_size=tile_size, **opts)
                 for v in views:                                # warm: uploads, estimates, shader compiles
                     renderers[p].render(v, tau)
             got = {("back", p, k): [] for p in POLICIES for k in range(len(views))}
@@ -83,13 +87,34 @@ def measure(model_for: str, frames: int = 8, size: str = "640x360", repeats: int
                     for (p, k), x in stats.items():
                         got[(way, p, k)] += x
             for (way, p, k), x in got.items():
-                plan, issue, wall = np.median([(s.plan_ms, s.issue_ms, s.wall_ms) for s in x], axis=0)
+                plan, issue, wall, adapt = np.median([(s.plan_ms, s.issue_ms, s.wall_ms, s.adapt_ms) for s in x],
+                                                     axis=0)
                 rows.append({"flight": fname, "policy": p, "frame": k, "way": way, "plan_ms": plan,
-                             "issue_ms": issue, "wall_ms": wall})
+                             "issue_ms": issue, "wall_ms": wall, "adapt_ms": adapt})
+            mixed += [{"flight": fname, **m} for m in mixed_parts(renderers["hybrid"], views, tau, repeats)]
         finally:
             for r in renderers.values():
                 r.release()
-    return {"renderer": gl_info(ctx).renderer, "rows": rows}
+    return {"renderer": gl_info(ctx).renderer, "rows": rows, "mixed": mixed}
+
+
+def mixed_parts(r, views, tau: float, repeats: int) -> list[dict]:
+    """Per view whose hybrid plan mixes strategies: the issue ms of the whole frame and of each strategy's tiles
+    drawn alone (the same plans), medians over ``repeats``."""
+    out = []
+    for k, v in enumerate(views):
+        plans = r.plan(v, tau)
+        used = sorted({p.choice for p in plans})
+        if len(used) < 2:
+            continue
+        whole, parts = [], []
+        for _ in range(repeats):
+            whole.append(r.render(v, tau, plans=plans, read=False).stats.issue_ms)
+            parts.append(sum(r.render(v, tau, plans=[p for p in plans if p.choice == s], read=False).stats.issue_ms
+                             for s in used))
+        out.append({"frame": k, "strategies": "+".join(used), "whole_ms": float(np.median(whole)),
+                    "parts_ms": float(np.median(parts))})
+    return out
 
 
 def run_child(model_for: str, frames: int, size: str, repeats: int) -> dict:
@@ -118,10 +143,13 @@ def summarize(result: dict) -> dict[str, pd.DataFrame]:
     """Per flight and policy, the medians over frames: plan, issue and CPU (plan + issue) ms drawn back to back,
     and CPU ms with the read-back, with their ratio."""
     df = pd.DataFrame(result["rows"])
-    df["cpu_ms"] = df["plan_ms"] + df["issue_ms"]
-    t = df.groupby(["way", "flight", "policy"], sort=False)[["plan_ms", "issue_ms", "cpu_ms"]].median()
+    if "adapt_ms" not in df:
+        df["adapt_ms"] = 0.0
+    df["cpu_ms"] = df["plan_ms"] + df["issue_ms"] + df["adapt_ms"]
+    t = df.groupby(["way", "flight", "policy"], sort=False)[["plan_ms", "issue_ms", "adapt_ms", "cpu_ms"]].median()
     back, read = t.loc["back"], t.loc["read"]
-    out = back.rename(columns={"plan_ms": "plan ms", "issue_ms": "issue ms", "cpu_ms": TARGET})
+    out = back.rename(columns={"plan_ms": "plan ms", "issue_ms": "issue ms", "adapt_ms": "adapt ms",
+                               "cpu_ms": TARGET})
     out[READ_BACK] = read["cpu_ms"]
     out["with / without read-back"] = read["cpu_ms"] / back["cpu_ms"]
     renderer = result["renderer"]
@@ -129,7 +157,15 @@ def summarize(result: dict) -> dict[str, pd.DataFrame]:
            f"{renderer}, drawing for real (issue without the waits for the GPU)")
     if result.get("attempts", 1) > 1:
         how += f"; the child crashed and was run again, {result['attempts']} runs in all"
-    return {f"CPU time a frame on Puget, median of frames ({how})": out.reset_index()}
+    tables = {f"CPU time a frame on Puget, median of frames ({how})": out.reset_index()}
+    if result.get("mixed"):
+        m = pd.DataFrame(result["mixed"])
+        m["extra_ms"] = m["whole_ms"] - m["parts_ms"]
+        tables["a mixed frame's issue against its strategies' tiles drawn alone (target: extra <= 0.5 ms)"] = \
+            m.groupby("flight", sort=False).agg(frames=("frame", "count"), whole_ms=("whole_ms", "median"),
+                                                 parts_ms=("parts_ms", "median"), extra_ms=("extra_ms", "median"),
+                                                 extra_max_ms=("extra_ms", "max")).reset_index()
+    return tables
 
 
 def run(ctx=None, frames: int = 8, size: str = "640x360", repeats: int = 5) -> dict[str, pd.DataFrame]:

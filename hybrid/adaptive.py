@@ -65,7 +65,7 @@ def explore(online: OnlineModel, plans: list[TilePlan]) -> Exploration | None:
     """Let the online model give a few of the frame's tiles to a strategy it is learning (their plans' choices
     changed); None where it does not."""
     frame = frame_columns(plans)
-    if frame is None:
+    if frame is None or not online.may_explore({p.choice for p in plans}):
         return None
     names = tuple(frame.predicted)
     table = np.array([frame.predicted[n] for n in names], dtype=np.float64)

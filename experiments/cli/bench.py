@@ -13,10 +13,13 @@ from hybrid.atomic import write_text
 from ..folders import writable_folder
 from . import argtypes
 
-HELP = "the ray-cast, triangle-count, raster, hybrid, planning and CPU benchmarks in one run, with the device named"
-BENCHES = ("raycast", "triangles", "raster", "hybrid", "planning", "cpu")
-"""In the order they run: triangles (mesh triangle counts against error) and planning use the CPU alone; cpu draws
-in a child process on Mesa's no-op driver (``experiments.bench_cpu``)."""
+HELP = ("the ray-cast, triangle-count, raster, hybrid, adaptation, choice, planning and CPU benchmarks in one run, "
+        "with the device named")
+BENCHES = ("raycast", "triangles", "raster", "hybrid", "adapt", "choice", "planning", "cpu")
+"""In the order they run: triangles (mesh triangle counts against error) and planning use the CPU alone; adapt is
+the hybrid started from wrong cost models (``experiments.bench_adapt``), choice what choosing costs where the
+hybrid's choices equal a pure method's (``experiments.bench_choice``); cpu draws in a child process on Mesa's
+no-op driver (``experiments.bench_cpu``)."""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -43,6 +46,12 @@ def benchmark(ctx, name: str, frames: int = 8) -> dict[str, pd.DataFrame]:
         return run(ctx, frames=frames)
     if name == "cpu":
         from ..bench_cpu import run
+        return run(ctx, frames=frames)
+    if name == "adapt":
+        from ..bench_adapt import run
+        return run(ctx, frames=max(frames, 24))        # its targets read frames 8 to 23 of a 24-frame flight
+    if name == "choice":
+        from ..bench_choice import run
         return run(ctx, frames=frames)
     from ..bench_hybrid import run
     return run(ctx, frames=frames)

@@ -7,7 +7,10 @@ with non-negative least squares on relative error (scipy's NNLS), pulled toward 
 (``prior_weight`` rows' worth) so that a few rows move the coefficients only where they say something: the
 starting model is first scaled by the median measured / predicted of the window, which corrects a model of
 another device or a uniformly wrong one from the first frames, and the ridge pulls toward that scaled model.
-Rows more than ``OUTLIER`` times the median relative residual off are dropped and the fit repeated once.
+Rows more than ``OUTLIER`` times the median relative residual off are dropped and the fit repeated once. A frame
+refits one strategy at most, the one with most rows since its last refit: a strategy is refitted every row while
+it has fewer than twice ``hold_rows``, every other row while its predictions do not hold, and every
+``refit_every`` rows while they do.
 
 A strategy the hybrid does not choose gives no rows, so it may be given a few tiles of a frame (exploration):
 at most ``explore_tiles`` tiles, those it is predicted to draw cheapest against the frame's choice, paid from a
@@ -122,6 +125,13 @@ class OnlineModel:
         """Whether every candidate's predictions hold."""
         return all(self.holds(s) for s in self.model.candidates)
 
+    def may_explore(self, used: set) -> bool:
+        """Whether the budget could pay to explore any candidate outside ``used`` whose predictions do not hold
+        (its per-frame overhead and a mixed frame's at least): a cheap test before any table is built."""
+        m = self.model
+        costs = [m.overhead.get(s, 0.0) for s in m.candidates if s not in used and not self.holds(s)]
+        return bool(costs) and min(costs) + m.mix_overhead <= self.credit
+
     def explore(self, table: np.ndarray, picks: np.ndarray, names: tuple) -> Exploration | None:
         """Give a few tiles to a candidate the frame does not use and whose predictions do not hold, when the
         budget covers its predicted cost; ``picks`` (B,) indices into ``names`` are changed in place."""
@@ -165,7 +175,7 @@ class OnlineModel:
             self.errors[s].append(abs(predicted - ms) / ms)
             self.rows[s].add(x, float(ms))
             self._fresh[s] += 1
-            if not self.holds(s) or self._fresh[s] >= self.options.refit_every:
+            if self._fresh[s] >= self._cadence(s):
                 learnt.append(s)
         kind = "mixed" if len(pass_ms) > 1 else "pure"
         self.residual[kind].append(frame_ms - sum(pass_ms.values()))
@@ -179,8 +189,15 @@ class OnlineModel:
             self.stats.explored_frames += 1
             self.stats.explored_tiles += len(explored.tiles)
             self.stats.explore_ms += spent
-        if learnt:
-            self._refit(learnt)
+        if learnt:          # one refit a frame, the strategy with the most rows since its last: a bounded cost
+            self._refit([max(learnt, key=self._fresh.get)])
+
+    def _cadence(self, s: str) -> int:
+        """Rows between refits of strategy s: every row while it has few, every other while its predictions do not
+        hold, ``refit_every`` while they do."""
+        if self.holds(s):
+            return self.options.refit_every
+        return 1 if len(self.rows[s]) < 2 * self.options.hold_rows else 2
 
     @staticmethod
     def _theta(m: CostModel, s: str) -> np.ndarray:
