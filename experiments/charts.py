@@ -24,11 +24,13 @@ from .noise import median_interval, repeat_matrix  # noqa: E402
 
 STRATEGY_CMAP = ListedColormap(["#f2f2f2", "#2b6cff", "#ff8c14"])   # no terrain, raster, ray cast
 MAX_COLS = 4             # panels a row
+DEVICE_START = "device"  # the hybrid's default starting cost model; others are named in its label (from-<start>)
 
 
 def label_columns(frames: pd.DataFrame) -> pd.DataFrame:
-    """Add 'method' (policy, plus tau / reconstruction / full-resolution rule where the run varies them; 'full_res'
-    ``PRIOR_FULL_RES`` where a run's rows lack it) and 'scene' columns; a run timed on several devices (a cluster) gets the
+    """Add 'method' (policy, plus tau / reconstruction / full-resolution rule where the run varies them, and a
+    hybrid's starting cost model where it is not the device's; 'full_res' ``PRIOR_FULL_RES`` where a run's rows
+    lack it) and 'scene' columns; a run timed on several devices (a cluster) gets the
     device in its scene, so no chart or sentence compares frame times across devices."""
     f = frames.copy()
     f["full_res"] = f["full_res"].fillna(PRIOR_FULL_RES) if "full_res" in f else PRIOR_FULL_RES
@@ -42,6 +44,9 @@ def label_columns(frames: pd.DataFrame) -> pd.DataFrame:
             s += f"/{r['reconstruction']}"
         if many_fr and r["policy"] in TILELET_POLICIES:
             s += f"/{r['full_res']}"
+        start = r.get("start_model")
+        if r["policy"] == "hybrid" and isinstance(start, str) and start != DEVICE_START:
+            s += f"/from-{start}"
         if many_tau and r["policy"] != "reference":
             s += f" tau={r['tau']:.3g}"
         return s

@@ -54,6 +54,16 @@ def cost_model_line(env: dict) -> str:
     return "; ".join(f"{r + ': ' if r else ''}{one(m)}" for r, m in models.items()) or "not recorded"
 
 
+def adaptation_line(spec: dict) -> str:
+    """Whether the run's hybrids refit their cost model as they drew (the spec's ``adapt``) and the models they
+    started from (``start_models``), in words."""
+    starts = {"device": "this device's model as loaded (above)", "fallback": "the uncalibrated fallback"}
+    named = ", ".join(starts.get(s, s) for s in spec.get("start_models", ["device"]))
+    if not spec.get("adapt", True):
+        return f"no, frozen at the model it started from ({named})"
+    return f"yes, refitted online from the frames it drew, starting from {named}"
+
+
 RESUME_KEYS = ("gl_renderer", "cost_model")
 """What must match between a run folder's earlier frames and a resumed run's (frames of another device or cost
 model would sit in one table as if measured together)."""

@@ -65,11 +65,10 @@ def mixed_sentences(g: pd.DataFrame) -> list[str]:
                 same = (g["policy"] == p) & (g["tau"] == tau)
                 pure[p] = g[same & (g["full_res"] == fr)] if p != "raycast" else g[same & (g["reconstruction"] == rec)]
         pure = {p: r for p, r in pure.items() if not r.empty}
-        for pol in MIXED:
-            rows = sub[sub["policy"] == pol]
-            if rows.empty or not pure:
+        for pol, name in [(p, m) for p in MIXED for m in sorted(sub.loc[sub["policy"] == p, "method"].unique())]:
+            rows = sub[sub["method"] == name]
+            if not pure:
                 continue
-            name = rows["method"].iloc[0]
             same = _same_choices(rows)
             if same and same in pure:
                 c = compare(name, rows, pure[same]["method"].iloc[0], pure[same])

@@ -16,7 +16,7 @@ from hybrid.atomic import write_text
 from hybrid.errors import TerrabenchError
 
 from .charts import all_charts, label_columns
-from .environment import cost_model_line
+from .environment import adaptation_line, cost_model_line
 from .reading import reading
 from .spec import Spec
 from .spec_datasets import credit_lines
@@ -113,71 +113,113 @@ def missing_frames(spec: dict, frames: pd.DataFrame) -> str:
             f"{named}{more}. Resume with `terrabench run` on the same spec, or read this report as partial.")
 
 
-def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | None = None, video: bool = False) -> Path:
-    """Charts, tables and reading of a run folder into reports_dir/<name>/; returns the report.md path."""
-    run = Path(run)
+TITLES = {"frame_time": "Frame time over the flight", "gpu_memory": "GPU memory over the flight",
+          "speed_vs_accuracy": "Speed against accuracy", "strategy_mix": "Strategy mix per frame",
+          "convergence": "Convergence: the hybrid's frame time and prediction error as its model learns",
+          "gpu_vs_cpu": "GPU time against CPU time per frame",
+          "popping": "Popping: pixels whose depth error steps in one frame",
+          "crossover": "Where each strategy pays: cost per tile against triangles per pixel",
+          "images": "Images", "video": "Flight animation"}
+
+
+def _read_run(run: Path) -> tuple[pd.DataFrame, dict, dict, list[dict]]:
+    """A run folder's frames, spec, environment and failures."""
     if not (run / "frames.parquet").exists():
         raise TerrabenchError(f"{run}: not a run folder with results (no frames.parquet); run `terrabench run SPEC` first")
-    frames = pd.read_parquet(run / "frames.parquet")
-    spec = json.loads((run / "spec.json").read_text())
-    env = json.loads((run / "env.json").read_text())
-    errors = [json.loads(l) for l in (run / "errors.jsonl").read_text().splitlines()] \
+    errors = [json.loads(line) for line in (run / "errors.jsonl").read_text().splitlines()] \
         if (run / "errors.jsonl").exists() else []
-    out = Path(reports_dir) / (name or spec["name"])
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise TerrabenchError(f"cannot create report folder {out}: {exc.strerror or exc}") from None
+    return (pd.read_parquet(run / "frames.parquet"), json.loads((run / "spec.json").read_text()),
+            json.loads((run / "env.json").read_text()), errors)
+
+
+def _charts(run: Path, frames: pd.DataFrame, spec: dict, out: Path, video: bool) -> dict[str, list[Path]]:
+    """Every chart of the report into out, by name in the order they appear."""
+    from .adapt_charts import convergence_chart, gpu_cpu_chart
     tiles = pd.read_parquet(run / "tiles.parquet") if (run / "tiles.parquet").exists() else None
     charts = all_charts(run, frames, out, spec.get("image_frames", [0]), tiles)
+    f = label_columns(frames)
+    charts = {**{k: v for k, v in charts.items() if k not in ("popping", "crossover", "images")},
+              "convergence": convergence_chart(f, out), "gpu_vs_cpu": gpu_cpu_chart(f, out),
+              **{k: v for k, v in charts.items() if k in ("popping", "crossover", "images")}}
     if video:
         from .video import write_videos
         charts["video"] = write_videos(run, frames, out)
-    table = summary_table(frames)
-    lines = reading(frames, errors)
+    return charts
+
+
+def _reading_lines(frames: pd.DataFrame, errors: list[dict], measured: bool) -> list[str]:
+    """The reading: per-scene sentences, the hybrids' adaptation, GPU against CPU time, and what was not measured."""
+    from .adapt_charts import adaptation_sentences, gpu_cpu_sentence
+    f = label_columns(frames)
+    lines = reading(frames, errors) + adaptation_sentences(f) + [gpu_cpu_sentence(f)]
+    return lines + ([] if measured else [NO_ACCURACY])
+
+
+def _markdown(title: str, missing: str, spec: dict, env: dict, lines: list[str], table: pd.DataFrame,
+              charts: dict, credits: list[str]) -> str:
+    """The report as Markdown."""
     measured = spec.get("accuracy", True)
-    if not measured:
-        lines.append(NO_ACCURACY)
-    missing = missing_frames(spec, frames)
-    title = f"terrabench report: {spec['name']}" + (" (INCOMPLETE RUN)" if missing else "")
     md = [f"# {title}", ""] + ([f"**Incomplete:** {missing}", ""] if missing else []) + [
           intro(spec), "",
           "## Environment", "",
           f"- GL renderer: {env['gl_renderer']} ({env['gl_version']})",
           f"- CPU: {env['cpu']} ({env['cpu_count']} cores); Python {env['python']}; {env['platform']}",
           "- Packages: " + ", ".join(f"{k} {v}" for k, v in env["packages"].items()),
-          f"- Hybrid cost model: {cost_model_line(env)}", "",
+          f"- Hybrid cost model: {cost_model_line(env)}",
+          f"- Hybrid adapted: {adaptation_line(spec)}", "",
           "## Spec", "", "```json", json.dumps(spec, indent=1), "```", "",
           "## Reading", ""] + [f"- {l}" if not l.startswith("  ") else f"  - {l.strip()}" for l in lines] + [
           "", "## Summary", "", md_table(table), ""] + [f"- {m}" for m in measures(measured)] + [""]
-    titles = {"frame_time": "Frame time over the flight", "gpu_memory": "GPU memory over the flight",
-              "speed_vs_accuracy": "Speed against accuracy", "strategy_mix": "Strategy mix per frame",
-              "popping": "Popping: pixels whose depth error steps in one frame",
-              "crossover": "Where each strategy pays: cost per tile against triangles per pixel",
-              "images": "Images", "video": "Flight animation"}
     for key, files in charts.items():
         pngs = [p for p in files if p.suffix in (".png", ".gif")]
-        if not pngs:
-            continue
-        md += [f"## {titles[key]}", ""] + [f"![{p.stem}]({p.name})" for p in pngs] + [""]
-    credits = credit_lines(spec.get("datasets", []), frames["dataset"].unique())   # the data of this run only
-    credits = credits or ["Terrain: synthetic only (seeded, made by terrabench); no data to credit."]
+        if pngs:
+            md += [f"## {TITLES[key]}", ""] + [f"![{p.stem}]({p.name})" for p in pngs] + [""]
     md += ["---"] + [f"- {c}" for c in credits]
-    write_text(out / "report.md", "\n".join(md) + "\n")
+    return "\n".join(md) + "\n"
+
+
+def _html(title: str, missing: str, spec: dict, env: dict, lines: list[str], table: pd.DataFrame,
+          charts: dict, credits: list[str]) -> str:
+    """The report as one HTML page."""
+    measured = spec.get("accuracy", True)
+    env = {**env, "hybrid adapted": adaptation_line(spec)}
     h = ["<!doctype html><html><head><meta charset='utf-8'><title>terrabench report</title>",
          "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;font-size:12px}"
          "td,th{border:1px solid #ccc;padding:2px 6px}img{max-width:100%}</style></head><body>",
          f"<h1>{html.escape(title)}</h1>" + (f"<p><b>Incomplete:</b> {html.escape(missing)}</p>" if missing else ""),
-         "<h2>Environment</h2><ul>" + "".join(f"<li>{html.escape(str(k))}: {html.escape(str(v))}</li>" for k, v in env.items()) + "</ul>",
-         "<h2>Reading</h2><ul>" + "".join(f"<li>{html.escape(l.strip()).replace('**', '')}</li>" for l in lines) + "</ul>",
+         "<h2>Environment</h2><ul>" + "".join(f"<li>{html.escape(str(k))}: {html.escape(str(v))}</li>"
+                                              for k, v in env.items()) + "</ul>",
+         "<h2>Reading</h2><ul>" + "".join(f"<li>{html.escape(l.strip()).replace('**', '')}</li>" for l in lines)
+         + "</ul>",
          "<h2>Summary</h2>", table.to_html(index=False, float_format=lambda v: f"{v:.3g}", na_rep="–"),
          "<ul>" + "".join(f"<li>{html.escape(m)}</li>" for m in measures(measured)) + "</ul>"]
     for key, files in charts.items():
         pngs = [p for p in files if p.suffix in (".png", ".gif")]
         if pngs:
-            h.append(f"<h2>{titles[key]}</h2>" + "".join(f"<p><img src='{p.name}'></p>" for p in pngs))
+            h.append(f"<h2>{TITLES[key]}</h2>" + "".join(f"<p><img src='{p.name}'></p>" for p in pngs))
     h.append("<hr>" + "".join(f"<p>{html.escape(c)}</p>" for c in credits) + "</body></html>")
-    write_text(out / "report.html", "\n".join(h))
+    return "\n".join(h)
+
+
+def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | None = None, video: bool = False) -> Path:
+    """Charts, tables and reading of a run folder into reports_dir/<name>/; returns the report.md path."""
+    run = Path(run)
+    frames, spec, env, errors = _read_run(run)
+    out = Path(reports_dir) / (name or spec["name"])
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise TerrabenchError(f"cannot create report folder {out}: {exc.strerror or exc}") from None
+    charts = _charts(run, frames, spec, out, video)
+    table = summary_table(frames)
+    lines = _reading_lines(frames, errors, spec.get("accuracy", True))
+    missing = missing_frames(spec, frames)
+    title = f"terrabench report: {spec['name']}" + (" (INCOMPLETE RUN)" if missing else "")
+    credits = credit_lines(spec.get("datasets", []), frames["dataset"].unique())   # the data of this run only
+    credits = credits or ["Terrain: synthetic only (seeded, made by terrabench); no data to credit."]
+    parts = (title, missing, spec, env, lines, table, charts, credits)
+    write_text(out / "report.md", _markdown(*parts))
+    write_text(out / "report.html", _html(*parts))
     return out / "report.md"
 
 
