@@ -6,7 +6,7 @@ imports nothing above ``hybrid.gl``. The renderer hands it ``TileItem``s front t
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any, Literal, NamedTuple, Protocol, Sequence, get_args, runtime_checkable
 
 from hybrid.camera.view import View
@@ -130,7 +130,8 @@ class FrameStats:
     wall_ms. With an upload budget, upload_ms and prep_ms are part of wall_ms, fallback_tiles counts the tiles
     drawn from a resident ancestor and pending_uploads the jobs left waiting. adapt_ms is an adapting hybrid's
     CPU time learning from the frame (exploration and refit, ``hybrid.cost.online``), part of wall_ms;
-    explored_tiles counts the tiles it gave to a strategy it is learning.
+    explored_tiles counts the tiles it gave to a strategy it is learning. plans are a mixed policy's tile plans,
+    behind ``tile_rows``.
     """
 
     wall_ms: float
@@ -157,16 +158,20 @@ class FrameStats:
     explored_tiles: int = 0
     counters: dict[str, float] = field(default_factory=dict)
     together_ms: dict[str, float] = field(default_factory=dict)
-    tile_rows: list[dict] = field(default_factory=list)
+    plans: list = field(default_factory=list, repr=False, compare=False)
 
     @property
     def cpu_ms(self) -> float | None:
         """The frame's CPU time, ms: plan_ms + issue_ms + adapt_ms (None where the issue time was not measured)."""
         return None if self.issue_ms is None else self.plan_ms + self.issue_ms + self.adapt_ms
 
+    @property
+    def tile_rows(self) -> list[dict]:
+        """One row per tile of a mixed policy's frame (its features, predictions and choice); built when asked, so
+        a frame nobody tabulates does not pay for it."""
+        return [p.row() for p in self.plans]
+
     def row(self) -> dict[str, Any]:
         """One flat table row: every scalar field, the counters and ``together_<strategy>_ms``."""
-        d = asdict(self)
-        counters, together = d.pop("counters"), d.pop("together_ms")
-        d.pop("tile_rows")
-        return {**d, **counters, **{f"together_{k}_ms": v for k, v in together.items()}}
+        d = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("counters", "together_ms", "plans")}
+        return {**d, **self.counters, **{f"together_{k}_ms": v for k, v in self.together_ms.items()}}

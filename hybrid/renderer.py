@@ -350,7 +350,7 @@ class Renderer:
                           gpu_bytes=by_kind["raster"] + by_kind["raycast"], gpu_bytes_raster=by_kind["raster"],
                           gpu_bytes_raycast=by_kind["raycast"], shared_bytes=shared, pred_ms=pred,
                           counters=counters, together_ms=together,
-                          tile_rows=[p.row() for p in plans] if self.mixed else [])
+                          plans=list(plans) if self.mixed else [])
 
     def strategy_map(self, view: View, plans: list[TilePlan], tau: float = DEFAULT_TAU,
                      options: dict | None = None) -> np.ndarray:
