@@ -13,11 +13,17 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .charts import figure_legend, grid_cols, method_colours, panel_title, save_figure
+from hybrid.contract import CANDIDATES
 
-PURE = ("raster", "raster_gs", "raycast")
+from .charts import figure_legend, grid_cols, method_colours, panel_grid, panel_title, save_figure
+
 NO_GPU_TIME = ("GPU and CPU time are not told apart: this GL has no valid timer query (a software rasterizer "
                "draws on the CPU), so frame time is the wall clock alone.")
+
+
+def prediction_error(rows: pd.DataFrame) -> pd.Series:
+    """Per row, the hybrid's prediction error in %: ``|pred_ms - draw_ms| / draw_ms``."""
+    return 100 * (rows["pred_ms"] - rows["draw_ms"]).abs() / rows["draw_ms"]
 
 
 def _convergence_groups(f: pd.DataFrame) -> list[tuple[str, pd.DataFrame]]:
@@ -28,7 +34,7 @@ def _convergence_groups(f: pd.DataFrame) -> list[tuple[str, pd.DataFrame]]:
         hy = g[g["policy"] == "hybrid"]
         if hy.empty or "pred_ms" not in hy or not hy["pred_ms"].notna().any():
             continue
-        keep = g["policy"].isin((*PURE, "hybrid", "oracle"))
+        keep = g["policy"].isin((*CANDIDATES, "hybrid", "oracle"))
         out.append((f"{sc}, tau {tau:.3g} px", g[keep]))
     return out
 
@@ -56,8 +62,7 @@ def convergence_chart(f: pd.DataFrame, folder: Path) -> list[Path]:
             top.plot(mg["frame"], mg["wall_ms"], marker="." if hybrid else None, lw=2.2 if hybrid else 1.0,
                      alpha=1.0 if hybrid else 0.8, color=colours[m], label=m)
             if hybrid:
-                err = 100 * (mg["pred_ms"] - mg["draw_ms"]).abs() / mg["draw_ms"]
-                bottom.plot(mg["frame"], err, marker=".", color=colours[m], label=m)
+                bottom.plot(mg["frame"], prediction_error(mg), marker=".", color=colours[m], label=m)
         panel_title(top, title, cols)
         top.set_ylabel("frame time (ms)")
         bottom.set_ylabel("prediction\nerror (%)")
@@ -73,26 +78,28 @@ def convergence_chart(f: pd.DataFrame, folder: Path) -> list[Path]:
     return save_figure(fig, folder, "convergence")
 
 
+def _timed_both(f: pd.DataFrame) -> pd.DataFrame:
+    """The frames of the methods (the reference left out) that carry both a GL timer query time and a CPU time."""
+    if "gpu_ms" not in f or "cpu_ms" not in f:
+        return f.iloc[:0]
+    return f[f["gpu_ms"].notna() & f["cpu_ms"].notna() & (f["policy"] != "reference")]
+
+
 def has_gpu_time(f: pd.DataFrame) -> bool:
-    """Whether any frame carries both a GL timer query time and a CPU time."""
-    return "gpu_ms" in f and "cpu_ms" in f and bool((f["gpu_ms"].notna() & f["cpu_ms"].notna()).any())
+    """Whether any method's frame carries both a GL timer query time and a CPU time."""
+    return not _timed_both(f).empty
 
 
 def gpu_cpu_chart(f: pd.DataFrame, folder: Path) -> list[Path]:
     """Per scene, every frame's GPU ms (timer query) against its CPU ms (planning, issue, learning), a colour per
     method, with the diagonal: frames above it are bound by the GPU; [] where no frame has both times."""
-    import matplotlib.pyplot as plt
-    if not has_gpu_time(f):
+    g = _timed_both(f)
+    if g.empty:
         return []
-    g = f[f["gpu_ms"].notna() & f["cpu_ms"].notna() & (f["policy"] != "reference")]
     scenes = sorted(g["scene"].unique())
-    cols = grid_cols(len(scenes))
-    rows = -(-len(scenes) // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(4.6 * cols if cols > 1 else 6.5, 4.2 * rows), squeeze=False,
-                             layout="constrained")
+    fig, axes = panel_grid(len(scenes), width=4.6, height=4.2, wide=6.5)
     colours = method_colours(g)
-    flat = list(axes.ravel())
-    for ax, sc in zip(flat, scenes):
+    for ax, sc in zip(axes, scenes):
         s = g[g["scene"] == sc]
         for m, mg in s.groupby("method"):
             ax.scatter(mg["cpu_ms"], mg["gpu_ms"], s=14, alpha=0.7, color=colours[m], label=m)
@@ -102,19 +109,17 @@ def gpu_cpu_chart(f: pd.DataFrame, folder: Path) -> list[Path]:
         ax.set_ylim(0, hi)
         ax.set_xlabel("CPU ms (plan + issue + learning)")
         ax.set_ylabel("GPU ms (timer query)")
-        panel_title(ax, sc, cols)
+        panel_title(ax, sc, grid_cols(len(scenes)))
         ax.grid(alpha=0.3)
-    for ax in flat[len(scenes):]:
-        ax.set_visible(False)
-    figure_legend(fig, flat[:len(scenes)])
+    figure_legend(fig, axes)
     return save_figure(fig, folder, "gpu_vs_cpu")
 
 
 def gpu_cpu_sentence(f: pd.DataFrame) -> str:
     """Per method, the share of frames the GPU bounds (GPU ms over CPU ms), or why GPU and CPU are not told apart."""
-    if not has_gpu_time(f):
+    g = _timed_both(f)
+    if g.empty:
         return NO_GPU_TIME
-    g = f[f["gpu_ms"].notna() & f["cpu_ms"].notna() & (f["policy"] != "reference")]
     share = (g["gpu_ms"] > g["cpu_ms"]).groupby(g["method"]).mean().sort_values(ascending=False)
     return ("Frames bound by the GPU (timer query over CPU time): "
             + ", ".join(f"{m} {100 * v:.0f} %" for m, v in share.items()) + ".")
@@ -134,7 +139,7 @@ def adaptation_sentences(f: pd.DataFrame, settled_from: int = 4) -> list[str]:
         base = device[0] if device else None
         parts = []
         for m, q in hy.items():
-            err = (100 * (q["pred_ms"] - q["draw_ms"]).abs() / q["draw_ms"]).groupby(q["frame"]).median()
+            err = prediction_error(q).groupby(q["frame"]).median()
             s = f"{m}: prediction error {err.iloc[0]:.0f} % at frame {int(err.index[0])}, " \
                 f"{err.iloc[-1]:.0f} % at frame {int(err.index[-1])}"
             if base is not None and m != base:

@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-PURE = ("raster", "raster_gs", "raycast")
+from hybrid.contract import CANDIDATES as PURE
+
 STARTS = ("h200", "fallback", "skewed", "device")
 SETTLED_FROM = 8
 TARGET = "adapting / better pure, frames 8- (target <= 1.05)"
@@ -30,7 +31,7 @@ TARGET = "adapting / better pure, frames 8- (target <= 1.05)"
 
 def start_models(renderer: str) -> dict:
     """The starting cost models by name (``STARTS``) for a GL renderer."""
-    from hybrid.cost.model import _shipped, cost_model_from_dict, fallback_cost_model, load_cost_model
+    from hybrid.cost.model import _shipped, fallback_cost_model, load_cost_model
     device = load_cost_model(renderer)
     skewed = copy.deepcopy(device)
     skewed.raycast = {k: v / 5 for k, v in skewed.raycast.items()}
@@ -81,6 +82,7 @@ def draw_flight(ctx, hf, views, tau: float, models: dict, repeats: int, tile_siz
 def summarize(frames: pd.DataFrame) -> dict[str, pd.DataFrame]:
     """The benchmark's tables: per flight, tau and start model the targets' ratios and readings, and the per-frame
     median ms of every method."""
+    from .adapt_charts import prediction_error
     from .noise import compare
     rows = []
     for (flight, tau), g in frames.groupby(["flight", "tau"], sort=False):
@@ -90,7 +92,6 @@ def summarize(frames: pd.DataFrame) -> dict[str, pd.DataFrame]:
         best = min(pure_ms, key=pure_ms.get)
         for s in sorted({m.split(":")[1] for m in by if ":" in m}, key=STARTS.index):
             hy, fr = by[f"hybrid:{s}"], by[f"frozen:{s}"]
-            err = (hy["pred_ms"] - hy["draw_ms"]).abs() / hy["draw_ms"]
             rows.append({"flight": flight, "tau": tau, "start": s, "better pure": best,
                          "better pure ms": pure_ms[best], "adapting ms": float(hy["wall_ms"].median()),
                          TARGET: float(hy["wall_ms"].median()) / pure_ms[best],
@@ -100,7 +101,7 @@ def summarize(frames: pd.DataFrame) -> dict[str, pd.DataFrame]:
                                                                          by["hybrid:device"]).words(),
                          "raster tiles %": 100 * hy["tiles_raster"].sum() / max(
                              hy["tiles_raster"].sum() + hy["tiles_raycast"].sum(), 1),
-                         "prediction error %, frames 8-": 100 * float(err.median()),
+                         "prediction error %, frames 8-": float(prediction_error(hy).median()),
                          "explored tiles": int(g[g["method"] == f"hybrid:{s}"]["explored"].sum()),
                          "adapt ms a frame": float(hy["adapt_ms"].median())})
     per_frame = frames.pivot_table(index=["flight", "tau", "frame"], columns="method", values="wall_ms").reset_index()

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from .adapt_charts import adaptation_sentences, gpu_cpu_sentence
 from .charts import label_columns
 from .noise import compare
 
@@ -65,10 +66,10 @@ def mixed_sentences(g: pd.DataFrame) -> list[str]:
                 same = (g["policy"] == p) & (g["tau"] == tau)
                 pure[p] = g[same & (g["full_res"] == fr)] if p != "raycast" else g[same & (g["reconstruction"] == rec)]
         pure = {p: r for p, r in pure.items() if not r.empty}
+        if not pure:
+            continue
         for pol, name in [(p, m) for p in MIXED for m in sorted(sub.loc[sub["policy"] == p, "method"].unique())]:
             rows = sub[sub["method"] == name]
-            if not pure:
-                continue
             same = _same_choices(rows)
             if same and same in pure:
                 c = compare(name, rows, pure[same]["method"].iloc[0], pure[same])
@@ -148,7 +149,8 @@ def accuracy_sentences(g: pd.DataFrame) -> list[str]:
 
 def reading(frames: pd.DataFrame, errors: list[dict]) -> list[str]:
     """Sentences per scene: speed (ties within noise named as ties), mixed policies' choices and times, accuracy
-    and failures; indented lines belong to the scene line above them."""
+    and failures, then the hybrids' adaptation and GPU against CPU time; indented lines belong to the scene line
+    above them."""
     f = label_columns(frames)
     out = []
     for sc, g in f.groupby("scene"):
@@ -156,4 +158,4 @@ def reading(frames: pd.DataFrame, errors: list[dict]) -> list[str]:
         out += ["  " + s for s in mixed_sentences(g) + accuracy_sentences(g)]
     for e in errors:
         out.append(f"Configuration {e.get('config')} failed: {e.get('error')}.")
-    return out
+    return out + adaptation_sentences(f) + [gpu_cpu_sentence(f)]

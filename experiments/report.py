@@ -15,6 +15,7 @@ import pandas as pd
 from hybrid.atomic import write_text
 from hybrid.errors import TerrabenchError
 
+from .adapt_charts import convergence_chart, gpu_cpu_chart
 from .charts import all_charts, label_columns
 from .environment import adaptation_line, cost_model_line
 from .reading import reading
@@ -134,25 +135,15 @@ def _read_run(run: Path) -> tuple[pd.DataFrame, dict, dict, list[dict]]:
 
 def _charts(run: Path, frames: pd.DataFrame, spec: dict, out: Path, video: bool) -> dict[str, list[Path]]:
     """Every chart of the report into out, by name in the order they appear."""
-    from .adapt_charts import convergence_chart, gpu_cpu_chart
     tiles = pd.read_parquet(run / "tiles.parquet") if (run / "tiles.parquet").exists() else None
     charts = all_charts(run, frames, out, spec.get("image_frames", [0]), tiles)
     f = label_columns(frames)
-    charts = {**{k: v for k, v in charts.items() if k not in ("popping", "crossover", "images")},
-              "convergence": convergence_chart(f, out), "gpu_vs_cpu": gpu_cpu_chart(f, out),
-              **{k: v for k, v in charts.items() if k in ("popping", "crossover", "images")}}
+    later = {k: charts.pop(k) for k in ("popping", "crossover", "images")}     # the adaptation charts go before
+    charts.update(convergence=convergence_chart(f, out), gpu_vs_cpu=gpu_cpu_chart(f, out), **later)
     if video:
         from .video import write_videos
         charts["video"] = write_videos(run, frames, out)
     return charts
-
-
-def _reading_lines(frames: pd.DataFrame, errors: list[dict], measured: bool) -> list[str]:
-    """The reading: per-scene sentences, the hybrids' adaptation, GPU against CPU time, and what was not measured."""
-    from .adapt_charts import adaptation_sentences, gpu_cpu_sentence
-    f = label_columns(frames)
-    lines = reading(frames, errors) + adaptation_sentences(f) + [gpu_cpu_sentence(f)]
-    return lines + ([] if measured else [NO_ACCURACY])
 
 
 def _markdown(title: str, missing: str, spec: dict, env: dict, lines: list[str], table: pd.DataFrame,
@@ -212,7 +203,7 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
         raise TerrabenchError(f"cannot create report folder {out}: {exc.strerror or exc}") from None
     charts = _charts(run, frames, spec, out, video)
     table = summary_table(frames)
-    lines = _reading_lines(frames, errors, spec.get("accuracy", True))
+    lines = reading(frames, errors) + ([] if spec.get("accuracy", True) else [NO_ACCURACY])
     missing = missing_frames(spec, frames)
     title = f"terrabench report: {spec['name']}" + (" (INCOMPLETE RUN)" if missing else "")
     credits = credit_lines(spec.get("datasets", []), frames["dataset"].unique())   # the data of this run only
