@@ -113,16 +113,9 @@ class TaskState:
 
 
 def reference_renderer(ctx, hf):
-    """The full-resolution reference renderer of a terrain; a tile store's grid is loaded whole for it, refused by
-    name where it does not fit (a spec that only times sets accuracy = false)."""
+    """The full-resolution reference renderer of a terrain (a tile store's grid drawn out of core, block by
+    block)."""
     from hybrid.reference import ReferenceRenderer
-    from hybrid.terrain.stored import StoredTerrain
-    if isinstance(hf, StoredTerrain):
-        try:
-            hf = hf.load()
-        except TerrabenchError as exc:
-            raise TerrabenchError(f"the reference image that accuracy is measured against needs the whole grid: "
-                                  f"{exc}; set accuracy = false in the spec to time it without one") from None
     return ReferenceRenderer(ctx, hf)
 
 

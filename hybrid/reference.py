@@ -14,17 +14,25 @@ import numpy as np
 from hybrid.camera.view import View
 from hybrid.contract import FrameStats
 from hybrid.errors import TerrabenchError
-from hybrid.gl.context import gl_bytes
+from hybrid.gl.context import gl_bytes, max_texture_size
 from hybrid.gl.programs import program
 from hybrid.gl.shading import resolve_mode
 from hybrid.gl.target import FrameTarget, RenderResult
 from hybrid.gl.textures import terrain_texture
 from hybrid.gl.timing import timed
+from hybrid.reference_blocks import (
+    DEFAULT_BLOCK_SAMPLES,
+    Block,
+    block_bounds,
+    reference_blocks,
+    visible_blocks,
+)
 from hybrid.terrain.heightfield import HeightField
 from hybrid.tiles.tiletree import DEFAULT_TAU
 
 ReferenceMode = Literal["texture", "shaded", "height"]
 MODES = {m: i for i, m in enumerate(get_args(ReferenceMode))}
+RESIDENT_SAMPLES = 1 << 26       # a stored grid up to this many samples is read once and kept on the GPU
 
 
 def grid_indices(rows: int, cols: int) -> np.ndarray:
@@ -36,42 +44,77 @@ def grid_indices(rows: int, cols: int) -> np.ndarray:
 
 
 class ReferenceRenderer:
-    """GPU state of the reference surface of one height field (height texture, index buffer, texture)."""
+    """GPU state of the reference surface of one height field: a height texture and index buffer per block
+    (``hybrid.reference_blocks``: blocks within the context's texture limit, so any grid size draws), and the
+    colour texture. Grids held in memory keep every block's texture on the GPU; a stored grid beyond
+    RESIDENT_SAMPLES streams the blocks a view sees from disk on each draw, so it draws out of core."""
 
-    def __init__(self, ctx, hf: HeightField):
+    def __init__(self, ctx, hf: HeightField, block_samples: int = DEFAULT_BLOCK_SAMPLES):
         self.ctx, self.hf = ctx, hf
         self.prog = program(ctx, "hybrid", "reference.vert.glsl", "reference.frag.glsl")
-        self.heights = ctx.texture((hf.cols, hf.rows), 1, hf.heights.tobytes(), dtype="f4")
-        self.heights.filter = (ctx.NEAREST, ctx.NEAREST)
-        self.ibo = ctx.buffer(grid_indices(hf.rows, hf.cols).tobytes())
-        self.vao = ctx.vertex_array(self.prog, [], index_buffer=self.ibo, index_element_size=4)
+        side = min(int(block_samples), max_texture_size(ctx))
+        self.blocks = reference_blocks(hf.rows, hf.cols, side)
+        self.lo, self.hi = block_bounds(hf, self.blocks)
+        self.resident = isinstance(hf.heights, np.ndarray) or hf.rows * hf.cols <= RESIDENT_SAMPLES
+        self.textures: dict = {}                 # block index (resident) or block shape (streamed) -> texture
+        self.vaos: dict = {}                     # block shape -> (index buffer, vertex array)
+        self.vao: object = True                  # None once released
+        if self.resident:
+            for k, b in enumerate(self.blocks):
+                self.textures[k] = self._texture(b)
         self.texture = terrain_texture(ctx, hf)
         self.triangles = 2 * (hf.rows - 1) * (hf.cols - 1)
+        self.drawn_blocks = 0
+
+    def _texture(self, b: Block, reuse=None):
+        data = np.ascontiguousarray(self.hf.heights[b.r0:b.r1, b.c0:b.c1], dtype=np.float32)
+        if reuse is not None:
+            reuse.write(data.tobytes())
+            return reuse
+        tex = self.ctx.texture((b.shape[1], b.shape[0]), 1, data.tobytes(), dtype="f4")
+        tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+        return tex
+
+    def _vao(self, shape: tuple[int, int]):
+        if shape not in self.vaos:
+            ibo = self.ctx.buffer(grid_indices(*shape).tobytes())
+            self.vaos[shape] = (ibo, self.ctx.vertex_array(self.prog, [], index_buffer=ibo, index_element_size=4))
+        return self.vaos[shape][1]
 
     @property
     def nbytes(self) -> int:
-        """GPU bytes of the height texture, index buffer and colour texture, as the driver reports them."""
-        return gl_bytes(self.heights, self.ibo, self.texture)
+        """GPU bytes of the height textures, index buffers and colour texture, as the driver reports them."""
+        return gl_bytes(*self.textures.values(), *(ibo for ibo, _ in self.vaos.values()), self.texture)
 
     def draw(self, target: FrameTarget, view: View, mode: str | None = None) -> None:
-        """Draw the whole surface into target (which must match the view's size) for the view."""
+        """Draw the whole surface into target (which must match the view's size) for the view, block by block."""
         if self.vao is None:
             raise TerrabenchError("this reference renderer was released; make a new one")
         mode = resolve_mode(self.hf, mode, MODES)
         hf = self.hf
-        self.prog["grid"].value = (hf.cols, hf.rows)
+        self.prog["full"].value = (hf.cols, hf.rows)
         self.prog["origin_rel"].value = tuple((np.array(hf.origin) - view.eye).astype(np.float32))
         self.prog["spacing"].value = (hf.spacing_x, hf.spacing_y)
         self.prog["view_proj_rel"].write(view.view_proj_rel.T.astype(np.float32).tobytes())
         self.prog["mode"].value = MODES[mode]
         self.prog["hrange"].value = hf.height_range
-        self.heights.use(0)
         self.prog["heights"].value = 0
         if self.texture is not None:
             self.texture.use(1)
             self.prog["tex"].value = 1
         target.use()
-        self.vao.render(self.ctx.TRIANGLES)
+        shown = visible_blocks(hf, self.blocks, self.lo, self.hi, view)
+        for k in shown:
+            b = self.blocks[k]
+            if self.resident:
+                tex = self.textures[k]
+            else:
+                tex = self.textures[b.shape] = self._texture(b, self.textures.get(b.shape))
+            tex.use(0)
+            self.prog["grid"].value = (b.shape[1], b.shape[0])
+            self.prog["first"].value = (b.c0, b.r0)
+            self._vao(b.shape).render(self.ctx.TRIANGLES)
+        self.drawn_blocks = len(shown)
 
     def render(self, view: View, tau: float = DEFAULT_TAU, *, mode: str | None = None, supersample: int = 1,
                maps: bool = False) -> RenderResult:
@@ -82,15 +125,18 @@ class ReferenceRenderer:
         """
         if isinstance(supersample, bool) or not isinstance(supersample, (int, np.integer)) or not (1 <= supersample <= 8):
             raise TerrabenchError(f"supersample must be an integer in [1, 8], got {supersample!r}")
-        if view.width * supersample > 16384 or view.height * supersample > 16384:
-            raise TerrabenchError(f"supersampled viewport {view.width * supersample}x{view.height * supersample} exceeds 16384")
+        limit = int(self.ctx.info["GL_MAX_TEXTURE_SIZE"])              # the render target's real limit
+        if view.width * supersample > limit or view.height * supersample > limit:
+            raise TerrabenchError(f"supersampled viewport {view.width * supersample}x{view.height * supersample} "
+                                  f"exceeds this GL's texture limit of {limit}")
         target = FrameTarget(self.ctx, view.width, view.height)
         try:
             target.clear()
             _, wall, gpu, issue = timed(self.ctx, lambda: self.draw(target, view, mode))
             stats = FrameStats(wall_ms=wall, plan_ms=0.0, draw_ms=wall, gpu_ms=gpu, issue_ms=issue, tiles=1, gpu_bytes=self.nbytes,
                                shared_bytes=self.nbytes,
-                               counters={"triangles": self.triangles, "supersample": supersample})
+                               counters={"triangles": self.triangles, "supersample": supersample,
+                                         "blocks": self.drawn_blocks})
             result = target.read(view, stats)
         finally:
             target.release()
@@ -107,7 +153,7 @@ class ReferenceRenderer:
             result.colour = np.clip(np.rint(c), 0, 255).astype(np.uint8)
         return result
 
-    def __enter__(self) -> "ReferenceRenderer":
+    def __enter__(self) -> ReferenceRenderer:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -117,7 +163,8 @@ class ReferenceRenderer:
         """Free the GPU objects; the renderer cannot draw afterwards."""
         if self.vao is None:
             return
-        for o in (self.vao, self.ibo, self.heights, self.texture, self.prog):
+        objects = [*self.textures.values(), *(o for pair in self.vaos.values() for o in pair), self.texture, self.prog]
+        for o in objects:
             if o is not None:
                 o.release()
-        self.vao = None
+        self.textures, self.vaos, self.vao = {}, {}, None

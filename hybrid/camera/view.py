@@ -231,22 +231,46 @@ class View:
         row = (1 - ndc[..., 1]) * 0.5 * self.height
         return np.stack([col, row, ndc[..., 2]], axis=-1)
 
-    def with_size(self, width: int, height: int) -> "View":
+    def with_size(self, width: int, height: int) -> View:
         """The same camera with another viewport size."""
         return View(self.eye, self.target, self.fov_y, width, height, self.near, self.far, self.up)
 
-    def moved(self, offset) -> "View":
+    def moved(self, offset) -> View:
         """The same camera translated by a world offset (metres)."""
         o = _vec3("offset", offset)
         return View(self.eye + o, self.target + o, self.fov_y, self.width, self.height, self.near, self.far, self.up)
 
 
+STRIP_ASPECT = 8.0              # a terrain this many times longer than wide is viewed along its length
+
+
 def default_view(hf, width=640, height=360, fov_y=60.0) -> View:
-    """A three-quarter view of the whole terrain from the south-west, above its highest point."""
+    """A three-quarter view of the whole terrain from the south-west, above its highest point; a long thin strip
+    (``STRIP_ASPECT``) is viewed along its length instead (``strip_view``), where a view of the whole would
+    make it a sliver under a pixel wide."""
     w, d = hf.extent
+    if max(w, d) >= STRIP_ASPECT * min(w, d):
+        return strip_view(hf, width, height, fov_y)
     lo, hi = hf.height_range
     ox, oy, oz = hf.origin
     size = max(w, d)
     eye = np.array([ox + 0.25 * w, oy - 0.08 * d, oz + hi + 0.12 * size])
     target = np.array([ox + 0.55 * w, oy + 0.55 * d, oz + lo])
     return View(eye, target, fov_y, width, height, near=max(0.5, size * 1e-5), far=size * 6 + (hi - lo) * 4)
+
+
+def strip_view(hf, width=640, height=360, fov_y=60.0) -> View:
+    """A view along a long thin terrain (world metres): from above the middle of its west or south end, half its
+    width above the end's highest sample, pitched 20 degrees down along its length."""
+    w, d = hf.extent
+    ox, oy, oz = hf.origin
+    lo, hi = hf.height_range
+    short, size = min(w, d), max(w, d)
+    along_x = w >= d
+    near_end = hf.heights[:, :2] if along_x else hf.heights[:2, :]
+    z = oz + float(np.max(near_end)) + 0.5 * short
+    eye = np.array([ox, oy + 0.5 * d, z]) if along_x else np.array([ox + 0.5 * w, oy, z])
+    ahead = np.array([4.0 * short, 0.0]) if along_x else np.array([0.0, 4.0 * short])
+    target = np.array([eye[0] + ahead[0], eye[1] + ahead[1], z - np.tan(np.radians(20.0)) * 4.0 * short])
+    near = max(1e-3, min(0.5, 0.05 * short))
+    return View(eye, target, fov_y, width, height, near=near, far=size * 6 + (hi - lo) * 4)
