@@ -1,0 +1,64 @@
+"""Right or refused at every size: memory bounds of synthetic terrain, and one clear message (exit code 2,
+no traceback, nothing half written) for corrupt runs, bad schedulers, missing files, full disks and more."""
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from experiments.cli import main
+from hybrid.terrain import datasets
+from hybrid.tiles import bounds
+
+
+def _fails(argv, capsys, *needles):
+    """Run the CLI; it must exit 2 with one error line holding every needle and no traceback."""
+    assert main([str(a) for a in argv]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and err.count("terrabench: error:") == 1, err
+    for needle in needles:
+        assert needle in err, err
+    return err
+
+
+@pytest.mark.parametrize("name", ["fbm", "ridged", "staircase", "ridges", "cliff"])
+def test_synthetic_bands_equal_the_whole_grid(monkeypatch, name):
+    whole = datasets.get_dataset(name, size=301, seed=3).heights
+    monkeypatch.setattr(datasets, "BAND_SAMPLES", 3000)           # ten rows a band: many bands, two passes
+    banded = datasets.get_dataset(name, size=301, seed=3).heights
+    assert banded.dtype == np.float32 and np.array_equal(banded, whole)
+
+
+def test_pyramid_bounds_blocks_equal_the_whole_grid(monkeypatch, synthetic):
+    from hybrid.tiles.pyramid import TilePyramid
+    hf = synthetic("fbm", size=257)
+    monkeypatch.setattr(bounds, "BLOCK_CELLS", 1 << 12)           # one block
+    one = TilePyramid(hf, 16)
+    monkeypatch.setattr(bounds, "BLOCK_CELLS", 8)                 # blocks smaller than every tile above level 0
+    many = TilePyramid(hf, 16)
+    for level in range(one.max_level + 1):
+        for a, b in ((one._zmax, many._zmax), (one._zmin, many._zmin), (one._err, many._err)):
+            assert np.array_equal(a[level], b[level])
+    assert one._err[one.max_level].max() > 0
+
+
+def test_too_large_synthetic_is_refused_at_once_with_the_numbers(capsys):
+    t0 = time.perf_counter()
+    _fails(["info", "--dataset", "fbm", "--size-samples", "16386", "--no-gl"], capsys,
+           "16386", "16385", "1.4 GiB", "terrabench prepare --synthetic SIZE --out STORE")
+    assert time.perf_counter() - t0 < 1.0
+
+
+def test_accepted_synthetic_size_stays_within_its_stated_peak():
+    size = 2049
+    code = ("import resource, sys\nfrom experiments.cli import main\n"
+            f"rc = main(['info', '--dataset', 'fbm', '--size-samples', '{size}', '--no-gl'])\n"
+            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024, file=sys.stderr)\n"
+            "raise SystemExit(rc)")
+    done = subprocess.run([sys.executable, "-c", code], check=False, capture_output=True, text=True, timeout=120,
+                          cwd=Path(__file__).resolve().parents[1])
+    assert done.returncode == 0, done.stderr
+    peak = int(done.stderr.strip().splitlines()[-1])
+    assert peak <= datasets.synthetic_peak_bytes(size), (peak, datasets.synthetic_peak_bytes(size))
