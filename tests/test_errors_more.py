@@ -62,3 +62,29 @@ def test_accepted_synthetic_size_stays_within_its_stated_peak():
     assert done.returncode == 0, done.stderr
     peak = int(done.stderr.strip().splitlines()[-1])
     assert peak <= datasets.synthetic_peak_bytes(size), (peak, datasets.synthetic_peak_bytes(size))
+
+
+def _run_folder(tmp_path, frames: bytes | None = None, spec: str = '{"name": "r"}'):
+    import pandas as pd
+    run = tmp_path / "runs" / "r"
+    run.mkdir(parents=True)
+    if frames is None:
+        pd.DataFrame({"frame": [0]}).to_parquet(run / "frames.parquet")
+    else:
+        (run / "frames.parquet").write_bytes(frames)
+    (run / "spec.json").write_text(spec)
+    (run / "env.json").write_text("{}")
+    return run
+
+
+@pytest.mark.parametrize("frames, spec, needles", [
+    (b"PAR1 torn off", '{"name": "r"}', ["frames.parquet", "corrupt", "Parquet"]),
+    (None, '{"name": "r", "frames": [', ["spec.json", "corrupt", "JSON"]),
+    (None, "\x00\xff", ["spec.json", "corrupt"]),
+])
+def test_report_of_a_corrupt_run_folder_is_one_message(tmp_path, capsys, frames, spec, needles):
+    run = _run_folder(tmp_path, frames, spec)
+    reports = tmp_path / "reports"
+    reports.mkdir()
+    _fails(["report", run, "--reports", reports], capsys, *needles)
+    assert not any(reports.iterdir())
