@@ -88,3 +88,22 @@ def test_report_of_a_corrupt_run_folder_is_one_message(tmp_path, capsys, frames,
     reports.mkdir()
     _fails(["report", run, "--reports", reports], capsys, *needles)
     assert not any(reports.iterdir())
+
+
+def test_scheduler_that_is_not_an_address_is_one_message(tmp_path, capsys):
+    pytest.importorskip("distributed")
+    runs = tmp_path / "runs"
+    _fails(["run", "tiny", "--runs", runs, "--scheduler", "notanaddress"], capsys,
+           "'notanaddress'", "not a Dask scheduler address")
+    assert not (runs / "tiny").exists()
+
+
+def test_unreachable_scheduler_gives_up_within_its_timeout(tmp_path, capsys):
+    pytest.importorskip("distributed")
+    from experiments.cluster import CONNECT_TIMEOUT_S
+    assert CONNECT_TIMEOUT_S <= 10
+    t0 = time.perf_counter()
+    _fails(["run", "tiny", "--runs", tmp_path, "--scheduler", "tcp://127.0.0.1:1", "--scheduler-timeout", "1"],
+           capsys, "cannot reach the Dask scheduler at 'tcp://127.0.0.1:1' within 1 s", "--scheduler-timeout")
+    assert time.perf_counter() - t0 < 6
+    assert not (tmp_path / "tiny").exists()
