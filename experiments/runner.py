@@ -39,6 +39,8 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
     With a Dask ``client`` the configurations run as tasks on its cluster (``experiments.cluster``)."""
     from hybrid.gl.context import shared_context
 
+    from .spec_datasets import check_dataset_paths
+    check_dataset_paths(spec.datasets, f"spec {spec.name!r}")
     runs_dir = Path(runs_dir)
     folder = runs_dir / spec.name
     try:

@@ -107,3 +107,28 @@ def test_unreachable_scheduler_gives_up_within_its_timeout(tmp_path, capsys):
            capsys, "cannot reach the Dask scheduler at 'tcp://127.0.0.1:1' within 1 s", "--scheduler-timeout")
     assert time.perf_counter() - t0 < 6
     assert not (tmp_path / "tiny").exists()
+
+
+@pytest.mark.parametrize("dataset, needles", [
+    ("missing.tif", ["missing.tif", "no such file"]),
+    ("nowhere", ["unknown dataset 'nowhere'"]),
+    ("LOOP", ["symlink loop"]),
+    ("store@periodic4097", ["store", "no such file"]),
+])
+def test_spec_with_a_missing_dataset_is_refused_before_its_run_folder(tmp_path, capsys, dataset, needles):
+    loop = tmp_path / "loop.tif"
+    loop.symlink_to(loop)
+    spec = tmp_path / "s.toml"
+    spec.write_text(f'name = "s"\ndatasets = ["{dataset.replace("LOOP", str(loop))}"]\nframes = 2\n')
+    runs = tmp_path / "runs"
+    _fails(["run", spec, "--runs", runs, "--quiet"], capsys, *needles)
+    assert not (runs / "s").exists()
+
+
+@pytest.mark.parametrize("name", ["loop", "loop.tif", "loop.npy"])
+def test_symlink_loop_as_a_dataset_is_named(tmp_path, capsys, name):
+    loop = tmp_path / name
+    loop.symlink_to(loop)
+    _fails(["info", "--dataset", loop, "--no-gl"], capsys, str(loop), "symlink loop")
+    _fails(["render", "--dataset", loop, "--out", tmp_path / "a.png"], capsys, "symlink loop")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [name]
