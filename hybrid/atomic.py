@@ -28,12 +28,21 @@ def atomic_path(path, suffix: str | None = None):
         os.replace(tmp, path)
     except OSError as exc:
         _remove(tmp)
-        if exc.errno == errno.ENOSPC:
+        if disk_full(exc):
             raise TerrabenchError(f"disk full while writing {path}; nothing was written there") from None
         raise TerrabenchError(f"cannot write {path}: {exc.strerror or exc}") from None
     except BaseException:
         _remove(tmp)
         raise
+
+
+def disk_full(exc: OSError) -> bool:
+    """Whether an OS error from a write means the disk (or the user's quota) is full: ENOSPC or EDQUOT, or the
+    short write NumPy reports without an errno ('14400 requested and 10208 written')."""
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        return True
+    text = str(exc)
+    return "No space left on device" in text or ("requested and" in text and "written" in text)
 
 
 def _remove(p: Path) -> None:

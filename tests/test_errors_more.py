@@ -1,14 +1,19 @@
 """Right or refused at every size: memory bounds of synthetic terrain, and one clear message (exit code 2,
 no traceback, nothing half written) for corrupt runs, bad schedulers, missing files, full disks and more."""
+import errno
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
+from PIL import Image
 
 from experiments.cli import main
+from hybrid import atomic
+from hybrid.errors import TerrabenchError
 from hybrid.terrain import datasets
 from hybrid.tiles import bounds
 
@@ -132,3 +137,33 @@ def test_symlink_loop_as_a_dataset_is_named(tmp_path, capsys, name):
     _fails(["info", "--dataset", loop, "--no-gl"], capsys, str(loop), "symlink loop")
     _fails(["render", "--dataset", loop, "--out", tmp_path / "a.png"], capsys, "symlink loop")
     assert sorted(p.name for p in tmp_path.iterdir()) == [name]
+
+
+def _enospc(*args, **kwargs):
+    raise OSError(errno.ENOSPC, "No space left on device")
+
+
+def _short_write(*args, **kwargs):
+    raise OSError("14400 requested and 10208 written")          # NumPy's tofile: no errno
+
+
+@pytest.mark.parametrize("owner, attr, writer, name", [
+    (np, "save", lambda p: atomic.save_npy(p, np.zeros(3600, np.float32)), "a.npy"),
+    (Image.Image, "save", lambda p: atomic.save_png(p, np.zeros((4, 4, 3), np.uint8)), "a.png"),
+    (pd.DataFrame, "to_parquet", lambda p: atomic.write_parquet(p, pd.DataFrame({"a": [1]})), "a.parquet"),
+    (Path, "write_text", lambda p: atomic.write_json(p, {"a": 1}), "a.json"),
+    (Path, "write_text", lambda p: atomic.write_text(p, "# report"), "report.md"),
+])
+@pytest.mark.parametrize("fail", [_enospc, _short_write])
+def test_every_writer_names_a_full_disk(tmp_path, monkeypatch, owner, attr, writer, name, fail):
+    monkeypatch.setattr(owner, attr, fail)
+    with pytest.raises(TerrabenchError, match=f"disk full while writing {tmp_path / name}"):
+        writer(tmp_path / name)
+    assert not any(tmp_path.iterdir())                            # no partial file, no temporary
+
+
+def test_render_on_a_full_disk_is_one_message_and_writes_nothing(tmp_path, capsys, ctx, monkeypatch):
+    monkeypatch.setattr(np, "save", _short_write)
+    _fails(["render", "--dataset", "fbm", "--size-samples", "65", "--size", "96x64", "--out", tmp_path / "a.png"],
+           capsys, "disk full while writing", "a.depth.npy")
+    assert not any(tmp_path.iterdir())

@@ -145,11 +145,11 @@ def run_from_args(args: argparse.Namespace) -> int:
 
 def save_strategy_map(result, path: Path) -> None:
     """Write the per-pixel strategy map blended over the frame: blue = raster tile, orange = ray-cast tile."""
-    from PIL import Image
+    from hybrid.atomic import save_png
     m = result.maps["strategy"]
     col = result.colour.astype(np.float32)
     tint = np.zeros_like(col)
     tint[m == 1] = (40, 110, 255)
     tint[m == 2] = (255, 140, 20)
     mix = np.where((m > 0)[..., None], 0.45 * col + 0.55 * tint, col)
-    Image.fromarray(np.clip(mix, 0, 255).astype(np.uint8)).save(path)
+    save_png(path, np.clip(mix, 0, 255).astype(np.uint8))
