@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from hybrid.atomic import write_text
+from hybrid.atomic import remove_stale_temps, write_text
 from hybrid.errors import TerrabenchError
 
 from .adapt_charts import convergence_chart, gpu_cpu_chart
@@ -203,6 +203,7 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise TerrabenchError(f"cannot create report folder {out}: {exc.strerror or exc}") from None
+    remove_stale_temps(out)                               # what a killed report left
     charts = _charts(run, frames, spec, out, video)
     table = summary_table(frames)
     lines = reading(frames, errors) + ([] if spec.get("accuracy", True) else [NO_ACCURACY])

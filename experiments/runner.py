@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from hybrid.atomic import write_json
+from hybrid.atomic import remove_stale_temps, write_json
 from hybrid.errors import TerrabenchError
 
 from .environment import environment
@@ -48,6 +48,8 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
     except OSError as exc:
         raise TerrabenchError(f"cannot create run folder {folder}: {exc.strerror or exc}") from None
     with RunLock(folder):
+        for where in (folder, folder / "images"):           # what a killed run was writing
+            remove_stale_temps(where)
         old = folder / "spec.json"
         if old.exists() and not spec.same_as(read_json(old, "run spec")):
             raise TerrabenchError(f"{folder} holds a run of a different spec; choose another name or folder")

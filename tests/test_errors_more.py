@@ -1,6 +1,7 @@
 """Right or refused at every size: memory bounds of synthetic terrain, and one clear message (exit code 2,
 no traceback, nothing half written) for corrupt runs, bad schedulers, missing files, full disks and more."""
 import errno
+import os
 import subprocess
 import sys
 import time
@@ -167,3 +168,45 @@ def test_render_on_a_full_disk_is_one_message_and_writes_nothing(tmp_path, capsy
     _fails(["render", "--dataset", "fbm", "--size-samples", "65", "--size", "96x64", "--out", tmp_path / "a.png"],
            capsys, "disk full while writing", "a.depth.npy")
     assert not any(tmp_path.iterdir())
+
+
+def _dead_pid() -> int:
+    done = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], check=True,
+                          capture_output=True, text=True)
+    return int(done.stdout)
+
+
+def _temps(folder, pid_dead, pid_live):
+    """A dead writer's and a live writer's temporaries in folder, as atomic_path names them."""
+    dead = [folder / f".tiles.parquet.{pid_dead}.tmp.parquet", folder / f".a.depth.npy.{pid_dead}.tmp.npy"]
+    live = folder / f".frames.parquet.{pid_live}.tmp.parquet"
+    for p in dead + [live]:
+        p.write_bytes(b"partial")
+    return dead, live
+
+
+def test_dead_writers_temps_go_and_a_live_writers_stay(tmp_path):
+    with subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"]) as live_writer:
+        try:
+            dead, live = _temps(tmp_path, _dead_pid(), live_writer.pid)
+            (tmp_path / ".notes.txt").write_text("not a temporary")
+            assert sorted(atomic.remove_stale_temps(tmp_path)) == sorted(dead)
+            assert live.exists() and (tmp_path / ".notes.txt").exists()
+            assert not any(p.exists() for p in dead)
+        finally:
+            live_writer.kill()
+
+
+def test_render_and_resumed_run_remove_dead_writers_temps(tmp_path, ctx):
+    dead, live = _temps(tmp_path, _dead_pid(), os.getpid())
+    assert main(["render", "--dataset", "fbm", "--size-samples", "65", "--size", "96x64",
+                 "--out", str(tmp_path / "a.png")]) == 0
+    assert not any(p.exists() for p in dead) and live.exists()
+    run = tmp_path / "runs" / "tiny"
+    (run / "images").mkdir(parents=True)
+    dead, _ = _temps(run, _dead_pid(), 1)
+    dead_image = run / "images" / f".ref-0-f0.png.{_dead_pid()}.tmp.png"
+    dead_image.write_bytes(b"partial")
+    assert main(["run", "tiny", "--runs", str(tmp_path / "runs"), "--frames", "1", "--quiet"]) == 0
+    assert not any(p.exists() for p in dead + [dead_image])
+    assert (run / "frames.parquet").exists()

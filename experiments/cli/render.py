@@ -122,6 +122,8 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
                             full_res)
         with Renderer(ctx, hf, method, tile_size, adapt=not freeze_model, **opts) as r:
             result = r.render(v, tau, maps=show_strategy)
+    from hybrid.atomic import remove_stale_temps
+    remove_stale_temps(out.parent)                       # what a killed render left beside its output
     png, depth = result.save(out)
     if show_strategy:
         smap = out.parent / (out.stem + ".strategy.png")
