@@ -210,3 +210,15 @@ def test_render_and_resumed_run_remove_dead_writers_temps(tmp_path, ctx):
     assert main(["run", "tiny", "--runs", str(tmp_path / "runs"), "--frames", "1", "--quiet"]) == 0
     assert not any(p.exists() for p in dead + [dead_image])
     assert (run / "frames.parquet").exists()
+
+
+def test_geographic_crs_on_a_metre_grid_says_so(tmp_path, capsys):
+    rasterio = pytest.importorskip("rasterio")
+    from rasterio.transform import from_origin
+    p = tmp_path / "utm.tif"
+    with rasterio.open(p, "w", driver="GTiff", height=16, width=16, count=1, dtype="float32", crs="EPSG:32610",
+                       transform=from_origin(500000, 5000000, 30, 30)) as d:
+        d.write(np.ones((16, 16), np.float32), 1)
+    _fails(["info", p, "--crs", "EPSG:4326", "--no-gl"], capsys,
+           str(p), "does not fit the CRS WGS 84 (EPSG:4326)", "degrees", "x 500000", "--spacing")
+    assert main(["info", str(p), "--no-gl"]) == 0                 # its own CRS converts as before
