@@ -222,3 +222,16 @@ def test_geographic_crs_on_a_metre_grid_says_so(tmp_path, capsys):
     _fails(["info", p, "--crs", "EPSG:4326", "--no-gl"], capsys,
            str(p), "does not fit the CRS WGS 84 (EPSG:4326)", "degrees", "x 500000", "--spacing")
     assert main(["info", str(p), "--no-gl"]) == 0                 # its own CRS converts as before
+
+
+def test_prepare_takes_the_files_render_takes(tmp_path, capsys):
+    np.save(tmp_path / "x.npy", np.random.default_rng(0).uniform(0, 100, (65, 65)).astype(np.float32))
+    (np.arange(33 * 33, dtype="<u2") % 500).reshape(33, 33).tofile(tmp_path / "x.raw")
+    assert main(["prepare", str(tmp_path / "x.npy"), "--spacing", "10", "--out", str(tmp_path / "s"), "--quiet"]) == 0
+    assert main(["prepare", str(tmp_path / "x.raw"), "--raw-shape", "33x33", "--raw-dtype", "<u2", "--spacing", "10",
+                 "--out", str(tmp_path / "r"), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["info", str(tmp_path / "s"), "--no-gl"]) == 0
+    assert "65 x 65" in capsys.readouterr().out
+    _fails(["prepare", tmp_path / "x.npy", "--out", tmp_path / "t"], capsys, "x.npy", "--spacing")
+    assert not (tmp_path / "t").exists()
