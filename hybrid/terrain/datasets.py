@@ -180,7 +180,7 @@ def sine_ridges(size=257, spacing=30.0, seed=0, amplitude=400.0, period_cells=16
 MAX_SYNTHETIC_SIZE = 16385
 """Largest synthetic terrain made in memory, samples a side; larger ones are prepared out of core."""
 
-PEAK_BASE_BYTES = 160 << 20
+PEAK_BASE_BYTES = 192 << 20
 PEAK_BYTES_PER_SAMPLE = 5
 """Peak memory of a synthetic terrain and its tile pyramid (`terrabench info --dataset fbm --no-gl`): about
 PEAK_BASE_BYTES (the interpreter and libraries) plus PEAK_BYTES_PER_SAMPLE a sample, 4 of them the float32
