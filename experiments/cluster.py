@@ -26,6 +26,8 @@ from .spec import Spec
 PLUGIN = "terrabench-gl"
 GL_RESOURCE = "terrabench_gl"     # a worker resource the plugin sets once the worker's GL context works
 READY_TIMEOUT_S = 120.0
+CONNECT_TIMEOUT_S = 5.0
+"""Seconds to wait for a --scheduler to answer before giving up (--scheduler-timeout changes it)."""
 
 
 def _distributed():
@@ -87,8 +89,9 @@ def group_task(spec: Spec, items: list, costs: dict):
     return run_group(spec, items, state, extra={"device": tb["renderer"], "worker": w.address})
 
 
-def connect(scheduler: str | None = None, workers: str | None = None):
-    """(client, cluster or None): a client of the scheduler at ADDRESS, or of a new local cluster 'local:N'."""
+def connect(scheduler: str | None = None, workers: str | None = None, timeout: float = CONNECT_TIMEOUT_S):
+    """(client, cluster or None): a client of the scheduler at ADDRESS (waiting at most ``timeout`` seconds for
+    it), or of a new local cluster 'local:N'."""
     distributed = _distributed()
     if scheduler and workers:
         raise TerrabenchError("give --scheduler or --workers, not both")
@@ -99,9 +102,13 @@ def connect(scheduler: str | None = None, workers: str | None = None):
                                            dashboard_address=None)
         return distributed.Client(cluster), cluster
     try:
-        return distributed.Client(scheduler, timeout="30s"), None
+        return distributed.Client(scheduler, timeout=f"{timeout:g}s"), None
+    except ValueError as exc:
+        raise TerrabenchError(f"--scheduler {scheduler!r} is not a Dask scheduler address such as "
+                              f"tcp://HOST:8786 ({exc})") from None
     except (OSError, TimeoutError) as exc:
-        raise TerrabenchError(f"cannot reach the Dask scheduler at {scheduler!r} ({exc})") from None
+        raise TerrabenchError(f"cannot reach the Dask scheduler at {scheduler!r} within {timeout:g} s ({exc}); "
+                              "check the address, or wait longer with --scheduler-timeout SECONDS") from None
 
 
 def ready_workers(client) -> dict[str, dict]:

@@ -7,14 +7,13 @@ here whoever ran it, this process or a cluster worker, so resuming never repeats
 """
 from __future__ import annotations
 
-import errno
 import json
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from hybrid.atomic import save_npy, save_png, write_parquet
+from hybrid.atomic import disk_full, save_npy, save_png, write_parquet
 from hybrid.errors import TerrabenchError
 
 from .spec import Spec
@@ -68,7 +67,7 @@ class Journal:
                 f.write(text)
                 f.flush()
         except OSError as exc:
-            what = "disk full" if exc.errno == errno.ENOSPC else (exc.strerror or str(exc))
+            what = "disk full" if disk_full(exc) else (exc.strerror or str(exc))
             raise JournalError(f"cannot append to the run journal {path} ({what}); the rows written so far "
                                   "are kept and the run resumes from them") from None
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from hybrid.atomic import write_text
+from hybrid.atomic import remove_stale_temps, write_text
 from hybrid.errors import TerrabenchError
 
 from .adapt_charts import convergence_chart, gpu_cpu_chart
@@ -127,15 +127,17 @@ def _read_run(run: Path) -> tuple[pd.DataFrame, dict, dict, list[dict]]:
     """A run folder's frames, spec, environment and failures."""
     if not (run / "frames.parquet").exists():
         raise TerrabenchError(f"{run}: not a run folder with results (no frames.parquet); run `terrabench run SPEC` first")
-    errors = [json.loads(line) for line in (run / "errors.jsonl").read_text().splitlines()] \
-        if (run / "errors.jsonl").exists() else []
-    return (pd.read_parquet(run / "frames.parquet"), json.loads((run / "spec.json").read_text()),
-            json.loads((run / "env.json").read_text()), errors)
+    from .folders import read_json, read_parquet
+    from .journal import Journal
+    errors = Journal(run).rows("errors")
+    return (read_parquet(run / "frames.parquet", "run table"), read_json(run / "spec.json", "run spec"),
+            read_json(run / "env.json", "run environment"), errors)
 
 
 def _charts(run: Path, frames: pd.DataFrame, spec: dict, out: Path, video: bool) -> dict[str, list[Path]]:
     """Every chart of the report into out, by name in the order they appear."""
-    tiles = pd.read_parquet(run / "tiles.parquet") if (run / "tiles.parquet").exists() else None
+    from .folders import read_parquet
+    tiles = read_parquet(run / "tiles.parquet", "run table") if (run / "tiles.parquet").exists() else None
     charts = all_charts(run, frames, out, spec.get("image_frames", [0]), tiles)
     f = label_columns(frames)
     later = {k: charts.pop(k) for k in ("popping", "crossover", "images")}     # the adaptation charts go before
@@ -201,6 +203,7 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise TerrabenchError(f"cannot create report folder {out}: {exc.strerror or exc}") from None
+    remove_stale_temps(out)                               # what a killed report left
     charts = _charts(run, frames, spec, out, video)
     table = summary_table(frames)
     lines = reading(frames, errors) + ([] if spec.get("accuracy", True) else [NO_ACCURACY])
@@ -223,6 +226,7 @@ def write_run_report(run, reports_dir=Path("reports"), name: str | None = None, 
         raise TerrabenchError(f"{run}: not a run folder with results (no frames.parquet); run `terrabench run SPEC` first")
     writable_folder(Path(reports_dir), "reports folder")
     if stress.exists():
+        from .folders import read_parquet
         from .stress import write_stress_report
-        return write_stress_report(pd.read_parquet(stress), Path(reports_dir) / (name or run.name))
+        return write_stress_report(read_parquet(stress, "stress table"), Path(reports_dir) / (name or run.name))
     return write_report(run, reports_dir, name, video)

@@ -20,13 +20,13 @@ repeats a frame.
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
-from hybrid.atomic import write_json
+from hybrid.atomic import remove_stale_temps, write_json
 from hybrid.errors import TerrabenchError
 
 from .environment import environment
+from .folders import read_json
 from .journal import Journal, pending, record
 from .progress import Progress
 from .runlock import RunLock
@@ -39,6 +39,8 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
     With a Dask ``client`` the configurations run as tasks on its cluster (``experiments.cluster``)."""
     from hybrid.gl.context import shared_context
 
+    from .spec_datasets import check_dataset_paths
+    check_dataset_paths(spec.datasets, f"spec {spec.name!r}")
     runs_dir = Path(runs_dir)
     folder = runs_dir / spec.name
     try:
@@ -46,8 +48,10 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
     except OSError as exc:
         raise TerrabenchError(f"cannot create run folder {folder}: {exc.strerror or exc}") from None
     with RunLock(folder):
+        for where in (folder, folder / "images"):           # what a killed run was writing
+            remove_stale_temps(where)
         old = folder / "spec.json"
-        if old.exists() and not spec.same_as(json.loads(old.read_text())):
+        if old.exists() and not spec.same_as(read_json(old, "run spec")):
             raise TerrabenchError(f"{folder} holds a run of a different spec; choose another name or folder")
         write_json(old, spec.to_dict())
         if client is not None:
@@ -71,7 +75,7 @@ def _check_resume(folder: Path, env: dict) -> None:
     frames, old = folder / "frames.jsonl", folder / "env.json"
     if not (frames.exists() and frames.stat().st_size and old.exists()):
         return
-    why = resume_mismatch(json.loads(old.read_text()), env)
+    why = resume_mismatch(read_json(old, "run environment"), env)
     if why:
         raise TerrabenchError(f"{folder} holds frames run with another setup ({why}); resuming would mix them in "
                               f"one table: choose another --name or --runs folder, or remove {folder}")

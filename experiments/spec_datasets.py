@@ -131,3 +131,25 @@ def check_dataset_entry(entry, source: str, base: Path | None):
             raise TerrabenchError(f"{what}: {exc}") from None
         out["crop"] = {k: c[k] for k in CROP_KEYS}
     return out
+
+
+def check_dataset_paths(datasets: list, source: str) -> None:
+    """Refuse, naming it, a dataset entry whose file or store folder is missing or unreadable (a symlink loop),
+    so a run stops before it makes its folder."""
+    from hybrid.terrain.datasets import NAMES
+    from hybrid.terrain.sources import path_problem
+    for entry in datasets:
+        path = entry if isinstance(entry, str) else entry["path"]
+        periodic = split_periodic(path)
+        if periodic:
+            path = periodic[0]
+            if path in BUNDLED_STORES:
+                continue
+        elif path in NAMES:
+            continue
+        problem = path_problem(path)
+        if problem == "no such file" and not Path(path).suffix and not periodic:
+            raise TerrabenchError(f"{source}: unknown dataset {path!r}; choose one of {', '.join(NAMES)}, a file "
+                                  "path or a tile store (terrabench prepare)")
+        if problem is not None:
+            raise TerrabenchError(f"{source}: dataset {dataset_label(entry)!r}: {path}: {problem}")

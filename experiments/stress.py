@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from hybrid.atomic import write_json, write_parquet, write_text
+from hybrid.atomic import remove_stale_temps, write_json, write_parquet, write_text
 from hybrid.camera.view import View
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.datasets import PUGET_CREDIT, get_dataset, puget
@@ -198,6 +198,7 @@ def run_stress_spec(spec, runs_dir, ctx=None, progress: bool = True) -> Path:
 
     from .folders import writable_folder
     folder = writable_folder(Path(runs_dir) / spec.name, "run folder")
+    remove_stale_temps(folder)                            # what a killed stress run left
     write_json(folder / "spec.json", spec.to_dict())
     df = stress_table(ctx or shared_context(), spec.scenes, spec.views, spec.methods, spec.size_samples,
                       parse_size(spec.size, "spec size"), spec.tile_size, progress)

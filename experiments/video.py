@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from hybrid.atomic import atomic_path
 from hybrid.errors import TerrabenchError
 
 from .charts import label_columns
@@ -39,6 +40,7 @@ def write_videos(run: Path, frames: pd.DataFrame, out: Path, fps: int = 6) -> li
         if not seq:
             raise TerrabenchError(f"{run}: no per-frame images for {scene}; run the spec with video = true")
         p = out / f"flight_{scene.replace(' / ', '_').replace(' ', '')}.gif"
-        imageio.mimsave(p, seq, duration=1.0 / fps, loop=0)
+        with atomic_path(p) as tmp:
+            imageio.mimsave(tmp, seq, duration=1.0 / fps, loop=0)
         written.append(p)
     return written

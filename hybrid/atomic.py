@@ -9,6 +9,7 @@ from __future__ import annotations
 import errno
 import json
 import os
+import re
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -28,12 +29,58 @@ def atomic_path(path, suffix: str | None = None):
         os.replace(tmp, path)
     except OSError as exc:
         _remove(tmp)
-        if exc.errno == errno.ENOSPC:
+        if disk_full(exc):
             raise TerrabenchError(f"disk full while writing {path}; nothing was written there") from None
         raise TerrabenchError(f"cannot write {path}: {exc.strerror or exc}") from None
     except BaseException:
         _remove(tmp)
         raise
+
+
+_TEMP = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.tmp(?P<suffix>\.[^.]+)?$")
+
+
+def _alive(pid: int) -> bool:
+    """Whether a process of this id runs on this machine (one of another user's counts)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    except (OverflowError, OSError):
+        return False
+    return True
+
+
+def remove_stale_temps(folder) -> list[Path]:
+    """Remove the temporaries atomic_path left in folder (not below it) for writers that are gone: names
+    ``.NAME.PID.tmpSUFFIX`` whose PID runs no process here. A live writer's temporary is kept. Returns those
+    removed."""
+    removed = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    for e in entries:
+        m = _TEMP.match(e.name)
+        if m is None or not e.is_file(follow_symlinks=False) or _alive(int(m["pid"])):
+            continue
+        try:
+            os.unlink(e.path)
+            removed.append(Path(e.path))
+        except FileNotFoundError:
+            pass
+    return removed
+
+
+def disk_full(exc: OSError) -> bool:
+    """Whether an OS error from a write means the disk (or the user's quota) is full: ENOSPC or EDQUOT, or the
+    short write NumPy reports without an errno ('14400 requested and 10208 written')."""
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        return True
+    text = str(exc)
+    return "No space left on device" in text or ("requested and" in text and "written" in text)
 
 
 def _remove(p: Path) -> None:

@@ -31,13 +31,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     where = p.add_mutually_exclusive_group()
     where.add_argument("--scheduler", default=None, metavar="ADDRESS",
                        help="calibrate every device of this Dask cluster (one worker per GL renderer)")
+    p.add_argument("--scheduler-timeout", type=argtypes.positive_float("--scheduler-timeout", "seconds"),
+                   default=None, metavar="SECONDS",
+                   help="seconds to wait for --scheduler to answer (default 5)")
     where.add_argument("--workers", default=None, metavar="local:N", help="calibrate on a local Dask cluster")
 
 
 def run(terrain: TerrainOptions = TerrainOptions(), flights=("flyover", "orbit"), frames: int = 6,
         size: tuple[int, int] = (640, 360), tau: float = 2 / 3, tile_size: int = 256, repeats: int = 3,
         holdout: float = 0.3, save: str | None = "user", key: str | None = None, device: int | None = None,
-        scheduler: str | None = None, workers: str | None = None):
+        scheduler: str | None = None, workers: str | None = None, scheduler_timeout: float | None = None):
     """Calibrate the cost model on views of the flights (size in pixels, tau in pixels); returns the fitted models
     (one, or one per device of a cluster)."""
     from hybrid.cost.model import save_cost_model
@@ -46,8 +49,8 @@ def run(terrain: TerrainOptions = TerrainOptions(), flights=("flyover", "orbit")
         writable_folder(Path(save).parent if str(Path(save).parent) else Path("."), "--save folder")
     args = (terrain, tuple(flights), frames, size, tau, tile_size, repeats, holdout)
     if scheduler or workers:
-        from ..cluster import calibrate_on_cluster, connect
-        client, cluster = connect(scheduler, workers)
+        from ..cluster import CONNECT_TIMEOUT_S, calibrate_on_cluster, connect
+        client, cluster = connect(scheduler, workers, scheduler_timeout or CONNECT_TIMEOUT_S)
         try:
             models = calibrate_on_cluster(client, args)
         finally:
@@ -69,5 +72,6 @@ def run(terrain: TerrainOptions = TerrainOptions(), flights=("flyover", "orbit")
 def run_from_args(args: argparse.Namespace) -> int:
     """The calibrate command from parsed arguments; returns the exit code."""
     run(from_args(TerrainOptions, args), args.flights, args.frames, args.size, args.tau, args.tile_size,
-        args.repeats, args.holdout, args.save, args.key, args.device, args.scheduler, args.workers)
+        args.repeats, args.holdout, args.save, args.key, args.device, args.scheduler, args.workers,
+        args.scheduler_timeout)
     return 0

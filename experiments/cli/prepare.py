@@ -14,7 +14,9 @@ HELP = "build the tile pyramid of a file (or a synthetic terrain) out of core in
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The prepare options: input (a GDAL file, or --synthetic SIZE), --out, tile size and loader overrides."""
-    p.add_argument("input", nargs="?", default=None, help="a GDAL-readable height grid (GeoTIFF/COG, .hgt, ...)")
+    p.add_argument("input", nargs="?", default=None,
+                   help="a height grid: GDAL-readable (GeoTIFF/COG, .hgt, ...), read in bands, or any other file "
+                        "render takes (.npy, .npz, 16-bit .png, raw), loaded whole")
     p.add_argument("--out", required=True, help="the tile store folder to write (resumed if interrupted)")
     p.add_argument("--synthetic", type=argtypes.int_in("--synthetic", 2, 1_048_577), default=None, metavar="SIZE",
                    help="instead of a file: a seeded fractal terrain of SIZE x SIZE samples (e.g. 16385)")
@@ -31,6 +33,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="ground metres between samples, one number or X,Y (overrides the CRS)")
     p.add_argument("--crs", default=None, help="CRS of the file, overriding its own")
     p.add_argument("--crop", type=argtypes.crop("--crop"), default=None, help="ROW,COL,ROWS,COLS window of the file")
+    p.add_argument("--raw-shape", type=argtypes.rows_cols("--raw-shape"), default=None, help="ROWSxCOLS for raw files")
+    p.add_argument("--raw-dtype", default=None, help="NumPy dtype for raw files, e.g. <u2, <f4")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -44,20 +48,39 @@ def _bar(done: int, total: int, what: str, seconds: float) -> None:
         sys.stderr.flush()
 
 
+def _file_source(path, vertical_scale=None, spacing=None, crs=None, crop=None, raw_shape=None, raw_dtype=None):
+    """The grid source of a height-field file: GDAL formats read in row bands, every other file render takes
+    (.npy, .npz, 16-bit .png, raw) loaded whole by the same loader."""
+    from hybrid.errors import TerrabenchError
+    from hybrid.terrain.grid_sources import GdalGridSource, HeightFieldSource
+    from hybrid.terrain.loaders import SUFFIXES, load_terrain
+    from hybrid.terrain.sources import path_problem
+    problem = path_problem(path)
+    if problem is not None:
+        raise TerrabenchError(f"{path}: {problem}")
+    if not Path(path).is_file():
+        raise TerrabenchError(f"{path}: not a file")
+    kind = SUFFIXES.get(Path(path).suffix.lower(), "gdal")
+    if kind == "gdal" and raw_shape is None and raw_dtype is None:
+        return GdalGridSource(path, vertical_scale=vertical_scale, spacing=spacing, crs=crs, crop=crop)
+    opts = {"vertical_scale": vertical_scale, "spacing": spacing, "crs": crs, "crop": crop}
+    if raw_shape is not None or raw_dtype is not None:
+        opts.update(shape=None if raw_shape is None else tuple(raw_shape), dtype=raw_dtype)
+    return HeightFieldSource(load_terrain(path, **opts))
+
+
 def run(input=None, out="store", synthetic=None, seed=0, synthetic_spacing=10.0, tile_size=256, vertical_scale=None,
-        spacing=None, crs=None, crop=None, quiet=False, synthetic_period=None) -> Path:
+        spacing=None, crs=None, crop=None, quiet=False, synthetic_period=None, raw_shape=None, raw_dtype=None) -> Path:
     """Build (or finish) the tile store of the input at ``out``; prints the time and the process's peak RSS."""
     from hybrid.errors import TerrabenchError
-    from hybrid.terrain.grid_sources import FractalSource, GdalGridSource
+    from hybrid.terrain.grid_sources import FractalSource
     from hybrid.tiles.store import prepare_store
     if (input is None) == (synthetic is None):
         raise TerrabenchError("give an input file or --synthetic SIZE (one of them)")
     if synthetic is not None:
         source = FractalSource(synthetic, seed, synthetic_spacing, period=synthetic_period)
     else:
-        if not Path(input).is_file():
-            raise TerrabenchError(f"{input}: no such file")
-        source = GdalGridSource(input, vertical_scale=vertical_scale, spacing=spacing, crs=crs, crop=crop)
+        source = _file_source(input, vertical_scale, spacing, crs, crop, raw_shape, raw_dtype)
     t0 = time.perf_counter()
     path = prepare_store(source, out, tile_size, None if quiet else _bar)
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
@@ -69,5 +92,5 @@ def run(input=None, out="store", synthetic=None, seed=0, synthetic_spacing=10.0,
 def run_from_args(args: argparse.Namespace) -> int:
     """The prepare command from parsed arguments; returns the exit code."""
     run(args.input, args.out, args.synthetic, args.seed, args.synthetic_spacing, args.tile_size, args.vertical_scale,
-        args.spacing, args.crs, args.crop, args.quiet, args.synthetic_period)
+        args.spacing, args.crs, args.crop, args.quiet, args.synthetic_period, args.raw_shape, args.raw_dtype)
     return 0

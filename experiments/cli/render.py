@@ -122,6 +122,8 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
                             full_res)
         with Renderer(ctx, hf, method, tile_size, adapt=not freeze_model, **opts) as r:
             result = r.render(v, tau, maps=show_strategy)
+    from hybrid.atomic import remove_stale_temps
+    remove_stale_temps(out.parent)                       # what a killed render left beside its output
     png, depth = result.save(out)
     if show_strategy:
         smap = out.parent / (out.stem + ".strategy.png")
@@ -145,11 +147,11 @@ def run_from_args(args: argparse.Namespace) -> int:
 
 def save_strategy_map(result, path: Path) -> None:
     """Write the per-pixel strategy map blended over the frame: blue = raster tile, orange = ray-cast tile."""
-    from PIL import Image
+    from hybrid.atomic import save_png
     m = result.maps["strategy"]
     col = result.colour.astype(np.float32)
     tint = np.zeros_like(col)
     tint[m == 1] = (40, 110, 255)
     tint[m == 2] = (255, 140, 20)
     mix = np.where((m > 0)[..., None], 0.45 * col + 0.55 * tint, col)
-    Image.fromarray(np.clip(mix, 0, 255).astype(np.uint8)).save(path)
+    save_png(path, np.clip(mix, 0, 255).astype(np.uint8))

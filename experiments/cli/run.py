@@ -30,13 +30,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     where.add_argument("--scheduler", default=None, metavar="ADDRESS",
                        help="run the configurations as tasks on the Dask cluster of this scheduler "
                             "(needs terrabench[cluster]); each worker uses the EGL device TERRABENCH_GL_DEVICE names")
+    p.add_argument("--scheduler-timeout", type=argtypes.positive_float("--scheduler-timeout", "seconds"),
+                   default=None, metavar="SECONDS",
+                   help="seconds to wait for --scheduler to answer (default 5)")
     where.add_argument("--workers", default=None, metavar="local:N",
                        help="run the configurations on a local Dask cluster of N processes")
 
 
 def run(spec, runs="runs", name: str | None = None, report: bool = False, reports="reports", quiet: bool = False,
         device: int | None = None, scheduler: str | None = None, workers: str | None = None,
-        frames: int | None = None, sizes: list[str] | None = None, freeze_model: bool = False) -> Path:
+        frames: int | None = None, sizes: list[str] | None = None, freeze_model: bool = False,
+        scheduler_timeout: float | None = None) -> Path:
     """Run a spec (a path, a bundled name or a parsed spec) into runs/<name>; returns the run folder. With a
     ``scheduler`` address or ``workers`` 'local:N' its configurations run on a Dask cluster; ``frames`` and
     ``sizes`` (pixels, 'WxH') replace a spec file's or bundled spec's own."""
@@ -64,8 +68,8 @@ def run(spec, runs="runs", name: str | None = None, report: bool = False, report
     if scheduler or workers:
         if isinstance(spec, StressSpec):
             raise TerrabenchError("stress specs run on one machine; drop --scheduler / --workers")
-        from ..cluster import connect
-        client, cluster = connect(scheduler, workers)
+        from ..cluster import CONNECT_TIMEOUT_S, connect
+        client, cluster = connect(scheduler, workers, scheduler_timeout or CONNECT_TIMEOUT_S)
         try:
             folder = run_spec(spec, Path(runs), progress=not quiet, client=client)
         finally:
@@ -85,7 +89,7 @@ def run_from_args(args: argparse.Namespace) -> int:
     """The run command from parsed arguments; returns the exit code: 1 when any configuration failed."""
     from ..journal import failed_configs
     folder = run(args.spec, args.runs, args.name, args.report, args.reports, args.quiet, args.device, args.scheduler,
-                 args.workers, args.frames, args.sizes, args.freeze_model)
+                 args.workers, args.frames, args.sizes, args.freeze_model, args.scheduler_timeout)
     failed = failed_configs(folder)
     if failed:
         print(f"terrabench: {len(failed)} configuration(s) failed (details in {folder / 'errors.jsonl'}):",

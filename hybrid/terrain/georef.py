@@ -99,6 +99,18 @@ def _step_metres(geod, to_lonlat, x0, y0, x1, y1) -> float:
     return float(geod.inv(lon[0], lat[0], lon[1], lat[1])[2])
 
 
+def check_degrees(crs, transform, rows: int, cols: int) -> None:
+    """Refuse a geographic CRS for a grid whose corner coordinates are no longitudes and latitudes in degrees."""
+    xs, ys = zip(*(transform @ (c, r) for c in (0, cols) for r in (0, rows)))
+    if max(abs(v) for v in ys) <= 90 and max(abs(v) for v in xs) <= 540:
+        return
+    raise TerrabenchError(
+        f"the grid does not fit the CRS {describe_crs(crs)}, whose coordinates are degrees: its corners lie at "
+        f"x {min(xs):.6g} .. {max(xs):.6g}, y {min(ys):.6g} .. {max(ys):.6g}, no longitudes and latitudes "
+        "(latitude within ±90°), so its unit is another (metres?); give its own CRS with --crs (e.g. a UTM zone, "
+        "EPSG:326NN) or its ground spacing with --spacing")
+
+
 def ground_spacing(crs, transform, rows: int, cols: int) -> GroundSpacing:
     """Ground spacing in metres at the centre of a rows x cols grid with an axis-aligned transform in crs."""
     import pyproj
@@ -113,6 +125,8 @@ def ground_spacing(crs, transform, rows: int, cols: int) -> GroundSpacing:
         return GroundSpacing(abs(transform.a) * k, abs(transform.e) * k,
                              (f"pixel size {abs(transform.a):g} x {abs(transform.e):g} {axis.unit_name} "
                               f"of a local CRS taken as ground spacing",))
+    if horizontal.is_geographic:
+        check_degrees(crs, transform, rows, cols)
     lonlat = GeographicCRS(datum=horizontal.datum)
     to_lonlat = pyproj.Transformer.from_crs(horizontal, lonlat, always_xy=True)
     geod = horizontal.get_geod()
@@ -127,6 +141,9 @@ def ground_spacing(crs, transform, rows: int, cols: int) -> GroundSpacing:
         return _step_metres(geod, to_lonlat, xe0, ye0, xe1, ye1), _step_metres(geod, to_lonlat, xn0, yn0, xn1, yn1)
 
     sx, sy = at(rows / 2)
+    if not (np.isfinite(sx) and np.isfinite(sy) and sx > 0 and sy > 0):
+        raise TerrabenchError(f"the grid's pixels in the CRS {describe_crs(crs)} give no ground spacing (east-west "
+                              f"{sx!r} m, north-south {sy!r} m); check the CRS (--crs) or pass --spacing")
     if abs(sx - sy) <= SAME * max(sx, sy):
         sx = sy = (sx + sy) / 2
     lon, lat = to_lonlat.transform(*(transform @ (cols / 2, rows / 2)))

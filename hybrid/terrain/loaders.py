@@ -132,9 +132,11 @@ def load_terrain(path, **options) -> HeightField:
     ``crop`` (a Crop window, rows as stored), ``crs`` (GDAL formats), ``shape``/``dtype`` (raw grids), ``name``.
     """
     from hybrid.terrain.gdal_files import load_gdal
+    from hybrid.terrain.sources import path_problem
     p = Path(path)
-    if not p.exists():
-        raise TerrainLoadError(f"{path}: no such file")
+    problem = path_problem(p)
+    if problem is not None:
+        raise TerrainLoadError(f"{path}: {problem}")
     if p.is_dir():
         raise TerrainLoadError(f"{path}: is a folder, not a height-field file")
     if p.stat().st_size == 0:

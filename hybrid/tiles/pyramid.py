@@ -24,6 +24,7 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.heightfield import HeightField
+from hybrid.tiles.bounds import level_bounds
 from hybrid.tiles.quantize import Q_MAX, error_bound, on_step_cells
 
 EDGE_W, EDGE_E, EDGE_S, EDGE_N = 1, 2, 4, 8
@@ -171,24 +172,11 @@ class TilePyramid:
         return self._zmax[level].shape
 
     def _build_bounds(self):
-        n, L = self.n, self.max_level
-        h = self.hf.heights
-        # per level-0 cell: min/max of its four corners (bounds every reconstruction of the cell)
-        cmax = np.maximum(np.maximum(h[:-1, :-1], h[:-1, 1:]), np.maximum(h[1:, :-1], h[1:, 1:]))
-        cmin = np.minimum(np.minimum(h[:-1, :-1], h[:-1, 1:]), np.minimum(h[1:, :-1], h[1:, 1:]))
-        self._zmax, self._zmin, self._err = {}, {}, {}
-        for level in range(L + 1):
-            b = n << level
-            self._zmax[level] = _block_reduce(cmax, b, np.maximum)
-            self._zmin[level] = _block_reduce(cmin, b, np.minimum)
-            if level == 0:
-                self._err[level] = np.zeros(self._zmax[level].shape)
-                continue
-            dev = np.abs(interpolate_clamped(h, 1 << level) - h)
-            # sample deviations onto cells: a cell's error is the max over its four corner samples
-            err_cells = np.maximum(np.maximum(dev[:-1, :-1], dev[:-1, 1:]), np.maximum(dev[1:, :-1], dev[1:, 1:]))
-            e = _block_reduce(err_cells, b, np.maximum)
-            self._err[level] = np.maximum(e, _block_reduce(self._err[level - 1], 2, np.maximum))
+        """Per level: the tiles' height bounds and geometric errors (hybrid.tiles.bounds, block by block).
+
+        A level-0 cell's min/max over its four corners bounds every reconstruction of the cell; a level's
+        error is each tile's largest deviation of its triangulated surface from level 0, made monotone."""
+        self._zmax, self._zmin, self._err = level_bounds(self.hf.heights, self.n, self.max_level)
 
     # --- tiles ------------------------------------------------------------------------------------
     def exists(self, key: TileKey) -> bool:
