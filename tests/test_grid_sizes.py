@@ -194,3 +194,25 @@ def test_the_default_view_of_a_square_terrain_is_unchanged():
     v = default_view(hf, 160, 90)
     w, d = hf.extent
     assert np.allclose(v.eye[:2], (hf.origin[0] + 0.25 * w, hf.origin[1] - 0.08 * d))
+
+
+def test_render_draws_a_tile_store_with_every_method(ctx, tmp_path):
+    """``render --dataset STORE`` with each method at the store's own tile size, against its reference."""
+    from experiments.cli import main
+    from experiments.metrics import coverage_errors
+    assert main(["prepare", "--synthetic", "129", "--tile-size", "32", "--out", str(tmp_path / "s"), "--quiet"]) == 0
+    frames = {}
+    for method in METHODS:
+        out = tmp_path / f"{method}.png"
+        assert main(["render", "--dataset", str(tmp_path / "s"), "--method", method, "--size", "160x90",
+                     "--shading", "shaded", "--out", str(out)]) == 0, method
+        frames[method] = np.load(tmp_path / f"{method}.depth.npy")
+
+    class Frame:
+        def __init__(self, d):
+            self.distance, self.colour = d, np.zeros(d.shape + (3,), np.uint8)
+    ref = Frame(frames["reference"])
+    assert np.isfinite(ref.distance).mean() > 0.3
+    for method, d in frames.items():
+        cov = coverage_errors(Frame(d), ref)
+        assert cov["crack_px"] == 0 and cov["coverage_mismatch"] < 0.005, (method, cov)

@@ -32,8 +32,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="reference colour supersampling factor (1..8)")
     p.add_argument("--tau", type=argtypes.positive_float("--tau", "pixels"), default=2 / 3,
                    help="screen-space error bound in pixels (> 0)")
-    p.add_argument("--tile-size", type=argtypes.power_of_two("--tile-size"), default=256,
-                   help="cells per tile side (power of two)")
+    p.add_argument("--tile-size", type=argtypes.power_of_two("--tile-size"), default=None,
+                   help="cells per tile side (power of two; default 256, or a tile store's own)")
     p.add_argument("--reconstruction", default="triangles", help="ray-cast surface: planes, linear, triangles, bilinear")
     p.add_argument("--traversal", default="maxmip", help="ray-cast traversal: maxmip or naive (level-0 stepping)")
     pre = p.add_mutually_exclusive_group()
@@ -96,7 +96,7 @@ def draw_options(method: str, tau: float, shading=None, reconstruction="triangle
 
 def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions(),
         view: ViewOptions = ViewOptions(), shading: str | None = None, supersample: int = 1, tau: float = 2 / 3,
-        tile_size: int = 256, reconstruction: str = "triangles", traversal: str = "maxmip",
+        tile_size: int | None = None, reconstruction: str = "triangles", traversal: str = "maxmip",
         prepass: bool | None = None,
         lod: bool = False, shadows: bool = False, wireframe: bool = False, show_strategy: bool = False,
         device: int | None = None, lean: bool = True, full_res: str = DEFAULT_FULL_RES, freeze_model: bool = False):
@@ -110,6 +110,8 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
     if freeze_model and method != "hybrid":
         raise TerrabenchError("--freeze-model applies to --method hybrid, the one policy that refits its cost model")
     hf = terrain.load()
+    if tile_size is None:
+        tile_size = int(hf.store.attrs["tile_size"]) if getattr(hf, "store", None) is not None else 256
     v = view.view(hf)
     ctx = shared_context(device)
     if method == "reference":
