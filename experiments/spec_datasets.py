@@ -137,7 +137,7 @@ def check_dataset_paths(datasets: list, source: str) -> None:
     """Refuse, naming it, a dataset entry whose file or store folder is missing or unreadable (a symlink loop),
     so a run stops before it makes its folder."""
     from hybrid.terrain.datasets import NAMES
-    from hybrid.terrain.sources import path_problem
+    from hybrid.terrain.paths import path_problem
     for entry in datasets:
         path = entry if isinstance(entry, str) else entry["path"]
         periodic = split_periodic(path)

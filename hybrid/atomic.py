@@ -29,6 +29,9 @@ def atomic_path(path, suffix: str | None = None):
         os.replace(tmp, path)
     except OSError as exc:
         _remove(tmp)
+        if disk_full(exc) and exc.errno is None:           # a short write: no errno to tell the two apart
+            raise TerrabenchError(f"cannot write {path}: disk full or a file size limit reached ({exc}); nothing "
+                                  "was written there") from None
         if disk_full(exc):
             raise TerrabenchError(f"disk full while writing {path}; nothing was written there") from None
         raise TerrabenchError(f"cannot write {path}: {exc.strerror or exc}") from None

@@ -162,15 +162,17 @@ def _short_write(*args, **kwargs):
 @pytest.mark.parametrize("fail", [_enospc, _short_write])
 def test_every_writer_names_a_full_disk(tmp_path, monkeypatch, owner, attr, writer, name, fail):
     monkeypatch.setattr(owner, attr, fail)
-    with pytest.raises(TerrabenchError, match=f"disk full while writing {tmp_path / name}"):
+    with pytest.raises(TerrabenchError, match=f"(disk full while writing|cannot write) {tmp_path / name}.*"
+                                              "nothing was written") as exc:
         writer(tmp_path / name)
+    assert "disk full" in str(exc.value)
     assert not any(tmp_path.iterdir())                            # no partial file, no temporary
 
 
 def test_render_on_a_full_disk_is_one_message_and_writes_nothing(tmp_path, capsys, ctx, monkeypatch):
     monkeypatch.setattr(np, "save", _short_write)
     _fails(["render", "--dataset", "fbm", "--size-samples", "65", "--size", "96x64", "--out", tmp_path / "a.png"],
-           capsys, "disk full while writing", "a.depth.npy")
+           capsys, "disk full or a file size limit", "a.depth.npy")
     assert not any(tmp_path.iterdir())
 
 

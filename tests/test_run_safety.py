@@ -115,12 +115,13 @@ def test_resuming_with_another_cost_model_is_refused(ctx, tmp_path, monkeypatch)
 
 def test_run_exits_nonzero_naming_the_failed_configuration(tmp_path, capsys):
     spec = tmp_path / "bad.toml"
-    spec.write_text(SMALL.replace('datasets = ["fbm"]', f'datasets = ["fbm", "{tmp_path / "missing.tif"}"]')
+    (tmp_path / "broken.tif").write_bytes(b"not a raster")                 # there, so the run starts; unreadable
+    spec.write_text(SMALL.replace('datasets = ["fbm"]', f'datasets = ["fbm", "{tmp_path / "broken.tif"}"]')
                     .replace("frames = 3", "frames = 1"))
     rc = main(["run", str(spec), "--runs", str(tmp_path / "runs"), "--quiet"])
     err = capsys.readouterr().err
     assert rc == 1
-    assert "2 configuration(s) failed" in err and "missing-s0-flyover-96x64-tau0.6667-triangles-raycast: " in err and "missing.tif: no such file" in err
+    assert "2 configuration(s) failed" in err and "broken-s0-flyover-96x64-tau0.6667-triangles-raycast: " in err and "broken.tif: not a readable raster" in err
     assert len(pd.read_parquet(tmp_path / "runs" / "s" / "frames.parquet")) == 2      # the good ones went on
 
 

@@ -97,11 +97,13 @@ def test_interrupted_run_resumes_without_redoing(run, ctx):
 
 
 def test_failed_configuration_is_recorded(ctx, tmp_path):
-    spec = parse_spec(TINY.replace('datasets = ["fbm"]', 'datasets = ["fbm", "missing.tif"]').replace("frames = 3", "frames = 2")
+    broken = tmp_path / "broken.tif"
+    broken.write_bytes(b"not a raster")                     # there, so the run starts; each of its configs fails
+    spec = parse_spec(TINY.replace('datasets = ["fbm"]', f'datasets = ["fbm", "{broken}"]').replace("frames = 3", "frames = 2")
                       .replace("image_frames = [1]", "image_frames = [0]"))
     folder = run_spec(spec, tmp_path, ctx, progress=False)
     errors = [json.loads(l) for l in (folder / "errors.jsonl").read_text().splitlines()]
-    assert errors and all("missing.tif" in e["error"] for e in errors)
+    assert errors and all("broken.tif" in e["error"] for e in errors)
     assert len(pd.read_parquet(folder / "frames.parquet")) == 3 * 2      # the rest went on
 
 

@@ -54,7 +54,7 @@ def _file_source(path, vertical_scale=None, spacing=None, crs=None, crop=None, r
     from hybrid.errors import TerrabenchError
     from hybrid.terrain.grid_sources import GdalGridSource, HeightFieldSource
     from hybrid.terrain.loaders import SUFFIXES, load_terrain
-    from hybrid.terrain.sources import path_problem
+    from hybrid.terrain.paths import path_problem
     problem = path_problem(path)
     if problem is not None:
         raise TerrabenchError(f"{path}: {problem}")

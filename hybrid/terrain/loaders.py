@@ -132,7 +132,7 @@ def load_terrain(path, **options) -> HeightField:
     ``crop`` (a Crop window, rows as stored), ``crs`` (GDAL formats), ``shape``/``dtype`` (raw grids), ``name``.
     """
     from hybrid.terrain.gdal_files import load_gdal
-    from hybrid.terrain.sources import path_problem
+    from hybrid.terrain.paths import path_problem
     p = Path(path)
     problem = path_problem(p)
     if problem is not None:

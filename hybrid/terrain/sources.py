@@ -1,31 +1,15 @@
 """What terrain to load: a bundled or synthetic dataset name, or a file with its loader options, and its credit."""
 from __future__ import annotations
 
-import errno
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.heightfield import HeightField
+from hybrid.terrain.paths import path_problem
 from hybrid.terrain.window import Crop
 
 FILE_OPTIONS = ("spacing", "vertical_scale", "crs", "crop", "raw_shape", "raw_dtype")
-
-
-def path_problem(path) -> str | None:
-    """Why ``path`` names nothing that can be read ('no such file', a symlink loop, a broken symlink), or None."""
-    try:
-        os.stat(path)
-    except FileNotFoundError:
-        if os.path.islink(path):
-            return f"a broken symlink (to {os.readlink(path)}, which does not exist)"
-        return "no such file"
-    except OSError as exc:
-        if exc.errno == errno.ELOOP:
-            return "a symlink loop (its links never reach a file)"
-        return exc.strerror or str(exc)
-    return None
 
 
 @dataclass(frozen=True)
