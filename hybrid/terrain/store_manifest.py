@@ -20,7 +20,7 @@ import os
 import zlib
 from pathlib import Path
 
-from hybrid.errors import TerrabenchError
+from hybrid.errors import StoreDamagedError, TerrabenchError
 
 MANIFEST = "manifest.json"
 MANIFEST_FORMAT = "terrabench-store-manifest"
@@ -43,9 +43,9 @@ def describe(key: str) -> str:
     return f"file {key}"
 
 
-def damaged(store, key: str, reason: str) -> TerrabenchError:
+def damaged(store, key: str, reason: str) -> StoreDamagedError:
     """The one error for a damaged file of a store: names the store, the array and chunk, and the fix."""
-    return TerrabenchError(f"{store}: tile store is damaged: {describe(key)} {reason}; run terrabench prepare again "
+    return StoreDamagedError(f"{store}: tile store is damaged: {describe(key)} {reason}; run terrabench prepare again "
                            f"on its input into a new folder (or remove {store} first)")
 
 
