@@ -204,8 +204,10 @@ def open_store(path) -> StoredTerrain:
     g = zarr.open_group(store=checked_store(path, files), mode="r")
     try:
         level0 = g["levels/0"]
-    except KeyError:
+    except KeyError:                                # a store without a manifest: checked here, by name
         raise damaged(path, "levels/0/zarr.json", "is missing") from None
+    except ValueError as exc:
+        raise damaged(path, "levels/0/zarr.json", f"is not valid array metadata ({exc})") from None
     notes = [f"tile store {p.name}: {a.get('made_by', '')}"] + (["periodic extension"] if a.get("periodic") else [])
     step = a.get("source_step")
     return StoredTerrain(LazyGrid(level0, tuple(a["height_range"]), a["name"]), tuple(a["spacing"]),
