@@ -127,7 +127,7 @@ def run_scaling(ctx, stores, frames: int = 48, size=(640, 360), tau: float = 2 /
 def _open(ctx, f: _Flight, method: str, tau: float, size, gpu_budget_mib: int, upload_budget_ms, host_budget_mib: int,
           refused: list, setup: list) -> bool:
     """Make f's pyramid and renderer for the method and time its setup; False (the reason recorded) if refused."""
-    from hybrid.errors import TerrabenchError
+    from hybrid.errors import StoreDamagedError, TerrabenchError
     from hybrid.renderer import Renderer
     from hybrid.tiles.store import StorePyramid
     t = f.terrain
@@ -143,19 +143,23 @@ def _open(ctx, f: _Flight, method: str, tau: float, size, gpu_budget_mib: int, u
         setup.append({"store": t.name, "samples": samples, "method": method, "setup_s": time.perf_counter() - t0})
         return True
     except TerrabenchError as exc:
-        refused.append({"store": t.name, "samples": samples, "method": method, "reason": str(exc)})
         f.close()
+        if isinstance(exc, StoreDamagedError):       # a damaged store is the input's fault, not a refusal
+            raise
+        refused.append({"store": t.name, "samples": samples, "method": method, "reason": str(exc)})
         return False
 
 
 def _frame(f: _Flight, method: str, k: int, tau: float, gpu_budget_mib: int, rows: list, refused: list) -> None:
     """Draw frame k of f's flight and append its row; a refusal mid-flight drops the store's rows for the method."""
-    from hybrid.errors import TerrabenchError
+    from hybrid.errors import StoreDamagedError, TerrabenchError
     t = f.terrain
     t0 = time.perf_counter()
     try:
         st = f.renderer.render(f.views[k], tau).stats
     except TerrabenchError as exc:
+        if isinstance(exc, StoreDamagedError):
+            raise
         refused.append({"store": t.name, "samples": t.rows * t.cols, "method": method, "reason": str(exc)})
         rows[:] = [x for x in rows if not (x["store"] == t.name and x["method"] == method)]
         f.close()

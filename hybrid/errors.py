@@ -13,6 +13,10 @@ class TerrainLoadError(TerrabenchError):
     """A height-field file that cannot be read or holds no usable terrain."""
 
 
+class StoreDamagedError(TerrabenchError):
+    """A tile store whose files do not match its manifest (missing, short, altered): never a method's refusal."""
+
+
 class GLContextError(TerrabenchError):
     """No usable OpenGL context: EGL missing, GL too old, or a bad device index."""
 

@@ -193,6 +193,7 @@ def test_an_extension_of_a_store_without_node_arrays_is_loaded_or_refused_by_the
     prepare_store(_rough(), tmp_path / "old", 16)
     g = zarr.open_group(str(tmp_path / "old"), mode="r+")               # as a store prepared before node arrays
     del g.attrs["nodes"]
+    del g.attrs["manifest"]                                             # (and so before manifests)
     shutil.rmtree(tmp_path / "old" / "nodes")
     ext = open_periodic(tmp_path / "old", 257)
     assert "nodes" not in ext.store.attrs

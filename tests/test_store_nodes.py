@@ -113,6 +113,7 @@ def test_a_store_without_node_arrays_is_refused_by_path_until_prepared_again(tmp
     prepare_store(ArraySource(h, SP), tmp_path / "old", 32)
     g = zarr.open_group(str(tmp_path / "old"), mode="r+")           # as a store prepared before node arrays
     del g.attrs["nodes"]
+    del g.attrs["manifest"]                                         # (and so before manifests)
     g.attrs.update({"progress": {k: v for k, v in dict(g.attrs["progress"]).items() if not k.startswith("nodes")}})
     shutil.rmtree(tmp_path / "old" / "nodes")
     with pytest.raises(TerrabenchError, match=f"{tmp_path / 'old'}.*without the raster.*prepare again"):
@@ -218,6 +219,7 @@ def test_a_store_without_blocks_gets_them_from_prepare_and_draws_the_same(tmp_pa
     del g["nodes/blocks"]
     attrs = dict(g.attrs)
     attrs.pop("node_blocks")
+    attrs.pop("manifest")                                     # a store made before blocks had no manifest either
     attrs["progress"] = {k: v for k, v in attrs["progress"].items() if not k.startswith("blocks:")}
     g.attrs.clear()
     g.attrs.update(attrs)
@@ -264,6 +266,7 @@ def test_a_store_prepared_before_side_codes_keeps_its_form_and_gets_blocks_of_it
         del g[name]
     attrs = dict(g.attrs)
     attrs.pop("node_blocks")
+    attrs.pop("manifest")                                     # a store made before blocks had no manifest either
     attrs["nodes"] = {k: v for k, v in attrs["nodes"].items() if k != "form"}
     attrs["progress"] = {k: v for k, v in attrs["progress"].items() if not k.startswith("blocks:")}
     g.attrs.clear()

@@ -1,4 +1,4 @@
-"""`terrabench info`: the GL renderer, and what a terrain file or dataset holds (tiles, levels)."""
+"""`terrabench info`: the GL renderer, and what a terrain file, dataset or tile store holds (tiles, levels)."""
 from __future__ import annotations
 
 import argparse
@@ -17,11 +17,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tile-size", type=argtypes.power_of_two("--tile-size"), default=256,
                    help="cells per tile side (power of two)")
     p.add_argument("--no-gl", dest="gl", action="store_false", help="do not open a GL context")
+    p.add_argument("--verify", action="store_true",
+                   help="a tile store: check every file against its manifest (exit 2 listing the damaged ones)")
 
 
-def run(terrain: TerrainOptions | None = None, tile_size: int = 256, gl: bool = True, device: int | None = None) -> None:
-    """Print the terrain's summary and tiling (when one is given) and the GL context's renderer (unless gl=False)."""
-    if terrain is not None:
+def run(terrain: TerrainOptions | None = None, tile_size: int = 256, gl: bool = True, device: int | None = None,
+        verify: bool = False) -> None:
+    """Print the terrain's summary and tiling (when one is given; a tile store's own, ``verify`` checking its files)
+    and the GL context's renderer (unless gl=False)."""
+    from hybrid.errors import TerrabenchError
+    from hybrid.terrain.stored import is_store, store_remains
+    store = terrain is not None and (is_store(terrain.dataset) or store_remains(terrain.dataset))
+    if verify and not store:
+        raise TerrabenchError("--verify applies to a tile store (terrabench info STORE --verify)")
+    if store:
+        from .store_info import describe_store
+        describe_store(terrain.dataset, verify)
+    elif terrain is not None:
         from hybrid.tiles.pyramid import TilePyramid
         hf = terrain.load()
         print(hf.summary())
@@ -40,5 +52,5 @@ def run_from_args(args: argparse.Namespace) -> int:
     if args.file or args.dataset:
         args.dataset = args.file or args.dataset
         terrain = from_args(TerrainOptions, args)
-    run(terrain, args.tile_size, args.gl, args.device)
+    run(terrain, args.tile_size, args.gl, args.device, args.verify)
     return 0

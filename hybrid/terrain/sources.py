@@ -55,8 +55,8 @@ class TerrainSource:
             if self.name is not None:
                 hf.name = self.name
             return hf
-        from hybrid.terrain.stored import is_store, open_store
-        if is_store(self.dataset):                       # a tile store from terrabench prepare: stays on disk
+        from hybrid.terrain.stored import is_store, open_store, store_remains
+        if is_store(self.dataset) or store_remains(self.dataset):    # a tile store (damaged or not): stays on disk
             if given:
                 raise TerrabenchError(f"{self.dataset} is a tile store; {', '.join(given)} were applied when it was "
                                       "prepared")

@@ -6,7 +6,9 @@ and ``error/<l>`` the per-tile bounds and geometric errors, ``nodes/effective|zl
 strategies' node arrays (hybrid.tiles.store_nodes), and the group's attributes the header (format, version, name,
 spacing, origin, CRS, height range, tile size, how it was made, the node arrays' parameters under ``nodes``, the
 source's height step ``source_step`` as [step, offset] metres or null, and whether it is complete). A store written
-before ``source_step`` was recorded lacks the attribute and reads as null (no step).
+before ``source_step`` was recorded lacks the attribute and reads as null (no step). ``manifest.json`` lists every
+other file's size and CRC-32 (``hybrid.terrain.store_manifest``): ``open_store`` reads the store through a Zarr store
+that checks every listed file it reads, so a missing, short or altered chunk is one named error, never fill values.
 Zarr was chosen over a COG with overviews because every level is a plain chunked array with its own per-tile
 tables beside it in one self-describing directory, written and read a window at a time from Python with no
 GDAL driver in the loop, and resumable chunk by chunk.
@@ -25,6 +27,13 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.heightfield import HeightField, spacing_pair
+from hybrid.terrain.store_manifest import (
+    MANIFEST,
+    bad_files,
+    checked_store,
+    damaged,
+    load_manifest,
+)
 
 STORE_FORMAT = "terrabench-tile-store"
 STORE_VERSION = 1
@@ -100,6 +109,10 @@ class LazyGrid:
         a = np.asarray(self.array[:, :], dtype=np.float32)
         return a if dtype is None else a.astype(dtype)
 
+    def astype(self, dtype, copy=True) -> np.ndarray:
+        """The whole grid in memory as dtype (numpy's astype; refused beyond MAX_LOAD_SAMPLES as ``__array__``)."""
+        return np.asarray(self).astype(dtype, copy=copy)
+
 
 @dataclass
 class StoredTerrain(HeightField):
@@ -142,21 +155,61 @@ class StoredTerrain(HeightField):
                            None, source=self.path, notes=list(self.notes), source_step=self.source_step)
 
 
-def open_store(path) -> StoredTerrain:
-    """Open a complete tile store (checked: format, version, completeness); refused by name otherwise."""
+HEADER_KEYS = ("version", "complete", "name", "spacing", "origin", "height_range", "tile_size", "max_level")
+
+
+def store_remains(path) -> bool:
+    """True if path is a directory that looks like a tile store (its header, manifest or levels), damaged or not."""
     p = Path(path)
-    if not is_store(p):
+    return p.is_dir() and any((p / name).exists() for name in ("zarr.json", MANIFEST, "levels"))
+
+
+def _header(p: Path, path) -> dict:
+    """The store's header (its group attributes), read from zarr.json; a missing or garbled one refused by name."""
+    import json
+    try:
+        text = (p / "zarr.json").read_bytes()
+    except OSError:
+        if store_remains(p):
+            raise damaged(path, "zarr.json", "is missing") from None
+        raise TerrabenchError(f"{path}: not a terrabench tile store (make one with terrabench prepare)") from None
+    try:
+        attrs = json.loads(text).get("attributes", {})
+    except (ValueError, AttributeError):
+        raise damaged(path, "zarr.json", "is not valid JSON") from None
+    if not isinstance(attrs, dict) or attrs.get("format") != STORE_FORMAT:
         raise TerrabenchError(f"{path}: not a terrabench tile store (make one with terrabench prepare)")
-    zarr = _zarr()
-    g = zarr.open_group(str(p), mode="r")
-    a = dict(g.attrs)
+    missing = [k for k in HEADER_KEYS if k not in attrs]
+    if missing:
+        raise damaged(path, "zarr.json", f"lacks the header's {', '.join(missing)}")
+    return attrs
+
+
+def open_store(path) -> StoredTerrain:
+    """Open a complete tile store (checked: format, version, completeness, every array's metadata against the
+    manifest); every later read of a file the manifest lists is checked (``store_manifest``); refused by name."""
+    p = Path(path)
+    a = _header(p, path)
     if a.get("version") != STORE_VERSION:
         raise TerrabenchError(f"{path}: tile store version {a.get('version')!r}, this terrabench reads {STORE_VERSION}")
     if not a.get("complete"):
         raise TerrabenchError(f"{path}: tile store is incomplete (interrupted prepare); run the same prepare "
                               "command again to finish it")
+    files = load_manifest(path, a)
+    bad = bad_files(p, files, only_metadata=True) if files else []
+    if bad:
+        more = f" (and {len(bad) - 1} more damaged files: terrabench info {path} --verify lists them)" if bad[1:] else ""
+        raise damaged(path, bad[0][0], bad[0][1] + more)
+    zarr = _zarr()
+    g = zarr.open_group(store=checked_store(path, files), mode="r")
+    try:
+        level0 = g["levels/0"]
+    except KeyError:                                # a store without a manifest: checked here, by name
+        raise damaged(path, "levels/0/zarr.json", "is missing") from None
+    except ValueError as exc:
+        raise damaged(path, "levels/0/zarr.json", f"is not valid array metadata ({exc})") from None
     notes = [f"tile store {p.name}: {a.get('made_by', '')}"] + (["periodic extension"] if a.get("periodic") else [])
     step = a.get("source_step")
-    return StoredTerrain(LazyGrid(g["levels/0"], tuple(a["height_range"]), a["name"]), tuple(a["spacing"]),
+    return StoredTerrain(LazyGrid(level0, tuple(a["height_range"]), a["name"]), tuple(a["spacing"]),
                          tuple(a["origin"]), a["name"], None, source=str(p), notes=notes,
                          source_step=None if step is None else (float(step[0]), float(step[1])), store=g, path=str(p))

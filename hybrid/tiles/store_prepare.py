@@ -13,7 +13,8 @@ it may refine a little more than the exact error would. Then the raster strategi
 ``source_step`` is recorded in the attributes (``[step, offset]``, or null) when every level-0 sample lies on it, so
 the ray caster's 16-bit tiles of the store are exact, as the in-memory grid's are. Progress is kept in
 the store's attributes after every band, so an interrupted prepare resumes where it stopped; the store is marked
-complete last.
+complete last, with its manifest (every file's size and CRC-32, ``hybrid.terrain.store_manifest``), which a
+complete store prepared before manifests gets when prepared again.
 """
 from __future__ import annotations
 
@@ -23,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from hybrid.errors import TerrabenchError
+from hybrid.terrain.store_manifest import record_manifest
 from hybrid.terrain.stored import STORE_FORMAT, STORE_VERSION, _zarr, is_store
 
 from .fans import GPU_BETA
@@ -88,6 +90,8 @@ def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: in
             raise TerrabenchError(f"{out}: holds a store of other input or settings ({dict(g.attrs).get('params')}); "
                                   "choose another folder or remove it")
         if g.attrs.get("complete") and g.attrs.get("nodes") and g.attrs.get("node_blocks"):
+            if not g.attrs.get("manifest"):           # prepared before manifests: record what is on disk
+                g.attrs.update({"manifest": record_manifest(out)})
             return out
     else:
         g = zarr.open_group(str(out), mode="w")
@@ -168,7 +172,7 @@ def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: in
             zmax[:, :] = _block_reduce(np.asarray(g[f"zmax/{level - 1}"][:]), 2, np.maximum)
     build_nodes(g, rows, cols, n, L, GPU_BETA, mark)
     build_blocks(g, n, L, mark)
-    g.attrs.update({"complete": True})
+    g.attrs.update({"manifest": record_manifest(out), "complete": True})
     return out
 
 
