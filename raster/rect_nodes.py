@@ -229,11 +229,14 @@ def _output(lv: dict, parent32, ax_r, ax_c, g: int, H: int, W: int, bound: bool)
         out.append(grow3(lv[kind][np.ix_(rows, cols)], fn)[:H, :W].astype(np.float32))
     codes = None
     if lv["sides"] is not None:
-        sides = lv["sides"][:, mr[:, None], mc[None, :]]
-        parent = None
-        if parent32 is not None:
-            parent = parent32[np.ix_(ax_r[0][g + 1][np.arange(H) // 2], ax_c[0][g + 1][np.arange(W) // 2])]
-        codes = side_codes_each(sides, out[0], parent)
+        codes = np.empty((H, W), np.float32)
+        step = max(1, SLICE_SAMPLES // max(W, 1))           # rows at once (memory: a few 4 x float64 arrays)
+        for a0 in range(0, H, step):
+            a = np.arange(a0, min(a0 + step, H))
+            parent = None
+            if parent32 is not None:
+                parent = parent32[np.ix_(ax_r[0][g + 1][a // 2], ax_c[0][g + 1][np.arange(W) // 2])]
+            codes[a0:a0 + a.size] = side_codes_each(lv["sides"][:, mr[a][:, None], mc[None, :]], out[0][a], parent)
     return (*out, codes)
 
 
