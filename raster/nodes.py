@@ -1,9 +1,10 @@
 """The terrain's one restricted quadtree of tilelets: saturated node errors and bounding boxes, per tile on the GPU.
 
 Every tile of every pyramid level is a part of one quadtree over the level-0 samples (the pyramid subsamples,
-so a level-l tile's tilelets are the level-0 quadtree's nodes of 2^(l+1) cells and up). Its error pyramid is
-computed once over the whole padded grid (``raster.quadtree.error_pyramid``), so the effective errors are
-saturated across tile borders: a node's effective error is at least 1/beta times that of its children and of
+so a level-l tile's tilelets are the level-0 quadtree's nodes of 2^(l+1) cells and up). Its error pyramid has
+the values ``raster.quadtree.error_pyramid`` gives over the pyramid's whole padded square (``square_nodes``),
+computed only at the nodes tiles read (``raster.rect_nodes``), so the effective errors are saturated across tile
+borders: a node's effective error is at least 1/beta times that of its children and of
 the child-size nodes touching its edges from outside, wherever they lie.
 
 A node of side s splits when ``E * K / d > tau``: E its effective error (metres), K the view's pixels per
@@ -37,23 +38,25 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.stored import MAX_LOAD_SAMPLES, StoredTerrain
 from hybrid.tiles.fans import grow3 as _grow
+from hybrid.tiles.periodic_blocks import PeriodicBlocks
 from hybrid.tiles.pyramid import TilePyramid
 from hybrid.tiles.sidecodes import side_codes, stored_codes
-from hybrid.tiles.periodic_blocks import PeriodicBlocks
-from hybrid.tiles.store_blocks import band_blocks, block_offsets
+from hybrid.tiles.store_blocks import block_offsets
 
 from .quadtree import GPU_BETA, error_pyramid
+from .rect_nodes import rect_nodes
 
 _CACHE: dict = {}
 
 
 @dataclass(frozen=True)
 class GlobalNodes:
-    """Saturated effective errors and box height ranges of every node of the whole padded grid, by global level.
+    """Saturated effective errors and box height ranges of the padded square's nodes, by global level.
 
-    Global level g: nodes of 2^(g+1) level-0 cells; arrays (R >> (g+1))², row from the south (numpy, or a tile
-    store's Zarr arrays). zlo/zhi span the samples of the node's box (its square grown by its side on every side),
-    relative to the terrain origin z; cells is R, the padded square's cells a side.
+    Global level g: nodes of 2^(g+1) level-0 cells, row from the south; arrays of the level's first rows and
+    columns: (R >> (g+1))² of a tile store's Zarr arrays or ``square_nodes``, or ``global_nodes``' (H_g, W_g),
+    every node a tile reads (``raster.rect_nodes``). zlo/zhi span the samples of the node's box (its square grown
+    by its side on every side), relative to the terrain origin z; cells is R, the padded square's cells a side.
     """
 
     cells: int
@@ -66,16 +69,11 @@ class GlobalNodes:
                                     # prepared before side errors: one error over both fans)
 
 
-def global_nodes(hf, tile_size: int, beta: float = GPU_BETA, side_errors: bool = True) -> GlobalNodes:
-    """The whole grid's node errors and boxes, over the pyramid's padded grid (cached per height field,
-    tile size, beta and form: about 3 s for 1025² samples); ``side_errors``: split on the full fans' errors with
-    side codes (``raster.quadtree``), else both fans in one error (the combined form: a store prepared before side
-    codes holds it, a periodic extension's nodes near its seams take bounds of it)."""
-    key = (id(hf), int(tile_size), float(beta), bool(side_errors))
-    hit = _CACHE.get(key)
-    if hit is not None and hit[0]() is hf:
-        return hit[1]
-    grid = hf.load() if isinstance(hf, StoredTerrain) else hf     # a store without usable node arrays, if it fits
+def square_nodes(hf, tile_size: int, beta: float = GPU_BETA, side_errors: bool = True) -> GlobalNodes:
+    """Node arrays over the pyramid's whole padded square ((R >> (g+1))² per level), as ``error_pyramid`` gives
+    them: the reference ``global_nodes`` and the tile store's builds are checked against (R² memory: small
+    grids only); ``side_errors`` as in ``global_nodes``."""
+    grid = hf.load() if isinstance(hf, StoredTerrain) else hf
     pyramid = TilePyramid(grid, tile_size)
     pyr = error_pyramid(pyramid.padded, beta, side_errors)
     zlo = tuple(_grow(z, np.minimum).astype(np.float32) for z in pyr.zmin)
@@ -83,7 +81,22 @@ def global_nodes(hf, tile_size: int, beta: float = GPU_BETA, side_errors: bool =
     effective = tuple(e.astype(np.float32) for e in pyr.effective)
     sides = tuple(side_codes(d, e, effective[g + 1] if g + 1 < len(effective) else None)
                   for g, (d, e) in enumerate(zip(pyr.sides, effective))) if side_errors else None
-    nodes = GlobalNodes(pyr.n, float(beta), effective, zlo, zhi, sides=sides)
+    return GlobalNodes(pyr.n, float(beta), effective, zlo, zhi, sides=sides)
+
+
+def global_nodes(hf, tile_size: int, beta: float = GPU_BETA, side_errors: bool = True) -> GlobalNodes:
+    """The node arrays every tile of hf's pyramid reads (``raster.rect_nodes``: over the grid's rectangle of
+    tiles at each level and their aprons, memory following the grid's samples; cached per height field, tile
+    size, beta and form); ``side_errors``: split on the full fans' errors with side codes (``raster.quadtree``),
+    else both fans in one error (the combined form: a store prepared before side codes holds it, a periodic
+    extension's nodes near its seams take bounds of it)."""
+    key = (id(hf), int(tile_size), float(beta), bool(side_errors))
+    hit = _CACHE.get(key)
+    if hit is not None and hit[0]() is hf:
+        return hit[1]
+    grid = hf.load() if isinstance(hf, StoredTerrain) else hf     # a store without usable node arrays, if it fits
+    R, effective, zlo, zhi, sides = rect_nodes(grid, int(tile_size), float(beta), bool(side_errors))
+    nodes = GlobalNodes(R, float(beta), effective, zlo, zhi, sides=sides)
     ref = weakref.ref(hf, lambda _r, k=key: _CACHE.pop(k, None))
     _CACHE[key] = (ref, nodes)
     return nodes
@@ -158,5 +171,25 @@ def tile_node_block(nodes: GlobalNodes, level: int, tx: int, ty: int, n: int) ->
     if nodes.blocks is not None:
         data = np.asarray(nodes.blocks[level][ty, tx], dtype=np.float32)
     else:
-        data = band_blocks(nodes.effective, nodes.zlo, nodes.zhi, level, ty, n, tx, tx + 1, nodes.sides)[0]
+        data = _cut(nodes, level, tx, ty, n)
     return np.ascontiguousarray(data), block_offsets(n)
+
+
+def _cut(nodes: GlobalNodes, level: int, tx: int, ty: int, n: int) -> np.ndarray:
+    """A tile's block (nodes, 4) float32 cut from node arrays by global level that hold a level's first rows and
+    columns (the whole square's, or ``global_nodes``' prefix of every node a tile reads): zeros beyond them, as
+    beyond the square (``hybrid.tiles.store_blocks.band_blocks``' layout)."""
+    parts = []
+    for m in range(tile_levels(n)):
+        g, side = level + m, n >> (m + 1)
+        rows, cols = nodes.effective[g].shape
+        r0, c0 = ty * side - 1, tx * side - 1
+        ra, rb, ca, cb = max(r0, 0), min(r0 + side + 2, rows), max(c0, 0), min(c0 + side + 2, cols)
+        block = np.zeros((side + 2, side + 2, 4), np.float32)
+        if rb > ra and cb > ca:
+            at = (slice(ra - r0, rb - r0), slice(ca - c0, cb - c0))
+            for k, arr in enumerate((nodes.effective[g], nodes.zlo[g], nodes.zhi[g])):
+                block[at + (k,)] = np.asarray(arr[ra:rb, ca:cb])
+            block[at + (3,)] = 1.0 if nodes.sides is None else np.asarray(nodes.sides[g][ra:rb, ca:cb])
+        parts.append(block.reshape(-1, 4))
+    return np.concatenate(parts)

@@ -18,7 +18,7 @@ from hybrid.tiles.sidecodes import decoded_sides
 from hybrid.tiles.store import prepare_store
 from hybrid.tiles.store_blocks import band_blocks
 from raster import nodes as nodes_mod
-from raster.nodes import global_nodes, nodes_for, tile_node_block
+from raster.nodes import global_nodes, nodes_for, square_nodes, tile_node_block
 from raster.quadtree import error_pyramid
 
 
@@ -42,7 +42,7 @@ def _check_against_exact(ext, n, P, exact_levels):
     side errors facing it over beta), its side codes read back never below its exact side errors, boxes containing
     the exact ones, equal away from the seams (bit for bit up to nodes of ``exact_levels``, codes where the parent
     is away too), saturated and nested; returns the exact and served nodes."""
-    ref, got = global_nodes(ext.load(), n), nodes_for(ext, n)
+    ref, got = square_nodes(ext.load(), n), nodes_for(ext, n)
     sides = error_pyramid(TilePyramid(ext.load(), n).padded, got.beta).sides
     assert got.cells == ref.cells and len(got.effective) == len(ref.effective) and got.beta == ref.beta
     periods = (ext.cols - 1) // P
@@ -87,7 +87,7 @@ def test_a_seamless_source_gives_the_exact_finest_errors_at_the_seams(tmp_path):
     prepare_store(_rough(period=128), tmp_path / "s", 32)
     ext = open_periodic(tmp_path / "s", 513)
     ref, got = _check_against_exact(ext, 32, 128, 99)
-    combined = global_nodes(ext.load(), 32, side_errors=False)
+    combined = square_nodes(ext.load(), 32, side_errors=False)
     e, re, ce = _levels(got, 0)[0], _levels(ref, 0)[0], _levels(combined, 0)[0]
     seam = (np.arange(e.shape[0]) % 64 == 63) & (np.arange(e.shape[0]) < 256)
     near = seam[:, None] | seam[None, :]

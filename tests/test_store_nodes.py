@@ -19,7 +19,7 @@ from hybrid.tiles import store_nodes
 from hybrid.tiles.pyramid import TilePyramid
 from hybrid.tiles.sidecodes import decoded_sides
 from hybrid.tiles.store import prepare_store
-from raster.nodes import global_nodes, nodes_for, tile_node_block
+from raster.nodes import global_nodes, nodes_for, square_nodes, tile_node_block
 from raster.quadtree import error_pyramid
 
 SP = (30.0, 40.0)
@@ -36,12 +36,12 @@ def open_store_attrs(path):
 
 
 def _compare(store_path, hf, n, exact_span):
-    """Assert the store's node arrays against global_nodes of hf: effective errors, combined errors and side codes
+    """Assert the store's node arrays against the padded square's of hf (``square_nodes``): effective errors, combined errors and side codes
     equal up to nodes of exact_span cells (codes where the parent is too), the errors above never below the exact
     ones and the codes read back never below the exact side errors (ranges always equal); returns the largest
     bound / exact ratio."""
     import zarr
-    ref, combined = global_nodes(hf, n), global_nodes(hf, n, side_errors=False)
+    ref, combined = square_nodes(hf, n), square_nodes(hf, n, side_errors=False)
     got = nodes_for(open_store(store_path), n)
     stored = zarr.open_group(str(store_path), mode="r")
     sides = error_pyramid(TilePyramid(hf, n).padded, got.beta).sides

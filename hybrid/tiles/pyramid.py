@@ -122,7 +122,7 @@ def interpolate_clamped(h: np.ndarray, k: int) -> np.ndarray:
     return np.where(fj >= fi, lower, upper)
 
 
-MAX_PADDED_SAMPLES = 1 << 27     # the square a few consumers still build (raster node errors): 128 M samples
+MAX_PADDED_SAMPLES = 1 << 27     # the square only the reference node arrays build (raster.nodes.square_nodes): 128 M
 
 
 class TilePyramid:
@@ -157,8 +157,8 @@ class TilePyramid:
             raise TerrabenchError(
                 f"{self.hf.name!r} ({self.hf.cols}x{self.hf.rows} samples, tiles of {self.n}) would need a padded "
                 f"square of {self.size}² samples ({need * 4 / 2**30:.1f} GiB as float32, several times that to process), "
-                f"beyond the limit of {MAX_PADDED_SAMPLES} samples; the raster strategies need it, the ray caster "
-                "does not")
+                f"beyond the limit of {MAX_PADDED_SAMPLES} samples; the strategies do not need it (raster node arrays "
+                "are computed over the grid's rectangle, raster.rect_nodes)")
         hf = self.hf
         return np.pad(hf.heights, ((0, self.size - hf.rows), (0, self.size - hf.cols)), mode="edge")
 
