@@ -4,6 +4,8 @@ an exact CPU intersection of its triangles at sampled pixels; the block layout c
 grid streams its blocks out of core into the same image; a colour texture past the limit is resampled to fit."""
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from experiments.metrics import near_silhouettes
 from hybrid.camera.view import View
@@ -216,3 +218,27 @@ def test_render_draws_a_tile_store_with_every_method(ctx, tmp_path):
     for method, d in frames.items():
         cov = coverage_errors(Frame(d), ref)
         assert cov["crack_px"] == 0 and cov["coverage_mismatch"] < 0.005, (method, cov)
+
+
+@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.sampled_from([-2, -1, 0, 1, 2, 31, 32, 33]), st.sampled_from([-1, 0, 1, 32]), st.booleans())
+def test_grids_around_the_texture_limit_draw_as_one_texture_does(ctx, dc, dr, wide):
+    """Grids a few samples either side of one and two limits: the reference with the limit forced to 32 draws
+    the image it draws with the grid in one texture."""
+    limit = 32
+    cols, rows = limit + dc if dc < 31 else 2 * limit + dc - 32, 12 + dr
+    hf = hills(*((rows, cols) if wide else (cols, rows)))
+    view = along(hf, 96, 64)
+    whole, cut = ReferenceRenderer(ctx, hf), None
+    context_extra(ctx)["max_texture_size"] = limit
+    try:
+        cut = ReferenceRenderer(ctx, hf)
+        assert all(max(b.shape) <= limit for b in cut.blocks) and len(cut.blocks) >= 1 + (max(hf.rows, hf.cols) > limit)
+        a, b = whole.render(view, mode="shaded"), cut.render(view, mode="shaded")
+    finally:
+        context_extra(ctx).pop("max_texture_size", None)
+        whole.release()
+        if cut is not None:
+            cut.release()
+    assert np.array_equal(a.mask, b.mask)
+    assert np.abs(a.distance[a.mask] - b.distance[a.mask]).max(initial=0) <= 1e-5 * a.distance[a.mask].max(initial=1)
