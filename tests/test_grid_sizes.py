@@ -145,7 +145,7 @@ def test_a_view_of_part_of_the_grid_draws_only_its_blocks(ctx):
 
 
 def test_a_stored_grid_streams_its_blocks_into_the_same_image(ctx, tmp_path, monkeypatch):
-    import hybrid.reference as reference
+    from hybrid import reference
     from hybrid.terrain.grid_sources import HeightFieldSource
     from hybrid.terrain.stored import open_store
     from hybrid.tiles.store import prepare_store
