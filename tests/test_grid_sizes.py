@@ -242,3 +242,20 @@ def test_grids_around_the_texture_limit_draw_as_one_texture_does(ctx, dc, dr, wi
             cut.release()
     assert np.array_equal(a.mask, b.mask)
     assert np.abs(a.distance[a.mask] - b.distance[a.mask]).max(initial=0) <= 1e-5 * a.distance[a.mask].max(initial=1)
+
+
+def test_a_run_on_a_tile_store_measures_accuracy_against_its_reference(ctx, tmp_path):
+    """A spec whose dataset is a tile store runs with accuracy on: the reference is drawn from the store."""
+    import pandas as pd
+
+    from experiments.cli import main
+    assert main(["prepare", "--synthetic", "129", "--tile-size", "32", "--out", str(tmp_path / "st"), "--quiet"]) == 0
+    spec = tmp_path / "s.toml"
+    spec.write_text(f'name = "s"\ndatasets = ["{tmp_path / "st"}"]\nflights = ["flyover"]\nframes = 2\n'
+                    'policies = ["raycast", "raster"]\nsizes = ["96x64"]\nrepeats = 3\ntile_size = 32\n'
+                    'supersample = 1\nimage_frames = [0]\n')
+    assert main(["run", str(spec), "--runs", str(tmp_path / "runs"), "--quiet"]) == 0
+    frames = pd.read_parquet(tmp_path / "runs" / "s" / "frames.parquet")
+    assert len(frames) == 4
+    assert (frames["crack_px"] == 0).all() and (frames["coverage_mismatch"] < 0.01).all()
+    assert (frames["ref_coverage"] > 0.2).all()
