@@ -241,3 +241,14 @@ def test_prepare_takes_the_files_render_takes(tmp_path, capsys):
     assert "65 x 65" in capsys.readouterr().out
     _fails(["prepare", tmp_path / "x.npy", "--out", tmp_path / "t"], capsys, "x.npy", "--spacing")
     assert not (tmp_path / "t").exists()
+
+
+def test_a_closed_stdout_ends_quietly(tmp_path):
+    """`terrabench render ... | head -0`: the reader is gone before the first line; no traceback."""
+    proc = subprocess.Popen([sys.executable, "-m", "experiments", "render", "--dataset", "puget", "--size-samples",
+                             "65", "--size", "32x16", "--out", str(tmp_path / "a.png")], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 141
+    assert "Traceback" not in err and "BrokenPipe" not in err, err

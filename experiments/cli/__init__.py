@@ -7,6 +7,7 @@ exception is a bug and keeps its traceback.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import warnings
 
@@ -55,3 +56,7 @@ def main(argv=None) -> int:
     except TerrabenchError as exc:
         print(f"terrabench: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:                      # the reader of stdout went away (| head): stop quietly
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())    # so the interpreter's final flush does not fail again
+        return 141
