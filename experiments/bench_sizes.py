@@ -142,14 +142,12 @@ HEADER = ("| dataset | view | method | exit | s | peak GiB | terrain % | coverag
 
 def main(argv=None) -> int:
     """Write the strip and square GeoTIFFs, prepare the square, render and compare every method; write the table."""
-    from hybrid.terrain.grid_sources import FractalSource
     from hybrid.terrain.sources import TerrainSource
-    from hybrid.terrain.stored import open_store
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--work", type=Path, required=True, help="folder for the GeoTIFFs, the store and the images")
     p.add_argument("--out", type=Path, required=True, help="the markdown report to write")
     p.add_argument("--strip", type=int, default=20000, help="columns of the 2-row strip")
-    p.add_argument("--square", type=int, default=16385, help="samples a side of the square")
+    p.add_argument("--square", type=int, default=16385, help="samples a side of the square (0: skip it)")
     p.add_argument("--size", default="320x180")
     a = p.parse_args(argv)
     a.work.mkdir(parents=True, exist_ok=True)
@@ -159,22 +157,26 @@ def main(argv=None) -> int:
     strip = write_geotiff(a.work / "strip.tif", 2, a.strip, strip_rows(a.strip))
     shf = TerrainSource(str(strip)).load()
     lines += check_views("strip", strip, shf, [default_view(shf, w, h)], a.work, [])
-    tif = a.work / "square.tif"
-    if not tif.exists():
-        src = FractalSource(a.square, seed=1)
-        write_geotiff(tif, a.square, a.square, src.read_rows)
-    store = a.work / "square.store"
-    t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "experiments", "prepare", str(tif), "--out", str(store), "--quiet"],
-                   check=True)
-    lines.insert(3, f"prepare of the square: {time.perf_counter() - t0:.0f} s (0 if resumed complete)")
-    qhf = open_store(store)
-    views = [default_view(qhf, w, h)]
-    lines += check_views("square", store, qhf, views, a.work, [])
+    if a.square:
+        lines += _square(a.square, a.work, w, h)
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text("\n".join(lines) + "\n")
     print(f"wrote {a.out}")
     return 0
+
+
+def _square(size: int, work: Path, w: int, h: int) -> list[str]:
+    """Table rows of the square: its GeoTIFF written (once), prepared (resumed if done) and drawn by every method."""
+    from hybrid.terrain.grid_sources import FractalSource
+    from hybrid.terrain.stored import open_store
+    tif = work / "square.tif"
+    if not tif.exists():
+        write_geotiff(tif, size, size, FractalSource(size, seed=1).read_rows)
+    store = work / "square.store"
+    subprocess.run([sys.executable, "-m", "experiments", "prepare", str(tif), "--out", str(store), "--quiet"],
+                   check=True)
+    qhf = open_store(store)
+    return check_views("square", store, qhf, [default_view(qhf, w, h)], work, [])
 
 
 def _environment() -> str:
