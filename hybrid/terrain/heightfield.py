@@ -176,7 +176,8 @@ class HeightField:
             f"samples:     {self.cols} x {self.rows} (columns x rows)",
             f"spacing:     {self.spacing_x:g} m east-west x {self.spacing_y:g} m north-south",
             f"extent:      {w / 1000:.2f} km x {d / 1000:.2f} km",
-            f"heights:     {lo:.1f} .. {hi:.1f} m (mean {float(self.heights.mean()):.1f} m)",
+            f"heights:     {lo:.1f} .. {hi:.1f} m" + (f" (mean {float(self.heights.mean()):.1f} m)"
+                                                    if isinstance(self.heights, np.ndarray) else ""),
             f"origin:      ({self.origin[0]:g}, {self.origin[1]:g}, {self.origin[2]:g}) m",
             f"texture:     {'%dx%d RGB' % (self.texture.shape[1], self.texture.shape[0]) if self.texture is not None else 'none'}",
             f"no-data:     {self.nodata_filled} samples filled",
