@@ -158,3 +158,15 @@ def test_the_page_does_not_overflow_1400_px(report, tmp_path):
                           "--virtual-time-budget=3000", "--dump-dom", page_file.as_uri()],
                          capture_output=True, text=True, timeout=60, check=False).stdout
     assert "data-over=\"false\"" in out, out[-500:]
+
+
+def test_without_accuracy_the_frame_time_chart_leads_and_no_accuracy_is_claimed(tmp_path):
+    f = synthetic().drop(columns="flip")
+    charts = {"frame_time": [tmp_path / "frame_time.png"], "speed_vs_accuracy": []}
+    spec = {"name": "x", "repeats": 3, "accuracy": False}
+    text = page("t", "2 of 9 frames are missing", spec, {"gl_renderer": ["a", "b"], "workers": {"w1": {"ok": 1}}},
+                ["**s**: fast."], summary_table(f), charts, [], scene_headlines(f), intro(spec), measures(False),
+                TITLES)
+    Tree(text)
+    assert text.index("id='headline'") < text.index("frame_time.png") < text.index("<table")
+    assert "Most accurate" not in text and "Incomplete:" in text and "<td>a, b</td>" in text
