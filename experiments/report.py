@@ -5,7 +5,6 @@ the charts and images, and a short reading generated from the numbers.
 """
 from __future__ import annotations
 
-import html
 import json
 from pathlib import Path
 
@@ -19,6 +18,8 @@ from .adapt_charts import convergence_chart, gpu_cpu_chart
 from .charts import all_charts, label_columns
 from .environment import adaptation_line, cost_model_line
 from .reading import reading
+from .report_html import page
+from .report_html_headline import scene_headlines
 from .spec import Spec
 from .spec_datasets import credit_lines
 from .tables import md_table
@@ -171,29 +172,6 @@ def _markdown(title: str, missing: str, spec: dict, env: dict, lines: list[str],
     return "\n".join(md) + "\n"
 
 
-def _html(title: str, missing: str, spec: dict, env: dict, lines: list[str], table: pd.DataFrame,
-          charts: dict, credits: list[str]) -> str:
-    """The report as one HTML page."""
-    measured = spec.get("accuracy", True)
-    env = {**env, "hybrid adapted": adaptation_line(spec)}
-    h = ["<!doctype html><html><head><meta charset='utf-8'><title>terrabench report</title>",
-         "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;font-size:12px}"
-         "td,th{border:1px solid #ccc;padding:2px 6px}img{max-width:100%}</style></head><body>",
-         f"<h1>{html.escape(title)}</h1>" + (f"<p><b>Incomplete:</b> {html.escape(missing)}</p>" if missing else ""),
-         "<h2>Environment</h2><ul>" + "".join(f"<li>{html.escape(str(k))}: {html.escape(str(v))}</li>"
-                                              for k, v in env.items()) + "</ul>",
-         "<h2>Reading</h2><ul>" + "".join(f"<li>{html.escape(l.strip()).replace('**', '')}</li>" for l in lines)
-         + "</ul>",
-         "<h2>Summary</h2>", table.to_html(index=False, float_format=lambda v: f"{v:.3g}", na_rep="–"),
-         "<ul>" + "".join(f"<li>{html.escape(m)}</li>" for m in measures(measured)) + "</ul>"]
-    for key, files in charts.items():
-        pngs = [p for p in files if p.suffix in (".png", ".gif")]
-        if pngs:
-            h.append(f"<h2>{TITLES[key]}</h2>" + "".join(f"<p><img src='{p.name}'></p>" for p in pngs))
-    h.append("<hr>" + "".join(f"<p>{html.escape(c)}</p>" for c in credits) + "</body></html>")
-    return "\n".join(h)
-
-
 def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | None = None, video: bool = False) -> Path:
     """Charts, tables and reading of a run folder into reports_dir/<name>/; returns the report.md path."""
     run = Path(run)
@@ -213,7 +191,8 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
     credits = credits or ["Terrain: synthetic only (seeded, made by terrabench); no data to credit."]
     parts = (title, missing, spec, env, lines, table, charts, credits)
     write_text(out / "report.md", _markdown(*parts))
-    write_text(out / "report.html", _html(*parts))
+    notes = measures(spec.get("accuracy", True))
+    write_text(out / "report.html", page(*parts, scene_headlines(frames), intro(spec), notes, TITLES))
     return out / "report.md"
 
 
