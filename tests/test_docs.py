@@ -16,6 +16,7 @@ WRITES = {
     "02_compare_methods.py": ["compare.csv"],
     "03_choose_per_tile.py": ["plans.csv", "hybrid.png", "hybrid.strategy.png", "hybrid.depth.npy"],
     "04_your_own_dem.py": ["dem.tif", "dem.png", "dem.depth.npy"],
+    "05_tile_store.py": ["fbm.store/manifest.json", "store_frame.png", "store_frame.depth.npy"],
 }
 """Example -> the files it writes into its output folder."""
 
@@ -79,7 +80,8 @@ LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
 
 
 def _pages():
-    return [ROOT / "README.md", ROOT / "CHANGELOG.md", ROOT / "reports" / "FINDINGS.md", *sorted(DOCS.glob("*.md"))]
+    return [ROOT / "README.md", ROOT / "CHANGELOG.md", ROOT / "reports" / "FINDINGS.md", *sorted(DOCS.glob("*.md")),
+            DOCS / "examples" / "README.md"]
 
 
 @pytest.mark.parametrize("page", _pages(), ids=lambda p: str(p.relative_to(ROOT)))
