@@ -95,3 +95,13 @@ def test_relative_links_resolve(page):
         if not (page.parent / path).exists():
             missing.append(target)
     assert not missing, f"{page.name}: links to missing files {missing}"
+
+
+def test_spec_reference_lists_every_key():
+    """docs/experiments.md has a row for every key a spec takes."""
+    import dataclasses
+
+    from experiments.spec import Spec
+    text = (DOCS / "experiments.md").read_text()
+    missing = [f.name for f in dataclasses.fields(Spec) if f"| `{f.name}` |" not in text]
+    assert not missing, f"docs/experiments.md lacks spec keys {missing}"
