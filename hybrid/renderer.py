@@ -23,16 +23,16 @@ from collections import OrderedDict
 
 import numpy as np
 
+from hybrid import adaptive, oracle
 from hybrid.camera.view import View
 from hybrid.contract import CANDIDATES, DEFAULT_FULL_RES, MIXED_POLICIES, POLICIES, FrameStats, TileItem
 from hybrid.cost.model import CostModel, load_cost_model
+from hybrid.cost.online import AdaptOptions, OnlineModel
 from hybrid.cost.planner import TilePlan, plan_frame
 from hybrid.errors import TerrabenchError
 from hybrid.gl.context import gl_info
 from hybrid.gl.target import FrameTarget, RenderResult
 from hybrid.gl.timing import timed
-from hybrid import adaptive, oracle
-from hybrid.cost.online import AdaptOptions, OnlineModel
 from hybrid.reference import ReferenceRenderer
 from hybrid.residency import ResidencyCache
 from hybrid.strategies import STRATEGIES, make_strategy, triangle_estimator

@@ -24,7 +24,6 @@ from hybrid.gl.edges import TerrainEdges
 from hybrid.gl.programs import program, register_include, set_uniform, write_uniform
 from hybrid.gl.shading import resolve_mode
 from hybrid.gl.textures import terrain_texture
-
 from hybrid.tiles.quantize import quantize
 
 from .maxmip import MaxMipBuilder, bytes_per_sample, level_count, tile_nbytes

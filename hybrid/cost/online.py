@@ -34,6 +34,7 @@ from scipy.optimize import nnls
 from hybrid.cost.model import _TERM_INDEX, TERMS, CostModel, all_term_values
 from hybrid.errors import TerrabenchError
 
+
 def _median(values) -> float:
     """Median of a short sequence (numpy's median costs more than the sort on a few dozen values)."""
     v = sorted(values)
