@@ -11,16 +11,16 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-from matplotlib.colors import ListedColormap  # noqa: E402
-from matplotlib.ticker import MaxNLocator  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+from matplotlib.colors import ListedColormap
+from matplotlib.ticker import MaxNLocator
 
-from hybrid.atomic import atomic_path  # noqa: E402
-from hybrid.contract import PRIOR_FULL_RES, TILELET_POLICIES  # noqa: E402
+from hybrid.atomic import atomic_path
+from hybrid.contract import PRIOR_FULL_RES, TILELET_POLICIES
 
-from .noise import median_interval, repeat_matrix  # noqa: E402
+from .noise import median_interval, repeat_matrix
 
 STRATEGY_CMAP = ListedColormap(["#f2f2f2", "#2b6cff", "#ff8c14"])   # no terrain, raster, ray cast
 MAX_COLS = 4             # panels a row

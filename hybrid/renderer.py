@@ -305,7 +305,7 @@ class Renderer:
             for p in plans:                # upload first: the timed frame measures drawing only
                 self._resident(p.choice, p.key, pinned)
             return None
-        ready, deferred = (lambda key: True), (lambda plan: False)     # noqa: E731
+        ready, deferred = (lambda key: True), (lambda plan: False)
         if hasattr(self.pyramid, "request"):      # a store: its loader thread reads what is missing
             missing = [p for p in plans if (p.choice, p.key) not in self.cache.entries]
             work, waiting = host_jobs(self.strategies, self.triangles, missing, self.pyramid.n)
