@@ -22,7 +22,7 @@ class RunLock:
         self.path = Path(folder) / LOCK_NAME
         self._file = None
 
-    def acquire(self) -> "RunLock":
+    def acquire(self) -> RunLock:
         """Take the lock; a TerrabenchError naming the holder's PID and host if another live process holds it."""
         try:
             f = open(self.path, "a+")
@@ -50,7 +50,7 @@ class RunLock:
             self._file.close()
             self._file = None
 
-    def __enter__(self) -> "RunLock":
+    def __enter__(self) -> RunLock:
         return self.acquire()
 
     def __exit__(self, *exc) -> None:

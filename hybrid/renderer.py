@@ -92,7 +92,7 @@ class Renderer:
         self._tiles: OrderedDict = OrderedDict()
         self._released = False
 
-    def __enter__(self) -> "Renderer":
+    def __enter__(self) -> Renderer:
         return self
 
     def __exit__(self, *exc) -> None:

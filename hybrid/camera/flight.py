@@ -100,7 +100,7 @@ class Flight:
             raise TerrabenchError(f"{path}: flight files end in .json or .csv")
 
     @classmethod
-    def load(cls, path) -> "Flight":
+    def load(cls, path) -> Flight:
         """Read a flight written by save (JSON or CSV)."""
         path = Path(path)
         if not path.is_file():

@@ -184,7 +184,7 @@ class HeightField:
         lines += [f"note:        {n}" for n in self.notes]
         return "\n".join(lines)
 
-    def moved(self, origin) -> "HeightField":
+    def moved(self, origin) -> HeightField:
         """The same terrain placed at another world origin (x, y, z) in metres."""
         return HeightField(self.heights, self.spacing, tuple(origin), self.name, self.texture,
                            self.nodata_filled, self.source, list(self.notes), self.source_step)
