@@ -203,7 +203,7 @@ def culling_rows(ctx, repeats=5):
     from hybrid.terrain.datasets import puget
     hf = puget(with_texture=False, size=513)
     w, d = hf.extent
-    ox, oy, oz = hf.origin
+    ox, oy, _oz = hf.origin
     eye = np.array([ox + 0.3 * w, oy + 0.3 * d, hf.ground_height(ox + 0.3 * w, oy + 0.3 * d) + 60.0])
     view = View(eye, eye + np.array([3000.0, 1000.0, -600.0]), 40, 320, 180, near=1.0, far=10 * w)
     r = Renderer(ctx, hf, "raster", tile_size=128)

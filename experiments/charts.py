@@ -11,6 +11,8 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
+import itertools
+
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
@@ -253,7 +255,7 @@ def crossover_chart(tiles: pd.DataFrame, folder: Path) -> list[Path]:
     axes[1].scatter(tpp, ratio, s=8, alpha=0.5, color="C3")
     axes[1].axhline(1.0, color="k", lw=1)
     edges = np.quantile(tpp, np.linspace(0, 1, 9))
-    mid = [np.median(ratio[(tpp >= a) & (tpp <= b)]) for a, b in zip(edges[:-1], edges[1:])]
+    mid = [np.median(ratio[(tpp >= a) & (tpp <= b)]) for a, b in itertools.pairwise(edges)]
     axes[1].plot(np.sqrt(edges[:-1] * edges[1:]), mid, "o-", color="C4", label="median per bin")
     axes[1].set_ylabel("faster raster ms / ray-cast ms (below 1: raster pays)")
     for ax in axes:

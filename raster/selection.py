@@ -247,7 +247,7 @@ class TileletSelection:
             lod_eye = np.asarray(lod_eye, dtype=np.float64)
             if lod_eye.shape != (3,) or not np.isfinite(lod_eye).all():
                 raise TerrabenchError(f"lod_eye must be three finite metres (x, y, z), got {lod_eye.tolist()}")
-        blocks, groups0, table1_start = self.frame_blocks(view, items, tau, culling, skirts, lod_eye)
+        _blocks, groups0, table1_start = self.frame_blocks(view, items, tau, culling, skirts, lod_eye)
         planes = view.frustum_planes_rel().astype(np.float32).tobytes()
         for prog in self.passes:
             write_uniform(prog, "planes", planes)

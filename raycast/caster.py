@@ -300,7 +300,7 @@ class RaycastStrategy:
                     self.tile_buf.release()
                 self.tile_buf = ctx.buffer(reserve=max(blocks.nbytes, 64 * self._stride))
             self.tile_buf.write(blocks.tobytes())
-            for k, (g, tile, _sel) in enumerate(items):
+            for k, (g, _tile, _sel) in enumerate(items):
                 self.tile_buf.bind_to_uniform_block(3, offset=k * self._stride, size=TILE_BLOCK.itemsize)
                 if id_fbo is not None:
                     id_fbo.use()

@@ -56,9 +56,8 @@ def test_a_second_run_is_refused_by_pid_and_a_dead_holders_lock_is_taken(tmp_pat
 
 def test_run_spec_refuses_a_folder_in_use(ctx, tmp_path):
     (tmp_path / "s").mkdir()
-    with RunLock(tmp_path / "s"):
-        with pytest.raises(TerrabenchError, match="in use by another run"):
-            run_spec(parse_spec(SMALL), tmp_path, ctx, progress=False)
+    with RunLock(tmp_path / "s"), pytest.raises(TerrabenchError, match="in use by another run"):
+        run_spec(parse_spec(SMALL), tmp_path, ctx, progress=False)
     assert not (tmp_path / "s" / "frames.jsonl").exists()
 
 
@@ -168,9 +167,8 @@ def test_a_full_disk_is_one_message_and_leaves_nothing(tmp_path):
 
 def test_lock_wait_is_not_a_hang(tmp_path):
     t = time.perf_counter()
-    with RunLock(tmp_path):
-        with pytest.raises(TerrabenchError):
-            RunLock(tmp_path).acquire()
+    with RunLock(tmp_path), pytest.raises(TerrabenchError):
+        RunLock(tmp_path).acquire()
     assert time.perf_counter() - t < 2.0
 
 
