@@ -25,7 +25,7 @@ class RunLock:
     def acquire(self) -> RunLock:
         """Take the lock; a TerrabenchError naming the holder's PID and host if another live process holds it."""
         try:
-            f = open(self.path, "a+")
+            f = open(self.path, "a+")  # noqa: SIM115 - held open as long as the lock is held
         except OSError as exc:
             raise TerrabenchError(f"cannot open the run lock {self.path}: {exc.strerror or exc}") from None
         try:

@@ -212,4 +212,4 @@ def test_a_thin_grid_costs_what_its_samples_do():
     np.testing.assert_array_equal(tiles[3].heights[0], h[0, 3 * 256:4 * 256 + 1])
     np.testing.assert_array_equal(tiles[3].heights[5], h[1, 3 * 256:4 * 256 + 1])   # rows beyond repeat the edge
     with pytest.raises(TerrabenchError, match="padded square of 32769² samples"):
-        pyr.padded
+        _ = pyr.padded

@@ -178,7 +178,7 @@ class HeightField:
             f"extent:      {w / 1000:.2f} km x {d / 1000:.2f} km",
             f"heights:     {lo:.1f} .. {hi:.1f} m (mean {float(self.heights.mean()):.1f} m)",
             f"origin:      ({self.origin[0]:g}, {self.origin[1]:g}, {self.origin[2]:g}) m",
-            f"texture:     {'%dx%d RGB' % (self.texture.shape[1], self.texture.shape[0]) if self.texture is not None else 'none'}",
+            f"texture:     {f'{self.texture.shape[1]}x{self.texture.shape[0]} RGB' if self.texture is not None else 'none'}",
             f"no-data:     {self.nodata_filled} samples filled",
         ]
         lines += [f"note:        {n}" for n in self.notes]

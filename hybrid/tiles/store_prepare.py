@@ -81,9 +81,8 @@ def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: in
     params = {"source": getattr(source, "path", source.name), "rows": rows, "cols": cols, "tile_size": n,
               "spacing": [float(sx), float(sy)]}
     out = Path(out)
-    if out.exists() and not is_store(out):
-        if any(out.iterdir()):
-            raise TerrabenchError(f"{out}: exists and is not a tile store; choose an empty or new folder")
+    if out.exists() and not is_store(out) and any(out.iterdir()):
+        raise TerrabenchError(f"{out}: exists and is not a tile store; choose an empty or new folder")
     if is_store(out):
         g = zarr.open_group(str(out), mode="r+")
         if dict(g.attrs).get("params") != params:
