@@ -196,14 +196,15 @@ class Renderer:
                 opts = {**opts, "occluders": True}      # rays stop behind the raster tiles drawn before them
             rasterized |= self.kind(name) == "raster"
             items = self._items(name, sub, pinned)
-            c = self._pass(clock, name, lambda: self.strategies[name].draw_tiles(target, view, items, tau, **opts)) or {}
+            c = self._pass(clock, name, lambda name=name, items=items, opts=opts:
+                           self.strategies[name].draw_tiles(target, view, items, tau, **opts)) or {}
             for k, v in c.items():
                 if isinstance(v, (int, float, np.integer, np.floating)):
                     counters[k] = counters.get(k, 0) + v
         if skirts:          # last, so the ray caster's pre-pass sees no skirt inside a ray-cast tile's box
             for name in self._order():
                 if "skirts" in self.strategies[name].draw_options and any(p.choice == name for p in plans):
-                    self._pass(clock, adaptive.SKIRTS, lambda: self.strategies[name].draw_skirts(target, view))
+                    self._pass(clock, adaptive.SKIRTS, lambda name=name: self.strategies[name].draw_skirts(target, view))
         return counters
 
     @staticmethod
