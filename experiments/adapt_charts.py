@@ -131,7 +131,7 @@ def adaptation_sentences(f: pd.DataFrame, settled_from: int = 4) -> list[str]:
     from .noise import compare
     out = []
     for title, g in _convergence_groups(f):
-        hy = dict(g[g["policy"] == "hybrid"].groupby("method"))
+        hy = {m: q for m, q in g[g["policy"] == "hybrid"].groupby("method")}
         if len(hy) < 2:
             continue
         device = [m for m, q in hy.items() if q["start_model"].fillna("device").eq("device").all()] \

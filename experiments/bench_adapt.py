@@ -87,7 +87,7 @@ def summarize(frames: pd.DataFrame) -> dict[str, pd.DataFrame]:
     rows = []
     for (flight, tau), g in frames.groupby(["flight", "tau"], sort=False):
         late = g[g["frame"] >= SETTLED_FROM]
-        by = dict(late.groupby("method", sort=False))
+        by = {m: q for m, q in late.groupby("method", sort=False)}
         pure_ms = {p: float(by[p]["wall_ms"].median()) for p in PURE}
         best = min(pure_ms, key=pure_ms.get)
         for s in sorted({m.split(":")[1] for m in by if ":" in m}, key=STARTS.index):

@@ -79,7 +79,7 @@ def run(ctx, frames: int = 8, size: str = "640x360", repeats: int = 5, tau: floa
             views = preset(flight, hf, frames, w, h).views()
             for method in methods:
                 df = draw(ctx, hf, views, tau, ts, model, method, repeats)
-                by = dict(df.groupby("policy"))
+                by = {p: g for p, g in df.groupby("policy")}
                 c = compare("hybrid", by["hybrid"], method, by[method])
                 out.append({"tile size": ts, "flight": flight, "pure": method, "tiles": float(by[method]["tiles"].median()),
                             "pure ms": c.ms_b, "hybrid ms": c.ms_a, TARGET: c.ratio, "reading": c.words(),

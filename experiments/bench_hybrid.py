@@ -120,7 +120,7 @@ def summarize(frames: pd.DataFrame, tiles: pd.DataFrame, model) -> dict[str, pd.
         raster = min(("raster", "raster_gs"), key=lambda p: tot[p])
         best = min(("raster", "raster_gs", "raycast"), key=lambda p: tot[p])
         hy = t.loc["hybrid"]
-        by = dict(g.groupby("policy", sort=False))
+        by = {p: q for p, q in g.groupby("policy", sort=False)}
         ratios.append({"flight": fname, "faster raster": raster,
                        "faster raster / raycast (target <= 1.5)": tot[raster] / tot["raycast"],
                        "reading": compare(raster, by[raster], "raycast", by["raycast"]).words(),
