@@ -60,7 +60,7 @@ def remove_stale_temps(folder) -> list[Path]:
     """Remove the temporaries atomic_path left in folder (not below it) for writers that are gone: names
     ``.NAME.PID.tmpSUFFIX`` whose PID runs no process here. A live writer's temporary is kept. Returns those
     removed."""
-    removed = []
+    removed: list = []
     try:
         entries = list(os.scandir(folder))
     except OSError:

@@ -145,6 +145,8 @@ def error_pyramid(heights: np.ndarray, beta: float = DEFAULT_BETA, side_errors: 
     top = int(np.log2(n)) - 1
     cmax = np.maximum(np.maximum(h[:-1, :-1], h[:-1, 1:]), np.maximum(h[1:, :-1], h[1:, 1:]))
     cmin = np.minimum(np.minimum(h[:-1, :-1], h[:-1, 1:]), np.minimum(h[1:, :-1], h[1:, 1:]))
+    errors: list[np.ndarray]
+    effective: list[np.ndarray]
     errors, effective, sides, zmin, zmax = [], [], [], [], []
     for m in range(top + 1):
         full, stitched = fan_surfaces(h, m)
