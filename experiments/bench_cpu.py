@@ -79,7 +79,7 @@ def measure(model_for: str, frames: int = 8, size: str = "640x360", repeats: int
                 renderers[p] = make_renderer(ctx, hf, base, tile_size=tile_size, **opts)
                 for v in views:                                # warm: uploads, estimates, shader compiles
                     renderers[p].render(v, tau)
-            got = {("back", p, k): [] for p in POLICIES for k in range(len(views))}
+            got: dict[tuple, list] = {("back", p, k): [] for p in POLICIES for k in range(len(views))}
             got.update({("read", p, k): [] for p in POLICIES for k in range(len(views))})
             for _ in range(repeats):                           # the two ways alternate: one machine for both
                 for way, stats in (("back", back_to_back_stats(renderers, views, tau)),

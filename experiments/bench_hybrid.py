@@ -20,7 +20,7 @@ POLICIES = ("raster", "raster_gs", "raycast", "heuristic", "hybrid", "oracle")
 def interleaved_stats(renderers: dict, views, tau: float, repeats: int) -> dict:
     """{(policy, frame index): the FrameStats of each repeat}: every repeat draws each frame with every renderer in
     turn, so that a slow spell of the machine falls on all of them alike."""
-    got = {(p, k): [] for p in renderers for k in range(len(views))}
+    got: dict[tuple, list] = {(p, k): [] for p in renderers for k in range(len(views))}
     for _ in range(repeats):
         for k, v in enumerate(views):
             for p, r in renderers.items():

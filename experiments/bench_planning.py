@@ -49,6 +49,23 @@ def run_benchmark(hf, flights: dict, model, tile_sizes=(256, 128), taus=(2 / 3,)
     from hybrid.cost.planner import default_estimator, plan_frame
     from hybrid.tiles.pyramid import TilePyramid
     from hybrid.tiles.tiletree import select_tiles
+
+    def frame_ms(pyramid, est, view, tau) -> dict:
+        """Median ms of each planning step for one view (the timed lambdas bind this call's arguments)."""
+        sel = select_tiles(pyramid, view, tau)
+        tri, vis = est.many(sel, view, tau)                 # warm: per-tile node data
+        return {
+            "tiles": len(sel),
+            "plan per tile ms": _median_ms(lambda: plan_frame(pyramid, view, model, batch=False), repeats),
+            "plan batch ms": _median_ms(lambda: plan_frame(pyramid, view, model), repeats),
+            "select ms": _median_ms(lambda: select_tiles(pyramid, view, tau), repeats),
+            "triangles ms": _median_ms(lambda: est.many(sel, view, tau), repeats),
+            "features per tile ms": _median_ms(
+                lambda: [tile_features(pyramid, view, s, t, v) for s, t, v in zip(sel, tri, vis)], repeats),
+            "features batch ms": _median_ms(lambda: feature_columns(pyramid, view, sel, tri, vis), repeats),
+            "features + choices ms (target <= 0.5)": _paired_ms(
+                lambda: plan_frame(pyramid, view, model), lambda: select_tiles(pyramid, view, tau), 3 * repeats)}
+
     rows = []
     for size in tile_sizes:
         pyramid = TilePyramid(hf, size)
@@ -56,19 +73,8 @@ def run_benchmark(hf, flights: dict, model, tile_sizes=(256, 128), taus=(2 / 3,)
         for fname, views in flights.items():
             for tau in taus:
                 for k, view in enumerate(views):
-                    sel = select_tiles(pyramid, view, tau)
-                    tri, vis = est.many(sel, view, tau)                 # warm: per-tile node data
-                    rows.append({
-                        "flight": fname, "tile_size": size, "tau": tau, "frame": k, "tiles": len(sel),
-                        "plan per tile ms": _median_ms(lambda: plan_frame(pyramid, view, model, batch=False), repeats),
-                        "plan batch ms": _median_ms(lambda: plan_frame(pyramid, view, model), repeats),
-                        "select ms": _median_ms(lambda: select_tiles(pyramid, view, tau), repeats),
-                        "triangles ms": _median_ms(lambda: est.many(sel, view, tau), repeats),
-                        "features per tile ms": _median_ms(
-                            lambda: [tile_features(pyramid, view, s, t, v) for s, t, v in zip(sel, tri, vis)], repeats),
-                        "features batch ms": _median_ms(lambda: feature_columns(pyramid, view, sel, tri, vis), repeats),
-                        "features + choices ms (target <= 0.5)": _paired_ms(
-                            lambda: plan_frame(pyramid, view, model), lambda: select_tiles(pyramid, view, tau), 3 * repeats)})
+                    rows.append({"flight": fname, "tile_size": size, "tau": tau, "frame": k,
+                                 **frame_ms(pyramid, est, view, tau)})
     return pd.DataFrame(rows)
 
 

@@ -76,7 +76,7 @@ def triangles_vs_error(tiles, errors=(5.0, 10.0, 20.0, 40.0, 80.0)):
                     # error measured at every sample meets the target
                     tile_m = martini.create_tile(h)
 
-                    def mesh_at(param):
+                    def mesh_at(param, tile_m=tile_m, h=h):
                         v, f = tile_m.get_mesh(param)
                         v = v.astype(np.float64)
                         return TinMesh(np.column_stack([v[:, 0], v[:, 1], h[v[:, 1].astype(int), v[:, 0].astype(int)]]),
@@ -133,7 +133,8 @@ def selection_rows(ctx, repeats=5):
         with Renderer(ctx, hf, name, tile_size=128) as r:
             r.render(view)
             items = r._items(name, r.plan(view), set())
-            issue, sel = _issue_and_total_ms(lambda: r.strategies[name].select_leaves(view, items, 2 / 3), repeats, ctx)
+            issue, sel = _issue_and_total_ms(lambda name=name, items=items: r.strategies[name].select_leaves(view, items, 2 / 3),
+                                             repeats, ctx)
             res = [r.render(view).stats for _ in range(repeats)]
             plan, draw_issue = np.median([x.plan_ms for x in res]), np.median([x.issue_ms for x in res])
             cpu = np.median([x.cpu_ms for x in res])
@@ -203,7 +204,7 @@ def culling_rows(ctx, repeats=5):
     from hybrid.terrain.datasets import puget
     hf = puget(with_texture=False, size=513)
     w, d = hf.extent
-    ox, oy, oz = hf.origin
+    ox, oy, _oz = hf.origin
     eye = np.array([ox + 0.3 * w, oy + 0.3 * d, hf.ground_height(ox + 0.3 * w, oy + 0.3 * d) + 60.0])
     view = View(eye, eye + np.array([3000.0, 1000.0, -600.0]), 40, 320, 180, near=1.0, far=10 * w)
     r = Renderer(ctx, hf, "raster", tile_size=128)

@@ -65,7 +65,9 @@ def strip_rows(cols: int, seed: int = 3):
 
 def render(dataset: Path, method: str, view: View, out: Path, extra: list[str]) -> Outcome:
     """``terrabench render`` of one view in its own process; its exit code, time, peak RSS and distance image."""
-    fmt = lambda v: ",".join(f"{x:.6f}" for x in v)
+    def fmt(v):
+        return ",".join(f"{x:.6f}" for x in v)
+
     cmd = [sys.executable, "-m", "experiments", "render", "--dataset", str(dataset), "--method", method,
            "--out", str(out), "--eye", fmt(view.eye), "--target", fmt(view.target), "--fov", str(view.fov_y),
            "--size", f"{view.width}x{view.height}", "--near", repr(view.near), "--far", repr(view.far),

@@ -11,16 +11,18 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-from matplotlib.colors import ListedColormap  # noqa: E402
-from matplotlib.ticker import MaxNLocator  # noqa: E402
+import itertools
 
-from hybrid.atomic import atomic_path  # noqa: E402
-from hybrid.contract import PRIOR_FULL_RES, TILELET_POLICIES  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+from matplotlib.colors import ListedColormap
+from matplotlib.ticker import MaxNLocator
 
-from .noise import median_interval, repeat_matrix  # noqa: E402
+from hybrid.atomic import atomic_path
+from hybrid.contract import PRIOR_FULL_RES, TILELET_POLICIES
+
+from .noise import median_interval, repeat_matrix
 
 STRATEGY_CMAP = ListedColormap(["#f2f2f2", "#2b6cff", "#ff8c14"])   # no terrain, raster, ray cast
 MAX_COLS = 4             # panels a row
@@ -253,7 +255,7 @@ def crossover_chart(tiles: pd.DataFrame, folder: Path) -> list[Path]:
     axes[1].scatter(tpp, ratio, s=8, alpha=0.5, color="C3")
     axes[1].axhline(1.0, color="k", lw=1)
     edges = np.quantile(tpp, np.linspace(0, 1, 9))
-    mid = [np.median(ratio[(tpp >= a) & (tpp <= b)]) for a, b in zip(edges[:-1], edges[1:])]
+    mid = [np.median(ratio[(tpp >= a) & (tpp <= b)]) for a, b in itertools.pairwise(edges)]
     axes[1].plot(np.sqrt(edges[:-1] * edges[1:]), mid, "o-", color="C4", label="median per bin")
     axes[1].set_ylabel("faster raster ms / ray-cast ms (below 1: raster pays)")
     for ax in axes:

@@ -255,7 +255,7 @@ def _time_frame(spec: Spec, live: list[_ConfigRun], k: int, views, fail_fast: bo
         results = draws[id(r)]
         mapped: list = []
         if spec.accuracy and k in spec.image_frames and r.c["policy"] in MIXED:       # untimed, for its maps
-            r.attempt(lambda r=r: mapped.append(r.renderer.render(views[k], r.c["tau"], maps=True)), fail_fast)
+            r.attempt(lambda r=r, mapped=mapped: mapped.append(r.renderer.render(views[k], r.c["tau"], maps=True)), fail_fast)
         if r.out.error is not None:
             continue
         cpu = [x.stats.cpu_ms for x in results if x.stats.cpu_ms is not None]

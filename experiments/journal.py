@@ -93,7 +93,7 @@ def failed_configs(folder) -> dict[str, str]:
     return {e["config"]: e["error"] for e in journal.rows("errors") if e["config"] not in finished}
 
 
-def pending(spec: Spec, journal: "Journal") -> list[tuple[dict, list[int]]]:
+def pending(spec: Spec, journal: Journal) -> list[tuple[dict, list[int]]]:
     """Every configuration with frames not yet in the journal, and those frames."""
     done = {(r["config"], r["frame"]) for r in journal.rows("frames")}
     out = []
@@ -104,7 +104,7 @@ def pending(spec: Spec, journal: "Journal") -> list[tuple[dict, list[int]]]:
     return out
 
 
-def record(folder: Path, journal: "Journal", result) -> None:
+def record(folder: Path, journal: Journal, result) -> None:
     """Journal a configuration's result (its frames, or its error) and save its images (a reference image once;
     a failed configuration's references too: they are its group's, rendered once for all its configurations)."""
     if result.error is not None:

@@ -22,10 +22,10 @@ class RunLock:
         self.path = Path(folder) / LOCK_NAME
         self._file = None
 
-    def acquire(self) -> "RunLock":
+    def acquire(self) -> RunLock:
         """Take the lock; a TerrabenchError naming the holder's PID and host if another live process holds it."""
         try:
-            f = open(self.path, "a+")
+            f = open(self.path, "a+")  # noqa: SIM115 - held open as long as the lock is held
         except OSError as exc:
             raise TerrabenchError(f"cannot open the run lock {self.path}: {exc.strerror or exc}") from None
         try:
@@ -50,7 +50,7 @@ class RunLock:
             self._file.close()
             self._file = None
 
-    def __enter__(self) -> "RunLock":
+    def __enter__(self) -> RunLock:
         return self.acquire()
 
     def __exit__(self, *exc) -> None:

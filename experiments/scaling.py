@@ -20,6 +20,7 @@ import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -71,8 +72,8 @@ class _Flight:
 
     terrain: object
     views: list
-    pyramid: object = None
-    renderer: object = None
+    pyramid: Any = None
+    renderer: Any = None
 
     def close(self) -> None:
         """Release the renderer and stop the pyramid's loader thread (freeing its host cache)."""

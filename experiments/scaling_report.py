@@ -7,14 +7,14 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import pandas as pd  # noqa: E402
+import matplotlib.pyplot as plt
+import pandas as pd
 
-from hybrid.atomic import write_parquet, write_text  # noqa: E402
+from hybrid.atomic import write_parquet, write_text
 
-from .charts import figure_legend, grid_cols, panel_grid, panel_title, save_figure  # noqa: E402
-from .scaling import size_ratio, summary  # noqa: E402
-from .tables import md_table  # noqa: E402
+from .charts import figure_legend, grid_cols, panel_grid, panel_title, save_figure
+from .scaling import size_ratio, summary
+from .tables import md_table
 
 COLOURS = {"raycast": "C1", "raster": "C0", "raster_gs": "C2", "hybrid": "C3"}
 

@@ -10,7 +10,7 @@ import errno
 import json
 import os
 import re
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 
 from hybrid.errors import TerrabenchError
@@ -60,7 +60,7 @@ def remove_stale_temps(folder) -> list[Path]:
     """Remove the temporaries atomic_path left in folder (not below it) for writers that are gone: names
     ``.NAME.PID.tmpSUFFIX`` whose PID runs no process here. A live writer's temporary is kept. Returns those
     removed."""
-    removed = []
+    removed: list = []
     try:
         entries = list(os.scandir(folder))
     except OSError:
@@ -87,10 +87,8 @@ def disk_full(exc: OSError) -> bool:
 
 
 def _remove(p: Path) -> None:
-    try:
+    with suppress(FileNotFoundError):
         p.unlink()
-    except FileNotFoundError:
-        pass
 
 
 def write_text(path, text: str) -> Path:
@@ -108,9 +106,8 @@ def write_json(path, data) -> Path:
 def save_npy(path, array) -> Path:
     """Write a NumPy array (.npy) atomically."""
     import numpy as np
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as f:
-            np.save(f, array)
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.save(f, array)
     return Path(path)
 
 

@@ -6,8 +6,9 @@ imports nothing above ``hybrid.gl``. The renderer hands it ``TileItem``s front t
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
-from typing import Any, Literal, NamedTuple, Protocol, Sequence, get_args, runtime_checkable
+from typing import Any, Literal, NamedTuple, Protocol, get_args, runtime_checkable
 
 from hybrid.camera.view import View
 from hybrid.gl.target import FrameTarget

@@ -23,16 +23,16 @@ from collections import OrderedDict
 
 import numpy as np
 
+from hybrid import adaptive, oracle
 from hybrid.camera.view import View
 from hybrid.contract import CANDIDATES, DEFAULT_FULL_RES, MIXED_POLICIES, POLICIES, FrameStats, TileItem
 from hybrid.cost.model import CostModel, load_cost_model
+from hybrid.cost.online import AdaptOptions, OnlineModel
 from hybrid.cost.planner import TilePlan, plan_frame
 from hybrid.errors import TerrabenchError
 from hybrid.gl.context import gl_info
 from hybrid.gl.target import FrameTarget, RenderResult
 from hybrid.gl.timing import timed
-from hybrid import adaptive, oracle
-from hybrid.cost.online import AdaptOptions, OnlineModel
 from hybrid.reference import ReferenceRenderer
 from hybrid.residency import ResidencyCache
 from hybrid.strategies import STRATEGIES, make_strategy, triangle_estimator
@@ -92,7 +92,7 @@ class Renderer:
         self._tiles: OrderedDict = OrderedDict()
         self._released = False
 
-    def __enter__(self) -> "Renderer":
+    def __enter__(self) -> Renderer:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -196,14 +196,15 @@ class Renderer:
                 opts = {**opts, "occluders": True}      # rays stop behind the raster tiles drawn before them
             rasterized |= self.kind(name) == "raster"
             items = self._items(name, sub, pinned)
-            c = self._pass(clock, name, lambda: self.strategies[name].draw_tiles(target, view, items, tau, **opts)) or {}
+            c = self._pass(clock, name, lambda name=name, items=items, opts=opts:
+                           self.strategies[name].draw_tiles(target, view, items, tau, **opts)) or {}
             for k, v in c.items():
                 if isinstance(v, (int, float, np.integer, np.floating)):
                     counters[k] = counters.get(k, 0) + v
         if skirts:          # last, so the ray caster's pre-pass sees no skirt inside a ray-cast tile's box
             for name in self._order():
                 if "skirts" in self.strategies[name].draw_options and any(p.choice == name for p in plans):
-                    self._pass(clock, adaptive.SKIRTS, lambda: self.strategies[name].draw_skirts(target, view))
+                    self._pass(clock, adaptive.SKIRTS, lambda name=name: self.strategies[name].draw_skirts(target, view))
         return counters
 
     @staticmethod
@@ -305,7 +306,7 @@ class Renderer:
             for p in plans:                # upload first: the timed frame measures drawing only
                 self._resident(p.choice, p.key, pinned)
             return None
-        ready, deferred = (lambda key: True), (lambda plan: False)     # noqa: E731
+        ready, deferred = (lambda key: True), (lambda plan: False)
         if hasattr(self.pyramid, "request"):      # a store: its loader thread reads what is missing
             missing = [p for p in plans if (p.choice, p.key) not in self.cache.entries]
             work, waiting = host_jobs(self.strategies, self.triangles, missing, self.pyramid.n)

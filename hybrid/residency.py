@@ -37,7 +37,7 @@ class ResidencyCache:
         self.bytes = 0
         self.stats = ResidencyStats()
 
-    def get(self, strategy_name: str, strategy, tile_key, make_tile, pinned: set = frozenset()):
+    def get(self, strategy_name: str, strategy, tile_key, make_tile, pinned: set | frozenset = frozenset()):
         """The resident GPU tile for (strategy, key), uploading ``make_tile()`` if absent; pinned keys stay."""
         k = (strategy_name, tile_key)
         if k in self.entries:

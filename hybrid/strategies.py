@@ -5,8 +5,8 @@ renderer (which find strategies only through it).
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from hybrid.contract import Kind, TileStrategy, TriangleEstimator
 from hybrid.errors import TerrabenchError

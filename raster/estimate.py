@@ -26,8 +26,8 @@ from hybrid.tiles.sidecodes import holds_side_codes
 from hybrid.tiles.tiletree import SelectedTile
 
 from .nodes import nodes_for, pending_cut, tile_node_block
-from .split_tables import TABLE_BINS, SplitTables, kind_splits, split_tables
 from .quadtree import GPU_BETA, check_full_res
+from .split_tables import TABLE_BINS, SplitTables, kind_splits, split_tables
 from .tile_nodes import KINDS, TileNodes, block_tile_nodes, tile_nodes
 
 MAX_TILES = 4096                # tiles whose TileNodes are kept (least recently used first out)

@@ -21,7 +21,7 @@ class HeapSlot:
 
     __slots__ = ("heap", "index")
 
-    def __init__(self, heap: "TileHeap", index: int):
+    def __init__(self, heap: TileHeap, index: int):
         self.heap, self.index = heap, index
 
     @property

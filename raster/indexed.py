@@ -17,7 +17,6 @@ from .frame_items import CMD_SKIRTS, CMD_TEMPLATE, CONTROL_WORDS
 from .tileblock import BLOCK_BYTES
 from .tilelets import TileletDrawing
 
-
 # the first five fields of a tile block (raster.tileblock.BLOCK) as per-instance attributes, one block an instance
 BLOCK_ATTRIBUTES = f"4f 4f 4f 4f 4i {BLOCK_BYTES - 80}x/i"
 BLOCK_NAMES = ("a_origin", "a_spacing", "a_clip_rel", "a_uv", "a_shape")

@@ -94,7 +94,7 @@ class MeshStrategyBase:
         cpu = 0
         try:
             with query:
-                for i, (g, tile, sel) in enumerate(items):
+                for i, (g, _tile, _sel) in enumerate(items):
                     self.blocks.bind(i)
                     g.vao.render(ctx.TRIANGLES)
                     cpu += g.triangles

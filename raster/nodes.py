@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -64,7 +65,7 @@ class GlobalNodes:
     effective: tuple
     zlo: tuple
     zhi: tuple
-    blocks: object = None           # a store's per-tile blocks, [level][ty, tx] (hybrid.tiles.store_blocks)
+    blocks: Any = None           # a store's per-tile blocks, [level][ty, tx] (hybrid.tiles.store_blocks)
     sides: tuple | None = None      # the blocks' fourth column per level (``side_codes``); None: 1 (a store
                                     # prepared before side errors: one error over both fans)
 

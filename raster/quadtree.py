@@ -37,8 +37,15 @@ import numpy as np
 
 from hybrid.contract import FULL_RES
 from hybrid.errors import TerrabenchError
-from hybrid.tiles.fans import GPU_BETA, fans_at  # noqa: F401  (GPU_BETA: the strategies' beta, defined with the fans)
-from hybrid.tiles.fans import cell_centre_error, cell_max, facing_side_errors, side_maxima, with_cell_centres
+from hybrid.tiles.fans import (  # noqa: F401  (GPU_BETA: the strategies' beta, defined with the fans)
+    GPU_BETA,
+    cell_centre_error,
+    cell_max,
+    facing_side_errors,
+    fans_at,
+    side_maxima,
+    with_cell_centres,
+)
 from hybrid.tiles.fans import dilate4 as _dilate4
 
 DEFAULT_BETA = 0.7
@@ -138,6 +145,8 @@ def error_pyramid(heights: np.ndarray, beta: float = DEFAULT_BETA, side_errors: 
     top = int(np.log2(n)) - 1
     cmax = np.maximum(np.maximum(h[:-1, :-1], h[:-1, 1:]), np.maximum(h[1:, :-1], h[1:, 1:]))
     cmin = np.minimum(np.minimum(h[:-1, :-1], h[:-1, 1:]), np.minimum(h[1:, :-1], h[1:, 1:]))
+    errors: list[np.ndarray]
+    effective: list[np.ndarray]
     errors, effective, sides, zmin, zmax = [], [], [], [], []
     for m in range(top + 1):
         full, stitched = fan_surfaces(h, m)

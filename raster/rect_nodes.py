@@ -190,7 +190,9 @@ def _level(below: dict, ax_r, ax_c, g: int, direct, beta: float, margin: float |
     """Level g's compact arrays (e, eff, sides or None, zmin, zmax) from level g-1's and its own measured errors
     ``direct`` ((e, sides) exact) or, with ``margin``, its children's post deviations (a bound)."""
     nr, nc = ax_r[2][g], ax_c[2][g]                  # (4, reps) level-(g-1) indices of 2a-1 .. 2a+2
-    kid = lambda arr, d, e: _take(arr, nr[d + 1], nc[e + 1])
+    def kid(arr, d, e):
+        return _take(arr, nr[d + 1], nc[e + 1])
+
     pairs = [(d, e) for d in (0, 1) for e in (0, 1)]
     kids = np.max([kid(below["e"], d, e) for d, e in pairs], axis=0)
     dil = np.max([kid(below["eff"], d, e) for d in range(-1, 3) for e in range(-1, 3)

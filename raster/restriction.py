@@ -89,7 +89,7 @@ class _Frame:
     """Working state of the frame pass (keys, maps, per-edge global-level profiles at level-0 cells)."""
 
     def __init__(self, tiles: list[TileLod], use_effective: bool):
-        self.tiles = {}
+        self.tiles: dict = {}
         ns = {t.pyramid.n for t in tiles}
         if len(ns) > 1:
             raise TerrabenchError(f"all tiles of a frame must have the same cells per side, got {sorted(ns)}")
@@ -100,7 +100,7 @@ class _Frame:
                 raise TerrabenchError(f"tile key {k} given twice")
             self.tiles[k] = t
         self.use_effective = use_effective
-        self.levels = {}
+        self.levels: dict = {}
         self.caps = {k: np.full((self.n // 2, self.n // 2), t.pyramid.top, np.int16) for k, t in self.tiles.items()}
 
     def solve(self, key):

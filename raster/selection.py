@@ -24,8 +24,20 @@ from .heap import TileHeap
 from .morph import TURN_FROM
 from .nodes import nodes_for, pending_cut, tile_levels, tile_node_block
 from .quadtree import GPU_BETA, check_full_res
-from .tileblock import BLOCK, CONSTANT_WORDS, MAX_STARTS, STARTS_FOUND, STARTS_HEIGHTS, STARTS_SEGMENTS, \
-    TILE_BLOCKS_BINDING, TileBlocks, register_tile_block, static_blocks, tile_constants, view_fields
+from .tileblock import (
+    BLOCK,
+    CONSTANT_WORDS,
+    MAX_STARTS,
+    STARTS_FOUND,
+    STARTS_HEIGHTS,
+    STARTS_SEGMENTS,
+    TILE_BLOCKS_BINDING,
+    TileBlocks,
+    register_tile_block,
+    static_blocks,
+    tile_constants,
+    view_fields,
+)
 
 LEAF_FORMAT = "4i 4f 4f 1f"             # a leaf record: j0, i0, level, dropped edges, nine post heights
 LEAN_LEAF_FORMAT = "4i 4f 4f 1f 2f"     # full_res "lean": and the SE and NW cells' turns (15 words)
@@ -235,7 +247,7 @@ class TileletSelection:
             lod_eye = np.asarray(lod_eye, dtype=np.float64)
             if lod_eye.shape != (3,) or not np.isfinite(lod_eye).all():
                 raise TerrabenchError(f"lod_eye must be three finite metres (x, y, z), got {lod_eye.tolist()}")
-        blocks, groups0, table1_start = self.frame_blocks(view, items, tau, culling, skirts, lod_eye)
+        _blocks, groups0, table1_start = self.frame_blocks(view, items, tau, culling, skirts, lod_eye)
         planes = view.frustum_planes_rel().astype(np.float32).tobytes()
         for prog in self.passes:
             write_uniform(prog, "planes", planes)

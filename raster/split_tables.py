@@ -60,7 +60,7 @@ def kind_splits(tables: SplitTables, rows: np.ndarray, threshold: np.ndarray) ->
     return tables.tables.reshape(-1).take(i).astype(np.int64)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _table_offsets(kinds: int, nb: int, width: int) -> np.ndarray:
     """(kinds, blocks) flat offsets of each kind's and block's table within a row of ``SplitTables.tables``."""
     return (np.arange(kinds)[:, None] * nb + np.arange(nb)) * width

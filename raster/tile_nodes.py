@@ -79,7 +79,7 @@ def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing, full_res: str | 
     org = np.asarray(origin, dtype=np.float64)
     sp = np.asarray(spacing, dtype=np.float64)
     fine, coarse_e, coarse_lo, coarse_hi = [np.zeros((nb * nb, 0))], [], [], []
-    for m in range(0, top):
+    for m in range(top):
         side = 2 << m                                            # node side, tile cells
         e = effective[m]
         a, b = np.indices(e.shape)

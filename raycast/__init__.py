@@ -7,5 +7,14 @@ from .caster import GpuTile, RaycastStrategy
 from .maxmip import bytes_per_sample, maxmip_levels, maxmip_nbytes
 from .options import MODES, RECONSTRUCTIONS, TRAVERSALS, CastOptions
 
-__all__ = ["RaycastStrategy", "GpuTile", "CastOptions", "bytes_per_sample", "maxmip_levels", "maxmip_nbytes", "MODES",
-           "RECONSTRUCTIONS", "TRAVERSALS"]
+__all__ = [
+           "MODES",
+           "RECONSTRUCTIONS",
+           "TRAVERSALS",
+           "CastOptions",
+           "GpuTile",
+           "RaycastStrategy",
+           "bytes_per_sample",
+           "maxmip_levels",
+           "maxmip_nbytes",
+]

@@ -24,7 +24,6 @@ from hybrid.gl.edges import TerrainEdges
 from hybrid.gl.programs import program, register_include, set_uniform, write_uniform
 from hybrid.gl.shading import resolve_mode
 from hybrid.gl.textures import terrain_texture
-
 from hybrid.tiles.quantize import quantize
 
 from .maxmip import MaxMipBuilder, bytes_per_sample, level_count, tile_nbytes
@@ -301,7 +300,7 @@ class RaycastStrategy:
                     self.tile_buf.release()
                 self.tile_buf = ctx.buffer(reserve=max(blocks.nbytes, 64 * self._stride))
             self.tile_buf.write(blocks.tobytes())
-            for k, (g, tile, _sel) in enumerate(items):
+            for k, (g, _tile, _sel) in enumerate(items):
                 self.tile_buf.bind_to_uniform_block(3, offset=k * self._stride, size=TILE_BLOCK.itemsize)
                 if id_fbo is not None:
                     id_fbo.use()

@@ -68,7 +68,7 @@ class CastOptions:
         if isinstance(self.heat_max, bool) or not isinstance(self.heat_max, (int, float)) or not self.heat_max > 0:
             raise TerrabenchError(f"heat_max must be a number of steps > 0, got {self.heat_max!r}")
 
-    def updated(self, **changes) -> "CastOptions":
+    def updated(self, **changes) -> CastOptions:
         """A copy with some options changed; unknown names raise TerrabenchError."""
         known = {f.name for f in fields(self)}
         bad = sorted(set(changes) - known)

@@ -47,11 +47,11 @@ def gl_objects(obj):
             yield v
         elif isinstance(v, moderngl.Framebuffer):                  # a held render target: its attachments
             yield from (t for t in (*v.color_attachments, v.depth_attachment) if isinstance(t, moderngl.Texture))
-        elif (dataclasses.is_dataclass(v) and not isinstance(v, type)) or \
-                type(v).__module__.split(".")[0] in ("raster", "raycast", "hybrid") and hasattr(v, "__dict__") \
-                and not callable(v) and not isinstance(v, type):
-            if v is not obj and not hasattr(v, "hf"):        # strategies hold the terrain, not its GPU copies
-                yield from gl_objects(v)
+        elif ((dataclasses.is_dataclass(v) and not isinstance(v, type)) or
+                (type(v).__module__.split(".")[0] in ("raster", "raycast", "hybrid") and hasattr(v, "__dict__")
+                 and not callable(v) and not isinstance(v, type))) \
+                and v is not obj and not hasattr(v, "hf"):       # strategies hold the terrain, not its GPU copies
+            yield from gl_objects(v)
 
 
 def allocated_bytes(obj) -> int:

@@ -1,5 +1,5 @@
 """Terrains and views for the non-square ground spacing tests: one seeded 129² height grid under several spacings."""
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 
@@ -11,7 +11,7 @@ NON_SQUARE = ((30.0, 55.0), (55.0, 30.0))
 SIZE = (320, 180)
 
 
-@lru_cache(maxsize=None)
+@cache
 def terrain(spacing: tuple[float, float]) -> HeightField:
     """The same 129² seeded fbm heights (0..800 m) with ground spacing (x, y) in metres, and a colour texture that
     ramps red from west to east and green from south to north (cell-centred)."""

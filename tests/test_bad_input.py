@@ -70,7 +70,7 @@ def test_api_bad_input(ctx, puget257):
     from hybrid.tiles.tiletree import select_tiles
     with pytest.raises(TerrabenchError, match="unknown policy 'magic'"):
         make_renderer(ctx, puget257, "magic")
-    with pytest.raises(TerrabenchError, match="unknown draw option.*colour_depth"):
+    with pytest.raises(TerrabenchError, match=r"unknown draw option.*colour_depth"):
         make_renderer(ctx, puget257, "raycast", colour_depth=8)
     with pytest.raises(TerrabenchError, match="tau"):
         select_tiles(TilePyramid(puget257, 64), default_view(puget257), tau=float("nan"))
@@ -88,9 +88,9 @@ def test_api_bad_input(ctx, puget257):
         HeightField(np.zeros((4, 4)), 30.0, origin=(1e20, 0, 0))
     with pytest.raises(TerrabenchError, match="full_res must be one of exact, lean, got 'half'"):
         Renderer(ctx, puget257, "hybrid", tile_size=64, full_res="half")
-    with make_renderer(ctx, puget257, "raster", tile_size=64) as r:
-        with pytest.raises(TerrabenchError, match="full_res must be one of exact, lean, got 'half'"):
-            r.render(default_view(puget257, 32, 18), full_res="half")
+    with (make_renderer(ctx, puget257, "raster", tile_size=64) as r,
+          pytest.raises(TerrabenchError, match="full_res must be one of exact, lean, got 'half'")):
+        r.render(default_view(puget257, 32, 18), full_res="half")
     r = make_renderer(ctx, puget257, "raycast", tile_size=64)
     with pytest.raises(TerrabenchError, match="tau"):
         r.render(default_view(puget257, 32, 18), tau=-1.0)

@@ -12,7 +12,7 @@ STRATEGIES = ("raster", "raster_gs", "raycast")
 def _model() -> CostModel:
     coef = {"const": 0.1}
     return CostModel("test", raster=dict(coef), raycast=dict(coef), raster_gs=dict(coef),
-                     call_overhead={s: 0.0 for s in STRATEGIES})
+                     call_overhead=dict.fromkeys(STRATEGIES, 0.0))
 
 
 def _tiles(factor: dict, noise: float = 0.0, n: int = 400, seed: int = 3) -> pd.DataFrame:
@@ -28,7 +28,7 @@ def _tiles(factor: dict, noise: float = 0.0, n: int = 400, seed: int = 3) -> pd.
 
 
 def test_a_uniform_drift_is_the_whole_raw_error_and_none_of_the_scaled():
-    err = tile_errors(_tiles({s: 0.75 for s in STRATEGIES}), _model()).set_index("strategy")
+    err = tile_errors(_tiles(dict.fromkeys(STRATEGIES, 0.75)), _model()).set_index("strategy")
     for s in STRATEGIES:
         assert err.loc[s, "median |relative error| %"] == pytest.approx(25.0)
         assert err.loc[s, SCALED] == pytest.approx(0.0, abs=1e-9)
@@ -38,7 +38,7 @@ def test_a_uniform_drift_is_the_whole_raw_error_and_none_of_the_scaled():
 
 
 def test_the_scale_leaves_per_tile_scatter():
-    err = tile_errors(_tiles({s: 0.75 for s in STRATEGIES}, noise=0.2), _model()).set_index("strategy")
+    err = tile_errors(_tiles(dict.fromkeys(STRATEGIES, 0.75), noise=0.2), _model()).set_index("strategy")
     for s in STRATEGIES:
         assert 7.0 < err.loc[s, SCALED] < 13.0          # |uniform(-0.2, 0.2)| has median 0.1
         assert err.loc[s, "median |relative error| %"] > 20.0

@@ -37,7 +37,7 @@ def test_strategy_mix_has_a_panel_per_mixed_method_and_scene(tmp_path):
             for fl in ("flyover", "orbit") for tau in (0.6667, 2.0) for pol in ("hybrid", "heuristic", "oracle", "raster")
             for k in range(8)]
     paths = strategy_mix_chart(label_columns(pd.DataFrame(rows)), tmp_path)
-    png = [p for p in paths if p.suffix == ".png"][0]
+    png = next(p for p in paths if p.suffix == ".png")
     with Image.open(png) as im:
         w, h = im.size
     assert w > h                                                  # 12 panels in rows of 4, not one tall column

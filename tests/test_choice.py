@@ -97,7 +97,7 @@ def test_hedged_picks_shortcut_agrees_with_pricing_every_subset():
                           raster_gs={"const": 0.0} if s > 2 else {}, mix_overhead=float(rng.choice([0.0, 0.5])),
                           mix_error=float(rng.choice([0.0, 0.05])))
         calls = []
-        planner._pure_base_wins = lambda *a: calls.append(original(*a)) or calls[-1]
+        planner._pure_base_wins = lambda *a, calls=calls: calls.append(original(*a)) or calls[-1]
         try:
             fast = planner.hedged_picks(table, names, model).tolist()
             planner._pure_base_wins = lambda *a: False

@@ -141,7 +141,7 @@ def test_a_worker_without_gl_is_reported_not_hung(tmp_path, capsys):
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
                                   env={"TERRABENCH_GL_DEVICE": "99"}) as cl, distributed.Client(cl) as client:
         t0 = time.time()
-        with pytest.raises(TerrabenchError, match="no worker of the cluster could make a GL context.*99"):
+        with pytest.raises(TerrabenchError, match=r"no worker of the cluster could make a GL context.*99"):
             run_spec(two_groups(), tmp_path / "none", progress=False, client=client)
         assert time.time() - t0 < 60
 

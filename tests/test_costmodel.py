@@ -171,7 +171,7 @@ def test_save_load_by_renderer(tmp_path):
     assert load_cost_model("fitted", p).full_res == "exact"
     data["fitted"]["full_res"] = "half"
     p.write_text(json.dumps(data))
-    with pytest.raises(TerrabenchError, match="malformed cost model .full_res must be one of exact, lean, got 'half'"):
+    with pytest.raises(TerrabenchError, match=r"malformed cost model .full_res must be one of exact, lean, got 'half'"):
         load_cost_model("fitted", p)
     shipped = load_cost_model("llvmpipe (LLVM 15.0.6, 256 bits)", p)
     assert "llvmpipe" in shipped.source

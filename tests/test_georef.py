@@ -160,7 +160,7 @@ def test_crop_window_crs_override_and_spacing_pair(tmp_path):
     asc = tmp_path / "g.asc"
     asc.write_text("ncols 3\nnrows 2\nxllcorner 500000\nyllcorner 5000000\ncellsize 10\nNODATA_value -9999\n"
                    "1 2 3\n4 5 6\n")
-    with pytest.raises(TerrainLoadError, match="no CRS.*--spacing"):
+    with pytest.raises(TerrainLoadError, match=r"no CRS.*--spacing"):
         load_terrain(asc)
     assert load_terrain(asc, crs="EPSG:32610").spacing == pytest.approx(10 / 0.9996, rel=1e-6)
     hf = load_terrain(asc, spacing=(10.0, 12.5))
@@ -177,7 +177,7 @@ def test_rotated_and_ungeoreferenced_grids_are_refused(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")                       # rasterio's NotGeoreferencedWarning on writing
         q = write_tif(tmp_path / "plain.tif", a, None, Affine.identity())
-    with pytest.raises(TerrainLoadError, match="no geotransform.*--spacing"):
+    with pytest.raises(TerrainLoadError, match=r"no geotransform.*--spacing"):
         load_terrain(q)
     assert load_terrain(q, spacing=5.0).spacing == 5.0
 

@@ -86,7 +86,7 @@ def test_no_hole_at_strategy_borders(frames):
         assert near.sum() > 20                                  # there are strategy borders to check
         # a seam is a hole or crack the mixed frame has and neither pure frame has (LOD silhouettes at the
         # horizon and the terrain's outer edge are the pure methods' own, measured elsewhere)
-        def holes(x):
+        def holes(x, ref=ref):
             return (np.isfinite(ref.distance) & ~np.isfinite(x.distance)) | hole_pixels_in_columns(x)
         seam = holes(h) & ~holes(f["raster"]) & ~holes(f["raycast"]) & ~hole_pixels_in_columns(ref)
         assert not (seam & near).any(), np.argwhere(seam & near)[:5]

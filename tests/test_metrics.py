@@ -2,8 +2,15 @@
 image errors over terrain only, known depth offsets recovered."""
 import numpy as np
 
-from experiments.metrics import (coverage_errors, crack_pixels, depth_errors, frame_accuracy, hole_pixels_in_columns,
-                                 image_errors, near_silhouettes)
+from experiments.metrics import (
+    coverage_errors,
+    crack_pixels,
+    depth_errors,
+    frame_accuracy,
+    hole_pixels_in_columns,
+    image_errors,
+    near_silhouettes,
+)
 from hybrid.gl.target import RenderResult
 
 

@@ -181,7 +181,7 @@ def test_edge_profiles_wrap_at_the_texture_limit(ctx, scene):
     for side in range(4):
         for i in (0, 49, 50, 128):
             assert folded[side * 3 + i // 50, i % 50] == prof[side, i]
-    hf, vs, refs = scene
+    hf, vs, _refs = scene
     images = []
     for limit in (None, 50):
         context_extra(ctx)["max_texture_size"] = limit

@@ -6,8 +6,14 @@ from hypothesis import strategies as st
 
 from hybrid.camera.flight import preset
 from hybrid.camera.view import View
-from hybrid.cost.features import (_convex_hull, _hull_area_clipped, feature_columns, footprint_pixels, tile_features,
-                                  tile_features_batch)
+from hybrid.cost.features import (
+    _convex_hull,
+    _hull_area_clipped,
+    feature_columns,
+    footprint_pixels,
+    tile_features,
+    tile_features_batch,
+)
 from hybrid.cost.footprint import clipped_signed_areas, footprints, near_cut
 from hybrid.cost.model import load_cost_model
 from hybrid.cost.planner import plan_frame

@@ -4,8 +4,7 @@ with the level of detail held."""
 import numpy as np
 import pytest
 
-from experiments.popping import (POP_MAX_FLOW_PX, image_flow, pop_pixels, popping, static_pop_pixels,
-                                 temporal_errors)
+from experiments.popping import POP_MAX_FLOW_PX, image_flow, pop_pixels, popping, static_pop_pixels, temporal_errors
 from hybrid.camera.view import View
 from hybrid.gl.target import RenderResult
 

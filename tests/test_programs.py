@@ -25,7 +25,7 @@ def test_every_program_compiles_and_every_glsl_file_is_used(ctx, puget257, monke
         return real(package, name, defines)
 
     monkeypatch.setattr(programs, "glsl_source", recording)
-    ctx.error                                              # clear any stale error
+    _ = ctx.error                                          # clear any stale error
     made = [ReferenceRenderer(ctx, puget257), TileletStrategy(ctx, puget257), IndexedTileletStrategy(ctx, puget257),
             TriangleListStrategy(ctx, puget257)]
     rc = RaycastStrategy(ctx, puget257)

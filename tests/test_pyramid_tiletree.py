@@ -1,4 +1,6 @@
 """The tile pyramid (errors, AABBs, padding) and per-view selection (culling, restriction, order)."""
+import itertools
+
 import numpy as np
 import pytest
 
@@ -21,7 +23,7 @@ def test_error_grows_with_level(pyr):
             kids = [c for c in k.children() if pyr.exists(c)]
             assert pyr.error(k) >= max(pyr.error(c) for c in kids)
     means = [np.mean([pyr.error(k) for k in pyr.keys(l)]) for l in range(1, pyr.max_level + 1)]
-    assert all(b > a for a, b in zip(means, means[1:]))
+    assert all(b > a for a, b in itertools.pairwise(means))
 
 
 def test_error_is_exact_deviation(puget_full, pyr):
@@ -210,4 +212,4 @@ def test_a_thin_grid_costs_what_its_samples_do():
     np.testing.assert_array_equal(tiles[3].heights[0], h[0, 3 * 256:4 * 256 + 1])
     np.testing.assert_array_equal(tiles[3].heights[5], h[1, 3 * 256:4 * 256 + 1])   # rows beyond repeat the edge
     with pytest.raises(TerrabenchError, match="padded square of 32769² samples"):
-        pyr.padded
+        _ = pyr.padded

@@ -39,7 +39,7 @@ def test_tin_decimates_exports_and_cracks_are_measured(ctx, puget257, tmp_path):
         export_tin(mesh, tmp_path / "tile.obj")
         export_tin(mesh, tmp_path / "tile.ply")
         assert (tmp_path / "tile.obj").stat().st_size > 0 and (tmp_path / "tile.ply").stat().st_size > 0
-        with pytest.raises(TerrabenchError, match="obj or .ply"):
+        with pytest.raises(TerrabenchError, match=r"obj or \.ply"):
             export_tin(mesh, tmp_path / "tile.stl")
     finally:
         r.release()

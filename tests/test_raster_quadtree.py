@@ -87,7 +87,7 @@ def _global_vertices(tiles, sets):
 def test_frame_restricted_across_tiles_and_vertices_agree(name, puget257, synthetic):
     hf = puget257 if name == "puget" else synthetic(name)
     for view in border_views(hf):
-        tiles, lods, sets = _frame(hf, view)
+        tiles, _lods, sets = _frame(hf, view)
         # global level map at level-0 cell resolution: neighbours differ by at most one level everywhere
         size = hf.cols - 1
         G = np.full((size, size), -1)

@@ -62,7 +62,7 @@ def test_culling_changes_no_pixel(renderers, strategy):
     r = rs[strategy]
     w, d = hf.extent
     ox, oy, oz = hf.origin
-    lo, hi = hf.height_range
+    _lo, hi = hf.height_range
     eye = np.array([ox + 0.3 * w, oy + 0.3 * d, oz + hi + 30])     # a low view: much of each tile outside
     view = View(eye, eye + np.array([3000.0, 1000.0, -800.0]), 40, 320, 180, near=1.0, far=10 * w)
     on = r.render(view, mode="shaded")
@@ -73,7 +73,7 @@ def test_culling_changes_no_pixel(renderers, strategy):
 
 
 def test_both_strategies_draw_the_same_surface(renderers):
-    hf, rs, ref = renderers["spike"]
+    hf, rs, _ref = renderers["spike"]
     for view in border_views(hf)[:3]:
         a, b = (rs[s].render(view, mode="shaded") for s in STRATEGIES)
         assert a.stats.counters == b.stats.counters

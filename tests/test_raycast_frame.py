@@ -52,8 +52,8 @@ def test_triangles_full_resolution_match_reference(ctx, puget257, puget_rc):
 @pytest.mark.parametrize("name", ["flat", "spike", "cliff", "ridges"])
 def test_hard_terrains(ctx, synthetic, name):
     hf = synthetic(name)
-    w, d = hf.extent
-    lo, hi = hf.height_range
+    _w, _d = hf.extent
+    _lo, _hi = hf.height_range
     views = [default_view(hf, 320, 180)]
     if name == "spike":
         i, j = int(257 * 0.55) | 1, int(257 * 0.45) | 1

@@ -110,7 +110,7 @@ def special_views(hf):
 def test_gpu_hits_equal_cpu_hits_per_reconstruction(ctx, setup, recon):
     hf, tile = setup[0], setup[1]
     view = default_view(hf, 320, 180)
-    aux, depth, colour, counters, cpu = gpu_and_cpu(ctx, setup, view, reconstruction=recon)
+    aux, _depth, _colour, counters, cpu = gpu_and_cpu(ctx, setup, view, reconstruction=recon)
     frac, _ = agreement(aux, cpu, min(tile.spacing_xy))
     assert cpu.hit.sum() > 0.4 * view.width * view.height
     assert frac >= 0.999, f"{recon}: only {frac:.5f} of rays agree"
@@ -140,7 +140,7 @@ def test_degenerate_rays(ctx, setup, name):
     lo, hi = tile.aabb
     if name in ("grazing_inside", "inside_above"):
         assert np.all(view.eye >= lo) and np.all(view.eye <= hi)
-    aux, depth, colour, counters, cpu = gpu_and_cpu(ctx, setup, view)
+    aux, depth, _colour, counters, cpu = gpu_and_cpu(ctx, setup, view)
     frac, ok = agreement(aux, cpu, min(tile.spacing_xy))
     assert frac >= 0.999, f"{name}: only {frac:.5f} of rays agree"
     assert ok.reshape(special.shape)[special].all(), f"{name}: the exactly axis-aligned rays disagree"
@@ -153,12 +153,12 @@ def test_degenerate_rays(ctx, setup, name):
 def test_eye_below_surface_is_defined(ctx, setup):
     hf, tile = setup[0], setup[1]
     w, d = hf.extent
-    ox, oy, oz = hf.origin
+    ox, oy, _oz = hf.origin
     gx, gy = ox + 0.5 * w, oy + 0.45 * d
     g = float(hf.ground_height(gx, gy))
     view = View([gx, gy, g - 50.0], [gx + w, gy + 0.3 * d, g - 50.0], 60, 160, 90, near=0.5, far=4e5)
     assert starts_under(hf, view.eye, pixel_dirs(view)).all()
-    aux, depth, colour, counters, cpu = gpu_and_cpu(ctx, setup, view)
+    aux, depth, _colour, counters, cpu = gpu_and_cpu(ctx, setup, view)
     frac, _ = agreement(aux, cpu, min(tile.spacing_xy))
     assert frac >= 0.999
     assert np.all(np.isfinite(depth)) and np.all((depth >= 0) & (depth <= 1))
@@ -212,7 +212,7 @@ def test_rays_from_under_the_sheet_agree_with_cpu(ctx, setup, name):
         tile = pyr.tile(key)
         g = s.upload(tile)
         try:
-            aux, depth, colour, counters, cpu = gpu_and_cpu(ctx, (hf, tile, s, g), view)
+            aux, _depth, _colour, counters, cpu = gpu_and_cpu(ctx, (hf, tile, s, g), view)
         finally:
             g.release()
         frac, _ = agreement(aux, cpu, min(tile.spacing_xy))

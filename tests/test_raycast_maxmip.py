@@ -5,10 +5,10 @@ import pytest
 from gl_memory import allocated_bytes, level_texels, object_bytes
 
 from hybrid.errors import TerrabenchError
-from hybrid.tiles.pyramid import TilePyramid
-from raycast import RaycastStrategy
 from hybrid.terrain.datasets import fbm
+from hybrid.tiles.pyramid import TilePyramid
 from hybrid.tiles.quantize import quantize
+from raycast import RaycastStrategy
 from raycast.maxmip import MaxMipBuilder, level_count, maxmip_levels, maxmip_nbytes, read_maxmip
 
 

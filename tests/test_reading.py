@@ -53,13 +53,13 @@ def test_identical_choices_are_named_with_the_noise_verdict():
     # the same choices but clearly slower (small spread): a difference, with the planning cost named
     slow = table(rows("raycast", 20.0, 0.02, seed=2), rows("hybrid", 40.0, 0.02, seed=3),
                  rows("raster", 30.0, 0.02, seed=1, tiles_raster=10, tiles_raycast=0))
-    line = [l for l in reading(slow, []) if l.strip().startswith("hybrid")][0]
+    line = next(l for l in reading(slow, []) if l.strip().startswith("hybrid"))
     assert "the same choices as raycast" in line and "yet 2.00x slower" in line and "plans each frame" in line
     # mixed choices: compared with the best pure method at the same tau, no "same choices"
     mixed = table(rows("raycast", 20.0, 0.02, seed=2), rows("raster", 30.0, 0.02, seed=1, tiles_raster=10,
                                                             tiles_raycast=0),
                   rows("hybrid", 10.0, 0.02, seed=3, tiles_raster=4, tiles_raycast=6))
-    line = [l for l in reading(mixed, []) if l.strip().startswith("hybrid")][0]
+    line = next(l for l in reading(mixed, []) if l.strip().startswith("hybrid"))
     assert "same choices" not in line and "rasterizes 40 %" in line and "best pure method (raycast" in line
     assert "2.00x faster" in line and "geometry shader" not in line
     # every tile through the geometry shader is the same choices as raster_gs, not as raster
@@ -67,13 +67,13 @@ def test_identical_choices_are_named_with_the_noise_verdict():
                                                          tiles_raycast=0, tiles_gs=10),
                rows("raster", 30.0, 0.02, seed=4, tiles_raster=10, tiles_raycast=0),
                rows("hybrid", 15.5, 0.3, seed=3, tiles_raster=10, tiles_raycast=0, tiles_gs=10))
-    line = [l for l in reading(gs, []) if l.strip().startswith("hybrid")][0]
+    line = next(l for l in reading(gs, []) if l.strip().startswith("hybrid"))
     assert "the same choices as raster_gs in every frame" in line
     # a three-way mix names the geometry-shader share
     three = table(rows("raycast", 20.0, 0.02, seed=2), rows("raster_gs", 40.0, 0.02, seed=1, tiles_raster=10,
                                                             tiles_raycast=0, tiles_gs=10),
                   rows("hybrid", 10.0, 0.02, seed=3, tiles_raster=6, tiles_raycast=4, tiles_gs=2))
-    line = [l for l in reading(three, []) if l.strip().startswith("hybrid")][0]
+    line = next(l for l in reading(three, []) if l.strip().startswith("hybrid"))
     assert "rasterizes 60 % of its tiles (20 % through the geometry shader)" in line
 
 

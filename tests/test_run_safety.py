@@ -56,9 +56,8 @@ def test_a_second_run_is_refused_by_pid_and_a_dead_holders_lock_is_taken(tmp_pat
 
 def test_run_spec_refuses_a_folder_in_use(ctx, tmp_path):
     (tmp_path / "s").mkdir()
-    with RunLock(tmp_path / "s"):
-        with pytest.raises(TerrabenchError, match="in use by another run"):
-            run_spec(parse_spec(SMALL), tmp_path, ctx, progress=False)
+    with RunLock(tmp_path / "s"), pytest.raises(TerrabenchError, match="in use by another run"):
+        run_spec(parse_spec(SMALL), tmp_path, ctx, progress=False)
     assert not (tmp_path / "s" / "frames.jsonl").exists()
 
 
@@ -105,7 +104,7 @@ def test_resuming_with_another_cost_model_is_refused(ctx, tmp_path, monkeypatch)
     other.renderer, other.raycast = renderer, {**other.raycast, "const": other.raycast["const"] + 1.0}
     save_cost_model(other, tmp_path / "costs.json")
     monkeypatch.setenv("TERRABENCH_COSTS", str(tmp_path / "costs.json"))
-    with pytest.raises(TerrabenchError, match="cost_model .*shipped.* then, .*costs.json"):
+    with pytest.raises(TerrabenchError, match=r"cost_model .*shipped.* then, .*costs\.json"):
         run_spec(spec, tmp_path / "runs", ctx, progress=False)
     assert (folder / "frames.jsonl").read_bytes() == journal
     monkeypatch.setenv("TERRABENCH_COSTS", str(tmp_path / "none.json"))
@@ -159,18 +158,17 @@ def test_outputs_land_whole_or_not_at_all(tmp_path, kind):
 
 def test_a_full_disk_is_one_message_and_leaves_nothing(tmp_path):
     path = tmp_path / "img.png"
-    with pytest.raises(TerrabenchError, match=f"disk full while writing {path}; nothing was written"):
-        with atomic_path(path) as tmp:
-            tmp.write_bytes(b"partial")
-            raise OSError(errno.ENOSPC, "No space left on device")
+    with (pytest.raises(TerrabenchError, match=f"disk full while writing {path}; nothing was written"),
+          atomic_path(path) as tmp):
+        tmp.write_bytes(b"partial")
+        raise OSError(errno.ENOSPC, "No space left on device")
     assert not list(tmp_path.iterdir())
 
 
 def test_lock_wait_is_not_a_hang(tmp_path):
     t = time.perf_counter()
-    with RunLock(tmp_path):
-        with pytest.raises(TerrabenchError):
-            RunLock(tmp_path).acquire()
+    with RunLock(tmp_path), pytest.raises(TerrabenchError):
+        RunLock(tmp_path).acquire()
     assert time.perf_counter() - t < 2.0
 
 

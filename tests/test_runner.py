@@ -110,7 +110,7 @@ def test_failed_configuration_is_recorded(ctx, tmp_path):
 def test_a_run_from_before_full_res_resumes_and_reports(run, ctx, tmp_path):
     import json
     import shutil
-    base, folder = run
+    _base, folder = run
     old = tmp_path / "runs" / folder.name
     shutil.copytree(folder, old)
     stored = json.loads((old / "spec.json").read_text())

@@ -211,7 +211,7 @@ def test_gpu_leaf_selection_measures_node_boxes_per_axis(ctx, spacing):
                 data, offsets = tile_node_block(nodes, p.key.level, p.key.tx, p.key.ty, TILE)
                 rel = np.asarray(tile.origin) - view.eye
 
-                def err_and_distance(m, a, b):
+                def err_and_distance(m, a, b, data=data, offsets=offsets, rel=rel, tile=tile, k_tau=k_tau):
                     side, size = TILE >> (m + 1), 2 << m
                     e, zlo, zhi, _ = data[offsets[m] + (a + 1) * (side + 2) + (b + 1)]
                     lo = rel + [(b - 1) * size * tile.spacing_x, (a - 1) * size * tile.spacing_y, zlo]

@@ -6,8 +6,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from raster.tile_nodes import KINDS
 from raster.split_tables import BIN_SHIFT, TABLE_BINS, SplitTables, kind_splits, split_tables
+from raster.tile_nodes import KINDS
 
 HALF_BIN = 1 + 1 / 64                   # the largest relative move of rounding to a bin edge
 

@@ -210,7 +210,7 @@ def test_nodata_is_refused_by_name(tmp_path):
     with rasterio.open(path, "w", driver="GTiff", height=40, width=40, count=1, dtype="float32", crs="EPSG:32610",
                        transform=from_origin(0, 400, 10, 10), nodata=-9999) as dst:
         dst.write(h, 1)
-    with pytest.raises(TerrabenchError, match="1 no-data samples.*fill them first"):
+    with pytest.raises(TerrabenchError, match=r"1 no-data samples.*fill them first"):
         prepare_store(GdalGridSource(path), tmp_path / "s", 16)
     out = tmp_path / "s"
     assert not out.exists() or not json.loads((out / "zarr.json").read_text())["attributes"]["complete"]

@@ -143,7 +143,7 @@ def test_a_store_from_before_manifests_reads_and_gets_one_when_prepared_again(cl
     prepare_store(FractalSource(129, seed=3), store, 32)              # the same prepare records one
     assert main(["info", str(store), "--no-gl", "--verify"]) == 0
     (store / "levels/0/c/0/0").unlink()
-    with pytest.raises(TerrabenchError, match="levels/0, chunk \\(0, 0\\).*is missing"):
+    with pytest.raises(TerrabenchError, match=r"levels/0, chunk \(0, 0\).*is missing"):
         open_store(store).heights[0, 0]
 
 

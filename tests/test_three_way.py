@@ -37,7 +37,7 @@ def test_three_strategies_in_one_frame_leave_no_hole(ctx, puget_full):
             frames = {n: p.render(v) for n, p in pure.items()}
             want = ref.render(v)
 
-            def holes(x):
+            def holes(x, want=want):
                 return (np.isfinite(want.distance) & ~np.isfinite(x.distance)) | hole_pixels_in_columns(x)
             seam = holes(r) & ~hole_pixels_in_columns(want)
             for f in frames.values():

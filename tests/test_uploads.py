@@ -68,9 +68,9 @@ def test_gpu_byte_budget_holds_with_fallbacks(ctx, puget257):
             assert r.cache.bytes <= budget and res.stats.gpu_bytes - res.stats.shared_bytes <= budget
             assert (res.stats.fallback_tiles > 0) == (res.stats.tiles + 1 > budget // per_tile)
             assert np.isfinite(res.distance).mean() > 0.3
-    with Renderer(ctx, puget257, "raycast", 32, budget_bytes=budget) as strict:
-        with pytest.raises(TerrabenchError, match="budget"):
-            strict.render(fly.view(2))
+    with (Renderer(ctx, puget257, "raycast", 32, budget_bytes=budget) as strict,
+          pytest.raises(TerrabenchError, match="budget")):
+        strict.render(fly.view(2))
 
 
 def test_bad_upload_budget_is_refused(ctx, puget257):

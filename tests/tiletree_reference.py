@@ -55,7 +55,7 @@ def select_tiles_by_traversal(pyramid, view, tau: float = 2 / 3) -> list[Selecte
     stack = [pyramid.root()] if classify(pyramid.root())[2] >= 0 else []
     while stack:
         key = stack.pop()
-        d, pe, c = classify(key)
+        d, pe, _c = classify(key)
         if key.level > 0 and pe > tau:
             stack.extend(live_children(key))
         else:
@@ -117,7 +117,7 @@ def select_tiles_by_traversal(pyramid, view, tau: float = 2 / 3) -> list[Selecte
             return
         if key not in needed:
             return
-        x0, y0, x1, y1 = pyramid.clip(key)
+        _x0, _y0, _x1, _y1 = pyramid.clip(key)
         span_x = (pyramid.n << key.level) * pyramid.hf.spacing_x
         span_y = (pyramid.n << key.level) * pyramid.hf.spacing_y
         mx = pyramid.hf.origin[0] + key.tx * span_x + span_x / 2

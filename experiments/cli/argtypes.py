@@ -7,7 +7,7 @@ returns 2, the same as every other user error, before anything is written.
 """
 from __future__ import annotations
 
-from typing import Callable, Iterable
+from collections.abc import Callable, Iterable
 
 import numpy as np
 

@@ -100,7 +100,7 @@ class Flight:
             raise TerrabenchError(f"{path}: flight files end in .json or .csv")
 
     @classmethod
-    def load(cls, path) -> "Flight":
+    def load(cls, path) -> Flight:
         """Read a flight written by save (JSON or CSV)."""
         path = Path(path)
         if not path.is_file():
@@ -199,7 +199,7 @@ def _dolly(hf: HeightField, k: np.ndarray, fov_y: float, height: int) -> tuple[n
     px_per_rad = height / (2.0 * np.tan(np.radians(fov_y) / 2))
     sin2 = np.sin(np.radians(DOLLY_PITCH_DEG + fov_y / 2)) ** 2
     for _ in range(2):                  # the line's height depends on its length: settle the step twice
-        eyes, targets = _dolly_line(hf, k, step)
+        eyes, _targets = _dolly_line(hf, k, step)
         clearance = float(np.min(eyes[:, 2] - hf.ground_height(eyes[:, 0], eyes[:, 1])))
         step = min(step, DOLLY_FLOW_PX * clearance / (sin2 * px_per_rad))
     return _dolly_line(hf, k, step)

@@ -14,14 +14,14 @@ import itertools
 import numpy as np
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _subsets(s: int) -> np.ndarray:
     """(2^s - 1, s) masks of the non-empty subsets of s strategies, smaller sets first (itertools order)."""
     rows = [np.isin(np.arange(s), c) for k in range(1, s + 1) for c in itertools.combinations(range(s), k)]
     return np.array(rows, dtype=bool).reshape(-1, s)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _sizes(s: int) -> np.ndarray:
     """(2^s - 1,) strategies in each subset of ``_subsets(s)``."""
     return _subsets(s).sum(axis=1)

@@ -42,7 +42,7 @@ class TileFeatures:
         return asdict(self)
 
     @classmethod
-    def from_row(cls, row: dict) -> "TileFeatures":
+    def from_row(cls, row: dict) -> TileFeatures:
         """The features of a tiles-table row (``TilePlan.row``: ``level`` and ``f_<name>`` columns)."""
         return cls(**{f.name: row["level"] if f.name == "level" else row[f"f_{f.name}"] for f in fields(cls)})
 

@@ -114,7 +114,7 @@ def fit_frames(samples: list[FrameSample], renderer: str, holdout: float = 0.3, 
     A = np.vstack(rows)
     scale = np.maximum(np.abs(A).max(axis=0), 1e-12)
     x = nnls(A / scale, np.concatenate(b), maxiter=50 * A.shape[1])[0] / scale
-    coef, overhead = {}, {s: 0.0 for s in TERMS}
+    coef, overhead = {}, dict.fromkeys(TERMS, 0.0)
     for j, s in enumerate(names):
         overhead[s] = float(x[offsets[j]])
         coef[s] = dict(zip(TERMS[s], map(float, x[offsets[j] + 1:offsets[j + 1]])))

@@ -83,7 +83,7 @@ class CostModel:
     fit_error: dict = field(default_factory=dict)
     tiles: int = 0
     source: str = ""
-    overhead: dict = field(default_factory=lambda: {s: 0.0 for s in TERMS})
+    overhead: dict = field(default_factory=lambda: dict.fromkeys(TERMS, 0.0))
     raster_gs: dict = field(default_factory=dict)
     frames: int = 0                 # whole frames fitted (0: fitted on per-tile times)
     tile_error: dict = field(default_factory=dict)   # held-out per-tile error against tiles timed a call each
@@ -232,7 +232,7 @@ def cost_model_from_dict(d: dict, source: str) -> CostModel:
     """A CostModel from its saved form (as in a costs file); ``source`` names where it came from."""
     try:
         m = CostModel(d["renderer"], dict(d["raster"]), dict(d["raycast"]), dict(d.get("fit_error", {})),
-                      int(d.get("tiles", 0)), source, {**{s: 0.0 for s in TERMS}, **d.get("overhead", {})},
+                      int(d.get("tiles", 0)), source, {**dict.fromkeys(TERMS, 0.0), **d.get("overhead", {})},
                       dict(d.get("raster_gs") or {}), int(d.get("frames", 0)), dict(d.get("tile_error", {})),
                       {s: float(v) for s, v in (d.get("call_overhead") or {}).items()}, float(d.get("mix_error", 0.0)),
                       float(d.get("mix_overhead", 0.0)), d.get("full_res", PRIOR_FULL_RES),

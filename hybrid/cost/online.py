@@ -34,6 +34,7 @@ from scipy.optimize import nnls
 from hybrid.cost.model import _TERM_INDEX, TERMS, CostModel, all_term_values
 from hybrid.errors import TerrabenchError
 
+
 def _median(values) -> float:
     """Median of a short sequence (numpy's median costs more than the sort on a few dozen values)."""
     v = sorted(values)
@@ -106,7 +107,7 @@ class OnlineModel:
         self.model.source = f"{start.source or 'unsaved'}, adapted online"
         names = self.model.candidates
         self.rows = {s: RowWindow(self.options.window, 1 + len(TERMS[s])) for s in names}
-        self._fresh = {s: 0 for s in names}          # rows since the strategy's last refit
+        self._fresh = dict.fromkeys(names, 0)          # rows since the strategy's last refit
         self._seen: set = set()                       # strategies whose first pass (compiles, first use) went by
         self._spent: dict = {}                        # the last measured cost of exploring each strategy
         self.errors = {s: deque(maxlen=self.options.hold_rows) for s in names}

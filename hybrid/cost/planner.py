@@ -52,7 +52,7 @@ _FEATURE_NAMES = tuple(f.name for f in fields(TileFeatures))
 class TilePlan:
     """One tile of a frame: where it is, what it costs (predicted, and measured where measured), how it is drawn."""
 
-    __slots__ = ("selected", "choice", "measured", "_features", "_predicted", "_frame", "_row")
+    __slots__ = ("_features", "_frame", "_predicted", "_row", "choice", "measured", "selected")
 
     def __init__(self, selected: SelectedTile, features: TileFeatures | None, predicted: dict | None, choice: str,
                  measured: dict | None = None, frame: FrameColumns | None = None, row: int = -1):
@@ -174,7 +174,7 @@ def _pure_base_wins(scaled: np.ndarray, base: int, overhead: np.ndarray, mixed: 
     return all(g + ov[base] <= o for i, (g, o) in enumerate(zip(gain, ov)) if i != base)
 
 
-_ESTIMATORS: "weakref.WeakKeyDictionary[TilePyramid, TriangleEstimator]" = weakref.WeakKeyDictionary()
+_ESTIMATORS: weakref.WeakKeyDictionary[TilePyramid, TriangleEstimator] = weakref.WeakKeyDictionary()
 
 
 def default_estimator(pyramid: TilePyramid) -> TriangleEstimator:

@@ -14,8 +14,14 @@ from pathlib import Path
 
 from hybrid.errors import TerrabenchError, TerrainLoadError
 from hybrid.terrain.assemble import assemble
-from hybrid.terrain.georef import (check_axis_aligned, describe_crs, ground_spacing, parse_crs, unit_metres,
-                                   vertical_metres)
+from hybrid.terrain.georef import (
+    check_axis_aligned,
+    describe_crs,
+    ground_spacing,
+    parse_crs,
+    unit_metres,
+    vertical_metres,
+)
 from hybrid.terrain.heightfield import HeightField
 from hybrid.terrain.window import Crop
 

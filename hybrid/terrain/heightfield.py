@@ -179,13 +179,13 @@ class HeightField:
             f"heights:     {lo:.1f} .. {hi:.1f} m" + (f" (mean {float(self.heights.mean()):.1f} m)"
                                                     if isinstance(self.heights, np.ndarray) else ""),
             f"origin:      ({self.origin[0]:g}, {self.origin[1]:g}, {self.origin[2]:g}) m",
-            f"texture:     {'%dx%d RGB' % (self.texture.shape[1], self.texture.shape[0]) if self.texture is not None else 'none'}",
+            f"texture:     {f'{self.texture.shape[1]}x{self.texture.shape[0]} RGB' if self.texture is not None else 'none'}",
             f"no-data:     {self.nodata_filled} samples filled",
         ]
         lines += [f"note:        {n}" for n in self.notes]
         return "\n".join(lines)
 
-    def moved(self, origin) -> "HeightField":
+    def moved(self, origin) -> HeightField:
         """The same terrain placed at another world origin (x, y, z) in metres."""
         return HeightField(self.heights, self.spacing, tuple(origin), self.name, self.texture,
                            self.nodata_filled, self.source, list(self.notes), self.source_step)

@@ -19,11 +19,11 @@ from hybrid.terrain.assemble import NoDataWarning, assemble
 from hybrid.terrain.heightfield import HeightField
 from hybrid.terrain.window import Crop
 
-__all__ = ["NoDataWarning", "load_terrain", "load_png16", "load_npy", "load_raw", "load_texture", "save_npz"]
+__all__ = ["NoDataWarning", "load_npy", "load_png16", "load_raw", "load_terrain", "load_texture", "save_npz"]
 
 GDAL_SUFFIXES = (".tif", ".tiff", ".hgt", ".asc", ".vrt", ".img", ".bil", ".dem")
 SUFFIXES = {".png": "png", ".npy": "npy", ".npz": "npz", ".raw": "raw", ".bin": "raw", ".r16": "raw", ".r32": "raw",
-            **{s: "gdal" for s in GDAL_SUFFIXES}}
+            **dict.fromkeys(GDAL_SUFFIXES, "gdal")}
 
 
 def _need(path, what, value):

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -119,7 +120,7 @@ class StoredTerrain(HeightField):
     """A HeightField over a tile store: ``heights`` is a LazyGrid of level 0; ``store`` is the opened group;
     ``source_step`` is the store's recorded step (None for a store without one)."""
 
-    store: object = None
+    store: Any = None               # the opened zarr group (typed Any: its attrs and arrays are read untyped)
     path: str = ""
 
     def __post_init__(self):

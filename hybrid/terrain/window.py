@@ -30,7 +30,7 @@ class Crop:
             raise TerrabenchError(f"a crop needs at least 2x2 samples, got rows {self.rows}, cols {self.cols}")
 
     @classmethod
-    def parse(cls, text: str, option: str = "--crop") -> "Crop":
+    def parse(cls, text: str, option: str = "--crop") -> Crop:
         """A crop from 'ROW,COL,ROWS,COLS' (samples)."""
         try:
             row, col, rows, cols = (int(s) for s in str(text).split(","))

@@ -55,7 +55,7 @@ def period_residue(level: int, tx: int, ty: int, n: int, period: int, cells: int
 class _LevelBlocks:
     """The blocks of one pyramid level, indexed [ty, tx] as a store's ``nodes/blocks/<level>`` array."""
 
-    def __init__(self, owner: "PeriodicBlocks", level: int):
+    def __init__(self, owner: PeriodicBlocks, level: int):
         self.owner, self.level = owner, level
 
     def __getitem__(self, index) -> np.ndarray:

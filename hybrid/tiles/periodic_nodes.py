@@ -135,7 +135,7 @@ class PeriodicNodes:
         self.bounds = "combined" if self.sides else "effective"
         self.kinds = KINDS + (("sides",) if self.sides else ())
 
-    def level(self, kind: str, g: int) -> "NodeLevel":
+    def level(self, kind: str, g: int) -> NodeLevel:
         """The lazy array of kind ``effective``, ``zlo`` or ``zhi`` (metres, float32) at global level g."""
         if kind not in self.kinds or not 0 <= g < self.levels:
             raise TerrabenchError(f"no periodic node array {kind!r} at level {g} (kinds {self.kinds}, levels "

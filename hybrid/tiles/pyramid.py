@@ -39,12 +39,12 @@ class TileKey(NamedTuple):
     tx: int
     ty: int
 
-    def children(self) -> tuple["TileKey", ...]:
+    def children(self) -> tuple[TileKey, ...]:
         """The four tiles of the next finer level covering this one (SW, SE, NW, NE)."""
         l, x, y = self.level - 1, 2 * self.tx, 2 * self.ty
         return (TileKey(l, x, y), TileKey(l, x + 1, y), TileKey(l, x, y + 1), TileKey(l, x + 1, y + 1))
 
-    def parent(self) -> "TileKey":
+    def parent(self) -> TileKey:
         """The tile of the next coarser level that contains this one."""
         return TileKey(self.level + 1, self.tx // 2, self.ty // 2)
 

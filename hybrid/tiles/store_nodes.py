@@ -36,8 +36,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from .fans import (block2, cell_centre_error, cell_max, dilate4, facing_side_errors, fan_deviation, fan_deviations,
-                   grow3, side_maxima, with_cell_centres)
+from .fans import (
+    block2,
+    cell_centre_error,
+    cell_max,
+    dilate4,
+    facing_side_errors,
+    fan_deviation,
+    fan_deviations,
+    grow3,
+    side_maxima,
+    with_cell_centres,
+)
 from .sidecodes import SIDE_FORM, holds_side_codes, side_codes
 
 NODE_EXACT_SPAN = 1024          # node sides (level-0 cells) up to which node errors are measured exactly

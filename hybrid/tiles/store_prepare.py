@@ -81,9 +81,8 @@ def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: in
     params = {"source": getattr(source, "path", source.name), "rows": rows, "cols": cols, "tile_size": n,
               "spacing": [float(sx), float(sy)]}
     out = Path(out)
-    if out.exists() and not is_store(out):
-        if any(out.iterdir()):
-            raise TerrabenchError(f"{out}: exists and is not a tile store; choose an empty or new folder")
+    if out.exists() and not is_store(out) and any(out.iterdir()):
+        raise TerrabenchError(f"{out}: exists and is not a tile store; choose an empty or new folder")
     if is_store(out):
         g = zarr.open_group(str(out), mode="r+")
         if dict(g.attrs).get("params") != params:
@@ -151,9 +150,9 @@ def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: in
                     k = 1 << level
                     b0, b1 = r0 * k, min((r1 - 1) * k, rows - 1) + 1
                     level0 = g["levels/0"]
-                    own = _band_error(lambda c0, c1: level0[b0:b1, c0:c1], cols, k, n)
+                    own = _band_error(lambda c0, c1, level0=level0, b0=b0, b1=b1: level0[b0:b1, c0:c1], cols, k, n)
                 else:                                      # bounded: against level l-1, plus its error
-                    own = _band_error(lambda c0, c1: fine[:, c0:c1], fine.shape[1], 2, n)
+                    own = _band_error(lambda c0, c1, fine=fine: fine[:, c0:c1], fine.shape[1], 2, n)
             lv[r0:r1, :] = band
             if level == 0:
                 zmin[ty, :] = _tile_reduce(band, n, np.minimum)

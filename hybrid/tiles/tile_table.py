@@ -100,7 +100,7 @@ def _build(pyramid: TilePyramid) -> TileTable:
                      centre, quadrant)
 
 
-_TABLES: "weakref.WeakKeyDictionary[TilePyramid, TileTable]" = weakref.WeakKeyDictionary()
+_TABLES: weakref.WeakKeyDictionary[TilePyramid, TileTable] = weakref.WeakKeyDictionary()
 
 
 def tile_table(pyramid: TilePyramid) -> TileTable:

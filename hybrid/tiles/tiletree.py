@@ -234,7 +234,7 @@ class TileSelection(list):
     """Selected tiles front to back (``SelectedTile``s), with the same tiles as arrays in the same order: keys
     (B, 3) int64 level, tx, ty; distance (B,) metres; lo, hi (B, 3) world box corners (metres); inside (B,) bool."""
 
-    __slots__ = ("keys", "distance", "lo", "hi", "inside")
+    __slots__ = ("distance", "hi", "inside", "keys", "lo")
 
 
 def select_tiles(pyramid: TilePyramid, view: View, tau: float = DEFAULT_TAU,
