@@ -9,6 +9,7 @@ wrapped layout, so it does not depend on the terminal's width or on the Python v
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 
 HEADER = """# Command-line reference
@@ -55,10 +56,8 @@ def _help(action: argparse.Action) -> str:
     if "%" in text:
         params = {**vars(action), "prog": "terrabench"}
         params = {k: getattr(v, "__name__", v) for k, v in params.items()}
-        try:
+        with contextlib.suppress(KeyError, TypeError, ValueError):     # a literal % stays as written
             text = text % params
-        except (KeyError, TypeError, ValueError):
-            pass
     return text
 
 
@@ -90,10 +89,10 @@ def reference() -> str:
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     helps = {c.dest: c.help for c in sub._choices_actions}
     for name in sub.choices:
-        out.append(f"- [`{name}`](#terrabench-{name}): {_cell(helps.get(name, ''))}")
+        out.append(f"- [`{name}`](#terrabench-{name}): {_cell(helps.get(name) or '')}")
     out.append("")
     for name, sp in sub.choices.items():
-        out += [f"## terrabench {name}", "", _cell(helps.get(name, "")), ""]
+        out += [f"## terrabench {name}", "", _cell(helps.get(name) or ""), ""]
         if sp.description:
             out += [_cell(sp.description), ""]
         args = _arguments(sp)

@@ -106,7 +106,7 @@ def table_html(df: pd.DataFrame, caption: str = "") -> str:
     for row in df.itertuples(index=False):
         cells = []
         for v in row:
-            num = isinstance(v, (int, float)) and not isinstance(v, bool) or hasattr(v, "dtype")
+            num = (isinstance(v, (int, float)) and not isinstance(v, bool)) or hasattr(v, "dtype")
             text = "–" if v is None or (num and pd.isna(v)) else format_number(v)
             cells.append(f"<td class='num'>{text}</td>" if num else f"<td>{html.escape(text)}</td>")
         body.append("<tr>" + "".join(cells) + "</tr>")
