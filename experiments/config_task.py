@@ -28,13 +28,13 @@ import numpy as np
 
 from hybrid.camera.view import parse_size
 from hybrid.errors import TerrabenchError
+from hybrid.strategies import mixed_policies
 
 from .metrics import frame_accuracy
 from .popping import popping, static_pop_pixels, temporal_errors
 from .spec import Spec
 
 SETTLE_S = 0.3   # seconds of idle before a configuration's timed frames
-MIXED = ("hybrid", "heuristic", "oracle")
 
 
 @dataclass
@@ -230,7 +230,7 @@ def _open(spec: Spec, r: _ConfigRun, state: TaskState, hf, views) -> None:
     if c.get("start_model", "device") == "fallback":
         model = fallback_cost_model()
     mixed = {"adapt": spec.adapt, **({"cost_model": model} if model is not None else {})} \
-        if c["policy"] in MIXED else {}
+        if c["policy"] in mixed_policies() else {}
     r.renderer = make_renderer(state.ctx, hf, c["policy"], tile_size=spec.tile_size,
                                reconstruction=c["reconstruction"], budget_bytes=spec.gpu_budget_mib << 20,
                                full_res=c["full_res"], upload_budget_ms=spec.upload_budget_ms, **mixed)
@@ -254,7 +254,7 @@ def _time_frame(spec: Spec, live: list[_ConfigRun], k: int, views, fail_fast: bo
             continue
         results = draws[id(r)]
         mapped: list = []
-        if spec.accuracy and k in spec.image_frames and r.c["policy"] in MIXED:       # untimed, for its maps
+        if spec.accuracy and k in spec.image_frames and r.c["policy"] in mixed_policies():       # untimed, for its maps
             r.attempt(lambda r=r: mapped.append(r.renderer.render(views[k], r.c["tau"], maps=True)), fail_fast)
         if r.out.error is not None:
             continue

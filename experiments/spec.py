@@ -45,17 +45,15 @@ import json
 import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import get_args
 
 from hybrid.camera.view import parse_size
-from hybrid.contract import DEFAULT_FULL_RES, FULL_RES, PRIOR_FULL_RES, TILELET_POLICIES, Method
+from hybrid.contract import DEFAULT_FULL_RES, PRIOR_FULL_RES
 from hybrid.errors import TerrabenchError
+from hybrid.strategies import adapting_policies, methods, option_choices, policies_taking
 from hybrid.terrain.sources import TerrainSource
 
 from .spec_datasets import check_dataset_entry, dataset_label, terrain_source
 
-POLICIES = get_args(Method)
-RECONSTRUCTIONS = ("planes", "linear", "triangles", "bilinear")
 START_MODELS = ("device", "fallback")
 """The hybrid's starting cost models: this GL renderer's as loaded (``hybrid.cost.model.load_cost_model``: the
 user's file, the shipped default, else the fallback), or the shipped uncalibrated fallback."""
@@ -92,19 +90,20 @@ class Spec:
         """Every combination, one dict each, with a stable id; frames of one (dataset, seed, flight, size) are paired."""
         out = []
         labels = [dataset_label(d) for d in self.datasets]
+        casting, tilelets, adapting = policies_taking("reconstruction"), policies_taking("full_res"), adapting_policies()
         for ds, seed, fl, size, tau, rec, fr, pol, sm in itertools.product(
                 labels, self.seeds, self.flights, self.sizes, self.taus, self.reconstructions, self.full_res,
                 self.policies, self.start_models):
-            if pol not in ("raycast", "hybrid", "heuristic", "oracle") and rec != self.reconstructions[0]:
+            if pol not in casting and rec != self.reconstructions[0]:
                 continue                      # reconstruction only matters where rays are cast
-            if pol not in TILELET_POLICIES and fr != self.full_res[0]:
+            if pol not in tilelets and fr != self.full_res[0]:
                 continue                      # the full-resolution rule only where tilelets are drawn
             if pol == "reference" and tau != self.taus[0]:
                 continue
-            if pol != "hybrid" and sm != self.start_models[0]:
+            if pol not in adapting and sm != self.start_models[0]:
                 continue                      # only the hybrid reads a cost model as it goes
-            fr = fr if pol in TILELET_POLICIES else PRIOR_FULL_RES
-            sm = sm if pol == "hybrid" else START_MODELS[0]
+            fr = fr if pol in tilelets else PRIOR_FULL_RES
+            sm = sm if pol in adapting else START_MODELS[0]
             cid = f"{Path(str(ds)).stem}-s{seed}-{Path(str(fl)).stem}-{size}-tau{tau:.4g}-{rec}-{pol}" + \
                 ("" if fr == PRIOR_FULL_RES else f"-{fr}") + ("" if sm == START_MODELS[0] else f"-from-{sm}")
             out.append({"config": cid, "dataset": ds, "seed": seed, "flight": fl, "size": size, "tau": tau,
@@ -228,20 +227,21 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None, overri
         raise TerrabenchError(f"{source}: unknown keys {sorted(unknown)}; known: {sorted(known)}")
 
     def policy_ok(p):
-        if p not in POLICIES:
-            raise TerrabenchError(f"{source}: unknown policy {p!r}; choose from {', '.join(POLICIES)}")
+        if p not in methods():
+            raise TerrabenchError(f"{source}: unknown policy {p!r}; choose from {', '.join(methods())}")
 
     def rec_ok(r):
-        if r not in RECONSTRUCTIONS:
-            raise TerrabenchError(f"{source}: unknown reconstruction {r!r}; choose from {', '.join(RECONSTRUCTIONS)}")
+        if r not in option_choices("reconstruction"):
+            raise TerrabenchError(f"{source}: unknown reconstruction {r!r}; "
+                                  f"choose from {', '.join(option_choices('reconstruction'))}")
 
     def start_ok(m):
         if m not in START_MODELS:
             raise TerrabenchError(f"{source}: unknown start model {m!r}; choose from {', '.join(START_MODELS)}")
 
     def full_res_ok(r):
-        if r not in FULL_RES:
-            raise TerrabenchError(f"{source}: unknown full_res {r!r}; choose from {', '.join(FULL_RES)}")
+        if r not in option_choices("full_res"):
+            raise TerrabenchError(f"{source}: unknown full_res {r!r}; choose from {', '.join(option_choices('full_res'))}")
 
     def tau_ok(t):
         if not (t > 0 and t < 1e3):

@@ -24,7 +24,7 @@ from collections import OrderedDict
 import numpy as np
 
 from hybrid.camera.view import View
-from hybrid.contract import CANDIDATES, DEFAULT_FULL_RES, MIXED_POLICIES, POLICIES, FrameStats, TileItem
+from hybrid.contract import DEFAULT_FULL_RES, FrameStats, TileItem
 from hybrid.cost.model import CostModel, load_cost_model
 from hybrid.cost.planner import TilePlan, plan_frame
 from hybrid.errors import TerrabenchError
@@ -35,7 +35,8 @@ from hybrid import adaptive, oracle
 from hybrid.cost.online import AdaptOptions, OnlineModel
 from hybrid.reference import ReferenceRenderer
 from hybrid.residency import ResidencyCache
-from hybrid.strategies import STRATEGIES, make_strategy, triangle_estimator
+from hybrid.strategies import (STRATEGIES, candidates, check_policy, make_strategy, mixed_policies, policy_entry,
+                               triangle_estimator)
 from hybrid.terrain.heightfield import HeightField
 from hybrid.tiles.pyramid import EDGE_E, EDGE_N, EDGE_S, EDGE_W, TilePyramid
 from hybrid.tiles.store import pyramid_for
@@ -67,18 +68,18 @@ class Renderer:
                  cost_model: CostModel | None = None, budget_bytes: int | None = None, threshold: float = 1.0,
                  oracle_repeats: int = 3, pyramid: TilePyramid | None = None, upload_budget_ms: float | None = None,
                  adapt: bool | AdaptOptions = True, **options):
-        if policy not in POLICIES:
-            raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
+        check_policy(policy)
         self.ctx, self.hf, self.policy = ctx, hf, policy
-        self.mixed = policy in MIXED_POLICIES
+        self.mixed = policy in mixed_policies()
+        self.entry = policy_entry(policy) if self.mixed else None
         self._own_pyramid = pyramid is None              # made here: closed (its loader thread) on release
         self.pyramid = pyramid or pyramid_for(hf, tile_size)
         self.cache = ResidencyCache(budget_bytes)
-        self.strategies = {n: make_strategy(n, ctx, hf) for n in (CANDIDATES if self.mixed else (policy,))}
+        self.strategies = {n: make_strategy(n, ctx, hf) for n in (candidates() if self.mixed else (policy,))}
         self.options = route_options(self.strategies, options)
         self._model = cost_model or (load_cost_model(gl_info(ctx).renderer) if self.mixed else None)
         self.online = OnlineModel(self._model, adapt if isinstance(adapt, AdaptOptions) else None) \
-            if adapt and policy == "hybrid" else None
+            if adapt and self.entry is not None and self.entry.adapts else None
         self.triangles = triangle_estimator(self.pyramid, full_res=options.get("full_res", DEFAULT_FULL_RES)) \
             if self.mixed else None
         if self.triangles is not None and upload_budget_ms is not None and hasattr(self.pyramid, "request"):
@@ -243,12 +244,12 @@ class Renderer:
         """
         self._check_live()
         if measure and not self.mixed:
-            raise TerrabenchError(f"measure=True needs a mixed policy ({', '.join(MIXED_POLICIES)}), not {self.policy!r}")
+            raise TerrabenchError(f"measure=True needs a mixed policy ({', '.join(mixed_policies())}), not {self.policy!r}")
         if maps and not read:
             raise TerrabenchError("maps=True reads the frame back; it cannot go with read=False")
         opts = {n: {**self.options[n], **o} for n, o in route_options(self.strategies, options).items()}
         if measure is None:
-            measure = self.policy == "oracle" and plans is None
+            measure = self.entry is not None and self.entry.measures and plans is None
         learn = self.online is not None and plans is None and not measure
         plans, plan_ms, prep_ms = self._planned(view, tau, plans)
         t_adapt = time.perf_counter()
