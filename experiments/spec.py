@@ -225,23 +225,40 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None, overri
     unknown = set(d) - known
     if unknown:
         raise TerrabenchError(f"{source}: unknown keys {sorted(unknown)}; known: {sorted(known)}")
+    kw = {"name": d.get("name", Path(source).stem)}
+    if not isinstance(kw["name"], str) or not kw["name"] or any(c in kw["name"] for c in "/\\ "):
+        raise TerrabenchError(f"{source}: name must be a non-empty word without slashes or spaces, got {kw['name']!r}")
+    if "datasets" in d:
+        kw["datasets"] = _datasets(d["datasets"], source, base)
+    for key, kind, check in _list_keys(source):
+        v = _list(d, key, kind, check)
+        if v is not None:
+            kw[key] = [float(x) for x in v] if key == "taus" else v
+    kw.update(_scalars(d, source))
+    return _checked(Spec(**kw), source)
 
-    def policy_ok(p):
-        if p not in methods():
-            raise TerrabenchError(f"{source}: unknown policy {p!r}; choose from {', '.join(methods())}")
 
-    def rec_ok(r):
-        if r not in option_choices("reconstruction"):
-            raise TerrabenchError(f"{source}: unknown reconstruction {r!r}; "
-                                  f"choose from {', '.join(option_choices('reconstruction'))}")
+def _datasets(v, source: str, base: Path | None) -> list:
+    """The spec's dataset entries, checked, with distinct labels."""
+    if not isinstance(v, list) or not v:
+        raise TerrabenchError(f"{source}: 'datasets' must be a non-empty list, got {v!r}")
+    entries = [check_dataset_entry(e, source, base) for e in v]
+    labels = [dataset_label(e) for e in entries]
+    twice = sorted({label for label in labels if labels.count(label) > 1})
+    if twice:
+        raise TerrabenchError(f"{source}: datasets {twice} appear twice; give each a distinct 'name'")
+    return entries
 
-    def start_ok(m):
-        if m not in START_MODELS:
-            raise TerrabenchError(f"{source}: unknown start model {m!r}; choose from {', '.join(START_MODELS)}")
 
-    def full_res_ok(r):
-        if r not in option_choices("full_res"):
-            raise TerrabenchError(f"{source}: unknown full_res {r!r}; choose from {', '.join(option_choices('full_res'))}")
+def _list_keys(source: str) -> tuple:
+    """(key, element type, element check or None) of every list key of a flights spec; the names a key allows
+    come from the strategy registry where they name policies or strategy options."""
+
+    def one_of(what: str, allowed: tuple):
+        def check(v):
+            if v not in allowed:
+                raise TerrabenchError(f"{source}: unknown {what} {v!r}; choose from {', '.join(allowed)}")
+        return check
 
     def tau_ok(t):
         if not (t > 0 and t < 1e3):
@@ -254,26 +271,16 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None, overri
         if not (0 <= s < 2**32):
             raise TerrabenchError(f"{source}: seeds must lie in [0, 2^32), got {s!r}")
 
-    kw = {"name": d.get("name", Path(source).stem)}
-    if not isinstance(kw["name"], str) or not kw["name"] or any(c in kw["name"] for c in "/\\ "):
-        raise TerrabenchError(f"{source}: name must be a non-empty word without slashes or spaces, got {kw['name']!r}")
-    if "datasets" in d:
-        v = d["datasets"]
-        if not isinstance(v, list) or not v:
-            raise TerrabenchError(f"{source}: 'datasets' must be a non-empty list, got {v!r}")
-        kw["datasets"] = [check_dataset_entry(e, source, base) for e in v]
-        labels = [dataset_label(e) for e in kw["datasets"]]
-        twice = sorted({label for label in labels if labels.count(label) > 1})
-        if twice:
-            raise TerrabenchError(f"{source}: datasets {twice} appear twice; give each a distinct 'name'")
-    for key, kind, check in (("flights", str, None), ("policies", str, policy_ok),
-                             ("taus", (int, float), tau_ok), ("sizes", str, size_ok),
-                             ("reconstructions", str, rec_ok), ("full_res", str, full_res_ok), ("seeds", int, seed_ok),
-                             ("start_models", str, start_ok),
-                             ("image_frames", int, None)):
-        v = _list(d, key, kind, check)
-        if v is not None:
-            kw[key] = [float(x) for x in v] if key == "taus" else v
+    return (("flights", str, None), ("policies", str, one_of("policy", methods())),
+            ("taus", (int, float), tau_ok), ("sizes", str, size_ok),
+            ("reconstructions", str, one_of("reconstruction", option_choices("reconstruction"))),
+            ("full_res", str, one_of("full_res", option_choices("full_res"))), ("seeds", int, seed_ok),
+            ("start_models", str, one_of("start model", START_MODELS)), ("image_frames", int, None))
+
+
+def _scalars(d: dict, source: str) -> dict:
+    """The spec's integer, number and true/false keys that ``d`` gives, checked."""
+    kw = {}
     for key, lo, hi in (("frames", 1, 100000), ("repeats", 3, 1000), ("tile_size", 2, 65536),
                         ("supersample", 1, 8), ("dataset_size", 0, 16385), ("gpu_budget_mib", 1, 1 << 20)):
         if key in d:
@@ -293,7 +300,7 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None, overri
             if not isinstance(d[key], bool):
                 raise TerrabenchError(f"{source}: '{key}' must be true or false, got {d[key]!r}")
             kw[key] = d[key]
-    return _checked(Spec(**kw), source)
+    return kw
 
 
 def _checked(spec: Spec, source: str) -> Spec:

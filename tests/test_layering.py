@@ -23,7 +23,8 @@ LAYERS = [
     ("hybrid.strategies",),
     ("hybrid.cost",),
     ("hybrid.oracle", "hybrid.adaptive"),   # the renderer's in-frame timing and online adaptation
-    ("hybrid.reference_blocks", "hybrid.reference", "hybrid.residency", "hybrid.uploads", "hybrid.renderer"),
+    ("hybrid.reference_blocks", "hybrid.reference", "hybrid.residency", "hybrid.uploads", "hybrid.streaming",
+     "hybrid.renderer"),
     ("hybrid.calibrate",),
     ("experiments",),
 ]
