@@ -18,7 +18,7 @@ struct TileData {
                               // list and its skirt segments (words) start in their buffers
 };
 #ifdef TILE_BLOCKS_STORAGE
-layout(std430, binding = 9) readonly buffer TileBlocks { TileData tile_blocks[]; };
+layout(std430, binding = TILE_BLOCKS_BINDING) readonly buffer TileBlocks { TileData tile_blocks[]; };
 int tile_item = 0;            // the frame item (tile drawing) this invocation selects for
 TileData TB;                  // its block, read once (use_tile_item)
 
