@@ -8,8 +8,14 @@ import numpy as np
 
 from hybrid.contract import DEFAULT_FULL_RES
 from hybrid.errors import TerrabenchError
-from hybrid.strategies import (adapting_policies, methods, mixed_policies, option_choices, policies_taking,
-                               strategies_of_kind)
+from hybrid.strategies import (
+    adapting_policies,
+    methods,
+    mixed_policies,
+    option_choices,
+    policies_taking,
+    strategies_of_kind,
+)
 
 from ..folders import writable_folder
 from . import argtypes
