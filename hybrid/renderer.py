@@ -90,7 +90,7 @@ class Renderer:
             if adapt and self.entry is not None and self.entry.adapts else None
         self.triangles = triangle_estimator(self.pyramid, full_res=options.get("full_res", DEFAULT_FULL_RES)) \
             if self.mixed else None
-        if self.triangles is not None and upload_budget_ms is not None and hasattr(self.pyramid, "request"):
+        if self.triangles is not None and upload_budget_ms is not None and self.pyramid.background_loader:
             self.triangles.background = True             # blocks still to cut: the store's loader thread cuts them
         self.threshold = threshold
         self.oracle_repeats = int(oracle_repeats)
@@ -134,7 +134,7 @@ class Renderer:
             self._tiles.move_to_end(key)
             return self._tiles[key]
         t = self._tiles[key] = self.pyramid.tile(key)
-        budget = getattr(self.pyramid, "host_budget", None)
+        budget = self.pyramid.host_budget
         if budget is not None and len(self._tiles) > max(budget // max(t.heights.nbytes, 1), 256):
             self._tiles.popitem(last=False)
         return t
@@ -384,7 +384,7 @@ class Renderer:
         self.cache.clear()
         for s in self.strategies.values():
             s.release()
-        if self._own_pyramid and hasattr(self.pyramid, "close"):
+        if self._own_pyramid:
             self.pyramid.close()
         self._released = True
 

@@ -19,7 +19,7 @@ def make_resident(r, plans: list, pinned: set, prep_ms: float) -> UploadReport |
         return None
     ready, deferred = (lambda key: True), (lambda plan: False)
     pyramid = r.pyramid
-    if hasattr(pyramid, "request"):      # a store: its loader thread reads what is missing
+    if pyramid.background_loader:      # a store: its loader thread reads what is missing
         missing = [p for p in plans if (p.choice, p.key) not in r.cache.entries]
         work, waiting = host_jobs(r.strategies, r.triangles, missing, pyramid.n)
         pyramid.request([p.key for p in missing] + list(work), work)
