@@ -43,7 +43,8 @@ from __future__ import annotations
 import itertools
 import json
 import tomllib
-from dataclasses import asdict, dataclass, field
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
 from hybrid.camera.view import parse_size
@@ -57,6 +58,32 @@ from .spec_datasets import check_dataset_entry, dataset_label, terrain_source
 START_MODELS = ("device", "fallback")
 """The hybrid's starting cost models: this GL renderer's as loaded (``hybrid.cost.model.load_cost_model``: the
 user's file, the shipped default, else the fallback), or the shipped uncalibrated fallback."""
+
+
+@dataclass(frozen=True)
+class Config:
+    """One configuration of a run: a policy over one flight of one dataset at one size, tau and option set; ``config``
+    is its stable id. Runs store it as a row (``row``), as spec.json and the journal hold it."""
+
+    config: str
+    dataset: str
+    seed: int
+    flight: str
+    size: str
+    tau: float
+    reconstruction: str
+    full_res: str
+    policy: str
+    start_model: str = START_MODELS[0]
+
+    @classmethod
+    def of(cls, row: Mapping) -> Config:
+        """The configuration of a row; keys that are no field are left out, a missing start model is the device's."""
+        return cls(**{f.name: row[f.name] for f in fields(cls) if f.name in row})
+
+    def row(self) -> dict:
+        """The configuration as a flat dict, fields in order."""
+        return asdict(self)
 
 
 @dataclass
@@ -106,8 +133,7 @@ class Spec:
             sm = sm if pol in adapting else START_MODELS[0]
             cid = f"{Path(str(ds)).stem}-s{seed}-{Path(str(fl)).stem}-{size}-tau{tau:.4g}-{rec}-{pol}" + \
                 ("" if fr == PRIOR_FULL_RES else f"-{fr}") + ("" if sm == START_MODELS[0] else f"-from-{sm}")
-            out.append({"config": cid, "dataset": ds, "seed": seed, "flight": fl, "size": size, "tau": tau,
-                        "reconstruction": rec, "full_res": fr, "policy": pol, "start_model": sm})
+            out.append(Config(cid, ds, seed, fl, size, tau, rec, fr, pol, sm).row())
         return out
 
     def source(self, label: str) -> TerrainSource:
