@@ -5,6 +5,16 @@ among it, its option values (e.g. ray-cast reconstructions) and its CPU triangle
 the pure policy of the same name. A mixed policy is registered once (``register_policy``) with its per-tile rule.
 The CLI's choices, the spec checks, the planner and the renderer ask the functions below, never a copied list.
 
+A policy that ray casts every tile whose triangles outnumber its pixels twice, else rasterizes::
+
+    def twice(columns, predicted, threshold):
+        return heuristic_rule(columns, predicted, 2.0 * threshold)
+
+    register_policy(PolicyEntry("heuristic2", "ray cast where triangles outnumber pixels twice", rule=twice))
+
+after which ``terrabench render --method heuristic2`` and ``policies = ["heuristic2"]`` in a spec work (register
+it in a module the command line imports). A strategy registers its GPU class the same way (``register_strategy``).
+
 This module sits above ``raster`` and ``raycast`` (it imports them) and below the cost model and the
 renderer (which find strategies only through it).
 """

@@ -74,3 +74,23 @@ def test_the_planner_follows_a_registered_rule(toys):
     cols = {"pixels": np.ones(3), "triangles": np.ones(3)}
     assert choices("toymix", cols, {}) == ["raycast"] * 3
     assert choices("toycast", cols, {}) == ["toycast"] * 3
+
+
+def test_the_worked_example_in_the_registry_docstring():
+    import numpy as np
+
+    from hybrid.cost.planner import choices
+    from hybrid.strategies import heuristic_rule
+
+    def twice(columns, predicted, threshold):
+        return heuristic_rule(columns, predicted, 2.0 * threshold)
+
+    register_policy(PolicyEntry("heuristic2", "ray cast where triangles outnumber pixels twice", rule=twice))
+    try:
+        assert "heuristic2" in _option("render", "method").choices
+        cols = {"pixels": np.array([10.0, 10.0]), "triangles": np.array([15.0, 25.0])}
+        assert choices("heuristic2", cols, {}) == ["raster", "raycast"]
+        assert choices("heuristic", cols, {}) == ["raycast", "raycast"]
+        assert parse_spec('policies = ["heuristic2"]').policies == ["heuristic2"]
+    finally:
+        unregister("heuristic2")
