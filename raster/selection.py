@@ -25,7 +25,7 @@ from .morph import TURN_FROM
 from .nodes import nodes_for, pending_cut, tile_levels, tile_node_block
 from .quadtree import GPU_BETA, check_full_res
 from .tileblock import BLOCK, CONSTANT_WORDS, MAX_STARTS, STARTS_FOUND, STARTS_HEIGHTS, STARTS_SEGMENTS, \
-    TILE_BLOCKS_BINDING, TileBlocks, register_tile_block, static_blocks, tile_constants, view_fields
+    BLOCK_DEFINES, TILE_BLOCKS_BINDING, TileBlocks, register_tile_block, static_blocks, tile_constants, view_fields
 
 LEAF_FORMAT = "4i 4f 4f 1f"             # a leaf record: j0, i0, level, dropped edges, nine post heights
 LEAN_LEAF_FORMAT = "4i 4f 4f 1f 2f"     # full_res "lean": and the SE and NW cells' turns (15 words)
@@ -41,8 +41,7 @@ def full_res_defines(full_res: str) -> dict:
 def select_defines(full_res: str, k: int) -> dict:
     """Every define of selection pass ``k`` (select.comp.glsl): buffer layouts and bindings, the full-resolution
     rule's and the pass's."""
-    return {"PASS": k, "TILE_BLOCKS_STORAGE": 1, "TILE_BLOCKS_BINDING": TILE_BLOCKS_BINDING,
-            "FRAME_BINDING": FRAME_BINDING, "ARENA_FIELD": FRAME_FIELDS.index("arena_leaves"),
+    return {"PASS": k, "TILE_BLOCKS_STORAGE": 1, **BLOCK_DEFINES, "FRAME_BINDING": FRAME_BINDING, "ARENA_FIELD": FRAME_FIELDS.index("arena_leaves"),
             "OVERFLOW_FIELD": FRAME_FIELDS.index("arena_overflow"), **ITEM_DEFINES, **HEAP_DEFINES,
             **arena_defines(full_res), **full_res_defines(full_res)}
 
