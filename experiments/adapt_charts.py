@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from hybrid.contract import CANDIDATES
+from hybrid.strategies import candidates
 
 from .charts import figure_legend, grid_cols, method_colours, panel_grid, panel_title, save_figure
 
@@ -34,7 +34,7 @@ def _convergence_groups(f: pd.DataFrame) -> list[tuple[str, pd.DataFrame]]:
         hy = g[g["policy"] == "hybrid"]
         if hy.empty or "pred_ms" not in hy or not hy["pred_ms"].notna().any():
             continue
-        keep = g["policy"].isin((*CANDIDATES, "hybrid", "oracle"))
+        keep = g["policy"].isin((*candidates(), "hybrid", "oracle"))
         out.append((f"{sc}, tau {tau:.3g} px", g[keep]))
     return out
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from hybrid.contract import CANDIDATES as PURE
+from hybrid.strategies import candidates
 
 STARTS = ("h200", "fallback", "skewed", "device")
 SETTLED_FROM = 8
@@ -53,7 +53,7 @@ def draw_flight(ctx, hf, views, tau: float, models: dict, repeats: int, tile_siz
     from hybrid.renderer import Renderer
     renderers = {}
     try:
-        for p in PURE:
+        for p in candidates():
             renderers[p] = Renderer(ctx, hf, p, tile_size)
         for name, model in models.items():
             renderers[f"hybrid:{name}"] = Renderer(ctx, hf, "hybrid", tile_size, cost_model=model)
@@ -88,7 +88,7 @@ def summarize(frames: pd.DataFrame) -> dict[str, pd.DataFrame]:
     for (flight, tau), g in frames.groupby(["flight", "tau"], sort=False):
         late = g[g["frame"] >= SETTLED_FROM]
         by = {m: q for m, q in late.groupby("method", sort=False)}
-        pure_ms = {p: float(by[p]["wall_ms"].median()) for p in PURE}
+        pure_ms = {p: float(by[p]["wall_ms"].median()) for p in candidates()}
         best = min(pure_ms, key=pure_ms.get)
         for s in sorted({m.split(":")[1] for m in by if ":" in m}, key=STARTS.index):
             hy, fr = by[f"hybrid:{s}"], by[f"frozen:{s}"]

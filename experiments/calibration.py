@@ -2,7 +2,7 @@
 process (``terrabench calibrate``) or a cluster worker (``experiments.cluster``)."""
 from __future__ import annotations
 
-from .cli.options import TerrainOptions
+from .scene_options import TerrainOptions
 
 
 def calibrate_here(ctx, terrain: TerrainOptions, flights, frames: int, size: tuple[int, int], tau: float,

@@ -20,7 +20,8 @@ from matplotlib.colors import ListedColormap
 from matplotlib.ticker import MaxNLocator
 
 from hybrid.atomic import atomic_path
-from hybrid.contract import PRIOR_FULL_RES, TILELET_POLICIES
+from hybrid.contract import PRIOR_FULL_RES
+from hybrid.strategies import mixed_policies, policies_taking
 
 from .noise import median_interval, repeat_matrix
 
@@ -38,13 +39,14 @@ def label_columns(frames: pd.DataFrame) -> pd.DataFrame:
     f["full_res"] = f["full_res"].fillna(PRIOR_FULL_RES) if "full_res" in f else PRIOR_FULL_RES
     many_tau = f["tau"].nunique() > 1
     many_rec = f["reconstruction"].nunique() > 1
-    many_fr = f.loc[f["policy"].isin(TILELET_POLICIES), "full_res"].nunique() > 1   # others record the prior rule
+    tilelets = policies_taking("full_res")
+    many_fr = f.loc[f["policy"].isin(tilelets), "full_res"].nunique() > 1   # others record the prior rule
 
     def method(r):
         s = r["policy"]
         if many_rec and r["policy"] not in ("raster", "reference", "fullres", "tin"):
             s += f"/{r['reconstruction']}"
-        if many_fr and r["policy"] in TILELET_POLICIES:
+        if many_fr and r["policy"] in tilelets:
             s += f"/{r['full_res']}"
         start = r.get("start_model")
         if r["policy"] == "hybrid" and isinstance(start, str) and start != DEVICE_START:
@@ -214,7 +216,7 @@ def speed_accuracy_chart(f, folder) -> list[Path]:
 
 def strategy_mix_chart(f, folder) -> list[Path]:
     """Tiles per strategy per frame for the mixed policies, one panel per method and scene."""
-    mixed = f[f["policy"].isin(["hybrid", "heuristic", "oracle"])]
+    mixed = f[f["policy"].isin(mixed_policies())]
     if mixed.empty or "tiles_raster" not in mixed:
         return []
     groups = list(mixed.groupby(["scene", "method"]))

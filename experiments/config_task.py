@@ -28,13 +28,13 @@ import numpy as np
 
 from hybrid.camera.view import parse_size
 from hybrid.errors import TerrabenchError
+from hybrid.strategies import mixed_policies
 
 from .metrics import frame_accuracy
 from .popping import popping, static_pop_pixels, temporal_errors
-from .spec import Spec
+from .spec import Config, Spec
 
 SETTLE_S = 0.3   # seconds of idle before a configuration's timed frames
-MIXED = ("hybrid", "heuristic", "oracle")
 
 
 @dataclass
@@ -84,14 +84,15 @@ class TaskState:
         key = (spec.name, group_id(c))
         if self._group != key:
             self.release_group()
-            tkey = (c["dataset"], c["seed"], spec.dataset_size)
+            cfg = Config.of(c)
+            tkey = (cfg.dataset, cfg.seed, spec.dataset_size)
             if tkey not in self._terrain:
-                self._terrain = {tkey: spec.terrain(c["dataset"], c["seed"])}
+                self._terrain = {tkey: spec.terrain(cfg.dataset, cfg.seed)}
             hf = self._terrain[tkey]
-            w, h = parse_size(c["size"])
-            views = get_flight(c["flight"], hf, frames=spec.frames, width=w, height=h).views()
+            w, h = parse_size(cfg.size)
+            views = get_flight(cfg.flight, hf, frames=spec.frames, width=w, height=h).views()
             for k, v in enumerate(views):
-                check_eye_above(hf, v, f"flight {c['flight']} frame {k}")
+                check_eye_above(hf, v, f"flight {cfg.flight} frame {k}")
             self._group, self._views = key, (hf, views)
             self._reference = reference_renderer(self.ctx, hf) if spec.accuracy else None
         return self._views
@@ -141,7 +142,7 @@ class _ConfigRun:
     """One configuration inside a group: its renderer (GPU state), its timed draws and its result."""
 
     def __init__(self, c: dict, todo: list[int]):
-        self.c, self.todo = c, todo
+        self.c, self.cfg, self.todo = c, Config.of(c), todo
         self.renderer = None
         self.timed: dict = {}
         self.out = ConfigResult(c)
@@ -215,7 +216,7 @@ def _keep_learned(r: _ConfigRun, state: TaskState) -> None:
     """Keep r's adapted cost model in ``state.learned`` when its predictions hold and it learned more frames than
     the one kept (started from the device's model: a fallback's start is a demonstration, not this device's)."""
     online = getattr(r.renderer, "online", None)
-    if online is None or not online.settled or r.c.get("start_model", "device") != "device":
+    if online is None or not online.settled or r.cfg.start_model != "device":
         return
     if state.learned is None or online.model.adapted_frames > state.learned.adapted_frames:
         state.learned = online.model
@@ -226,17 +227,17 @@ def _open(spec: Spec, r: _ConfigRun, state: TaskState, hf, views) -> None:
     an uninterrupted run's) and draw that frame once untimed (compiles, first uploads: one-off costs)."""
     from hybrid.cost.model import fallback_cost_model
     from hybrid.renderer import make_renderer
-    c, model = r.c, state.cost_model
-    if c.get("start_model", "device") == "fallback":
+    c, model = r.cfg, state.cost_model
+    if c.start_model == "fallback":
         model = fallback_cost_model()
     mixed = {"adapt": spec.adapt, **({"cost_model": model} if model is not None else {})} \
-        if c["policy"] in MIXED else {}
-    r.renderer = make_renderer(state.ctx, hf, c["policy"], tile_size=spec.tile_size,
-                               reconstruction=c["reconstruction"], budget_bytes=spec.gpu_budget_mib << 20,
-                               full_res=c["full_res"], upload_budget_ms=spec.upload_budget_ms, **mixed)
+        if c.policy in mixed_policies() else {}
+    r.renderer = make_renderer(state.ctx, hf, c.policy, tile_size=spec.tile_size,
+                               reconstruction=c.reconstruction, budget_bytes=spec.gpu_budget_mib << 20,
+                               full_res=c.full_res, upload_budget_ms=spec.upload_budget_ms, **mixed)
     for k in range(r.todo[0]):
-        r.renderer.render(views[k], c["tau"])
-    r.renderer.render(views[r.todo[0]], c["tau"])
+        r.renderer.render(views[k], c.tau)
+    r.renderer.render(views[r.todo[0]], c.tau)
 
 
 def _time_frame(spec: Spec, live: list[_ConfigRun], k: int, views, fail_fast: bool, step) -> None:
@@ -248,21 +249,22 @@ def _time_frame(spec: Spec, live: list[_ConfigRun], k: int, views, fail_fast: bo
             return
         shift = (k * spec.repeats + rep) % len(turn)
         for r in turn[shift:] + turn[:shift]:
-            r.attempt(lambda r=r: draws[id(r)].append(r.renderer.render(views[k], r.c["tau"])), fail_fast)
+            r.attempt(lambda r=r: draws[id(r)].append(r.renderer.render(views[k], r.cfg.tau)), fail_fast)
     for r in live:
         if r.out.error is not None:
             continue
         results = draws[id(r)]
         mapped: list = []
-        if spec.accuracy and k in spec.image_frames and r.c["policy"] in MIXED:       # untimed, for its maps
-            r.attempt(lambda r=r, mapped=mapped: mapped.append(r.renderer.render(views[k], r.c["tau"], maps=True)), fail_fast)
+        if spec.accuracy and k in spec.image_frames and r.cfg.policy in mixed_policies():       # untimed, for its maps
+            r.attempt(lambda r=r, mapped=mapped: mapped.append(r.renderer.render(views[k], r.cfg.tau, maps=True)),
+                      fail_fast)
         if r.out.error is not None:
             continue
         cpu = [x.stats.cpu_ms for x in results if x.stats.cpu_ms is not None]
         gpu = [x.stats.gpu_ms for x in results if x.stats.gpu_ms is not None]
         r.timed[k] = ((mapped or results)[-1], [x.stats.wall_ms for x in results], results[-1].stats, cpu, gpu)
         if step:
-            step(f"{r.c['config']} frame {k}")
+            step(f"{r.cfg.config} frame {k}")
 
 
 def _measure(spec: Spec, r: _ConfigRun, state: TaskState, views, extra: dict | None) -> None:
@@ -279,20 +281,21 @@ def _measure(spec: Spec, r: _ConfigRun, state: TaskState, views, extra: dict | N
                "wall_ms_repeats": [float(w) for w in walls]}
         if spec.accuracy:
             row.update(_accuracy(spec, r, state, views, k, res, drawn))
-        tiles = [{"config": c["config"], "frame": k, "policy": c["policy"], **t} for t in timed_stats.tile_rows]
+        cfg = r.cfg
+        tiles = [{"config": cfg.config, "frame": k, "policy": cfg.policy, **t} for t in timed_stats.tile_rows]
         out.frames.append((row, tiles))
         if spec.accuracy and (k in spec.image_frames or spec.video):
-            out.images.append(_image(f"{c['config']}-f{k}", res, k in spec.image_frames))
+            out.images.append(_image(f"{cfg.config}-f{k}", res, k in spec.image_frames))
 
 
 def _accuracy(spec: Spec, r: _ConfigRun, state: TaskState, views, k: int, res, drawn: dict) -> dict:
     """Frame k's accuracy, temporal and popping measures against the group's references; ``drawn`` holds the
     frames drawn so far (neighbours a resumed run did not time are added)."""
-    c = r.c
+    c, tau = r.c, r.cfg.tau
 
     def frame(j):
         if j not in drawn:
-            drawn[j] = r.renderer.render(views[j], c["tau"])
+            drawn[j] = r.renderer.render(views[j], tau)
         return drawn[j]
 
     def ref(j):
@@ -304,6 +307,6 @@ def _accuracy(spec: Spec, r: _ConfigRun, state: TaskState, views, k: int, res, d
     if 0 < k < spec.frames - 1:
         refs = (ref(k - 1), ref(k), ref(k + 1))
         row.update(popping((frame(k - 1), res, frame(k + 1)), refs, views[k - 1:k + 2]))
-        row["pop_static_px"] = (static_pop_pixels(r.renderer, views[k - 1:k + 2], refs, c["tau"], res)
+        row["pop_static_px"] = (static_pop_pixels(r.renderer, views[k - 1:k + 2], refs, tau, res)
                                 if np.isfinite(row["pop_px"]) else np.nan)
     return row

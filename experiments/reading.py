@@ -10,11 +10,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from hybrid.strategies import mixed_policies
+
 from .adapt_charts import adaptation_sentences, gpu_cpu_sentence
 from .charts import label_columns
 from .noise import compare
-
-MIXED = ("hybrid", "heuristic", "oracle")
 
 
 def _fmt_list(items: list[str]) -> str:
@@ -68,7 +68,7 @@ def mixed_sentences(g: pd.DataFrame) -> list[str]:
         pure = {p: r for p, r in pure.items() if not r.empty}
         if not pure:
             continue
-        for pol, name in [(p, m) for p in MIXED for m in sorted(sub.loc[sub["policy"] == p, "method"].unique())]:
+        for pol, name in [(p, m) for p in mixed_policies() for m in sorted(sub.loc[sub["policy"] == p, "method"].unique())]:
             rows = sub[sub["method"] == name]
             same = _same_choices(rows)
             if same and same in pure:

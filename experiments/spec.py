@@ -43,22 +43,48 @@ from __future__ import annotations
 import itertools
 import json
 import tomllib
-from dataclasses import asdict, dataclass, field
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
-from typing import get_args
+from typing import Any
 
 from hybrid.camera.view import parse_size
-from hybrid.contract import DEFAULT_FULL_RES, FULL_RES, PRIOR_FULL_RES, TILELET_POLICIES, Method
+from hybrid.contract import DEFAULT_FULL_RES, PRIOR_FULL_RES
 from hybrid.errors import TerrabenchError
+from hybrid.strategies import adapting_policies, methods, option_choices, policies_taking
 from hybrid.terrain.sources import TerrainSource
 
 from .spec_datasets import check_dataset_entry, dataset_label, terrain_source
 
-POLICIES = get_args(Method)
-RECONSTRUCTIONS = ("planes", "linear", "triangles", "bilinear")
 START_MODELS = ("device", "fallback")
 """The hybrid's starting cost models: this GL renderer's as loaded (``hybrid.cost.model.load_cost_model``: the
 user's file, the shipped default, else the fallback), or the shipped uncalibrated fallback."""
+
+
+@dataclass(frozen=True)
+class Config:
+    """One configuration of a run: a policy over one flight of one dataset at one size, tau and option set; ``config``
+    is its stable id. Runs store it as a row (``row``), as spec.json and the journal hold it."""
+
+    config: str
+    dataset: str
+    seed: int
+    flight: str
+    size: str
+    tau: float
+    reconstruction: str
+    full_res: str
+    policy: str
+    start_model: str = START_MODELS[0]
+
+    @classmethod
+    def of(cls, row: Mapping) -> Config:
+        """The configuration of a row; keys that are no field are left out, a missing start model is the device's."""
+        return cls(**{f.name: row[f.name] for f in fields(cls) if f.name in row})
+
+    def row(self) -> dict:
+        """The configuration as a flat dict, fields in order."""
+        return asdict(self)
 
 
 @dataclass
@@ -92,23 +118,23 @@ class Spec:
         """Every combination, one dict each, with a stable id; frames of one (dataset, seed, flight, size) are paired."""
         out = []
         labels = [dataset_label(d) for d in self.datasets]
+        casting, tilelets, adapting = policies_taking("reconstruction"), policies_taking("full_res"), adapting_policies()
         for ds, seed, fl, size, tau, rec, fr, pol, sm in itertools.product(
                 labels, self.seeds, self.flights, self.sizes, self.taus, self.reconstructions, self.full_res,
                 self.policies, self.start_models):
-            if pol not in ("raycast", "hybrid", "heuristic", "oracle") and rec != self.reconstructions[0]:
+            if pol not in casting and rec != self.reconstructions[0]:
                 continue                      # reconstruction only matters where rays are cast
-            if pol not in TILELET_POLICIES and fr != self.full_res[0]:
+            if pol not in tilelets and fr != self.full_res[0]:
                 continue                      # the full-resolution rule only where tilelets are drawn
             if pol == "reference" and tau != self.taus[0]:
                 continue
-            if pol != "hybrid" and sm != self.start_models[0]:
+            if pol not in adapting and sm != self.start_models[0]:
                 continue                      # only the hybrid reads a cost model as it goes
-            fr = fr if pol in TILELET_POLICIES else PRIOR_FULL_RES
-            sm = sm if pol == "hybrid" else START_MODELS[0]
+            fr = fr if pol in tilelets else PRIOR_FULL_RES
+            sm = sm if pol in adapting else START_MODELS[0]
             cid = f"{Path(str(ds)).stem}-s{seed}-{Path(str(fl)).stem}-{size}-tau{tau:.4g}-{rec}-{pol}" + \
                 ("" if fr == PRIOR_FULL_RES else f"-{fr}") + ("" if sm == START_MODELS[0] else f"-from-{sm}")
-            out.append({"config": cid, "dataset": ds, "seed": seed, "flight": fl, "size": size, "tau": tau,
-                        "reconstruction": rec, "full_res": fr, "policy": pol, "start_model": sm})
+            out.append(Config(cid, ds, seed, fl, size, tau, rec, fr, pol, sm).row())
         return out
 
     def source(self, label: str) -> TerrainSource:
@@ -226,22 +252,40 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None, overri
     unknown = set(d) - known
     if unknown:
         raise TerrabenchError(f"{source}: unknown keys {sorted(unknown)}; known: {sorted(known)}")
+    kw = {"name": d.get("name", Path(source).stem)}
+    if not isinstance(kw["name"], str) or not kw["name"] or any(c in kw["name"] for c in "/\\ "):
+        raise TerrabenchError(f"{source}: name must be a non-empty word without slashes or spaces, got {kw['name']!r}")
+    if "datasets" in d:
+        kw["datasets"] = _datasets(d["datasets"], source, base)
+    for key, kind, check in _list_keys(source):
+        v = _list(d, key, kind, check)
+        if v is not None:
+            kw[key] = [float(x) for x in v] if key == "taus" else v
+    kw.update(_scalars(d, source))
+    return _checked(Spec(**kw), source)
 
-    def policy_ok(p):
-        if p not in POLICIES:
-            raise TerrabenchError(f"{source}: unknown policy {p!r}; choose from {', '.join(POLICIES)}")
 
-    def rec_ok(r):
-        if r not in RECONSTRUCTIONS:
-            raise TerrabenchError(f"{source}: unknown reconstruction {r!r}; choose from {', '.join(RECONSTRUCTIONS)}")
+def _datasets(v, source: str, base: Path | None) -> list:
+    """The spec's dataset entries, checked, with distinct labels."""
+    if not isinstance(v, list) or not v:
+        raise TerrabenchError(f"{source}: 'datasets' must be a non-empty list, got {v!r}")
+    entries = [check_dataset_entry(e, source, base) for e in v]
+    labels = [dataset_label(e) for e in entries]
+    twice = sorted({label for label in labels if labels.count(label) > 1})
+    if twice:
+        raise TerrabenchError(f"{source}: datasets {twice} appear twice; give each a distinct 'name'")
+    return entries
 
-    def start_ok(m):
-        if m not in START_MODELS:
-            raise TerrabenchError(f"{source}: unknown start model {m!r}; choose from {', '.join(START_MODELS)}")
 
-    def full_res_ok(r):
-        if r not in FULL_RES:
-            raise TerrabenchError(f"{source}: unknown full_res {r!r}; choose from {', '.join(FULL_RES)}")
+def _list_keys(source: str) -> tuple:
+    """(key, element type, element check or None) of every list key of a flights spec; the names a key allows
+    come from the strategy registry where they name policies or strategy options."""
+
+    def one_of(what: str, allowed: tuple):
+        def check(v):
+            if v not in allowed:
+                raise TerrabenchError(f"{source}: unknown {what} {v!r}; choose from {', '.join(allowed)}")
+        return check
 
     def tau_ok(t):
         if not (t > 0 and t < 1e3):
@@ -254,26 +298,16 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None, overri
         if not (0 <= s < 2**32):
             raise TerrabenchError(f"{source}: seeds must lie in [0, 2^32), got {s!r}")
 
-    kw = {"name": d.get("name", Path(source).stem)}
-    if not isinstance(kw["name"], str) or not kw["name"] or any(c in kw["name"] for c in "/\\ "):
-        raise TerrabenchError(f"{source}: name must be a non-empty word without slashes or spaces, got {kw['name']!r}")
-    if "datasets" in d:
-        v = d["datasets"]
-        if not isinstance(v, list) or not v:
-            raise TerrabenchError(f"{source}: 'datasets' must be a non-empty list, got {v!r}")
-        kw["datasets"] = [check_dataset_entry(e, source, base) for e in v]
-        labels = [dataset_label(e) for e in kw["datasets"]]
-        twice = sorted({label for label in labels if labels.count(label) > 1})
-        if twice:
-            raise TerrabenchError(f"{source}: datasets {twice} appear twice; give each a distinct 'name'")
-    for key, kind, check in (("flights", str, None), ("policies", str, policy_ok),
-                             ("taus", (int, float), tau_ok), ("sizes", str, size_ok),
-                             ("reconstructions", str, rec_ok), ("full_res", str, full_res_ok), ("seeds", int, seed_ok),
-                             ("start_models", str, start_ok),
-                             ("image_frames", int, None)):
-        v = _list(d, key, kind, check)
-        if v is not None:
-            kw[key] = [float(x) for x in v] if key == "taus" else v
+    return (("flights", str, None), ("policies", str, one_of("policy", methods())),
+            ("taus", (int, float), tau_ok), ("sizes", str, size_ok),
+            ("reconstructions", str, one_of("reconstruction", option_choices("reconstruction"))),
+            ("full_res", str, one_of("full_res", option_choices("full_res"))), ("seeds", int, seed_ok),
+            ("start_models", str, one_of("start model", START_MODELS)), ("image_frames", int, None))
+
+
+def _scalars(d: dict, source: str) -> dict:
+    """The spec's integer, number and true/false keys that ``d`` gives, checked."""
+    kw: dict[str, Any] = {}
     for key, lo, hi in (("frames", 1, 100000), ("repeats", 3, 1000), ("tile_size", 2, 65536),
                         ("supersample", 1, 8), ("dataset_size", 0, 16385), ("gpu_budget_mib", 1, 1 << 20)):
         if key in d:
@@ -293,7 +327,7 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None, overri
             if not isinstance(d[key], bool):
                 raise TerrabenchError(f"{source}: '{key}' must be true or false, got {d[key]!r}")
             kw[key] = d[key]
-    return _checked(Spec(**kw), source)
+    return kw
 
 
 def _checked(spec: Spec, source: str) -> Spec:

@@ -23,6 +23,7 @@ _UPPER = {
     "TileItem": "hybrid.contract", "Policy": "hybrid.contract", "Method": "hybrid.contract",
     "shared_context": "hybrid.gl.context", "gl_info": "hybrid.gl.context", "RenderResult": "hybrid.gl.target",
     "STRATEGIES": "hybrid.strategies", "make_strategy": "hybrid.strategies",
+    "register_strategy": "hybrid.strategies", "register_policy": "hybrid.strategies",
     "CostModel": "hybrid.cost.model", "load_cost_model": "hybrid.cost.model", "TilePlan": "hybrid.cost.planner",
     "plan_frame": "hybrid.cost.planner", "TileFeatures": "hybrid.cost.features",
     "ReferenceRenderer": "hybrid.reference", "Renderer": "hybrid.renderer", "make_renderer": "hybrid.renderer",

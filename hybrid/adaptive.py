@@ -86,3 +86,21 @@ def observe(online: OnlineModel, plans: list[TilePlan], pass_ms: dict, draw_ms: 
     frame = frame_columns(plans)
     if frame is not None:
         online.observe(frame.columns, [p.choice for p in plans], pass_ms, draw_ms, explored)
+
+
+def timed_explore(online: OnlineModel | None, plans: list[TilePlan], learn: bool) -> tuple[Exploration | None, float]:
+    """(``explore``'s exploration or None, its CPU ms); nothing done unless ``learn``."""
+    t0 = time.perf_counter()
+    explored = explore(online, plans) if learn and online is not None else None
+    return explored, (time.perf_counter() - t0) * 1e3
+
+
+def learn(online: OnlineModel, clock: PassClock, plans: list[TilePlan], draw_ms: float, gpu_ms: float | None,
+          issue_ms: float, explored: Exploration | None) -> float:
+    """Hand the drawn frame to the online model (each pass's ms: the clock's, or the whole drawing for a frame of
+    one strategy); its CPU ms back."""
+    t0 = time.perf_counter()
+    passes = clock.passes() if clock.split else \
+        {plans[0].choice: draw_ms if gpu_ms is None else max(gpu_ms, issue_ms)} if plans else {}
+    observe(online, plans, passes, draw_ms, explored)
+    return (time.perf_counter() - t0) * 1e3

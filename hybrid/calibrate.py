@@ -11,12 +11,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from hybrid.camera.view import View
-from hybrid.contract import CANDIDATES, DEFAULT_FULL_RES
+from hybrid.contract import DEFAULT_FULL_RES
 from hybrid.cost.features import TileFeatures
 from hybrid.cost.fit import FrameSample, TileSample, fit_frames
 from hybrid.cost.model import CostModel, term_values
 from hybrid.gl.context import gl_info
 from hybrid.renderer import Renderer
+from hybrid.strategies import candidates
 from hybrid.terrain.heightfield import HeightField
 from hybrid.tiles.tiletree import DEFAULT_TAU
 
@@ -39,10 +40,10 @@ def time_view_tiles(r: Renderer, v: View, tau: float, feats: list, times: dict, 
     res = r.render(v, tau, measure=True)
     rows = res.stats.tile_rows
     frames.append({n: (np.array([row[f"meas_{n}_ms"] for row in rows]), res.stats.together_ms.get(n))
-                   for n in CANDIDATES})
+                   for n in candidates()})
     for row in rows:
         feats.append(TileFeatures.from_row(row))
-        for n in CANDIDATES:
+        for n in candidates():
             times[n].append(row[f"meas_{n}_ms"])
 
 
@@ -53,10 +54,10 @@ def time_view_frames(r: Renderer, v: View, tau: float, repeats: int, mixes: int,
     plans = r.plan(v, tau)
     if not plans:
         return []
-    terms = {n: np.array([term_values(p.features, n) for p in plans]) for n in CANDIDATES}
-    assigns = [np.array([n] * len(plans)) for n in CANDIDATES]
+    terms = {n: np.array([term_values(p.features, n) for p in plans]) for n in candidates()}
+    assigns = [np.array([n] * len(plans)) for n in candidates()]
     for _ in range(mixes):
-        pool = rng.choice(CANDIDATES, size=int(rng.integers(2, len(CANDIDATES) + 1)), replace=False)
+        pool = rng.choice(candidates(), size=int(rng.integers(2, len(candidates()) + 1)), replace=False)
         assigns.append(rng.choice(pool, size=len(plans)))
     ms = [[] for _ in assigns]
     for rep in range(repeats + 1):                   # the first round warms (uploads, compiles)
@@ -66,15 +67,15 @@ def time_view_frames(r: Renderer, v: View, tau: float, repeats: int, mixes: int,
             t = r.render(v, tau, plans=plans).stats.draw_ms
             if rep:
                 m.append(t)
-    return [FrameSample({n: bool((a == n).any()) for n in CANDIDATES},
-                        {n: terms[n][a == n].sum(axis=0) for n in CANDIDATES}, float(np.median(m)))
+    return [FrameSample({n: bool((a == n).any()) for n in candidates()},
+                        {n: terms[n][a == n].sum(axis=0) for n in candidates()}, float(np.median(m)))
             for a, m in zip(assigns, ms)]
 
 
 def tile_samples(feats: list[TileFeatures], times: dict) -> list[TileSample]:
     """Every tile timed one call each (``time_view_tiles``) as one sample per candidate, with that candidate's
     terms."""
-    return [TileSample(n, term_values(f, n), float(times[n][i])) for i, f in enumerate(feats) for n in CANDIDATES]
+    return [TileSample(n, term_values(f, n), float(times[n][i])) for i, f in enumerate(feats) for n in candidates()]
 
 
 def calibrate(ctx, hf: HeightField, views: list[View], tau: float = DEFAULT_TAU, tile_size: int = 256,
@@ -85,13 +86,13 @@ def calibrate(ctx, hf: HeightField, views: list[View], tau: float = DEFAULT_TAU,
     view's frames and tiles are timed one after the other, so that a drift of the machine's speed over the run
     falls on both alike."""
     rng = np.random.default_rng(seed)
-    samples, feats, times, frames = [], [], {n: [] for n in CANDIDATES}, []
+    samples, feats, times, frames = [], [], {n: [] for n in candidates()}, []
     with Renderer(ctx, hf, "hybrid", tile_size, oracle_repeats=repeats, full_res=full_res) as r:
         for v in views:
             samples += time_view_frames(r, v, tau, repeats, mixes, rng)
             time_view_tiles(r, v, tau, feats, times, frames)
     times = {n: np.array(t) for n, t in times.items()}
-    model = fit_frames(samples, gl_info(ctx).renderer, holdout, seed, CANDIDATES, tile_samples(feats, times))
+    model = fit_frames(samples, gl_info(ctx).renderer, holdout, seed, candidates(), tile_samples(feats, times))
     model.tiles = len(feats)
     model.full_res = full_res
     return Calibration(model, feats, times, frames, samples)

@@ -16,23 +16,15 @@ from hybrid.tiles.pyramid import Tile, TileKey
 from hybrid.tiles.tiletree import SelectedTile
 
 StrategyName = Literal["raster", "raster_gs", "raycast", "fullres", "tin"]
-"""Registered tile strategies: tilelets as indexed triangles (raster) and through the geometry shader
-(raster_gs), the max-mipmap ray caster, and two raster baselines."""
+"""Names of the registered tile strategies, for type checkers; ``hybrid.strategies`` is the registry, and
+tests/test_registry.py keeps this in step with it."""
 Kind = Literal["raster", "raycast"]
 """How a strategy makes pixels: triangles through the rasterizer, or rays in the fragment shader."""
 Policy = Literal["raster", "raster_gs", "raycast", "fullres", "tin", "hybrid", "heuristic", "oracle"]
-"""How a renderer chooses each tile's strategy: one strategy for all, or a per-tile choice."""
+"""How a renderer chooses each tile's strategy (for type checkers; the registry's ``policies()``)."""
 Method = Literal["reference", "raster", "raster_gs", "raycast", "fullres", "tin", "hybrid", "heuristic", "oracle"]
-"""Anything that renders a view: the full-resolution reference or a policy."""
+"""Anything that renders a view: the full-resolution reference or a policy (the registry's ``methods()``)."""
 
-PURE_POLICIES: tuple[str, ...] = get_args(StrategyName)
-MIXED_POLICIES: tuple[str, ...] = ("hybrid", "heuristic", "oracle")
-POLICIES: tuple[str, ...] = get_args(Policy)
-METHODS: tuple[str, ...] = get_args(Method)
-CANDIDATES: tuple[str, ...] = ("raster", "raster_gs", "raycast")
-"""The strategies a mixed policy chooses between: both restricted-quadtree raster paths and the ray caster."""
-TILELET_POLICIES: tuple[str, ...] = ("raster", "raster_gs", *MIXED_POLICIES)
-"""The policies that draw restricted-quadtree tilelets (alone, or among a mixed policy's candidates)."""
 FullRes = Literal["exact", "lean"]
 """Full-resolution rules of the tilelet strategies: "exact" draws every full-resolution leaf with all its
 midpoints, its cells split SW-NE as the reference's (more triangles than the bound asks for, closer to the

@@ -8,11 +8,12 @@ from __future__ import annotations
 import numpy as np
 
 from hybrid.camera.view import View
-from hybrid.contract import CANDIDATES, TileItem
+from hybrid.contract import TileItem
 from hybrid.cost.choice import best_assignment
 from hybrid.cost.fit import estimate_overhead
 from hybrid.gl.target import FrameTarget
 from hybrid.gl.timing import timed
+from hybrid.strategies import candidates
 
 
 def timed_call(r, target: FrameTarget, view: View, name: str, items: list[TileItem], tau: float) -> float:
@@ -58,16 +59,16 @@ def measure_plans(r, view: View, plans, target: FrameTarget, pinned: set, tau: f
     """Time every tile inside frames each candidate way (each plan's ``measured``) and each pure frame (returned,
     ms by strategy); the oracle policy then takes the cheapest assignment, with per-strategy overheads estimated
     from the same frames."""
-    pinned |= {(n, p.key) for p in plans for n in CANDIDATES}
+    pinned |= {(n, p.key) for p in plans for n in candidates()}
     if not plans:
         return {}
-    runs = time_in_frames(r, view, plans, CANDIDATES, target, pinned, tau)
+    runs = time_in_frames(r, view, plans, candidates(), target, pinned, tau)
     per, together = {n: t[0] for n, t in runs.items()}, {n: t[1] for n, t in runs.items()}
     for i, p in enumerate(plans):
-        p.measured = {n: float(per[n][i]) for n in CANDIDATES}
+        p.measured = {n: float(per[n][i]) for n in candidates()}
     if r.policy == "oracle":
-        overhead = {n: estimate_overhead([per[n]], [together[n]]) for n in CANDIDATES}
-        best, _ = best_assignment({n: per[n] - overhead[n] for n in CANDIDATES}, overhead, together)
+        overhead = {n: estimate_overhead([per[n]], [together[n]]) for n in candidates()}
+        best, _ = best_assignment({n: per[n] - overhead[n] for n in candidates()}, overhead, together)
         for p, c in zip(plans, best):
             p.choice = c
     return together

@@ -11,7 +11,7 @@ Frame time (``wall_ms``) is what a user waits for a frame: the CPU planning (til
 mixed policies the features and choices) plus the drawing, wall clock with ctx.finish() on both sides.
 Without an upload budget, tiles not yet resident are uploaded before the timed draw and counted apart
 (``uploads``); with ``upload_budget_ms`` uploads are jobs run inside the frame within that budget
-(``hybrid.uploads``), their time is part of ``wall_ms``, and tiles still waiting are drawn from a resident
+(``hybrid.streaming``), their time is part of ``wall_ms``, and tiles still waiting are drawn from a resident
 ancestor (``fallback_tiles``); from a tile store, the store's loader thread is asked at the start of the frame
 for the samples the frame lacks and for the slow host work of uploads and estimates (``hybrid.uploads.host_jobs``),
 and an upload whose host work it has not yet done waits for it.
@@ -25,7 +25,7 @@ import numpy as np
 
 from hybrid import adaptive, oracle
 from hybrid.camera.view import View
-from hybrid.contract import CANDIDATES, DEFAULT_FULL_RES, MIXED_POLICIES, POLICIES, FrameStats, TileItem
+from hybrid.contract import DEFAULT_FULL_RES, FrameStats, TileItem
 from hybrid.cost.model import CostModel, load_cost_model
 from hybrid.cost.online import AdaptOptions, OnlineModel
 from hybrid.cost.planner import TilePlan, plan_frame
@@ -35,12 +35,21 @@ from hybrid.gl.target import FrameTarget, RenderResult
 from hybrid.gl.timing import timed
 from hybrid.reference import ReferenceRenderer
 from hybrid.residency import ResidencyCache
-from hybrid.strategies import STRATEGIES, make_strategy, triangle_estimator
+from hybrid.strategies import (
+    STRATEGIES,
+    candidates,
+    check_policy,
+    make_strategy,
+    mixed_policies,
+    policy_entry,
+    triangle_estimator,
+)
+from hybrid.streaming import make_resident
 from hybrid.terrain.heightfield import HeightField
 from hybrid.tiles.pyramid import EDGE_E, EDGE_N, EDGE_S, EDGE_W, TilePyramid
 from hybrid.tiles.store import pyramid_for
 from hybrid.tiles.tiletree import DEFAULT_TAU, edge_neighbours
-from hybrid.uploads import fallback_selection, fallback_tile, host_jobs, stream_uploads
+from hybrid.uploads import fallback_selection, fallback_tile
 
 STRATEGY_CODES = {"raster": 1, "raycast": 2}
 """Per-pixel codes of the strategy map, by strategy kind (0 = no terrain)."""
@@ -67,21 +76,21 @@ class Renderer:
                  cost_model: CostModel | None = None, budget_bytes: int | None = None, threshold: float = 1.0,
                  oracle_repeats: int = 3, pyramid: TilePyramid | None = None, upload_budget_ms: float | None = None,
                  adapt: bool | AdaptOptions = True, **options):
-        if policy not in POLICIES:
-            raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
+        check_policy(policy)
         self.ctx, self.hf, self.policy = ctx, hf, policy
-        self.mixed = policy in MIXED_POLICIES
+        self.mixed = policy in mixed_policies()
+        self.entry = policy_entry(policy) if self.mixed else None
         self._own_pyramid = pyramid is None              # made here: closed (its loader thread) on release
         self.pyramid = pyramid or pyramid_for(hf, tile_size)
         self.cache = ResidencyCache(budget_bytes)
-        self.strategies = {n: make_strategy(n, ctx, hf) for n in (CANDIDATES if self.mixed else (policy,))}
+        self.strategies = {n: make_strategy(n, ctx, hf) for n in (candidates() if self.mixed else (policy,))}
         self.options = route_options(self.strategies, options)
         self._model = cost_model or (load_cost_model(gl_info(ctx).renderer) if self.mixed else None)
         self.online = OnlineModel(self._model, adapt if isinstance(adapt, AdaptOptions) else None) \
-            if adapt and policy == "hybrid" else None
+            if adapt and self.entry is not None and self.entry.adapts else None
         self.triangles = triangle_estimator(self.pyramid, full_res=options.get("full_res", DEFAULT_FULL_RES)) \
             if self.mixed else None
-        if self.triangles is not None and upload_budget_ms is not None and hasattr(self.pyramid, "request"):
+        if self.triangles is not None and upload_budget_ms is not None and self.pyramid.background_loader:
             self.triangles.background = True             # blocks still to cut: the store's loader thread cuts them
         self.threshold = threshold
         self.oracle_repeats = int(oracle_repeats)
@@ -125,7 +134,7 @@ class Renderer:
             self._tiles.move_to_end(key)
             return self._tiles[key]
         t = self._tiles[key] = self.pyramid.tile(key)
-        budget = getattr(self.pyramid, "host_budget", None)
+        budget = self.pyramid.host_budget
         if budget is not None and len(self._tiles) > max(budget // max(t.heights.nbytes, 1), 256):
             self._tiles.popitem(last=False)
         return t
@@ -243,52 +252,61 @@ class Renderer:
         itself and does not measure (``hybrid.adaptive``).
         """
         self._check_live()
-        if measure and not self.mixed:
-            raise TerrabenchError(f"measure=True needs a mixed policy ({', '.join(MIXED_POLICIES)}), not {self.policy!r}")
-        if maps and not read:
-            raise TerrabenchError("maps=True reads the frame back; it cannot go with read=False")
+        measure = self._measures(measure, maps, read, plans)
         opts = {n: {**self.options[n], **o} for n, o in route_options(self.strategies, options).items()}
-        if measure is None:
-            measure = self.policy == "oracle" and plans is None
         learn = self.online is not None and plans is None and not measure
         plans, plan_ms, prep_ms = self._planned(view, tau, plans)
-        t_adapt = time.perf_counter()
-        explored = adaptive.explore(self.online, plans) if learn else None
-        adapt_ms = (time.perf_counter() - t_adapt) * 1e3
+        explored, adapt_ms = adaptive.timed_explore(self.online, plans, learn)
         pinned = {(p.choice, p.key) for p in plans}
-        uploads0, evictions0 = self.cache.stats.uploads, self.cache.stats.evictions
+        before = (self.cache.stats.uploads, self.cache.stats.evictions)
         target = FrameTarget(self.ctx, view.width, view.height)
         try:
             together = oracle.measure_plans(self, view, plans, target, pinned, tau) if measure else {}
-            streamed = self._uploads(plans, pinned, prep_ms)
+            streamed = make_resident(self, plans, pinned, prep_ms)
             clock = adaptive.PassClock(self.ctx, learn and len({p.choice for p in plans}) > 1)
-            target.clear()
-            target.use()
-            try:
-                counters, draw, gpu, issue = timed(self.ctx, lambda: self._draw(target, view, plans, pinned, tau, opts,
-                                                                                clock), query=not clock.gpu)
-            finally:
-                self._fallbacks = {}
-            gpu = clock.gpu_ms if clock.gpu else gpu
+            counters, draw, gpu, issue = self._timed_draw(target, view, plans, pinned, tau, opts, clock)
             if learn and not (streamed and streamed.fallback_tiles):
-                t_adapt = time.perf_counter()
-                passes = clock.passes() if clock.split else \
-                    {plans[0].choice: draw if gpu is None else max(gpu, issue)} if plans else {}
-                adaptive.observe(self.online, plans, passes, draw, explored)
-                adapt_ms += (time.perf_counter() - t_adapt) * 1e3
+                adapt_ms += adaptive.learn(self.online, clock, plans, draw, gpu, issue, explored)
             stats = self._stats(plans, plan_ms, draw, gpu, counters, together)
-            stats.prep_ms, stats.issue_ms, stats.adapt_ms = prep_ms, issue, adapt_ms
-            stats.explored_tiles = 0 if explored is None else len(explored.tiles)
-            stats.wall_ms += adapt_ms
-            if streamed is not None:
-                stats.upload_ms, stats.fallback_tiles, stats.pending_uploads = \
-                    streamed.upload_ms, streamed.fallback_tiles, streamed.fallback_tiles
-                stats.wall_ms += streamed.upload_ms + prep_ms
-            stats.uploads = self.cache.stats.uploads - uploads0
-            stats.evictions = self.cache.stats.evictions - evictions0
+            self._frame_costs(stats, prep_ms, issue, adapt_ms, explored, streamed, before)
             return self._result(target, view, plans, stats, counters, tau, opts, read, maps)
         finally:
             target.release()
+
+    def _measures(self, measure: bool | None, maps: bool, read: bool, plans) -> bool:
+        """Whether ``render`` times every tile every candidate way (default: a measuring policy planning the view
+        itself); refuses arguments that do not go together."""
+        if measure and not self.mixed:
+            raise TerrabenchError(f"measure=True needs a mixed policy ({', '.join(mixed_policies())}), not {self.policy!r}")
+        if maps and not read:
+            raise TerrabenchError("maps=True reads the frame back; it cannot go with read=False")
+        if measure is None:
+            return self.entry is not None and self.entry.measures and plans is None
+        return bool(measure)
+
+    def _timed_draw(self, target, view, plans, pinned, tau: float, opts: dict, clock) -> tuple:
+        """(counters, draw ms, GPU ms or None, issue ms) of drawing the frame into the cleared target."""
+        target.clear()
+        target.use()
+        try:
+            counters, draw, gpu, issue = timed(self.ctx, lambda: self._draw(target, view, plans, pinned, tau, opts,
+                                                                            clock), query=not clock.gpu)
+        finally:
+            self._fallbacks = {}
+        return counters, draw, clock.gpu_ms if clock.gpu else gpu, issue
+
+    def _frame_costs(self, stats: FrameStats, prep_ms: float, issue: float, adapt_ms: float, explored, streamed,
+                     before: tuple[int, int]) -> None:
+        """Fill in the frame's preparation, issue, adaptation, streaming and residency figures."""
+        stats.prep_ms, stats.issue_ms, stats.adapt_ms = prep_ms, issue, adapt_ms
+        stats.explored_tiles = 0 if explored is None else len(explored.tiles)
+        stats.wall_ms += adapt_ms
+        if streamed is not None:
+            stats.upload_ms, stats.fallback_tiles, stats.pending_uploads = \
+                streamed.upload_ms, streamed.fallback_tiles, streamed.fallback_tiles
+            stats.wall_ms += streamed.upload_ms + prep_ms
+        stats.uploads = self.cache.stats.uploads - before[0]
+        stats.evictions = self.cache.stats.evictions - before[1]
 
     def _planned(self, view: View, tau: float, plans: list[TilePlan] | None) -> tuple[list[TilePlan], float, float]:
         """(plans, planning ms, one-time preparation ms): the view's own plans unless ``plans`` are given."""
@@ -297,27 +315,6 @@ class Renderer:
         plans = self.plan(view, tau) if plans is None else plans
         prep_ms = (self.triangles.build_ms if self.triangles is not None else 0.0) - prep0
         return plans, (time.perf_counter() - t_plan) * 1e3 - prep_ms, prep_ms   # first-seen tiles' work apart
-
-    def _uploads(self, plans: list[TilePlan], pinned: set, prep_ms: float):
-        """Make the frame's tiles resident: all before the timed draw without an upload budget (None back), else
-        within the budget less ``prep_ms`` (``hybrid.uploads.stream_uploads``; the rest drawn from ancestors)."""
-        self._fallbacks = {}
-        if self.upload_budget_ms is None:
-            for p in plans:                # upload first: the timed frame measures drawing only
-                self._resident(p.choice, p.key, pinned)
-            return None
-        ready, deferred = (lambda key: True), (lambda plan: False)
-        if hasattr(self.pyramid, "request"):      # a store: its loader thread reads what is missing
-            missing = [p for p in plans if (p.choice, p.key) not in self.cache.entries]
-            work, waiting = host_jobs(self.strategies, self.triangles, missing, self.pyramid.n)
-            self.pyramid.request([p.key for p in missing] + list(work), work)
-            ready = self.pyramid.cached
-            deferred = lambda p: (p.choice, p.key) in waiting and not self.pyramid.failed(p.key)  # noqa: E731
-        # the frame's budget covers the estimate's preparation and the uploads together
-        streamed = stream_uploads(self.cache, self.strategies, plans, pinned, self.tile, self.pyramid.max_level,
-                                  max(self.upload_budget_ms - prep_ms, 0.0), ready, deferred)
-        self._fallbacks = {plans[i].key: a for i, a in streamed.fallbacks.items()}
-        return streamed
 
     def _result(self, target, view, plans, stats, counters, tau, opts, read: bool, maps: bool) -> RenderResult:
         """The frame read back (or left on the GPU with ``read`` False), with its plans and, with ``maps``, the
@@ -388,7 +385,7 @@ class Renderer:
         self.cache.clear()
         for s in self.strategies.values():
             s.release()
-        if self._own_pyramid and hasattr(self.pyramid, "close"):
+        if self._own_pyramid:
             self.pyramid.close()
         self._released = True
 

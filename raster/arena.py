@@ -22,11 +22,19 @@ GROW = 2.0                      # a grown or shrunk arena holds this many times 
 GROW_ABOVE = 0.75               # grow before the next frame when the frame's leaves fill more than this share
 SHRINK_BELOW = 0.25             # shrink when the calls' leaves fill less than this share ...
 SHRINK_AFTER = 64               # ... in this many draw calls in a row
-RECORD_BYTES = 13 * 4           # a leaf record (raster.selection.LEAF_FORMAT)
-VERTEX_BYTES, INDEX_BYTES = 9 * 16, 24 * 4
-LAYOUTS = {"exact": (RECORD_BYTES, VERTEX_BYTES, INDEX_BYTES), "lean": (15 * 4, 11 * 16, 36 * 4)}
-"""Bytes a leaf of (record, vertices, indices) by full-resolution rule (select.comp.glsl LEAF_RECORD_WORDS,
-LEAF_VERTICES, LEAF_INDICES)."""
+LEAF_SIZES = {"exact": (13, 9, 24), "lean": (15, 11, 36)}
+"""A leaf's (record words (raster.selection.LEAF_FORMAT), vec4 vertices, indices) by full-resolution rule."""
+LAYOUTS = {rule: (words * 4, vertices * 16, indices * 4) for rule, (words, vertices, indices) in LEAF_SIZES.items()}
+"""Bytes a leaf of (record, vertices, indices) by full-resolution rule."""
+RECORDS_BINDING, VERTICES_BINDING, INDICES_BINDING = 1, 7, 8     # storage bindings
+
+
+def arena_defines(full_res: str) -> dict:
+    """The arena's layout and bindings as select.comp.glsl's defines, for a full-resolution rule."""
+    words, vertices, indices = LEAF_SIZES[full_res]
+    return {"LEAF_RECORD_WORDS": f"{words}u", "LEAF_VERTICES": f"{vertices}u", "LEAF_INDICES": f"{indices}u",
+            "RECORDS_BINDING": RECORDS_BINDING, "VERTICES_BINDING": VERTICES_BINDING,
+            "INDICES_BINDING": INDICES_BINDING}
 
 
 def arena_leaves(need: int) -> int:
@@ -96,10 +104,10 @@ class LeafArena:
         return True
 
     def bind(self) -> None:
-        """Bind the buffers where the selection writes them (storage bindings 1, 7, 8)."""
-        self.records.bind_to_storage_buffer(1)
-        self.vertices.bind_to_storage_buffer(7)
-        self.indices.bind_to_storage_buffer(8)
+        """Bind the buffers where the selection writes them (``*_BINDING``)."""
+        self.records.bind_to_storage_buffer(RECORDS_BINDING)
+        self.vertices.bind_to_storage_buffer(VERTICES_BINDING)
+        self.indices.bind_to_storage_buffer(INDICES_BINDING)
 
     @property
     def nbytes(self) -> int:

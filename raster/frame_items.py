@@ -16,7 +16,7 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 from hybrid.gl.context import gl_bytes
 
-CONTROL_WORDS = 20              # select.comp.glsl CONTROL_WORDS
+CONTROL_WORDS = 20              # control words a item
 COMMANDS_PER_ITEM = CONTROL_WORDS // 5
 BASE_WORD, DONE_WORD, GROUPS_WORD, FOUND_WORD = 15, 16, 17, 18
 CMD_POINTS, CMD_TEMPLATE, CMD_SKIRTS = 0, 1, 2
@@ -24,6 +24,13 @@ SEGMENT_WORDS = 6               # skirt segment: x, y, height of both ends
 WORK_HEADER = 4                 # pass 1's dispatch (x, y, z) and an unused word
 LOCAL = 64                      # work group size (select.comp.glsl)
 MAX_ITEMS = 1 << 16             # items and work groups per item a work-table word can name
+CONTROL_BINDING, SEGMENTS_BINDING, FOUND_BINDING, WORK_BINDING = 2, 3, 6, 10   # storage bindings
+ITEM_DEFINES = {"CONTROL_WORDS": CONTROL_WORDS, "BASE_WORD": BASE_WORD, "DONE_WORD": DONE_WORD,
+                "GROUPS_WORD": GROUPS_WORD, "FOUND_WORD": FOUND_WORD, "CMD_POINTS_": CMD_POINTS,
+                "CMD_TEMPLATE_": CMD_TEMPLATE, "WORK_HEADER": f"{WORK_HEADER}u", "LOCAL": LOCAL,
+                "SEGMENT_WORDS": SEGMENT_WORDS, "CONTROL_BINDING": CONTROL_BINDING,
+                "SEGMENTS_BINDING": SEGMENTS_BINDING, "FOUND_BINDING": FOUND_BINDING, "WORK_BINDING": WORK_BINDING}
+"""The layout above as select.comp.glsl's defines: the shader's only source of these numbers."""
 
 
 def found_words(n: int) -> int:
@@ -99,11 +106,11 @@ class FrameItems:
         return found_base, seg_base, table1_start
 
     def bind(self) -> None:
-        """Bind the buffers where the selection reads and writes them (storage bindings 2, 3, 6, 10)."""
-        self.control.bind_to_storage_buffer(2)
-        self.segments.bind_to_storage_buffer(3)
-        self.found.bind_to_storage_buffer(6)
-        self.work.bind_to_storage_buffer(10)
+        """Bind the buffers where the selection reads and writes them (``*_BINDING``)."""
+        self.control.bind_to_storage_buffer(CONTROL_BINDING)
+        self.segments.bind_to_storage_buffer(SEGMENTS_BINDING)
+        self.found.bind_to_storage_buffer(FOUND_BINDING)
+        self.work.bind_to_storage_buffer(WORK_BINDING)
 
     @property
     def nbytes(self) -> int:

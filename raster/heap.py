@@ -12,6 +12,10 @@ import numpy as np
 
 from hybrid.gl.context import gl_bytes
 
+NODES_BINDING, HEIGHTS_BINDING = 0, 5     # storage bindings
+HEAP_DEFINES = {"NODES_BINDING": NODES_BINDING, "HEIGHTS_BINDING": HEIGHTS_BINDING}
+"""The heap's bindings as select.comp.glsl's defines."""
+
 MIN_SLOTS = 4                   # smallest heap, tiles
 SHRINK_BELOW = 0.25             # remake a heap whose tiles fill less than this share of it ...
 
@@ -116,9 +120,9 @@ class TileHeap:
         return gl_bytes(self.heights, self.nodes) - self.used * self.slot_bytes
 
     def bind(self) -> None:
-        """Bind the node buffer at storage binding 0 and the heights at 5 (select.comp.glsl)."""
-        self.nodes.bind_to_storage_buffer(0)
-        self.heights.bind_to_storage_buffer(5)
+        """Bind the node buffer and the heights at their storage bindings (``HEAP_DEFINES``)."""
+        self.nodes.bind_to_storage_buffer(NODES_BINDING)
+        self.heights.bind_to_storage_buffer(HEIGHTS_BINDING)
 
     def _free_buffers(self) -> None:
         for b in (self.heights, self.nodes):

@@ -14,7 +14,7 @@ from hybrid.gl.context import multi_draw_indirect
 from hybrid.gl.programs import program
 
 from .frame_items import CMD_SKIRTS, CMD_TEMPLATE, CONTROL_WORDS
-from .tileblock import BLOCK_BYTES
+from .tileblock import BLOCK_BYTES, BLOCK_DEFINES
 from .tilelets import TileletDrawing
 
 # the first five fields of a tile block (raster.tileblock.BLOCK) as per-instance attributes, one block an instance
@@ -30,8 +30,9 @@ class IndexedTileletStrategy(TileletDrawing):
     def __init__(self, ctx, hf, **options):
         super().__init__(ctx, hf, **options)
         self.prog = program(ctx, "raster", "template.vert.glsl", "tilelet.frag.glsl",
-                            defines={"MULTI_DRAW": 1, "TILE_BLOCK_ATTRIBUTES": 1, "SURFACE_FROM_VERTEX": 1})
-        self.skirt_prog = program(ctx, "raster", "skirt.vert.glsl", "tilelet.frag.glsl", defines={"SKIRT_PROGRAM": 1})
+                            defines={"MULTI_DRAW": 1, "TILE_BLOCK_ATTRIBUTES": 1, "SURFACE_FROM_VERTEX": 1, **BLOCK_DEFINES})
+        self.skirt_prog = program(ctx, "raster", "skirt.vert.glsl", "tilelet.frag.glsl",
+                                 defines={"SKIRT_PROGRAM": 1, **BLOCK_DEFINES})
 
     def programs(self) -> tuple:
         """The mesh and skirt programs."""

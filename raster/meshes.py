@@ -14,7 +14,7 @@ from hybrid.gl.shading import resolve_mode
 from hybrid.gl.textures import terrain_texture
 
 from .shading import MODES
-from .tileblock import TileBlocks, register_tile_block, tile_blocks
+from .tileblock import BLOCK_DEFINES, TileBlocks, register_tile_block, tile_blocks
 
 GL_CLIP_DISTANCE0 = 0x3000
 
@@ -56,7 +56,7 @@ class MeshStrategyBase:
         self.ctx, self.hf = ctx, hf
         register_tile_block(ctx)
         self.blocks = TileBlocks(ctx)
-        self.prog = program(ctx, "raster", "mesh.vert.glsl", "tilelet.frag.glsl")
+        self.prog = program(ctx, "raster", "mesh.vert.glsl", "tilelet.frag.glsl", defines=BLOCK_DEFINES)
         self.texture = terrain_texture(ctx, hf)
 
     @property

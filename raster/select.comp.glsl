@@ -8,33 +8,39 @@
 // same-size neighbour is near its own split (lean leaves, below). The leaf's nine post heights are
 // fetched and geomorphed, and it is appended as a record (geometry-shader path) or as 9 vertices and 24
 // indices (indexed path) for the tile's indirect draw, with skirt segments where asked.
+// Buffer layouts and bindings come as defines from Python (raster.selection.select_defines): CONTROL_WORDS cmd[]
+// words per item, its indirect commands CMD_POINTS_ and CMD_TEMPLATE_, the item's first leaf in the arena
+// (BASE_WORD), its pass-0 work groups finished (DONE_WORD) and in all (GROUPS_WORD), its leaves listed by pass 0
+// (FOUND_WORD); WORK_HEADER words of work[] before pass 0's table; LOCAL invocations a work group; SEGMENT_WORDS a
+// skirt segment; LEAF_RECORD_WORDS, LEAF_VERTICES and LEAF_INDICES a leaf; frame_count[]'s ARENA_FIELD (arena
+// leaves reserved this frame) and OVERFLOW_FIELD (leaves of tiles that did not fit, drawn nothing).
+#if !defined(CONTROL_WORDS) || !defined(LEAF_RECORD_WORDS) || !defined(NODES_BINDING) || !defined(ARENA_FIELD)
+#error "select.comp.glsl needs the defines of raster.selection.select_defines"
+#endif
 #extension GL_ARB_shader_ballot : enable
 #extension GL_ARB_gpu_shader_int64 : enable
 #include "raster/tile_block"
-layout(local_size_x = 64) in;
-layout(std430, binding = 0) readonly buffer Nodes { vec4 node[]; };   // E, zlo, zhi, inside (0 beyond the grid,
-                                                                      // else 1 + side codes); one apron
-layout(std430, binding = 1) writeonly buffer Leaves { uint leaf[]; }; // arena: LEAF_RECORD_WORDS a leaf: j0 i0 m drop,
-                                                                      // h[9] (LEAN_FULL_RES: and the turns)
-layout(std430, binding = 2) buffer Commands { uint cmd[]; };          // per item CONTROL_WORDS: indirect draws,
-                                                                      // 5 words each, then the item's arena base,
-                                                                      // pass-0 groups done, its pass-0 groups
-                                                                      // and its leaf count
-layout(std430, binding = 3) writeonly buffer Skirts { float seg[]; };  // 6 words a skirt segment, per item from
-                                                                       // segments_base
-layout(std430, binding = 4) buffer Frame { uint frame_count[]; };     // triangles, leaves, culled, segments,
-                                                                      // arena leaves reserved, overflow
+layout(local_size_x = LOCAL) in;
+// E, zlo, zhi, inside (0 beyond the grid, else 1 + side codes); one apron
+layout(std430, binding = NODES_BINDING) readonly buffer Nodes { vec4 node[]; };
+// arena: LEAF_RECORD_WORDS a leaf: j0 i0 m drop, h[9] (LEAN_FULL_RES: and the turns)
+layout(std430, binding = RECORDS_BINDING) writeonly buffer Leaves { uint leaf[]; };
+// per item CONTROL_WORDS: indirect draws, 5 words each, then the item's arena base, pass-0 groups done, its pass-0
+// groups and its leaf count
+layout(std430, binding = CONTROL_BINDING) buffer Commands { uint cmd[]; };
+// SEGMENT_WORDS a skirt segment, per item from segments_base
+layout(std430, binding = SEGMENTS_BINDING) writeonly buffer Skirts { float seg[]; };
+// triangles, leaves, culled, segments, arena leaves reserved, overflow
+layout(std430, binding = FRAME_BINDING) buffer Frame { uint frame_count[]; };
 
-layout(std430, binding = 7) writeonly buffer MeshVerts { vec4 mesh_vertex[]; }; // arena: LEAF_VERTICES a leaf
-layout(std430, binding = 8) writeonly buffer MeshIndex { uint mesh_index[]; };  // arena: LEAF_INDICES a leaf
-layout(std430, binding = 6) buffer Found { uint found[]; };          // per item from found_base: its leaves
-layout(std430, binding = 5) readonly buffer Heights { float height[]; };  // per tile from heights_base: (n+1)^2
-                                                                         // samples, row from south, metres from
-                                                                         // the origin z
-layout(std430, binding = 10) buffer Work { uint work[]; };           // pass 1's dispatch (x, 1, 1), 1 unused,
-                                                                      // then pass 0's work table (item | group
-                                                                      // << 16 per work group), then pass 1's
-                                                                      // from table1_start (written by pass 0)
+layout(std430, binding = VERTICES_BINDING) writeonly buffer MeshVerts { vec4 mesh_vertex[]; }; // arena: LEAF_VERTICES a leaf
+layout(std430, binding = INDICES_BINDING) writeonly buffer MeshIndex { uint mesh_index[]; };   // arena: LEAF_INDICES a leaf
+layout(std430, binding = FOUND_BINDING) buffer Found { uint found[]; };    // per item from found_base: its leaves
+// per tile from heights_base: (n+1)^2 samples, row from south, metres from the origin z
+layout(std430, binding = HEIGHTS_BINDING) readonly buffer Heights { float height[]; };
+// pass 1's dispatch (x, 1, 1), 1 unused, then pass 0's work table (item | group << 16 per work group), then
+// pass 1's from table1_start (written by pass 0)
+layout(std430, binding = WORK_BINDING) buffer Work { uint work[]; };
 uniform float k_tau;            // K / tau: a node splits when E * k_tau > distance to its box
 uniform float beta;             // morph-safe error growth (raster.quadtree)
 uniform bool stitch;            // drop midpoints toward coarser neighbours (off: cracks, for tests)
@@ -48,33 +54,15 @@ uniform vec3 eye_terrain;       // eye minus the terrain's origin, metres
 uniform vec2 cell_metres;       // the terrain's level-0 spacing (x, y), metres
 uniform bool side_errors;       // nodes carry side codes and split on their full fans' errors (raster.quadtree)
 uniform uint table1_start;      // work[]: where pass 1's work table starts
-#ifdef LEAN_FULL_RES
-// Lean full resolution (raster.tilelets, full_res "lean"): full-resolution leaves drop edge midpoints by their
+// Lean full resolution (LEAN_FULL_RES; raster.tilelets, full_res "lean"): full-resolution leaves drop edge midpoints by their
 // side errors as every other leaf does, and a level-0 leaf's SE and NW cells turn from the reference's diagonal
 // to the fan's through a post at the cell's centre, morphed from the mean of the one diagonal's ends to the
 // other's as the cell's midpoints morph (its turn: the larger of their morph factors from TURN_FROM to 1, where
 // the midpoint drops; raster.morph.turn_factor), so that a drop never moves the surface in one frame: 4 triangles
 // a turning cell, at most 12 a leaf.
-#define LEAF_VERTICES 11u
-#define LEAF_INDICES 36u
-#define LEAF_RECORD_WORDS 15u
-#else
-#define LEAF_VERTICES 9u
-#define LEAF_INDICES 24u
-#define LEAF_RECORD_WORDS 13u
-#endif
 
-const int CMD_POINTS_ = 0, CMD_TEMPLATE_ = 1;   // indirect commands (raster.frame_items CMD_*)
-const int CONTROL_WORDS = 20;   // cmd[] words per item (raster.frame_items)
-const int BASE_WORD = 15;       // cmd[]: the item's first leaf in the arena
-const int DONE_WORD = 16;       // cmd[]: the item's pass-0 work groups finished
-const int GROUPS_WORD = 17;     // cmd[]: the item's pass-0 work groups
-const int FOUND_WORD = 18;      // cmd[]: the item's leaves listed by pass 0
-const uint WORK_HEADER = 4u;     // work[]: pass 0's table starts here (raster.frame_items)
 #define CMD0 (tile_item * CONTROL_WORDS)
 #define FOUND0 uint(found_base)
-const int ARENA_FIELD = 4;      // frame_count[]: arena leaves reserved this frame
-const int OVERFLOW_FIELD = 5;   // frame_count[]: leaves of tiles that did not fit (drawn nothing)
 
 int side_of(int m) { return n_cells >> (m + 1); }
 
@@ -173,7 +161,7 @@ float H(int i, int j) { return height[heights_base + i * (n_cells + 1) + j]; }
 
 void put_segment(vec2 p, float hp, vec2 q, float hq) {
     uint k = reserve(11, -1, 3);
-    uint w = uint(segments_base) + 6u * k;
+    uint w = uint(segments_base) + uint(SEGMENT_WORDS) * k;
     seg[w + 0u] = p.x; seg[w + 1u] = p.y; seg[w + 2u] = hp;
     seg[w + 3u] = q.x; seg[w + 4u] = q.y; seg[w + 5u] = hq;
 }
@@ -395,7 +383,7 @@ void reserve_arena() {
     cmd[CMD0 + BASE_WORD] = base;
     cmd[CMD0 + 5 * CMD_POINTS_ + 2] = base;           // DrawArraysIndirect: first
     cmd[CMD0 + 5 * CMD_TEMPLATE_ + 2] = LEAF_INDICES * base;   // DrawElementsIndirect: first index
-    s_groups = (count + 63u) / 64u;
+    s_groups = (count + uint(LOCAL) - 1u) / uint(LOCAL);
     s_first = atomicAdd(work[0], s_groups);
 }
 #endif
@@ -407,7 +395,7 @@ void main() {
     uint entry = work[table1_start + gl_WorkGroupID.x];
 #endif
     use_tile_item(int(entry & 65535u));
-    uint gid = (entry >> 16) * 64u + gl_LocalInvocationID.x;
+    uint gid = (entry >> 16) * uint(LOCAL) + gl_LocalInvocationID.x;
 #if PASS == 0
     list_node(gid);
     memoryBarrierBuffer();
@@ -419,7 +407,7 @@ void main() {
     barrier();
     // the item's pass-1 work groups into pass 1's table, shared by the work group (at most 2^16 a tile)
     if (s_last)
-        for (uint j = gl_LocalInvocationIndex; j < min(s_groups, 65536u); j += 64u)
+        for (uint j = gl_LocalInvocationIndex; j < min(s_groups, 65536u); j += uint(LOCAL))
             work[table1_start + s_first + j] = uint(tile_item) | (j << 16);
 #else
     if (gid >= cmd[CMD0 + FOUND_WORD]) return;

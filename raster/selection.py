@@ -18,14 +18,15 @@ from hybrid.gl.context import gl_bytes, gl_finish, gl_memory_barrier
 from hybrid.gl.programs import UniformCache, compute_shader, write_uniform
 from hybrid.gl.textures import terrain_texture
 
-from .arena import LeafArena
-from .frame_items import COMMANDS_PER_ITEM, CONTROL_WORDS, LOCAL, FrameItems
-from .heap import TileHeap
+from .arena import LeafArena, arena_defines
+from .frame_items import COMMANDS_PER_ITEM, CONTROL_WORDS, ITEM_DEFINES, LOCAL, FrameItems
+from .heap import HEAP_DEFINES, TileHeap
 from .morph import TURN_FROM
 from .nodes import nodes_for, pending_cut, tile_levels, tile_node_block
 from .quadtree import GPU_BETA, check_full_res
 from .tileblock import (
     BLOCK,
+    BLOCK_DEFINES,
     CONSTANT_WORDS,
     MAX_STARTS,
     STARTS_FOUND,
@@ -42,11 +43,20 @@ from .tileblock import (
 LEAF_FORMAT = "4i 4f 4f 1f"             # a leaf record: j0, i0, level, dropped edges, nine post heights
 LEAN_LEAF_FORMAT = "4i 4f 4f 1f 2f"     # full_res "lean": and the SE and NW cells' turns (15 words)
 FRAME_FIELDS = ("triangles", "tilelets", "tilelets_culled", "skirt_segments", "arena_leaves", "arena_overflow")
+FRAME_BINDING = 4                       # storage binding of the frame's counters (FRAME_FIELDS)
 
 
 def full_res_defines(full_res: str) -> dict:
     """The shader defines of a full-resolution rule (select.comp.glsl, leaf.vert.glsl, tilelet.geom.glsl)."""
     return {"LEAN_FULL_RES": 1, "TURN_FROM": f"{TURN_FROM!r}"} if full_res == "lean" else {}
+
+
+def select_defines(full_res: str, k: int) -> dict:
+    """Every define of selection pass ``k`` (select.comp.glsl): buffer layouts and bindings, the full-resolution
+    rule's and the pass's."""
+    return {"PASS": k, "TILE_BLOCKS_STORAGE": 1, **BLOCK_DEFINES, "FRAME_BINDING": FRAME_BINDING, "ARENA_FIELD": FRAME_FIELDS.index("arena_leaves"),
+            "OVERFLOW_FIELD": FRAME_FIELDS.index("arena_overflow"), **ITEM_DEFINES, **HEAP_DEFINES,
+            **arena_defines(full_res), **full_res_defines(full_res)}
 
 
 def level_starts(n: int) -> np.ndarray:
@@ -154,8 +164,7 @@ class TileletSelection:
 
     def _compile_passes(self, full_res: str) -> tuple:
         """The selection's two passes for a full-resolution rule."""
-        return tuple(compute_shader(self.ctx, "raster", "select.comp.glsl",
-                                    {"PASS": k, "TILE_BLOCKS_STORAGE": 1, **full_res_defines(full_res)})
+        return tuple(compute_shader(self.ctx, "raster", "select.comp.glsl", select_defines(full_res, k))
                      for k in (0, 1))
 
     def use_full_res(self, full_res: str) -> None:
@@ -261,7 +270,7 @@ class TileletSelection:
         self.set_selection("side_errors", items[0][0].side_errors)
         self.set_selection("table1_start", int(table1_start))
         self.frame.write(np.zeros(len(FRAME_FIELDS), np.uint32).tobytes())
-        self.frame.bind_to_storage_buffer(4)
+        self.frame.bind_to_storage_buffer(FRAME_BINDING)
         self.blocks.buffer.bind_to_storage_buffer(TILE_BLOCKS_BINDING)
         self.arena.bind()
         self.items.bind()

@@ -3,6 +3,10 @@
 // as the uniform block TileBlock; the selection (a compute shader over every tile of the frame, defining
 // TILE_BLOCKS_STORAGE) reads them all as a storage buffer and picks its tile's with ``tile_item``; a multi-draw's
 // vertex stage (TILE_BLOCK_ATTRIBUTES) gets its draw's block's first fields as instanced attributes.
+// The bindings come as defines (raster.tileblock.BLOCK_DEFINES).
+#if !defined(TILE_BLOCK_BINDING) || !defined(TILE_BLOCKS_BINDING)
+#error "programs including raster/tile_block need raster.tileblock.BLOCK_DEFINES"
+#endif
 struct TileData {
     vec4 t_origin;            // tile sample [0, 0] minus eye (z: terrain origin z minus eye z); w unused
     vec4 t_spacing;           // xy: metres per tile cell east-west and north-south (1, 1 for metre meshes)
@@ -18,7 +22,7 @@ struct TileData {
                               // list and its skirt segments (words) start in their buffers
 };
 #ifdef TILE_BLOCKS_STORAGE
-layout(std430, binding = 9) readonly buffer TileBlocks { TileData tile_blocks[]; };
+layout(std430, binding = TILE_BLOCKS_BINDING) readonly buffer TileBlocks { TileData tile_blocks[]; };
 int tile_item = 0;            // the frame item (tile drawing) this invocation selects for
 TileData TB;                  // its block, read once (use_tile_item)
 
@@ -26,7 +30,7 @@ void use_tile_item(int item) { tile_item = item; TB = tile_blocks[item]; }
 #elif defined(TILE_BLOCK_ATTRIBUTES)
 TileData TB;                  // its first fields set from instanced attributes (a multi-draw: raster.indexed)
 #else
-layout(std140, binding = 0) uniform TileBlock { TileData TB; };
+layout(std140, binding = TILE_BLOCK_BINDING) uniform TileBlock { TileData TB; };
 #endif
 #define origin_rel (TB.t_origin.xyz)
 #define spacing (TB.t_spacing.xy)

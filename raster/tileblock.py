@@ -13,6 +13,9 @@ from hybrid.gl.programs import register_include
 
 BLOCK_BYTES = 256              # one block per tile, at a range offset every GL implementation accepts
 TILE_BLOCKS_BINDING = 9        # the storage binding of a frame's blocks (tile_block.glsl TILE_BLOCKS_STORAGE)
+TILE_BLOCK_BINDING = 0         # the uniform binding of the drawn tile's block (tile_block.glsl TileBlock)
+BLOCK_DEFINES = {"TILE_BLOCK_BINDING": TILE_BLOCK_BINDING, "TILE_BLOCKS_BINDING": TILE_BLOCKS_BINDING}
+"""The bindings as defines of every program that includes tile_block.glsl."""
 BLOCK = np.dtype([("origin", "<f4", 4), ("spacing", "<f4", 4), ("clip_rel", "<f4", 4), ("uv", "<f4", 4),
                   ("shape", "<i4", 4), ("nb_delta", "<i4", 4), ("flags", "<i4", 4), ("skirt", "<f4", 4),
                   ("offsets", "<i4", 16), ("starts", "<i4", 16)])
@@ -105,8 +108,8 @@ class TileBlocks:
             self.buffer.write(blocks.tobytes())
 
     def bind(self, i: int) -> None:
-        """Make tile i's block the TileBlock of every program (binding 0)."""
-        self.buffer.bind_to_uniform_block(0, offset=i * BLOCK_BYTES, size=BLOCK_BYTES)
+        """Make tile i's block the TileBlock of every program (``TILE_BLOCK_BINDING``)."""
+        self.buffer.bind_to_uniform_block(TILE_BLOCK_BINDING, offset=i * BLOCK_BYTES, size=BLOCK_BYTES)
 
     @property
     def nbytes(self) -> int:

@@ -18,6 +18,7 @@ from hybrid.gl.shading import resolve_mode
 from .frame_items import BASE_WORD, CMD_POINTS
 from .selection import LEAF_FORMAT, LEAN_LEAF_FORMAT, SelectedTileletTile, TileletSelection, full_res_defines
 from .shading import MODES
+from .tileblock import BLOCK_DEFINES
 
 GL_CLIP_DISTANCE0 = 0x3000
 
@@ -199,7 +200,8 @@ class TileletStrategy(TileletDrawing):
     def _compile(self, full_res: str) -> tuple:
         """The geometry-shader program and its skirt-pass variant for a full-resolution rule's leaf records."""
         progs = tuple(program(self.ctx, "raster", "leaf.vert.glsl", "tilelet.frag.glsl", "tilelet.geom.glsl",
-                              defines={**full_res_defines(full_res), **skirt}) for skirt in ({}, {"SKIRT_PROGRAM": 1}))
+                              defines={**full_res_defines(full_res), **BLOCK_DEFINES, **skirt})
+                      for skirt in ({}, {"SKIRT_PROGRAM": 1}))
         progs[0]["skirt_pass"].value = False
         progs[1]["skirt_pass"].value = True
         return progs

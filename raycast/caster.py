@@ -31,8 +31,13 @@ from .options import MODES, RECONSTRUCTIONS, CastOptions, default_max_steps, pre
 from .tile_params import TILE_BLOCK, block_stride, outer_bits, tile_params, tile_row
 
 STAT_FIELDS = ("rays", "hits", "steps", "max_steps", "capped", "shadow_rays", "shadow_steps", "shadow_capped")
-STAT_SLOTS = 64          # copies of each tile's counters (one per 64x64 screen bin, modulo), as in raycast.frag.glsl
+STAT_SLOTS = 64          # copies of each tile's counters (one per screen bin, modulo)
 STAT_STRIDE = 64         # bytes between copies (16 uints: one cache line, 8 used)
+STAT_BIN_SHIFT = 6       # screen bins of 2^6 = 64 pixels a side
+STATS_BINDING, TILE_PARAMS_BINDING = 0, 3     # storage binding of the counters, uniform binding of a tile's block
+LAYOUT_DEFINES = {"STAT_SLOTS": STAT_SLOTS, "STAT_WORDS": STAT_STRIDE // 4, "STAT_BIN_SHIFT": STAT_BIN_SHIFT,
+                  "STATS_BINDING": STATS_BINDING, "TILE_PARAMS_BINDING": TILE_PARAMS_BINDING}
+"""The layout above as the shaders' defines (raycast.frag.glsl, tile_block.glsl): their only source of it."""
 
 
 def _cube_back_face_triangles() -> np.ndarray:
@@ -107,7 +112,7 @@ class RaycastStrategy:
         self._check_mode(self.options)
         self.builder = MaxMipBuilder(ctx)
         self.cube = ctx.buffer(_cube_back_face_triangles().tobytes())
-        self.prepass_prog = program(ctx, "raycast", "box.vert.glsl", "prepass.frag.glsl")
+        self.prepass_prog = program(ctx, "raycast", "box.vert.glsl", "prepass.frag.glsl", defines=LAYOUT_DEFINES)
         self.prepass_vao = ctx.vertex_array(self.prepass_prog, [(self.cube, "3f", "corner")])
         self.programs: dict = {}
         self.texture = terrain_texture(ctx, hf)
@@ -136,7 +141,8 @@ class RaycastStrategy:
         if key not in self.programs:
             defines = {"RECON": RECONSTRUCTIONS.index(opts.reconstruction), "NAIVE": int(opts.traversal == "naive"),
                        "LOD": int(opts.lod is not None), "PREPASS": int(opts.prepass), "STATS": int(opts.stats),
-                       "SHADOWS": int(opts.shadows), "MODE": MODES.index(mode), "OCCLUDERS": int(opts.occluders)}
+                       "SHADOWS": int(opts.shadows), "MODE": MODES.index(mode), "OCCLUDERS": int(opts.occluders),
+                       **LAYOUT_DEFINES}
             prog = program(self.ctx, "raycast", "box.vert.glsl", "raycast.frag.glsl", defines=defines)
             vao = self.ctx.vertex_array(prog, [(self.cube, "3f", "corner")])
             self.programs[key] = (prog, vao)
@@ -222,11 +228,23 @@ class RaycastStrategy:
         opts = self._resolved(self.options.updated(**options))
         mode = self._check_mode(opts)
         prog, vao = self._program(opts, mode)
-        ctx, hf = self.ctx, self.hf
-        eye = np.asarray(view.eye, dtype=np.float64)
         W, H = int(view.width), int(view.height)
         if tuple(target.size) != (W, H):
             raise TerrabenchError(f"target size {tuple(target.size)} does not match the view's {W}x{H} pixels")
+        self._view_uniforms(prog, view, opts)
+        grid = self._shadow_uniforms(prog, opts) if opts.shadows else None
+        self._stats_buffer(prog, W, len(items))
+        if opts.occluders and items:
+            self._occluder_uniforms(prog, target, view)
+        id_fbo = self._id_framebuffer(prog, target, (W, H), len(items)) if opts.prepass and items else None
+        self._cast(target, view, items, opts, vao, id_fbo)
+        gl_memory_barrier(self.ctx)
+        return self._counters(opts, items, grid)
+
+    def _view_uniforms(self, prog, view, opts: CastOptions) -> None:
+        """The view's, the terrain's and the textures' uniforms of the cast program (and the pre-pass's view)."""
+        hf = self.hf
+        W, H = int(view.width), int(view.height)
         vp = np.asarray(view.view_proj_rel, dtype=np.float64)
         write_uniform(prog, "view_proj_rel", vp.T.astype(np.float32).tobytes())
         self.prepass_prog["view_proj_rel"].write(vp.T.astype(np.float32).tobytes())
@@ -239,69 +257,73 @@ class RaycastStrategy:
         lo, hi = hf.height_range
         set_uniform(prog, "hrange", (lo, hi))
         set_uniform(prog, "heat_max", float(opts.heat_max))
-        K = float(view.height) / (2.0 * t)
         if self.texture is not None:
             self.texture.use(2)
             set_uniform(prog, "tex", 2)
         set_uniform(prog, "hmap", 0)
         set_uniform(prog, "mmap", 1)
         self.edges.bind(prog, hf, view, 6)
-        grid = None
-        if opts.shadows:
-            grid = self._shadow_grid()
-            grid.tex.heights.use(3)
-            grid.tex.maxmip.use(5)
-            set_uniform(prog, "g_dq", (grid.tex.offset, grid.tex.step))
-            set_uniform(prog, "g_dq_base", grid.tex.base)
-            set_uniform(prog, "g_hmap", 3)
-            set_uniform(prog, "g_mmap", 5)
-            set_uniform(prog, "g_cells", grid.n)
-            set_uniform(prog, "g_levels", level_count(grid.n) - 1)
-            set_uniform(prog, "g_ext", grid.ext)
-            set_uniform(prog, "g_zr", grid.zr)
-            set_uniform(prog, "g_spacing", (hf.spacing_x, hf.spacing_y))
-            set_uniform(prog, "g_max_steps", opts.max_steps or default_max_steps(grid.n))
-        n_items = len(items)
-        set_uniform(prog, "stat_bins_x", (W + 63) // 64)
+
+    def _shadow_uniforms(self, prog, opts: CastOptions):
+        """Bind the whole terrain's shadow grid and set its uniforms; the grid back."""
+        hf = self.hf
+        grid = self._shadow_grid()
+        grid.tex.heights.use(3)
+        grid.tex.maxmip.use(5)
+        set_uniform(prog, "g_dq", (grid.tex.offset, grid.tex.step))
+        set_uniform(prog, "g_dq_base", grid.tex.base)
+        set_uniform(prog, "g_hmap", 3)
+        set_uniform(prog, "g_mmap", 5)
+        set_uniform(prog, "g_cells", grid.n)
+        set_uniform(prog, "g_levels", level_count(grid.n) - 1)
+        set_uniform(prog, "g_ext", grid.ext)
+        set_uniform(prog, "g_zr", grid.zr)
+        set_uniform(prog, "g_spacing", (hf.spacing_x, hf.spacing_y))
+        set_uniform(prog, "g_max_steps", opts.max_steps or default_max_steps(grid.n))
+        return grid
+
+    def _stats_buffer(self, prog, width: int, n_items: int) -> None:
+        """The per-tile counters' buffer, cleared and bound, large enough for ``n_items`` tiles."""
+        set_uniform(prog, "stat_bins_x", -(-width >> STAT_BIN_SHIFT))
         need = STAT_SLOTS * STAT_STRIDE * max(n_items, 1)
         if self.stats_buf.size < need:
             self.stats_buf.release()
-            self.stats_buf = ctx.buffer(reserve=need)
+            self.stats_buf = self.ctx.buffer(reserve=need)
         self.stats_buf.clear()
-        self.stats_buf.bind_to_storage_buffer(0)
-        if opts.occluders and n_items:
-            prior = self._prior_target((W, H))
-            self.ctx.copy_framebuffer(prior, target.fbo)       # depth (and colour) drawn so far this frame
-            prior.depth_attachment.use(8)
-            set_uniform(prog, "prior_depth", 8)
-            n, f = float(view.near), float(view.far)
-            set_uniform(prog, "depth_ab", (n / (f - n), n * f / (f - n)))
-        id_fbo = None
-        if opts.prepass and n_items:
-            ids = self._ids_texture((W, H))
-            if self._next_id + n_items >= 2 ** 32 - 1:
-                ids.write(np.zeros(W * H, np.uint32).tobytes())
-                self._next_id = 1
-            ids.use(4)
-            set_uniform(prog, "ids", 4)
-            id_fbo = ctx.framebuffer(color_attachments=[ids], depth_attachment=target.depth)
-            id_fbo.depth_mask = False
+        self.stats_buf.bind_to_storage_buffer(STATS_BINDING)
+
+    def _occluder_uniforms(self, prog, target, view) -> None:
+        """A copy of the depth drawn so far this frame, bound for the rays to stop behind it."""
+        prior = self._prior_target(tuple(target.size))
+        self.ctx.copy_framebuffer(prior, target.fbo)       # depth (and colour) drawn so far this frame
+        prior.depth_attachment.use(8)
+        set_uniform(prog, "prior_depth", 8)
+        n, f = float(view.near), float(view.far)
+        set_uniform(prog, "depth_ab", (n / (f - n), n * f / (f - n)))
+
+    def _id_framebuffer(self, prog, target, size: tuple[int, int], n_items: int):
+        """The tile-ID pre-pass's framebuffer over the target's depth, its IDs texture bound for the cast pass."""
+        ids = self._ids_texture(size)
+        if self._next_id + n_items >= 2 ** 32 - 1:
+            ids.write(np.zeros(size[0] * size[1], np.uint32).tobytes())
+            self._next_id = 1
+        ids.use(4)
+        set_uniform(prog, "ids", 4)
+        id_fbo = self.ctx.framebuffer(color_attachments=[ids], depth_attachment=target.depth)
+        id_fbo.depth_mask = False
+        return id_fbo
+
+    def _cast(self, target, view, items, opts: CastOptions, vao, id_fbo) -> None:
+        """Draw every item's box (after its pre-pass, with one), front faces culled, its tile block bound."""
+        ctx = self.ctx
         ctx.enable(ctx.CULL_FACE)
         ctx.front_face = "ccw"
         ctx.cull_face = "front"
         try:
-            lod_scale = K / float(opts.lod) if opts.lod else 0.0
-            # a tile drawn for a missing one (hybrid.uploads) has that one's clip and heights: its row is made here
-            rows = np.stack([g.row if g.row is not None and g.bounds == (t.clip, t.zmin, t.zmax) else tile_row(g, t)
-                             for g, t, _ in items]) if n_items else None
-            blocks = tile_params(items, eye, hf, lod_scale, opts.max_steps, self._next_id, self._stride, rows)
-            if self.tile_buf is None or self.tile_buf.size < blocks.nbytes:
-                if self.tile_buf is not None:
-                    self.tile_buf.release()
-                self.tile_buf = ctx.buffer(reserve=max(blocks.nbytes, 64 * self._stride))
-            self.tile_buf.write(blocks.tobytes())
+            self._tile_blocks(view, items, opts)
             for k, (g, _tile, _sel) in enumerate(items):
-                self.tile_buf.bind_to_uniform_block(3, offset=k * self._stride, size=TILE_BLOCK.itemsize)
+                self.tile_buf.bind_to_uniform_block(TILE_PARAMS_BINDING, offset=k * self._stride,
+                                                    size=TILE_BLOCK.itemsize)
                 if id_fbo is not None:
                     id_fbo.use()
                     ctx.depth_func = ">"
@@ -315,10 +337,28 @@ class RaycastStrategy:
             ctx.disable(ctx.CULL_FACE)
             ctx.cull_face = "back"
             if id_fbo is not None:
-                self._next_id += n_items
+                self._next_id += len(items)
                 target.fbo.use()
                 id_fbo.release()
-        gl_memory_barrier(ctx)
+
+    def _tile_blocks(self, view, items, opts: CastOptions) -> None:
+        """Write every item's tile block (``raycast.tile_params``) into the tile buffer, grown as needed."""
+        K = float(view.height) / (2.0 * float(view.tan_half_fov))
+        lod_scale = K / float(opts.lod) if opts.lod else 0.0
+        eye = np.asarray(view.eye, dtype=np.float64)
+        # a tile drawn for a missing one (hybrid.uploads) has that one's clip and heights: its row is made here
+        rows = np.stack([g.row if g.row is not None and g.bounds == (t.clip, t.zmin, t.zmax) else tile_row(g, t)
+                         for g, t, _ in items]) if items else None
+        blocks = tile_params(items, eye, self.hf, lod_scale, opts.max_steps, self._next_id, self._stride, rows)
+        if self.tile_buf is None or self.tile_buf.size < blocks.nbytes:
+            if self.tile_buf is not None:
+                self.tile_buf.release()
+            self.tile_buf = self.ctx.buffer(reserve=max(blocks.nbytes, 64 * self._stride))
+        self.tile_buf.write(blocks.tobytes())
+
+    def _counters(self, opts: CastOptions, items, grid) -> dict:
+        """The frame's counters: rays, hits and steps summed over the tiles' copies (with ``stats``), and more."""
+        n_items = len(items)
         counters = {"rays": 0, "hits": 0, "steps": 0, "max_steps": 0, "capped": 0}
         if opts.stats and n_items:
             gl_finish(self.ctx)                 # the wait lets other threads (the tile loader) run

@@ -45,11 +45,10 @@ uniform vec2 g_spacing;        // terrain spacing east-west and north-south, met
 uniform int g_max_steps;
 
 #if STATS
-// STAT_SLOTS copies of each tile's 8 counters, 16 uints (a cache line) apart; a fragment adds to the copy of
-// its 64x64-pixel screen bin, so rasterizer threads (which take whole bins) rarely share a counter line.
-// The caster sums (and maxes) the copies.
-#define STAT_SLOTS 64
-layout(std430, binding = 0) buffer Stats { uint stats[]; };
+// STAT_SLOTS copies of each tile's 8 counters, STAT_WORDS uints (a cache line) apart; a fragment adds to the copy
+// of its screen bin (2^STAT_BIN_SHIFT pixels a side), so rasterizer threads (which take whole bins) rarely share
+// a counter line. The caster sums (and maxes) the copies; the layout comes as defines (raycast.caster).
+layout(std430, binding = STATS_BINDING) buffer Stats { uint stats[]; };
 
 #if defined(GL_ARB_shader_ballot) && defined(GL_ARB_gpu_shader_int64)
 // Counters summed over the subgroup first (ballot + readInvocation), then one atomic per counter per
@@ -156,8 +155,8 @@ void main() {
     int r = rc_traverse(hmap, mmap, dq, dq_base, n_cells, n_levels, ext_lo, ext, zr, eye_tex, D, near_plane, tmax, 0, spacing, lod_k,
                         max_steps, outer, under, Q, cell, lev, hc, steps);
 #if STATS
-    ivec2 bin = ivec2(gl_FragCoord.xy) >> 6;
-    int base = (tile_index * STAT_SLOTS + ((bin.x + bin.y * stat_bins_x) & (STAT_SLOTS - 1))) * 16;
+    ivec2 bin = ivec2(gl_FragCoord.xy) >> STAT_BIN_SHIFT;
+    int base = (tile_index * STAT_SLOTS + ((bin.x + bin.y * stat_bins_x) & (STAT_SLOTS - 1))) * STAT_WORDS;
     stats_add(base + 0, base + 1, r == RC_HIT, base + 4, r == RC_CAPPED, base + 2, base + 3, uint(steps));
 #endif
     if (r != RC_HIT) discard;

@@ -149,10 +149,10 @@ def test_a_worker_without_gl_is_reported_not_hung(tmp_path, capsys):
 def test_calibrate_on_a_cluster_fits_one_model_per_device(cluster):
     from experiments.cli.options import TerrainOptions
     from experiments.cluster import calibrate_on_cluster
-    from hybrid.contract import CANDIDATES
+    from hybrid.strategies import candidates
     _, client = cluster
     args = (TerrainOptions("fbm", size_samples=129), ("flyover",), 2, (160, 90), 2 / 3, 32, 1, 0.3)
     models = calibrate_on_cluster(client, args)
     renderers = {i["renderer"] for i in client.run(worker_info).values()}
-    assert [m.renderer for m in models] == sorted(renderers) and models[0].candidates == CANDIDATES
+    assert [m.renderer for m in models] == sorted(renderers) and models[0].candidates == candidates()
     assert models[0].tiles >= 8 and all(np.isfinite(e) for e in models[0].fit_error.values())

@@ -4,15 +4,19 @@ import numpy as np
 import pytest
 from gl_memory import allocated_bytes
 
-from experiments.metrics import coverage_errors, grow, hole_pixels_in_columns, near_silhouettes
+from experiments.metrics import (
+    coverage_errors,
+    grow,
+    hole_pixels_in_columns,
+    near_silhouettes,
+)
 from hybrid.camera.flight import preset
-from hybrid.contract import CANDIDATES
 from hybrid.cost.model import CostModel
 from hybrid.errors import TerrabenchError
 from hybrid.gl.target import FrameTarget
 from hybrid.reference import ReferenceRenderer
 from hybrid.renderer import Renderer, make_renderer
-from hybrid.strategies import STRATEGIES
+from hybrid.strategies import STRATEGIES, candidates
 
 SIZE = (320, 180)
 # a model under which raster wins for tiles with few triangles and ray casting for the rest, so the
@@ -237,11 +241,11 @@ def test_oracle_picks_the_strategy_that_is_faster_when_timed_apart(ctx, puget257
         rows = o.render(v).stats.tile_rows
     chosen = {(row["level"], row["tx"], row["ty"]): row["strategy"] for row in rows}
     for row in rows:                              # every tile timed inside frames every candidate way
-        assert all(row[f"meas_{n}_ms"] > 0 for n in CANDIDATES)
+        assert all(row[f"meas_{n}_ms"] > 0 for n in candidates())
     apart = {}
     target = FrameTarget(ctx, v.width, v.height)
     try:
-        for name in CANDIDATES:
+        for name in candidates():
             with Renderer(ctx, puget257, name, tile_size=64, oracle_repeats=5) as r:
                 for p in r.plan(v):
                     apart.setdefault((p.key.level, p.key.tx, p.key.ty), {})[name] = r.time_draw(v, [p], name, target)
@@ -271,15 +275,15 @@ def test_in_frame_timing_interleaves_the_strategies(ctx, puget257):
                 draw = strategy.draw_tiles
                 strategy.draw_tiles = (lambda d, n: lambda t, view, items, *a, **k: calls.append((n, len(items)))
                                        or d(t, view, items, *a, **k))(draw, name)
-            runs = r.time_in_frames(v, plans, CANDIDATES, target)
+            runs = r.time_in_frames(v, plans, candidates(), target)
     finally:
         target.release()
     b = len(plans)
     assert b > 1
-    expected = [(n, 1) for _ in range(2) for n in CANDIDATES for _ in range(b)] + \
-               [(n, b) for _ in range(2) for n in CANDIDATES]
+    expected = [(n, 1) for _ in range(2) for n in candidates() for _ in range(b)] + \
+               [(n, b) for _ in range(2) for n in candidates()]
     assert calls == expected
-    for n in CANDIDATES:
+    for n in candidates():
         per, together = runs[n]
         assert per.shape == (b,) and (per > 0).all() and together > 0
 

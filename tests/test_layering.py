@@ -23,7 +23,8 @@ LAYERS = [
     ("hybrid.strategies",),
     ("hybrid.cost",),
     ("hybrid.oracle", "hybrid.adaptive"),   # the renderer's in-frame timing and online adaptation
-    ("hybrid.reference_blocks", "hybrid.reference", "hybrid.residency", "hybrid.uploads", "hybrid.renderer"),
+    ("hybrid.reference_blocks", "hybrid.reference", "hybrid.residency", "hybrid.uploads", "hybrid.streaming",
+     "hybrid.renderer"),
     ("hybrid.calibrate",),
     ("experiments",),
 ]
@@ -57,7 +58,9 @@ def layer_of(name: str) -> tuple[int, str]:
 
 
 def imports(name: str, path: Path, known: set[str]) -> set[str]:
-    """Project modules a module imports anywhere in its body (function-level imports too)."""
+    """Project modules a module imports anywhere in its body (function-level imports too), with the packages
+    whose ``__init__`` those imports run: every package above an imported module that is not above ``name``
+    (those have run before ``name`` does)."""
     tree = ast.parse(path.read_text())
     is_pkg = path.name == "__init__.py"
     base = name.split(".") if is_pkg else name.split(".")[:-1]
@@ -77,7 +80,13 @@ def imports(name: str, path: Path, known: set[str]) -> set[str]:
                 t = t.rpartition(".")[0]
             if t and t != name:
                 found.add(t)
-    return found
+    return found | {p for t in found for p in packages_above(t) if p in known and p not in packages_above(name)}
+
+
+def packages_above(name: str) -> set[str]:
+    """The dotted names of the packages that hold a module: "a.b.c" -> {"a", "a.b"}."""
+    parts = name.split(".")
+    return {".".join(parts[:i]) for i in range(1, len(parts))}
 
 
 def graph() -> dict[str, set[str]]:
@@ -127,6 +136,16 @@ def test_no_import_cycle():
         if v not in index:
             visit(v)
     assert not cycles, f"import cycles: {cycles}"
+
+
+def test_package_inits_and_function_imports_count(tmp_path):
+    """Importing a package's module runs the package's ``__init__``, as does an import inside a function."""
+    known = set(modules())
+    f = tmp_path / "toy.py"
+    f.write_text("def later():\n    from experiments.cli.options import from_args\n")
+    assert {"experiments.cli.options", "experiments.cli"} <= imports("experiments.toy", f, known)
+    assert "experiments.cli" not in imports("experiments.cli.toy", f, known)    # its own package ran already
+    assert "hybrid" in graph()["raster.tilelets"]
 
 
 def test_layers_name_every_subpackage():

@@ -15,8 +15,8 @@ from experiments.runlock import RunLock
 from experiments.runner import run_spec
 from experiments.spec import parse_spec
 from hybrid.atomic import atomic_path
-from hybrid.contract import CANDIDATES
 from hybrid.errors import TerrabenchError
+from hybrid.strategies import candidates
 
 SMALL = """
 name = "s"
@@ -77,7 +77,7 @@ def test_resume_after_a_kill_at_every_journal_write_equals_an_uninterrupted_run(
     assert len(lines) == 6 and all("tiles_rows" in json.loads(line) for line in lines)   # a frame with its tiles
     frames, tiles = _comparable(whole, "frames"), _comparable(whole, "tiles")
     # the hybrid's rows: a candidate strategy and the features it chose from, for every tile of every frame
-    assert len(tiles) >= 6 and tiles["strategy"].isin(CANDIDATES).all() and (tiles["f_pixels"] > 0).any()
+    assert len(tiles) >= 6 and tiles["strategy"].isin(candidates()).all() and (tiles["f_pixels"] > 0).any()
     for kept in range(len(lines)):
         folder = tmp_path / f"cut{kept}" / "s"
         folder.mkdir(parents=True)

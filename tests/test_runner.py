@@ -7,9 +7,10 @@ import pytest
 from experiments.report import write_report
 from experiments.runner import run_spec
 from experiments.spec import load_spec, parse_spec
-from hybrid.contract import DEFAULT_FULL_RES, TILELET_POLICIES
+from hybrid.contract import DEFAULT_FULL_RES
 from hybrid.cost.model import load_cost_model
 from hybrid.errors import TerrabenchError
+from hybrid.strategies import policies_taking
 
 TINY = """
 name = "t"
@@ -166,7 +167,7 @@ def test_full_resolution_rules_vary_only_tilelet_policies():
                      "raycast": ["exact"], "reference": ["exact"]}
     ids = [c["config"] for c in spec.configs()]
     assert len(set(ids)) == len(ids) and sum(i.endswith("-lean") for i in ids) == 3
-    assert {c["full_res"] for c in parse_spec("").configs() if c["policy"] in TILELET_POLICIES} == {DEFAULT_FULL_RES}
+    assert {c["full_res"] for c in parse_spec("").configs() if c["policy"] in policies_taking("full_res")} == {DEFAULT_FULL_RES}
 
 
 def test_a_run_compares_both_full_resolution_rules(ctx, tmp_path):

@@ -4,10 +4,10 @@ import numpy as np
 
 from experiments.metrics import hole_pixels_in_columns
 from hybrid.camera.flight import preset
-from hybrid.contract import CANDIDATES
 from hybrid.cost.model import CostModel
 from hybrid.reference import ReferenceRenderer
 from hybrid.renderer import Renderer, make_renderer
+from hybrid.strategies import candidates
 
 SIZE = (320, 180)
 FLAT = {"const": 0.0, "triangles": 0.0, "visible_triangles": 0.0, "pixels": 0.0}
@@ -16,13 +16,13 @@ FLAT = {"const": 0.0, "triangles": 0.0, "visible_triangles": 0.0, "pixels": 0.0}
 def cyclic(plans):
     """The plans with their strategies cycled over the candidates by tile position (neighbours differ)."""
     for p in plans:
-        p.choice = CANDIDATES[(p.key.tx + 2 * p.key.ty) % 3]
+        p.choice = candidates()[(p.key.tx + 2 * p.key.ty) % 3]
     return plans
 
 
 def test_three_strategies_in_one_frame_leave_no_hole(ctx, puget_full):
     ref = ReferenceRenderer(ctx, puget_full)
-    pure = {n: make_renderer(ctx, puget_full, n, tile_size=128) for n in CANDIDATES}
+    pure = {n: make_renderer(ctx, puget_full, n, tile_size=128) for n in candidates()}
     mixed = Renderer(ctx, puget_full, "hybrid", tile_size=128,
                      cost_model=CostModel("flat", FLAT, {"const": 1.0, "pixels": 0.0, "surface_pixels": 0.0,
                                                           "pixel_steps": 0.0}), adapt=False)
@@ -33,7 +33,7 @@ def test_three_strategies_in_one_frame_leave_no_hole(ctx, puget_full):
         for v in (fly.view(1), fly.view(4)):
             r = mixed.render(v)
             choices = {row["strategy"] for row in r.stats.tile_rows}
-            assert choices == set(CANDIDATES)
+            assert choices == set(candidates())
             frames = {n: p.render(v) for n, p in pure.items()}
             want = ref.render(v)
 

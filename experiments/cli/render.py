@@ -3,29 +3,32 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import get_args
 
 import numpy as np
 
-from hybrid.contract import DEFAULT_FULL_RES, FULL_RES, TILELET_POLICIES, Method
+from hybrid.contract import DEFAULT_FULL_RES
 from hybrid.errors import TerrabenchError
-from hybrid.strategies import STRATEGIES
+from hybrid.strategies import (
+    adapting_policies,
+    methods,
+    mixed_policies,
+    option_choices,
+    policies_taking,
+    strategies_of_kind,
+)
 
 from ..folders import writable_folder
 from . import argtypes
 from .options import TerrainOptions, ViewOptions, add_terrain_arguments, add_view_arguments, from_args
 
 HELP = "render one view with a method to PNG + depth (.depth.npy)"
-METHODS = get_args(Method)
-MIXED = ("hybrid", "heuristic", "oracle")
-RASTER_METHODS = tuple(n for n, e in STRATEGIES.items() if e.kind == "raster")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The render options: terrain, view, method, output and the strategies' draw options."""
     add_terrain_arguments(p)
     add_view_arguments(p)
-    p.add_argument("--method", default="reference", choices=METHODS)
+    p.add_argument("--method", default="reference", choices=methods())
     p.add_argument("--out", required=True, help="output PNG path; the depth goes to PATH.depth.npy")
     p.add_argument("--shading", default=None, help="texture, shaded or height (default: texture if present)")
     p.add_argument("--supersample", type=argtypes.int_in("--supersample", 1, 8), default=1,
@@ -34,7 +37,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="screen-space error bound in pixels (> 0)")
     p.add_argument("--tile-size", type=argtypes.power_of_two("--tile-size"), default=None,
                    help="cells per tile side (power of two; default 256, or a tile store's own)")
-    p.add_argument("--reconstruction", default="triangles", help="ray-cast surface: planes, linear, triangles, bilinear")
+    recs = option_choices("reconstruction")
+    p.add_argument("--reconstruction", default="triangles", help=f"ray-cast surface: {', '.join(recs)}")
     p.add_argument("--traversal", default="maxmip", help="ray-cast traversal: maxmip or naive (level-0 stepping)")
     pre = p.add_mutually_exclusive_group()
     pre.add_argument("--prepass", dest="prepass", action="store_const", const=True, default=None,
@@ -47,7 +51,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-lean", dest="lean", action="store_false",
                    help="raster, raster_gs (and their tiles in mixed policies): every leaf keeps the edge midpoints "
                         "that only lean leaves drop (those no finer neighbour and no near split needs)")
-    p.add_argument("--full-res", choices=FULL_RES, default=DEFAULT_FULL_RES,
+    p.add_argument("--full-res", choices=option_choices("full_res"), default=DEFAULT_FULL_RES,
                    help="raster, raster_gs (and their tiles in mixed policies): full-resolution leaves drop "
                         "midpoints by their errors as other leaves do (lean: no more triangles than the bound asks "
                         "for), or keep every midpoint, cells split as the reference's (exact: more triangles, "
@@ -75,19 +79,19 @@ def draw_options(method: str, tau: float, shading=None, reconstruction="triangle
     elif shadows or lod or prepass is not None or traversal != "maxmip":
         raise TerrabenchError("--shadows, --lod, --prepass, --no-prepass and --traversal apply to --method raycast "
                               "only")
-    if method in MIXED:
+    if method in mixed_policies():
         opts.update(reconstruction=reconstruction, **({} if prepass is None else {"prepass": prepass}))
     if wireframe:
-        if method not in RASTER_METHODS:
+        if method not in strategies_of_kind("raster"):
             raise TerrabenchError("--wireframe applies to the raster methods (raster, fullres, tin)")
         opts["wireframe"] = True
     if not lean:
-        if method not in TILELET_POLICIES:
+        if method not in policies_taking("lean"):
             raise TerrabenchError("--no-lean applies to raster, raster_gs and the mixed policies (hybrid, heuristic, "
                                   "oracle)")
         opts["lean"] = False
     if full_res != DEFAULT_FULL_RES:
-        if method not in TILELET_POLICIES:
+        if method not in policies_taking("full_res"):
             raise TerrabenchError("--full-res applies to raster, raster_gs and the mixed policies (hybrid, heuristic, "
                                   "oracle)")
         opts["full_res"] = full_res
@@ -105,9 +109,9 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
     from hybrid.gl.target import check_png_path
     out = check_png_path(out, "--out")
     writable_folder(out.parent if str(out.parent) else Path("."), "--out folder")
-    if show_strategy and method not in MIXED:
+    if show_strategy and method not in mixed_policies():
         raise TerrabenchError("--show-strategy needs a mixed policy: --method hybrid (or heuristic, oracle)")
-    if freeze_model and method != "hybrid":
+    if freeze_model and method not in adapting_policies():
         raise TerrabenchError("--freeze-model applies to --method hybrid, the one policy that refits its cost model")
     hf = terrain.load()
     if tile_size is None:

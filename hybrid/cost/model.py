@@ -43,7 +43,7 @@ hold-out draws each) the term took the held-out frame error from 9.8 to 7.8 % an
 0.83 on the orbit (surface 0.9 of the box, median tile) and 1.14 to 1.03 on the dolly (0.1)."""
 TERMS = {"raster": RASTER_TERMS, "raster_gs": RASTER_TERMS,
          "raycast": ("const", "pixels", "surface_pixels", "pixel_steps")}
-"""The model's terms per candidate strategy (hybrid.contract.CANDIDATES)."""
+"""The model's terms per candidate strategy (hybrid.strategies.candidates())."""
 
 
 ALL_TERMS = ("const", "triangles", "visible_triangles", "pixels", "surface_pixels", "pixel_steps")

@@ -18,12 +18,18 @@ from dataclasses import fields
 import numpy as np
 
 from hybrid.camera.view import View
-from hybrid.contract import CANDIDATES, POLICIES, PURE_POLICIES, TriangleEstimator
+from hybrid.contract import TriangleEstimator
 from hybrid.cost.choice import best_assignment_table
 from hybrid.cost.features import TileFeatures, feature_columns, tile_features
 from hybrid.cost.model import CostModel
 from hybrid.errors import TerrabenchError
-from hybrid.strategies import triangle_estimator
+from hybrid.strategies import (
+    STRATEGIES,
+    candidates,
+    check_policy,
+    policy_entry,
+    triangle_estimator,
+)
 from hybrid.tiles.pyramid import TileKey, TilePyramid
 from hybrid.tiles.tiletree import DEFAULT_TAU, SelectedTile, select_tiles
 
@@ -87,8 +93,8 @@ class TilePlan:
         features = self.features.as_dict() if self.features is not None else {}
         return {"level": k.level, "tx": k.tx, "ty": k.ty, "strategy": self.choice,
                 **{f"f_{n}": v for n, v in features.items() if n != "level"},
-                **{f"pred_{s}_ms": self.predicted.get(s) for s in CANDIDATES},
-                **{f"meas_{s}_ms": self.measured.get(s) for s in CANDIDATES}}
+                **{f"pred_{s}_ms": self.predicted.get(s) for s in candidates()},
+                **{f"meas_{s}_ms": self.measured.get(s) for s in candidates()}}
 
 
 def frame_columns(plans: list[TilePlan]) -> FrameColumns | None:
@@ -99,20 +105,15 @@ def frame_columns(plans: list[TilePlan]) -> FrameColumns | None:
 
 def choices(policy: str, columns: dict, predicted: dict, threshold: float = 1.0) -> list[str]:
     """The strategy a policy picks for each of many tiles, from feature columns and predicted ms ((B,) arrays)."""
-    if policy in PURE_POLICIES:
+    check_policy(policy)
+    if policy in STRATEGIES:
         return [policy] * len(columns["pixels"])
-    if policy == "hybrid":
-        names = list(predicted)
-        costs = np.stack([np.asarray(predicted[n], dtype=np.float64) for n in names])
-        return [names[i] for i in np.argmin(costs, axis=0)]
-    if policy == "heuristic":
-        tri = np.asarray(columns["triangles"], dtype=np.float64)
-        raster = ~(tri > threshold * np.maximum(columns["pixels"], 1.0)) & ~np.isnan(tri)
-    elif policy == "oracle":
-        raster = np.ones(len(columns["pixels"]), dtype=bool)
-    else:
-        raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
-    return np.where(raster, "raster", "raycast").tolist()
+    rule = policy_entry(policy).rule
+    if rule is not None:
+        return rule(columns, predicted, threshold)
+    names = list(predicted)                     # the model's cheapest, unhedged
+    costs = np.stack([np.asarray(predicted[n], dtype=np.float64) for n in names])
+    return [names[i] for i in np.argmin(costs, axis=0)]
 
 
 def choose(policy: str, features: TileFeatures, predicted: dict, threshold: float = 1.0) -> str:
@@ -197,23 +198,23 @@ def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
     estimate prepares new tiles only within that much wall time; a tile it could not prepare has unknown
     triangles (NaN) and is ray cast this frame (its raster cost is unknown, ray casting needs no such preparation).
     """
-    if policy not in POLICIES:
-        raise TerrabenchError(f"unknown policy {policy!r}; choose one of {', '.join(POLICIES)}")
+    check_policy(policy)
     selected = select_tiles(pyramid, view, tau)
-    if policy in PURE_POLICIES:
+    if policy in STRATEGIES:
         return [TilePlan(s, None, {}, policy) for s in selected]
     if model is None:
         raise TerrabenchError(f"policy {policy!r} needs a cost model (hybrid.cost.model.load_cost_model)")
     if not selected:
         return []
     triangles_fn = triangles_fn or default_estimator(pyramid)
+    hedged = policy_entry(policy).rule is None          # the cost model's choice, hedged by its error
     if batch:
         triangles, visible = triangles_fn.many(selected, view, tau, prep_budget_ms)
         columns = feature_columns(pyramid, view, selected, triangles, visible)
         names = model.candidates
         table = model.predict_table(columns, unknown=np.inf)   # unknown triangles: raster infinite, so ray cast
         pred = dict(zip(names, table))
-        if policy == "hybrid":
+        if hedged:
             chosen = [names[i] for i in hedged_picks(table, names, model).tolist()]
         else:
             chosen = choices(policy, columns, pred, threshold)
@@ -223,7 +224,7 @@ def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
         counts = [triangles_fn.many([s], view, tau) for s in selected]
         features = [tile_features(pyramid, view, s, t[0], v[0]) for s, (t, v) in zip(selected, counts)]
         predicted = [model.predict(f) for f in features]
-        if policy == "hybrid":
+        if hedged:
             chosen = hedged_choices({n: np.array([q[n] for q in predicted]) for n in predicted[0]}, model)
         else:
             chosen = [choose(policy, f, p, threshold) for f, p in zip(features, predicted)]

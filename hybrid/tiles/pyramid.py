@@ -126,7 +126,16 @@ MAX_PADDED_SAMPLES = 1 << 27     # the square only the reference node arrays bui
 
 
 class TilePyramid:
-    """Tiles of ``tile_size`` cells over a height field at levels 0..max_level, with AABBs and errors."""
+    """Tiles of ``tile_size`` cells over a height field at levels 0..max_level, with AABBs and errors.
+
+    Host loading: an in-memory pyramid holds every sample, so ``request``, ``cached``, ``failed`` and ``close`` do
+    nothing here; a tile store (``hybrid.tiles.store.StorePyramid``) sets ``background_loader`` and overrides them.
+    """
+
+    background_loader = False
+    """Whether a loader thread reads tiles ahead (``request``); callers then ask ``cached`` and ``failed``."""
+    host_budget: int | None = None
+    """Bytes of tiles the pyramid keeps on the host, or None: all of them (in memory)."""
 
     def __init__(self, hf: HeightField, tile_size: int = 256):
         if isinstance(tile_size, bool) or not isinstance(tile_size, (int, np.integer)) or tile_size < 2 \
@@ -297,6 +306,20 @@ class TilePyramid:
         lo, hi = np.empty((len(levels), 3)), np.empty((len(levels), 3))
         lo[:, 0], lo[:, 1], lo[:, 2], hi[:, 0], hi[:, 1], hi[:, 2] = x0, y0, z0, x1, y1, z1
         return lo, hi
+
+    def request(self, keys, work: dict | None = None) -> None:
+        """Have these tiles (and their host ``work``) ready soon: in memory they are."""
+
+    def cached(self, key) -> bool:
+        """Whether the tile's samples are on the host: always, in memory."""
+        return True
+
+    def failed(self, key) -> bool:
+        """Whether loading the tile failed: never, in memory."""
+        return False
+
+    def close(self) -> None:
+        """Stop background loading and drop host caches: nothing to do in memory."""
 
     def tile(self, key: TileKey) -> Tile:
         """The tile's level-l samples and placement."""

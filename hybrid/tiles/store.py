@@ -26,6 +26,8 @@ class StorePyramid(TilePyramid):
     """A TilePyramid over a tile store: bounds and errors from disk, tiles read on demand into a host LRU cache of
     ``host_bytes`` (default 512 MiB); thread-safe: one loader thread reads ahead what ``request`` asks for."""
 
+    background_loader = True
+
     def __init__(self, terrain: StoredTerrain | str | Path, host_bytes: int = 512 << 20):
         if not isinstance(terrain, StoredTerrain):
             terrain = open_store(terrain)
