@@ -64,7 +64,7 @@ def _compare(store_path, hf, n, exact_span):
     return loose
 
 
-@pytest.mark.parametrize("shape", [(513, 513), (300, 700)])
+@pytest.mark.parametrize("shape", [(513, 513), pytest.param((300, 700), marks=pytest.mark.slow)])
 def test_node_arrays_equal_global_nodes_bit_for_bit(tmp_path, shape):
     h = np.ascontiguousarray(puget().heights[200:200 + shape[0], 100:100 + shape[1]])
     prepare_store(ArraySource(h, SP), tmp_path / "s", 64)
@@ -122,6 +122,7 @@ def test_a_store_without_node_arrays_is_refused_by_path_until_prepared_again(tmp
     assert _compare(tmp_path / "old", HeightField(h, SP), 32, 1 << 30) == 1.0
 
 
+@pytest.mark.slow
 def test_prepare_memory_stays_band_sized(tmp_path, monkeypatch):
     import tracemalloc
 
