@@ -6,6 +6,7 @@ from experiments.bench_cpu import FLIGHTS, POLICIES, READ_BACK, TARGET, run_chil
 from hybrid.gl.context import gl_info, is_software
 
 
+@pytest.mark.slow
 def test_child_draws_every_policy_on_the_no_op_driver(ctx):
     if not is_software(ctx):
         pytest.skip("the no-op driver is Mesa's; a GPU's driver draws for real")

@@ -18,7 +18,7 @@ from hybrid.tiles.periodic import open_periodic
 from hybrid.tiles.store import StorePyramid, prepare_store
 from raster import estimate as estimate_mod
 
-SIZE = (320, 180)
+SIZE = (160, 90)
 
 
 def _seam_view(hf) -> View:

@@ -216,6 +216,7 @@ def test_nodata_is_refused_by_name(tmp_path):
     assert not out.exists() or not json.loads((out / "zarr.json").read_text())["attributes"]["complete"]
 
 
+@pytest.mark.slow
 def test_synthetic_terrain_is_window_independent_and_prepare_stays_small(tmp_path):
     a = FractalSource(1025, seed=0)
     whole = a.read_rows(0, 1025)
