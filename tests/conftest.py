@@ -4,12 +4,19 @@ Every test that needs the GL context (through the ``ctx`` fixture, directly or t
 is marked ``gl``: it is skipped where no headless EGL context can be made, and fails when it leaves a GL
 error behind. Tests without the marker run without any GL context.
 """
+import os
+import tempfile
+
 import pytest
 from gl_errors import gl_errors
 
 from hybrid.terrain.datasets import get_dataset, puget
 
 SMALL = (320, 180)
+
+# no test, fixture or run of any scope reads or writes the user's costs file (a run saves what its hybrid
+# learned there): session-scoped work sees an empty one of this process's, modules and tests their own below
+os.environ["TERRABENCH_COSTS"] = os.path.join(tempfile.mkdtemp(prefix="terrabench-costs-"), "costs.json")
 
 
 def pytest_collection_modifyitems(config, items):
@@ -27,6 +34,15 @@ def ctx():
         return shared_context()
     except GLContextError as exc:
         pytest.skip(f"no EGL context: {exc}")
+
+
+@pytest.fixture(autouse=True, scope="module")
+def module_costs_file(tmp_path_factory):
+    """Each module's fixtures (runs made once for a module) start from an empty costs file of the module's own,
+    so a run another module made and saved its learned model from never changes their starting model."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("TERRABENCH_COSTS", str(tmp_path_factory.mktemp("module-costs") / "costs.json"))
+        yield
 
 
 @pytest.fixture(autouse=True)
