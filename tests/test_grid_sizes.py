@@ -259,3 +259,15 @@ def test_a_run_on_a_tile_store_measures_accuracy_against_its_reference(ctx, tmp_
     assert len(frames) == 4
     assert (frames["crack_px"] == 0).all() and (frames["coverage_mismatch"] < 0.01).all()
     assert (frames["ref_coverage"] > 0.2).all()
+
+
+def test_prepare_says_when_an_elongated_grid_pays_for_its_square(tmp_path, capsys):
+    from experiments.cli import main
+    from experiments.cli.prepare import square_note
+    assert square_note(16385, 16385, 256) is None and square_note(1025, 513, 256) is None
+    assert "6711x its samples" in square_note(8, 20000, 256)
+    np.save(tmp_path / "strip.npy", hills(3, 257).heights)
+    assert main(["prepare", str(tmp_path / "strip.npy"), "--spacing", "10", "--tile-size", "16", "--quiet",
+                 "--out", str(tmp_path / "s")]) == 0
+    err = capsys.readouterr().err
+    assert "257x3 samples" in err and "86x its samples" in err

@@ -7,6 +7,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from . import argtypes
 
 HELP = "build the tile pyramid of a file (or a synthetic terrain) out of core into a tile store"
@@ -69,6 +71,24 @@ def _file_source(path, vertical_scale=None, spacing=None, crs=None, crop=None, r
     return HeightFieldSource(load_terrain(path, **opts))
 
 
+SQUARE_NOTE_RATIO = 16          # node arrays over a square this many times the grid's samples: say so first
+
+
+def square_note(rows: int, cols: int, tile_size: int) -> str | None:
+    """A warning when a store's node arrays, built over the square of whole root tiles around the grid, would
+    cover SQUARE_NOTE_RATIO times the grid's samples or more (an elongated grid), else None."""
+    from hybrid.tiles.store_nodes import node_square
+    cells = max(rows, cols) - 1
+    tiles0 = -(-cells // tile_size)
+    level = int(np.ceil(np.log2(tiles0))) if tiles0 > 1 else 0
+    square = (node_square(tile_size, level)[0] + 1) ** 2
+    if square < SQUARE_NOTE_RATIO * rows * cols:
+        return None
+    return (f"note: {cols}x{rows} samples: the raster strategies' node arrays cover the square of whole tiles "
+            f"around the grid, {square / (rows * cols):.0f}x its samples, so this prepare's time and disk grow with "
+            f"that square, not with the grid; a grid that fits in memory draws with every method without prepare")
+
+
 def run(input=None, out="store", synthetic=None, seed=0, synthetic_spacing=10.0, tile_size=256, vertical_scale=None,
         spacing=None, crs=None, crop=None, quiet=False, synthetic_period=None, raw_shape=None, raw_dtype=None) -> Path:
     """Build (or finish) the tile store of the input at ``out``; prints the time and the process's peak RSS."""
@@ -81,6 +101,9 @@ def run(input=None, out="store", synthetic=None, seed=0, synthetic_spacing=10.0,
         source = FractalSource(synthetic, seed, synthetic_spacing, period=synthetic_period)
     else:
         source = _file_source(input, vertical_scale, spacing, crs, crop, raw_shape, raw_dtype)
+    note = square_note(source.rows, source.cols, int(tile_size))
+    if note:
+        sys.stderr.write(note + "\n")
     t0 = time.perf_counter()
     path = prepare_store(source, out, tile_size, None if quiet else _bar)
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
