@@ -58,7 +58,7 @@ class ReferenceRenderer:
         self.resident = isinstance(hf.heights, np.ndarray) or hf.rows * hf.cols <= RESIDENT_SAMPLES
         self.textures: dict = {}                 # block index (resident) or block shape (streamed) -> texture
         self.vaos: dict = {}                     # block shape -> (index buffer, vertex array)
-        self.vao: object = True                  # None once released
+        self.released = False
         if self.resident:
             for k, b in enumerate(self.blocks):
                 self.textures[k] = self._texture(b)
@@ -88,7 +88,7 @@ class ReferenceRenderer:
 
     def draw(self, target: FrameTarget, view: View, mode: str | None = None) -> None:
         """Draw the whole surface into target (which must match the view's size) for the view, block by block."""
-        if self.vao is None:
+        if self.released:
             raise TerrabenchError("this reference renderer was released; make a new one")
         mode = resolve_mode(self.hf, mode, MODES)
         hf = self.hf
@@ -161,10 +161,10 @@ class ReferenceRenderer:
 
     def release(self) -> None:
         """Free the GPU objects; the renderer cannot draw afterwards."""
-        if self.vao is None:
+        if self.released:
             return
         objects = [*self.textures.values(), *(o for pair in self.vaos.values() for o in pair), self.texture, self.prog]
         for o in objects:
             if o is not None:
                 o.release()
-        self.textures, self.vaos, self.vao = {}, {}, None
+        self.textures, self.vaos, self.released = {}, {}, True

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hybrid.errors import TerrabenchError
+from hybrid.tiles.tiletree import box_classes, corner_planes
 
 DEFAULT_BLOCK_SAMPLES = 2049        # 2048² cells a block: a 96 MiB shared index buffer at most
 
@@ -58,18 +59,13 @@ def block_bounds(hf, blocks: list[Block]) -> tuple[np.ndarray, np.ndarray]:
 
 
 def visible_blocks(hf, blocks: list[Block], lo: np.ndarray, hi: np.ndarray, view) -> np.ndarray:
-    """Indices of the blocks whose box meets the view's frustum (boxes in world metres, tested eye-relative)."""
+    """Indices of the blocks whose box meets the view's frustum (boxes in world metres, tested eye-relative by the
+    tile selection's own test, ``hybrid.tiles.tiletree.box_classes``)."""
     ox, oy, oz = (float(v) for v in hf.origin)
-    sx, sy = hf.spacing_x, hf.spacing_y
     c0, c1 = np.array([b.c0 for b in blocks], float), np.array([b.c1 - 1 for b in blocks], float)
     r0, r1 = np.array([b.r0 for b in blocks], float), np.array([b.r1 - 1 for b in blocks], float)
-    bmin = np.stack([ox + c0 * sx, oy + r0 * sy, oz + lo], axis=1) - view.eye
-    bmax = np.stack([ox + c1 * sx, oy + r1 * sy, oz + hi], axis=1) - view.eye
-    planes = view.frustum_planes_rel()
-    inside = np.ones(len(blocks), bool)
-    for a, b, c, d in planes:
-        px = np.where(a >= 0, bmax[:, 0], bmin[:, 0])
-        py = np.where(b >= 0, bmax[:, 1], bmin[:, 1])
-        pz = np.where(c >= 0, bmax[:, 2], bmin[:, 2])
-        inside &= a * px + b * py + c * pz + d >= -1e-6 * (np.abs(px) + np.abs(py) + np.abs(pz) + 1.0)
-    return np.flatnonzero(inside)
+    boxes = np.stack([ox + c0 * hf.spacing_x, oy + r0 * hf.spacing_y, oz + lo,
+                      ox + c1 * hf.spacing_x, oy + r1 * hf.spacing_y, oz + hi], axis=1)
+    eye = np.asarray(view.eye, dtype=np.float64)
+    classes = box_classes(boxes - np.concatenate([eye, eye]), *corner_planes(view.frustum_planes_rel()))
+    return np.flatnonzero(classes >= 0)
