@@ -28,6 +28,7 @@ import numpy as np
 
 from hybrid.camera.view import parse_size
 from hybrid.errors import TerrabenchError
+from hybrid.reference import ReferenceRenderer
 from hybrid.strategies import mixed_policies
 
 from .metrics import frame_accuracy
@@ -94,7 +95,7 @@ class TaskState:
             for k, v in enumerate(views):
                 check_eye_above(hf, v, f"flight {cfg.flight} frame {k}")
             self._group, self._views = key, (hf, views)
-            self._reference = reference_renderer(self.ctx, hf) if spec.accuracy else None
+            self._reference = ReferenceRenderer(self.ctx, hf) if spec.accuracy else None
         return self._views
 
     def reference(self, spec: Spec, c: dict, k: int, images: list):
@@ -111,13 +112,6 @@ class TaskState:
         if self._reference is not None:
             self._reference.release()
         self._group, self._views, self._refs, self._reference = None, None, {}, None
-
-
-def reference_renderer(ctx, hf):
-    """The full-resolution reference renderer of a terrain (a tile store's grid drawn out of core, block by
-    block)."""
-    from hybrid.reference import ReferenceRenderer
-    return ReferenceRenderer(ctx, hf)
 
 
 def _image(stem: str, result, full: bool) -> ImageOut:
