@@ -6,7 +6,7 @@ import pytest
 from gl_errors import gl_errors
 
 from hybrid.errors import GLContextError
-from hybrid.gl.context import _gl_function, create_context, depth32f_texture, driver_texture_bytes, gl_info
+from hybrid.gl.context import _gl_function, create_context, depth32f_texture, driver_texture_bytes, gl_bytes, gl_info
 
 
 def test_info_and_float_depth(ctx):
@@ -20,6 +20,18 @@ def test_info_and_float_depth(ctx):
     assert np.all(d == np.float32(0.123456789))               # exact float storage
     fbo.release()
     tex.release()
+
+
+def test_gl_bytes_counts_each_object_as_the_driver_sized_it(ctx):
+    tex = ctx.texture((16, 8), 4)
+    tex.build_mipmaps()
+    buf = ctx.buffer(reserve=1000)
+    levels = sum(max(16 >> k, 1) * max(8 >> k, 1) * 4 for k in range(5))   # 16x8 down to 1x1, RGBA8
+    assert gl_bytes(tex, None, buf) == levels + 1000
+    assert gl_bytes(tex, buf) == levels + 1000              # asked again: the same, from each object's slot
+    assert tex.extra == {"driver_bytes": levels}
+    tex.release()
+    buf.release()
 
 
 def test_missing_device_index_is_named(ctx):

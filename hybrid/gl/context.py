@@ -287,12 +287,24 @@ def driver_texture_bytes(tex) -> int:
 
 
 def gl_bytes(*objects) -> int:
-    """Bytes of moderngl textures and buffers as the driver reports them (None entries count 0)."""
+    """Bytes of moderngl textures and buffers as the driver reports them (None entries count 0).
+
+    The project never resizes a texture or buffer after making it (a bigger one is a new object, and mip levels
+    are allocated or built before the object is handed out), so the driver is asked once per object and its
+    answer kept in the object's ``extra`` slot: the renderer accounts its memory every frame."""
     total = 0
     for o in objects:
         if o is None:
             continue
-        total += driver_buffer_bytes(o) if hasattr(o, "bind_to_storage_buffer") else driver_texture_bytes(o)
+        extra = o.extra if isinstance(o.extra, dict) else None
+        n = extra.get("driver_bytes") if extra is not None else None
+        if n is None:
+            n = driver_buffer_bytes(o) if hasattr(o, "bind_to_storage_buffer") else driver_texture_bytes(o)
+            if extra is not None:
+                extra["driver_bytes"] = n
+            elif o.extra is None:
+                o.extra = {"driver_bytes": n}
+        total += n
     return total
 
 
