@@ -78,6 +78,53 @@ def test_fit_rows_recovers_coefficients_from_a_wrong_prior():
     assert np.median(np.abs(X @ (theta / 5) - y) / y) > 0.7
 
 
+def test_fit_rows_keeps_the_prior_shape_from_passes_of_a_few_explored_tiles():
+    rng = np.random.default_rng(7)
+    theta = np.array([2.0, 0.3, 1e-4])                 # overhead, per tile, per pixel
+    X = np.c_[np.ones(40), rng.integers(1, 3, 40), rng.uniform(1e3, 2e4, 40)]
+    y = (X @ np.array([0.5, 1.5, 1e-4])) * (1 + 0.05 * rng.standard_normal(40))   # another split, same level
+    fitted = fit_rows(X, y, theta, prior_weight=2.0, shape_rows=12, few_tiles=2)
+    ratio = fitted / theta
+    assert np.allclose(ratio, ratio[0])                # the prior's split kept, only its level moved
+    assert 0.8 < np.median((X @ fitted) / y) < 1.25
+    X[:, 1] = rng.integers(5, 30, 40)                  # passes of many tiles: the split is learnt
+    y = (X @ np.array([0.5, 1.5, 1e-4])) * (1 + 0.01 * rng.standard_normal(40))
+    fitted = fit_rows(X, y, theta, prior_weight=2.0, shape_rows=12, few_tiles=2)
+    assert fitted[1] / fitted[0] > 2 * theta[1] / theta[0]
+
+
+def test_prior_share_damps_a_split_the_rows_barely_tell():
+    rng = np.random.default_rng(8)
+    theta = np.array([1.0, 0.25, 1e-4])
+    X = np.c_[np.ones(48), rng.integers(11, 14, 48), rng.uniform(1e4, 2e4, 48)]   # tile counts nearly constant
+    y = (X @ theta) * (1 + 0.15 * rng.standard_normal(48))                         # noisy passes, same model
+    free = fit_rows(X, y, theta, prior_weight=2.0)
+    damped = fit_rows(X, y, theta, prior_weight=2.0, prior_share=0.5)
+    assert abs(damped[0] - theta[0]) < abs(free[0] - theta[0])
+    assert abs(damped[0] - theta[0]) < 0.5 * theta[0]
+
+
+def test_a_strategy_that_could_not_pay_is_not_explored_once_its_level_is_known():
+    rng = np.random.default_rng(9)
+    online = OnlineModel(TRUE, AdaptOptions(explore_share=0.05, hold_error=0.0))   # predictions never 'hold'
+    online.credit = 1e9
+    cols = columns(rng, 20)
+    names = TRUE.candidates
+    table = TRUE.predict_table(cols)
+    g = names.index("raster_gs")
+    hopeless = table.copy()
+    hopeless[g] = 10 * table.min(axis=0) + 10.0        # 10x the best of every tile
+    picks = np.delete(hopeless, g, axis=0).argmin(axis=0)
+    picks = np.where(picks >= g, picks + 1, picks)
+    assert online.explore(hopeless, picks.copy(), names) is not None   # level unknown yet: it might pay
+    for _ in range(AdaptOptions().hold_rows):
+        online.rows["raster_gs"].add(np.ones(1 + len(TERMS["raster_gs"])), 5.0)
+    assert all(online.explore(hopeless, picks.copy(), names) is None for _ in range(10))
+    cheap = table.copy()
+    cheap[g] = 0.2 * table.min(axis=0)                 # a fifth of the best: worth a look
+    assert any(online.explore(cheap, picks.copy(), names) is not None for _ in range(10))
+
+
 def test_fit_rows_drops_an_outlier():
     rng = np.random.default_rng(2)
     theta = np.array([1.0, 0.2, 1e-4])

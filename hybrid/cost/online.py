@@ -42,6 +42,10 @@ def _median(values) -> float:
     return float(v[n // 2]) if n % 2 else 0.5 * float(v[n // 2 - 1] + v[n // 2])
 
 
+OPTIMISM = 0.5
+"""Exploration prices a strategy at this share of its predicted cost: one that would not pay even then is not
+explored (its predictions may be this far off before they hold, and no farther once its level is fitted)."""
+
 OUTLIER = 4.0
 """Rows whose relative residual is over this many times the median one (and over 0.25) are refitted without."""
 
@@ -53,6 +57,7 @@ class AdaptOptions:
 
     window: int = 48
     prior_weight: float = 2.0
+    prior_share: float = 0.5
     explore_share: float = 0.05
     explore_tiles: int = 2
     hold_rows: int = 6
@@ -62,7 +67,7 @@ class AdaptOptions:
     def __post_init__(self):
         if not (self.window >= 4 and self.hold_rows >= 1 and self.explore_tiles >= 1 and self.refit_every >= 1):
             raise TerrabenchError("adapt options need window >= 4 and hold_rows, explore_tiles, refit_every >= 1")
-        for name in ("prior_weight", "explore_share", "hold_error"):
+        for name in ("prior_weight", "prior_share", "explore_share", "hold_error"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise TerrabenchError(f"adapt option {name} must be a finite number >= 0, got {v!r}")
@@ -148,10 +153,22 @@ class OnlineModel:
         tiles = np.sort(self._rng.choice(pool, size=k, replace=False))
         m = self.model
         cost = (m.overhead.get(names[i], 0.0) + m.mix_overhead + float(table[i, tiles].sum() - base[tiles].sum()))
-        if max(cost, self._spent.get(names[i], 0.0)) > self.credit:
+        if max(cost, self._spent.get(names[i], 0.0)) > self.credit or not self._might_pay(table[i], base, names[i]):
             return None
         picks[tiles] = i
         return Exploration(names[i], tiles, float(base[tiles].sum()))
+
+    def _might_pay(self, costs: np.ndarray, base: np.ndarray, strategy: str) -> bool:
+        """Whether strategy ``strategy``, ``OPTIMISM`` times as costly as predicted (its per-tile ``costs`` (B,) and
+        its per-frame overhead), would save this frame more than a mixed frame's overhead on the tiles where it
+        beats the frame's choices ``base`` (B,): exploring a strategy that could not win even so buys nothing.
+        Until the strategy has ``hold_rows`` rows its level is the starting model's, which may be off by any
+        factor: it might pay."""
+        if len(self.rows[strategy]) < self.options.hold_rows:
+            return True
+        finite = np.isfinite(costs)
+        gain = float(np.maximum(base[finite] - OPTIMISM * costs[finite], 0.0).sum())
+        return gain > OPTIMISM * self.model.overhead.get(strategy, 0.0) + self.model.mix_overhead
 
     def observe(self, columns: dict, picks: list[str], pass_ms: dict, frame_ms: float,
                 explored: Exploration | None = None) -> None:
@@ -211,7 +228,9 @@ class OnlineModel:
         for s in names:
             self._fresh[s] = 0
             X, y = self.rows[s].arrays()
-            theta = fit_rows(X, y, self._theta(self.start, s), self.options.prior_weight)
+            o = self.options
+            theta = fit_rows(X, y, self._theta(self.start, s), o.prior_weight, o.prior_share, 2 * o.hold_rows,
+                             o.explore_tiles)
             m.overhead = {**m.overhead, s: float(theta[0])}
             setattr(m, s, dict(zip(TERMS[s], map(float, theta[1:]))))
         mixed, pure = self.residual["mixed"], self.residual["pure"]
@@ -247,21 +266,27 @@ class RowWindow:
         return min(self.n, len(self.y))
 
 
-def fit_rows(X: np.ndarray, y: np.ndarray, prior: np.ndarray, prior_weight: float) -> np.ndarray:
-    """Non-negative [overhead, coefficients] of one strategy from rows of terms X (n, p) and measured ms y (n,),
-    on relative error, with a ridge of ``prior_weight`` rows toward ``prior`` scaled by the rows' median
-    measured / predicted; outliers (``OUTLIER``) dropped and refitted once. No rows: the prior."""
+def fit_rows(X: np.ndarray, y: np.ndarray, prior: np.ndarray, prior_weight: float,
+             prior_share: float = 0.0, shape_rows: int = 0, few_tiles: int = 0) -> np.ndarray:
+    """Non-negative [overhead, coefficients] of one strategy from rows of terms X (n, p; column 1 the tile
+    count) and measured ms y (n,), on relative error, with a ridge toward ``prior`` scaled by the rows' median
+    measured / predicted, worth the larger of ``prior_weight`` rows and ``prior_share`` of the rows; outliers
+    (``OUTLIER``) dropped and refitted once. No rows: the prior. Fewer than ``shape_rows`` rows of more than
+    ``few_tiles`` tiles: the scaled prior (passes of a few explored tiles fix a strategy's level, not how its
+    cost splits between the frame and its tiles)."""
     if len(y) == 0:
         return prior.copy()
     pred = X @ prior
     ratio = y[pred > 0] / pred[pred > 0]
     scaled = prior * (_median(ratio.tolist()) if len(ratio) else 1.0)
+    if int(np.count_nonzero(X[:, 1] > few_tiles)) < shape_rows:
+        return scaled
     A = X / y[:, None]
     col = np.sqrt(np.einsum("ij,ij->j", A, A) / len(y))
     col = np.where(col > 0, col, 1.0)
     keep = np.ones(len(y), dtype=bool)
     for _ in range(2):
-        ridge = np.sqrt(prior_weight) * np.eye(len(prior))
+        ridge = np.sqrt(max(prior_weight, prior_share * int(keep.sum()))) * np.eye(len(prior))
         M = np.vstack([A[keep] / col, ridge])
         b = np.concatenate([np.ones(int(keep.sum())), ridge @ (scaled * col)])
         u, _ = nnls(M, b, maxiter=50 * len(prior))
