@@ -10,13 +10,14 @@ clipped to the viewport and its area summed per box. Vertices are the reference'
 crossings of the box edges (within rounding: a crossing is found along the face's edge as it runs), projected
 the same way and rounded to 1e-6 px.
 
-A frame has a few dozen tiles, so the time is set by the number of array operations more than their size:
-each step works on every polygon at once, coordinates leading every array so that a step runs over all
-vertices contiguously, and the viewport clip is a clamp integrated in closed form (``clipped_signed_areas_xy``).
+A frame has a few dozen tiles: as numpy array operations the time was set by their number, not their size,
+so the boxes are walked one by one in a loop compiled by numba, with the same steps. The viewport clip is a
+clamp integrated in closed form (``_clipped_area``).
 """
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from hybrid.camera.view import View
 
@@ -77,42 +78,15 @@ def near_cut(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
                   < _near(view), axis=1)
 
 
-def _project(view: View, p: np.ndarray) -> np.ndarray:
-    """Eye-space points (3, ...) (coordinates first) in front of the near plane to pixels (2, ...), x then y,
-    rounded to 1e-6 px."""
-    tan = view.tan_half_fov
-    out = p[:2] / p[2] * _column(-0.5 * view.width / (tan * view.aspect), 0.5 * view.height / tan, p.ndim) \
-        + _column(0.5 * view.width, 0.5 * view.height, p.ndim)
-    return out.round(6, out=out)
-
-
-def _column(x: float, y: float, ndim: int) -> np.ndarray:
-    """(2, 1, ...) of x and y, broadcasting against (2, ...) coordinates of ``ndim`` axes."""
-    return np.array([x, y]).reshape((2,) + (1,) * (ndim - 1))
-
-
-class _Next(dict):
-    """Index arrays i -> (i + 1) mod m, one per polygon width m, made once."""
-
-    def __missing__(self, m):
-        self[m] = np.roll(np.arange(m), -1)
-        return self[m]
-
-
-_NEXT = _Next()
 _OUTLINE, _HAS_OUTLINE = _silhouettes()
-_PAD = {k: np.minimum(np.arange(8), k - 1) for k in (4, 6, 8)}            # k vertices padded to 8 by the last
+_FACE_SIDE = np.array([0, 3, 1, 4, 2, 5])                  # face f's column of ``side`` (faces in _FACES order)
+_FLAT_OUTLINE = np.array([0, 2, 6, 4])                     # a box flat in z: its low z face
 
 
-def clipped_signed_areas(poly: np.ndarray, w: float, h: float) -> np.ndarray:
-    """Signed areas (N,) of convex padded polygons (N, m, 2) clipped to the rectangle [0, w] x [0, h] (pixels),
-    with the sign of each polygon's own orientation (``clipped_signed_areas_xy`` of their coordinates)."""
-    return clipped_signed_areas_xy(np.moveaxis(np.asarray(poly, dtype=np.float64), -1, 0), w, h)
-
-
-def clipped_signed_areas_xy(p: np.ndarray, w: float, h: float) -> np.ndarray:
-    """Signed areas (N,) of convex padded polygons given as (2, N, m) x and y pixel coordinates, clipped to the
-    rectangle [0, w] x [0, h], with the sign of each polygon's own orientation.
+@njit(cache=True)
+def _clipped_area(px: np.ndarray, py: np.ndarray, n: int, w: float, h: float) -> float:
+    """Signed area of the convex polygon px[:n], py[:n] (pixels) clipped to the rectangle [0, w] x [0, h], with
+    the sign of the polygon's own orientation.
 
     Clamping (x, y) to the rectangle is the nearest-point projection onto it. It maps the polygon's boundary to
     a closed path that winds once around every point of the intersection and never around a point outside the
@@ -123,48 +97,103 @@ def clipped_signed_areas_xy(p: np.ndarray, w: float, h: float) -> np.ndarray:
     mean of y clamped to [0, h] between the part's end values, a closed form. Repeated vertices (padding) are
     edges of no span and add nothing; so do vertical edges.
     """
-    m = p.shape[2]
-    q = p[:, :, _NEXT[m]]                                                      # each edge's end
-    cx = np.minimum(np.maximum(np.stack([p[0], q[0]]), 0.0), w)               # the edge's x span over [0, w]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (cx - p[0]) / (q[0] - p[0])
-    t = np.fmin(np.fmax(t, 0.0), 1.0)                                         # a vertical edge (0 / 0): its start
-    y = p[1] + t * (q[1] - p[1])                                              # y at the span's ends (2, N, m)
-    lo, hi = np.minimum(y[0], y[1]), np.maximum(y[0], y[1])
-    a, b = np.minimum(np.maximum(lo, 0.0), h), np.minimum(np.maximum(hi, 0.0), h)
-    span = hi - lo
-    with np.errstate(divide="ignore", invalid="ignore"):                      # mean of clamp(y) for y in [lo, hi]
-        mean = ((b - a) * (a + b) * 0.5 + h * np.maximum(hi - np.maximum(lo, h), 0.0)) / span
-    mean = np.where(span > 0, mean, a)
-    return -np.einsum("ij,ij->i", cx[1] - cx[0], mean)
+    total = 0.0
+    for k in range(n):
+        j = k + 1 if k + 1 < n else 0
+        x0, y0, x1, y1 = px[k], py[k], px[j], py[j]
+        c0, c1 = min(max(x0, 0.0), w), min(max(x1, 0.0), w)
+        if c1 == c0:
+            continue
+        t0 = min(max((c0 - x0) / (x1 - x0), 0.0), 1.0)
+        t1 = min(max((c1 - x0) / (x1 - x0), 0.0), 1.0)
+        ya, yb = y0 + t0 * (y1 - y0), y0 + t1 * (y1 - y0)
+        lo, hi = min(ya, yb), max(ya, yb)
+        a, b = min(max(lo, 0.0), h), min(max(hi, 0.0), h)
+        span = hi - lo
+        mean = ((b - a) * (a + b) * 0.5 + h * max(hi - max(lo, h), 0.0)) / span if span > 0 else a
+        total -= (c1 - c0) * mean
+    return total
 
 
-def _cut_faces(face: np.ndarray, near: float) -> np.ndarray:
-    """Faces (3, N, 4) in eye space (coordinates first) cut at depth >= near: (3, N, 8) closed polygons whose
-    projections have the cut faces' signed areas.
+@njit(cache=True)
+def _cut_face(face: np.ndarray, near: float, out: np.ndarray) -> None:
+    """A face (3, 4) in eye space cut at depth >= near, into ``out`` (3, 8): a closed polygon whose projection
+    has the cut face's signed area.
 
     Each edge k yields vertex k and the point where the edge crosses the plane (vertex k again if it does not).
-    Points behind the plane are then replaced by one crossing of their face: the face meets the plane in a line,
+    Points behind the plane are then replaced by one crossing of the face: the face meets the plane in a line,
     so what replaced them runs along that line and back, which adds no area to the projection (the clipped
     face is what is left). A face wholly behind becomes a point in front of the eye (no area)."""
-    n = face.shape[1]
-    nxt = face[:, :, _NEXT[4]]
-    depth = -face[2]
-    front = depth >= near
-    cross = front != front[:, _NEXT[4]]
-    step = depth - depth[:, _NEXT[4]]
-    t = (depth - near) / np.where(cross, step, 1.0)                            # along edge k where it crosses
-    hit = face + t * (nxt - face)
-    pts = np.empty((3, n, 4, 2))
-    pts[..., 0] = face
-    pts[..., 1] = np.where(cross, hit, face)
-    keep = np.empty((n, 4, 2), bool)
-    keep[..., 0], keep[..., 1] = front, front | cross
-    anchor = np.where(cross.any(axis=1), hit[:, np.arange(n), cross.argmax(axis=1)], _AHEAD)
-    return np.where(keep.reshape(n, 8), pts.reshape(3, n, 8), anchor[:, :, None])
+    anchor = (0.0, 0.0, -1.0)
+    found = False
+    for k in range(4):
+        j = (k + 1) % 4
+        dk, dj = -face[2, k], -face[2, j]
+        front = dk >= near
+        cross = front != (dj >= near)
+        t = (dk - near) / (dk - dj) if cross else 0.0
+        for r in range(3):
+            hit = face[r, k] + t * (face[r, j] - face[r, k])
+            out[r, 2 * k] = face[r, k] if front else np.nan
+            out[r, 2 * k + 1] = hit if cross else (face[r, k] if front else np.nan)
+        if cross and not found:
+            anchor = (out[0, 2 * k + 1], out[1, 2 * k + 1], out[2, 2 * k + 1])
+            found = True
+    for c in range(8):
+        if np.isnan(out[0, c]):
+            out[0, c], out[1, c], out[2, c] = anchor
 
 
-_AHEAD = np.array([0.0, 0.0, -1.0])[:, None]                                # a point in front of the eye
+@njit(cache=True)
+def _project_area(pts: np.ndarray, n: int, scale: np.ndarray, w: float, h: float) -> float:
+    """Signed viewport-clipped area (pixels) of the projection of eye-space points pts[:, :n] (in front of the
+    near plane), projected as the reference does and rounded to 1e-6 px; scale is (sx, sy, ox, oy)."""
+    px, py = np.empty(n), np.empty(n)
+    for c in range(n):
+        px[c] = np.rint((pts[0, c] / pts[2, c] * scale[0] + scale[2]) * 1e6) / 1e6
+        py[c] = np.rint((pts[1, c] / pts[2, c] * scale[1] + scale[3]) * 1e6) / 1e6
+    return _clipped_area(px, py, n, w, h)
+
+
+@njit(cache=True)
+def _box_areas(rot, eye, lo, hi, near, scale, w, h, outline, has_outline):
+    """Viewport area in pixels of each box's near-cut projection (see ``footprints``): (B,) from (B, 3) corners."""
+    out = np.zeros(lo.shape[0])
+    rel, pts, face = np.empty((3, 8)), np.empty((3, 8)), np.empty((3, 4))
+    side, spans = np.empty(6, np.bool_), np.empty(3, np.bool_)
+    for b in range(lo.shape[0]):
+        cut = False
+        for c in range(8):
+            dx = (hi[b, 0] if (c >> 2) & 1 else lo[b, 0]) - eye[0]
+            dy = (hi[b, 1] if (c >> 1) & 1 else lo[b, 1]) - eye[1]
+            dz = (hi[b, 2] if c & 1 else lo[b, 2]) - eye[2]
+            for r in range(3):
+                rel[r, c] = rot[r, 0] * dx + rot[r, 1] * dy + rot[r, 2] * dz
+            cut |= rel[2, c] > -near
+        code = 0
+        for a in range(3):
+            side[a], side[a + 3] = eye[a] > lo[b, a], eye[a] < hi[b, a]
+            spans[a] = hi[b, a] - lo[b, a] > 0
+            code += (1 << (2 * a)) * side[a] + (2 << (2 * a)) * side[a + 3]
+        flat = spans[0] and spans[1] and not spans[2]
+        if (has_outline[code] or flat) and not cut:
+            corners = _FLAT_OUTLINE if flat else outline[code]
+            for k in range(len(corners)):
+                pts[:, k] = rel[:, corners[k]]
+            out[b] = abs(_project_area(pts, len(corners), scale, w, h))
+            continue
+        total = 0.0
+        for f in range(6):
+            if side[_FACE_SIDE[f]] and spans[_FACE_SPAN[f, 0]] and spans[_FACE_SPAN[f, 1]]:
+                for k in range(4):
+                    face[:, k] = rel[:, _FACES[f, k]]
+                if cut:
+                    _cut_face(face, near, pts)
+                    total += _project_area(pts, 8, scale, w, h)
+                else:
+                    total += _project_area(face, 4, scale, w, h)
+        out[b] = abs(total)
+    return out
 
 
 def footprints(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -173,36 +202,27 @@ def footprints(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     A box wholly in front of the near plane with some extent on every axis projects to its outline, one
     polygon of 4 or 6 corners looked up by where the eye is (``_silhouettes``), and one flat in z to its
     rectangle; any other box (flat in x or y, or reaching behind the near plane) to its back faces, cut at the
-    near plane when any reaches behind it. All polygons
-    are projected and clipped to the viewport in one pass; a box's areas are then summed."""
+    near plane when any corner reaches behind it, their signed areas summed."""
     lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
-    b = lo.shape[0]
-    rel = _eye_space(view, lo, hi)                             # (3, B, 8)
-    near = _near(view)
-    eye = np.asarray(view.eye, dtype=np.float64)
-    side = np.concatenate([eye > lo, eye < hi], axis=1)        # (B, 6): per axis the low, then the high face is back
-    code = side @ _CODE_WEIGHTS
-    cut = (rel[2] > -near).any(axis=1)
-    spans = (hi - lo) > 0
-    flat = spans[:, 0] & spans[:, 1] & ~spans[:, 2]             # a rectangle at one height: its outline is itself
-    outline = (_HAS_OUTLINE[code] | flat) & ~cut
-    sbox = np.flatnonzero(outline)
-    corner = np.where(flat[sbox, None], _FLAT_OUTLINE, _OUTLINE[code[sbox]])
-    sil = np.take(rel.reshape(3, -1), sbox[:, None] * 8 + corner, axis=1)                   # (3, S, 6)
-    if len(sbox) == b:                                          # every box one polygon (in box order): no faces
-        return np.abs(clipped_signed_areas_xy(_project(view, sil), float(view.width), float(view.height)))
-    back = side[:, _FACE_SIDE] & spans[:, _FACE_SPAN[:, 0]] & spans[:, _FACE_SPAN[:, 1]]
-    back[outline] = False
-    box, fid = np.nonzero(back)
-    face = np.take(rel.reshape(3, -1), box[:, None] * 8 + _FACES[fid], axis=1)             # (3, N, 4)
-    if cut.any():
-        face = _cut_faces(face, near)
-    m = max(6, face.shape[2])
-    poly = _project(view, np.concatenate([sil[:, :, _PAD[6][:m]], face[:, :, _PAD[face.shape[2]][:m]]], axis=1))
-    area = clipped_signed_areas_xy(poly, float(view.width), float(view.height))
-    return np.abs(np.bincount(np.concatenate([sbox, box]), area, minlength=b))
+    tan = view.tan_half_fov
+    scale = np.array([-0.5 * view.width / (tan * view.aspect), 0.5 * view.height / tan,
+                      0.5 * view.width, 0.5 * view.height])
+    return _box_areas(np.ascontiguousarray(view.rotation(), dtype=np.float64), np.asarray(view.eye, dtype=np.float64),
+                      np.ascontiguousarray(lo.reshape(-1, 3)), np.ascontiguousarray(hi.reshape(-1, 3)), _near(view),
+                      scale, float(view.width), float(view.height), _OUTLINE, _HAS_OUTLINE)
 
 
-_CODE_WEIGHTS = np.array([1, 4, 16, 2, 8, 32])             # the eye position code of ``_silhouettes`` from ``side``
-_FACE_SIDE = np.array([0, 3, 1, 4, 2, 5])                  # face f's column of ``side`` (faces in _FACES order)
-_FLAT_OUTLINE = np.array([0, 2, 6, 4, 4, 4])               # a box flat in z: its low z face, padded to 6 corners
+@njit(cache=True)
+def _polygon_areas(px: np.ndarray, py: np.ndarray, w: float, h: float) -> np.ndarray:
+    """``_clipped_area`` of each row of (N, m) pixel coordinates."""
+    out = np.empty(px.shape[0])
+    for i in range(px.shape[0]):
+        out[i] = _clipped_area(px[i], py[i], px.shape[1], w, h)
+    return out
+
+
+def clipped_signed_areas(poly: np.ndarray, w: float, h: float) -> np.ndarray:
+    """Signed areas (N,) of convex padded polygons (N, m, 2) (pixels) clipped to the rectangle [0, w] x [0, h],
+    with the sign of each polygon's own orientation (``_clipped_area``)."""
+    p = np.asarray(poly, dtype=np.float64)
+    return _polygon_areas(np.ascontiguousarray(p[..., 0]), np.ascontiguousarray(p[..., 1]), float(w), float(h))
