@@ -28,11 +28,13 @@ from hybrid.reference_blocks import (
     visible_blocks,
 )
 from hybrid.terrain.heightfield import HeightField
+from hybrid.tiles.byte_lru import ByteLRU
 from hybrid.tiles.tiletree import DEFAULT_TAU
 
 ReferenceMode = Literal["texture", "shaded", "height"]
 MODES = {m: i for i, m in enumerate(get_args(ReferenceMode))}
 RESIDENT_SAMPLES = 1 << 26       # a stored grid up to this many samples is read once and kept on the GPU
+HOST_BLOCK_BYTES = 256 << 20     # a streamed grid's blocks kept in host memory between draws, least recently used out
 
 
 def grid_indices(rows: int, cols: int) -> np.ndarray:
@@ -47,9 +49,12 @@ class ReferenceRenderer:
     """GPU state of the reference surface of one height field: a height texture and index buffer per block
     (``hybrid.reference_blocks``: blocks within the context's texture limit, so any grid size draws), and the
     colour texture. Grids held in memory keep every block's texture on the GPU; a stored grid beyond
-    RESIDENT_SAMPLES streams the blocks a view sees from disk on each draw, so it draws out of core."""
+    RESIDENT_SAMPLES streams the blocks a view sees on each draw, so it draws out of core: from a host cache of
+    ``host_bytes`` (blocks it holds drawn first, so a view that shows more than it holds still reads only the
+    rest), else from disk. ``block_reads`` counts the blocks read from disk."""
 
-    def __init__(self, ctx, hf: HeightField, block_samples: int = DEFAULT_BLOCK_SAMPLES):
+    def __init__(self, ctx, hf: HeightField, block_samples: int = DEFAULT_BLOCK_SAMPLES,
+                 host_bytes: int = HOST_BLOCK_BYTES):
         self.ctx, self.hf = ctx, hf
         self.prog = program(ctx, "hybrid", "reference.vert.glsl", "reference.frag.glsl")
         side = min(int(block_samples), max_texture_size(ctx))
@@ -59,15 +64,20 @@ class ReferenceRenderer:
         self.textures: dict = {}                 # block index (resident) or block shape (streamed) -> texture
         self.vaos: dict = {}                     # block shape -> (index buffer, vertex array)
         self.released = False
+        self.drawn_blocks = self.block_reads = 0
+        self.host = None if self.resident else ByteLRU(host_bytes)
         if self.resident:
             for k, b in enumerate(self.blocks):
                 self.textures[k] = self._texture(b)
         self.texture = terrain_texture(ctx, hf)
         self.triangles = 2 * (hf.rows - 1) * (hf.cols - 1)
-        self.drawn_blocks = 0
+
+    def _read(self, b: Block) -> np.ndarray:
+        self.block_reads += 1
+        return np.ascontiguousarray(self.hf.heights[b.r0:b.r1, b.c0:b.c1], dtype=np.float32)
 
     def _texture(self, b: Block, reuse=None):
-        data = np.ascontiguousarray(self.hf.heights[b.r0:b.r1, b.c0:b.c1], dtype=np.float32)
+        data = self._read(b) if self.host is None else self.host.get((b.r0, b.c0), lambda: self._read(b))
         if reuse is not None:
             reuse.write(data.tobytes())
             return reuse
@@ -103,7 +113,10 @@ class ReferenceRenderer:
             self.texture.use(1)
             self.prog["tex"].value = 1
         target.use()
-        shown = visible_blocks(hf, self.blocks, self.lo, self.hi, view)
+        shown = visible_blocks(hf, self.blocks, self.lo, self.hi, view).tolist()
+        if self.host is not None:                  # held blocks first: each is drawn before a read can evict it
+            host = self.host
+            shown.sort(key=lambda k: (self.blocks[k].r0, self.blocks[k].c0) not in host)
         for k in shown:
             b = self.blocks[k]
             if self.resident:
@@ -168,3 +181,5 @@ class ReferenceRenderer:
             if o is not None:
                 o.release()
         self.textures, self.vaos, self.released = {}, {}, True
+        if self.host is not None:
+            self.host.clear()

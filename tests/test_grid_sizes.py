@@ -162,6 +162,27 @@ def test_a_stored_grid_streams_its_blocks_into_the_same_image(ctx, tmp_path, mon
     assert np.array_equal(a.distance, b.distance)
 
 
+def test_a_streamed_grid_reads_only_the_blocks_its_host_cache_lacks(ctx, tmp_path, monkeypatch):
+    from hybrid import reference
+    from hybrid.terrain.grid_sources import HeightFieldSource
+    from hybrid.terrain.stored import open_store
+    from hybrid.tiles.store import prepare_store
+    store = open_store(prepare_store(HeightFieldSource(hills(97, 161)), tmp_path / "hills", tile_size=32))
+    view = along(store.load())
+    monkeypatch.setattr(reference, "RESIDENT_SAMPLES", 0)
+    with ReferenceRenderer(ctx, store, block_samples=33) as all_held, \
+            ReferenceRenderer(ctx, store, block_samples=33, host_bytes=2 * 33 * 33 * 4) as two_held:
+        first = all_held.render(view, mode="shaded")
+        shown = all_held.drawn_blocks
+        assert all_held.block_reads == shown > 4
+        again = all_held.render(view, mode="shaded")
+        assert all_held.block_reads == shown                     # the second draw read nothing from disk
+        assert np.array_equal(first.distance, again.distance)
+        two_held.render(view, mode="shaded")
+        two_held.render(view, mode="shaded")
+        assert two_held.block_reads == 2 * shown - 2              # it held two blocks between the draws
+
+
 def test_a_texture_past_the_limit_is_resampled_to_fit(ctx, small_limit):
     rng = np.random.default_rng(3)
     t = rng.integers(0, 256, (40, 300, 3), dtype=np.uint8)
