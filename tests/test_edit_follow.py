@@ -104,3 +104,29 @@ def test_gpu_max_mipmap_updated_over_the_window_equals_a_rebuild(ctx):
     finally:
         for o in (ht, tex, b):
             o.release()
+
+
+@pytest.mark.parametrize("exact_span", [1024, 8])       # 8: levels of bounded errors too
+def test_node_arrays_after_edits_equal_a_rebuild(monkeypatch, exact_span):
+    import raster.rect_nodes as rn
+    from raster.node_edit import node_edits, update_nodes
+    from raster.nodes import GlobalNodes
+    monkeypatch.setattr(rn, "EXACT_SPAN", exact_span)
+    hf = get_dataset("fbm", 97)                  # tiles of 16: a 128-cell square, so padding classes beyond the grid
+    R, eff, zlo, zhi, sides = rn.rect_nodes(hf, 16, 0.9)
+    nodes = GlobalNodes(R, 0.9, tuple(a.copy() for a in eff), tuple(a.copy() for a in zlo),
+                        tuple(a.copy() for a in zhi), sides=tuple(a.copy() for a in sides))
+    st = node_edits(hf, 16, 0.9)
+    edits = [Raise((16 * 30.0, 32 * 30.0), 100.0, 60.0),            # across a tile border
+             Crater((96 * 30.0, 96 * 30.0), 200.0, 40.0),           # the grid's corner: padding classes change
+             Smooth((50 * 30.0, 20 * 30.0), 150.0, 1.0)]
+    for brush in edits:
+        win = _edit(hf, [brush])
+        rewritten = update_nodes(st, nodes, hf, win)
+        want = rn.rect_nodes(hf, 16, 0.9)
+        for got_arrays, want_arrays in zip((nodes.effective, nodes.zlo, nodes.zhi, nodes.sides), want[1:],
+                                           strict=True):
+            for g, (a, b) in enumerate(zip(got_arrays, want_arrays, strict=True)):
+                np.testing.assert_array_equal(a, b, err_msg=f"level {g} after {brush}")
+        assert rewritten[0].i1 - rewritten[0].i0 < nodes.effective[0].shape[0]      # not the whole level 0
+    assert not np.array_equal(nodes.zhi[0], zhi[0]) and not np.array_equal(nodes.effective[2], eff[2])
