@@ -6,6 +6,7 @@ from hybrid.terrain.datasets import crop, get_dataset, puget
 from hybrid.terrain.edits import Crater, Raise, Smooth, apply_brush, brush_params
 from hybrid.tiles.pyramid import TilePyramid
 from hybrid.tiles.pyramid_edit import touched_keys, update_pyramid
+from hybrid.tiles.tile_table import tile_table
 
 
 @pytest.fixture(scope="module")
@@ -37,6 +38,7 @@ def test_pyramid_after_edits_equals_a_rebuild(small_puget, name):
     hf = crop(small_puget, 97) if name == "puget" else get_dataset("fbm", 97)
     p = TilePyramid(hf, 16)
     _pyramid_arrays(p)                                   # every cache made before the edit
+    tile_table(p)
     cx, cy = hf.origin[0] + 32 * hf.spacing_x, hf.origin[1] + 48 * hf.spacing_y
     win = _edit(hf, [Raise((cx, cy), 9 * hf.spacing_x, 40.0), Crater((cx + 30 * hf.spacing_x, cy), 6 * hf.spacing_x, 25.0),
                      Smooth((hf.origin[0], hf.origin[1]), 5 * hf.spacing_x, 1.0)])
@@ -44,6 +46,7 @@ def test_pyramid_after_edits_equals_a_rebuild(small_puget, name):
     fresh = TilePyramid(hf, 16)
     for a, b in zip(_pyramid_arrays(p), _pyramid_arrays(fresh), strict=True):
         np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(tile_table(p).boxes, tile_table(fresh).boxes)
     assert hf.height_range == (float(hf.heights.min()), float(hf.heights.max()))
     assert {k.level for k in keys} == set(range(p.max_level + 1))
     assert len([k for k in keys if k.level == 0]) < len(p.keys(0))     # not every tile

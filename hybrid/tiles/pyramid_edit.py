@@ -5,7 +5,7 @@ geometric error can change only where the tile's samples meet the window (its ow
 error reads the level-0 samples it covers). ``update_pyramid`` recomputes exactly those tiles at every level with
 the arithmetic of ``hybrid.tiles.bounds.level_bounds`` (maxima and minima are exact; each deviation is the same
 operations on the same samples), so the arrays equal a full rebuild; the per-level caches made on first use (boxes,
-selection tables, quantisation bounds, on-step flags) are updated over the same tiles.
+selection tables, the dense selection's table, quantisation bounds, on-step flags) are updated over the same tiles.
 """
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from hybrid.terrain.edits import Window
 from hybrid.tiles.bounds import _corner, _deviation
 from hybrid.tiles.pyramid import TileKey, TilePyramid
 from hybrid.tiles.quantize import Q_MAX, error_bound, on_step_cells
+from hybrid.tiles.tile_table import _TABLES
 
 
 def touched_tiles(pyramid: TilePyramid, win: Window, level: int) -> tuple[range, range]:
@@ -103,10 +104,16 @@ def _caches(pyramid: TilePyramid, win: Window) -> None:
         if level in pyramid._boxes:
             lo, hi = pyramid.aabbs(np.full(ty.size, level), tx, ty)
             pyramid._boxes[level][0][ty, tx], pyramid._boxes[level][1][ty, tx] = lo, hi
-        if level in pyramid._tables:
+        if level in pyramid._tables or pyramid in _TABLES:
             lo, hi = pyramid.boxes_at(level, tx, ty)
             e = pyramid.errors_at(level, tx, ty) + pyramid.quantization_errors_at(level, tx, ty)
-            pyramid._tables[level][ty, tx] = np.concatenate([lo, hi, e[:, None]], axis=1)
+            rows7 = np.concatenate([lo, hi, e[:, None]], axis=1)
+            if level in pyramid._tables:
+                pyramid._tables[level][ty, tx] = rows7
+            if pyramid in _TABLES:                        # the dense selection's flat table of tile places
+                side = pyramid.tiles_per_side(level)
+                first = sum(pyramid.tiles_per_side(lv) ** 2 for lv in range(level))
+                _TABLES[pyramid].boxes[first + ty * side + tx] = rows7
 
 
 def update_pyramid(pyramid: TilePyramid, win: Window) -> list[TileKey]:
