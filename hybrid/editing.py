@@ -25,6 +25,7 @@ from hybrid.gl.brush import GpuHeights
 from hybrid.gl.edges import TerrainEdges
 from hybrid.reference import ReferenceRenderer
 from hybrid.renderer import Renderer
+from hybrid.terrain.edit_log import EditLog, check_log
 from hybrid.terrain.edits import Brush, Window
 from hybrid.terrain.heightfield import HeightField
 from hybrid.tiles.pyramid_edit import update_pyramid
@@ -146,6 +147,12 @@ class TerrainEditor:
 
     def __exit__(self, *exc) -> None:
         self.release()
+
+
+def replay(editor: TerrainEditor, log: EditLog) -> list[EditReport]:
+    """Apply every edit of a log (checked for the editor's terrain first), in order; one report per edit."""
+    check_log(log, editor.hf)
+    return [editor.apply(e.brush) for e in log.edits]
 
 
 def _bounds_changed(r: Renderer, key, gpu) -> bool:
