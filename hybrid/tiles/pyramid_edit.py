@@ -9,10 +9,12 @@ selection tables, the dense selection's table, quantisation bounds, on-step flag
 """
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from hybrid.terrain.edits import Window
-from hybrid.tiles.bounds import _corner, _deviation
+from hybrid.tiles.bounds import BLOCK_CELLS, _corner, _deviation, _reduce
 from hybrid.tiles.pyramid import TileKey, TilePyramid
 from hybrid.tiles.quantize import Q_MAX, error_bound, on_step_cells
 from hybrid.tiles.tile_table import _TABLES
@@ -45,8 +47,36 @@ def _tile_cells(pyramid: TilePyramid, level: int, ty: int, tx: int) -> tuple[int
     return ty * b, min((ty + 1) * b, hf.rows - 1), tx * b, min((tx + 1) * b, hf.cols - 1)
 
 
+def _deviation_blocks(h: np.ndarray, k: int, a0: int, a1: int, b0: int, b1: int) -> np.ndarray:
+    """Per block of k x k level-0 cells, rows [a0, a1) and columns [b0, b1) of blocks: the largest deviation
+    (``level_bounds``' per-cell corner maximum) of the every-k-th-sample surface from the samples."""
+    cells_r, cells_c = h.shape[0] - 1, h.shape[1] - 1
+    i0, i1, j0, j1 = a0 * k, min(a1 * k, cells_r), b0 * k, min(b1 * k, cells_c)
+    return _reduce(_corner(_deviation(h, k, i0, i1, j0, j1), np.maximum), k, np.maximum)
+
+
+_BLOCKS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _level_blocks(pyramid: TilePyramid) -> dict:
+    """Per level >= 1, the deviation maxima per block of 2^l x 2^l level-0 cells (made at the pyramid's first edit,
+    one pass over the grid a level), so an edit re-measures only the blocks around it."""
+    if pyramid not in _BLOCKS:
+        h = pyramid.hf.heights
+        cells_r, cells_c = h.shape[0] - 1, h.shape[1] - 1
+        out = {}
+        for level in range(1, pyramid.max_level + 1):
+            k = 1 << level
+            step, rows = max(1, BLOCK_CELLS // k), -(-cells_r // k)      # a band of blocks at once (memory bound)
+            out[level] = np.concatenate([_deviation_blocks(h, k, a, min(a + step, rows), 0, -(-cells_c // k))
+                                         for a in range(0, rows, step)])
+        _BLOCKS[pyramid] = out
+    return _BLOCKS[pyramid]
+
+
 def _bounds(pyramid: TilePyramid, win: Window) -> None:
     """Recompute zmax, zmin and err of the touched tiles of every level (level_bounds' values)."""
+    blocks = _level_blocks(pyramid)
     h, zmax, zmin, err = pyramid.hf.heights, pyramid._zmax, pyramid._zmin, pyramid._err
     rows0, cols0 = touched_tiles(pyramid, win, 0)
     for ty in rows0:
@@ -55,16 +85,20 @@ def _bounds(pyramid: TilePyramid, win: Window) -> None:
             sub = h[i0:i1 + 1, j0:j1 + 1]
             zmax[0][ty, tx], zmin[0][ty, tx] = _corner(sub, np.maximum).max(), _corner(sub, np.minimum).min()
     for level in range(1, pyramid.max_level + 1):
-        k = 1 << level
+        k, dev = 1 << level, blocks[level]
+        # a block's cells read samples of its own coarse cell and the next one's first row: two blocks of margin
+        a0, a1 = max(win.i0 // k - 2, 0), min((win.i1 - 1) // k + 2, dev.shape[0])
+        b0, b1 = max(win.j0 // k - 2, 0), min((win.j1 - 1) // k + 2, dev.shape[1])
+        dev[a0:a1, b0:b1] = _deviation_blocks(h, k, a0, a1, b0, b1)
         rows, cols = touched_tiles(pyramid, win, level)
+        n = pyramid.n
         for ty in rows:
             for tx in cols:
                 kids = (slice(ty * k, (ty + 1) * k), slice(tx * k, (tx + 1) * k))
                 zmax[level][ty, tx], zmin[level][ty, tx] = zmax[0][kids].max(), zmin[0][kids].min()
-                i0, i1, j0, j1 = _tile_cells(pyramid, level, ty, tx)
-                dev = _corner(_deviation(h, k, i0, i1, j0, j1), np.maximum).max()
+                mine = dev[ty * n:(ty + 1) * n, tx * n:(tx + 1) * n].max()
                 below = err[level - 1][2 * ty:2 * ty + 2, 2 * tx:2 * tx + 2].max()
-                err[level][ty, tx] = max(dev, below)
+                err[level][ty, tx] = max(mine, below)
 
 
 def _on_step(pyramid: TilePyramid, win: Window) -> None:
