@@ -172,11 +172,18 @@ class _Rows:
         self.stamp[rows[rows >= 0]] = self.tick
         return rows
 
+    def forget(self, keys) -> None:
+        """Drop the keys' rows (their tiles changed): built again on their next lookup, their rows reused first."""
+        for k in keys:
+            r = self.row.pop(k, None)
+            if r is not None:
+                self.stamp[r] = -1
+
     def put(self, key, nodes: TileNodes) -> int:
         """Store a tile's nodes as used by the call at hand; returns its row."""
         if len(self.row) >= self.limit:
             r = int(self.stamp[:len(self.keys)].argmin())      # the least recently used
-            del self.row[self.keys[r]]
+            self.row.pop(self.keys[r], None)                   # (absent when forgotten)
             self.keys[r] = key
         else:
             r = len(self.keys)
@@ -259,6 +266,14 @@ class TileletTriangleEstimator:
         self.builds += 1
         self.build_ms += (time.perf_counter() - t0) * 1e3
         return r
+
+    def forget(self, keys) -> None:
+        """Build these tiles' nodes again when next asked (their heights or node arrays changed: an edit)."""
+        self._rows.forget(keys)
+
+    def known(self) -> list[TileKey]:
+        """The tiles whose nodes are built and kept."""
+        return list(self._rows.row)
 
     def _global_nodes(self):
         """An in-memory height field's whole-grid nodes, which its GPU selection reads too (``nodes_for``, cached per

@@ -18,6 +18,7 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 from hybrid.gl.context import r16ui_mip_texture, read_r16ui_level
 from hybrid.gl.programs import compute_shader
+from hybrid.terrain.edits import Window
 
 
 def _check_heights(heights) -> np.ndarray:
@@ -48,6 +49,34 @@ def maxmip_levels(heights) -> list[np.ndarray]:
         m = a.shape[0] // 2
         levels.append(np.ascontiguousarray(a.reshape(m, 2, m, 2).max(axis=(1, 3))))
     return levels
+
+
+def texel_windows(n: int, win: Window) -> list[tuple[int, int, int, int]]:
+    """Per stored level (max-mip levels 1 .. log2 n) of an n-cell tile, the texels (r0, r1, c0, c1) whose value
+    can change when height samples in ``win`` (tile-local rows and columns) change: a level-1 texel p reads
+    samples 2p .. 2p + 2, a coarser one its 2x2 texels below."""
+    half = n // 2
+    r0, r1 = max((win.i0 - 1) // 2, 0), min((win.i1 - 1) // 2 + 1, half)
+    c0, c1 = max((win.j0 - 1) // 2, 0), min((win.j1 - 1) // 2 + 1, half)
+    out = []
+    for _ in range(level_count(n) - 1):
+        out.append((r0, r1, c0, c1))
+        r0, r1, c0, c1 = r0 // 2, (r1 - 1) // 2 + 1, c0 // 2, (c1 - 1) // 2 + 1
+    return out
+
+
+def update_levels(levels: list[np.ndarray], heights, win: Window) -> None:
+    """CPU counterpart of ``MaxMipBuilder.update``: refill ``maxmip_levels``' levels 1.. in place over the texels a
+    window of changed samples reaches (``texel_windows``); level 0 is refilled over the window's cells."""
+    h = _check_heights(heights)
+    n = h.shape[0] - 1
+    a0, a1, b0, b1 = max(win.i0 - 1, 0), min(win.i1, n), max(win.j0 - 1, 0), min(win.j1, n)
+    s = h[a0:a1 + 1, b0:b1 + 1]
+    levels[0][a0:a1, b0:b1] = np.maximum(np.maximum(s[:-1, :-1], s[:-1, 1:]), np.maximum(s[1:, :-1], s[1:, 1:]))
+    for k, (r0, r1, c0, c1) in enumerate(texel_windows(n, win), start=1):
+        below = levels[k - 1][2 * r0:2 * r1, 2 * c0:2 * c1]
+        m0, m1 = r1 - r0, c1 - c0
+        levels[k][r0:r1, c0:c1] = below.reshape(m0, 2, m1, 2).max(axis=(1, 3))
 
 
 def maxmip_nbytes(n: int) -> int:
@@ -85,22 +114,28 @@ class MaxMipBuilder:
     def build(self, height_tex, n: int, out_tex=None):
         """Fill (or allocate and fill) the max-mip texture of an R16UI (n+1)² height texture; returns it."""
         tex = out_tex if out_tex is not None else self.allocate(n)
+        self._fill(height_tex, tex, n, texel_windows(n, Window(0, n + 1, 0, n + 1)))
+        return tex
+
+    def update(self, height_tex, tex, n: int, win: Window) -> None:
+        """Refill only the max-mip texels over a window of changed height samples (tile-local rows and columns):
+        the same codes as ``build`` gives the changed heights (``texel_windows``)."""
+        self._fill(height_tex, tex, n, texel_windows(n, win))
+
+    def _fill(self, height_tex, tex, n: int, windows) -> None:
+        """Dispatch the base pass and the reductions over one (r0, r1, c0, c1) texel window per stored level."""
         height_tex.use(0)
         self.base["heights"].value = 0
-        self.base["size"].value = n // 2
-        tex.bind_to_image(1, read=False, write=True, level=0)
-        g = (n // 2 + 7) // 8
-        self.base.run(g, g, 1)
-        for l in range(1, level_count(n) - 1):
-            m = n >> (l + 1)
-            self.ctx.memory_barrier()
-            tex.bind_to_image(0, read=True, write=False, level=l - 1)
-            tex.bind_to_image(1, read=False, write=True, level=l)
-            self.reduce["size"].value = m
-            g = (m + 7) // 8
-            self.reduce.run(g, g, 1)
+        for k, (r0, r1, c0, c1) in enumerate(windows):
+            prog = self.base if k == 0 else self.reduce
+            if k:
+                self.ctx.memory_barrier()
+                tex.bind_to_image(0, read=True, write=False, level=k - 1)
+            tex.bind_to_image(1, read=False, write=True, level=k)
+            prog["extent"].value = (c1 - c0, r1 - r0)
+            prog["first"].value = (c0, r0)
+            prog.run(-(-(c1 - c0) // 8), -(-(r1 - r0) // 8), 1)
         self.ctx.memory_barrier()
-        return tex
 
     def release(self) -> None:
         """Free the programs."""

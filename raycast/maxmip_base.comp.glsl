@@ -4,11 +4,13 @@
 // heights (rc_bound in traverse.glsl).
 layout(local_size_x = 8, local_size_y = 8) in;
 uniform usampler2D heights;                // R16UI (N+1)², row 0 = south
-uniform int size;                          // N / 2
+uniform ivec2 extent;                     // texels (x, y) to fill from first (a whole level: its side)
+uniform ivec2 first;                       // first texel (x, y) filled: a window after an edit, else 0
 layout(r16ui, binding = 1) writeonly uniform uimage2D dst;
 void main() {
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
-    if (p.x >= size || p.y >= size) return;
+    if (p.x >= extent.x || p.y >= extent.y) return;
+    p += first;
     ivec2 q = 2 * p;
     uint m = 0u;
     for (int dy = 0; dy <= 2; dy++)

@@ -57,6 +57,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "for), or keep every midpoint, cells split as the reference's (exact: more triangles, "
                         "closer to the reference at a given tau)")
     p.add_argument("--show-strategy", action="store_true", help="hybrid: also write PATH.strategy.png")
+    p.add_argument("--edit", type=Path, default=None, metavar="FILE.jsonl",
+                   help="replay this edit log (JSON lines, made for this terrain) on the GPU before rendering")
     p.add_argument("--freeze-model", action="store_true",
                    help="hybrid: choose by the loaded cost model as it is (no online refit from the frames drawn)")
 
@@ -103,8 +105,10 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
         tile_size: int | None = None, reconstruction: str = "triangles", traversal: str = "maxmip",
         prepass: bool | None = None,
         lod: bool = False, shadows: bool = False, wireframe: bool = False, show_strategy: bool = False,
-        device: int | None = None, lean: bool = True, full_res: str = DEFAULT_FULL_RES, freeze_model: bool = False):
-    """Render one view with a method; write out (.png) and its .depth.npy; returns the RenderResult."""
+        device: int | None = None, lean: bool = True, full_res: str = DEFAULT_FULL_RES, freeze_model: bool = False,
+        edit: Path | None = None):
+    """Render one view with a method, after replaying the edit log ``edit`` if given; write out (.png) and its
+    .depth.npy; returns the RenderResult."""
     from hybrid.gl.context import shared_context
     from hybrid.gl.target import check_png_path
     out = check_png_path(out, "--out")
@@ -114,20 +118,27 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
     if freeze_model and method not in adapting_policies():
         raise TerrabenchError("--freeze-model applies to --method hybrid, the one policy that refits its cost model")
     hf = terrain.load()
+    log = None
+    if edit is not None:                                 # checked whole before anything is drawn or written
+        from hybrid.terrain.edit_log import check_log, read_log
+        log = check_log(read_log(edit), hf, str(edit))
     if tile_size is None:
         tile_size = int(hf.store.attrs["tile_size"]) if getattr(hf, "store", None) is not None else 256
-    v = view.view(hf)
     ctx = shared_context(device)
     if method == "reference":
         from hybrid.reference import ReferenceRenderer
         with ReferenceRenderer(ctx, hf) as r:
-            result = r.render(v, mode=shading, supersample=supersample)
+            _replay(ctx, hf, log, reference=r)
+            result = r.render(view.view(hf), mode=shading, supersample=supersample)
     else:
         from hybrid.renderer import Renderer
         opts = draw_options(method, tau, shading, reconstruction, traversal, prepass, lod, shadows, wireframe, lean,
                             full_res)
         with Renderer(ctx, hf, method, tile_size, adapt=not freeze_model, **opts) as r:
+            _replay(ctx, hf, log, renderer=r)
+            v = view.view(hf)
             result = r.render(v, tau, maps=show_strategy)
+    v = view.view(hf)
     from hybrid.atomic import remove_stale_temps
     remove_stale_temps(out.parent)                       # what a killed render left beside its output
     png, depth = result.save(out)
@@ -143,11 +154,27 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
     return result
 
 
+def _replay(ctx, hf, log, **renderers) -> None:
+    """Replay an edit log (None: nothing) on the GPU, the renderers following; print what the edits cost."""
+    if log is None:
+        return
+    from hybrid.editing import TerrainEditor, replay
+    with TerrainEditor(ctx, hf, **renderers) as editor:
+        reports = replay(editor, log)
+    total: dict = {}
+    for rep in reports:
+        for k, ms in rep.ms.items():
+            total[k] = total.get(k, 0.0) + ms
+    steps = ", ".join(f"{k} {ms:.1f}" for k, ms in total.items())
+    print(f"replayed {len(reports)} edits: {steps} ms in all")
+
+
 def run_from_args(args: argparse.Namespace) -> int:
     """The render command from parsed arguments; returns the exit code."""
     run(args.out, args.method, from_args(TerrainOptions, args), from_args(ViewOptions, args), args.shading,
         args.supersample, args.tau, args.tile_size, args.reconstruction, args.traversal, args.prepass, args.lod,
-        args.shadows, args.wireframe, args.show_strategy, args.device, args.lean, args.full_res, args.freeze_model)
+        args.shadows, args.wireframe, args.show_strategy, args.device, args.lean, args.full_res, args.freeze_model,
+        args.edit)
     return 0
 
 

@@ -1,0 +1,171 @@
+"""Edits of a terrain being drawn: the GPU brush pass first, then every strategy follows, each paying what it must.
+
+``TerrainEditor`` applies a brush to the terrain's resident full-resolution heights on the GPU
+(``hybrid.gl.brush``), writes the touched window through to the CPU heights, then brings up to date, over what the
+window reaches only:
+
+- the tile pyramid's bounds, errors and caches of the touched tiles (``hybrid.tiles.pyramid_edit``);
+- the ray caster's resident tiles: codes and max-mip texels over the window (``raycast.edit``);
+- the raster strategies' node arrays over the nodes the edit reaches, saturation included (``raster.edit``), and
+  their resident tiles whose samples or node blocks changed, uploaded again (a tile's heap slot);
+- the triangle estimate of the touched tiles (the hybrid's per-tile features read it and the pyramid's boxes);
+- the reference renderer's height textures over the window and its blocks' bounds.
+
+Each step is timed (wall ms, with a GL finish for the GPU's part) per edit, in ``EditReport.ms``.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hybrid.errors import TerrabenchError
+from hybrid.gl.brush import GpuHeights
+from hybrid.gl.edges import TerrainEdges
+from hybrid.reference import ReferenceRenderer
+from hybrid.renderer import Renderer
+from hybrid.terrain.edit_log import EditLog, check_log
+from hybrid.terrain.edits import Brush, Window
+from hybrid.terrain.heightfield import HeightField
+from hybrid.tiles.pyramid_edit import update_pyramid
+from raster.edit import follow_nodes, reads_changed_nodes
+from raster.quadtree import GPU_BETA
+from raycast.caster import RaycastStrategy
+from raycast.edit import follow_tile, local_window
+
+
+@dataclass
+class EditReport:
+    """What one edit changed and cost: the window of samples (rows, columns), the tiles touched, the resident
+    tiles refreshed per strategy, and wall ms per step (``brush``, ``pyramid``, ``raster_nodes``, per strategy
+    name, ``estimate``, ``reference``)."""
+
+    window: Window
+    tiles: int = 0
+    refreshed: dict = field(default_factory=dict)
+    ms: dict = field(default_factory=dict)
+
+
+def _timed(ctx, report: EditReport, name: str, fn):
+    """fn() with its wall ms (GPU work finished) added to the report under name."""
+    t0 = time.perf_counter()
+    out = fn()
+    if ctx is not None:
+        ctx.finish()
+    report.ms[name] = report.ms.get(name, 0.0) + (time.perf_counter() - t0) * 1e3
+    return out
+
+
+def follow_reference(ref: ReferenceRenderer, win: Window) -> None:
+    """Write the changed window of the terrain's heights into the reference's block textures, update their bounds."""
+    h = ref.hf.heights
+    for k, b in enumerate(ref.blocks):
+        r0, r1, c0, c1 = max(b.r0, win.i0), min(b.r1, win.i1), max(b.c0, win.j0), min(b.c1, win.j1)
+        if r0 >= r1 or c0 >= c1:
+            continue
+        ref.lo[k], ref.hi[k] = float(np.min(h[b.r0:b.r1, b.c0:b.c1])), float(np.max(h[b.r0:b.r1, b.c0:b.c1]))
+        if ref.resident:
+            data = np.ascontiguousarray(h[r0:r1, c0:c1], dtype=np.float32)
+            ref.textures[k].write(data.tobytes(), viewport=(c0 - b.c0, r0 - b.r0, c1 - c0, r1 - r0))
+
+
+class TerrainEditor:
+    """The GPU heights of one in-memory terrain and the renderers drawing it, kept up to date edit by edit."""
+
+    def __init__(self, ctx, hf: HeightField, renderer: Renderer | None = None,
+                 reference: ReferenceRenderer | None = None):
+        if not isinstance(hf.heights, np.ndarray):
+            raise TerrabenchError(f"{hf.name!r} is a tile store: editing it (write-through to the store) is not "
+                                  "supported yet; load it into memory first")
+        for r in (renderer, reference):
+            if r is not None and r.hf is not hf:
+                raise TerrabenchError("an editor's renderers must draw the terrain it edits")
+        self.ctx, self.hf, self.renderer, self.reference = ctx, hf, renderer, reference
+        self.gpu = GpuHeights(ctx, hf)
+
+    def apply(self, brush: Brush) -> EditReport:
+        """Apply one brush (world metres, the terrain's frame) and bring every renderer up to date."""
+        report = EditReport(Window(0, 0, 0, 0))
+        report.window = win = _timed(self.ctx, report, "brush", lambda: self.gpu.edit(brush))
+        if win.empty:
+            return report
+        if self.renderer is not None:
+            self._follow_renderer(self.renderer, win, report)
+        if self.reference is not None:
+            _timed(self.ctx, report, "reference", lambda: follow_reference(self.reference, win))
+        return report
+
+    def _follow_renderer(self, r: Renderer, win: Window, report: EditReport) -> None:
+        keys = _timed(None, report, "pyramid", lambda: update_pyramid(r.pyramid, win))
+        report.tiles = len(keys)
+        for k in keys:
+            r._tiles.pop(k, None)                           # the renderer's CPU copies of the tiles
+        raster = [n for n in r.strategies if r.kind(n) == "raster"]
+        rewritten: list[Window] = []
+        if raster:
+            rewritten = _timed(None, report, "raster_nodes",
+                               lambda: follow_nodes(self.hf, r.pyramid.n, win,
+                                                    getattr(r.strategies[raster[0]], "beta", GPU_BETA)))
+        touched = set(keys)
+        for name, strategy in r.strategies.items():
+            entries = [(k, g) for (n, k), g in list(r.cache.entries.items()) if n == name]
+            if isinstance(strategy, RaycastStrategy):
+                done = _timed(self.ctx, report, name, lambda s=strategy, e=entries: self._follow_raycast(r, s, e, win))
+            else:
+                stale = [(k, g) for k, g in entries if k in touched or reads_changed_nodes(k, r.pyramid.n, rewritten)]
+                done = _timed(self.ctx, report, name, lambda s=strategy, n=name, e=stale: _reupload(r, n, s, e))
+            report.refreshed[name] = done
+        forget, known = getattr(r.triangles, "forget", None), getattr(r.triangles, "known", None)
+        if forget is not None and known is not None:
+            _timed(None, report, "estimate", lambda: forget(
+                [k for k in known() if k in touched or reads_changed_nodes(k, r.pyramid.n, rewritten)]))
+
+    def _follow_raycast(self, r: Renderer, strategy: RaycastStrategy, entries, win: Window) -> int:
+        """Refresh the strategy's resident tiles whose samples changed; its edge profiles and shadow grid too."""
+        done = 0
+        for key, gpu in entries:
+            local = local_window(win, key, r.pyramid.n, self.hf.rows, self.hf.cols)
+            if local.empty and not _bounds_changed(r, key, gpu):
+                continue
+            follow_tile(strategy, gpu, r.tile(key), local)
+            done += 1
+        if win.i0 == 0 or win.j0 == 0 or win.i1 == self.hf.rows or win.j1 == self.hf.cols:
+            strategy.edges.release()
+            strategy.edges = TerrainEdges(self.ctx, self.hf)
+        if strategy.grid is not None:                       # the shadow rays' whole grid: made again when next used
+            strategy.grid.tex.release()
+            strategy.grid = None
+        return done
+
+    def release(self) -> None:
+        """Free the GPU heights (not the renderers)."""
+        self.gpu.release()
+
+    def __enter__(self) -> TerrainEditor:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+def replay(editor: TerrainEditor, log: EditLog) -> list[EditReport]:
+    """Apply every edit of a log (checked for the editor's terrain first), in order; one report per edit."""
+    check_log(log, editor.hf)
+    return [editor.apply(e.brush) for e in log.edits]
+
+
+def _bounds_changed(r: Renderer, key, gpu) -> bool:
+    """Whether a resident ray-cast tile's box (clip and height range) differs from the pyramid's now."""
+    return bool(gpu.bounds) and tuple(gpu.bounds[1:]) != r.pyramid.zrange(key)
+
+
+def _reupload(r: Renderer, name: str, strategy, entries) -> int:
+    """Upload the resident tiles again from the edited pyramid (a raster tile's heap slot: heights and node block),
+    in place of the old ones in the residency cache; returns how many."""
+    for key, old in entries:
+        new = strategy.upload(r.tile(key))
+        r.cache.entries[(name, key)] = new
+        r.cache.bytes += int(new.nbytes) - int(old.nbytes)
+        old.release()
+    return len(entries)

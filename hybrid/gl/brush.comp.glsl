@@ -1,0 +1,62 @@
+#version 430
+// A terrain brush (hybrid/terrain/edits.py) on R32F heights in place, over the touched window only.
+// SNAPSHOT 1: copy the window grown by one sample (clamped to the grid) into the scratch image, so the brush
+// reads the heights before the edit (the smooth brush reads neighbours). SNAPSHOT 0: the brush itself, each
+// texel from the scratch copy, in the CPU reference's float32 order of operations (precise: no fused ops).
+layout(local_size_x = 8, local_size_y = 8) in;
+layout(r32f, binding = 0) uniform image2D heights;     // the grid, texel (j, i) = sample (i, j), row 0 = south
+layout(r32f, binding = 1) uniform image2D scratch;     // the window grown by one sample
+uniform ivec2 win0;                                    // first (column, row) of the window
+uniform ivec2 win_size;                                // (columns, rows) of the window
+uniform ivec2 grid;                                    // (columns, rows) of the grid
+uniform vec2 centre;                                   // (cj, ci): the brush centre in fractional samples
+uniform vec2 spacing;                                  // (sx, sy) metres between samples
+uniform float radius2;                                 // radius² (m²)
+uniform float strength;
+uniform float target;                                  // flatten: metres relative to the origin z
+uniform int code;                                      // 0 raise, 1 flatten, 2 smooth, 3 crater
+const float BOWL = 0.7;
+const float RIM = 0.3;
+
+float crater(float q, float depth) {
+    precise float b = 1.0 - (q * q) / (BOWL * BOWL);
+    precise float bowl = q < BOWL ? -depth * b : 0.0;
+    precise float u = (q - BOWL) / (1.0 - BOWL);
+    precise float c = 1.0 - u * u;
+    precise float ring = abs(q - BOWL) < (1.0 - BOWL) ? RIM * depth * c * c : 0.0;
+    return bowl + ring;
+}
+
+void main() {
+    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
+#if SNAPSHOT
+    if (p.x >= win_size.x + 2 || p.y >= win_size.y + 2) return;
+    ivec2 src = clamp(win0 - 1 + p, ivec2(0), grid - 1);
+    imageStore(scratch, p, imageLoad(heights, src));
+#else
+    if (p.x >= win_size.x || p.y >= win_size.y) return;
+    ivec2 s = p + 1;                                    // this sample in the scratch image
+    precise float old = imageLoad(scratch, s).r;
+    vec2 ij = vec2(win0 + p);
+    precise float dx = (ij.x - centre.x) * spacing.x;
+    precise float dy = (ij.y - centre.y) * spacing.y;
+    precise float t = (dx * dx + dy * dy) / radius2;
+    if (t >= 1.0) return;
+    precise float w = (1.0 - t) * (1.0 - t);
+    precise float h;
+    if (code == 0) {
+        h = old + strength * w;
+    } else if (code == 1) {
+        h = old + (target - old) * (strength * w);
+    } else if (code == 2) {
+        precise float total = 0.0;
+        for (int di = -1; di <= 1; di++)                // fixed 3x3: rows south to north, as the CPU sums
+            for (int dj = -1; dj <= 1; dj++)
+                total += imageLoad(scratch, s + ivec2(dj, di)).r;
+        h = old + (total / 9.0 - old) * (strength * w);
+    } else {
+        h = old + crater(sqrt(t), strength);
+    }
+    imageStore(heights, win0 + p, vec4(h));
+#endif
+}

@@ -1,0 +1,160 @@
+"""The raster strategies' node arrays following an edit: the touched nodes and what they saturate, nothing else.
+
+``raster.rect_nodes`` computes every global level's nodes from the level below (children, their outside
+neighbours' effective and side errors) and its own samples, per class of node along each axis. After the samples
+of a window change, a level-g node's values can change only where its own samples meet the window or where one
+of the level-(g-1) nodes it reads changed; per axis that is a short run of classes, growing by about one node a
+level (the saturation across tile borders and by neighbours). ``NodeEdits`` keeps rect_nodes' per-level compact
+arrays (float64), recomputes those classes with rect_nodes' own functions, and rewrites the float32 arrays of
+``raster.nodes.GlobalNodes`` over the nodes that read them, so they equal a full rebuild. A level of bounded
+errors (nodes beyond ``EXACT_SPAN`` cells) depends on the grid's height range through its margin: an edit that
+changes that margin rebuilds everything.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hybrid.terrain.edits import Window
+
+from . import rect_nodes as rn
+from .nodes import GlobalNodes
+
+
+@dataclass
+class NodeEdits:
+    """rect_nodes' state of one grid: per axis its classes (maps, representatives, near), per level the compact
+    arrays (dicts of float64 arrays) and whether its errors are bounds; the margin the bounds were made with."""
+
+    n: int
+    beta: float
+    side_errors: bool
+    R: int
+    ax_r: tuple
+    ax_c: tuple
+    levels: list = field(default_factory=list)
+    bound: list = field(default_factory=list)
+    margin: float = 0.0
+
+
+def _margin(h: np.ndarray) -> float:
+    return 16 * np.finfo(np.float64).eps * max(abs(float(h.min())), abs(float(h.max())), 1.0)
+
+
+def _sub(ax: tuple, g: int, idx: np.ndarray) -> tuple:
+    """An axis restricted at level g to the representatives at compact positions idx (sorted)."""
+    reps, near = list(ax[1]), list(ax[2])
+    reps[g] = ax[1][g][idx]
+    if near[g] is not None:
+        near[g] = ax[2][g][:, idx]
+    return ax[0], reps, near
+
+
+def _compute(st: NodeEdits, h: np.ndarray, g: int, ar: np.ndarray, ac: np.ndarray) -> dict:
+    """Level g's compact arrays at representatives (ar, ac), from the level below (already up to date)."""
+    sr, sc = _sub(st.ax_r, g, ar), _sub(st.ax_c, g, ac)
+    if g == 0:
+        e, sides, (zmin, zmax) = rn._direct(h, sr, sc, 0, st.R, st.side_errors)
+        return {"e": e, "eff": e, "sides": sides, "zmin": zmin, "zmax": zmax}
+    if st.bound[g]:
+        return rn._level(st.levels[g - 1], sr, sc, g, rn._post_bound(h, sr, sc, g, st.R), st.beta, st.margin)
+    return rn._level(st.levels[g - 1], sr, sc, g, rn._direct(h, sr, sc, g, st.R, st.side_errors)[:2], st.beta, None)
+
+
+def node_edits(grid, n: int, beta: float, side_errors: bool = True) -> NodeEdits:
+    """rect_nodes' compact state of an in-memory height field, every class of every level computed."""
+    h = np.asarray(grid.heights)
+    R, _ = rn.square_cells(grid.rows, grid.cols, n)
+    count = int(np.log2(R))
+    st = NodeEdits(int(n), float(beta), bool(side_errors), R, rn._axis(grid.rows, R, count),
+                   rn._axis(grid.cols, R, count), margin=_margin(h))
+    for g in range(count):
+        st.bound.append((2 << g) > rn.EXACT_SPAN)
+        st.levels.append(_compute(st, h, g, np.arange(st.ax_r[1][g].size), np.arange(st.ax_c[1][g].size)))
+    return st
+
+
+def _affected(ax: tuple, g: int, samples: int, lo: int, hi: int, below: np.ndarray | None) -> np.ndarray:
+    """Compact positions of level-g representatives along an axis whose samples meet [lo, hi) or whose
+    level-(g-1) nodes (children and their outside neighbours) are in ``below``."""
+    reps, s = ax[1][g], 2 << g
+    first, last = np.minimum(reps * s, samples - 1), np.minimum((reps + 1) * s, samples - 1)
+    hit = (first <= hi - 1) & (last >= lo)
+    if below is not None and below.size:
+        near = ax[2][g]
+        hit |= np.isin(near, below).any(axis=0)
+    return np.flatnonzero(hit)
+
+
+def _node_range(ax: tuple, g: int, idx: np.ndarray, extent: int) -> tuple[int, int]:
+    """[first, end) of the level-g nodes among the first ``extent`` whose class is at a compact position in idx."""
+    where = np.flatnonzero(np.isin(ax[0][g][:extent], idx))
+    return (int(where[0]), int(where[-1]) + 1) if where.size else (0, 0)
+
+
+def _rewrite(st: NodeEdits, nodes: GlobalNodes, g: int, r: tuple[int, int], c: tuple[int, int]) -> None:
+    """Rewrite nodes[r0:r1, c0:c1] of level g's float32 arrays from the compact arrays (rect_nodes._output's values)."""
+    (r0, r1), (c0, c1) = r, c
+    lv = st.levels[g]
+    H, W = nodes.effective[g].shape
+    mr, mc = st.ax_r[0][g], st.ax_c[0][g]
+    eff = rn._float32(lv["eff"][np.ix_(mr[r0:r1], mc[c0:c1])], st.bound[g])
+    nodes.effective[g][r0:r1, c0:c1] = eff
+    gr0, gr1 = max(r0 - 1, 0), min(r1 + 1, H + 1, mr.size)   # one node more for the 3x3 boxes
+    gc0, gc1 = max(c0 - 1, 0), min(c1 + 1, W + 1, mc.size)
+    for arr, kind, fn in ((nodes.zlo, "zmin", np.minimum), (nodes.zhi, "zmax", np.maximum)):
+        grown = rn.grow3(lv[kind][np.ix_(mr[gr0:gr1], mc[gc0:gc1])], fn)
+        arr[g][r0:r1, c0:c1] = grown[r0 - gr0:r1 - gr0, c0 - gc0:c1 - gc0].astype(np.float32)
+    if nodes.sides is not None and lv["sides"] is not None:
+        parent = None
+        if g + 1 < len(st.levels):
+            up = st.levels[g + 1]["eff"]
+            parent = rn._float32(up[np.ix_(st.ax_r[0][g + 1][np.arange(r0, r1) // 2],
+                                           st.ax_c[0][g + 1][np.arange(c0, c1) // 2])], st.bound[g + 1])
+        sides = lv["sides"][:, mr[r0:r1][:, None], mc[None, c0:c1]]
+        nodes.sides[g][r0:r1, c0:c1] = rn.side_codes_each(sides, eff, parent)
+
+
+def update_nodes(st: NodeEdits, nodes: GlobalNodes, grid, win: Window) -> list[Window]:
+    """Bring the compact state and the node arrays up to date after the samples of ``win`` changed in grid's
+    heights; returns per level the window of nodes rewritten (rows and columns of node indices, maybe empty)."""
+    h = np.asarray(grid.heights)
+    if any(st.bound) and _margin(h) != st.margin:         # the bounded levels' margin moved: rebuild all
+        fresh = node_edits(grid, st.n, st.beta, st.side_errors)
+        st.levels, st.margin = fresh.levels, fresh.margin
+        win = Window(0, grid.rows, 0, grid.cols)
+    changed, below_r, below_c = [], None, None
+    for g in range(len(st.levels)):
+        ar = _affected(st.ax_r, g, grid.rows, win.i0, win.i1, below_r)
+        ac = _affected(st.ax_c, g, grid.cols, win.j0, win.j1, below_c)
+        if ar.size and ac.size:
+            part = _compute(st, h, g, ar, ac)
+            for k, v in part.items():
+                if v is not None:
+                    st.levels[g][k][(..., *np.ix_(ar, ac))] = v
+        changed.append((ar, ac))
+        below_r, below_c = ar, ac
+    return _rewrite_all(st, nodes, changed)
+
+
+def _rewrite_all(st: NodeEdits, nodes: GlobalNodes, changed: list) -> list[Window]:
+    """Rewrite every level's nodes whose values read changed classes: their own, their 3x3 box neighbours', and
+    (side codes) their parents'."""
+    out = []
+    for g, (ar, ac) in enumerate(changed):
+        H, W = nodes.effective[g].shape
+        r, c = _node_range(st.ax_r, g, ar, H), _node_range(st.ax_c, g, ac, W)
+        if r[1] > r[0] and c[1] > c[0]:
+            r, c = (max(r[0] - 1, 0), min(r[1] + 1, H)), (max(c[0] - 1, 0), min(c[1] + 1, W))
+        if g + 1 < len(changed):                          # children of changed parents: their side codes
+            pr, pc = _node_range(st.ax_r, g + 1, changed[g + 1][0], (H + 1) // 2), \
+                _node_range(st.ax_c, g + 1, changed[g + 1][1], (W + 1) // 2)
+            if pr[1] > pr[0] and pc[1] > pc[0]:
+                pr, pc = (2 * pr[0], min(2 * pr[1], H)), (2 * pc[0], min(2 * pc[1], W))
+                r = (min(r[0], pr[0]), max(r[1], pr[1])) if r[1] > r[0] else pr
+                c = (min(c[0], pc[0]), max(c[1], pc[1])) if c[1] > c[0] else pc
+        if r[1] > r[0] and c[1] > c[0]:
+            _rewrite(st, nodes, g, r, c)
+        out.append(Window(r[0], r[1], c[0], c[1]))
+    return out
