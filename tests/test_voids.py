@@ -4,8 +4,14 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
+from hybrid.camera.flight import preset
+from hybrid.camera.view import default_view
+from hybrid.reference import ReferenceRenderer
+from hybrid.renderer import Renderer
+from hybrid.terrain.datasets import puget
 from hybrid.terrain.loaders import NoDataWarning, load_terrain
 from hybrid.terrain.voids import fill_voids
+from hybrid.tiles.pyramid import TilePyramid
 
 
 def curved_slope(n=120):
@@ -69,3 +75,48 @@ def test_overshoot_is_bounded_by_the_rim_and_reported(tmp_path):
     assert hf.heights[void].max() == pytest.approx(dome[rim].max(), abs=1e-3)
     assert hf.heights[void].min() >= dome[rim].min() - 1e-3
     assert any(note.startswith("no-data:") and "samples held" in note for note in hf.notes)
+
+
+def srtm_like(tmp_path):
+    """An int16 GeoTIFF of whole-metre heights (Puget's window, north-up) with no-data holes of a few hundred
+    samples, as an SRTM tile with voids: its path and the holes (north-up)."""
+    import rasterio
+    from rasterio.transform import from_origin
+    base = puget(size=257, with_texture=False)
+    ints = np.rint(base.heights[::-1]).astype(np.int16)
+    holes = blob(257, seed=7) | np.roll(blob(257, seed=11), 60, axis=1)
+    path = tmp_path / "srtm_voids.tif"
+    with rasterio.open(path, "w", driver="GTiff", width=257, height=257, count=1, dtype="int16",
+                       crs="EPSG:32610", transform=from_origin(500000.0, 5200000.0, 30.0, 30.0),
+                       nodata=-32768) as dst:
+        dst.write(np.where(holes, -32768, ints).astype(np.int16), 1)
+    return path, holes
+
+
+def test_an_integer_source_with_voids_stays_on_its_step(tmp_path):
+    path, holes = srtm_like(tmp_path)
+    assert holes.sum() > 300
+    with pytest.warns(NoDataWarning, match="integer step"):
+        hf = load_terrain(path)
+    assert hf.nodata_filled == int(holes.sum()) and hf.source_step == (1.0, 0.0)
+    assert np.array_equal(hf.heights, np.rint(hf.heights))              # the fill is whole metres too
+    pyr = TilePyramid(hf, 64)
+    for level in range(pyr.max_level + 1):                              # so every tile's 16-bit codes are exact
+        rows, cols = pyr.tile_counts(level)
+        ty, tx = np.divmod(np.arange(rows * cols), cols)
+        assert not pyr.quantization_errors_at(level, tx, ty).any()
+
+
+@pytest.mark.gl
+def test_a_void_filled_integer_source_ray_casts_within_float_precision_of_the_reference(ctx, tmp_path):
+    path, _ = srtm_like(tmp_path)
+    with pytest.warns(NoDataWarning):
+        hf = load_terrain(path)
+    views = [default_view(hf, 200, 120)] + preset("flyover", hf, 3, 200, 120).views()
+    with Renderer(ctx, hf, "raycast", 64) as rc, ReferenceRenderer(ctx, hf) as ref:
+        for view in views:
+            a, b = rc.render(view, 2 / 3, mode="shaded"), ref.render(view, mode="shaded")
+            both = a.mask & b.mask
+            assert both.mean() > 0.1
+            rel = np.abs(a.distance[both] - b.distance[both]) / b.distance[both]
+            assert np.median(rel) <= 1e-6, np.median(rel)

@@ -48,7 +48,7 @@ def assemble(path, raw: np.ndarray, *, spacing, scale: float = 1.0, offset: floa
         raise TerrainLoadError(f"{path}: all {vals.size} samples are no-data")
     notes = list(notes)
     if n_missing:
-        vals, report = fill_voids(vals, gone)
+        vals, report = fill_voids(vals, gone, integer=bool(np.issubdtype(raw.dtype, np.integer)))
         text = report.describe(vals.size)
         notes.append(f"no-data: {text}")
         warnings.warn(f"{path}: {text}", NoDataWarning, stacklevel=3)
@@ -60,7 +60,7 @@ def assemble(path, raw: np.ndarray, *, spacing, scale: float = 1.0, offset: floa
         heights = heights[:, ::-1]
         texture = None if texture is None else texture[:, ::-1]
     try:
-        step = (float(scale), float(offset)) if np.issubdtype(raw.dtype, np.integer) and not n_missing else None
+        step = (float(scale), float(offset)) if np.issubdtype(raw.dtype, np.integer) else None
         return HeightField(np.ascontiguousarray(heights), spacing, origin, name or Path(path).stem,
                            None if texture is None else np.ascontiguousarray(texture), n_missing, str(path), notes,
                            step)

@@ -57,8 +57,10 @@ def rim_ranges(values: np.ndarray, missing: np.ndarray, labels: np.ndarray,
     return lo, hi
 
 
-def fill_voids(values: np.ndarray, missing: np.ndarray) -> tuple[np.ndarray, VoidFill]:
-    """Heights (float64, same units) with samples where ``missing`` is True filled; and what was done."""
+def fill_voids(values: np.ndarray, missing: np.ndarray, integer: bool = False) -> tuple[np.ndarray, VoidFill]:
+    """Heights (float64, same units) with samples where ``missing`` is True filled; and what was done. With
+    ``integer`` (a source of integer codes) the fill is rounded to integers, so the grid stays on the source's
+    step and its 16-bit tiles stay exact (the rim's range, of integers, still bounds it)."""
     from scipy import ndimage
     from skimage.restoration import inpaint_biharmonic
     missing = np.asarray(missing, dtype=bool)
@@ -76,5 +78,7 @@ def fill_voids(values: np.ndarray, missing: np.ndarray) -> tuple[np.ndarray, Voi
     # known range put them (a summit inside a void); on a flat rim, only fills that differ from its height
     off_flat = np.abs(fill - high) > 1e-9 * np.maximum(1.0, np.abs(high))
     held = np.where(high > low, (fill >= high) | (fill <= low), off_flat)
-    filled[missing] = np.clip(fill, low, high)
-    return filled, VoidFill(int(missing.sum()), int(count), int(sizes.max()), int(np.count_nonzero(held)))
+    fill = np.clip(fill, low, high)
+    filled[missing] = np.rint(fill) if integer else fill
+    method = METHOD + (", rounded to the source's integer step" if integer else "")
+    return filled, VoidFill(int(missing.sum()), int(count), int(sizes.max()), int(np.count_nonzero(held)), method)
