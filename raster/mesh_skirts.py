@@ -25,13 +25,40 @@ STEPS = ((-1, 0), (1, 0), (0, -1), (0, 1))   # tile steps to the W, E, S, N neig
 MARGIN = 0.01                                # of the tile's larger sample spacing: the skirt passes the lower edge
 
 
-def rays_may_start_under(hf, eye) -> bool:
-    """Whether any ray from the eye (world metres) may start under the terrain sheet: over the footprint when the
-    eye lies under the ground; from outside it always (a ray can enter below the outer edge, hybrid.terrain.edges)."""
-    o = grid_frame(hf, eye, np.zeros((1, 3)))[0]
+def clip_polygon(polygon: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """The part (k', 3) of a convex polygon (k, 3) inside half-spaces (p, 4) (a, b, c, d): a x + b y + c z + d >= 0
+    (Sutherland-Hodgman); empty when none is."""
+    poly = list(np.asarray(polygon, dtype=np.float64))
+    for plane in planes:
+        out = []
+        for i, p in enumerate(poly):
+            q = poly[(i + 1) % len(poly)]
+            dp, dq = p @ plane[:3] + plane[3], q @ plane[:3] + plane[3]
+            if dp >= 0:
+                out.append(p)
+            if (dp >= 0) != (dq >= 0):
+                out.append(p + dp / (dp - dq) * (q - p))
+        poly = out
+    return np.array(poly).reshape(-1, 3)
+
+
+def rays_may_start_under(hf, view, edge_tops) -> bool:
+    """Whether any ray of the view may start under the terrain sheet: over the footprint when the eye lies under
+    the ground; from outside when the frustum reaches below an outer edge the eye faces (bounded by that edge's
+    highest sample: ``edge_tops`` S, N, W, E metres above the origin z, hybrid.terrain.edges.edge_profiles)."""
+    o = grid_frame(hf, view.eye, np.zeros((1, 3)))[0]
     if 0.0 <= o[0] <= hf.cols - 1 and 0.0 <= o[1] <= hf.rows - 1:
-        return eye_under(hf, eye)
-    return True
+        return eye_under(hf, view.eye)
+    x0, y0, z0 = (float(c) for c in hf.origin)
+    x1, y1 = x0 + hf.extent[0], y0 + hf.extent[1]
+    low = float(view.eye[2]) - view.far
+    walls = []
+    for top, faces, a, b in ((edge_tops[0], o[1] < 0, (x0, y0), (x1, y0)), (edge_tops[1], o[1] > hf.rows - 1, (x0, y1), (x1, y1)),
+                             (edge_tops[2], o[0] < 0, (x0, y0), (x0, y1)), (edge_tops[3], o[0] > hf.cols - 1, (x1, y0), (x1, y1))):
+        if faces:
+            walls.append(np.array([[*a, low], [*b, low], [*b, z0 + top], [*a, z0 + top]]) - view.eye)
+    planes = view.frustum_planes_rel()[[0, 1, 2, 3, 5]]
+    return any(len(clip_polygon(w, planes)) for w in walls)
 
 
 def grid_border_edges(rows: int, cols: int) -> list[np.ndarray]:

@@ -17,6 +17,7 @@ from hybrid.gl.edges import TerrainEdges
 from hybrid.gl.programs import program, set_uniform
 from hybrid.gl.shading import resolve_mode
 from hybrid.gl.textures import terrain_texture
+from hybrid.terrain.edges import edge_profiles
 
 from .mesh_skirts import SeamDepths, SkirtMesh, mesh_border_edges, rays_may_start_under
 from .shading import MODES
@@ -70,6 +71,7 @@ class MeshStrategyBase:
                                   defines={"SEAM_SKIRT": 1, "SKIRT_PROGRAM": 1, **BLOCK_DEFINES})
         self.texture = terrain_texture(ctx, hf)
         self.edges = TerrainEdges(ctx, hf)   # which rays start under the sheet (skirts rise for those)
+        self.edge_tops = edge_profiles(hf.heights).max(axis=1)
         self.depths = SeamDepths(hf.height_range[0])
 
     @property
@@ -148,7 +150,7 @@ class MeshStrategyBase:
         for i in range(4):
             ctx.enable_direct(GL_CLIP_DISTANCE0 + i)
         try:
-            for under in (False, True) if rays_may_start_under(self.hf, view.eye) else (False,):
+            for under in (False, True) if rays_may_start_under(self.hf, view, self.edge_tops) else (False,):
                 prog["under_pass"].value = under
                 for i, (g, _tile, _sel) in enumerate(items):
                     if depths[i].any():
