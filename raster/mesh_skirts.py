@@ -207,6 +207,7 @@ class SeamDepths:
     def __init__(self, low: float):
         self.low = float(low)           # lowest height (metres above the origin z) a surface can have
         self.gaps: dict = {}
+        self.last: tuple = ((), np.zeros((0, 4)))   # the last frame's items (keys, edge levels, clips), depths
 
     def __call__(self, items) -> np.ndarray:
         """(B, 4) depths (metres; 0: no skirt) for (gpu, tile, selected) items, on each side facing a selected
@@ -214,6 +215,9 @@ class SeamDepths:
         or in its surface along the side (same-level tiles of one grid share their border samples); to the lowest
         height when none of them is among the items; none on a tile drawn from an ancestor (clipped inside its
         mesh)."""
+        frame = tuple((it[2].key, it[2].edge_deltas, it[1].clip, it[0].skirt.clip) for it in items)
+        if frame == self.last[0]:
+            return self.last[1]
         out = np.zeros((len(items), 4))
         mine = {it[2].key: i for i, it in enumerate(items) if it[0].skirt.clip == tuple(map(float, it[1].clip))}
         keys = set(mine)
@@ -229,6 +233,7 @@ class SeamDepths:
                     out[i, k] = sk.top[k] - min(self.low, sk.profiles[k][1].min()) + MARGIN * sk.spacing
                 elif max(gaps) > 0 or any(n.level != key.level for n in near):
                     out[i, k] = max(gaps) + MARGIN * sk.spacing
+        self.last = (frame, out)
         return out
 
     def gap(self, a, side: int, b) -> float:
