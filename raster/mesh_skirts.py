@@ -52,11 +52,10 @@ def rays_may_start_under(hf, view, edge_tops) -> bool:
     x0, y0, z0 = (float(c) for c in hf.origin)
     x1, y1 = x0 + hf.extent[0], y0 + hf.extent[1]
     low = float(view.eye[2]) - view.far
-    walls = []
-    for top, faces, a, b in ((edge_tops[0], o[1] < 0, (x0, y0), (x1, y0)), (edge_tops[1], o[1] > hf.rows - 1, (x0, y1), (x1, y1)),
-                             (edge_tops[2], o[0] < 0, (x0, y0), (x0, y1)), (edge_tops[3], o[0] > hf.cols - 1, (x1, y0), (x1, y1))):
-        if faces:
-            walls.append(np.array([[*a, low], [*b, low], [*b, z0 + top], [*a, z0 + top]]) - view.eye)
+    sides = ((o[1] < 0, (x0, y0), (x1, y0)), (o[1] > hf.rows - 1, (x0, y1), (x1, y1)),    # S, N
+             (o[0] < 0, (x0, y0), (x0, y1)), (o[0] > hf.cols - 1, (x1, y0), (x1, y1)))    # W, E
+    walls = [np.array([[*a, low], [*b, low], [*b, z0 + top], [*a, z0 + top]]) - view.eye
+             for top, (faces, a, b) in zip(edge_tops, sides) if faces]
     planes = view.frustum_planes_rel()[[0, 1, 2, 3, 5]]
     return any(len(clip_polygon(w, planes)) for w in walls)
 
@@ -177,8 +176,8 @@ class SkirtMesh:
         return int(self.vbo.size + self.ibo.size)
 
     def draw(self, depths: np.ndarray) -> int:
-        """Issue the sides from the first to the last with a depth > 0 (a side between them at 0 draws nothing);
-        triangles issued."""
+        """Issue the sides from the first to the last with a depth > 0 (a side between them at 0 draws only its
+        flange, part of the tile's own square); triangles issued."""
         on = np.flatnonzero(depths > 0)
         if not len(on):
             return 0
