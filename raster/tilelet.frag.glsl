@@ -17,6 +17,11 @@ out vec4 frag;
 #ifdef SKIRT_PROGRAM
 #include "terrain_edges"
 #endif
+#ifdef SEAM_SKIRT
+uniform bool under_pass;       // the baselines' skirts rising above their edges, for rays from under the sheet
+#else
+const bool under_pass = false;
+#endif
 
 vec3 level_colour(int l) {
     const vec3 pal[8] = vec3[8](vec3(0.90, 0.25, 0.20), vec3(0.95, 0.60, 0.15), vec3(0.95, 0.90, 0.25),
@@ -27,8 +32,9 @@ vec3 level_colour(int l) {
 
 void main() {
 #ifdef SKIRT_PROGRAM
-    // a skirt closes a crack for rays from above the sheet; to a ray from under it, it would be a wall
-    if (ray_starts_under(v_rel)) discard;
+    // a skirt hanging below the sheet closes a crack for rays from above it; to a ray from under it, it would be
+    // a wall (and a skirt rising above the sheet the other way round)
+    if (ray_starts_under(v_rel) != under_pass) discard;
 #endif
 #ifndef SURFACE_FROM_VERTEX
     vec2 v_uv = uv_origin + (v_rel.xy - origin_rel.xy) / spacing * uv_per_cell;

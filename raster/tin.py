@@ -1,13 +1,16 @@
 """Decimated-TIN baseline: each tile's full-resolution grid simplified by fast-simplification (quadric edge
 collapse) to a target triangle count or a max vertical error, with trimesh as the mesh container.
 
-Tiles are simplified independently, so their border vertices do not match: the TIN may crack at tile
-borders. ``border_gaps`` measures that (nothing hides it); ``preserve_border=True`` keeps the border
-vertices (no cracks between same-level tiles, more triangles). Otherwise border vertices may slide along
-the tile's outline but not off it: a vertical wall hangs from each side during the simplification, so its
-plane enters the border vertices' quadrics (Garland and Heckbert's boundary constraint planes), and is cut
-off afterwards. Without it a collapse on flat ground costs nothing, and a flat region (a sea) at a tile's
-border is pulled in until most of it is gone.
+Tiles are simplified independently and drawn each at its own level, unstitched by design, so their border
+vertices do not match: the TINs part at tile borders. ``border_gaps`` measures that; the strategy hangs skirts
+from the sides that face a neighbour, as deep as the two surfaces differ along them (raster.mesh_skirts), so no
+background shows through; ``preserve_border=True`` keeps the border vertices (no gaps between same-level
+tiles, more triangles). Otherwise border vertices are held to the tile's outline: a vertical wall hangs from
+each side during the simplification, so its plane enters the border vertices' quadrics (Garland and Heckbert's
+boundary constraint planes), and is cut off afterwards. Without it a collapse on flat ground costs nothing, and
+a flat region (a sea) at a tile's border is pulled in until most of it is gone. The walls keep most border
+vertices on the outline, not all: some stray a few cells inside, near corners most, leaving a sliver of the
+tile uncovered (``tin_max_error`` counts its samples), which the skirts' flange covers.
 """
 from __future__ import annotations
 
@@ -125,7 +128,7 @@ def build_tin(heights: np.ndarray, spacing, target_count: int | None = None, max
     """TIN of a tile's heights: simplify the full grid to about ``target_count`` triangles or to <= ``max_error``
     metres; spacing in metres, one number or an (x, y) pair.
 
-    Border vertices stay on the tile's outline (module docstring); with preserve_border they all stay. With
+    Border vertices are held to the tile's outline (module docstring); with preserve_border they all stay. With
     max_error the reduction is bisected (8 steps) on the measured max vertical error over the samples the TIN
     covers (samples it leaves uncovered are cracks; ``tin_max_error`` counts them).
     """

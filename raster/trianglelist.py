@@ -1,7 +1,9 @@
 """Full-resolution baseline: every tile as an indexed triangle list of all its samples (VBO + IBO).
 
-Cells are split along the (i, j) -> (i+1, j+1) diagonal like the reference. Also builds the indexed list
-of exactly the triangles a tilelet set draws, for comparing the geometry-shader path's throughput.
+Each selected tile is drawn at its own level, unstitched by design; where neighbours differ in level, skirts
+close the seam's T-junctions (raster.mesh_skirts). Cells are split along the (i, j) -> (i+1, j+1) diagonal like
+the reference. Also builds the indexed list of exactly the triangles a tilelet set draws, for comparing the
+geometry-shader path's throughput.
 """
 from __future__ import annotations
 
@@ -9,6 +11,7 @@ import numpy as np
 
 from hybrid.terrain.heightfield import spacing_pair
 
+from .mesh_skirts import grid_border_edges
 from .meshes import MeshStrategyBase
 
 
@@ -58,3 +61,8 @@ class TriangleListStrategy(MeshStrategyBase):
         """All samples and 2 triangles a cell of the tile."""
         h = np.asarray(tile.heights)
         return grid_vertices(h, tile.spacing_xy), grid_faces(h.shape[0], h.shape[1])
+
+    def border_edges(self, tile, vertices, faces):
+        """The grid's outer rows and columns of samples, per side W, E, S, N."""
+        h = np.asarray(tile.heights)
+        return grid_border_edges(h.shape[0], h.shape[1])
