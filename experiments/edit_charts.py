@@ -35,7 +35,7 @@ def update_chart(f: pd.DataFrame, folder: Path) -> list[Path]:
     e = per_edit(f)
     if e.empty:
         return []
-    fig, ax = plt.subplots(figsize=(6.4, 4.0), layout="constrained")
+    fig, ax = plt.subplots(figsize=(8.6, 4.0), layout="constrained")
     cmap = plt.get_cmap("tab10")
     for i, (policy, g) in enumerate(e.groupby("policy", sort=True)):
         m = g.groupby("edit_radius")["update_per_edit_ms"].median()
@@ -50,7 +50,7 @@ def update_chart(f: pd.DataFrame, folder: Path) -> list[Path]:
     ax.set_ylabel("update ms per edit (median over frames)")
     ax.set_title("What each method pays to follow one edit", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    fig.legend(fontsize=8, loc="outside right upper", frameon=False)
     return save_figure(fig, folder, "update_vs_radius")
 
 

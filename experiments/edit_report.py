@@ -115,6 +115,20 @@ def share_sentence(f: pd.DataFrame) -> str:
             if parts else "")
 
 
+def step_sentence(f: pd.DataFrame) -> str:
+    """Each method's largest update step at the largest radius, and its share of that method's update."""
+    e = per_edit(f)
+    if e.empty:
+        return ""
+    e = e[e["edit_radius"] == e["edit_radius"].max()]
+    parts = []
+    for p, g in e.groupby("policy"):
+        steps = {s: float(g[f"{s}_per_edit_ms"].median()) for s in STEPS if g[f"{s}_per_edit_ms"].notna().any()}
+        top = max(steps, key=lambda s: steps[s])
+        parts.append(f"{p}: {top} {format_number(steps[top])} of {format_number(g['update_per_edit_ms'].median())} ms")
+    return (f"The largest update step at {e['edit_radius'].max():g} m, per edit: " + "; ".join(parts) + ".")
+
+
 def accuracy_sentence(f: pd.DataFrame) -> str:
     """Whether accuracy after edits kept its static level: cracks, coverage and each method's median depth error."""
     e, s = f[f["editing"]], f[~f["editing"]]
@@ -144,7 +158,8 @@ def particles_sentence(f: pd.DataFrame) -> str:
 def reading(f: pd.DataFrame, env: dict, errors: list[dict]) -> list[str]:
     """The generated reading of an edit run."""
     device = env.get("gl_renderer", "this device")
-    lines = favour_sentences(f, device) + [share_sentence(f), accuracy_sentence(f), particles_sentence(f)]
+    lines = favour_sentences(f, device) + [share_sentence(f), step_sentence(f), accuracy_sentence(f),
+                                           particles_sentence(f)]
     lines.append("Timings are indicative: one run, wall clock on a machine possibly shared with other work.")
     if errors:
         lines.append(f"{len({e.get('config') for e in errors})} configuration(s) failed: "
