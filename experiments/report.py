@@ -196,14 +196,25 @@ def write_report(run: Path, reports_dir: Path = Path("reports"), name: str | Non
     return out / "report.md"
 
 
+def _kind(run: Path) -> str:
+    """The kind of spec a run folder ran ("flights" when its spec.json names none or is missing)."""
+    from .folders import read_json
+    spec = run / "spec.json"
+    return str(read_json(spec, "run spec").get("kind", "flights")) if spec.exists() else "flights"
+
+
 def write_run_report(run, reports_dir=Path("reports"), name: str | None = None, video: bool = False) -> Path:
-    """The report of any run folder into reports_dir/<name>/: stress.md for a stress run, else report.md + .html."""
+    """The report of any run folder into reports_dir/<name>/: stress.md for a stress run, else report.md + .html
+    (an edit run's from ``experiments.edit_report``)."""
     from .folders import writable_folder
     run = Path(run)
     stress = run / "stress.parquet"
     if not stress.exists() and not (run / "frames.parquet").exists():
         raise TerrabenchError(f"{run}: not a run folder with results (no frames.parquet); run `terrabench run SPEC` first")
     writable_folder(Path(reports_dir), "reports folder")
+    if _kind(run) == "edit":
+        from .edit_report import write_edit_report
+        return write_edit_report(run, Path(reports_dir), name)
     if stress.exists():
         from .folders import read_parquet
         from .stress import write_stress_report

@@ -233,7 +233,7 @@ def parse_stress_spec(d: dict, source: str) -> StressSpec:
 
 
 def parse_spec(text: str, source: str = "spec", base: Path | None = None, overrides: dict | None = None):
-    """Parse and check TOML text (a paired-flight Spec, or a StressSpec when kind = "stress").
+    """Parse and check TOML text (a paired-flight Spec, a StressSpec when kind = "stress", an EditSpec when "edit").
 
     ``base`` is the folder relative dataset paths are taken from (the spec file's); None keeps them as given.
     ``overrides`` (the command line's ``frames``, ``sizes``) replace the text's keys before the checks.
@@ -246,8 +246,11 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None, overri
     d = _overridden(d, overrides or {}, kind, source)
     if kind == "stress":
         return parse_stress_spec(d, source)
+    if kind == "edit":
+        from .edit_spec import parse_edit_spec
+        return parse_edit_spec(d, source, base)
     if kind != "flights":
-        raise TerrabenchError(f"{source}: kind must be 'flights' (default) or 'stress', got {kind!r}")
+        raise TerrabenchError(f"{source}: kind must be 'flights' (default), 'stress' or 'edit', got {kind!r}")
     known = set(Spec.__dataclass_fields__)
     unknown = set(d) - known
     if unknown:
@@ -353,11 +356,11 @@ def _overridden(d: dict, overrides: dict, kind: str, source: str) -> dict:
 
 
 BUNDLED = {"default": "default.toml", "tiny": "tiny.toml", "stress": "stress.toml", "full-res": "full-res.toml",
-           "gpu": "gpu.toml"}
+           "gpu": "gpu.toml", "edit": "edit.toml"}
 
 
 def load_spec(path, overrides: dict | None = None) -> Spec:
-    """Read and check a spec file, or a bundled spec by name (default, tiny, stress, full-res, gpu), with
+    """Read and check a spec file, or a bundled spec by name (default, tiny, stress, full-res, gpu, edit), with
     ``overrides`` of its keys (parse_spec)."""
     if str(path) in BUNDLED:
         from importlib import resources

@@ -239,11 +239,11 @@ class Renderer:
         return oracle.time_in_frames(self, view, plans, names, target, pinned, tau)
 
     def render(self, view: View, tau: float = DEFAULT_TAU, *, measure: bool | None = None, maps: bool = False,
-               plans: list[TilePlan] | None = None, read: bool = True, **options) -> RenderResult:
+               plans: list[TilePlan] | None = None, read: bool = True, overlay=None, **options) -> RenderResult:
         """Draw the view and read it back: colour, distance (m), FrameStats and the plans drawn; ``plans`` (from
         ``plan`` or an earlier result, choices possibly changed, as calibration does) are drawn instead of the
         view's own, with their choices; ``read=False`` leaves the image on the GPU (colour and distance None), as an
-        application's frame loop does.
+        application's frame loop does; ``overlay(target, view)`` draws into the frame after it is timed (particles).
 
         With ``measure`` (mixed policies only; the oracle's default when it plans the view itself) every tile is
         also timed inside frames every candidate way (``time_in_frame``) and the oracle takes the cheapest; with
@@ -269,6 +269,8 @@ class Renderer:
                 adapt_ms += adaptive.learn(self.online, clock, plans, draw, gpu, issue, explored)
             stats = self._stats(plans, plan_ms, draw, gpu, counters, together)
             self._frame_costs(stats, prep_ms, issue, adapt_ms, explored, streamed, before)
+            if overlay is not None:
+                overlay(target, view)
             return self._result(target, view, plans, stats, counters, tau, opts, read, maps)
         finally:
             target.release()

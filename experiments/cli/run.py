@@ -14,7 +14,8 @@ HELP = "run an experiment spec (TOML): paired flights, tables, images"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The run options: the spec, where runs and reports go, and --quiet."""
-    p.add_argument("spec", help="experiment spec file (.toml) or a bundled one: default, tiny, stress, full-res, gpu")
+    p.add_argument("spec", help="experiment spec file (.toml) or a bundled one: default, tiny, stress, full-res, gpu, "
+                                "edit")
     p.add_argument("--runs", default="runs", help="folder that holds run folders")
     p.add_argument("--name", default=None, help="run name (default: the spec's)")
     p.add_argument("--frames", type=argtypes.int_in("--frames", 1, 100000), default=None,
@@ -47,6 +48,8 @@ def run(spec, runs="runs", name: str | None = None, report: bool = False, report
     from hybrid.errors import TerrabenchError
     from hybrid.gl.context import shared_context
 
+    from ..edit_run import run_edit_spec
+    from ..edit_spec import EditSpec
     from ..report import write_run_report
     from ..runner import run_spec
     from ..spec import StressSpec, load_spec
@@ -66,8 +69,8 @@ def run(spec, runs="runs", name: str | None = None, report: bool = False, report
     if report:
         writable_folder(Path(reports), "--reports")
     if scheduler or workers:
-        if isinstance(spec, StressSpec):
-            raise TerrabenchError("stress specs run on one machine; drop --scheduler / --workers")
+        if isinstance(spec, (StressSpec, EditSpec)):
+            raise TerrabenchError("stress and edit specs run on one machine; drop --scheduler / --workers")
         from ..cluster import CONNECT_TIMEOUT_S, connect
         client, cluster = connect(scheduler, workers, scheduler_timeout or CONNECT_TIMEOUT_S)
         try:
@@ -77,7 +80,7 @@ def run(spec, runs="runs", name: str | None = None, report: bool = False, report
             if cluster is not None:
                 cluster.close()
     else:
-        runner = run_stress_spec if isinstance(spec, StressSpec) else run_spec
+        runner = {StressSpec: run_stress_spec, EditSpec: run_edit_spec}.get(type(spec), run_spec)
         folder = runner(spec, Path(runs), shared_context(device), progress=not quiet)
     print(f"run folder: {folder}")
     if report:
