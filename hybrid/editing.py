@@ -11,6 +11,12 @@ window reaches only:
 - the triangle estimate of the touched tiles (the hybrid's per-tile features read it and the pyramid's boxes);
 - the reference renderer's height textures over the window and its blocks' bounds.
 
+Deformations driven by time (``hybrid.terrain.deform``: a travelling wave, a slow uplift) change the GPU heights
+only, at each ``step`` of the editor's clock, over what they reach (``hybrid.gl.deform``: heights = base +
+displacements, so a time's heights never depend on the steps before); ``sync`` writes what they changed since the
+last sync through to the CPU heights and every renderer follows it as it follows a brush. A brush given while
+deformations are held edits the base under them.
+
 Each step is timed (wall ms, with a GL finish for the GPU's part) per edit, in ``EditReport.ms``.
 """
 from __future__ import annotations
@@ -21,10 +27,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hybrid.errors import TerrabenchError
-from hybrid.gl.brush import GpuHeights
+from hybrid.gl.brush import GpuHeights, read_r32f_window
+from hybrid.gl.deform import GpuDeformations
 from hybrid.gl.edges import TerrainEdges
 from hybrid.reference import ReferenceRenderer
 from hybrid.renderer import Renderer
+from hybrid.terrain.deform import Deformation, deform_params
 from hybrid.terrain.edit_log import EditLog, check_log
 from hybrid.terrain.edits import Brush, Window
 from hybrid.terrain.heightfield import HeightField
@@ -38,8 +46,8 @@ from raycast.edit import follow_tile, local_window
 @dataclass
 class EditReport:
     """What one edit changed and cost: the window of samples (rows, columns), the tiles touched, the resident
-    tiles refreshed per strategy, and wall ms per step (``brush``, ``pyramid``, ``raster_nodes``, per strategy
-    name, ``estimate``, ``reference``)."""
+    tiles refreshed per strategy, and wall ms per step (``brush``, ``sync``, ``pyramid``, ``raster_nodes``, per
+    strategy name, ``estimate``, ``reference``)."""
 
     window: Window
     tiles: int = 0
@@ -83,11 +91,51 @@ class TerrainEditor:
                 raise TerrabenchError("an editor's renderers must draw the terrain it edits")
         self.ctx, self.hf, self.renderer, self.reference = ctx, hf, renderer, reference
         self.gpu = GpuHeights(ctx, hf)
+        self.deforms: GpuDeformations | None = None
+        self.pending: list[Window] = []                     # what deformations changed since the last sync
 
     def apply(self, brush: Brush) -> EditReport:
         """Apply one brush (world metres, the terrain's frame) and bring every renderer up to date."""
         report = EditReport(Window(0, 0, 0, 0))
-        report.window = win = _timed(self.ctx, report, "brush", lambda: self.gpu.edit(brush))
+        edit = self.gpu.edit if self.deforms is None else self.deforms.edit
+        report.window = win = _timed(self.ctx, report, "brush", lambda: edit(brush))
+        return self._follow(win, report)
+
+    def deform(self, deformation: Deformation, start: float, end: float) -> None:
+        """Add a deformation driven by time (world metres, the terrain's frame; start and end in seconds on the
+        editor's clock): the GPU heights follow it from the next ``step``, the CPU copy and renderers at ``sync``."""
+        p = deform_params(deformation, self.hf, start, end)
+        if self.deforms is None:
+            self.deforms = GpuDeformations(self.gpu)
+        self.deforms.add(p)
+
+    def step(self, t: float) -> list[Window]:
+        """Set the GPU heights to clock time t (s) where the deformations moved (GPU only, no CPU work beyond the
+        pass); returns those windows of samples."""
+        if self.deforms is None:
+            return []
+        wins = self.deforms.step(t)
+        self.pending += wins
+        return wins
+
+    def sync(self) -> EditReport:
+        """Write what the deformations changed since the last sync through to the CPU heights and bring every
+        renderer up to date over it; the report's window bounds every window followed."""
+        report = EditReport(Window(0, 0, 0, 0))
+        wins, self.pending = merged(self.pending), []
+        for w in wins:
+            _timed(self.ctx, report, "sync", lambda w=w: self._write_through(w))
+            report.window = report.window.union(w)
+        for w in wins:
+            self._follow(w, report)
+        return report
+
+    def _write_through(self, win: Window) -> None:
+        """Copy a window of the GPU heights into the CPU heights."""
+        self.hf.heights[win.slices()] = read_r32f_window(self.gpu.texture, win)
+
+    def _follow(self, win: Window, report: EditReport) -> EditReport:
+        """Bring every renderer up to date after the samples of a window changed in the CPU heights."""
         if win.empty:
             return report
         if self.renderer is not None:
@@ -98,7 +146,7 @@ class TerrainEditor:
 
     def _follow_renderer(self, r: Renderer, win: Window, report: EditReport) -> None:
         keys = _timed(None, report, "pyramid", lambda: update_pyramid(r.pyramid, win))
-        report.tiles = len(keys)
+        report.tiles += len(keys)
         for k in keys:
             r._tiles.pop(k, None)                           # the renderer's CPU copies of the tiles
         raster = [n for n in r.strategies if r.kind(n) == "raster"]
@@ -139,7 +187,9 @@ class TerrainEditor:
         return done
 
     def release(self) -> None:
-        """Free the GPU heights (not the renderers)."""
+        """Free the GPU heights and deformations (not the renderers)."""
+        if self.deforms is not None:
+            self.deforms.release()
         self.gpu.release()
 
     def __enter__(self) -> TerrainEditor:
@@ -149,10 +199,31 @@ class TerrainEditor:
         self.release()
 
 
-def replay(editor: TerrainEditor, log: EditLog) -> list[EditReport]:
-    """Apply every edit of a log (checked for the editor's terrain first), in order; one report per edit."""
+def replay(editor: TerrainEditor, log: EditLog, time: float | None = None) -> list[EditReport]:
+    """Apply every edit of a log (checked for the editor's terrain first), in order, one report per edit; then
+    its deformations at clock time ``time`` (s; None: the last one's end), written through (one report more)."""
     check_log(log, editor.hf)
-    return [editor.apply(e.brush) for e in log.edits]
+    reports = [editor.apply(e.brush) for e in log.edits]
+    if log.deformations:
+        for d in log.deformations:
+            editor.deform(d.deformation, d.start, d.end)
+        editor.step(max(d.end for d in log.deformations) if time is None else time)
+        reports.append(editor.sync())
+    return reports
+
+
+def merged(wins: list[Window]) -> list[Window]:
+    """Windows of samples with those that overlap or touch merged into their union, until none do."""
+    out: list[Window] = []
+    for w in wins:
+        while True:
+            hit = next((o for o in out if o.i0 <= w.i1 and w.i0 <= o.i1 and o.j0 <= w.j1 and w.j0 <= o.j1), None)
+            if hit is None:
+                break
+            out.remove(hit)
+            w = w.union(hit)
+        out.append(w)
+    return out
 
 
 def _bounds_changed(r: Renderer, key, gpu) -> bool:
