@@ -135,19 +135,23 @@ def _node_range(ax: tuple, g: int, idx: np.ndarray, extent: int) -> tuple[int, i
     return (int(where[0]), int(where[-1]) + 1) if where.size else (0, 0)
 
 
-def _rewrite(st: NodeEdits, nodes: GlobalNodes, g: int, r: tuple[int, int], c: tuple[int, int]) -> None:
-    """Rewrite nodes[r0:r1, c0:c1] of level g's float32 arrays from the compact arrays (rect_nodes._output's values)."""
+def _rewrite(st: NodeEdits, nodes: GlobalNodes, g: int, r: tuple[int, int], c: tuple[int, int]) -> Window:
+    """Rewrite nodes[r0:r1, c0:c1] of level g's float32 arrays from the compact arrays (rect_nodes._output's
+    values); returns the window of the nodes whose values changed (node indices, maybe empty)."""
     (r0, r1), (c0, c1) = r, c
     lv = st.levels[g]
     H, W = nodes.effective[g].shape
     mr, mc = st.ax_r[0][g], st.ax_c[0][g]
     eff = rn._float32(lv["eff"][np.ix_(mr[r0:r1], mc[c0:c1])], st.bound[g])
+    moved = nodes.effective[g][r0:r1, c0:c1] != eff
     nodes.effective[g][r0:r1, c0:c1] = eff
     gr0, gr1 = max(r0 - 1, 0), min(r1 + 1, H + 1, mr.size)   # one node more for the 3x3 boxes
     gc0, gc1 = max(c0 - 1, 0), min(c1 + 1, W + 1, mc.size)
     for arr, kind, fn in ((nodes.zlo, "zmin", np.minimum), (nodes.zhi, "zmax", np.maximum)):
         grown = rn.grow3(lv[kind][np.ix_(mr[gr0:gr1], mc[gc0:gc1])], fn)
-        arr[g][r0:r1, c0:c1] = grown[r0 - gr0:r1 - gr0, c0 - gc0:c1 - gc0].astype(np.float32)
+        new = grown[r0 - gr0:r1 - gr0, c0 - gc0:c1 - gc0].astype(np.float32)
+        moved |= arr[g][r0:r1, c0:c1] != new
+        arr[g][r0:r1, c0:c1] = new
     if nodes.sides is not None and lv["sides"] is not None:
         parent = None
         if g + 1 < len(st.levels):
@@ -155,12 +159,19 @@ def _rewrite(st: NodeEdits, nodes: GlobalNodes, g: int, r: tuple[int, int], c: t
             parent = rn._float32(up[np.ix_(st.ax_r[0][g + 1][np.arange(r0, r1) // 2],
                                            st.ax_c[0][g + 1][np.arange(c0, c1) // 2])], st.bound[g + 1])
         sides = lv["sides"][:, mr[r0:r1][:, None], mc[None, c0:c1]]
-        nodes.sides[g][r0:r1, c0:c1] = rn.side_codes_each(sides, eff, parent)
+        codes = rn.side_codes_each(sides, eff, parent)
+        moved |= nodes.sides[g][r0:r1, c0:c1] != codes
+        nodes.sides[g][r0:r1, c0:c1] = codes
+    rows, cols = np.flatnonzero(moved.any(axis=1)), np.flatnonzero(moved.any(axis=0))
+    if not rows.size:
+        return Window(0, 0, 0, 0)
+    return Window(r0 + int(rows[0]), r0 + int(rows[-1]) + 1, c0 + int(cols[0]), c0 + int(cols[-1]) + 1)
 
 
 def update_nodes(st: NodeEdits, nodes: GlobalNodes, grid, win: Window) -> list[Window]:
     """Bring the compact state and the node arrays up to date after the samples of ``win`` changed in grid's
-    heights; returns per level the window of nodes rewritten (rows and columns of node indices, maybe empty)."""
+    heights; returns per level the window of nodes whose values changed (rows and columns of node indices, maybe
+    empty)."""
     h = np.asarray(grid.heights)
     if any(st.bound) and _margin(h) != st.margin:         # the bounded levels' margin moved: rebuild all
         vars(st).update(vars(node_edits(grid, st.n, st.beta, st.side_errors)))
@@ -181,7 +192,7 @@ def update_nodes(st: NodeEdits, nodes: GlobalNodes, grid, win: Window) -> list[W
 
 def _rewrite_all(st: NodeEdits, nodes: GlobalNodes, changed: list) -> list[Window]:
     """Rewrite every level's nodes whose values read changed classes: their own, their 3x3 box neighbours', and
-    (side codes) their parents'."""
+    (side codes) their parents'; per level the window of the nodes whose values changed."""
     out = []
     for g, (ar, ac) in enumerate(changed):
         H, W = nodes.effective[g].shape
@@ -195,7 +206,5 @@ def _rewrite_all(st: NodeEdits, nodes: GlobalNodes, changed: list) -> list[Windo
                 pr, pc = (2 * pr[0], min(2 * pr[1], H)), (2 * pc[0], min(2 * pc[1], W))
                 r = (min(r[0], pr[0]), max(r[1], pr[1])) if r[1] > r[0] else pr
                 c = (min(c[0], pc[0]), max(c[1], pc[1])) if c[1] > c[0] else pc
-        if r[1] > r[0] and c[1] > c[0]:
-            _rewrite(st, nodes, g, r, c)
-        out.append(Window(r[0], r[1], c[0], c[1]))
+        out.append(_rewrite(st, nodes, g, r, c) if r[1] > r[0] and c[1] > c[0] else Window(0, 0, 0, 0))
     return out
