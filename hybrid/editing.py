@@ -11,6 +11,9 @@ window reaches only:
 - the triangle estimate of the touched tiles (the hybrid's per-tile features read it and the pyramid's boxes);
 - the reference renderer's height textures over the window and its blocks' bounds.
 
+A terrain opened from a tile store is edited through an in-memory copy of its level 0, each change written
+through to the store at once (``hybrid.store_editing``); its renderers then read the new files.
+
 Deformations driven by time (``hybrid.terrain.deform``: a travelling wave, a slow uplift) change the GPU heights
 only, at each ``step`` of the editor's clock, over what they reach (``hybrid.gl.deform``: heights = base +
 displacements, so a time's heights never depend on the steps before); ``sync`` writes what they changed since the
@@ -32,12 +35,15 @@ from hybrid.gl.deform import GpuDeformations
 from hybrid.gl.edges import TerrainEdges
 from hybrid.reference import ReferenceRenderer
 from hybrid.renderer import Renderer
+from hybrid.store_editing import StoreEditing, follow_store_pyramid
 from hybrid.terrain.deform import Deformation, deform_params
 from hybrid.terrain.edit_log import EditLog, check_log
 from hybrid.terrain.edits import Brush, Window
 from hybrid.terrain.heightfield import HeightField
+from hybrid.terrain.stored import StoredTerrain
 from hybrid.tiles.pyramid_edit import update_pyramid
-from raster.edit import follow_nodes, reads_changed_nodes
+from hybrid.tiles.store import StorePyramid
+from raster.edit import edit_state, follow_nodes, reads_changed_nodes
 from raster.quadtree import GPU_BETA
 from raycast.caster import RaycastStrategy
 from raycast.edit import follow_tile, local_window
@@ -46,13 +52,15 @@ from raycast.edit import follow_tile, local_window
 @dataclass
 class EditReport:
     """What one edit changed and cost: the window of samples (rows, columns), the tiles touched, the resident
-    tiles refreshed per strategy, and wall ms per step (``brush``, ``sync``, ``pyramid``, ``raster_nodes``, per
-    strategy name, ``estimate``, ``reference``)."""
+    tiles refreshed per strategy, wall ms per step (``brush``, ``sync``, ``store``, ``pyramid``, ``raster_nodes``,
+    per strategy name, ``estimate``, ``reference``), and for a stored terrain the files and bytes written through."""
 
     window: Window
     tiles: int = 0
     refreshed: dict = field(default_factory=dict)
     ms: dict = field(default_factory=dict)
+    store_files: int = 0
+    store_bytes: int = 0
 
 
 def _timed(ctx, report: EditReport, name: str, fn):
@@ -83,14 +91,16 @@ class TerrainEditor:
 
     def __init__(self, ctx, hf: HeightField, renderer: Renderer | None = None,
                  reference: ReferenceRenderer | None = None):
-        if not isinstance(hf.heights, np.ndarray):
-            raise TerrabenchError(f"{hf.name!r} is a tile store: editing it (write-through to the store) is not "
-                                  "supported yet; load it into memory first")
         for r in (renderer, reference):
             if r is not None and r.hf is not hf:
                 raise TerrabenchError("an editor's renderers must draw the terrain it edits")
         self.ctx, self.hf, self.renderer, self.reference = ctx, hf, renderer, reference
-        self.gpu = GpuHeights(ctx, hf)
+        # a tile store is edited through an in-memory copy, each change written through to the store
+        self.stored = StoreEditing(hf) if isinstance(hf, StoredTerrain) else None
+        self.cpu = hf if self.stored is None else self.stored.mem
+        if self.stored is None and renderer is not None:
+            _node_state(renderer)
+        self.gpu = GpuHeights(ctx, self.cpu)
         self.deforms: GpuDeformations | None = None
         self.pending: list[Window] = []                     # what deformations changed since the last sync
 
@@ -132,12 +142,16 @@ class TerrainEditor:
 
     def _write_through(self, win: Window) -> None:
         """Copy a window of the GPU heights into the CPU heights."""
-        self.hf.heights[win.slices()] = read_r32f_window(self.gpu.texture, win)
+        self.cpu.heights[win.slices()] = read_r32f_window(self.gpu.texture, win)
 
     def _follow(self, win: Window, report: EditReport) -> EditReport:
         """Bring every renderer up to date after the samples of a window changed in the CPU heights."""
         if win.empty:
             return report
+        if self.stored is not None:
+            wrote = _timed(None, report, "store", lambda: self.stored.write(win))
+            report.store_files += wrote.files
+            report.store_bytes += wrote.bytes
         if self.renderer is not None:
             self._follow_renderer(self.renderer, win, report)
         if self.reference is not None:
@@ -145,7 +159,7 @@ class TerrainEditor:
         return report
 
     def _follow_renderer(self, r: Renderer, win: Window, report: EditReport) -> None:
-        keys = _timed(None, report, "pyramid", lambda: update_pyramid(r.pyramid, win))
+        keys = _timed(None, report, "pyramid", lambda: self._follow_pyramid(r, win))
         report.tiles += len(keys)
         for k in keys:
             r._tiles.pop(k, None)                           # the renderer's CPU copies of the tiles
@@ -154,7 +168,8 @@ class TerrainEditor:
         if raster:
             rewritten = _timed(None, report, "raster_nodes",
                                lambda: follow_nodes(self.hf, r.pyramid.n, win,
-                                                    getattr(r.strategies[raster[0]], "beta", GPU_BETA)))
+                                                    getattr(r.strategies[raster[0]], "beta", GPU_BETA))
+                               if self.stored is None else self.stored.rewritten)
         touched = set(keys)
         for name, strategy in r.strategies.items():
             entries = [(k, g) for (n, k), g in list(r.cache.entries.items()) if n == name]
@@ -168,6 +183,13 @@ class TerrainEditor:
         if forget is not None and known is not None:
             _timed(None, report, "estimate", lambda: forget(
                 [k for k in known() if k in touched or reads_changed_nodes(k, r.pyramid.n, rewritten)]))
+
+    def _follow_pyramid(self, r: Renderer, win: Window) -> list:
+        """The renderer's pyramid after the window changed: updated in place, or for a store the written bounds."""
+        if self.stored is None:
+            return update_pyramid(r.pyramid, win)
+        assert isinstance(r.pyramid, StorePyramid)          # a stored terrain's renderer reads the store
+        return follow_store_pyramid(r.pyramid, self.stored.pyramid, win)
 
     def _follow_raycast(self, r: Renderer, strategy: RaycastStrategy, entries, win: Window) -> int:
         """Refresh the strategy's resident tiles whose samples changed; its edge profiles and shadow grid too."""
@@ -224,6 +246,14 @@ def merged(wins: list[Window]) -> list[Window]:
             w = w.union(hit)
         out.append(w)
     return out
+
+
+def _node_state(r: Renderer) -> None:
+    """Make the rect_nodes state of the renderer's raster node arrays before any edit (it measures what an edit
+    changes against the heights before it)."""
+    raster = [n for n in r.strategies if r.kind(n) == "raster"]
+    if raster:
+        edit_state(r.hf, r.pyramid.n, getattr(r.strategies[raster[0]], "beta", GPU_BETA))
 
 
 def _bounds_changed(r: Renderer, key, gpu) -> bool:
