@@ -11,6 +11,15 @@ window reaches only:
 - the triangle estimate of the touched tiles (the hybrid's per-tile features read it and the pyramid's boxes);
 - the reference renderer's height textures over the window and its blocks' bounds.
 
+A terrain opened from a tile store is edited through an in-memory copy of its level 0, each change written
+through to the store at once (``hybrid.store_editing``); its renderers then read the new files.
+
+Deformations driven by time (``hybrid.terrain.deform``: a travelling wave, a slow uplift) change the GPU heights
+only, at each ``step`` of the editor's clock, over what they reach (``hybrid.gl.deform``: heights = base +
+displacements, so a time's heights never depend on the steps before); ``sync`` writes what they changed since the
+last sync through to the CPU heights and every renderer follows it as it follows a brush. A brush given while
+deformations are held edits the base under them.
+
 Each step is timed (wall ms, with a GL finish for the GPU's part) per edit, in ``EditReport.ms``.
 """
 from __future__ import annotations
@@ -21,15 +30,20 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hybrid.errors import TerrabenchError
-from hybrid.gl.brush import GpuHeights
+from hybrid.gl.brush import GpuHeights, read_r32f_window
+from hybrid.gl.deform import GpuDeformations
 from hybrid.gl.edges import TerrainEdges
 from hybrid.reference import ReferenceRenderer
 from hybrid.renderer import Renderer
+from hybrid.store_editing import StoreEditing, follow_store_pyramid
+from hybrid.terrain.deform import Deformation, deform_params
 from hybrid.terrain.edit_log import EditLog, check_log
 from hybrid.terrain.edits import Brush, Window
 from hybrid.terrain.heightfield import HeightField
+from hybrid.terrain.stored import StoredTerrain
 from hybrid.tiles.pyramid_edit import update_pyramid
-from raster.edit import follow_nodes, reads_changed_nodes
+from hybrid.tiles.store import StorePyramid
+from raster.edit import edit_state, follow_nodes, reads_changed_nodes
 from raster.quadtree import GPU_BETA
 from raycast.caster import RaycastStrategy
 from raycast.edit import follow_tile, local_window
@@ -38,13 +52,15 @@ from raycast.edit import follow_tile, local_window
 @dataclass
 class EditReport:
     """What one edit changed and cost: the window of samples (rows, columns), the tiles touched, the resident
-    tiles refreshed per strategy, and wall ms per step (``brush``, ``pyramid``, ``raster_nodes``, per strategy
-    name, ``estimate``, ``reference``)."""
+    tiles refreshed per strategy, wall ms per step (``brush``, ``sync``, ``store``, ``pyramid``, ``raster_nodes``,
+    per strategy name, ``estimate``, ``reference``), and for a stored terrain the files and bytes written through."""
 
     window: Window
     tiles: int = 0
     refreshed: dict = field(default_factory=dict)
     ms: dict = field(default_factory=dict)
+    store_files: int = 0
+    store_bytes: int = 0
 
 
 def _timed(ctx, report: EditReport, name: str, fn):
@@ -75,21 +91,67 @@ class TerrainEditor:
 
     def __init__(self, ctx, hf: HeightField, renderer: Renderer | None = None,
                  reference: ReferenceRenderer | None = None):
-        if not isinstance(hf.heights, np.ndarray):
-            raise TerrabenchError(f"{hf.name!r} is a tile store: editing it (write-through to the store) is not "
-                                  "supported yet; load it into memory first")
         for r in (renderer, reference):
             if r is not None and r.hf is not hf:
                 raise TerrabenchError("an editor's renderers must draw the terrain it edits")
         self.ctx, self.hf, self.renderer, self.reference = ctx, hf, renderer, reference
-        self.gpu = GpuHeights(ctx, hf)
+        # a tile store is edited through an in-memory copy, each change written through to the store
+        self.stored = StoreEditing(hf) if isinstance(hf, StoredTerrain) else None
+        self.cpu = hf if self.stored is None else self.stored.mem
+        if self.stored is None and renderer is not None:
+            _node_state(renderer)
+        self.gpu = GpuHeights(ctx, self.cpu)
+        self.deforms: GpuDeformations | None = None
+        self.pending: list[Window] = []                     # what deformations changed since the last sync
 
     def apply(self, brush: Brush) -> EditReport:
         """Apply one brush (world metres, the terrain's frame) and bring every renderer up to date."""
         report = EditReport(Window(0, 0, 0, 0))
-        report.window = win = _timed(self.ctx, report, "brush", lambda: self.gpu.edit(brush))
+        edit = self.gpu.edit if self.deforms is None else self.deforms.edit
+        report.window = win = _timed(self.ctx, report, "brush", lambda: edit(brush))
+        return self._follow(win, report)
+
+    def deform(self, deformation: Deformation, start: float, end: float) -> None:
+        """Add a deformation driven by time (world metres, the terrain's frame; start and end in seconds on the
+        editor's clock): the GPU heights follow it from the next ``step``, the CPU copy and renderers at ``sync``."""
+        p = deform_params(deformation, self.hf, start, end)
+        if self.deforms is None:
+            self.deforms = GpuDeformations(self.gpu)
+        self.deforms.add(p)
+
+    def step(self, t: float) -> list[Window]:
+        """Set the GPU heights to clock time t (s) where the deformations moved (GPU only, no CPU work beyond the
+        pass); returns those windows of samples."""
+        if self.deforms is None:
+            return []
+        wins = self.deforms.step(t)
+        self.pending += wins
+        return wins
+
+    def sync(self) -> EditReport:
+        """Write what the deformations changed since the last sync through to the CPU heights and bring every
+        renderer up to date over it; the report's window bounds every window followed."""
+        report = EditReport(Window(0, 0, 0, 0))
+        wins, self.pending = merged(self.pending), []
+        for w in wins:
+            _timed(self.ctx, report, "sync", lambda w=w: self._write_through(w))
+            report.window = report.window.union(w)
+        for w in wins:
+            self._follow(w, report)
+        return report
+
+    def _write_through(self, win: Window) -> None:
+        """Copy a window of the GPU heights into the CPU heights."""
+        self.cpu.heights[win.slices()] = read_r32f_window(self.gpu.texture, win)
+
+    def _follow(self, win: Window, report: EditReport) -> EditReport:
+        """Bring every renderer up to date after the samples of a window changed in the CPU heights."""
         if win.empty:
             return report
+        if self.stored is not None:
+            wrote = _timed(None, report, "store", lambda: self.stored.write(win))
+            report.store_files += wrote.files
+            report.store_bytes += wrote.bytes
         if self.renderer is not None:
             self._follow_renderer(self.renderer, win, report)
         if self.reference is not None:
@@ -97,8 +159,8 @@ class TerrainEditor:
         return report
 
     def _follow_renderer(self, r: Renderer, win: Window, report: EditReport) -> None:
-        keys = _timed(None, report, "pyramid", lambda: update_pyramid(r.pyramid, win))
-        report.tiles = len(keys)
+        keys = _timed(None, report, "pyramid", lambda: self._follow_pyramid(r, win))
+        report.tiles += len(keys)
         for k in keys:
             r._tiles.pop(k, None)                           # the renderer's CPU copies of the tiles
         raster = [n for n in r.strategies if r.kind(n) == "raster"]
@@ -106,7 +168,8 @@ class TerrainEditor:
         if raster:
             rewritten = _timed(None, report, "raster_nodes",
                                lambda: follow_nodes(self.hf, r.pyramid.n, win,
-                                                    getattr(r.strategies[raster[0]], "beta", GPU_BETA)))
+                                                    getattr(r.strategies[raster[0]], "beta", GPU_BETA))
+                               if self.stored is None else self.stored.rewritten)
         touched = set(keys)
         for name, strategy in r.strategies.items():
             entries = [(k, g) for (n, k), g in list(r.cache.entries.items()) if n == name]
@@ -120,6 +183,13 @@ class TerrainEditor:
         if forget is not None and known is not None:
             _timed(None, report, "estimate", lambda: forget(
                 [k for k in known() if k in touched or reads_changed_nodes(k, r.pyramid.n, rewritten)]))
+
+    def _follow_pyramid(self, r: Renderer, win: Window) -> list:
+        """The renderer's pyramid after the window changed: updated in place, or for a store the written bounds."""
+        if self.stored is None:
+            return update_pyramid(r.pyramid, win)
+        assert isinstance(r.pyramid, StorePyramid)          # a stored terrain's renderer reads the store
+        return follow_store_pyramid(r.pyramid, self.stored.pyramid, win)
 
     def _follow_raycast(self, r: Renderer, strategy: RaycastStrategy, entries, win: Window) -> int:
         """Refresh the strategy's resident tiles whose samples changed; its edge profiles and shadow grid too."""
@@ -139,7 +209,9 @@ class TerrainEditor:
         return done
 
     def release(self) -> None:
-        """Free the GPU heights (not the renderers)."""
+        """Free the GPU heights and deformations (not the renderers)."""
+        if self.deforms is not None:
+            self.deforms.release()
         self.gpu.release()
 
     def __enter__(self) -> TerrainEditor:
@@ -149,10 +221,39 @@ class TerrainEditor:
         self.release()
 
 
-def replay(editor: TerrainEditor, log: EditLog) -> list[EditReport]:
-    """Apply every edit of a log (checked for the editor's terrain first), in order; one report per edit."""
+def replay(editor: TerrainEditor, log: EditLog, time: float | None = None) -> list[EditReport]:
+    """Apply every edit of a log (checked for the editor's terrain first), in order, one report per edit; then
+    its deformations at clock time ``time`` (s; None: the last one's end), written through (one report more)."""
     check_log(log, editor.hf)
-    return [editor.apply(e.brush) for e in log.edits]
+    reports = [editor.apply(e.brush) for e in log.edits]
+    if log.deformations:
+        for d in log.deformations:
+            editor.deform(d.deformation, d.start, d.end)
+        editor.step(max(d.end for d in log.deformations) if time is None else time)
+        reports.append(editor.sync())
+    return reports
+
+
+def merged(wins: list[Window]) -> list[Window]:
+    """Windows of samples with those that overlap or touch merged into their union, until none do."""
+    out: list[Window] = []
+    for w in wins:
+        while True:
+            hit = next((o for o in out if o.i0 <= w.i1 and w.i0 <= o.i1 and o.j0 <= w.j1 and w.j0 <= o.j1), None)
+            if hit is None:
+                break
+            out.remove(hit)
+            w = w.union(hit)
+        out.append(w)
+    return out
+
+
+def _node_state(r: Renderer) -> None:
+    """Make the rect_nodes state of the renderer's raster node arrays before any edit (it measures what an edit
+    changes against the heights before it)."""
+    raster = [n for n in r.strategies if r.kind(n) == "raster"]
+    if raster:
+        edit_state(r.hf, r.pyramid.n, getattr(r.strategies[raster[0]], "beta", GPU_BETA))
 
 
 def _bounds_changed(r: Renderer, key, gpu) -> bool:

@@ -3,8 +3,8 @@
 An in-memory terrain's node arrays (``raster.nodes.global_nodes``, which every raster tile's upload and the
 triangle estimate read) are updated in place over the nodes the edit reaches (``raster.node_edit``); the rect_nodes
 state that takes is made at the terrain's first edit and kept per terrain, tile size and beta. A resident tile must
-be uploaded again when its node block (its nodes and a one-node apron at each local level) meets a rewritten node
-window, or its own samples changed.
+be uploaded again when its node block (its nodes and a one-node apron at each local level) meets the window of the
+nodes whose values changed, or its own samples changed.
 """
 from __future__ import annotations
 
@@ -21,31 +21,33 @@ from .quadtree import GPU_BETA
 _STATE: dict = {}
 
 
-def edit_state(hf, n: int, beta: float = GPU_BETA) -> NodeEdits:
-    """The rect_nodes state of hf's node arrays for tiles of n cells (made on first use, kept while hf lives)."""
+def edit_state(hf, n: int, beta: float = GPU_BETA, side_errors: bool = True) -> NodeEdits:
+    """The rect_nodes state of hf's node arrays for tiles of n cells (made on first use, kept while hf lives);
+    ``side_errors`` as in ``raster.nodes.global_nodes``."""
     if isinstance(hf, StoredTerrain):
-        raise TerrabenchError(f"{hf.name!r} is a tile store: editing it (write-through to the store) is not "
-                              "supported yet; load it into memory first")
-    key = (id(hf), int(n), float(beta))
+        raise TerrabenchError(f"{hf.name!r} is a tile store: its node arrays follow an edit through the in-memory "
+                              "copy the editor keeps (hybrid.editing.TerrainEditor), not here")
+    key = (id(hf), int(n), float(beta), bool(side_errors))
     hit = _STATE.get(key)
     if hit is not None and hit[0]() is hf:
         return hit[1]
-    st = node_edits(hf, n, beta)
+    st = node_edits(hf, n, beta, side_errors)
     def drop(_ref, k=key) -> None:
         _STATE.pop(k, None)
     _STATE[key] = (weakref.ref(hf, drop), st)
     return st
 
 
-def follow_nodes(hf, n: int, win: Window, beta: float = GPU_BETA) -> list[Window]:
-    """Update hf's node arrays (tiles of n cells) after the samples of ``win`` changed; per global level the window
-    of node indices rewritten."""
-    st = edit_state(hf, n, beta)
-    return update_nodes(st, global_nodes(hf, n, beta), hf, win)
+def follow_nodes(hf, n: int, win: Window, beta: float = GPU_BETA, side_errors: bool = True) -> list[Window]:
+    """Update hf's node arrays (tiles of n cells; ``side_errors`` as in ``global_nodes``) after the samples of
+    ``win`` changed; per global level the window of the nodes whose values changed (node indices)."""
+    st = edit_state(hf, n, beta, side_errors)
+    return update_nodes(st, global_nodes(hf, n, beta, side_errors), hf, win)
 
 
 def reads_changed_nodes(key, n: int, rewritten: list[Window]) -> bool:
-    """Whether tile ``key``'s node block (n cells, local levels with a one-node apron) meets a rewritten window."""
+    """Whether tile ``key``'s node block (n cells, local levels with a one-node apron) meets a window of changed
+    nodes (per global level)."""
     for m in range(tile_levels(n)):
         g = key.level + m
         if g >= len(rewritten) or rewritten[g].empty:

@@ -182,8 +182,10 @@ def _post_bound(h, ax_r, ax_c, g: int, R: int) -> np.ndarray:
 
 def _take(arr: np.ndarray, ri: np.ndarray, ci: np.ndarray) -> np.ndarray:
     """arr[..., ri, ci] over compact indices, 0 where an index is -1 (beyond the square: no neighbour)."""
-    pad = [(0, 0)] * (arr.ndim - 2) + [(0, 1), (0, 1)]
-    return np.pad(arr, pad)[..., ri[:, None], ci[None, :]]
+    out = arr[..., np.maximum(ri, 0)[:, None], np.maximum(ci, 0)[None, :]]
+    out[..., ri < 0, :] = 0.0
+    out[..., ci < 0] = 0.0
+    return out
 
 
 def _level(below: dict, ax_r, ax_c, g: int, direct, beta: float, margin: float | None) -> dict:

@@ -5,6 +5,8 @@ import pytest
 
 import hybrid.gl.programs as programs
 from hybrid.errors import TerrabenchError
+from hybrid.gl.brush import GpuHeights
+from hybrid.gl.deform import GpuDeformations
 from hybrid.reference import ReferenceRenderer
 from raster.indexed import IndexedTileletStrategy
 from raster.tilelets import TileletStrategy
@@ -29,7 +31,8 @@ def test_every_program_compiles_and_every_glsl_file_is_used(ctx, puget257, monke
     made = [ReferenceRenderer(ctx, puget257), TileletStrategy(ctx, puget257), IndexedTileletStrategy(ctx, puget257),
             TriangleListStrategy(ctx, puget257)]
     rc = RaycastStrategy(ctx, puget257)
-    made.append(rc)
+    heights = GpuHeights(ctx, puget257)                    # the editing passes: brushes and deformations
+    made += [rc, GpuDeformations(heights), heights]
     variants = [CastOptions(reconstruction=r, mode=m) for r in RECONSTRUCTIONS for m in CAST_MODES]
     variants += [CastOptions(traversal="naive"), CastOptions(lod=0.5), CastOptions(prepass=False),
                  CastOptions(stats=False), CastOptions(shadows=True)]

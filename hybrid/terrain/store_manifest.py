@@ -80,11 +80,21 @@ def record_manifest(root) -> dict:
     for key in _listed(root):
         data = (root / key).read_bytes()
         files[key] = [len(data), crc32(data)]
-    text = json.dumps({"format": MANIFEST_FORMAT, "version": 1, "checksum": "crc32", "files": files},
-                      separators=(",", ":")).encode()
+    text = manifest_bytes(files)
     tmp = root / (MANIFEST + ".tmp")
     tmp.write_bytes(text)
     os.replace(tmp, root / MANIFEST)
+    return manifest_attribute(text, files)
+
+
+def manifest_bytes(files: dict) -> bytes:
+    """The manifest file's bytes listing ``files`` (key -> [bytes, crc32])."""
+    return json.dumps({"format": MANIFEST_FORMAT, "version": 1, "checksum": "crc32", "files": files},
+                      separators=(",", ":")).encode()
+
+
+def manifest_attribute(text: bytes, files: dict) -> dict:
+    """The header's ``manifest`` attribute of a manifest file's bytes: its size and CRC-32, and the count of files."""
     return {"file": MANIFEST, "bytes": len(text), "crc32": crc32(text), "files": len(files)}
 
 

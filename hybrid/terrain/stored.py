@@ -28,6 +28,7 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.heightfield import HeightField, spacing_pair
+from hybrid.terrain.store_journal import recover
 from hybrid.terrain.store_manifest import (
     MANIFEST,
     bad_files,
@@ -166,8 +167,11 @@ def store_remains(path) -> bool:
 
 
 def _header(p: Path, path) -> dict:
-    """The store's header (its group attributes), read from zarr.json; a missing or garbled one refused by name."""
+    """The store's header (its group attributes), read from zarr.json after finishing or dropping an interrupted
+    edit's write-through (``store_journal.recover``); a missing or garbled one refused by name."""
     import json
+    if p.is_dir():
+        recover(p)
     try:
         text = (p / "zarr.json").read_bytes()
     except OSError:
