@@ -7,6 +7,7 @@ import hybrid.gl.programs as programs
 from hybrid.errors import TerrabenchError
 from hybrid.gl.brush import GpuHeights
 from hybrid.gl.deform import GpuDeformations
+from hybrid.gl.particles import ParticleParams, ParticleSystem
 from hybrid.reference import ReferenceRenderer
 from raster.indexed import IndexedTileletStrategy
 from raster.tilelets import TileletStrategy
@@ -32,7 +33,7 @@ def test_every_program_compiles_and_every_glsl_file_is_used(ctx, puget257, monke
             TriangleListStrategy(ctx, puget257)]
     rc = RaycastStrategy(ctx, puget257)
     heights = GpuHeights(ctx, puget257)                    # the editing passes: brushes and deformations
-    made += [rc, GpuDeformations(heights), heights]
+    made += [rc, GpuDeformations(heights), ParticleSystem(ctx, heights, ParticleParams(count=64)), heights]
     variants = [CastOptions(reconstruction=r, mode=m) for r in RECONSTRUCTIONS for m in CAST_MODES]
     variants += [CastOptions(traversal="naive"), CastOptions(lod=0.5), CastOptions(prepass=False),
                  CastOptions(stats=False), CastOptions(shadows=True)]
