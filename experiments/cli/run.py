@@ -52,8 +52,9 @@ def run(spec, runs="runs", name: str | None = None, report: bool = False, report
     from ..edit_spec import EditSpec
     from ..report import write_run_report
     from ..runner import run_spec
-    from ..spec import StressSpec, load_spec
+    from ..spec import load_spec
     from ..stress import run_stress_spec
+    from ..stress_spec import StressSpec
     overrides = {k: v for k, v in (("frames", frames), ("sizes", sizes)) if v is not None}
     if isinstance(spec, (str, Path)):
         spec = load_spec(spec, overrides)
