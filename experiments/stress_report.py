@@ -41,7 +41,7 @@ def failure_chart(df: pd.DataFrame, folder: Path) -> list[Path]:
         ax.set_yticks(range(len(cases)), cases if ax is axes[0] else [""] * len(cases), fontsize=6)
         ax.set_title(title, fontsize=9)
         fig.colorbar(im, ax=ax, shrink=0.5)
-    from .charts import save_figure
+    from .figures import save_figure
     return save_figure(fig, folder, "stress_failures")
 
 
