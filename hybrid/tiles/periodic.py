@@ -23,9 +23,10 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.stored import LazyGrid, StoredTerrain, open_store
 
-from .periodic_nodes import PeriodicNodes, _spans, seam_profiles
-from .pyramid import _block_reduce, interpolate_clamped
+from .periodic_nodes import PeriodicNodes
+from .seams import profile_spans, seam_profiles
 from .store_prepare import _levels
+from .subsampling import block_reduce, interpolate_clamped
 
 
 class _WrappedLevel:
@@ -104,7 +105,7 @@ class PeriodicStore:
         if level == 0:
             err = np.zeros_like(err)                   # level 0 is the extension's own samples
         if level:                                      # monotone, as every pyramid's errors
-            err = np.maximum(err, _block_reduce(self.arrays[f"error/{level - 1}"], 2, np.maximum))
+            err = np.maximum(err, block_reduce(self.arrays[f"error/{level - 1}"], 2, np.maximum))
         self.arrays[f"zmin/{level}"], self.arrays[f"zmax/{level}"] = zmin, zmax
         self.arrays[f"error/{level}"] = err
         src_level = min(level, src_L)                  # above the source's levels: its top grid, strided
@@ -154,10 +155,10 @@ def _within_period(g, level: int, tiles: int, span: int, P: int, seams) -> tuple
     zmax = np.asarray(g[f"zmax/{level}"][:])[np.ix_(idx, idx)]
     err = np.asarray(g[f"error/{level}"][:])[np.ix_(idx, idx)]
     # per source tile row/column span: the seam's step and the first row/column's range
-    step_r = _spans(seams.col_step, span, np.maximum)[idx]
-    step_c = _spans(seams.row_step, span, np.maximum)[idx]
-    c_lo, c_hi = _spans(seams.col0, span, np.minimum)[idx], _spans(seams.col0, span, np.maximum)[idx]
-    r_lo, r_hi = _spans(seams.row0, span, np.minimum)[idx], _spans(seams.row0, span, np.maximum)[idx]
+    step_r = profile_spans(seams.col_step, span, np.maximum)[idx]
+    step_c = profile_spans(seams.row_step, span, np.maximum)[idx]
+    c_lo, c_hi = (profile_spans(seams.col0, span, fn)[idx] for fn in (np.minimum, np.maximum))
+    r_lo, r_hi = (profile_spans(seams.row0, span, fn)[idx] for fn in (np.minimum, np.maximum))
     east, north = seam[None, :], seam[:, None]
     zmin = np.where(east, np.minimum(zmin, c_lo[:, None]), zmin)
     zmin = np.where(north, np.minimum(zmin, r_lo[None, :]), zmin)

@@ -28,10 +28,10 @@ from hybrid.terrain.store_manifest import record_manifest
 from hybrid.terrain.stored import STORE_FORMAT, STORE_VERSION, _zarr, is_store
 
 from .fans import GPU_BETA
-from .pyramid import _block_reduce, interpolate_clamped
 from .quantize import on_step_cells
 from .store_blocks import build_blocks
 from .store_nodes import build_nodes, node_bands, node_square
+from .subsampling import block_reduce, interpolate_clamped
 
 COL_BLOCK = 4096                # about this many columns per piece of a band when measuring errors (memory bound)
 EXACT_SPAN = 1024               # levels whose tiles span at most this many level-0 cells get exact errors
@@ -180,7 +180,7 @@ def _write_level(g, source, level: int, rows: int, cols: int, n: int, mark) -> N
             zmin[ty, :] = _tile_reduce(band, n, np.minimum)
             zmax[ty, :] = _tile_reduce(band, n, np.maximum)
         if level:
-            kids = _block_reduce(prev_err, 2, np.maximum)[ty]
+            kids = block_reduce(prev_err, 2, np.maximum)[ty]
             err[ty, :] = np.maximum(own, kids) if (n << level) <= EXACT_SPAN else own + kids
         else:
             err[ty, :] = own
@@ -189,8 +189,8 @@ def _write_level(g, source, level: int, rows: int, cols: int, n: int, mark) -> N
         mark(str(level), ty + 1, f"level {level} band {ty + 1}",
              {"height_range": [min(lo, hr[0]), max(hi, hr[1])] if hr else [lo, hi]} if level == 0 else None)
     if level:                                          # bounds of a level: its children's, 2 x 2
-        zmin[:, :] = _block_reduce(np.asarray(g[f"zmin/{level - 1}"][:]), 2, np.minimum)
-        zmax[:, :] = _block_reduce(np.asarray(g[f"zmax/{level - 1}"][:]), 2, np.maximum)
+        zmin[:, :] = block_reduce(np.asarray(g[f"zmin/{level - 1}"][:]), 2, np.minimum)
+        zmax[:, :] = block_reduce(np.asarray(g[f"zmax/{level - 1}"][:]), 2, np.maximum)
 
 
 def _level0_band(g, source, r0: int, r1: int) -> np.ndarray:
@@ -254,7 +254,7 @@ def _band_error(piece_of, cols: int, k: int, n: int) -> np.ndarray:
             cell = np.maximum(np.maximum(dev[:-1, :-1], dev[:-1, 1:]), np.maximum(dev[1:, :-1], dev[1:, 1:]))
         else:
             cell = dev
-        e = _block_reduce(cell, span, np.maximum).max(axis=0)
+        e = block_reduce(cell, span, np.maximum).max(axis=0)
         t0 = c0 // span
         out[t0:t0 + len(e)] = np.maximum(out[t0:t0 + len(e)], e)
     return out
