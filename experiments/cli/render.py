@@ -122,10 +122,7 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
     from hybrid.gl.context import shared_context
     out = _checked_out(out, method, show_strategy, freeze_model)
     hf = terrain.load()
-    log = None
-    if edit is not None:                                 # checked whole before anything is drawn or written
-        from hybrid.terrain.edit_log import check_log, read_log
-        log = check_log(read_log(edit), hf, str(edit))
+    log = _checked_log(edit, hf)
     if tile_size is None:
         tile_size = int(hf.store.attrs["tile_size"]) if getattr(hf, "store", None) is not None else 256
     ctx = shared_context(device)
@@ -143,6 +140,22 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
             v = view.view(hf)
             result = r.render(v, tau, maps=show_strategy)
     v = view.view(hf)
+    png, depth = _write_outputs(result, out, show_strategy)
+    _print_result(method, result, v, png, depth)
+    return result
+
+
+def _checked_log(edit: Path | None, hf):
+    """The edit log at ``edit`` (None: none), checked whole against the terrain before anything is drawn or
+    written."""
+    if edit is None:
+        return None
+    from hybrid.terrain.edit_log import check_log, read_log
+    return check_log(read_log(edit), hf, str(edit))
+
+
+def _write_outputs(result, out: Path, show_strategy: bool) -> tuple:
+    """Write the frame's PNG and depth (and with ``show_strategy`` its strategy map beside them); the two paths."""
     from hybrid.atomic import remove_stale_temps
     remove_stale_temps(out.parent)                       # what a killed render left beside its output
     png, depth = result.save(out)
@@ -150,8 +163,7 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
         smap = out.parent / (out.stem + ".strategy.png")
         save_strategy_map(result, smap)
         print(f"strategy map: {smap} (blue raster, orange ray cast)")
-    _print_result(method, result, v, png, depth)
-    return result
+    return png, depth
 
 
 def _checked_out(out, method: str, show_strategy: bool, freeze_model: bool) -> Path:
