@@ -15,7 +15,7 @@ import pandas as pd
 
 from hybrid.strategies import candidates
 
-from .charts import figure_legend, grid_cols, method_colours, panel_grid, panel_title, save_figure
+from .figures import figure_legend, grid_cols, method_colours, panel_grid, panel_title, save_figure
 
 NO_GPU_TIME = ("GPU and CPU time are not told apart: this GL has no valid timer query (a software rasterizer "
                "draws on the CPU), so frame time is the wall clock alone.")

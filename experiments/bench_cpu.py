@@ -58,44 +58,57 @@ def measure(model_for: str, frames: int = 8, size: str = "640x360", repeats: int
     from hybrid.camera.view import parse_size
     from hybrid.cost.model import load_cost_model
     from hybrid.gl.context import gl_info, shared_context
-    from hybrid.renderer import make_renderer
     from hybrid.terrain.datasets import puget
-
-    from .bench_hybrid import interleaved_stats
     warnings.simplefilter("ignore", RuntimeWarning)          # the no-op driver's read-backs hold no image
     ctx = shared_context()
     w, h = parse_size(size, "size")
     hf = puget()
-    from .bench_choice import forced
     model = load_cost_model(model_for)
     rows, mixed = [], []
     for fname in FLIGHTS:
         views = preset(fname, hf, frames, w, h).views()
-        renderers = {}
+        renderers: dict = {}
         try:
-            for p in POLICIES:
-                base, _, only = p.partition("=")
-                opts = {"cost_model": forced(model, only) if only else model} if base == "hybrid" else {}
-                renderers[p] = make_renderer(ctx, hf, base, tile_size=tile_size, **opts)
-                for v in views:                                # warm: uploads, estimates, shader compiles
-                    renderers[p].render(v, tau)
-            got: dict[tuple, list] = {("back", p, k): [] for p in POLICIES for k in range(len(views))}
-            got.update({("read", p, k): [] for p in POLICIES for k in range(len(views))})
-            for _ in range(repeats):                           # the two ways alternate: one machine for both
-                for way, stats in (("back", back_to_back_stats(renderers, views, tau)),
-                                   ("read", interleaved_stats(renderers, views, tau, 1))):
-                    for (p, k), x in stats.items():
-                        got[(way, p, k)] += x
-            for (way, p, k), x in got.items():
-                plan, issue, wall, adapt = np.median([(s.plan_ms, s.issue_ms, s.wall_ms, s.adapt_ms) for s in x],
-                                                     axis=0)
-                rows.append({"flight": fname, "policy": p, "frame": k, "way": way, "plan_ms": plan,
-                             "issue_ms": issue, "wall_ms": wall, "adapt_ms": adapt})
+            _warm_renderers(renderers, ctx, hf, model, views, tile_size, tau)
+            rows += _median_rows(fname, renderers, views, tau, repeats)
             mixed += [{"flight": fname, **m} for m in mixed_parts(renderers["hybrid"], views, tau, repeats)]
         finally:
             for r in renderers.values():
                 r.release()
     return {"renderer": gl_info(ctx).renderer, "rows": rows, "mixed": mixed}
+
+
+def _warm_renderers(renderers: dict, ctx, hf, model, views, tile_size: int, tau: float) -> None:
+    """Make each policy's renderer into ``renderers`` (the hybrid's with ``model``) and draw the views once with it:
+    uploads, estimates and shader compiles out of the way."""
+    from hybrid.renderer import make_renderer
+
+    from .bench_choice import forced
+    for p in POLICIES:
+        base, _, only = p.partition("=")
+        opts = {"cost_model": forced(model, only) if only else model} if base == "hybrid" else {}
+        renderers[p] = make_renderer(ctx, hf, base, tile_size=tile_size, **opts)
+        for v in views:                                # warm: uploads, estimates, shader compiles
+            renderers[p].render(v, tau)
+
+
+def _median_rows(fname: str, renderers: dict, views, tau: float, repeats: int) -> list[dict]:
+    """Per policy, frame and way of drawing (``back`` to back, ``read``-back), the median plan, issue, wall and
+    adapt ms over ``repeats``, the two ways alternating."""
+    from .bench_hybrid import interleaved_stats
+    got: dict[tuple, list] = {("back", p, k): [] for p in POLICIES for k in range(len(views))}
+    got.update({("read", p, k): [] for p in POLICIES for k in range(len(views))})
+    for _ in range(repeats):                           # the two ways alternate: one machine for both
+        for way, stats in (("back", back_to_back_stats(renderers, views, tau)),
+                           ("read", interleaved_stats(renderers, views, tau, 1))):
+            for (p, k), x in stats.items():
+                got[(way, p, k)] += x
+    rows = []
+    for (way, p, k), x in got.items():
+        plan, issue, wall, adapt = np.median([(s.plan_ms, s.issue_ms, s.wall_ms, s.adapt_ms) for s in x], axis=0)
+        rows.append({"flight": fname, "policy": p, "frame": k, "way": way, "plan_ms": plan,
+                     "issue_ms": issue, "wall_ms": wall, "adapt_ms": adapt})
+    return rows
 
 
 def mixed_parts(r, views, tau: float, repeats: int) -> list[dict]:

@@ -106,7 +106,6 @@ def summarize(frames: pd.DataFrame, tiles: pd.DataFrame, model) -> dict[str, pd.
     Each target ratio (of total frame time) comes with the reading of the same pair from this run's repeats
     (``experiments.noise.compare``: median frame times, bootstrap interval, repeat spread), so a ratio inside
     the run's noise reads as a tie."""
-    from .noise import compare
     out, ratios = {}, []
     for fname, g in frames.groupby("flight", sort=False):
         t = g.groupby("policy", sort=False).agg(total_ms=("wall_ms", "sum"), median_ms=("wall_ms", "median"),
@@ -116,21 +115,7 @@ def summarize(frames: pd.DataFrame, tiles: pd.DataFrame, model) -> dict[str, pd.
                                                 raycast_tiles=("tiles_raycast", "sum"),
                                                 plan_ms=("plan_ms", "median"))
         out[f"flight {fname} ({g['frame'].nunique()} frames)"] = t.reset_index()
-        tot = t["total_ms"]
-        raster = min(("raster", "raster_gs"), key=lambda p: tot[p])
-        best = min(("raster", "raster_gs", "raycast"), key=lambda p: tot[p])
-        hy = t.loc["hybrid"]
-        by = {p: q for p, q in g.groupby("policy", sort=False)}
-        ratios.append({"flight": fname, "faster raster": raster,
-                       "faster raster / raycast (target <= 1.5)": tot[raster] / tot["raycast"],
-                       "reading": compare(raster, by[raster], "raycast", by["raycast"]).words(),
-                       "hybrid raster tiles % (target >= 15 on one flight)":
-                           100 * hy["raster_tiles"] / max(hy["raster_tiles"] + hy["raycast_tiles"], 1),
-                       "better pure": best,
-                       "hybrid / better pure (target <= 0.85 on one, <= 1.05 on every flight)": tot["hybrid"] / tot[best],
-                       "hybrid reading": compare("hybrid", by["hybrid"], best, by[best]).words(),
-                       "hybrid / oracle": tot["hybrid"] / tot["oracle"],
-                       "noise (median repeat spread %)": float(t["spread_pct"].median())})
+        ratios.append(_flight_ratios(fname, g, t))
     out["targets: ratios of total frame time in this run"] = pd.DataFrame(ratios)
     if len(tiles):
         out[f"cost model ({model.source}): per-tile error against the oracle's in-frame measurements, each tile's "
@@ -143,6 +128,27 @@ def summarize(frames: pd.DataFrame, tiles: pd.DataFrame, model) -> dict[str, pd.
             [{"flight": f, "median |relative error| %": 100 * float(np.median(rel[hy["flight"] == f])),
               "frames": int((hy["flight"] == f).sum())} for f in hy["flight"].unique()])
     return out
+
+
+def _flight_ratios(fname: str, g: pd.DataFrame, t: pd.DataFrame) -> dict:
+    """One flight's target ratios of total frame time (``t``: per policy, from its frames ``g``), each with the
+    reading of the same pair from the run's repeats."""
+    from .noise import compare
+    tot = t["total_ms"]
+    raster = min(("raster", "raster_gs"), key=lambda p: tot[p])
+    best = min(("raster", "raster_gs", "raycast"), key=lambda p: tot[p])
+    hy = t.loc["hybrid"]
+    by = {p: q for p, q in g.groupby("policy", sort=False)}
+    return {"flight": fname, "faster raster": raster,
+            "faster raster / raycast (target <= 1.5)": tot[raster] / tot["raycast"],
+            "reading": compare(raster, by[raster], "raycast", by["raycast"]).words(),
+            "hybrid raster tiles % (target >= 15 on one flight)":
+                100 * hy["raster_tiles"] / max(hy["raster_tiles"] + hy["raycast_tiles"], 1),
+            "better pure": best,
+            "hybrid / better pure (target <= 0.85 on one, <= 1.05 on every flight)": tot["hybrid"] / tot[best],
+            "hybrid reading": compare("hybrid", by["hybrid"], best, by[best]).words(),
+            "hybrid / oracle": tot["hybrid"] / tot["oracle"],
+            "noise (median repeat spread %)": float(t["spread_pct"].median())}
 
 
 def run(ctx, frames: int = 8, size: str = "640x360", tau: float = 2 / 3, repeats: int = 5,

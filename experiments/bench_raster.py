@@ -36,6 +36,11 @@ def puget_tiles(count=4):
     return hf, [pyr.tile(k) for k in keys[::step][:count]]
 
 
+TIN_METHODS = ("quadtree", "quadtree-lean", "quadtree-morph", "gpu-full-res-exact", "gpu-combined",
+               "gpu-full-res-lean", "martini", "delatin", "fast-simpl")
+"""The meshes ``triangles_vs_error`` compares, in its rows' order."""
+
+
 def triangles_vs_error(tiles, errors=(5.0, 10.0, 20.0, 40.0, 80.0)):
     """Rows (target error, method, triangles summed over tiles, measured max error) for each method."""
     try:
@@ -45,9 +50,7 @@ def triangles_vs_error(tiles, errors=(5.0, 10.0, 20.0, 40.0, 80.0)):
         raise TerrabenchError(f"the raster benchmark compares with pymartini and pydelatin ({exc.name} is missing): "
                               "pip install 'terrabench[bench]'") from None
 
-    from raster.quadtree import GPU_BETA, drawn_max_error, error_pyramid
-    from raster.restriction import TileLod, restrict_frame
-    from raster.tin import TinMesh, build_tin, tin_max_error
+    from raster.quadtree import GPU_BETA, error_pyramid
     rows = []
     pyrs = {"quadtree": [error_pyramid(t.heights) for t in tiles]}
     pyrs["quadtree-lean"] = pyrs["quadtree-morph"] = pyrs["quadtree"]
@@ -58,52 +61,71 @@ def triangles_vs_error(tiles, errors=(5.0, 10.0, 20.0, 40.0, 80.0)):
     martini = Martini(n + 1)
     for e in errors:
         res = {}
-        for name in ("quadtree", "quadtree-lean", "quadtree-morph", "gpu-full-res-exact", "gpu-combined",
-                     "gpu-full-res-lean", "martini", "delatin", "fast-simpl"):
+        for name in TIN_METHODS:
             tri, err = 0, 0.0
             for i, t in enumerate(tiles):
                 h = np.asarray(t.heights, dtype=np.float32)
                 if name.startswith(("quadtree", "gpu")):
-                    morph = name == "quadtree-morph" or name.startswith("gpu")
-                    ts = restrict_frame([TileLod((0, 0, 0), pyrs[name][i], e)], morph=morph, use_effective=morph,
-                                        lean=name not in ("quadtree", "quadtree-morph"),
-                                        exact_full_resolution=name != "gpu-full-res-lean")[(0, 0, 0)]
-                    tri += ts.triangles
-                    err = max(err, float(drawn_max_error(h, ts.leaves, ts.drop).max()))
-                    continue
-                if name == "martini":
-                    # martini checks its error only at split midpoints: bisect its parameter until the
-                    # error measured at every sample meets the target
-                    tile_m = martini.create_tile(h)
-
-                    def mesh_at(param, tile_m=tile_m, h=h):
-                        v, f = tile_m.get_mesh(param)
-                        v = v.astype(np.float64)
-                        return TinMesh(np.column_stack([v[:, 0], v[:, 1], h[v[:, 1].astype(int), v[:, 0].astype(int)]]),
-                                       f.astype(np.int64))
-                    lo, hi, mesh = 0.0, e, mesh_at(0.0)
-                    for _ in range(7):
-                        mid = 0.5 * (lo + hi)
-                        cand = mesh_at(mid)
-                        if tin_max_error(cand, h, 1.0)[0] <= e:
-                            lo, mesh = mid, cand
-                        else:
-                            hi = mid
-                elif name == "delatin":
-                    d = Delatin(h, max_error=e)
-                    V = np.asarray(d.vertices, dtype=np.float64)
-                    V[:, 1] = n - V[:, 1]          # delatin's rows run north to south
-                    mesh = TinMesh(V, np.asarray(d.triangles, dtype=np.int64))
+                    t_tri, t_err = _quadtree_tile(name, pyrs[name][i], h, e)
                 else:
-                    mesh = build_tin(h, 1.0, max_error=e, preserve_border=True)
-                me, unc = tin_max_error(mesh, h, 1.0)
-                tri += mesh.triangles
-                err = max(err, me if unc == 0 else float("inf"))
+                    t_tri, t_err = _tin_tile(name, h, e, n, martini, Delatin)
+                tri += t_tri
+                err = max(err, t_err)
             res[name] = (tri, err)
         for name, (tri, err) in res.items():
             rows.append((f"{e:g}", name, tri, f"{err:.2f}", f"{tri / res['delatin'][0]:.2f}",
                          f"{tri / res['martini'][0]:.2f}"))
     return rows
+
+
+def _quadtree_tile(name: str, pyramid, h: np.ndarray, e: float) -> tuple:
+    """(triangles, measured max error) of one tile's restricted quadtree at error ``e`` under method ``name``."""
+    from raster.quadtree import drawn_max_error
+    from raster.restriction import TileLod, restrict_frame
+    morph = name == "quadtree-morph" or name.startswith("gpu")
+    ts = restrict_frame([TileLod((0, 0, 0), pyramid, e)], morph=morph, use_effective=morph,
+                        lean=name not in ("quadtree", "quadtree-morph"),
+                        exact_full_resolution=name != "gpu-full-res-lean")[(0, 0, 0)]
+    return ts.triangles, float(drawn_max_error(h, ts.leaves, ts.drop).max())
+
+
+def _tin_tile(name: str, h: np.ndarray, e: float, n: int, martini, Delatin) -> tuple:
+    """(triangles, measured max error, inf where unmeasured) of one tile's TIN at error ``e``: martini's, delatin's
+    or fast-simplification's (``raster.tin.build_tin``)."""
+    from raster.tin import TinMesh, build_tin, tin_max_error
+    if name == "martini":
+        mesh = _martini_mesh(martini, h, e)
+    elif name == "delatin":
+        d = Delatin(h, max_error=e)
+        V = np.asarray(d.vertices, dtype=np.float64)
+        V[:, 1] = n - V[:, 1]          # delatin's rows run north to south
+        mesh = TinMesh(V, np.asarray(d.triangles, dtype=np.int64))
+    else:
+        mesh = build_tin(h, 1.0, max_error=e, preserve_border=True)
+    me, unc = tin_max_error(mesh, h, 1.0)
+    return mesh.triangles, me if unc == 0 else float("inf")
+
+
+def _martini_mesh(martini, h: np.ndarray, e: float):
+    """Martini's mesh of a tile meeting error ``e`` at every sample: martini checks its error only at split
+    midpoints, so its parameter is bisected until the error measured at every sample meets the target."""
+    from raster.tin import TinMesh, tin_max_error
+    tile_m = martini.create_tile(h)
+
+    def mesh_at(param):
+        v, f = tile_m.get_mesh(param)
+        v = v.astype(np.float64)
+        return TinMesh(np.column_stack([v[:, 0], v[:, 1], h[v[:, 1].astype(int), v[:, 0].astype(int)]]),
+                       f.astype(np.int64))
+    lo, hi, mesh = 0.0, e, mesh_at(0.0)
+    for _ in range(7):
+        mid = 0.5 * (lo + hi)
+        cand = mesh_at(mid)
+        if tin_max_error(cand, h, 1.0)[0] <= e:
+            lo, mesh = mid, cand
+        else:
+            hi = mid
+    return mesh
 
 
 def _issue_and_total_ms(fn, repeats, ctx):

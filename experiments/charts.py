@@ -1,11 +1,9 @@
 """Charts of a run (matplotlib, PNG and SVG): frame time, memory, speed vs accuracy, strategy mix, popping, images.
 
-Charts with one panel per scene or method lay their panels out in rows of up to MAX_COLS (``panel_grid``) with
-one legend for the whole figure, so they stay readable from 1 to 20 panels."""
+Charts with one panel per scene or method lay their panels out in rows of up to MAX_COLS (``panel_grid``, in
+``experiments.figures``) with one legend for the whole figure, so they stay readable from 1 to 20 panels."""
 from __future__ import annotations
 
-import math
-import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -19,14 +17,13 @@ import pandas as pd
 from matplotlib.colors import ListedColormap
 from matplotlib.ticker import MaxNLocator
 
-from hybrid.atomic import atomic_path
 from hybrid.contract import PRIOR_FULL_RES
 from hybrid.strategies import mixed_policies, policies_taking
 
+from .figures import figure_legend, grid_cols, method_colours, panel_grid, panel_title, save_figure
 from .noise import median_interval, repeat_matrix
 
 STRATEGY_CMAP = ListedColormap(["#f2f2f2", "#2b6cff", "#ff8c14"])   # no terrain, raster, ray cast
-MAX_COLS = 4             # panels a row
 DEVICE_START = "device"  # the hybrid's default starting cost model; others are named in its label (from-<start>)
 
 
@@ -60,59 +57,6 @@ def label_columns(frames: pd.DataFrame) -> pd.DataFrame:
     if "device" in f and f["device"].nunique() > 1:
         f["scene"] = f["scene"] + " / " + f["device"].fillna("unknown device").astype(str)
     return f
-
-
-def save_figure(fig, folder: Path, name: str) -> list[Path]:
-    """Write a figure as folder/name.png and .svg, close it; returns both paths."""
-    out = []
-    for ext in ("png", "svg"):
-        p = folder / f"{name}.{ext}"
-        with atomic_path(p) as tmp:
-            fig.savefig(tmp, dpi=110, bbox_inches="tight", format=ext)
-        out.append(p)
-    plt.close(fig)
-    return out
-
-
-def grid_cols(n: int) -> int:
-    """Columns for n panels: one up to two panels, else about a square, at most MAX_COLS."""
-    return 1 if n <= 2 else min(MAX_COLS, math.ceil(math.sqrt(n)))
-
-
-def panel_grid(n: int, width: float = 4.6, height: float = 3.0, wide: float = 8.0):
-    """A figure of n panels in grid_cols(n) columns, panels width x height inches (wide when one column);
-    returns (figure, the n axes). Constrained layout keeps titles, labels and the figure legend apart."""
-    cols = grid_cols(n)
-    rows = math.ceil(n / cols)
-    w = wide if cols == 1 else width
-    fig, axes = plt.subplots(rows, cols, figsize=(w * cols, height * rows), squeeze=False, layout="constrained")
-    flat = list(axes.ravel())
-    for ax in flat[n:]:
-        ax.set_visible(False)
-    return fig, flat[:n]
-
-
-def panel_title(ax, text: str, cols: int) -> None:
-    """A panel title, each of its lines wrapped to the panel's width (small font)."""
-    width = 90 if cols == 1 else 44
-    ax.set_title("\n".join(w for line in text.split("\n") for w in textwrap.wrap(line, width)), fontsize=9)
-
-
-def figure_legend(fig, axes) -> None:
-    """One legend above all panels, with every label any panel drew (each once)."""
-    seen = {}
-    for ax in axes:
-        for h, lab in zip(*ax.get_legend_handles_labels()):
-            seen.setdefault(lab, h)
-    if seen:
-        fig.legend(list(seen.values()), list(seen), loc="outside upper center", fontsize=8,
-                   ncol=min(len(seen), 4), frameon=False)
-
-
-def method_colours(f: pd.DataFrame) -> dict:
-    """One colour per method, the same in every panel."""
-    cmap = plt.get_cmap("tab20" if f["method"].nunique() > 10 else "tab10")
-    return {m: cmap(i % cmap.N) for i, m in enumerate(sorted(f["method"].unique()))}
 
 
 def _per_scene(f: pd.DataFrame, folder: Path, name: str, ycol: str, ylabel: str, scale=1.0, band=None,

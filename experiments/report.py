@@ -217,6 +217,6 @@ def write_run_report(run, reports_dir=Path("reports"), name: str | None = None, 
         return write_edit_report(run, Path(reports_dir), name)
     if stress.exists():
         from .folders import read_parquet
-        from .stress import write_stress_report
+        from .stress_report import write_stress_report
         return write_stress_report(read_parquet(stress, "stress table"), Path(reports_dir) / (name or run.name))
     return write_report(run, reports_dir, name, video)

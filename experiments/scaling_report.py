@@ -12,7 +12,7 @@ import pandas as pd
 
 from hybrid.atomic import write_parquet, write_text
 
-from .charts import figure_legend, grid_cols, panel_grid, panel_title, save_figure
+from .figures import figure_legend, grid_cols, panel_grid, panel_title, save_figure
 from .scaling import size_ratio, summary
 from .tables import md_table
 
@@ -62,6 +62,11 @@ def size_chart(table: pd.DataFrame, folder: Path) -> list[Path]:
 
 def reading(frames: pd.DataFrame, table: pd.DataFrame, refused: pd.DataFrame) -> list[str]:
     """Sentences on the scaling targets, each with the measured figures."""
+    return _size_sentences(frames) + _flight_sentences(table) + _memory_sentences(table, refused)
+
+
+def _size_sentences(frames: pd.DataFrame) -> list[str]:
+    """Ray casting's frame time on each larger store against the smallest, and the tiles the views select."""
     out = []
     ray = frames[frames["method"] == "raycast"]
     sides = sorted(ray["side"].unique())
@@ -80,6 +85,12 @@ def reading(frames: pd.DataFrame, table: pd.DataFrame, refused: pd.DataFrame) ->
                    "terrain seen from the scaled path shows more detail above the error bound, and the ray caster's "
                    "time grows with the tiles drawn, less than in proportion (" + ", ".join(f"{m / t:.2f} ms a tile at {int(s)}²" for s, (t, m) in
                                                              per[["tiles", "ms"]].iterrows()) + ").")
+    return out
+
+
+def _flight_sentences(table: pd.DataFrame) -> list[str]:
+    """The flights' p99 frame times, GPU budget, host memory and frames drawn from ancestors."""
+    out = []
     worst = table.loc[table["p99_over_median"].idxmax()]
     late = table[table["p99_over_median"] > 2]
     out.append(f"p99 frame time over the median (a flight that streams new tiles all along) is at most {worst['p99_over_median']:.2f}x "
@@ -98,6 +109,12 @@ def reading(frames: pd.DataFrame, table: pd.DataFrame, refused: pd.DataFrame) ->
     out.append(f"Frames drawing some tile from a coarser ancestor while its upload waited: "
                f"{int(table['fallback_frames'].sum())} of {int(table['frames'].sum())}; no tile is ever missing "
                "(a tile without data is drawn from its ancestor).")
+    return out
+
+
+def _memory_sentences(table: pd.DataFrame, refused: pd.DataFrame) -> list[str]:
+    """Raster memory against the ray caster's per store size, and the methods not drawn."""
+    out = []
     ras = table[table["method"].isin(["raster", "raster_gs"])]
     ray = table[table["method"] == "raycast"].set_index("side")["peak_gpu_mib"]
     for side, m in ras.groupby("side"):

@@ -46,19 +46,15 @@ import tomllib
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
-from typing import Any
 
-from hybrid.camera.view import parse_size
 from hybrid.contract import DEFAULT_FULL_RES, PRIOR_FULL_RES
 from hybrid.errors import TerrabenchError
-from hybrid.strategies import adapting_policies, methods, option_choices, policies_taking
+from hybrid.strategies import adapting_policies, policies_taking
 from hybrid.terrain.sources import TerrainSource
 
 from .spec_datasets import check_dataset_entry, dataset_label, terrain_source
-
-START_MODELS = ("device", "fallback")
-"""The hybrid's starting cost models: this GL renderer's as loaded (``hybrid.cost.model.load_cost_model``: the
-user's file, the shipped default, else the fallback), or the shipped uncalibrated fallback."""
+from .spec_keys import START_MODELS, checked_list, list_keys, scalar_keys
+from .stress_spec import parse_stress_spec
 
 
 @dataclass(frozen=True)
@@ -168,70 +164,6 @@ BEFORE_KEYS = {"full_res": [PRIOR_FULL_RES], "adapt": False}
 """Spec keys added since runs were first written, with what those runs did: a spec.json without the key."""
 
 
-def _list(d, key, kind, check=None):
-    v = d.get(key)
-    if v is None:
-        return None
-    if not isinstance(v, list) or not v:
-        raise TerrabenchError(f"spec: '{key}' must be a non-empty list, got {v!r}")
-    for x in v:
-        if not isinstance(x, kind) or isinstance(x, bool):
-            raise TerrabenchError(f"spec: '{key}' entries must be {getattr(kind, '__name__', kind)}, got {x!r}")
-        if check:
-            check(x)
-    seen = [repr(x) for x in v]
-    twice = sorted({x for x in seen if seen.count(x) > 1})
-    if twice:
-        raise TerrabenchError(f"spec: '{key}' lists {', '.join(twice)} more than once; each entry once")
-    return v
-
-
-@dataclass
-class StressSpec:
-    """A stress experiment (kind = "stress"): scenes x views x methods, see experiments.stress."""
-
-    name: str
-    scenes: list
-    views: list
-    methods: list
-    size_samples: int = 257
-    size: str = "320x180"
-    tile_size: int = 64
-
-    def to_dict(self) -> dict:
-        """Plain form."""
-        return {"kind": "stress", **asdict(self)}
-
-
-def parse_stress_spec(d: dict, source: str) -> StressSpec:
-    """Check a kind = "stress" spec: names from experiments.stress, sizes in range."""
-    from .stress import METHODS, SCENES, VIEWS
-    known = set(StressSpec.__dataclass_fields__) | {"kind"}
-    if set(d) - known:
-        raise TerrabenchError(f"{source}: unknown keys {sorted(set(d) - known)}; known: {sorted(known)}")
-    kw = {"name": d.get("name", Path(source).stem)}
-    for key, allowed in (("scenes", SCENES), ("views", VIEWS), ("methods", METHODS)):
-        v = _list(d, key, str)
-        bad = [x for x in (v or []) if x not in allowed]
-        if bad:
-            raise TerrabenchError(f"{source}: unknown {key} {bad}; choose from {', '.join(allowed)}")
-        kw[key] = v or list(allowed)
-    if "size_samples" in d:
-        v = d["size_samples"]
-        if isinstance(v, bool) or not isinstance(v, int) or not (17 <= v <= 4097):
-            raise TerrabenchError(f"{source}: 'size_samples' must be an integer in [17, 4097], got {v!r}")
-        kw["size_samples"] = v
-    if "size" in d:
-        parse_size(d["size"], f"{source}: size")
-        kw["size"] = str(d["size"])
-    if "tile_size" in d:
-        v = d["tile_size"]
-        if isinstance(v, bool) or not isinstance(v, int) or v < 2 or v & (v - 1):
-            raise TerrabenchError(f"{source}: 'tile_size' must be a power of two >= 2, got {v!r}")
-        kw["tile_size"] = v
-    return StressSpec(**kw)
-
-
 def parse_spec(text: str, source: str = "spec", base: Path | None = None, overrides: dict | None = None):
     """Parse and check TOML text (a paired-flight Spec, a StressSpec when kind = "stress", an EditSpec when "edit").
 
@@ -260,11 +192,11 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None, overri
         raise TerrabenchError(f"{source}: name must be a non-empty word without slashes or spaces, got {kw['name']!r}")
     if "datasets" in d:
         kw["datasets"] = _datasets(d["datasets"], source, base)
-    for key, kind, check in _list_keys(source):
-        v = _list(d, key, kind, check)
+    for key, kind, check in list_keys(source):
+        v = checked_list(d, key, kind, check)
         if v is not None:
             kw[key] = [float(x) for x in v] if key == "taus" else v
-    kw.update(_scalars(d, source))
+    kw.update(scalar_keys(d, source))
     return _checked(Spec(**kw), source)
 
 
@@ -278,59 +210,6 @@ def _datasets(v, source: str, base: Path | None) -> list:
     if twice:
         raise TerrabenchError(f"{source}: datasets {twice} appear twice; give each a distinct 'name'")
     return entries
-
-
-def _list_keys(source: str) -> tuple:
-    """(key, element type, element check or None) of every list key of a flights spec; the names a key allows
-    come from the strategy registry where they name policies or strategy options."""
-
-    def one_of(what: str, allowed: tuple):
-        def check(v):
-            if v not in allowed:
-                raise TerrabenchError(f"{source}: unknown {what} {v!r}; choose from {', '.join(allowed)}")
-        return check
-
-    def tau_ok(t):
-        if not (t > 0 and t < 1e3):
-            raise TerrabenchError(f"{source}: tau must lie in (0, 1000) pixels, got {t!r}")
-
-    def size_ok(s):
-        parse_size(s, f"{source}: size")
-
-    def seed_ok(s):
-        if not (0 <= s < 2**32):
-            raise TerrabenchError(f"{source}: seeds must lie in [0, 2^32), got {s!r}")
-
-    return (("flights", str, None), ("policies", str, one_of("policy", methods())),
-            ("taus", (int, float), tau_ok), ("sizes", str, size_ok),
-            ("reconstructions", str, one_of("reconstruction", option_choices("reconstruction"))),
-            ("full_res", str, one_of("full_res", option_choices("full_res"))), ("seeds", int, seed_ok),
-            ("start_models", str, one_of("start model", START_MODELS)), ("image_frames", int, None))
-
-
-def _scalars(d: dict, source: str) -> dict:
-    """The spec's integer, number and true/false keys that ``d`` gives, checked."""
-    kw: dict[str, Any] = {}
-    for key, lo, hi in (("frames", 1, 100000), ("repeats", 3, 1000), ("tile_size", 2, 65536),
-                        ("supersample", 1, 8), ("dataset_size", 0, 16385), ("gpu_budget_mib", 1, 1 << 20)):
-        if key in d:
-            v = d[key]
-            if isinstance(v, bool) or not isinstance(v, int) or not (lo <= v <= hi):
-                raise TerrabenchError(f"{source}: '{key}' must be an integer in [{lo}, {hi}], got {v!r}")
-            kw[key] = v
-    if "tile_size" in kw and kw["tile_size"] & (kw["tile_size"] - 1):
-        raise TerrabenchError(f"{source}: 'tile_size' must be a power of two, got {kw['tile_size']}")
-    if "upload_budget_ms" in d:
-        v = d["upload_budget_ms"]
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0 <= v <= 1e4):
-            raise TerrabenchError(f"{source}: 'upload_budget_ms' must be a number of ms in [0, 10000], got {v!r}")
-        kw["upload_budget_ms"] = float(v)
-    for key in ("flip", "video", "accuracy", "adapt"):
-        if key in d:
-            if not isinstance(d[key], bool):
-                raise TerrabenchError(f"{source}: '{key}' must be true or false, got {d[key]!r}")
-            kw[key] = d[key]
-    return kw
 
 
 def _checked(spec: Spec, source: str) -> Spec:

@@ -25,14 +25,16 @@ import numpy as np
 
 from hybrid import adaptive, oracle
 from hybrid.camera.view import View
-from hybrid.contract import DEFAULT_FULL_RES, FrameStats, TileItem
+from hybrid.contract import DEFAULT_FULL_RES, TileItem
 from hybrid.cost.model import CostModel, load_cost_model
 from hybrid.cost.online import AdaptOptions, OnlineModel
 from hybrid.cost.planner import TilePlan, plan_frame
 from hybrid.errors import TerrabenchError
+from hybrid.frame_draw import timed_draw
+from hybrid.frame_readback import frame_result, strategy_map
+from hybrid.frame_stats import add_frame_costs, frame_stats
 from hybrid.gl.context import gl_info
 from hybrid.gl.target import FrameTarget, RenderResult
-from hybrid.gl.timing import timed
 from hybrid.reference import ReferenceRenderer
 from hybrid.residency import ResidencyCache
 from hybrid.strategies import (
@@ -50,9 +52,6 @@ from hybrid.tiles.pyramid import EDGE_E, EDGE_N, EDGE_S, EDGE_W, TilePyramid
 from hybrid.tiles.store import pyramid_for
 from hybrid.tiles.tiletree import DEFAULT_TAU, edge_neighbours
 from hybrid.uploads import fallback_selection, fallback_tile
-
-STRATEGY_CODES = {"raster": 1, "raycast": 2}
-"""Per-pixel codes of the strategy map, by strategy kind (0 = no terrain)."""
 
 
 def route_options(strategies: dict, options: dict) -> dict[str, dict]:
@@ -185,42 +184,6 @@ class Renderer:
         """Strategy names in drawing order: raster kinds first, ray casting last."""
         return sorted(self.strategies, key=lambda n: self.kind(n) == "raycast")
 
-    def _draw(self, target, view, plans: list[TilePlan], pinned, tau: float, options: dict,
-              clock: adaptive.PassClock | None = None) -> dict:
-        counters: dict = {}
-        skirts = self.skirts(plans)
-        kinds = [self.kind(p.choice) for p in plans]
-        # rays can pass behind raster tiles only where one of those lies nearer (earlier front to back)
-        behind = "raster" in kinds and "raycast" in kinds and \
-            kinds.index("raster") < len(kinds) - 1 - kinds[::-1].index("raycast")
-        rasterized = False
-        for name in self._order():
-            sub = [p for p in plans if p.choice == name]
-            if not sub:
-                continue
-            opts = options[name]
-            if skirts and "skirts" in self.strategies[name].draw_options:
-                opts = {**opts, "skirts": skirts}
-            if behind and rasterized and "occluders" in self.strategies[name].draw_options and "occluders" not in opts:
-                opts = {**opts, "occluders": True}      # rays stop behind the raster tiles drawn before them
-            rasterized |= self.kind(name) == "raster"
-            items = self._items(name, sub, pinned)
-            c = self._pass(clock, name, lambda name=name, items=items, opts=opts:
-                           self.strategies[name].draw_tiles(target, view, items, tau, **opts)) or {}
-            for k, v in c.items():
-                if isinstance(v, (int, float, np.integer, np.floating)):
-                    counters[k] = counters.get(k, 0) + v
-        if skirts:          # last, so the ray caster's pre-pass sees no skirt inside a ray-cast tile's box
-            for name in self._order():
-                if "skirts" in self.strategies[name].draw_options and any(p.choice == name for p in plans):
-                    self._pass(clock, adaptive.SKIRTS, lambda name=name: self.strategies[name].draw_skirts(target, view))
-        return counters
-
-    @staticmethod
-    def _pass(clock, name: str, fn):
-        """fn() timed as a pass by the frame's clock, where there is one."""
-        return fn() if clock is None else clock.run(name, fn)
-
     def time_draw(self, view: View, plans: list[TilePlan], name: str, target: FrameTarget, pinned=frozenset(),
                   tau: float = DEFAULT_TAU) -> float:
         """Median ms of drawing the plans' tiles with one strategy in one call (``hybrid.oracle.time_draw``)."""
@@ -264,14 +227,14 @@ class Renderer:
             together = oracle.measure_plans(self, view, plans, target, pinned, tau) if measure else {}
             streamed = make_resident(self, plans, pinned, prep_ms)
             clock = adaptive.PassClock(self.ctx, learn and len({p.choice for p in plans}) > 1)
-            counters, draw, gpu, issue = self._timed_draw(target, view, plans, pinned, tau, opts, clock)
+            counters, draw, gpu, issue = timed_draw(self, target, view, plans, pinned, tau, opts, clock)
             if learn and not (streamed and streamed.fallback_tiles):
                 adapt_ms += adaptive.learn(self.online, clock, plans, draw, gpu, issue, explored)
-            stats = self._stats(plans, plan_ms, draw, gpu, counters, together)
-            self._frame_costs(stats, prep_ms, issue, adapt_ms, explored, streamed, before)
+            stats = frame_stats(self, plans, plan_ms, draw, gpu, counters, together)
+            add_frame_costs(self, stats, prep_ms, issue, adapt_ms, explored, streamed, before)
             if overlay is not None:
                 overlay(target, view)
-            return self._result(target, view, plans, stats, counters, tau, opts, read, maps)
+            return frame_result(self, target, view, plans, stats, counters, tau, opts, read, maps)
         finally:
             target.release()
 
@@ -286,30 +249,6 @@ class Renderer:
             return self.entry is not None and self.entry.measures and plans is None
         return bool(measure)
 
-    def _timed_draw(self, target, view, plans, pinned, tau: float, opts: dict, clock) -> tuple:
-        """(counters, draw ms, GPU ms or None, issue ms) of drawing the frame into the cleared target."""
-        target.clear()
-        target.use()
-        try:
-            counters, draw, gpu, issue = timed(self.ctx, lambda: self._draw(target, view, plans, pinned, tau, opts,
-                                                                            clock), query=not clock.gpu)
-        finally:
-            self._fallbacks = {}
-        return counters, draw, clock.gpu_ms if clock.gpu else gpu, issue
-
-    def _frame_costs(self, stats: FrameStats, prep_ms: float, issue: float, adapt_ms: float, explored, streamed,
-                     before: tuple[int, int]) -> None:
-        """Fill in the frame's preparation, issue, adaptation, streaming and residency figures."""
-        stats.prep_ms, stats.issue_ms, stats.adapt_ms = prep_ms, issue, adapt_ms
-        stats.explored_tiles = 0 if explored is None else len(explored.tiles)
-        stats.wall_ms += adapt_ms
-        if streamed is not None:
-            stats.upload_ms, stats.fallback_tiles, stats.pending_uploads = \
-                streamed.upload_ms, streamed.fallback_tiles, streamed.fallback_tiles
-            stats.wall_ms += streamed.upload_ms + prep_ms
-        stats.uploads = self.cache.stats.uploads - before[0]
-        stats.evictions = self.cache.stats.evictions - before[1]
-
     def _planned(self, view: View, tau: float, plans: list[TilePlan] | None) -> tuple[list[TilePlan], float, float]:
         """(plans, planning ms, one-time preparation ms): the view's own plans unless ``plans`` are given."""
         prep0 = self.triangles.build_ms if self.triangles is not None else 0.0
@@ -318,66 +257,11 @@ class Renderer:
         prep_ms = (self.triangles.build_ms if self.triangles is not None else 0.0) - prep0
         return plans, (time.perf_counter() - t_plan) * 1e3 - prep_ms, prep_ms   # first-seen tiles' work apart
 
-    def _result(self, target, view, plans, stats, counters, tau, opts, read: bool, maps: bool) -> RenderResult:
-        """The frame read back (or left on the GPU with ``read`` False), with its plans and, with ``maps``, the
-        strategy map."""
-        if not read:
-            return RenderResult(None, None, stats, plans=plans)
-        result = target.read(view, stats)
-        result.plans = plans
-        if "triangles" in counters:          # drawn triangles per pixel that shows terrain
-            counters["triangles_per_pixel"] = counters["triangles"] / max(int(result.mask.sum()), 1)
-        if maps:
-            result.maps = {"strategy": self.strategy_map(view, plans, tau, opts)}
-        return result
-
-    def _stats(self, plans, plan_ms, draw, gpu, counters, together) -> FrameStats:
-        by_kind = {"raster": 0, "raycast": 0}
-        for (name, _), g in self.cache.entries.items():
-            by_kind[self.kind(name)] += int(g.nbytes)
-        shared = 0
-        for name, s in self.strategies.items():
-            b = int(s.shared_nbytes)
-            by_kind[self.kind(name)] += b
-            shared += b
-        n_raster = sum(self.kind(p.choice) == "raster" for p in plans)
-        pred = None
-        if self.mixed and plans and all(p.choice in p.predicted for p in plans):
-            pred = self.model.frame_ms([p.predicted[p.choice] for p in plans], {p.choice for p in plans})
-        return FrameStats(wall_ms=plan_ms + draw, plan_ms=plan_ms, draw_ms=draw, gpu_ms=gpu, tiles=len(plans),
-                          tiles_raster=n_raster, tiles_raycast=len(plans) - n_raster,
-                          tiles_gs=sum(p.choice == "raster_gs" for p in plans),
-                          gpu_bytes=by_kind["raster"] + by_kind["raycast"], gpu_bytes_raster=by_kind["raster"],
-                          gpu_bytes_raycast=by_kind["raycast"], shared_bytes=shared, pred_ms=pred,
-                          counters=counters, together_ms=together,
-                          plans=list(plans) if self.mixed else [])
-
     def strategy_map(self, view: View, plans: list[TilePlan], tau: float = DEFAULT_TAU,
                      options: dict | None = None) -> np.ndarray:
         """Per pixel: 0 no terrain, 1 drawn by a raster tile, 2 by a ray-cast tile (compares depth per kind)."""
         self._check_live()
-        options = options or self.options
-        depths = {}
-        for name in self.strategies:
-            sub = [p for p in plans if p.choice == name]
-            t = FrameTarget(self.ctx, view.width, view.height)
-            try:
-                t.clear()
-                t.use()
-                if sub:
-                    opts = {**options[name], **({"prepass": False} if "prepass" in options[name] else {})}
-                    self.strategies[name].draw_tiles(t, view, self._items(name, sub, set()), tau, **opts)
-                depths[name] = t.read_depth()
-            finally:
-                t.release()
-        out = np.zeros((view.height, view.width), np.uint8)
-        best = np.zeros((view.height, view.width), np.float32)
-        for name in self._order():             # raster kinds first: they win ties, as in the frame
-            d = depths[name]
-            win = (d > 0) & (d > best) if self.kind(name) == "raycast" else (d > 0) & (d >= best)
-            out[win] = STRATEGY_CODES[self.kind(name)]
-            best = np.where(win, d, best)
-        return out
+        return strategy_map(self, view, plans, tau, options or self.options)
 
     def release(self) -> None:
         """Free resident tiles and strategies (and stop the loader of a store pyramid made here); the renderer

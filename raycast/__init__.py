@@ -3,7 +3,8 @@
 It satisfies ``hybrid.contract.TileStrategy``, imports ``hybrid``'s lower layers and never ``raster``, the cost
 model or the renderer.
 """
-from .caster import GpuTile, RaycastStrategy
+from .caster import RaycastStrategy
+from .gpu_tile import GpuTile
 from .maxmip import bytes_per_sample, maxmip_levels, maxmip_nbytes
 from .options import MODES, RECONSTRUCTIONS, TRAVERSALS, CastOptions
 

@@ -14,30 +14,33 @@ gl_FragDepth = clip.z / clip.w with the view's reversed-Z ``view_proj_rel``. Mis
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import fields
 
 import numpy as np
 
 from hybrid.errors import TerrabenchError
 from hybrid.gl.context import depth32f_texture, gl_bytes, gl_finish, gl_memory_barrier, is_software
 from hybrid.gl.edges import TerrainEdges
-from hybrid.gl.programs import program, register_include, set_uniform, write_uniform
+from hybrid.gl.programs import program, register_include, set_uniform
 from hybrid.gl.shading import resolve_mode
 from hybrid.gl.textures import terrain_texture
-from hybrid.tiles.quantize import quantize
 
-from .maxmip import MaxMipBuilder, bytes_per_sample, level_count, tile_nbytes
-from .options import MODES, RECONSTRUCTIONS, CastOptions, default_max_steps, prepass_default
+from .cast_stats import (
+    LAYOUT_DEFINES,
+    STAT_BIN_SHIFT,
+    STAT_FIELDS,
+    STAT_SLOTS,
+    STAT_STRIDE,
+    STATS_BINDING,
+    TILE_PARAMS_BINDING,
+    frame_counters,
+    read_tile_stats,
+)
+from .cast_uniforms import shadow_uniforms, view_uniforms
+from .gpu_tile import GpuTile, ShadowGrid, shadow_grid, upload_heights
+from .maxmip import MaxMipBuilder, bytes_per_sample
+from .options import MODES, RECONSTRUCTIONS, CastOptions, prepass_default
 from .tile_params import TILE_BLOCK, block_stride, outer_bits, tile_params, tile_row
-
-STAT_FIELDS = ("rays", "hits", "steps", "max_steps", "capped", "shadow_rays", "shadow_steps", "shadow_capped")
-STAT_SLOTS = 64          # copies of each tile's counters (one per screen bin, modulo)
-STAT_STRIDE = 64         # bytes between copies (16 uints: one cache line, 8 used)
-STAT_BIN_SHIFT = 6       # screen bins of 2^6 = 64 pixels a side
-STATS_BINDING, TILE_PARAMS_BINDING = 0, 3     # storage binding of the counters, uniform binding of a tile's block
-LAYOUT_DEFINES = {"STAT_SLOTS": STAT_SLOTS, "STAT_WORDS": STAT_STRIDE // 4, "STAT_BIN_SHIFT": STAT_BIN_SHIFT,
-                  "STATS_BINDING": STATS_BINDING, "TILE_PARAMS_BINDING": TILE_PARAMS_BINDING}
-"""The layout above as the shaders' defines (raycast.frag.glsl, tile_block.glsl): their only source of it."""
 
 
 def _cube_back_face_triangles() -> np.ndarray:
@@ -52,44 +55,6 @@ def _cube_back_face_triangles() -> np.ndarray:
     for a, b, c, d in quads:
         tris += [a, b, c, a, c, d]
     return np.array(tris, dtype=np.float32)
-
-
-@dataclass
-class GpuTile:
-    """One tile on the GPU: R16UI (N+1)² height codes and their R16UI (N/2)² max mipmap (levels 1..log2 N);
-    exact byte count; metres = offset + step * (code + base); quant_error: largest |height - dequantised| (m)."""
-
-    heights: object
-    maxmip: object
-    n: int
-    nbytes: int
-    offset: float = 0.0
-    step: float = 1.0
-    base: int = 0
-    quant_error: float = 0.0
-    row: np.ndarray | None = None       # tile_row of the tile uploaded (None: a grid, not a tile)
-    bounds: tuple = ()                  # that tile's clip, zmin and zmax, to tell it from a tile drawn in its place
-
-    @property
-    def bytes_per_sample(self) -> float:
-        """GPU bytes per height sample held, max mipmap included: nbytes / (N+1)²."""
-        return self.nbytes / (self.n + 1) ** 2
-
-    def release(self) -> None:
-        """Free both textures."""
-        self.heights.release()
-        self.maxmip.release()
-
-
-@dataclass
-class _Grid:
-    """The whole terrain as one power-of-two grid, for shadow rays (built on the first shadowed draw)."""
-
-    tex: GpuTile
-    n: int
-    ext: tuple
-    zr: tuple
-    nbytes: int
 
 
 def outer_faces(clip, hf) -> int:
@@ -123,7 +88,7 @@ class RaycastStrategy:
         self.tile_buf = None                    # the frame's TileParams blocks (tile_params)
         self._stride = block_stride(ctx.info.get("GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT", 256))
         self._next_id = 1
-        self.grid: _Grid | None = None
+        self.grid: ShadowGrid | None = None
         self.last_tile_stats = np.zeros((0, len(STAT_FIELDS)), np.int64)
 
     # --- options and programs ---------------------------------------------------------------------
@@ -168,30 +133,15 @@ class RaycastStrategy:
         g.row, g.bounds = tile_row(g, tile), (tile.clip, tile.zmin, tile.zmax)
         return g
 
-    def _shadow_grid(self) -> _Grid:
+    def _shadow_grid(self) -> ShadowGrid:
         if self.grid is None:
-            hf = self.hf
-            h = np.asarray(hf.heights, dtype=np.float32)
-            cells = max(h.shape) - 1
-            n = 1 << max(1, int(np.ceil(np.log2(max(cells, 2)))))
-            pad = np.pad(h, ((0, n + 1 - h.shape[0]), (0, n + 1 - h.shape[1])), mode="edge")
-            g = self.upload_grid(pad, getattr(hf, "source_step", None))
-            lo, hi = float(h.min()), float(h.max())
-            self.grid = _Grid(g, n, (float(h.shape[1] - 1), float(h.shape[0] - 1)), (lo, hi), g.nbytes)
+            self.grid = shadow_grid(self.hf, self.upload_grid)
         return self.grid
 
     def upload_grid(self, heights: np.ndarray, source_step=None) -> GpuTile:
         """Heights (N+1)² (N a power of two >= 2; float32 metres relative to origin z) on the GPU as 16-bit codes
         (exact on ``source_step``, hybrid.tiles.quantize), with their max mipmap built there."""
-        h = np.asarray(heights, dtype=np.float32)
-        n = h.shape[0] - 1
-        if h.ndim != 2 or h.shape[1] != h.shape[0] or n < 2 or n & (n - 1):
-            raise TerrabenchError(f"tile heights must be (N+1, N+1) with N a power of two >= 2, got {h.shape}")
-        qz = quantize(h, source_step)
-        ht = self.ctx.texture((n + 1, n + 1), 1, np.ascontiguousarray(qz.q).tobytes(), dtype="u2")
-        ht.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
-        mm = self.builder.build(ht, n)
-        return GpuTile(ht, mm, n, tile_nbytes(n), qz.offset, qz.step, qz.base, qz.error)
+        return upload_heights(self.ctx, self.builder, heights, source_step)
 
     def _ids_texture(self, size):
         if self.ids is None or self.ids.size != tuple(size):
@@ -231,8 +181,10 @@ class RaycastStrategy:
         W, H = int(view.width), int(view.height)
         if tuple(target.size) != (W, H):
             raise TerrabenchError(f"target size {tuple(target.size)} does not match the view's {W}x{H} pixels")
-        self._view_uniforms(prog, view, opts)
-        grid = self._shadow_uniforms(prog, opts) if opts.shadows else None
+        view_uniforms(prog, self.prepass_prog, view, self.hf, self.texture, self.edges, opts.heat_max)
+        grid = self._shadow_grid() if opts.shadows else None
+        if grid is not None:
+            shadow_uniforms(prog, grid, self.hf, opts.max_steps)
         self._stats_buffer(prog, W, len(items))
         if opts.occluders and items:
             self._occluder_uniforms(prog, target, view)
@@ -240,47 +192,6 @@ class RaycastStrategy:
         self._cast(target, view, items, opts, vao, id_fbo)
         gl_memory_barrier(self.ctx)
         return self._counters(opts, items, grid)
-
-    def _view_uniforms(self, prog, view, opts: CastOptions) -> None:
-        """The view's, the terrain's and the textures' uniforms of the cast program (and the pre-pass's view)."""
-        hf = self.hf
-        W, H = int(view.width), int(view.height)
-        vp = np.asarray(view.view_proj_rel, dtype=np.float64)
-        write_uniform(prog, "view_proj_rel", vp.T.astype(np.float32).tobytes())
-        self.prepass_prog["view_proj_rel"].write(vp.T.astype(np.float32).tobytes())
-        write_uniform(prog, "cam_to_world", np.asarray(view.rotation(), np.float64).astype(np.float32).tobytes())
-        t = float(view.tan_half_fov)
-        set_uniform(prog, "ndc_scale", (t * W / H, t))
-        set_uniform(prog, "viewport", (float(W), float(H)))
-        set_uniform(prog, "near_plane", float(view.near))
-        set_uniform(prog, "far_plane", float(view.far))
-        lo, hi = hf.height_range
-        set_uniform(prog, "hrange", (lo, hi))
-        set_uniform(prog, "heat_max", float(opts.heat_max))
-        if self.texture is not None:
-            self.texture.use(2)
-            set_uniform(prog, "tex", 2)
-        set_uniform(prog, "hmap", 0)
-        set_uniform(prog, "mmap", 1)
-        self.edges.bind(prog, hf, view, 6)
-
-    def _shadow_uniforms(self, prog, opts: CastOptions):
-        """Bind the whole terrain's shadow grid and set its uniforms; the grid back."""
-        hf = self.hf
-        grid = self._shadow_grid()
-        grid.tex.heights.use(3)
-        grid.tex.maxmip.use(5)
-        set_uniform(prog, "g_dq", (grid.tex.offset, grid.tex.step))
-        set_uniform(prog, "g_dq_base", grid.tex.base)
-        set_uniform(prog, "g_hmap", 3)
-        set_uniform(prog, "g_mmap", 5)
-        set_uniform(prog, "g_cells", grid.n)
-        set_uniform(prog, "g_levels", level_count(grid.n) - 1)
-        set_uniform(prog, "g_ext", grid.ext)
-        set_uniform(prog, "g_zr", grid.zr)
-        set_uniform(prog, "g_spacing", (hf.spacing_x, hf.spacing_y))
-        set_uniform(prog, "g_max_steps", opts.max_steps or default_max_steps(grid.n))
-        return grid
 
     def _stats_buffer(self, prog, width: int, n_items: int) -> None:
         """The per-tile counters' buffer, cleared and bound, large enough for ``n_items`` tiles."""
@@ -357,29 +268,13 @@ class RaycastStrategy:
         self.tile_buf.write(blocks.tobytes())
 
     def _counters(self, opts: CastOptions, items, grid) -> dict:
-        """The frame's counters: rays, hits and steps summed over the tiles' copies (with ``stats``), and more."""
-        n_items = len(items)
-        counters = {"rays": 0, "hits": 0, "steps": 0, "max_steps": 0, "capped": 0}
-        if opts.stats and n_items:
-            gl_finish(self.ctx)                 # the wait lets other threads (the tile loader) run
-            raw = np.frombuffer(self.stats_buf.read(size=STAT_SLOTS * STAT_STRIDE * n_items), dtype=np.uint32)
-            raw = raw.reshape(n_items, STAT_SLOTS, STAT_STRIDE // 4)[:, :, :len(STAT_FIELDS)].astype(np.int64)
-            st = raw.sum(axis=1)
-            st[:, 3] = raw[:, :, 3].max(axis=1)
-            self.last_tile_stats = st
-            tot = st.sum(axis=0)
-            counters = {f: int(tot[i]) for i, f in enumerate(STAT_FIELDS)}
-            counters["max_steps"] = int(st[:, 3].max())
-            counters["mean_steps"] = counters["steps"] / max(counters["rays"], 1)
-            if not opts.shadows:
-                for f in ("shadow_rays", "shadow_steps", "shadow_capped"):
-                    counters.pop(f)
-        counters["tiles_cast"] = n_items
-        counters["quant_error_max_m"] = max((float(g.quant_error) for g, _t, _s in items), default=0.0)
-        if grid is not None:
-            counters["shadow_grid_bytes"] = grid.nbytes
-            counters["shadow_quant_error_m"] = float(grid.tex.quant_error)
-        return counters
+        """The frame's counters (``raycast.cast_stats.frame_counters``); with ``stats``, each tile's kept in
+        ``last_tile_stats``."""
+        if not (opts.stats and items):
+            return frame_counters(None, opts, items, grid)
+        gl_finish(self.ctx)                 # the wait lets other threads (the tile loader) run
+        self.last_tile_stats = read_tile_stats(self.stats_buf, len(items))
+        return frame_counters(self.last_tile_stats, opts, items, grid)
 
     def release(self) -> None:
         """Free programs, buffers and textures (not the tiles: release those through their GpuTile)."""

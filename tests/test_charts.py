@@ -4,7 +4,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.charts import figure_legend, label_columns, panel_grid, panel_title, strategy_mix_chart
+from experiments.charts import label_columns, strategy_mix_chart
+from experiments.figures import figure_legend, panel_grid, panel_title
 
 
 def _overlaps(boxes):

@@ -24,7 +24,8 @@ LAYERS = [
     ("hybrid.cost",),
     ("hybrid.oracle", "hybrid.adaptive"),   # the renderer's in-frame timing and online adaptation
     ("hybrid.reference_blocks", "hybrid.reference", "hybrid.residency", "hybrid.uploads", "hybrid.streaming",
-     "hybrid.renderer", "hybrid.store_editing", "hybrid.editing"),
+     "hybrid.frame_draw", "hybrid.frame_stats", "hybrid.frame_readback", "hybrid.renderer", "hybrid.store_editing",
+     "hybrid.editing"),
     ("hybrid.calibrate",),
     ("experiments",),
 ]

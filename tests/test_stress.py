@@ -5,7 +5,8 @@ import pandas as pd
 import pytest
 
 from experiments.metrics import hole_pixels_in_columns
-from experiments.stress import SCENES, VIEWS, make_scene, run_stress, stress_reading, stress_view, write_stress_report
+from experiments.stress import SCENES, VIEWS, make_scene, run_stress, stress_view
+from experiments.stress_report import stress_reading, write_stress_report
 from hybrid.reference import ReferenceRenderer
 from hybrid.renderer import make_renderer
 

@@ -37,6 +37,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="screen-space error bound in pixels (> 0)")
     p.add_argument("--tile-size", type=argtypes.power_of_two("--tile-size"), default=None,
                    help="cells per tile side (power of two; default 256, or a tile store's own)")
+    _add_ray_arguments(p)
+    _add_raster_arguments(p)
+    p.add_argument("--show-strategy", action="store_true", help="hybrid: also write PATH.strategy.png")
+    p.add_argument("--edit", type=Path, default=None, metavar="FILE.jsonl",
+                   help="replay this edit log (JSON lines, made for this terrain) on the GPU before rendering")
+    p.add_argument("--freeze-model", action="store_true",
+                   help="hybrid: choose by the loaded cost model as it is (no online refit from the frames drawn)")
+
+
+def _add_ray_arguments(p: argparse.ArgumentParser) -> None:
+    """The ray-cast draw options: reconstruction, traversal, pre-pass, LOD and shadows."""
     recs = option_choices("reconstruction")
     p.add_argument("--reconstruction", default="triangles", help=f"ray-cast surface: {', '.join(recs)}")
     p.add_argument("--traversal", default="maxmip", help="ray-cast traversal: maxmip or naive (level-0 stepping)")
@@ -47,6 +58,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                      help="ray casting without the tile-ID pre-pass")
     p.add_argument("--lod", action="store_true", help="ray casting stops descending at tau pixels (LOD)")
     p.add_argument("--shadows", action="store_true", help="ray-cast shadow rays toward the light")
+
+
+def _add_raster_arguments(p: argparse.ArgumentParser) -> None:
+    """The raster draw options: wireframe, lean leaves and the full-resolution rule."""
     p.add_argument("--wireframe", action="store_true", help="raster methods: draw edges only")
     p.add_argument("--no-lean", dest="lean", action="store_false",
                    help="raster, raster_gs (and their tiles in mixed policies): every leaf keeps the edge midpoints "
@@ -56,11 +71,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "midpoints by their errors as other leaves do (lean: no more triangles than the bound asks "
                         "for), or keep every midpoint, cells split as the reference's (exact: more triangles, "
                         "closer to the reference at a given tau)")
-    p.add_argument("--show-strategy", action="store_true", help="hybrid: also write PATH.strategy.png")
-    p.add_argument("--edit", type=Path, default=None, metavar="FILE.jsonl",
-                   help="replay this edit log (JSON lines, made for this terrain) on the GPU before rendering")
-    p.add_argument("--freeze-model", action="store_true",
-                   help="hybrid: choose by the loaded cost model as it is (no online refit from the frames drawn)")
 
 
 def draw_options(method: str, tau: float, shading=None, reconstruction="triangles", traversal="maxmip",
@@ -110,18 +120,9 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
     """Render one view with a method, after replaying the edit log ``edit`` if given; write out (.png) and its
     .depth.npy; returns the RenderResult."""
     from hybrid.gl.context import shared_context
-    from hybrid.gl.target import check_png_path
-    out = check_png_path(out, "--out")
-    writable_folder(out.parent if str(out.parent) else Path("."), "--out folder")
-    if show_strategy and method not in mixed_policies():
-        raise TerrabenchError("--show-strategy needs a mixed policy: --method hybrid (or heuristic, oracle)")
-    if freeze_model and method not in adapting_policies():
-        raise TerrabenchError("--freeze-model applies to --method hybrid, the one policy that refits its cost model")
+    out = _checked_out(out, method, show_strategy, freeze_model)
     hf = terrain.load()
-    log = None
-    if edit is not None:                                 # checked whole before anything is drawn or written
-        from hybrid.terrain.edit_log import check_log, read_log
-        log = check_log(read_log(edit), hf, str(edit))
+    log = _checked_log(edit, hf)
     if tile_size is None:
         tile_size = int(hf.store.attrs["tile_size"]) if getattr(hf, "store", None) is not None else 256
     ctx = shared_context(device)
@@ -139,6 +140,22 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
             v = view.view(hf)
             result = r.render(v, tau, maps=show_strategy)
     v = view.view(hf)
+    png, depth = _write_outputs(result, out, show_strategy)
+    _print_result(method, result, v, png, depth)
+    return result
+
+
+def _checked_log(edit: Path | None, hf):
+    """The edit log at ``edit`` (None: none), checked whole against the terrain before anything is drawn or
+    written."""
+    if edit is None:
+        return None
+    from hybrid.terrain.edit_log import check_log, read_log
+    return check_log(read_log(edit), hf, str(edit))
+
+
+def _write_outputs(result, out: Path, show_strategy: bool) -> tuple:
+    """Write the frame's PNG and depth (and with ``show_strategy`` its strategy map beside them); the two paths."""
     from hybrid.atomic import remove_stale_temps
     remove_stale_temps(out.parent)                       # what a killed render left beside its output
     png, depth = result.save(out)
@@ -146,12 +163,28 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
         smap = out.parent / (out.stem + ".strategy.png")
         save_strategy_map(result, smap)
         print(f"strategy map: {smap} (blue raster, orange ray cast)")
+    return png, depth
+
+
+def _checked_out(out, method: str, show_strategy: bool, freeze_model: bool) -> Path:
+    """The output PNG path, its folder writable; refuses options the method does not take."""
+    from hybrid.gl.target import check_png_path
+    out = check_png_path(out, "--out")
+    writable_folder(out.parent if str(out.parent) else Path("."), "--out folder")
+    if show_strategy and method not in mixed_policies():
+        raise TerrabenchError("--show-strategy needs a mixed policy: --method hybrid (or heuristic, oracle)")
+    if freeze_model and method not in adapting_policies():
+        raise TerrabenchError("--freeze-model applies to --method hybrid, the one policy that refits its cost model")
+    return out
+
+
+def _print_result(method: str, result, v, png, depth) -> None:
+    """Say what was written, how much of the view shows terrain, and the frame's stats."""
     cover = float(result.mask.mean()) * 100
     print(f"{method}: wrote {png} and {depth} ({v.width}x{v.height}, terrain on {cover:.1f} % of pixels)")
     for k, val in result.stats.row().items():
         if not isinstance(val, (list, dict)):
             print(f"  {k}: {val:.4g}" if isinstance(val, float) else f"  {k}: {val}")
-    return result
 
 
 def _replay(ctx, hf, log, **renderers) -> None:

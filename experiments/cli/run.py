@@ -52,8 +52,9 @@ def run(spec, runs="runs", name: str | None = None, report: bool = False, report
     from ..edit_spec import EditSpec
     from ..report import write_run_report
     from ..runner import run_spec
-    from ..spec import StressSpec, load_spec
+    from ..spec import load_spec
     from ..stress import run_stress_spec
+    from ..stress_spec import StressSpec
     overrides = {k: v for k, v in (("frames", frames), ("sizes", sizes)) if v is not None}
     if isinstance(spec, (str, Path)):
         spec = load_spec(spec, overrides)
@@ -71,14 +72,7 @@ def run(spec, runs="runs", name: str | None = None, report: bool = False, report
     if scheduler or workers:
         if isinstance(spec, (StressSpec, EditSpec)):
             raise TerrabenchError("stress and edit specs run on one machine; drop --scheduler / --workers")
-        from ..cluster import CONNECT_TIMEOUT_S, connect
-        client, cluster = connect(scheduler, workers, scheduler_timeout or CONNECT_TIMEOUT_S)
-        try:
-            folder = run_spec(spec, Path(runs), progress=not quiet, client=client)
-        finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+        folder = _run_on_cluster(spec, Path(runs), quiet, scheduler, workers, scheduler_timeout)
     else:
         runner = {StressSpec: run_stress_spec, EditSpec: run_edit_spec}.get(type(spec), run_spec)
         folder = runner(spec, Path(runs), shared_context(device), progress=not quiet)
@@ -86,6 +80,21 @@ def run(spec, runs="runs", name: str | None = None, report: bool = False, report
     if report:
         print(f"report: {write_run_report(folder, Path(reports), video=getattr(spec, 'video', False))}")
     return folder
+
+
+def _run_on_cluster(spec, runs: Path, quiet: bool, scheduler: str | None, workers: str | None,
+                    scheduler_timeout: float | None) -> Path:
+    """Run a paired-flight spec's configurations on a Dask cluster (a ``scheduler`` address, or ``workers``
+    'local:N'), closing the client and a local cluster afterwards; returns the run folder."""
+    from ..cluster import CONNECT_TIMEOUT_S, connect
+    from ..runner import run_spec
+    client, cluster = connect(scheduler, workers, scheduler_timeout or CONNECT_TIMEOUT_S)
+    try:
+        return run_spec(spec, runs, progress=not quiet, client=client)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
 
 
 def run_from_args(args: argparse.Namespace) -> int:

@@ -29,7 +29,8 @@ def run(scenes=SCENES, views=VIEWS, methods=METHODS, size_samples: int = 257, si
     """Measure every (scene, view, method) and write stress.md, the chart and the table to out; returns stress.md."""
     from hybrid.gl.context import shared_context
 
-    from ..stress import stress_table, write_stress_report
+    from ..stress import stress_table
+    from ..stress_report import write_stress_report
     folder = writable_folder(Path(out), "--out")
     df = stress_table(shared_context(device), scenes, views, methods, size_samples, size, tile_size, not quiet)
     path = write_stress_report(df, folder)

@@ -87,21 +87,8 @@ class GridHeader:
 
 def grid_header(path: str, src, *, vertical_scale=None, spacing=None, crs=None, crop: Crop | None = None) -> GridHeader:
     """The header of an open rasterio dataset (refusals named as load_gdal's)."""
-    from rasterio.enums import ColorInterp
-    from rasterio.transform import Affine
-    from rasterio.windows import Window
-    heights_bands = [i for i, c in enumerate(src.colorinterp, 1) if c != ColorInterp.alpha]
-    if len(heights_bands) != 1:
-        raise TerrainLoadError(f"{path}: {len(heights_bands)} bands; a height grid has one (plus an optional "
-                               "alpha band)")
-    band = heights_bands[0]
-    shape = (src.height, src.width)
-    window = None
-    if crop is not None:
-        crop.check(shape, path)
-        window = Window(crop.col, crop.row, crop.cols, crop.rows)
-        shape = (crop.rows, crop.cols)
-    transform = src.transform if crop is None else src.transform @ Affine.translation(crop.col, crop.row)
+    band = _height_band(path, src)
+    shape, window, transform = _window(path, src, crop)
     file_crs = parse_crs(src.crs.to_wkt(), path) if src.crs is not None else None
     georeferenced = not src.transform.is_identity        # GDAL's stand-in when a file has no geotransform
     if src.gcps[0] and not georeferenced and spacing is None:
@@ -112,27 +99,8 @@ def grid_header(path: str, src, *, vertical_scale=None, spacing=None, crs=None, 
     band_unit = (src.units[band - 1] or "").strip()
     notes = [f"read by GDAL's {src.driver} driver"] + ([f"window {crop.describe()} of {src.height}x{src.width}"]
                                                        if crop is not None else [])
-    use_crs = file_crs
     try:
-        if crs is not None:
-            use_crs = parse_crs(crs, "--crs")
-            notes.append(f"CRS from --crs: {describe_crs(use_crs)}"
-                         + (f" (the file says {describe_crs(file_crs)})" if file_crs is not None else ""))
-        elif file_crs is not None:
-            notes.append(f"CRS: {describe_crs(file_crs)}")
-        if georeferenced:
-            check_axis_aligned(transform)
-        if spacing is not None:
-            notes.append("ground spacing from --spacing")
-            ground = spacing
-        elif not georeferenced:
-            raise TerrainLoadError(f"{path}: {NO_TRANSFORM}")
-        elif use_crs is None:
-            raise TerrainLoadError(f"{path}: {NO_CRS}")
-        else:
-            g = ground_spacing(use_crs, transform, shape[0], shape[1])
-            ground = (g.x, g.y)
-            notes += list(g.notes)
+        ground, use_crs = _ground(path, file_crs, transform, shape, georeferenced, spacing, crs, notes)
         metres, vnotes = _vertical(path, use_crs, band_unit, vertical_scale)
     except TerrainLoadError:
         raise
@@ -144,6 +112,54 @@ def grid_header(path: str, src, *, vertical_scale=None, spacing=None, crs=None, 
     return GridHeader(band, shape, window, ground, band_scale * metres, band_offset * metres,
                       not georeferenced or transform.e < 0, not georeferenced or transform.a > 0, notes,
                       src.nodatavals[band - 1])
+
+
+def _height_band(path: str, src) -> int:
+    """The (1-based) index of a dataset's one height band; an alpha band beside it is left out."""
+    from rasterio.enums import ColorInterp
+    heights_bands = [i for i, c in enumerate(src.colorinterp, 1) if c != ColorInterp.alpha]
+    if len(heights_bands) != 1:
+        raise TerrainLoadError(f"{path}: {len(heights_bands)} bands; a height grid has one (plus an optional "
+                               "alpha band)")
+    return heights_bands[0]
+
+
+def _window(path: str, src, crop: Crop | None) -> tuple:
+    """(shape, rasterio window or None, affine transform) of the samples read: the whole grid, or its crop."""
+    from rasterio.transform import Affine
+    from rasterio.windows import Window
+    shape = (src.height, src.width)
+    window = None
+    if crop is not None:
+        crop.check(shape, path)
+        window = Window(crop.col, crop.row, crop.cols, crop.rows)
+        shape = (crop.rows, crop.cols)
+    transform = src.transform if crop is None else src.transform @ Affine.translation(crop.col, crop.row)
+    return shape, window, transform
+
+
+def _ground(path: str, file_crs, transform, shape, georeferenced: bool, spacing, crs, notes: list) -> tuple:
+    """(ground spacing in metres, CRS used): ``spacing`` if given, else from the CRS (``crs`` over the file's) and
+    the transform; what was taken from where is added to ``notes``."""
+    use_crs = file_crs
+    if crs is not None:
+        use_crs = parse_crs(crs, "--crs")
+        notes.append(f"CRS from --crs: {describe_crs(use_crs)}"
+                     + (f" (the file says {describe_crs(file_crs)})" if file_crs is not None else ""))
+    elif file_crs is not None:
+        notes.append(f"CRS: {describe_crs(file_crs)}")
+    if georeferenced:
+        check_axis_aligned(transform)
+    if spacing is not None:
+        notes.append("ground spacing from --spacing")
+        return spacing, use_crs
+    if not georeferenced:
+        raise TerrainLoadError(f"{path}: {NO_TRANSFORM}")
+    if use_crs is None:
+        raise TerrainLoadError(f"{path}: {NO_CRS}")
+    g = ground_spacing(use_crs, transform, shape[0], shape[1])
+    notes += list(g.notes)
+    return (g.x, g.y), use_crs
 
 
 def load_gdal(path, *, vertical_scale=None, spacing=None, crs=None, crop: Crop | None = None,

@@ -117,14 +117,7 @@ def ground_spacing(crs, transform, rows: int, cols: int) -> GroundSpacing:
     from pyproj.crs import GeographicCRS
     horizontal = horizontal_part(crs)
     if not (horizontal.is_geographic or horizontal.is_projected):
-        axis = horizontal.axis_info[0] if horizontal.axis_info else None
-        if axis is None or axis.unit_name in ("degree", "radian") or not axis.unit_conversion_factor:
-            raise TerrabenchError(f"the CRS {describe_crs(crs)} is neither geographic nor projected, and its axes "
-                                  "are not in a length unit; pass --spacing")
-        k = float(axis.unit_conversion_factor)
-        return GroundSpacing(abs(transform.a) * k, abs(transform.e) * k,
-                             (f"pixel size {abs(transform.a):g} x {abs(transform.e):g} {axis.unit_name} "
-                              f"of a local CRS taken as ground spacing",))
+        return _local_spacing(crs, horizontal, transform)
     if horizontal.is_geographic:
         check_degrees(crs, transform, rows, cols)
     lonlat = GeographicCRS(datum=horizontal.datum)
@@ -152,10 +145,28 @@ def ground_spacing(crs, transform, rows: int, cols: int) -> GroundSpacing:
     notes = [f"converted: pixels of {abs(transform.a):.6g} x {abs(transform.e):.6g} {units} to "
              f"{sx:.4f} m east-west x {sy:.4f} m north-south, geodesics on the {horizontal.ellipsoid.name} ellipsoid "
              f"at the grid centre ({where})"]
-    edges = np.array([at(0.5), at(rows - 0.5)])
+    return GroundSpacing(sx, sy, tuple(notes + _variation_notes(np.array([at(0.5), at(rows - 0.5)]))))
+
+
+def _local_spacing(crs, horizontal, transform) -> GroundSpacing:
+    """The pixel size as ground spacing, for a CRS neither geographic nor projected whose axes have a length unit."""
+    axis = horizontal.axis_info[0] if horizontal.axis_info else None
+    if axis is None or axis.unit_name in ("degree", "radian") or not axis.unit_conversion_factor:
+        raise TerrabenchError(f"the CRS {describe_crs(crs)} is neither geographic nor projected, and its axes "
+                              "are not in a length unit; pass --spacing")
+    k = float(axis.unit_conversion_factor)
+    return GroundSpacing(abs(transform.a) * k, abs(transform.e) * k,
+                         (f"pixel size {abs(transform.a):g} x {abs(transform.e):g} {axis.unit_name} "
+                          f"of a local CRS taken as ground spacing",))
+
+
+def _variation_notes(edges: np.ndarray) -> list[str]:
+    """Notes for each axis whose ground spacing varies by more than VARIES between the grid's first and last rows
+    (``edges``: their (east-west, north-south) metres)."""
+    notes = []
     for axis, (lo, hi) in (("east-west", (edges[:, 0].min(), edges[:, 0].max())),
                            ("north-south", (edges[:, 1].min(), edges[:, 1].max()))):
         if hi - lo > VARIES * (hi + lo) / 2:
             notes.append(f"{axis} ground spacing varies across the grid from {lo:.4f} to {hi:.4f} m (between its first "
                          "and last rows); the centre's is used")
-    return GroundSpacing(sx, sy, tuple(notes))
+    return notes

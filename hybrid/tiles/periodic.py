@@ -23,9 +23,10 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.stored import LazyGrid, StoredTerrain, open_store
 
-from .periodic_nodes import PeriodicNodes, _spans, seam_profiles
-from .pyramid import _block_reduce, interpolate_clamped
+from .periodic_nodes import PeriodicNodes
+from .seams import profile_spans, seam_profiles
 from .store_prepare import _levels
+from .subsampling import block_reduce, interpolate_clamped
 
 
 class _WrappedLevel:
@@ -74,22 +75,12 @@ class PeriodicStore:
         g = terrain.store
         src_attrs = dict(g.attrs)
         n, P = int(src_attrs["tile_size"]), terrain.cols - 1
-        if terrain.rows != terrain.cols:
-            raise TerrabenchError(f"{terrain.path}: a periodic extension needs a square store, got "
-                                  f"{terrain.cols}x{terrain.rows} samples")
-        if P & (P - 1) or P < n:
-            raise TerrabenchError(f"{terrain.path}: a periodic extension needs a period of a power of two cells "
-                                  f"of at least one tile ({n}), got {P}")
-        if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size <= terrain.cols or \
-                (size - 1) % P or size > (1 << 24) + 1:
-            raise TerrabenchError(f"periodic size must be k x {P} + 1 samples, larger than the store and at most "
-                                  f"{(1 << 24) + 1}, got {size!r}")
+        _check_extension(terrain, size, n, P)
         self.source, self.n, self.P, self.size = g, n, P, int(size)
         L = _levels(size, size, n)
         self.attrs = {**src_attrs, "max_level": L, "name": f"{src_attrs['name']}-periodic-{size}",
                       "periodic": {"source": terrain.path, "period_cells": P, "size": int(size)}}
         seams = seam_profiles(terrain.heights, P)          # the seams' samples (corner included) and steps
-        col_step, row_step, col0, row0 = seams.col_step, seams.row_step, seams.col0, seams.row0
         lo, hi = terrain.height_range
         self.arrays = {}
         src_L = int(src_attrs["max_level"])
@@ -98,40 +89,28 @@ class PeriodicStore:
             span = n << level
             tiles = -(-(size - 1) // span)                 # the last may cover padding (k not a power of two)
             if span <= P and level <= src_L:
-                t = P // span
-                idx = np.arange(tiles) % t
-                seam = idx == t - 1
-                zmin = np.asarray(g[f"zmin/{level}"][:])[np.ix_(idx, idx)]
-                zmax = np.asarray(g[f"zmax/{level}"][:])[np.ix_(idx, idx)]
-                err = np.asarray(g[f"error/{level}"][:])[np.ix_(idx, idx)]
-                # per source tile row/column span: the seam's step and the first row/column's range
-                step_r = _spans(col_step, span, np.maximum)[idx]
-                step_c = _spans(row_step, span, np.maximum)[idx]
-                c_lo, c_hi = _spans(col0, span, np.minimum)[idx], _spans(col0, span, np.maximum)[idx]
-                r_lo, r_hi = _spans(row0, span, np.minimum)[idx], _spans(row0, span, np.maximum)[idx]
-                east, north = seam[None, :], seam[:, None]
-                zmin = np.where(east, np.minimum(zmin, c_lo[:, None]), zmin)
-                zmin = np.where(north, np.minimum(zmin, r_lo[None, :]), zmin)
-                zmax = np.where(east, np.maximum(zmax, c_hi[:, None]), zmax)
-                zmax = np.where(north, np.maximum(zmax, r_hi[None, :]), zmax)
-                extra = np.where(east, step_r[:, None], 0.0) + np.where(north, step_c[None, :], 0.0)
-                err = err + 2.0 * extra
+                zmin, zmax, err = _within_period(g, level, tiles, span, P, seams)
             else:                                          # tiles of whole periods: the periodic chain bound
                 if not beyond:                             # from the top source level's errors, seams included
                     beyond = _whole_period_errors(g, src_L, L, float(self.arrays[f"error/{src_L}"].max()))
                 zmin, zmax = np.full((tiles, tiles), lo), np.full((tiles, tiles), hi)
                 err = np.full((tiles, tiles), beyond[level])
-            if level == 0:
-                err = np.zeros_like(err)                   # level 0 is the extension's own samples
-            if level:                                      # monotone, as every pyramid's errors
-                err = np.maximum(err, _block_reduce(self.arrays[f"error/{level - 1}"], 2, np.maximum))
-            self.arrays[f"zmin/{level}"], self.arrays[f"zmax/{level}"] = zmin, zmax
-            self.arrays[f"error/{level}"] = err
-            src_level = min(level, src_L)                  # above the source's levels: its top grid, strided
-            self.arrays[f"levels/{level}"] = _WrappedLevel(g[f"levels/{src_level}"], max(P >> level, 1),
-                                                           ((size - 1) >> level) + 1, 1 << (level - src_level))
+            self._add_level(level, zmin, zmax, err, src_L)
 
         self._add_nodes(src_attrs.get("nodes"), seams, terrain.height_range)
+
+    def _add_level(self, level: int, zmin, zmax, err, src_L: int) -> None:
+        """A level's tile bounds and errors (level 0's none, every level's at least its children's) and its samples,
+        the source's level grid wrapped (above the source's levels, its top grid strided)."""
+        if level == 0:
+            err = np.zeros_like(err)                   # level 0 is the extension's own samples
+        if level:                                      # monotone, as every pyramid's errors
+            err = np.maximum(err, block_reduce(self.arrays[f"error/{level - 1}"], 2, np.maximum))
+        self.arrays[f"zmin/{level}"], self.arrays[f"zmax/{level}"] = zmin, zmax
+        self.arrays[f"error/{level}"] = err
+        src_level = min(level, src_L)                  # above the source's levels: its top grid, strided
+        self.arrays[f"levels/{level}"] = _WrappedLevel(self.source[f"levels/{src_level}"], max(self.P >> level, 1),
+                                                       ((self.size - 1) >> level) + 1, 1 << (level - src_level))
 
     def _add_nodes(self, info, seams, height_range) -> None:
         """The raster strategies' node arrays, served from the source's (hybrid.tiles.periodic_nodes), when the
@@ -149,6 +128,44 @@ class PeriodicStore:
 
     def __getitem__(self, name):
         return self.arrays[name]
+
+
+def _check_extension(terrain: StoredTerrain, size, n: int, P: int) -> None:
+    """Refuse an extension of a store that is not square with a power-of-two period of at least a tile, or to a
+    size that is not a whole number of periods (plus one sample) larger than the store, up to 2^24 + 1."""
+    if terrain.rows != terrain.cols:
+        raise TerrabenchError(f"{terrain.path}: a periodic extension needs a square store, got "
+                              f"{terrain.cols}x{terrain.rows} samples")
+    if P & (P - 1) or P < n:
+        raise TerrabenchError(f"{terrain.path}: a periodic extension needs a period of a power of two cells "
+                              f"of at least one tile ({n}), got {P}")
+    if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size <= terrain.cols or \
+            (size - 1) % P or size > (1 << 24) + 1:
+        raise TerrabenchError(f"periodic size must be k x {P} + 1 samples, larger than the store and at most "
+                              f"{(1 << 24) + 1}, got {size!r}")
+
+
+def _within_period(g, level: int, tiles: int, span: int, P: int, seams) -> tuple:
+    """(zmin, zmax, error) of a level whose tiles lie within one period: the source tiles', those on a seam
+    widened by the source's first row or column over their span and their error by twice the seam's step."""
+    t = P // span
+    idx = np.arange(tiles) % t
+    seam = idx == t - 1
+    zmin = np.asarray(g[f"zmin/{level}"][:])[np.ix_(idx, idx)]
+    zmax = np.asarray(g[f"zmax/{level}"][:])[np.ix_(idx, idx)]
+    err = np.asarray(g[f"error/{level}"][:])[np.ix_(idx, idx)]
+    # per source tile row/column span: the seam's step and the first row/column's range
+    step_r = profile_spans(seams.col_step, span, np.maximum)[idx]
+    step_c = profile_spans(seams.row_step, span, np.maximum)[idx]
+    c_lo, c_hi = (profile_spans(seams.col0, span, fn)[idx] for fn in (np.minimum, np.maximum))
+    r_lo, r_hi = (profile_spans(seams.row0, span, fn)[idx] for fn in (np.minimum, np.maximum))
+    east, north = seam[None, :], seam[:, None]
+    zmin = np.where(east, np.minimum(zmin, c_lo[:, None]), zmin)
+    zmin = np.where(north, np.minimum(zmin, r_lo[None, :]), zmin)
+    zmax = np.where(east, np.maximum(zmax, c_hi[:, None]), zmax)
+    zmax = np.where(north, np.maximum(zmax, r_hi[None, :]), zmax)
+    extra = np.where(east, step_r[:, None], 0.0) + np.where(north, step_c[None, :], 0.0)
+    return zmin, zmax, err + 2.0 * extra
 
 
 def _whole_period_errors(g, src_L: int, L: int, base: float) -> dict:

@@ -42,14 +42,12 @@ against a parent whose error became a bound reads larger, never smaller.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from hybrid.errors import TerrabenchError
 
 from .fans import block2, dilate4
-from .pyramid import _block_reduce
+from .seams import SeamProfiles, profile_spans
 from .sidecodes import holds_side_codes, side_codes_each
 from .source_chunks import SourceChunks, gather
 
@@ -57,36 +55,6 @@ KINDS = ("effective", "zlo", "zhi")
 _UP = 1.0 + 2.0 ** -21          # relative headroom over float32 rounding (2^-24 per rounded value)
 MAX_WHOLE_NODES = 1 << 26       # a level may be read whole (np.asarray) up to this many nodes
 DEPTH = 2                       # levels below a near-seam node whose bounds tighten its own (``_effective``)
-
-
-def _spans(profile: np.ndarray, span: int, fn) -> np.ndarray:
-    """fn over each span of a (P + 1,) profile, both ends included: (P / span,)."""
-    blocks = _block_reduce(profile[None, :-1], span, fn)[0]
-    ends = profile[span::span]
-    return fn(blocks, ends)
-
-
-@dataclass(frozen=True)
-class SeamProfiles:
-    """The source's samples along the extension's seams (metres, float64, P + 1 each, index t of a period): the
-    extension's seam row ``row0[t] = h(0, t mod P)`` and seam column ``col0[t] = h(t mod P, 0)``, and their steps
-    from the source's last row and column: ``row_step[t] = |h(P, t) - row0[t]|``,
-    ``col_step[t] = |h(t, P) - col0[t]|``."""
-
-    row0: np.ndarray
-    col0: np.ndarray
-    row_step: np.ndarray
-    col_step: np.ndarray
-
-
-def seam_profiles(heights, P: int) -> SeamProfiles:
-    """The seam profiles (metres) of a square source grid of P + 1 samples a side (read: two rows, two columns)."""
-    wrap = np.arange(P + 1) % P
-    row0 = np.asarray(heights[0, :], dtype=np.float64)[wrap]
-    col0 = np.asarray(heights[:, 0], dtype=np.float64)[wrap]
-    last_row = np.asarray(heights[P, :], dtype=np.float64)
-    last_col = np.asarray(heights[:, P], dtype=np.float64)
-    return SeamProfiles(row0, col0, np.abs(last_row - row0), np.abs(last_col - col0))
 
 
 def _up32(x) -> np.ndarray:
@@ -146,10 +114,10 @@ class PeriodicNodes:
         """Per source node of level g (T values): the largest seam steps and the seam samples' range along it."""
         if g not in self._spans:
             s, p = 2 << g, self.profiles
-            self._spans[g] = {"row_step": _spans(p.row_step, s, np.maximum),
-                              "col_step": _spans(p.col_step, s, np.maximum),
-                              "row_lo": _spans(p.row0, s, np.minimum), "row_hi": _spans(p.row0, s, np.maximum),
-                              "col_lo": _spans(p.col0, s, np.minimum), "col_hi": _spans(p.col0, s, np.maximum)}
+            self._spans[g] = {"row_step": profile_spans(p.row_step, s, np.maximum),
+                              "col_step": profile_spans(p.col_step, s, np.maximum),
+                              "row_lo": profile_spans(p.row0, s, np.minimum), "row_hi": profile_spans(p.row0, s, np.maximum),
+                              "col_lo": profile_spans(p.col0, s, np.minimum), "col_hi": profile_spans(p.col0, s, np.maximum)}
         return self._spans[g]
 
     def _top_values(self) -> tuple[float, float, float]:

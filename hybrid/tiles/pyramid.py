@@ -26,6 +26,7 @@ from hybrid.errors import TerrabenchError
 from hybrid.terrain.heightfield import HeightField
 from hybrid.tiles.bounds import level_bounds
 from hybrid.tiles.quantize import Q_MAX, error_bound, on_step_cells
+from hybrid.tiles.subsampling import block_reduce
 
 EDGE_W, EDGE_E, EDGE_S, EDGE_N = 1, 2, 4, 8
 
@@ -95,31 +96,6 @@ class Tile:
     def nbytes_heights(self) -> int:
         """Bytes of the tile's heights as float32."""
         return int(self.heights.size * 4)
-
-
-def _block_reduce(a: np.ndarray, b: int, fn) -> np.ndarray:
-    """Reduce a 2-D array over b x b blocks with the ufunc fn (np.maximum, np.minimum); the last blocks of each
-    axis may be partial (ceil(shape / b) blocks a side)."""
-    rows, cols = np.arange(0, a.shape[0], b), np.arange(0, a.shape[1], b)
-    return fn.reduceat(fn.reduceat(a, rows, axis=0), cols, axis=1)
-
-
-def interpolate_clamped(h: np.ndarray, k: int) -> np.ndarray:
-    """Triangulated surface of the every-k-th-sample grid of h, edge-repeated beyond h, at every sample of h
-    (float64); cells split along the (i, j) -> (i+1, j+1) diagonal; h may be any rectangle."""
-    def axis(n):
-        idx = np.arange(n)
-        c = idx // k
-        return np.minimum(c * k, n - 1), np.minimum((c + 1) * k, n - 1), (idx - c * k) / k
-    r0, r1, fi = axis(h.shape[0])
-    c0, c1, fj = axis(h.shape[1])
-    h = h.astype(np.float64, copy=False)
-    fi, fj = fi[:, None], fj[None, :]
-    h00, h01 = h[np.ix_(r0, c0)], h[np.ix_(r0, c1)]
-    h10, h11 = h[np.ix_(r1, c0)], h[np.ix_(r1, c1)]
-    lower = h00 + fj * (h01 - h00) + fi * (h11 - h01)
-    upper = h00 + fi * (h10 - h00) + fj * (h11 - h10)
-    return np.where(fj >= fi, lower, upper)
 
 
 MAX_PADDED_SAMPLES = 1 << 27     # the square only the reference node arrays build (raster.nodes.square_nodes): 128 M
@@ -253,7 +229,7 @@ class TilePyramid:
         """Per tile of a level: True where every level-0 sample it covers is on the source step."""
         if self._on_step is None:
             self._on_step = on_step_cells(self.hf.heights, step)
-        return _block_reduce(self._on_step, self.n << level, np.minimum)
+        return block_reduce(self._on_step, self.n << level, np.minimum)
 
     def quantization_error(self, key: TileKey) -> float:
         """Bound (metres) on the tile's 16-bit quantisation error, as quantization_errors_at."""

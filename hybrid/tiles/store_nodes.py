@@ -171,6 +171,37 @@ def _facing(sides_below, a0: int, a1: int, total: int) -> np.ndarray:
     return np.concatenate(out, axis=0)
 
 
+KINDS = ("error", "eff", "serror", "seff", "zmin", "zmax")
+"""A level's working arrays: both fans' errors and effective errors, the full fan's, and the height range."""
+
+
+class _Build:
+    """A node build of store group ``g``: the padded square of R cells, its working arrays (``nodes/tmp``), the
+    bands recorded and ``mark``, which records one more."""
+
+    def __init__(self, g, R: int, n: int, max_level: int, beta: float, mark):
+        self.g, self.R, self.n, self.max_level, self.beta, self.mark = g, R, n, max_level, beta, mark
+        hr = g.attrs["height_range"]
+        self.margin = 16 * np.finfo(np.float64).eps * max(abs(float(hr[0])), abs(float(hr[1])), 1.0)
+
+    def progress(self, key: str) -> int:
+        """Bands recorded under ``key``."""
+        return int(dict(self.g.attrs["progress"]).get(key, 0))
+
+    @staticmethod
+    def tmp(kind: str, lev: int) -> str:
+        """The name of a level's working array of ``kind``."""
+        return f"nodes/tmp/{kind}/{lev}"
+
+    def work(self, kind: str, lev: int, dtype: str = "f8"):
+        """Level ``lev``'s working array of ``kind``, made if missing."""
+        return _array(self.g, self.tmp(kind, lev), self.R >> (lev + 1), dtype)
+
+    def sides(self, lev: int):
+        """Level ``lev``'s side errors (4, total, total), made if missing."""
+        return _array(self.g, self.tmp("sides", lev), self.R >> (lev + 1), "f8", planes=4)
+
+
 def build_nodes(g, rows: int, cols: int, n: int, max_level: int, beta: float, mark) -> None:
     """Write the node arrays of a store group ``g`` whose levels are written; ``mark(key, count, what)`` records
     a band's progress (and may raise KeyboardInterrupt)."""
@@ -178,100 +209,118 @@ def build_nodes(g, rows: int, cols: int, n: int, max_level: int, beta: float, ma
     B, gx = _plan(R)
     if g.attrs.get("nodes") and not holds_side_codes(g):
         return                      # complete arrays of the combined form (prepared before side codes): kept
-    progress = lambda key: int(dict(g.attrs["progress"]).get(key, 0))  # noqa: E731
-    tmp = lambda kind, lev: f"nodes/tmp/{kind}/{lev}"  # noqa: E731
-    if progress("nodes:direct") and tmp("full", 0) not in g:      # a build begun before side codes: begin again
+    b = _Build(g, R, n, max_level, beta, mark)
+    if b.progress("nodes:direct") and b.tmp("full", 0) not in g:      # a build begun before side codes: begin again
         g.attrs.update({"progress": {k: v for k, v in dict(g.attrs["progress"]).items() if not k.startswith("nodes")}})
         if "nodes/tmp" in g:
             del g["nodes/tmp"]
-    lv0 = g["levels/0"]
-    hr = g.attrs["height_range"]
-    margin = 16 * np.finfo(np.float64).eps * max(abs(float(hr[0])), abs(float(hr[1])), 1.0)
-    side_array = lambda lev: _array(g, tmp("sides", lev), R >> (lev + 1), "f8", planes=4)  # noqa: E731
-
-    for br in range(progress("nodes:direct"), R // B):
-        for c0 in range(0, R, B):                             # a block of B x B cells at a time
-            direct, full, sides, zmin, zmax = _direct_block(lv0, rows, cols, R, B, gx, br, c0)
-            for lev, (d, f, sd) in enumerate(zip(direct, full, sides)):
-                at = (slice(br * d.shape[0], (br + 1) * d.shape[0]), slice(c0 >> (lev + 1), (c0 + B) >> (lev + 1)))
-                _array(g, tmp("direct", lev), R >> (lev + 1), "f8")[at] = d
-                _array(g, tmp("full", lev), R >> (lev + 1), "f8")[at] = f
-                side_array(lev)[(slice(None),) + at] = sd
-            for kind, z in (("zmin", zmin), ("zmax", zmax)):
-                _array(g, tmp(kind, 0), R // 2, "f4")[br * (B // 2):(br + 1) * (B // 2), c0 // 2:(c0 + B) // 2] = z
-        mark("nodes:direct", br + 1, f"node errors, band {br + 1}")
-    kinds = ("error", "eff", "serror", "seff", "zmin", "zmax")
+    _direct_errors(b, rows, cols, B, gx)
     for lev in range(levels):
-        total = R >> (lev + 1)
-        exact = lev <= gx
-        hb = _band_rows(total, exact)
-        starts = list(range(0, total, hb))
-        key = f"nodes:{lev}"
-        done = progress(key)
-        if done >= 2 * len(starts):
-            continue
-        arr = {k: _array(g, tmp(k, lev), total, "f4" if k.startswith("z") else "f8") for k in kinds}
-        below = {k: g[tmp(k, lev - 1)] for k in kinds} if lev else None
-        for i, a0 in enumerate(starts):                       # pass 1: errors, effective errors, ranges
-            if i < done:
-                continue
-            a1 = min(a0 + hb, total)
-            if lev == 0:
-                for k, src in (("error", "direct"), ("eff", "direct"), ("serror", "full"), ("seff", "full")):
-                    arr[k][a0:a1, :] = np.asarray(g[tmp(src, 0)][a0:a1, :])
-                arr["zmin"][a0:a1, :] = np.asarray(g[tmp("zmin", 0)][a0:a1, :])
-                arr["zmax"][a0:a1, :] = np.asarray(g[tmp("zmax", 0)][a0:a1, :])
-            else:
-                facing = _facing(side_array(lev - 1), a0, a1, total)
-                post = None if exact else _post_deviation(lambda l: g[f"levels/{l}"], R, max_level, lev)
-                lo, hi = max(2 * a0 - 1, 0), min(2 * a1 + 1, 2 * total)
-                # the combined form (both fans in one error), then the side-error form (full fans, sides facing)
-                for err, eff, direct, with_sides in (("error", "eff", "direct", False), ("serror", "seff", "full", True)):
-                    kids = np.asarray(below[err][2 * a0:2 * a1, :])
-                    if exact:
-                        e = np.maximum(np.asarray(g[tmp(direct, lev)][a0:a1, :]), block2(kids, np.max))
-                    else:                                     # a bound of both fans, so of every side too
-                        e = block2(post + kids, np.max) + margin
-                        if with_sides:
-                            side_array(lev)[:, a0:a1, :] = np.broadcast_to(e, (4,) + e.shape)
-                    del kids
-                    d = block2(dilate4(np.asarray(below[eff][lo:hi, :]))[2 * a0 - lo:2 * a1 - lo], np.max)
-                    if with_sides:
-                        e = np.maximum(e, facing)
-                        d = np.maximum(d, facing)
-                    arr[err][a0:a1, :] = e
-                    arr[eff][a0:a1, :] = np.maximum(e, d / beta)
-                    del e, d
-                arr["zmin"][a0:a1, :] = block2(np.asarray(below["zmin"][2 * a0:2 * a1, :]), np.min)
-                arr["zmax"][a0:a1, :] = block2(np.asarray(below["zmax"][2 * a0:2 * a1, :]), np.max)
-            mark(key, i + 1, f"node level {lev}, band {i + 1}")
-        final = {k: _array(g, f"nodes/{k}/{lev}", total, "f4", tile_chunk(n, lev))
-                 for k in ("effective", "combined", "zlo", "zhi")}
-        for i, a0 in enumerate(starts):                       # pass 2: float32 errors, 3x3 box ranges, codes
-            if len(starts) + i < done:
-                continue
-            a1 = min(a0 + hb, total)
-            e32 = {}
-            for kind, src in (("effective", "seff"), ("combined", "eff")):
-                e64 = np.asarray(arr[src][a0:a1, :])
-                e32[kind] = e64.astype(np.float32)
-                if not exact:                                 # a bound stays a bound in float32
-                    e32[kind] = np.where(e32[kind] < e64, np.nextafter(e32[kind], np.float32(np.inf)), e32[kind])
-                final[kind][a0:a1, :] = e32[kind]
-            lo, hi = max(a0 - 1, 0), min(a1 + 1, total)
-            for kind, src, fn in (("zlo", "zmin", np.minimum), ("zhi", "zmax", np.maximum)):
-                # the slab's own edges repeat only where they are the square's; other rows are the apron
-                final[kind][a0:a1, :] = grow3(np.asarray(arr[src][lo:hi, :]), fn)[a0 - lo:a1 - lo]
-            if lev:                                           # the level below's side codes, against these errors
-                _write_codes(g, side_array(lev - 1), lev - 1, 2 * a0, 2 * a1, e32["effective"], tile_chunk(n, lev - 1))
-            mark(key, len(starts) + i + 1, f"node boxes {lev}, band {i + 1}")
-    if not progress("nodes:codes"):                           # the root level's: no parent
+        _build_level(b, lev, lev <= gx)
+    if not b.progress("nodes:codes"):                         # the root level's: no parent
         top = levels - 1
-        _write_codes(g, side_array(top), top, 0, 1, None, tile_chunk(n, top))
+        _write_codes(g, b.sides(top), top, 0, 1, None, tile_chunk(n, top))
         mark("nodes:codes", 1, "side codes")
     g.attrs.update({"nodes": {"beta": float(beta), "levels": levels, "square": R, "exact_span": B, "form": SIDE_FORM}})
     if "nodes/tmp" in g:
         del g["nodes/tmp"]
+
+
+def _direct_errors(b: _Build, rows: int, cols: int, B: int, gx: int) -> None:
+    """The exact levels' direct errors and side errors and level 0's height ranges into the working arrays, a band
+    of B x B blocks at a time, from the first band not yet recorded."""
+    lv0, R = b.g["levels/0"], b.R
+    for br in range(b.progress("nodes:direct"), R // B):
+        for c0 in range(0, R, B):                             # a block of B x B cells at a time
+            direct, full, sides, zmin, zmax = _direct_block(lv0, rows, cols, R, B, gx, br, c0)
+            for lev, (d, f, sd) in enumerate(zip(direct, full, sides)):
+                at = (slice(br * d.shape[0], (br + 1) * d.shape[0]), slice(c0 >> (lev + 1), (c0 + B) >> (lev + 1)))
+                b.work("direct", lev)[at] = d
+                b.work("full", lev)[at] = f
+                b.sides(lev)[(slice(None),) + at] = sd
+            for kind, z in (("zmin", zmin), ("zmax", zmax)):
+                b.work(kind, 0, "f4")[br * (B // 2):(br + 1) * (B // 2), c0 // 2:(c0 + B) // 2] = z
+        b.mark("nodes:direct", br + 1, f"node errors, band {br + 1}")
+
+
+def _build_level(b: _Build, lev: int, exact: bool) -> None:
+    """Global level ``lev``'s node arrays in two passes of bands, from the first band not yet recorded: errors,
+    effective errors and ranges (``_level_band``), then the final float32 arrays (``_final_band``)."""
+    total = b.R >> (lev + 1)
+    hb = _band_rows(total, exact)
+    starts = list(range(0, total, hb))
+    key = f"nodes:{lev}"
+    done = b.progress(key)
+    if done >= 2 * len(starts):
+        return
+    arr = {k: _array(b.g, b.tmp(k, lev), total, "f4" if k.startswith("z") else "f8") for k in KINDS}
+    below = {k: b.g[b.tmp(k, lev - 1)] for k in KINDS} if lev else None
+    for i, a0 in enumerate(starts):                       # pass 1: errors, effective errors, ranges
+        if i < done:
+            continue
+        a1 = min(a0 + hb, total)
+        if below is None:
+            for k, src in (("error", "direct"), ("eff", "direct"), ("serror", "full"), ("seff", "full")):
+                arr[k][a0:a1, :] = np.asarray(b.g[b.tmp(src, 0)][a0:a1, :])
+            arr["zmin"][a0:a1, :] = np.asarray(b.g[b.tmp("zmin", 0)][a0:a1, :])
+            arr["zmax"][a0:a1, :] = np.asarray(b.g[b.tmp("zmax", 0)][a0:a1, :])
+        else:
+            _level_band(b, lev, exact, arr, below, a0, a1)
+        b.mark(key, i + 1, f"node level {lev}, band {i + 1}")
+    final = {k: _array(b.g, f"nodes/{k}/{lev}", total, "f4", tile_chunk(b.n, lev))
+             for k in ("effective", "combined", "zlo", "zhi")}
+    for i, a0 in enumerate(starts):                       # pass 2: float32 errors, 3x3 box ranges, codes
+        if len(starts) + i < done:
+            continue
+        _final_band(b, lev, exact, arr, final, a0, min(a0 + hb, total))
+        b.mark(key, len(starts) + i + 1, f"node boxes {lev}, band {i + 1}")
+
+
+def _level_band(b: _Build, lev: int, exact: bool, arr: dict, below: dict, a0: int, a1: int) -> None:
+    """Rows a0..a1-1 of level ``lev`` >= 1's working arrays from the level below: the combined form's errors and
+    effective errors (both fans in one error), the side-error form's (full fans, sides facing), height ranges."""
+    total = b.R >> (lev + 1)
+    facing = _facing(b.sides(lev - 1), a0, a1, total)
+    post = None if exact else _post_deviation(lambda l: b.g[f"levels/{l}"], b.R, b.max_level, lev)
+    lo, hi = max(2 * a0 - 1, 0), min(2 * a1 + 1, 2 * total)
+    # the combined form (both fans in one error), then the side-error form (full fans, sides facing)
+    for err, eff, direct, with_sides in (("error", "eff", "direct", False), ("serror", "seff", "full", True)):
+        kids = np.asarray(below[err][2 * a0:2 * a1, :])
+        if exact:
+            e = np.maximum(np.asarray(b.g[b.tmp(direct, lev)][a0:a1, :]), block2(kids, np.max))
+        else:                                     # a bound of both fans, so of every side too
+            e = block2(post + kids, np.max) + b.margin
+            if with_sides:
+                b.sides(lev)[:, a0:a1, :] = np.broadcast_to(e, (4,) + e.shape)
+        del kids
+        d = block2(dilate4(np.asarray(below[eff][lo:hi, :]))[2 * a0 - lo:2 * a1 - lo], np.max)
+        if with_sides:
+            e = np.maximum(e, facing)
+            d = np.maximum(d, facing)
+        arr[err][a0:a1, :] = e
+        arr[eff][a0:a1, :] = np.maximum(e, d / b.beta)
+        del e, d
+    arr["zmin"][a0:a1, :] = block2(np.asarray(below["zmin"][2 * a0:2 * a1, :]), np.min)
+    arr["zmax"][a0:a1, :] = block2(np.asarray(below["zmax"][2 * a0:2 * a1, :]), np.max)
+
+
+def _final_band(b: _Build, lev: int, exact: bool, arr: dict, final: dict, a0: int, a1: int) -> None:
+    """Rows a0..a1-1 of level ``lev``'s final arrays: float32 errors (bounds rounded up), the 3x3 box ranges, and
+    the level below's side codes against these errors."""
+    total = b.R >> (lev + 1)
+    e32 = {}
+    for kind, src in (("effective", "seff"), ("combined", "eff")):
+        e64 = np.asarray(arr[src][a0:a1, :])
+        e32[kind] = e64.astype(np.float32)
+        if not exact:                                 # a bound stays a bound in float32
+            e32[kind] = np.where(e32[kind] < e64, np.nextafter(e32[kind], np.float32(np.inf)), e32[kind])
+        final[kind][a0:a1, :] = e32[kind]
+    lo, hi = max(a0 - 1, 0), min(a1 + 1, total)
+    for kind, src, fn in (("zlo", "zmin", np.minimum), ("zhi", "zmax", np.maximum)):
+        # the slab's own edges repeat only where they are the square's; other rows are the apron
+        final[kind][a0:a1, :] = grow3(np.asarray(arr[src][lo:hi, :]), fn)[a0 - lo:a1 - lo]
+    if lev:                                           # the level below's side codes, against these errors
+        _write_codes(b.g, b.sides(lev - 1), lev - 1, 2 * a0, 2 * a1, e32["effective"], tile_chunk(b.n, lev - 1))
 
 
 def _write_codes(g, sides, lev: int, r0: int, r1: int, parent, chunk: int) -> None:
