@@ -161,12 +161,18 @@ def build_tin(heights: np.ndarray, spacing, target_count: int | None = None, max
         return simplify(target_count=min(int(target_count) + max(kept_walls, 0), full + walls))
     if not (np.isfinite(max_error) and max_error >= 0):
         raise TerrabenchError(f"max_error must be finite and >= 0 metres, got {max_error!r}")
-    best = TinMesh(pts, faces.astype(np.int64))
-    lo, hi = 0.0, 1.0 - 2.0 / (full + walls)
+    return _bisect_reduction(simplify, TinMesh(pts, faces.astype(np.int64)), 1.0 - 2.0 / (full + walls),
+                             lambda m: tin_max_error(m, h, spacing)[0] <= max_error)
+
+
+def _bisect_reduction(simplify, full: TinMesh, most: float, good) -> TinMesh:
+    """The most reduced TIN ``simplify(target_reduction=r)`` for r in [0, most] that is ``good``, bisected in 8
+    steps (the full mesh if none is)."""
+    best, lo, hi = full, 0.0, most
     for _ in range(8):
         mid = 0.5 * (lo + hi)
         m = simplify(target_reduction=mid)
-        if tin_max_error(m, h, spacing)[0] <= max_error:
+        if good(m):
             best, lo = m, mid
         else:
             hi = mid

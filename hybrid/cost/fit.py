@@ -84,25 +84,13 @@ def fit_frames(samples: list[FrameSample], renderer: str, holdout: float = 0.3, 
     ``tiles`` (timed one call each), a random (1 - holdout) share of them joins the fit with a per-call overhead
     per strategy (``call_overhead``), and ``tile_error`` is the held-out median relative error of the rest per
     strategy."""
-    if not (0.0 <= holdout < 1.0):
-        raise TerrabenchError(f"holdout must lie in [0, 1), got {holdout}")
-    ms = np.array([f.ms for f in samples], dtype=np.float64)
     width = sum(1 + len(TERMS[s]) for s in names) + 1          # the strategies' columns, then mixed
-    if len(samples) < width or not np.all(np.isfinite(ms)) or np.any(ms <= 0):
-        raise TerrabenchError(f"need at least {width} frames with finite times > 0 ms to fit {', '.join(names)}, "
-                              f"got {len(samples)}")
     tiles = [t for t in tiles if t.strategy in names]
-    tms = np.array([t.ms for t in tiles], dtype=np.float64)
-    if not np.all(np.isfinite(tms)) or np.any(tms <= 0):
-        raise TerrabenchError("tiles timed one call each need finite times > 0 ms")
+    ms, tms = _checked_times(samples, tiles, names, width, holdout)
     offsets = np.cumsum([0] + [1 + len(TERMS[s]) for s in names])
     calls = len(names) if tiles else 0
     X = np.hstack([frame_design(samples, names), np.zeros((len(samples), calls))])
-    T = np.zeros((len(tiles), width + calls))
-    for k, t in enumerate(tiles):
-        j = names.index(t.strategy)
-        T[k, offsets[j] + 1:offsets[j + 1]] = t.terms
-        T[k, width + j] = 1.0
+    T = _tile_design(tiles, names, offsets, width + calls)
     rng = np.random.default_rng(seed)
     test, train = _split(rng, len(samples), holdout)
     t_test, t_train = _split(rng, len(tiles), holdout)
@@ -123,16 +111,48 @@ def fit_frames(samples: list[FrameSample], renderer: str, holdout: float = 0.3, 
     if calls:
         model.call_overhead = {s: float(x[width + j]) for j, s in enumerate(names)}
     if len(test):
-        err = np.abs(X[test] @ x - ms[test]) / ms[test]
-        used = X[test][:, offsets[:-1]] > 0
-        model.fit_error = {s: float(np.median(err[used[:, j]])) for j, s in enumerate(names) if used[:, j].any()}
-        mixed = used.sum(axis=1) > 1
-        model.mix_error = float(np.median(err[mixed])) if mixed.any() else 0.0
+        _held_out_frame_errors(model, X[test] @ x, ms[test], X[test][:, offsets[:-1]] > 0, names)
     if len(t_test):
         err = np.abs(T[t_test] @ x - tms[t_test]) / tms[t_test]
         which = np.array([names.index(tiles[i].strategy) for i in t_test])
         model.tile_error = {s: float(np.median(err[which == j])) for j, s in enumerate(names) if (which == j).any()}
     return model
+
+
+def _checked_times(samples: list, tiles: list, names: tuple, width: int, holdout: float) -> tuple:
+    """Measured ms of the frames and of the tiles (float64 arrays), refused by name where too few, not finite or
+    not positive, or where the held-out share is outside [0, 1)."""
+    if not (0.0 <= holdout < 1.0):
+        raise TerrabenchError(f"holdout must lie in [0, 1), got {holdout}")
+    ms = np.array([f.ms for f in samples], dtype=np.float64)
+    if len(samples) < width or not np.all(np.isfinite(ms)) or np.any(ms <= 0):
+        raise TerrabenchError(f"need at least {width} frames with finite times > 0 ms to fit {', '.join(names)}, "
+                              f"got {len(samples)}")
+    tms = np.array([t.ms for t in tiles], dtype=np.float64)
+    if not np.all(np.isfinite(tms)) or np.any(tms <= 0):
+        raise TerrabenchError("tiles timed one call each need finite times > 0 ms")
+    return ms, tms
+
+
+def _tile_design(tiles: list, names: tuple, offsets: np.ndarray, width: int) -> np.ndarray:
+    """Rows (tiles, width) of tiles timed one call each: each tile's terms in its strategy's columns and a 1 in
+    its strategy's per-call column (the last ``len(names)`` columns)."""
+    T = np.zeros((len(tiles), width))
+    for k, t in enumerate(tiles):
+        j = names.index(t.strategy)
+        T[k, offsets[j] + 1:offsets[j + 1]] = t.terms
+        T[k, width - len(names) + j] = 1.0
+    return T
+
+
+def _held_out_frame_errors(model: CostModel, predicted: np.ndarray, ms: np.ndarray, used: np.ndarray,
+                           names: tuple) -> None:
+    """Set the model's held-out median relative frame error per strategy (frames using it: ``used`` (F, S)) and
+    that of the frames mixing strategies, from predicted and measured frame ms (F,)."""
+    err = np.abs(predicted - ms) / ms
+    model.fit_error = {s: float(np.median(err[used[:, j]])) for j, s in enumerate(names) if used[:, j].any()}
+    mixed = used.sum(axis=1) > 1
+    model.mix_error = float(np.median(err[mixed])) if mixed.any() else 0.0
 
 
 def _split(rng, n: int, holdout: float) -> tuple[np.ndarray, np.ndarray]:
