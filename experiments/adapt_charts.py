@@ -6,6 +6,7 @@ hybrid's prediction error per frame: ``|pred_ms - draw_ms| / draw_ms``, the mode
 the tiles as it chose them against the drawing measured. The GPU-against-CPU chart needs the GL timer query
 (``gpu_ms``), which llvmpipe lacks; where no frame has it, there is no chart and ``gpu_cpu_sentence`` says why.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -17,8 +18,10 @@ from hybrid.strategies import candidates
 
 from .figures import figure_legend, grid_cols, method_colours, panel_grid, panel_title, save_figure
 
-NO_GPU_TIME = ("GPU and CPU time are not told apart: this GL has no valid timer query (a software rasterizer "
-               "draws on the CPU), so frame time is the wall clock alone.")
+NO_GPU_TIME = (
+    "GPU and CPU time are not told apart: this GL has no valid timer query (a software rasterizer "
+    "draws on the CPU), so frame time is the wall clock alone."
+)
 
 
 def prediction_error(rows: pd.DataFrame) -> pd.Series:
@@ -44,13 +47,20 @@ def convergence_chart(f: pd.DataFrame, folder: Path) -> list[Path]:
     oracle (thin), and below each hybrid's prediction error per frame (%); [] where no hybrid predicted."""
     import matplotlib.pyplot as plt
     from matplotlib.ticker import MaxNLocator
+
     groups = _convergence_groups(f)
     if not groups:
         return []
     cols = grid_cols(len(groups))
     rows = -(-len(groups) // cols)
-    fig, axes = plt.subplots(2 * rows, cols, figsize=(4.8 * cols if cols > 1 else 8.0, 5.2 * rows), squeeze=False,
-                             layout="constrained", gridspec_kw={"height_ratios": [3, 1.4] * rows})
+    fig, axes = plt.subplots(
+        2 * rows,
+        cols,
+        figsize=(4.8 * cols if cols > 1 else 8.0, 5.2 * rows),
+        squeeze=False,
+        layout="constrained",
+        gridspec_kw={"height_ratios": [3, 1.4] * rows},
+    )
     colours = method_colours(pd.concat([g for _, g in groups]))
     used = []
     for i, (title, g) in enumerate(groups):
@@ -59,8 +69,15 @@ def convergence_chart(f: pd.DataFrame, folder: Path) -> list[Path]:
         for m, mg in g.groupby("method"):
             mg = mg.sort_values("frame")
             hybrid = mg["policy"].iloc[0] == "hybrid"
-            top.plot(mg["frame"], mg["wall_ms"], marker="." if hybrid else None, lw=2.2 if hybrid else 1.0,
-                     alpha=1.0 if hybrid else 0.8, color=colours[m], label=m)
+            top.plot(
+                mg["frame"],
+                mg["wall_ms"],
+                marker="." if hybrid else None,
+                lw=2.2 if hybrid else 1.0,
+                alpha=1.0 if hybrid else 0.8,
+                color=colours[m],
+                label=m,
+            )
             if hybrid:
                 bottom.plot(mg["frame"], prediction_error(mg), marker=".", color=colours[m], label=m)
         panel_title(top, title, cols)
@@ -121,27 +138,36 @@ def gpu_cpu_sentence(f: pd.DataFrame) -> str:
     if g.empty:
         return NO_GPU_TIME
     share = (g["gpu_ms"] > g["cpu_ms"]).groupby(g["method"]).mean().sort_values(ascending=False)
-    return ("Frames bound by the GPU (timer query over CPU time): "
-            + ", ".join(f"{m} {100 * v:.0f} %" for m, v in share.items()) + ".")
+    return (
+        "Frames bound by the GPU (timer query over CPU time): "
+        + ", ".join(f"{m} {100 * v:.0f} %" for m, v in share.items())
+        + "."
+    )
 
 
 def adaptation_sentences(f: pd.DataFrame, settled_from: int = 4) -> list[str]:
     """Per scene and tau where hybrids started from several models: each start's median frame ms from frame
     ``settled_from`` on against the device's start, and its median prediction error first and last."""
     from .noise import compare
+
     out = []
     for title, g in _convergence_groups(f):
         hy = {m: q for m, q in g[g["policy"] == "hybrid"].groupby("method")}
         if len(hy) < 2:
             continue
-        device = [m for m, q in hy.items() if q["start_model"].fillna("device").eq("device").all()] \
-            if "start_model" in g else []
+        device = (
+            [m for m, q in hy.items() if q["start_model"].fillna("device").eq("device").all()]
+            if "start_model" in g
+            else []
+        )
         base = device[0] if device else None
         parts = []
         for m, q in hy.items():
             err = prediction_error(q).groupby(q["frame"]).median()
-            s = f"{m}: prediction error {err.iloc[0]:.0f} % at frame {int(err.index[0])}, " \
+            s = (
+                f"{m}: prediction error {err.iloc[0]:.0f} % at frame {int(err.index[0])}, "
                 f"{err.iloc[-1]:.0f} % at frame {int(err.index[-1])}"
+            )
             if base is not None and m != base:
                 late = q["frame"] >= settled_from
                 b = hy[base]

@@ -11,6 +11,7 @@ adapting hybrid learns from each of its draws, as in a run). The targets read fr
 adapting hybrid's median frame within 1.05x of the better pure method's, and within noise of the hybrid
 started from this device's model (``experiments.noise.compare``).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -32,6 +33,7 @@ TARGET = "adapting / better pure, frames 8- (target <= 1.05)"
 def start_models(renderer: str) -> dict:
     """The starting cost models by name (``STARTS``) for a GL renderer."""
     from hybrid.cost.model import _shipped, fallback_cost_model, load_cost_model
+
     device = load_cost_model(renderer)
     skewed = copy.deepcopy(device)
     skewed.raycast = {k: v / 5 for k, v in skewed.raycast.items()}
@@ -51,6 +53,7 @@ def draw_flight(ctx, hf, views, tau: float, models: dict, repeats: int, tile_siz
     drawn by every renderer in turn, ``repeats`` times; methods are the pure policies and, per start model,
     ``hybrid:<start>`` adapting and ``frozen:<start>``."""
     from hybrid.renderer import Renderer
+
     renderers = {}
     try:
         for p in candidates():
@@ -59,20 +62,31 @@ def draw_flight(ctx, hf, views, tau: float, models: dict, repeats: int, tile_siz
             renderers[f"hybrid:{name}"] = Renderer(ctx, hf, "hybrid", tile_size, cost_model=model)
             renderers[f"frozen:{name}"] = Renderer(ctx, hf, "hybrid", tile_size, cost_model=model, adapt=False)
         for r in renderers.values():
-            r.render(views[0], tau, read=False)         # warm, as a run's configuration is: compiles, uploads
+            r.render(views[0], tau, read=False)  # warm, as a run's configuration is: compiles, uploads
         rows, names = [], list(renderers)
         for k, v in enumerate(views):
             stats: dict = {m: [] for m in names}
-            for rep in range(repeats):                  # every renderer in turn, the first one rotating
+            for rep in range(repeats):  # every renderer in turn, the first one rotating
                 shift = (k * repeats + rep) % len(names)
                 for m in names[shift:] + names[:shift]:
                     stats[m].append(renderers[m].render(v, tau, read=False).stats)
             for m, st in stats.items():
                 w = [s.wall_ms for s in st]
-                rows.append({"method": m, "frame": k, "wall_ms": float(np.median(w)), "wall_ms_repeats": w,
-                             "pred_ms": st[-1].pred_ms, "draw_ms": st[-1].draw_ms, "plan_ms": st[-1].plan_ms,
-                             "adapt_ms": st[-1].adapt_ms, "tiles_raster": st[-1].tiles_raster,
-                             "tiles_raycast": st[-1].tiles_raycast, "explored": sum(s.explored_tiles for s in st)})
+                rows.append(
+                    {
+                        "method": m,
+                        "frame": k,
+                        "wall_ms": float(np.median(w)),
+                        "wall_ms_repeats": w,
+                        "pred_ms": st[-1].pred_ms,
+                        "draw_ms": st[-1].draw_ms,
+                        "plan_ms": st[-1].plan_ms,
+                        "adapt_ms": st[-1].adapt_ms,
+                        "tiles_raster": st[-1].tiles_raster,
+                        "tiles_raycast": st[-1].tiles_raycast,
+                        "explored": sum(s.explored_tiles for s in st),
+                    }
+                )
     finally:
         for r in renderers.values():
             r.release()
@@ -84,6 +98,7 @@ def summarize(frames: pd.DataFrame) -> dict[str, pd.DataFrame]:
     median ms of every method."""
     from .adapt_charts import prediction_error
     from .noise import compare
+
     rows = []
     for (flight, tau), g in frames.groupby(["flight", "tau"], sort=False):
         late = g[g["frame"] >= SETTLED_FROM]
@@ -92,30 +107,49 @@ def summarize(frames: pd.DataFrame) -> dict[str, pd.DataFrame]:
         best = min(pure_ms, key=pure_ms.get)
         for s in sorted({m.split(":")[1] for m in by if ":" in m}, key=STARTS.index):
             hy, fr = by[f"hybrid:{s}"], by[f"frozen:{s}"]
-            rows.append({"flight": flight, "tau": tau, "start": s, "better pure": best,
-                         "better pure ms": pure_ms[best], "adapting ms": float(hy["wall_ms"].median()),
-                         TARGET: float(hy["wall_ms"].median()) / pure_ms[best],
-                         "frozen / better pure (starting gap)": float(fr["wall_ms"].median()) / pure_ms[best],
-                         "adapting against better pure": compare("hybrid", hy, best, by[best]).words(),
-                         "adapting against the device's start": compare("hybrid", hy, "device",
-                                                                         by["hybrid:device"]).words(),
-                         "raster tiles %": 100 * hy["tiles_raster"].sum() / max(
-                             hy["tiles_raster"].sum() + hy["tiles_raycast"].sum(), 1),
-                         "prediction error %, frames 8-": float(prediction_error(hy).median()),
-                         "explored tiles": int(g[g["method"] == f"hybrid:{s}"]["explored"].sum()),
-                         "adapt ms a frame": float(hy["adapt_ms"].median())})
+            rows.append(
+                {
+                    "flight": flight,
+                    "tau": tau,
+                    "start": s,
+                    "better pure": best,
+                    "better pure ms": pure_ms[best],
+                    "adapting ms": float(hy["wall_ms"].median()),
+                    TARGET: float(hy["wall_ms"].median()) / pure_ms[best],
+                    "frozen / better pure (starting gap)": float(fr["wall_ms"].median()) / pure_ms[best],
+                    "adapting against better pure": compare("hybrid", hy, best, by[best]).words(),
+                    "adapting against the device's start": compare("hybrid", hy, "device", by["hybrid:device"]).words(),
+                    "raster tiles %": 100
+                    * hy["tiles_raster"].sum()
+                    / max(hy["tiles_raster"].sum() + hy["tiles_raycast"].sum(), 1),
+                    "prediction error %, frames 8-": float(prediction_error(hy).median()),
+                    "explored tiles": int(g[g["method"] == f"hybrid:{s}"]["explored"].sum()),
+                    "adapt ms a frame": float(hy["adapt_ms"].median()),
+                }
+            )
     per_frame = frames.pivot_table(index=["flight", "tau", "frame"], columns="method", values="wall_ms").reset_index()
-    return {"convergence: frames 8 to the end, ratios of median frame ms in this run": pd.DataFrame(rows),
-            "frame ms per frame (median of repeats)": per_frame}
+    return {
+        "convergence: frames 8 to the end, ratios of median frame ms in this run": pd.DataFrame(rows),
+        "frame ms per frame (median of repeats)": per_frame,
+    }
 
 
-def run(ctx, frames: int = 24, size: str = "640x360", repeats: int = 3, taus=(2 / 3, 2.0),
-        flights=("flyover", "orbit", "dolly"), tile_size: int = 128, starts=STARTS) -> dict[str, pd.DataFrame]:
+def run(
+    ctx,
+    frames: int = 24,
+    size: str = "640x360",
+    repeats: int = 3,
+    taus=(2 / 3, 2.0),
+    flights=("flyover", "orbit", "dolly"),
+    tile_size: int = 128,
+    starts=STARTS,
+) -> dict[str, pd.DataFrame]:
     """The benchmark on Puget: its tables keyed by title; size WIDTHxHEIGHT in pixels, tau in pixels."""
     from hybrid.camera.flight import preset
     from hybrid.camera.view import parse_size
     from hybrid.gl.context import gl_info
     from hybrid.terrain.datasets import puget
+
     w, h = parse_size(size, "size")
     hf = puget()
     models = {s: m for s, m in start_models(gl_info(ctx).renderer).items() if s in starts or s == "device"}
@@ -133,6 +167,7 @@ def main(argv=None) -> int:
     from hybrid.gl.context import gl_info, shared_context
 
     from .tables import text_tables
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=24)
     ap.add_argument("--size", default="640x360")

@@ -8,6 +8,7 @@ beside it the pure method draws the same frames, the two interleaved frame by fr
 256 on Puget's default flights. Its extra time is planning (features, triangle estimates, the choice) and
 learning (``adapt_ms``). Target: the hybrid's frame within 1.03x the pure method's.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -34,6 +35,7 @@ def draw(ctx, hf, views, tau: float, tile_size: int, model, method: str, repeats
     """Rows (policy, frame, wall_ms, wall_ms_repeats, plan_ms, adapt_ms, tiles): the pure method and the hybrid
     forced to its choices, interleaved, every frame ``repeats`` times."""
     from hybrid.renderer import Renderer
+
     rs = {}
     try:
         rs[method] = Renderer(ctx, hf, method, tile_size)
@@ -43,7 +45,7 @@ def draw(ctx, hf, views, tau: float, tile_size: int, model, method: str, repeats
         got: dict = {(p, k): [] for p in rs for k in range(len(views))}
         for rep in range(repeats):
             for k, v in enumerate(views):
-                for p in (list(rs) if (k + rep) % 2 else list(rs)[::-1]):
+                for p in list(rs) if (k + rep) % 2 else list(rs)[::-1]:
                     got[(p, k)].append(rs[p].render(v, tau, read=False).stats)
     finally:
         for r in rs.values():
@@ -53,15 +55,30 @@ def draw(ctx, hf, views, tau: float, tile_size: int, model, method: str, repeats
         if p == "hybrid" and any((s.tiles_raycast if method == "raycast" else s.tiles_raster) != s.tiles for s in st):
             raise TerrabenchError(f"the hybrid forced to {method} drew some tiles another way")
         w = [s.wall_ms for s in st]
-        rows.append({"policy": p, "frame": k, "wall_ms": float(np.median(w)), "wall_ms_repeats": w,
-                     "plan_ms": float(np.median([s.plan_ms for s in st])),
-                     "adapt_ms": float(np.median([s.adapt_ms for s in st])), "tiles": st[-1].tiles})
+        rows.append(
+            {
+                "policy": p,
+                "frame": k,
+                "wall_ms": float(np.median(w)),
+                "wall_ms_repeats": w,
+                "plan_ms": float(np.median([s.plan_ms for s in st])),
+                "adapt_ms": float(np.median([s.adapt_ms for s in st])),
+                "tiles": st[-1].tiles,
+            }
+        )
     return pd.DataFrame(rows)
 
 
-def run(ctx, frames: int = 8, size: str = "640x360", repeats: int = 5, tau: float = 2 / 3,
-        flights=("flyover", "orbit", "dolly"), methods=("raster", "raycast"),
-        tile_sizes=TILE_SIZES) -> dict[str, pd.DataFrame]:
+def run(
+    ctx,
+    frames: int = 8,
+    size: str = "640x360",
+    repeats: int = 5,
+    tau: float = 2 / 3,
+    flights=("flyover", "orbit", "dolly"),
+    methods=("raster", "raycast"),
+    tile_sizes=TILE_SIZES,
+) -> dict[str, pd.DataFrame]:
     """The benchmark's table on Puget: per tile size, flight and pure method, the hybrid's frame against it."""
     from hybrid.camera.flight import preset
     from hybrid.camera.view import parse_size
@@ -70,6 +87,7 @@ def run(ctx, frames: int = 8, size: str = "640x360", repeats: int = 5, tau: floa
     from hybrid.terrain.datasets import puget
 
     from .noise import compare
+
     w, h = parse_size(size, "size")
     hf = puget()
     model = load_cost_model(gl_info(ctx).renderer)
@@ -81,13 +99,25 @@ def run(ctx, frames: int = 8, size: str = "640x360", repeats: int = 5, tau: floa
                 df = draw(ctx, hf, views, tau, ts, model, method, repeats)
                 by = {p: g for p, g in df.groupby("policy")}
                 c = compare("hybrid", by["hybrid"], method, by[method])
-                out.append({"tile size": ts, "flight": flight, "pure": method, "tiles": float(by[method]["tiles"].median()),
-                            "pure ms": c.ms_b, "hybrid ms": c.ms_a, TARGET: c.ratio, "reading": c.words(),
-                            "pure plan ms": float(by[method]["plan_ms"].median()),
-                            "hybrid plan ms": float(by["hybrid"]["plan_ms"].median()),
-                            "hybrid adapt ms": float(by["hybrid"]["adapt_ms"].median())})
-    return {f"choosing where the hybrid's choices equal a pure method's ({size}, tau {tau:.3g} px, {frames} frames, "
-            f"median of {repeats} repeats)": pd.DataFrame(out)}
+                out.append(
+                    {
+                        "tile size": ts,
+                        "flight": flight,
+                        "pure": method,
+                        "tiles": float(by[method]["tiles"].median()),
+                        "pure ms": c.ms_b,
+                        "hybrid ms": c.ms_a,
+                        TARGET: c.ratio,
+                        "reading": c.words(),
+                        "pure plan ms": float(by[method]["plan_ms"].median()),
+                        "hybrid plan ms": float(by["hybrid"]["plan_ms"].median()),
+                        "hybrid adapt ms": float(by["hybrid"]["adapt_ms"].median()),
+                    }
+                )
+    return {
+        f"choosing where the hybrid's choices equal a pure method's ({size}, tau {tau:.3g} px, {frames} frames, "
+        f"median of {repeats} repeats)": pd.DataFrame(out)
+    }
 
 
 def main(argv=None) -> int:
@@ -95,6 +125,7 @@ def main(argv=None) -> int:
     from hybrid.gl.context import gl_info, shared_context
 
     from .tables import text_tables
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=8)
     ap.add_argument("--size", default="640x360")

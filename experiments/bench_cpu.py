@@ -19,6 +19,7 @@ Two ways of drawing, alternated in every repeat, so both see the same machine:
   turn, as the accuracy runs do. The read-back and the other policies' frames between two frames of a policy
   leave its data out of the CPU's caches, which makes the same work slower.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -47,8 +48,9 @@ def back_to_back_stats(renderers: dict, views, tau: float) -> dict:
     return {(p, k): [r.render(v, tau, read=False).stats] for p, r in renderers.items() for k, v in enumerate(views)}
 
 
-def measure(model_for: str, frames: int = 8, size: str = "640x360", repeats: int = 5, tile_size: int = 128,
-            tau: float = 2 / 3) -> dict:
+def measure(
+    model_for: str, frames: int = 8, size: str = "640x360", repeats: int = 5, tile_size: int = 128, tau: float = 2 / 3
+) -> dict:
     """In this process (the child): per flight, policy, frame and way of drawing (``back`` to back, or with
     ``read``-back), the median over repeats of plan, issue and wall ms on Puget's default flights, with the
     renderer's name; the hybrid with ``model_for``'s cost model."""
@@ -59,7 +61,8 @@ def measure(model_for: str, frames: int = 8, size: str = "640x360", repeats: int
     from hybrid.cost.model import load_cost_model
     from hybrid.gl.context import gl_info, shared_context
     from hybrid.terrain.datasets import puget
-    warnings.simplefilter("ignore", RuntimeWarning)          # the no-op driver's read-backs hold no image
+
+    warnings.simplefilter("ignore", RuntimeWarning)  # the no-op driver's read-backs hold no image
     ctx = shared_context()
     w, h = parse_size(size, "size")
     hf = puget()
@@ -84,11 +87,12 @@ def _warm_renderers(renderers: dict, ctx, hf, model, views, tile_size: int, tau:
     from hybrid.renderer import make_renderer
 
     from .bench_choice import forced
+
     for p in POLICIES:
         base, _, only = p.partition("=")
         opts = {"cost_model": forced(model, only) if only else model} if base == "hybrid" else {}
         renderers[p] = make_renderer(ctx, hf, base, tile_size=tile_size, **opts)
-        for v in views:                                # warm: uploads, estimates, shader compiles
+        for v in views:  # warm: uploads, estimates, shader compiles
             renderers[p].render(v, tau)
 
 
@@ -96,18 +100,31 @@ def _median_rows(fname: str, renderers: dict, views, tau: float, repeats: int) -
     """Per policy, frame and way of drawing (``back`` to back, ``read``-back), the median plan, issue, wall and
     adapt ms over ``repeats``, the two ways alternating."""
     from .bench_hybrid import interleaved_stats
+
     got: dict[tuple, list] = {("back", p, k): [] for p in POLICIES for k in range(len(views))}
     got.update({("read", p, k): [] for p in POLICIES for k in range(len(views))})
-    for _ in range(repeats):                           # the two ways alternate: one machine for both
-        for way, stats in (("back", back_to_back_stats(renderers, views, tau)),
-                           ("read", interleaved_stats(renderers, views, tau, 1))):
+    for _ in range(repeats):  # the two ways alternate: one machine for both
+        for way, stats in (
+            ("back", back_to_back_stats(renderers, views, tau)),
+            ("read", interleaved_stats(renderers, views, tau, 1)),
+        ):
             for (p, k), x in stats.items():
                 got[(way, p, k)] += x
     rows = []
     for (way, p, k), x in got.items():
         plan, issue, wall, adapt = np.median([(s.plan_ms, s.issue_ms, s.wall_ms, s.adapt_ms) for s in x], axis=0)
-        rows.append({"flight": fname, "policy": p, "frame": k, "way": way, "plan_ms": plan,
-                     "issue_ms": issue, "wall_ms": wall, "adapt_ms": adapt})
+        rows.append(
+            {
+                "flight": fname,
+                "policy": p,
+                "frame": k,
+                "way": way,
+                "plan_ms": plan,
+                "issue_ms": issue,
+                "wall_ms": wall,
+                "adapt_ms": adapt,
+            }
+        )
     return rows
 
 
@@ -123,10 +140,19 @@ def mixed_parts(r, views, tau: float, repeats: int) -> list[dict]:
         whole, parts = [], []
         for _ in range(repeats):
             whole.append(r.render(v, tau, plans=plans, read=False).stats.issue_ms)
-            parts.append(sum(r.render(v, tau, plans=[p for p in plans if p.choice == s], read=False).stats.issue_ms
-                             for s in used))
-        out.append({"frame": k, "strategies": "+".join(used), "whole_ms": float(np.median(whole)),
-                    "parts_ms": float(np.median(parts))})
+            parts.append(
+                sum(
+                    r.render(v, tau, plans=[p for p in plans if p.choice == s], read=False).stats.issue_ms for s in used
+                )
+            )
+        out.append(
+            {
+                "frame": k,
+                "strategies": "+".join(used),
+                "whole_ms": float(np.median(whole)),
+                "parts_ms": float(np.median(parts)),
+            }
+        )
     return out
 
 
@@ -136,8 +162,20 @@ def run_child(model_for: str, frames: int, size: str, repeats: int) -> dict:
     all (the no-op driver has crashed inside a buffer write in about one run in fifteen here; a crash leaves no
     numbers, so those of a run that finished are whole)."""
     env = {**os.environ, "GALLIUM_NOOP": "1"}
-    cmd = [sys.executable, "-m", "experiments.bench_cpu", "--child", "--model-for", model_for, "--frames", str(frames),
-           "--size", size, "--repeats", str(repeats)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "experiments.bench_cpu",
+        "--child",
+        "--model-for",
+        model_for,
+        "--frames",
+        str(frames),
+        "--size",
+        size,
+        "--repeats",
+        str(repeats),
+    ]
     for attempt in range(1, CHILD_ATTEMPTS + 1):
         try:
             done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=CHILD_TIMEOUT_S)
@@ -147,8 +185,10 @@ def run_child(model_for: str, frames: int, size: str, repeats: int) -> dict:
             break
     lines = done.stdout.strip().splitlines()
     if done.returncode != 0 or not lines:
-        raise TerrabenchError(f"the CPU benchmark's child process failed (exit {done.returncode}, attempt {attempt} "
-                              f"of {CHILD_ATTEMPTS}): {done.stderr.strip()[-2000:]}")
+        raise TerrabenchError(
+            f"the CPU benchmark's child process failed (exit {done.returncode}, attempt {attempt} "
+            f"of {CHILD_ATTEMPTS}): {done.stderr.strip()[-2000:]}"
+        )
     return {**json.loads(lines[-1]), "attempts": attempt}
 
 
@@ -161,23 +201,32 @@ def summarize(result: dict) -> dict[str, pd.DataFrame]:
     df["cpu_ms"] = df["plan_ms"] + df["issue_ms"] + df["adapt_ms"]
     t = df.groupby(["way", "flight", "policy"], sort=False)[["plan_ms", "issue_ms", "adapt_ms", "cpu_ms"]].median()
     back, read = t.loc["back"], t.loc["read"]
-    out = back.rename(columns={"plan_ms": "plan ms", "issue_ms": "issue ms", "adapt_ms": "adapt ms",
-                               "cpu_ms": TARGET})
+    out = back.rename(columns={"plan_ms": "plan ms", "issue_ms": "issue ms", "adapt_ms": "adapt ms", "cpu_ms": TARGET})
     out[READ_BACK] = read["cpu_ms"]
     out["with / without read-back"] = read["cpu_ms"] / back["cpu_ms"]
     renderer = result["renderer"]
-    how = ("Mesa's no-op driver: every GL call made, no GPU work" if renderer == "NOOP" else
-           f"{renderer}, drawing for real (issue without the waits for the GPU)")
+    how = (
+        "Mesa's no-op driver: every GL call made, no GPU work"
+        if renderer == "NOOP"
+        else f"{renderer}, drawing for real (issue without the waits for the GPU)"
+    )
     if result.get("attempts", 1) > 1:
         how += f"; the child crashed and was run again, {result['attempts']} runs in all"
     tables = {f"CPU time a frame on Puget, median of frames ({how})": out.reset_index()}
     if result.get("mixed"):
         m = pd.DataFrame(result["mixed"])
         m["extra_ms"] = m["whole_ms"] - m["parts_ms"]
-        tables["a mixed frame's issue against its strategies' tiles drawn alone (target: extra <= 0.5 ms)"] = \
-            m.groupby("flight", sort=False).agg(frames=("frame", "count"), whole_ms=("whole_ms", "median"),
-                                                 parts_ms=("parts_ms", "median"), extra_ms=("extra_ms", "median"),
-                                                 extra_max_ms=("extra_ms", "max")).reset_index()
+        tables["a mixed frame's issue against its strategies' tiles drawn alone (target: extra <= 0.5 ms)"] = (
+            m.groupby("flight", sort=False)
+            .agg(
+                frames=("frame", "count"),
+                whole_ms=("whole_ms", "median"),
+                parts_ms=("parts_ms", "median"),
+                extra_ms=("extra_ms", "median"),
+                extra_max_ms=("extra_ms", "max"),
+            )
+            .reset_index()
+        )
     return tables
 
 
@@ -185,6 +234,7 @@ def run(ctx=None, frames: int = 8, size: str = "640x360", repeats: int = 5) -> d
     """The benchmark's table keyed by title; the frames drawn in a child process (``run_child``), the hybrid with the
     cost model of ``ctx``'s device (the default process context when None)."""
     from hybrid.gl.context import gl_info, shared_context
+
     renderer = gl_info(ctx if ctx is not None else shared_context()).renderer
     return summarize(run_child(renderer, frames, size, repeats))
 
@@ -192,6 +242,7 @@ def run(ctx=None, frames: int = 8, size: str = "640x360", repeats: int = 5) -> d
 def main(argv=None) -> int:
     """Run the CPU benchmark and print its table (``--child``: measure here and print the rows as JSON)."""
     from .tables import text_tables
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=8)
     ap.add_argument("--size", default="640x360")

@@ -7,6 +7,7 @@ repeats, the policies interleaved frame by frame) of every policy with the noise
 targets (faster raster strategy vs the ray caster, the hybrid's share of raster tiles, hybrid vs the better
 pure method and vs the oracle), and the cost model's per-tile error against the oracle's measurements.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -35,23 +36,34 @@ def run_benchmark(ctx, hf, flights: dict, tau: float = 2 / 3, repeats: int = 5, 
     slow spell of the machine falls on all of them alike instead of on whichever ran then.
     """
     from hybrid.renderer import make_renderer
+
     rows, tiles = [], []
     for fname, views in flights.items():
         renderers = {}
         try:
             for pol in POLICIES:
                 renderers[pol] = make_renderer(ctx, hf, pol, tile_size=tile_size)
-                renderers[pol].render(views[0], tau)             # warm: uploads, shader compiles
+                renderers[pol].render(views[0], tau)  # warm: uploads, shader compiles
             stats = interleaved_stats(renderers, views, tau, repeats)
             for pol in POLICIES:
                 for k in range(len(views)):
                     w, st = [x.wall_ms for x in stats[(pol, k)]], stats[(pol, k)][-1]
-                    rows.append({"flight": fname, "policy": pol, "frame": k, "wall_ms": float(np.median(w)),
-                                 "wall_ms_repeats": [float(x) for x in w],
-                                 "spread": float((max(w) - min(w)) / np.median(w)),
-                                 "tiles": st.tiles, "tiles_raster": st.tiles_raster, "tiles_raycast": st.tiles_raycast,
-                                 "tiles_gs": st.tiles_gs, "plan_ms": st.plan_ms,
-                                 "pred_ms": np.nan if st.pred_ms is None else st.pred_ms})
+                    rows.append(
+                        {
+                            "flight": fname,
+                            "policy": pol,
+                            "frame": k,
+                            "wall_ms": float(np.median(w)),
+                            "wall_ms_repeats": [float(x) for x in w],
+                            "spread": float((max(w) - min(w)) / np.median(w)),
+                            "tiles": st.tiles,
+                            "tiles_raster": st.tiles_raster,
+                            "tiles_raycast": st.tiles_raycast,
+                            "tiles_gs": st.tiles_gs,
+                            "plan_ms": st.plan_ms,
+                            "pred_ms": np.nan if st.pred_ms is None else st.pred_ms,
+                        }
+                    )
                     if pol == "oracle":
                         together = {f"together_{n}_ms": v for n, v in st.together_ms.items()}
                         for t in st.tile_rows:
@@ -73,30 +85,44 @@ def tile_errors(tiles: pd.DataFrame, model) -> pd.DataFrame:
     and ``meas_<s>_ms`` columns, ms): raw, of the ratio to ray casting, and with the run's one scale (``SCALED``);
     each prediction has the model's per-call overhead added (a model fitted without tiles: the frames')."""
     from hybrid.cost.fit import estimate_overhead
+
     err, pred_of = [], {}
     frames_of = tiles.groupby(["flight", "frame"])
-    for s in model.candidates:                # each tile's call pays the model's per-call overhead (a model
-        call = model.call_overhead.get(s)     # fitted without tiles: that of this run's frames)
+    for s in model.candidates:  # each tile's call pays the model's per-call overhead (a model
+        call = model.call_overhead.get(s)  # fitted without tiles: that of this run's frames)
         if call is None:
-            call = estimate_overhead([g[f"meas_{s}_ms"].to_numpy() for _, g in frames_of],
-                                     [float(g[f"together_{s}_ms"].iloc[0]) for _, g in frames_of])
+            call = estimate_overhead(
+                [g[f"meas_{s}_ms"].to_numpy() for _, g in frames_of],
+                [float(g[f"together_{s}_ms"].iloc[0]) for _, g in frames_of],
+            )
         pred = pred_of[s] = tiles[f"pred_{s}_ms"] + call
         meas = tiles[f"meas_{s}_ms"]
-        err.append({"strategy": s, "median |relative error| %": 100 * float(np.median(np.abs(pred - meas) / meas)),
-                    "median predicted / measured": float(np.median(pred / meas)), "tiles": len(tiles)})
+        err.append(
+            {
+                "strategy": s,
+                "median |relative error| %": 100 * float(np.median(np.abs(pred - meas) / meas)),
+                "median predicted / measured": float(np.median(pred / meas)),
+                "tiles": len(tiles),
+            }
+        )
     # one factor for the whole run, every strategy's tiles together: the machine's speed against calibration's
     scale = float(np.median(np.concatenate([(pred_of[s] / tiles[f"meas_{s}_ms"]).to_numpy() for s in pred_of])))
-    for e in err:                             # the ratio the choice reads, which a drift of the machine's speed
-        s = e["strategy"]                     # since calibration (the median above) does not change
+    for e in err:  # the ratio the choice reads, which a drift of the machine's speed
+        s = e["strategy"]  # since calibration (the median above) does not change
         if s != "raycast" and "raycast" in pred_of:
             q = (pred_of[s] / pred_of["raycast"]) / (tiles[f"meas_{s}_ms"] / tiles["meas_raycast_ms"])
             e["median |relative error| of the ratio to raycast %"] = 100 * float(np.median(np.abs(q - 1)))
         meas = tiles[f"meas_{s}_ms"]
         e[SCALED] = 100 * float(np.median(np.abs(pred_of[s] / scale - meas) / meas))
-    err.append({"strategy": "all", "median |relative error| %":
-                float(np.median([e["median |relative error| %"] for e in err])),
-                "median predicted / measured": scale, "tiles": len(tiles),
-                SCALED: float(np.median([e[SCALED] for e in err]))})
+    err.append(
+        {
+            "strategy": "all",
+            "median |relative error| %": float(np.median([e["median |relative error| %"] for e in err])),
+            "median predicted / measured": scale,
+            "tiles": len(tiles),
+            SCALED: float(np.median([e[SCALED] for e in err])),
+        }
+    )
     return pd.DataFrame(err)
 
 
@@ -108,25 +134,37 @@ def summarize(frames: pd.DataFrame, tiles: pd.DataFrame, model) -> dict[str, pd.
     the run's noise reads as a tie."""
     out, ratios = {}, []
     for fname, g in frames.groupby("flight", sort=False):
-        t = g.groupby("policy", sort=False).agg(total_ms=("wall_ms", "sum"), median_ms=("wall_ms", "median"),
-                                                spread_pct=("spread", lambda x: 100 * float(np.median(x))),
-                                                raster_tiles=("tiles_raster", "sum"),
-                                                gs_tiles=("tiles_gs", "sum"),
-                                                raycast_tiles=("tiles_raycast", "sum"),
-                                                plan_ms=("plan_ms", "median"))
+        t = g.groupby("policy", sort=False).agg(
+            total_ms=("wall_ms", "sum"),
+            median_ms=("wall_ms", "median"),
+            spread_pct=("spread", lambda x: 100 * float(np.median(x))),
+            raster_tiles=("tiles_raster", "sum"),
+            gs_tiles=("tiles_gs", "sum"),
+            raycast_tiles=("tiles_raycast", "sum"),
+            plan_ms=("plan_ms", "median"),
+        )
         out[f"flight {fname} ({g['frame'].nunique()} frames)"] = t.reset_index()
         ratios.append(_flight_ratios(fname, g, t))
     out["targets: ratios of total frame time in this run"] = pd.DataFrame(ratios)
     if len(tiles):
-        out[f"cost model ({model.source}): per-tile error against the oracle's in-frame measurements, each tile's "
-            "call's overhead (the model's) added to its prediction (target <= 20 %)"] = tile_errors(tiles, model)
+        out[
+            f"cost model ({model.source}): per-tile error against the oracle's in-frame measurements, each tile's "
+            "call's overhead (the model's) added to its prediction (target <= 20 %)"
+        ] = tile_errors(tiles, model)
     hy = frames[(frames["policy"] == "hybrid") & frames["pred_ms"].notna()]
-    if len(hy):                                   # what the model is fitted to: whole frames (drawing, planning apart)
+    if len(hy):  # what the model is fitted to: whole frames (drawing, planning apart)
         drawn = hy["wall_ms"] - hy["plan_ms"]
         rel = np.abs(hy["pred_ms"] - drawn) / drawn
         out[f"cost model ({model.source}): the hybrid's predicted frame against its measured drawing"] = pd.DataFrame(
-            [{"flight": f, "median |relative error| %": 100 * float(np.median(rel[hy["flight"] == f])),
-              "frames": int((hy["flight"] == f).sum())} for f in hy["flight"].unique()])
+            [
+                {
+                    "flight": f,
+                    "median |relative error| %": 100 * float(np.median(rel[hy["flight"] == f])),
+                    "frames": int((hy["flight"] == f).sum()),
+                }
+                for f in hy["flight"].unique()
+            ]
+        )
     return out
 
 
@@ -134,31 +172,44 @@ def _flight_ratios(fname: str, g: pd.DataFrame, t: pd.DataFrame) -> dict:
     """One flight's target ratios of total frame time (``t``: per policy, from its frames ``g``), each with the
     reading of the same pair from the run's repeats."""
     from .noise import compare
+
     tot = t["total_ms"]
     raster = min(("raster", "raster_gs"), key=lambda p: tot[p])
     best = min(("raster", "raster_gs", "raycast"), key=lambda p: tot[p])
     hy = t.loc["hybrid"]
     by = {p: q for p, q in g.groupby("policy", sort=False)}
-    return {"flight": fname, "faster raster": raster,
-            "faster raster / raycast (target <= 1.5)": tot[raster] / tot["raycast"],
-            "reading": compare(raster, by[raster], "raycast", by["raycast"]).words(),
-            "hybrid raster tiles % (target >= 15 on one flight)":
-                100 * hy["raster_tiles"] / max(hy["raster_tiles"] + hy["raycast_tiles"], 1),
-            "better pure": best,
-            "hybrid / better pure (target <= 0.85 on one, <= 1.05 on every flight)": tot["hybrid"] / tot[best],
-            "hybrid reading": compare("hybrid", by["hybrid"], best, by[best]).words(),
-            "hybrid / oracle": tot["hybrid"] / tot["oracle"],
-            "noise (median repeat spread %)": float(t["spread_pct"].median())}
+    return {
+        "flight": fname,
+        "faster raster": raster,
+        "faster raster / raycast (target <= 1.5)": tot[raster] / tot["raycast"],
+        "reading": compare(raster, by[raster], "raycast", by["raycast"]).words(),
+        "hybrid raster tiles % (target >= 15 on one flight)": 100
+        * hy["raster_tiles"]
+        / max(hy["raster_tiles"] + hy["raycast_tiles"], 1),
+        "better pure": best,
+        "hybrid / better pure (target <= 0.85 on one, <= 1.05 on every flight)": tot["hybrid"] / tot[best],
+        "hybrid reading": compare("hybrid", by["hybrid"], best, by[best]).words(),
+        "hybrid / oracle": tot["hybrid"] / tot["oracle"],
+        "noise (median repeat spread %)": float(t["spread_pct"].median()),
+    }
 
 
-def run(ctx, frames: int = 8, size: str = "640x360", tau: float = 2 / 3, repeats: int = 5,
-        flights=("flyover", "orbit"), tile_size: int = 128) -> dict[str, pd.DataFrame]:
+def run(
+    ctx,
+    frames: int = 8,
+    size: str = "640x360",
+    tau: float = 2 / 3,
+    repeats: int = 5,
+    flights=("flyover", "orbit"),
+    tile_size: int = 128,
+) -> dict[str, pd.DataFrame]:
     """The benchmark on Puget: its tables keyed by title; size WIDTHxHEIGHT in pixels, tau in pixels."""
     from hybrid.camera.flight import preset
     from hybrid.camera.view import parse_size
     from hybrid.cost.model import load_cost_model
     from hybrid.gl.context import gl_info
     from hybrid.terrain.datasets import puget
+
     w, h = parse_size(size, "size")
     hf = puget()
     views = {f: preset(f, hf, frames, w, h).views() for f in flights}
@@ -172,6 +223,7 @@ def main(argv=None) -> int:
     from hybrid.gl.context import gl_info, shared_context
 
     from .tables import text_tables
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=8)
     ap.add_argument("--size", default="640x360")

@@ -9,6 +9,7 @@ tile by tile (``batch=False``) and as arrays, and the parts (selection, triangle
 hybrid adds to the selection every policy pays (features, predictions, choices) is the batch plan less the
 selection, the two timed back to back in each of 3x the repeats and the median of their differences taken.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -53,7 +54,7 @@ def run_benchmark(hf, flights: dict, model, tile_sizes=(256, 128), taus=(2 / 3,)
     def frame_ms(pyramid, est, view, tau) -> dict:
         """Median ms of each planning step for one view (the timed lambdas bind this call's arguments)."""
         sel = select_tiles(pyramid, view, tau)
-        tri, vis = est.many(sel, view, tau)                 # warm: per-tile node data
+        tri, vis = est.many(sel, view, tau)  # warm: per-tile node data
         return {
             "tiles": len(sel),
             "plan per tile ms": _median_ms(lambda: plan_frame(pyramid, view, model, batch=False), repeats),
@@ -61,10 +62,13 @@ def run_benchmark(hf, flights: dict, model, tile_sizes=(256, 128), taus=(2 / 3,)
             "select ms": _median_ms(lambda: select_tiles(pyramid, view, tau), repeats),
             "triangles ms": _median_ms(lambda: est.many(sel, view, tau), repeats),
             "features per tile ms": _median_ms(
-                lambda: [tile_features(pyramid, view, s, t, v) for s, t, v in zip(sel, tri, vis)], repeats),
+                lambda: [tile_features(pyramid, view, s, t, v) for s, t, v in zip(sel, tri, vis)], repeats
+            ),
             "features batch ms": _median_ms(lambda: feature_columns(pyramid, view, sel, tri, vis), repeats),
             "features + choices ms (target <= 0.5)": _paired_ms(
-                lambda: plan_frame(pyramid, view, model), lambda: select_tiles(pyramid, view, tau), 3 * repeats)}
+                lambda: plan_frame(pyramid, view, model), lambda: select_tiles(pyramid, view, tau), 3 * repeats
+            ),
+        }
 
     rows = []
     for size in tile_sizes:
@@ -73,8 +77,15 @@ def run_benchmark(hf, flights: dict, model, tile_sizes=(256, 128), taus=(2 / 3,)
         for fname, views in flights.items():
             for tau in taus:
                 for k, view in enumerate(views):
-                    rows.append({"flight": fname, "tile_size": size, "tau": tau, "frame": k,
-                                 **frame_ms(pyramid, est, view, tau)})
+                    rows.append(
+                        {
+                            "flight": fname,
+                            "tile_size": size,
+                            "tau": tau,
+                            "frame": k,
+                            **frame_ms(pyramid, est, view, tau),
+                        }
+                    )
     return pd.DataFrame(rows)
 
 
@@ -90,25 +101,36 @@ def summarize(df: pd.DataFrame) -> pd.DataFrame:
     return out.reset_index()
 
 
-def run(ctx=None, frames: int = 8, size: str = "640x360", taus=(2 / 3,), tile_sizes=(256, 128), repeats: int = 7,
-        flights=("flyover", "orbit")) -> dict[str, pd.DataFrame]:
+def run(
+    ctx=None,
+    frames: int = 8,
+    size: str = "640x360",
+    taus=(2 / 3,),
+    tile_sizes=(256, 128),
+    repeats: int = 7,
+    flights=("flyover", "orbit"),
+) -> dict[str, pd.DataFrame]:
     """The benchmark on Puget, its table keyed by title; ``ctx`` is unused (planning needs no GL)."""
     from hybrid.camera.flight import preset
     from hybrid.camera.view import parse_size
     from hybrid.cost.model import load_cost_model
     from hybrid.terrain.datasets import puget
+
     w, h = parse_size(size, "size")
     hf = puget()
     views = {f: preset(f, hf, frames, w, h).views() for f in flights}
     model = load_cost_model(LLVMPIPE)
-    title = (f"planning on {hf.name} at {w}x{h}, {frames} frames a flight, CPU only, median of {repeats} "
-             f"(cost model {model.source})")
+    title = (
+        f"planning on {hf.name} at {w}x{h}, {frames} frames a flight, CPU only, median of {repeats} "
+        f"(cost model {model.source})"
+    )
     return {title: summarize(run_benchmark(hf, views, model, tile_sizes, taus, repeats))}
 
 
 def main(argv=None) -> int:
     """Run the planning benchmark on Puget and print its table."""
     from .tables import text_tables
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=8)
     ap.add_argument("--size", default="640x360")

@@ -15,6 +15,7 @@
 5. Tilelet culling gain on a low view.
 Timings: wall clock around ctx.finish() (GPU timer queries are wrong on llvmpipe); median of repeats.
 """
+
 from __future__ import annotations
 
 import time
@@ -29,6 +30,7 @@ def puget_tiles(count=4):
     """A few 257² full-resolution tiles of the bundled Puget Sound model (tile size 256)."""
     from hybrid.terrain.datasets import puget
     from hybrid.tiles.pyramid import TilePyramid
+
     hf = puget(with_texture=False)
     pyr = TilePyramid(hf, 256)
     keys = pyr.keys(0)
@@ -36,8 +38,17 @@ def puget_tiles(count=4):
     return hf, [pyr.tile(k) for k in keys[::step][:count]]
 
 
-TIN_METHODS = ("quadtree", "quadtree-lean", "quadtree-morph", "gpu-full-res-exact", "gpu-combined",
-               "gpu-full-res-lean", "martini", "delatin", "fast-simpl")
+TIN_METHODS = (
+    "quadtree",
+    "quadtree-lean",
+    "quadtree-morph",
+    "gpu-full-res-exact",
+    "gpu-combined",
+    "gpu-full-res-lean",
+    "martini",
+    "delatin",
+    "fast-simpl",
+)
 """The meshes ``triangles_vs_error`` compares, in its rows' order."""
 
 
@@ -47,14 +58,17 @@ def triangles_vs_error(tiles, errors=(5.0, 10.0, 20.0, 40.0, 80.0)):
         from pydelatin import Delatin
         from pymartini import Martini
     except ImportError as exc:
-        raise TerrabenchError(f"the raster benchmark compares with pymartini and pydelatin ({exc.name} is missing): "
-                              "pip install 'terrabench[bench]'") from None
+        raise TerrabenchError(
+            f"the raster benchmark compares with pymartini and pydelatin ({exc.name} is missing): "
+            "pip install 'terrabench[bench]'"
+        ) from None
 
     from raster.quadtree import GPU_BETA, error_pyramid
+
     rows = []
     pyrs = {"quadtree": [error_pyramid(t.heights) for t in tiles]}
     pyrs["quadtree-lean"] = pyrs["quadtree-morph"] = pyrs["quadtree"]
-    pyrs["gpu-full-res-lean"] = [error_pyramid(t.heights, GPU_BETA) for t in tiles]   # what raster, raster_gs draw
+    pyrs["gpu-full-res-lean"] = [error_pyramid(t.heights, GPU_BETA) for t in tiles]  # what raster, raster_gs draw
     pyrs["gpu-full-res-exact"] = pyrs["gpu-full-res-lean"]
     pyrs["gpu-combined"] = [error_pyramid(t.heights, GPU_BETA, side_errors=False) for t in tiles]
     n = tiles[0].n
@@ -73,8 +87,9 @@ def triangles_vs_error(tiles, errors=(5.0, 10.0, 20.0, 40.0, 80.0)):
                 err = max(err, t_err)
             res[name] = (tri, err)
         for name, (tri, err) in res.items():
-            rows.append((f"{e:g}", name, tri, f"{err:.2f}", f"{tri / res['delatin'][0]:.2f}",
-                         f"{tri / res['martini'][0]:.2f}"))
+            rows.append(
+                (f"{e:g}", name, tri, f"{err:.2f}", f"{tri / res['delatin'][0]:.2f}", f"{tri / res['martini'][0]:.2f}")
+            )
     return rows
 
 
@@ -82,10 +97,15 @@ def _quadtree_tile(name: str, pyramid, h: np.ndarray, e: float) -> tuple:
     """(triangles, measured max error) of one tile's restricted quadtree at error ``e`` under method ``name``."""
     from raster.quadtree import drawn_max_error
     from raster.restriction import TileLod, restrict_frame
+
     morph = name == "quadtree-morph" or name.startswith("gpu")
-    ts = restrict_frame([TileLod((0, 0, 0), pyramid, e)], morph=morph, use_effective=morph,
-                        lean=name not in ("quadtree", "quadtree-morph"),
-                        exact_full_resolution=name != "gpu-full-res-lean")[(0, 0, 0)]
+    ts = restrict_frame(
+        [TileLod((0, 0, 0), pyramid, e)],
+        morph=morph,
+        use_effective=morph,
+        lean=name not in ("quadtree", "quadtree-morph"),
+        exact_full_resolution=name != "gpu-full-res-lean",
+    )[(0, 0, 0)]
     return ts.triangles, float(drawn_max_error(h, ts.leaves, ts.drop).max())
 
 
@@ -93,12 +113,13 @@ def _tin_tile(name: str, h: np.ndarray, e: float, n: int, martini, Delatin) -> t
     """(triangles, measured max error, inf where unmeasured) of one tile's TIN at error ``e``: martini's, delatin's
     or fast-simplification's (``raster.tin.build_tin``)."""
     from raster.tin import TinMesh, build_tin, tin_max_error
+
     if name == "martini":
         mesh = _martini_mesh(martini, h, e)
     elif name == "delatin":
         d = Delatin(h, max_error=e)
         V = np.asarray(d.vertices, dtype=np.float64)
-        V[:, 1] = n - V[:, 1]          # delatin's rows run north to south
+        V[:, 1] = n - V[:, 1]  # delatin's rows run north to south
         mesh = TinMesh(V, np.asarray(d.triangles, dtype=np.int64))
     else:
         mesh = build_tin(h, 1.0, max_error=e, preserve_border=True)
@@ -110,13 +131,16 @@ def _martini_mesh(martini, h: np.ndarray, e: float):
     """Martini's mesh of a tile meeting error ``e`` at every sample: martini checks its error only at split
     midpoints, so its parameter is bisected until the error measured at every sample meets the target."""
     from raster.tin import TinMesh, tin_max_error
+
     tile_m = martini.create_tile(h)
 
     def mesh_at(param):
         v, f = tile_m.get_mesh(param)
         v = v.astype(np.float64)
-        return TinMesh(np.column_stack([v[:, 0], v[:, 1], h[v[:, 1].astype(int), v[:, 0].astype(int)]]),
-                       f.astype(np.int64))
+        return TinMesh(
+            np.column_stack([v[:, 0], v[:, 1], h[v[:, 1].astype(int), v[:, 0].astype(int)]]), f.astype(np.int64)
+        )
+
     lo, hi, mesh = 0.0, e, mesh_at(0.0)
     for _ in range(7):
         mid = 0.5 * (lo + hi)
@@ -148,6 +172,7 @@ def selection_rows(ctx, repeats=5):
     from hybrid.camera.flight import preset
     from hybrid.renderer import Renderer
     from hybrid.terrain.datasets import puget
+
     hf = puget()
     view = preset("flyover", hf, 8).view(3)
     rows = []
@@ -155,13 +180,25 @@ def selection_rows(ctx, repeats=5):
         with Renderer(ctx, hf, name, tile_size=128) as r:
             r.render(view)
             items = r._items(name, r.plan(view), set())
-            issue, sel = _issue_and_total_ms(lambda name=name, items=items: r.strategies[name].select_leaves(view, items, 2 / 3),
-                                             repeats, ctx)
+            issue, sel = _issue_and_total_ms(
+                lambda name=name, items=items: r.strategies[name].select_leaves(view, items, 2 / 3), repeats, ctx
+            )
             res = [r.render(view).stats for _ in range(repeats)]
             plan, draw_issue = np.median([x.plan_ms for x in res]), np.median([x.issue_ms for x in res])
             cpu = np.median([x.cpu_ms for x in res])
-            rows.append((name, len(items), f"{issue:.2f}", f"{sel:.1f}", f"{np.median([x.wall_ms for x in res]):.1f}",
-                         f"{plan:.2f}", f"{draw_issue:.2f}", f"{cpu:.2f}", res[-1].counters["triangles"]))
+            rows.append(
+                (
+                    name,
+                    len(items),
+                    f"{issue:.2f}",
+                    f"{sel:.1f}",
+                    f"{np.median([x.wall_ms for x in res]):.1f}",
+                    f"{plan:.2f}",
+                    f"{draw_issue:.2f}",
+                    f"{cpu:.2f}",
+                    res[-1].counters["triangles"],
+                )
+            )
     return rows
 
 
@@ -172,20 +209,25 @@ def memory_rows(ctx, hf, tiles):
     from raster.tilelets import TileletStrategy
     from raster.tin import TinStrategy
     from raster.trianglelist import TriangleListStrategy
+
     rows = []
     tile = tiles[0]
     full_tris = 2 * tile.n * tile.n
-    for name, cls, kw in (("tilelets resident (raster, raster_gs)", TileletStrategy, {}),
-                          ("fullres list", TriangleListStrategy, {}),
-                          ("tin 90% reduced", TinStrategy, {"reduction": 0.9})):
+    for name, cls, kw in (
+        ("tilelets resident (raster, raster_gs)", TileletStrategy, {}),
+        ("fullres list", TriangleListStrategy, {}),
+        ("tin 90% reduced", TinStrategy, {"reduction": 0.9}),
+    ):
         s = cls(ctx, hf, **kw)
         g = s.upload(tile)
         tris = getattr(g, "triangles", full_tris)
         rows.append((name, g.nbytes, tris, f"{g.nbytes / tris:.1f}"))
         g.release()
         s.release()
-    for name, per_leaf in (("raster arena, a drawn leaf", VERTEX_BYTES + INDEX_BYTES),
-                           ("raster_gs arena, a drawn leaf", RECORD_BYTES)):
+    for name, per_leaf in (
+        ("raster arena, a drawn leaf", VERTEX_BYTES + INDEX_BYTES),
+        ("raster_gs arena, a drawn leaf", RECORD_BYTES),
+    ):
         rows.append((name, per_leaf, 8, f"{per_leaf / 8:.1f}"))
     rows.append(("paper: list indices", full_tris * 12, full_tris, "12.0 (96 bits)"))
     return rows
@@ -193,6 +235,7 @@ def memory_rows(ctx, hf, tiles):
 
 def _top_view(hf, width=320, height=180):
     from hybrid.camera.view import View
+
     w, d = hf.extent
     ox, oy, oz = hf.origin
     c = np.array([ox + w / 2, oy + d / 2, oz])
@@ -203,6 +246,7 @@ def throughput_rows(ctx, repeats=5):
     """Rows comparing the geometry-shader tilelets with the indexed triangles of the same leaves (Mtri/s)."""
     from hybrid.renderer import Renderer
     from hybrid.terrain.datasets import puget
+
     hf = puget(with_texture=False, size=513)
     view = _top_view(hf)
     rows = []
@@ -214,8 +258,17 @@ def throughput_rows(ctx, repeats=5):
                 res = [r.render(view, mode="shaded", leaf_tau=leaf_tau, culling=False) for _ in range(repeats)]
                 ms[name] = float(np.median([x.stats.draw_ms for x in res]))
                 tris = res[-1].stats.counters["triangles"]
-            rows.append((f"{leaf_tau:g}", tris, f"{ms['gs']:.1f}", f"{tris / ms['gs'] / 1e3:.2f}", f"{ms['inst']:.1f}",
-                         f"{tris / ms['inst'] / 1e3:.2f}", f"{ms['inst'] / ms['gs']:.2f}"))
+            rows.append(
+                (
+                    f"{leaf_tau:g}",
+                    tris,
+                    f"{ms['gs']:.1f}",
+                    f"{tris / ms['gs'] / 1e3:.2f}",
+                    f"{ms['inst']:.1f}",
+                    f"{tris / ms['inst'] / 1e3:.2f}",
+                    f"{ms['inst'] / ms['gs']:.2f}",
+                )
+            )
     return rows
 
 
@@ -224,6 +277,7 @@ def culling_rows(ctx, repeats=5):
     from hybrid.camera.view import View
     from hybrid.renderer import Renderer
     from hybrid.terrain.datasets import puget
+
     hf = puget(with_texture=False, size=513)
     w, d = hf.extent
     ox, oy, _oz = hf.origin
@@ -240,8 +294,7 @@ def culling_rows(ctx, repeats=5):
             ms = float(np.median([x.stats.draw_ms for x in res]))
             s = counted.stats.counters
             base[cull] = ms
-            rows.append(("on" if cull else "off", s["tilelets"], s["tilelets_culled"],
-                         s["triangles"], f"{ms:.1f}"))
+            rows.append(("on" if cull else "off", s["tilelets"], s["tilelets_culled"], s["triangles"], f"{ms:.1f}"))
         rows.append(("gain", "", "", "", f"{base[False] / base[True]:.2f}x"))
     finally:
         r.release()
@@ -252,9 +305,11 @@ def triangle_tables() -> dict[str, pd.DataFrame]:
     """The triangle counts against max vertical error (metres) of every mesh method: CPU only, the same on every
     device (`terrabench bench --which triangles`)."""
     _, tiles = puget_tiles()
-    return {"1. triangles vs max vertical error, 4 Puget tiles of 257² (160 m spacing); error in metres":
-            pd.DataFrame(triangles_vs_error(tiles),
-                         columns=["target", "method", "triangles", "max err", "x delatin", "x martini"])}
+    return {
+        "1. triangles vs max vertical error, 4 Puget tiles of 257² (160 m spacing); error in metres": pd.DataFrame(
+            triangles_vs_error(tiles), columns=["target", "method", "triangles", "max err", "x delatin", "x martini"]
+        )
+    }
 
 
 def run(ctx) -> dict[str, pd.DataFrame]:
@@ -262,17 +317,37 @@ def run(ctx) -> dict[str, pd.DataFrame]:
     triangle_tables."""
     hf, tiles = puget_tiles()
     tables = (
-        ("2. GPU leaf selection alone and the whole frame (Puget flyover frame 3, tiles of 128, 640x360)",
-         ["strategy", "tiles", "selection issue ms", "selection ms", "frame ms", "plan ms", "draw issue ms",
-          "CPU ms (plan + draw issue; on a CPU rasterizer with its vertex and compute work: the cpu bench "
-          "times the target)", "triangles"], selection_rows(ctx)),
-        ("3. GPU bytes per 257² tile", ["representation", "bytes", "triangles", "bytes/tri"],
-         memory_rows(ctx, hf, tiles)),
-        ("4. geometry shader vs indexed triangles, same leaves (Puget 513², top view, 320x180)",
-         ["leaf tau", "triangles", "GS ms", "GS Mtri/s", "indexed ms", "indexed Mtri/s", "indexed/GS"],
-         throughput_rows(ctx)),
-        ("5. tilelet culling on a low view (Puget 513², tiles of 128)",
-         ["culling", "tilelets drawn", "culled", "triangles", "draw ms"], culling_rows(ctx)),
+        (
+            "2. GPU leaf selection alone and the whole frame (Puget flyover frame 3, tiles of 128, 640x360)",
+            [
+                "strategy",
+                "tiles",
+                "selection issue ms",
+                "selection ms",
+                "frame ms",
+                "plan ms",
+                "draw issue ms",
+                "CPU ms (plan + draw issue; on a CPU rasterizer with its vertex and compute work: the cpu bench "
+                "times the target)",
+                "triangles",
+            ],
+            selection_rows(ctx),
+        ),
+        (
+            "3. GPU bytes per 257² tile",
+            ["representation", "bytes", "triangles", "bytes/tri"],
+            memory_rows(ctx, hf, tiles),
+        ),
+        (
+            "4. geometry shader vs indexed triangles, same leaves (Puget 513², top view, 320x180)",
+            ["leaf tau", "triangles", "GS ms", "GS Mtri/s", "indexed ms", "indexed Mtri/s", "indexed/GS"],
+            throughput_rows(ctx),
+        ),
+        (
+            "5. tilelet culling on a low view (Puget 513², tiles of 128)",
+            ["culling", "tilelets drawn", "culled", "triangles", "draw ms"],
+            culling_rows(ctx),
+        ),
     )
     return {title: pd.DataFrame(rows, columns=header) for title, header, rows in tables}
 
@@ -282,6 +357,7 @@ def main() -> None:
     from hybrid.gl.context import gl_info, shared_context
 
     from .tables import text_tables
+
     ctx = shared_context()
     info = gl_info(ctx)
     print(f"terrabench raster benchmark on {info.renderer} ({info.version})\n")

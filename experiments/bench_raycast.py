@@ -7,6 +7,7 @@ and step counts come from a second pass with statistics on (exact). On llvmpipe 
 
     python -m experiments.bench_raycast [--frames 8] [--width 640] [--height 360] [--dataset puget]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -20,25 +21,39 @@ CONFIGS = {
 }
 
 
-def run_benchmark(ctx, hf, views, configs: dict | None = None, tau: float = 2.0 / 3.0, mode: str = "shaded",
-                  tile_size: int = 256) -> pd.DataFrame:
+def run_benchmark(
+    ctx, hf, views, configs: dict | None = None, tau: float = 2.0 / 3.0, mode: str = "shaded", tile_size: int = 256
+) -> pd.DataFrame:
     """One row per (configuration, frame): wall ms, rays started, hits, steps, capped, tiles; for the views."""
     from hybrid.renderer import Renderer
+
     configs = configs or CONFIGS
     rows = []
     r = Renderer(ctx, hf, "raycast", tile_size=tile_size)
     try:
         for name, opts in configs.items():
-            r.render(views[0], tau, mode=mode, stats=False, **opts)      # warm-up: compile, upload
+            r.render(views[0], tau, mode=mode, stats=False, **opts)  # warm-up: compile, upload
             r.render(views[0], tau, mode=mode, stats=True, **opts)
             for k, view in enumerate(views):
                 timed = r.render(view, tau, mode=mode, stats=False, **opts)
                 counted = r.render(view, tau, mode=mode, stats=True, **opts)
                 s = counted.stats.row()
-                rows.append({"config": name, "frame": k, "wall_ms": timed.stats.wall_ms,
-                             "wall_ms_stats": s["wall_ms"], "tiles": s["tiles"], "rays": s["rays"], "hits": s["hits"],
-                             "steps": s["steps"], "max_steps": s["max_steps"], "capped": s["capped"],
-                             "pixels": view.width * view.height, "coverage": float(counted.mask.mean())})
+                rows.append(
+                    {
+                        "config": name,
+                        "frame": k,
+                        "wall_ms": timed.stats.wall_ms,
+                        "wall_ms_stats": s["wall_ms"],
+                        "tiles": s["tiles"],
+                        "rays": s["rays"],
+                        "hits": s["hits"],
+                        "steps": s["steps"],
+                        "max_steps": s["max_steps"],
+                        "capped": s["capped"],
+                        "pixels": view.width * view.height,
+                        "coverage": float(counted.mask.mean()),
+                    }
+                )
     finally:
         r.release()
     return pd.DataFrame(rows)
@@ -47,33 +62,45 @@ def run_benchmark(ctx, hf, views, configs: dict | None = None, tau: float = 2.0 
 def summarize(df: pd.DataFrame) -> pd.DataFrame:
     """Per configuration: ms/frame, rays/s (started rays), mean steps/ray, pixels/s, speed-ups."""
     g = df.groupby("config", sort=False)
-    out = pd.DataFrame({
-        "ms/frame": g["wall_ms"].mean(),
-        "M rays/s": g["rays"].sum() / (g["wall_ms"].sum() / 1e3) / 1e6,
-        "M pixels/s": g["pixels"].sum() / (g["wall_ms"].sum() / 1e3) / 1e6,
-        "rays/frame": g["rays"].mean(),
-        "steps/ray": g["steps"].sum() / g["rays"].sum(),
-        "max steps": g["max_steps"].max(),
-        "capped": g["capped"].sum(),
-        "tiles/frame": g["tiles"].mean(),
-        "coverage": g["coverage"].mean(),
-        "ms/frame (stats on)": g["wall_ms_stats"].mean(),
-    })
+    out = pd.DataFrame(
+        {
+            "ms/frame": g["wall_ms"].mean(),
+            "M rays/s": g["rays"].sum() / (g["wall_ms"].sum() / 1e3) / 1e6,
+            "M pixels/s": g["pixels"].sum() / (g["wall_ms"].sum() / 1e3) / 1e6,
+            "rays/frame": g["rays"].mean(),
+            "steps/ray": g["steps"].sum() / g["rays"].sum(),
+            "max steps": g["max_steps"].max(),
+            "capped": g["capped"].sum(),
+            "tiles/frame": g["tiles"].mean(),
+            "coverage": g["coverage"].mean(),
+            "ms/frame (stats on)": g["wall_ms_stats"].mean(),
+        }
+    )
     base = out["ms/frame"].get("naive")
     if base is not None:
         out["speed-up vs naive"] = base / out["ms/frame"]
     return out
 
 
-def measure(ctx, frames: int = 8, dataset: str = "puget", flight: str = "flyover", width: int = 640,
-            height: int = 360, tau: float = 2.0 / 3.0) -> tuple[str, pd.DataFrame]:
+def measure(
+    ctx,
+    frames: int = 8,
+    dataset: str = "puget",
+    flight: str = "flyover",
+    width: int = 640,
+    height: int = 360,
+    tau: float = 2.0 / 3.0,
+) -> tuple[str, pd.DataFrame]:
     """(title, per-frame rows) of the benchmark on a dataset's flight; tau in pixels, sizes in pixels."""
     from hybrid.camera.flight import preset
     from hybrid.terrain.datasets import get_dataset
+
     hf = get_dataset(dataset)
     views = preset(flight, hf, frames=frames, width=width, height=height).views()
-    title = (f"ray caster on {hf.name} {hf.cols}x{hf.rows}, {flight} flight, {frames} frames at {width}x{height}, "
-             f"tau {tau:.3g} px")
+    title = (
+        f"ray caster on {hf.name} {hf.cols}x{hf.rows}, {flight} flight, {frames} frames at {width}x{height}, "
+        f"tau {tau:.3g} px"
+    )
     return title, run_benchmark(ctx, hf, views, tau=tau)
 
 
@@ -88,6 +115,7 @@ def main(argv=None) -> int:
     from hybrid.gl.context import gl_info, shared_context
 
     from .tables import text_tables
+
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--dataset", default="puget")
     p.add_argument("--flight", default="flyover")

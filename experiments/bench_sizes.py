@@ -7,6 +7,7 @@ full-resolution reference (coverage agreement, crack pixels: ``experiments.metri
 exact CPU intersection at sampled pixels (``experiments.exact_hits``). A method that refuses says why (exit 2):
 the table shows its message. Run: ``python -m experiments.bench_sizes --work DIR --out reports/sizes/NAME.md``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -41,14 +42,25 @@ def write_geotiff(path: Path, rows: int, cols: int, read_rows, spacing: float = 
     north, written band by band."""
     import rasterio
     from rasterio.transform import from_origin
-    profile = dict(driver="GTiff", width=cols, height=rows, count=1, dtype="float32", crs="EPSG:32610",
-                   transform=from_origin(500000.0, 5200000.0 + rows * spacing, spacing, spacing), tiled=True,
-                   blockxsize=256, blockysize=256, BIGTIFF="IF_SAFER")
+
+    profile = dict(
+        driver="GTiff",
+        width=cols,
+        height=rows,
+        count=1,
+        dtype="float32",
+        crs="EPSG:32610",
+        transform=from_origin(500000.0, 5200000.0 + rows * spacing, spacing, spacing),
+        tiled=True,
+        blockxsize=256,
+        blockysize=256,
+        BIGTIFF="IF_SAFER",
+    )
     with rasterio.open(path, "w", **profile) as dst:
         for r0 in range(0, rows, band):
             r1 = min(rows, r0 + band)
             south_up = read_rows(r0, r1)
-            window = rasterio.windows.Window(0, rows - r1, cols, r1 - r0)     # file rows run north to south
+            window = rasterio.windows.Window(0, rows - r1, cols, r1 - r0)  # file rows run north to south
             dst.write(south_up[::-1].astype(np.float32), 1, window=window)
     return path
 
@@ -60,21 +72,46 @@ def strip_rows(cols: int, seed: int = 3):
 
     def read(r0: int, r1: int) -> np.ndarray:
         return np.stack([base + 0.5 * r for r in range(r0, r1)]).astype(np.float32)
+
     return read
 
 
 def render(dataset: Path, method: str, view: View, out: Path, extra: list[str]) -> Outcome:
     """``terrabench render`` of one view in its own process; its exit code, time, peak RSS and distance image."""
+
     def fmt(v):
         return ",".join(f"{x:.6f}" for x in v)
 
-    cmd = [sys.executable, "-m", "experiments", "render", "--dataset", str(dataset), "--method", method,
-           "--out", str(out), "--eye", fmt(view.eye), "--target", fmt(view.target), "--fov", str(view.fov_y),
-           "--size", f"{view.width}x{view.height}", "--near", repr(view.near), "--far", repr(view.far),
-           "--shading", "shaded", *extra]
+    cmd = [
+        sys.executable,
+        "-m",
+        "experiments",
+        "render",
+        "--dataset",
+        str(dataset),
+        "--method",
+        method,
+        "--out",
+        str(out),
+        "--eye",
+        fmt(view.eye),
+        "--target",
+        fmt(view.target),
+        "--fov",
+        str(view.fov_y),
+        "--size",
+        f"{view.width}x{view.height}",
+        "--near",
+        repr(view.near),
+        "--far",
+        repr(view.far),
+        "--shading",
+        "shaded",
+        *extra,
+    ]
     t0 = time.perf_counter()
     with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
-        _, status, usage = os.wait4(proc.pid, 0)            # the child's own peak RSS (output is a few lines)
+        _, status, usage = os.wait4(proc.pid, 0)  # the child's own peak RSS (output is a few lines)
         code = os.waitstatus_to_exitcode(status)
         proc.returncode = code
         out_text, err_text = proc.stdout.read(), proc.stderr.read()
@@ -102,6 +139,7 @@ def reference_against_exact(hf, view: View, distance: np.ndarray, seed: int = 0)
     the exact CPU intersection at SAMPLED_PIXELS random pixels away from silhouettes."""
     from experiments.exact_hits import exact_distances
     from experiments.metrics import near_silhouettes
+
     rng = np.random.default_rng(seed)
     rows, cols = rng.integers(0, view.height, SAMPLED_PIXELS), rng.integers(0, view.width, SAMPLED_PIXELS)
     keep = ~near_silhouettes(distance)[rows, cols]
@@ -116,6 +154,7 @@ def reference_against_exact(hf, view: View, distance: np.ndarray, seed: int = 0)
 def check_views(name: str, dataset: Path, hf, views: list[View], work: Path, extra: list[str]) -> list[str]:
     """Markdown table rows: every method on every view of one dataset, against the reference."""
     from experiments.metrics import coverage_errors
+
     rows = []
     for k, view in enumerate(views):
         outcomes = {m: render(dataset, m, view, work / f"{name}-v{k}-{m}.png", extra) for m in METHODS}
@@ -125,26 +164,31 @@ def check_views(name: str, dataset: Path, hf, views: list[View], work: Path, ext
             cells = [name, str(k), m, str(o.code), f"{o.seconds:.1f}", f"{o.peak_gib:.2f}"]
             if o.distance is not None and ref.distance is not None:
                 cov = coverage_errors(Frame(o.distance), Frame(ref.distance))
-                cells += [f"{float(np.isfinite(o.distance).mean()) * 100:.1f}",
-                          f"{(1 - cov['coverage_mismatch']) * 100:.3f}", str(cov["crack_px"])]
+                cells += [
+                    f"{float(np.isfinite(o.distance).mean()) * 100:.1f}",
+                    f"{(1 - cov['coverage_mismatch']) * 100:.3f}",
+                    str(cov["crack_px"]),
+                ]
             else:
                 cells += ["", "", ""]
-            cells.append(f"{exact[0] * 100:.2f} / {exact[1]:.1e} ({exact[2]} px)" if m == "reference" and exact
-                         else "")
+            cells.append(f"{exact[0] * 100:.2f} / {exact[1]:.1e} ({exact[2]} px)" if m == "reference" and exact else "")
             cells.append(o.message.replace("|", "/")[:160] if o.code else "")
             rows.append("| " + " | ".join(cells) + " |")
             print(rows[-1], flush=True)
     return rows
 
 
-HEADER = ("| dataset | view | method | exit | s | peak GiB | terrain % | coverage agreement % | cracks px | "
-          "reference vs exact: agreement % / max rel. distance (pixels) | message |\n"
-          "|---|---|---|---|---|---|---|---|---|---|---|")
+HEADER = (
+    "| dataset | view | method | exit | s | peak GiB | terrain % | coverage agreement % | cracks px | "
+    "reference vs exact: agreement % / max rel. distance (pixels) | message |\n"
+    "|---|---|---|---|---|---|---|---|---|---|---|"
+)
 
 
 def main(argv=None) -> int:
     """Write the strip and square GeoTIFFs, prepare the square, render and compare every method; write the table."""
     from hybrid.terrain.sources import TerrainSource
+
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--work", type=Path, required=True, help="folder for the GeoTIFFs, the store and the images")
     p.add_argument("--out", type=Path, required=True, help="the markdown report to write")
@@ -154,8 +198,13 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     a.work.mkdir(parents=True, exist_ok=True)
     w, h = (int(v) for v in a.size.split("x"))
-    lines = [f"# Any grid size: a {a.strip}x2 strip in memory and a {a.square}² square through prepare", "",
-             _environment(), "", HEADER]
+    lines = [
+        f"# Any grid size: a {a.strip}x2 strip in memory and a {a.square}² square through prepare",
+        "",
+        _environment(),
+        "",
+        HEADER,
+    ]
     strip = write_geotiff(a.work / "strip.tif", 2, a.strip, strip_rows(a.strip))
     shf = TerrainSource(str(strip)).load()
     lines += check_views("strip", strip, shf, [default_view(shf, w, h)], a.work, [])
@@ -171,18 +220,21 @@ def _square(size: int, work: Path, w: int, h: int) -> list[str]:
     """Table rows of the square: its GeoTIFF written (once), prepared (resumed if done) and drawn by every method."""
     from hybrid.terrain.grid_sources import FractalSource
     from hybrid.terrain.stored import open_store
+
     tif = work / "square.tif"
     if not tif.exists():
         write_geotiff(tif, size, size, FractalSource(size, seed=1).read_rows)
     store = work / "square.store"
-    subprocess.run([sys.executable, "-m", "experiments", "prepare", str(tif), "--out", str(store), "--quiet"],
-                   check=True)
+    subprocess.run(
+        [sys.executable, "-m", "experiments", "prepare", str(tif), "--out", str(store), "--quiet"], check=True
+    )
     qhf = open_store(store)
     return check_views("square", store, qhf, [default_view(qhf, w, h)], work, [])
 
 
 def _environment() -> str:
     from hybrid.gl.context import gl_info, shared_context
+
     info = gl_info(shared_context(None))
     return f"Device: {info.renderer}; {os.cpu_count()} CPU cores; {time.strftime('%Y-%m-%d')}."
 

@@ -2,6 +2,7 @@
 
 Charts with one panel per scene or method lay their panels out in rows of up to MAX_COLS (``panel_grid``, in
 ``experiments.figures``) with one legend for the whole figure, so they stay readable from 1 to 20 panels."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -23,7 +24,7 @@ from hybrid.strategies import mixed_policies, policies_taking
 from .figures import figure_legend, grid_cols, method_colours, panel_grid, panel_title, save_figure
 from .noise import median_interval, repeat_matrix
 
-STRATEGY_CMAP = ListedColormap(["#f2f2f2", "#2b6cff", "#ff8c14"])   # no terrain, raster, ray cast
+STRATEGY_CMAP = ListedColormap(["#f2f2f2", "#2b6cff", "#ff8c14"])  # no terrain, raster, ray cast
 DEVICE_START = "device"  # the hybrid's default starting cost model; others are named in its label (from-<start>)
 
 
@@ -37,7 +38,7 @@ def label_columns(frames: pd.DataFrame) -> pd.DataFrame:
     many_tau = f["tau"].nunique() > 1
     many_rec = f["reconstruction"].nunique() > 1
     tilelets = policies_taking("full_res")
-    many_fr = f.loc[f["policy"].isin(tilelets), "full_res"].nunique() > 1   # others record the prior rule
+    many_fr = f.loc[f["policy"].isin(tilelets), "full_res"].nunique() > 1  # others record the prior rule
 
     def method(r):
         s = r["policy"]
@@ -51,16 +52,31 @@ def label_columns(frames: pd.DataFrame) -> pd.DataFrame:
         if many_tau and r["policy"] != "reference":
             s += f" tau={r['tau']:.3g}"
         return s
+
     f["method"] = f.apply(method, axis=1)
-    f["scene"] = f["dataset"].map(lambda d: Path(str(d)).stem) + " / " + f["flight"].map(lambda d: Path(str(d)).stem) \
-        + " / " + f["size"]
+    f["scene"] = (
+        f["dataset"].map(lambda d: Path(str(d)).stem)
+        + " / "
+        + f["flight"].map(lambda d: Path(str(d)).stem)
+        + " / "
+        + f["size"]
+    )
     if "device" in f and f["device"].nunique() > 1:
         f["scene"] = f["scene"] + " / " + f["device"].fillna("unknown device").astype(str)
     return f
 
 
-def _per_scene(f: pd.DataFrame, folder: Path, name: str, ycol: str, ylabel: str, scale=1.0, band=None,
-               counts: bool = False, dashed: str | None = None) -> list[Path]:
+def _per_scene(
+    f: pd.DataFrame,
+    folder: Path,
+    name: str,
+    ycol: str,
+    ylabel: str,
+    scale=1.0,
+    band=None,
+    counts: bool = False,
+    dashed: str | None = None,
+) -> list[Path]:
     """One panel per scene of ``ycol`` over the frames, a line per method (``dashed``: a second column, drawn
     dashed in the method's colour)."""
     scenes = sorted(f["scene"].unique())
@@ -75,11 +91,10 @@ def _per_scene(f: pd.DataFrame, folder: Path, name: str, ycol: str, ylabel: str,
             if dashed and dashed in g and g[dashed].notna().any():
                 ax.plot(g["frame"], g[dashed] * scale, ls="--", lw=1, color=colours[m])
             if band and all(c in g and g[c].notna().all() for c in band):
-                ax.fill_between(g["frame"], g[band[0]] * scale, g[band[1]] * scale, color=colours[m], alpha=0.15,
-                                lw=0)
+                ax.fill_between(g["frame"], g[band[0]] * scale, g[band[1]] * scale, color=colours[m], alpha=0.15, lw=0)
         panel_title(ax, sc, cols)
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-        if counts:                               # pixel counts: whole numbers from 0
+        if counts:  # pixel counts: whole numbers from 0
             ax.yaxis.set_major_locator(MaxNLocator(integer=True))
             ax.set_ylim(0, max(1.0, ax.get_ylim()[1]))
         ax.set_xlabel("frame")
@@ -91,8 +106,9 @@ def _per_scene(f: pd.DataFrame, folder: Path, name: str, ycol: str, ylabel: str,
 
 def frame_time_chart(f, folder) -> list[Path]:
     """Frame time over the flight per method (as Dick et al. Figs. 9/10): median of repeats, shaded min to max."""
-    return _per_scene(f, folder, "frame_time", "wall_ms", "frame time (ms, wall clock)",
-                      band=("wall_ms_min", "wall_ms_max"))
+    return _per_scene(
+        f, folder, "frame_time", "wall_ms", "frame time (ms, wall clock)", band=("wall_ms_min", "wall_ms_max")
+    )
 
 
 def memory_chart(f, folder) -> list[Path]:
@@ -105,10 +121,16 @@ def popping_chart(f, folder) -> list[Path]:
     the frame's level of detail held (experiments.popping)."""
     if "pop_px" not in f or not f["pop_px"].notna().any():
         return []
-    measured = f.groupby("scene")["pop_px"].transform(lambda s: s.notna().any())    # slow flights only
-    return _per_scene(f[measured], folder, "popping", "pop_px",
-                      "pixels popping around the frame\n(dashed: level of detail held)", counts=True,
-                      dashed="pop_static_px")
+    measured = f.groupby("scene")["pop_px"].transform(lambda s: s.notna().any())  # slow flights only
+    return _per_scene(
+        f[measured],
+        folder,
+        "popping",
+        "pop_px",
+        "pixels popping around the frame\n(dashed: level of detail held)",
+        counts=True,
+        dashed="pop_static_px",
+    )
 
 
 def pareto_front(points: np.ndarray) -> np.ndarray:
@@ -126,23 +148,40 @@ def speed_accuracy_chart(f, folder) -> list[Path]:
     """Median frame time (bar: its 95 % bootstrap interval over frames and repeats) against mean image error over
     terrain pixels, per method (one colour each) and scene; Pareto front marked."""
     err_col = "flip" if "flip" in f and f["flip"].notna().any() else "ssim"
-    if err_col not in f:                       # a run without accuracy (spec accuracy = false)
+    if err_col not in f:  # a run without accuracy (spec accuracy = false)
         return []
     rows = []
     for (sc, m), g in f.groupby(["scene", "method"]):
         lo, hi = median_interval(repeat_matrix(g))
         err = float(g[err_col].mean())
-        rows.append({"scene": sc, "method": m, "ms": float(g["wall_ms"].median()), "lo": lo, "hi": hi,
-                     "err": 1 - err if err_col == "ssim" else err})
+        rows.append(
+            {
+                "scene": sc,
+                "method": m,
+                "ms": float(g["wall_ms"].median()),
+                "lo": lo,
+                "hi": hi,
+                "err": 1 - err if err_col == "ssim" else err,
+            }
+        )
     agg = pd.DataFrame(rows)
     scenes = sorted(agg["scene"].unique())
     fig, axes = panel_grid(len(scenes), width=5.0, height=3.8, wide=7.5)
     colours = method_colours(agg)
     for ax, sc in zip(axes, scenes):
         a = agg[agg["scene"] == sc].reset_index(drop=True)
-        for _, r in a.iterrows():               # one colour per method, named in the figure's legend
-            ax.errorbar([r["ms"]], [r["err"]], xerr=[[r["ms"] - r["lo"]], [r["hi"] - r["ms"]]], fmt="o", ms=5,
-                        capsize=2, color=colours[r["method"]], label=r["method"], zorder=3)
+        for _, r in a.iterrows():  # one colour per method, named in the figure's legend
+            ax.errorbar(
+                [r["ms"]],
+                [r["err"]],
+                xerr=[[r["ms"] - r["lo"]], [r["hi"] - r["ms"]]],
+                fmt="o",
+                ms=5,
+                capsize=2,
+                color=colours[r["method"]],
+                label=r["method"],
+                zorder=3,
+            )
         pts = a[["ms", "err"]].to_numpy()
         ok = np.all(np.isfinite(pts), axis=1)
         if ok.sum() >= 1:
@@ -184,8 +223,11 @@ def crossover_chart(tiles: pd.DataFrame, folder: Path) -> list[Path]:
     strategy, and the faster raster strategy's time over the ray caster's, against triangles per pixel; where
     the ratio crosses 1 rasterizing starts to pay on this device."""
     raster = [s for s in ("raster", "raster_gs") if f"meas_{s}_ms" in tiles]
-    t = tiles.dropna(subset=[f"meas_{s}_ms" for s in (*raster, "raycast")]) \
-        if len(tiles) and raster and "meas_raycast_ms" in tiles else tiles.iloc[:0]
+    t = (
+        tiles.dropna(subset=[f"meas_{s}_ms" for s in (*raster, "raycast")])
+        if len(tiles) and raster and "meas_raycast_ms" in tiles
+        else tiles.iloc[:0]
+    )
     if t.empty or "f_triangles" not in t:
         return []
     px = np.maximum(t["f_pixels"].to_numpy(float), 1.0)
@@ -217,6 +259,7 @@ def crossover_chart(tiles: pd.DataFrame, folder: Path) -> list[Path]:
 def image_panels(run: Path, f: pd.DataFrame, folder: Path, frames: list[int]) -> list[Path]:
     """For chosen frames: each method's image, its error heat map against the reference, and its maps."""
     from PIL import Image
+
     out = []
     img = run / "images"
     for scene, sf in f.groupby("scene"):
@@ -234,13 +277,18 @@ def image_panels(run: Path, f: pd.DataFrame, folder: Path, frames: list[int]) ->
             for _, r in rows.iterrows():
                 p = img / f"{r['config']}-f{k}.png"
                 if p.exists():
-                    extra = {m.name.split(".")[-2]: np.load(m) for m in img.glob(f"{r['config']}-f{k}.*.npy")
-                             if not m.name.endswith(".depth.npy")}
+                    extra = {
+                        m.name.split(".")[-2]: np.load(m)
+                        for m in img.glob(f"{r['config']}-f{k}.*.npy")
+                        if not m.name.endswith(".depth.npy")
+                    }
                     panels.append((r["method"], np.asarray(Image.open(p)), extra))
             if not panels:
                 continue
             ncol = 2 + max(len(e) for _, _, e in panels)
-            fig, axes = plt.subplots(len(panels) + 1, ncol, figsize=(3.2 * ncol, 2.0 * (len(panels) + 1)), squeeze=False)
+            fig, axes = plt.subplots(
+                len(panels) + 1, ncol, figsize=(3.2 * ncol, 2.0 * (len(panels) + 1)), squeeze=False
+            )
             for ax in axes.ravel():
                 ax.axis("off")
             axes[0, 0].imshow(ref.astype(np.uint8))
@@ -256,20 +304,27 @@ def image_panels(run: Path, f: pd.DataFrame, folder: Path, frames: list[int]) ->
                         axes[i, j].imshow(arr, cmap=STRATEGY_CMAP, vmin=0, vmax=2, interpolation="nearest")
                     else:
                         axes[i, j].imshow(arr, cmap="inferno", interpolation="nearest")
-                    axes[i, j].set_title({"strategy": "strategy (blue raster, orange ray cast)"}.get(name, name), fontsize=8)
+                    axes[i, j].set_title(
+                        {"strategy": "strategy (blue raster, orange ray cast)"}.get(name, name), fontsize=8
+                    )
             fig.colorbar(h, ax=axes[1:, 1].tolist(), shrink=0.6)
             safe = scene.replace(" / ", "_").replace(" ", "")
             out += save_figure(fig, folder, f"images_{safe}_f{k}")
     return out
 
 
-def all_charts(run: Path, frames: pd.DataFrame, folder: Path, image_frames: list[int],
-               tiles: pd.DataFrame | None = None) -> dict[str, list[Path]]:
+def all_charts(
+    run: Path, frames: pd.DataFrame, folder: Path, image_frames: list[int], tiles: pd.DataFrame | None = None
+) -> dict[str, list[Path]]:
     """Every chart of a run into folder; returns name -> files."""
     folder.mkdir(parents=True, exist_ok=True)
     f = label_columns(frames)
-    return {"frame_time": frame_time_chart(f, folder), "gpu_memory": memory_chart(f, folder),
-            "speed_vs_accuracy": speed_accuracy_chart(f, folder), "strategy_mix": strategy_mix_chart(f, folder),
-            "popping": popping_chart(f, folder),
-            "crossover": crossover_chart(tiles if tiles is not None else pd.DataFrame(), folder),
-            "images": image_panels(run, f, folder, image_frames)}
+    return {
+        "frame_time": frame_time_chart(f, folder),
+        "gpu_memory": memory_chart(f, folder),
+        "speed_vs_accuracy": speed_accuracy_chart(f, folder),
+        "strategy_mix": strategy_mix_chart(f, folder),
+        "popping": popping_chart(f, folder),
+        "crossover": crossover_chart(tiles if tiles is not None else pd.DataFrame(), folder),
+        "images": image_panels(run, f, folder, image_frames),
+    }

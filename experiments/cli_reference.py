@@ -6,6 +6,7 @@ The text is built from the parsers' actions (flags, metavars, choices, defaults,
 wrapped layout, so it does not depend on the terminal's width or on the Python version's help formatter.
 ``tests/test_docs.py`` regenerates it and compares it with the committed file.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -56,7 +57,7 @@ def _help(action: argparse.Action) -> str:
     if "%" in text:
         params = {**vars(action), "prog": "terrabench"}
         params = {k: getattr(v, "__name__", v) for k, v in params.items()}
-        with contextlib.suppress(KeyError, TypeError, ValueError):     # a literal % stays as written
+        with contextlib.suppress(KeyError, TypeError, ValueError):  # a literal % stays as written
             text = text % params
     return text
 
@@ -69,23 +70,39 @@ def _table(actions: list[argparse.Action]) -> list[str]:
         if a.option_strings and a.required:
             name += " (required)"
         value = _value(a)
-        rows.append(f"| {name} | {_cell(value) and '`' + _cell(value) + '`'} | {_cell(_default(a))} | "
-                    f"{_cell(_help(a))} |")
+        rows.append(
+            f"| {name} | {_cell(value) and '`' + _cell(value) + '`'} | {_cell(_default(a))} | {_cell(_help(a))} |"
+        )
     return rows
 
 
 def _arguments(parser: argparse.ArgumentParser) -> list[argparse.Action]:
     """A parser's arguments, help and subcommand actions left out."""
-    return [a for a in parser._actions
-            if not isinstance(a, (argparse._HelpAction, argparse._SubParsersAction)) and a.help != argparse.SUPPRESS]
+    return [
+        a
+        for a in parser._actions
+        if not isinstance(a, (argparse._HelpAction, argparse._SubParsersAction)) and a.help != argparse.SUPPRESS
+    ]
 
 
 def reference() -> str:
     """The whole reference as Markdown."""
     from experiments.cli import build_parser
+
     parser = build_parser()
-    out = [HEADER, "## terrabench", "", _cell(parser.description or ""), "",
-           "Global options (before the subcommand):", "", *_table(_arguments(parser)), "", "Subcommands:", ""]
+    out = [
+        HEADER,
+        "## terrabench",
+        "",
+        _cell(parser.description or ""),
+        "",
+        "Global options (before the subcommand):",
+        "",
+        *_table(_arguments(parser)),
+        "",
+        "Subcommands:",
+        "",
+    ]
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     helps = {c.dest: c.help for c in sub._choices_actions}
     for name in sub.choices:

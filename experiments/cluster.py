@@ -13,6 +13,7 @@ nothing finished, and the task of a worker that dies is run again elsewhere by D
 Rows carry the device (GL renderer) and the worker that timed them; each task uses the cost model
 calibrated for its worker's device when this process's costs file has one.
 """
+
 from __future__ import annotations
 
 import asyncio
@@ -24,7 +25,7 @@ from hybrid.errors import TerrabenchError
 from .spec import Spec
 
 PLUGIN = "terrabench-gl"
-GL_RESOURCE = "terrabench_gl"     # a worker resource the plugin sets once the worker's GL context works
+GL_RESOURCE = "terrabench_gl"  # a worker resource the plugin sets once the worker's GL context works
 READY_TIMEOUT_S = 120.0
 CONNECT_TIMEOUT_S = 5.0
 """Seconds to wait for a --scheduler to answer before giving up (--scheduler-timeout changes it)."""
@@ -40,7 +41,7 @@ def _distributed():
 
 try:
     from distributed.diagnostics.plugin import WorkerPlugin
-except ImportError:          # without the cluster extra the plugin is never registered
+except ImportError:  # without the cluster extra the plugin is never registered
     WorkerPlugin = object
 
 
@@ -51,18 +52,21 @@ class GLWorkerPlugin(WorkerPlugin):
 
     async def setup(self, worker):
         """Make the context in the executor thread that runs the tasks; record the renderer or the error."""
+
         def make():
             from hybrid.gl.context import gl_info, shared_context
 
             from .config_task import TaskState
+
             try:
                 ctx = shared_context()
                 return {"state": TaskState(ctx), "renderer": gl_info(ctx).renderer, "error": None}
             except Exception as exc:  # reported to the client, never raised into the worker
                 return {"state": None, "renderer": None, "error": f"{type(exc).__name__}: {exc}"}
+
         loop = asyncio.get_running_loop()
         worker.terrabench = await loop.run_in_executor(worker.executors["default"], make)
-        if worker.terrabench["error"] is None:          # tasks ask for this resource: only GL workers run them
+        if worker.terrabench["error"] is None:  # tasks ask for this resource: only GL workers run them
             await worker.set_resources(**{GL_RESOURCE: 1})
 
 
@@ -79,6 +83,7 @@ def group_task(spec: Spec, items: list, costs: dict):
     from hybrid.cost.model import cost_model_from_dict
 
     from .config_task import run_group
+
     w = get_worker()
     tb = getattr(w, "terrabench", None)
     if tb is None or tb["state"] is None:
@@ -98,17 +103,21 @@ def connect(scheduler: str | None = None, workers: str | None = None, timeout: f
     if workers:
         if not workers.startswith("local:") or not workers[6:].isdigit() or not 1 <= int(workers[6:]) <= 64:
             raise TerrabenchError(f"--workers must be local:N with N in [1, 64], got {workers!r}")
-        cluster = distributed.LocalCluster(n_workers=int(workers[6:]), threads_per_worker=1, processes=True,
-                                           dashboard_address=None)
+        cluster = distributed.LocalCluster(
+            n_workers=int(workers[6:]), threads_per_worker=1, processes=True, dashboard_address=None
+        )
         return distributed.Client(cluster), cluster
     try:
         return distributed.Client(scheduler, timeout=f"{timeout:g}s"), None
     except ValueError as exc:
-        raise TerrabenchError(f"--scheduler {scheduler!r} is not a Dask scheduler address such as "
-                              f"tcp://HOST:8786 ({exc})") from None
+        raise TerrabenchError(
+            f"--scheduler {scheduler!r} is not a Dask scheduler address such as tcp://HOST:8786 ({exc})"
+        ) from None
     except (OSError, TimeoutError) as exc:
-        raise TerrabenchError(f"cannot reach the Dask scheduler at {scheduler!r} within {timeout:g} s ({exc}); "
-                              "check the address, or wait longer with --scheduler-timeout SECONDS") from None
+        raise TerrabenchError(
+            f"cannot reach the Dask scheduler at {scheduler!r} within {timeout:g} s ({exc}); "
+            "check the address, or wait longer with --scheduler-timeout SECONDS"
+        ) from None
 
 
 def ready_workers(client) -> dict[str, dict]:
@@ -128,21 +137,34 @@ def run_on_cluster(spec: Spec, folder: Path, client, progress: bool = True) -> N
     from .config_task import ConfigResult, groups
     from .journal import Journal, pending, record
     from .progress import Progress
+
     info = ready_workers(client)
     good = [a for a, i in info.items() if i["error"] is None]
     for a, i in info.items():
         if i["error"] is not None:
             print(f"terrabench: worker {a} has no GL context and gets no task: {i['error']}")
     if not good:
-        raise TerrabenchError("no worker of the cluster could make a GL context: " +
-                              "; ".join(f"{a}: {i['error']}" for a, i in info.items()))
+        raise TerrabenchError(
+            "no worker of the cluster could make a GL context: "
+            + "; ".join(f"{a}: {i['error']}" for a, i in info.items())
+        )
     costs = read_costs_file()
     journal = Journal(folder)
     todo = pending(spec, journal)
     total = len(spec.configs()) * spec.frames
     bar = Progress(total, total - sum(len(t) for _, t in todo), progress)
-    futures = {client.submit(group_task, spec, items, costs, key=f"terrabench-{spec.name}-{items[0][0]['config']}",
-                             pure=False, resources={GL_RESOURCE: 1}): items for items in groups(todo)}
+    futures = {
+        client.submit(
+            group_task,
+            spec,
+            items,
+            costs,
+            key=f"terrabench-{spec.name}-{items[0][0]['config']}",
+            pure=False,
+            resources={GL_RESOURCE: 1},
+        ): items
+        for items in groups(todo)
+    }
     for fut in as_completed(futures):
         items = futures[fut]
         try:
@@ -163,11 +185,17 @@ def cluster_environment(client) -> dict:
     from hybrid.cost.model import read_costs_file
 
     from .environment import cost_model_fingerprint, package_versions
+
     info = ready_workers(client)
     renderers = sorted({i["renderer"] for i in info.values() if i["renderer"]})
     sent = read_costs_file()
-    return {"scheduler": client.scheduler.address, "workers": info, "packages": package_versions(),
-            "gl_renderer": renderers, "cost_model": {r: cost_model_fingerprint(r, sent) for r in renderers}}
+    return {
+        "scheduler": client.scheduler.address,
+        "workers": info,
+        "packages": package_versions(),
+        "gl_renderer": renderers,
+        "cost_model": {r: cost_model_fingerprint(r, sent) for r in renderers},
+    }
 
 
 def calibrate_task(args: tuple) -> dict:
@@ -175,6 +203,7 @@ def calibrate_task(args: tuple) -> dict:
     from distributed import get_worker
 
     from .calibration import calibrate_here
+
     tb = getattr(get_worker(), "terrabench", None)
     if tb is None or tb["state"] is None:
         raise TerrabenchError(f"worker {get_worker().address} has no GL context")
@@ -184,6 +213,7 @@ def calibrate_task(args: tuple) -> dict:
 def calibrate_on_cluster(client, args: tuple) -> list:
     """One calibration per distinct GL renderer of the cluster's workers, each on one of its workers."""
     from hybrid.cost.model import cost_model_from_dict
+
     info = ready_workers(client)
     by_device = {}
     for address, i in sorted(info.items()):

@@ -17,6 +17,7 @@ timer query; NaN where the GL has none, as on llvmpipe). Maps for the report's i
 untimed, draw. A spec with ``accuracy = false`` draws no reference: its rows carry timing only, and no images. A configuration resumed part-way first replays its earlier frames untimed, so
 that its GPU tile cache is in the state an uninterrupted run would have.
 """
+
 from __future__ import annotations
 
 import time
@@ -35,7 +36,7 @@ from .metrics import frame_accuracy
 from .popping import popping, static_pop_pixels, temporal_errors
 from .spec import Config, Spec
 
-SETTLE_S = 0.3   # seconds of idle before a configuration's timed frames
+SETTLE_S = 0.3  # seconds of idle before a configuration's timed frames
 
 
 @dataclass
@@ -75,13 +76,14 @@ class TaskState:
         self._views = None
         self._refs: dict = {}
         self._reference = None
-        self.cost_model = None          # the device's calibrated model, when the client sends one
-        self.learned = None             # the adapted model of the hybrid that learned most, once it settled
+        self.cost_model = None  # the device's calibrated model, when the client sends one
+        self.learned = None  # the adapted model of the hybrid that learned most, once it settled
 
     def views(self, spec: Spec, c: dict):
         """The group's terrain and views (checked: every eye above the ground); loads the terrain once."""
         from hybrid.camera.clearance import check_eye_above
         from hybrid.camera.flight import get_flight
+
         key = (spec.name, group_id(c))
         if self._group != key:
             self.release_group()
@@ -115,8 +117,9 @@ class TaskState:
 
 
 def _image(stem: str, result, full: bool) -> ImageOut:
-    return ImageOut(stem, result.colour, result.distance if full else None,
-                    dict(getattr(result, "maps", {})) if full else {})
+    return ImageOut(
+        stem, result.colour, result.distance if full else None, dict(getattr(result, "maps", {})) if full else {}
+    )
 
 
 def group_key(c: dict) -> tuple:
@@ -157,7 +160,7 @@ class _ConfigRun:
         msg = str(exc) if isinstance(exc, TerrabenchError) else f"{type(exc).__name__}: {exc}"
         self.out.error = {**self.c, "error": msg, "trace": traceback.format_exc(limit=4)}
         self.out.frames = []
-        self.out.images = [i for i in self.out.images if i.stem.startswith("ref-")]   # the group's references
+        self.out.images = [i for i in self.out.images if i.stem.startswith("ref-")]  # the group's references
         self.out.unreached = len([k for k in self.todo if k not in self.timed])
         self.release()
 
@@ -168,8 +171,14 @@ class _ConfigRun:
             self.renderer = None
 
 
-def run_group(spec: Spec, items: list[tuple[dict, list[int]]], state: TaskState, step=None,
-              fail_fast: bool = False, extra: dict | None = None) -> list[ConfigResult]:
+def run_group(
+    spec: Spec,
+    items: list[tuple[dict, list[int]]],
+    state: TaskState,
+    step=None,
+    fail_fast: bool = False,
+    extra: dict | None = None,
+) -> list[ConfigResult]:
     """Draw, time and measure the frames to do of configurations that share their views (one group_key).
 
     The configurations are timed interleaved: each repeat of a frame is drawn by every configuration in
@@ -190,7 +199,7 @@ def run_group(spec: Spec, items: list[tuple[dict, list[int]]], state: TaskState,
             return [r.out for r in runs]
         for r in runs:
             r.attempt(lambda r=r: _open(spec, r, state, hf, views), fail_fast)
-        time.sleep(SETTLE_S)           # threads of earlier work (compiles, uploads) go idle before timing
+        time.sleep(SETTLE_S)  # threads of earlier work (compiles, uploads) go idle before timing
         for k in sorted({k for r in runs for k in r.todo}):
             _time_frame(spec, [r for r in runs if k in r.todo], k, views, fail_fast, step)
         for r in runs:
@@ -221,14 +230,26 @@ def _open(spec: Spec, r: _ConfigRun, state: TaskState, hf, views) -> None:
     an uninterrupted run's) and draw that frame once untimed (compiles, first uploads: one-off costs)."""
     from hybrid.cost.model import fallback_cost_model
     from hybrid.renderer import make_renderer
+
     c, model = r.cfg, state.cost_model
     if c.start_model == "fallback":
         model = fallback_cost_model()
-    mixed = {"adapt": spec.adapt, **({"cost_model": model} if model is not None else {})} \
-        if c.policy in mixed_policies() else {}
-    r.renderer = make_renderer(state.ctx, hf, c.policy, tile_size=spec.tile_size,
-                               reconstruction=c.reconstruction, budget_bytes=spec.gpu_budget_mib << 20,
-                               full_res=c.full_res, upload_budget_ms=spec.upload_budget_ms, **mixed)
+    mixed = (
+        {"adapt": spec.adapt, **({"cost_model": model} if model is not None else {})}
+        if c.policy in mixed_policies()
+        else {}
+    )
+    r.renderer = make_renderer(
+        state.ctx,
+        hf,
+        c.policy,
+        tile_size=spec.tile_size,
+        reconstruction=c.reconstruction,
+        budget_bytes=spec.gpu_budget_mib << 20,
+        full_res=c.full_res,
+        upload_budget_ms=spec.upload_budget_ms,
+        **mixed,
+    )
     for k in range(r.todo[0]):
         r.renderer.render(views[k], c.tau)
     r.renderer.render(views[r.todo[0]], c.tau)
@@ -249,9 +270,10 @@ def _time_frame(spec: Spec, live: list[_ConfigRun], k: int, views, fail_fast: bo
             continue
         results = draws[id(r)]
         mapped: list = []
-        if spec.accuracy and k in spec.image_frames and r.cfg.policy in mixed_policies():       # untimed, for its maps
-            r.attempt(lambda r=r, mapped=mapped: mapped.append(r.renderer.render(views[k], r.cfg.tau, maps=True)),
-                      fail_fast)
+        if spec.accuracy and k in spec.image_frames and r.cfg.policy in mixed_policies():  # untimed, for its maps
+            r.attempt(
+                lambda r=r, mapped=mapped: mapped.append(r.renderer.render(views[k], r.cfg.tau, maps=True)), fail_fast
+            )
         if r.out.error is not None:
             continue
         cpu = [x.stats.cpu_ms for x in results if x.stats.cpu_ms is not None]
@@ -267,12 +289,19 @@ def _measure(spec: Spec, r: _ConfigRun, state: TaskState, views, extra: dict | N
     c, out = r.c, r.out
     drawn = {k: v[0] for k, v in r.timed.items()}
     for k in r.todo:
-        res, walls, timed_stats, cpu, gpu = r.timed[k]         # counters of a timed draw, not the maps draw
-        row = {**c, "frame": k, **timed_stats.row(), **(extra or {}), "wall_ms": float(np.median(walls)),
-               "cpu_ms": float(np.median(cpu)) if cpu else float("nan"),
-               "gpu_ms": float(np.median(gpu)) if gpu else float("nan"),
-               "wall_ms_min": float(np.min(walls)), "wall_ms_max": float(np.max(walls)),
-               "wall_ms_repeats": [float(w) for w in walls]}
+        res, walls, timed_stats, cpu, gpu = r.timed[k]  # counters of a timed draw, not the maps draw
+        row = {
+            **c,
+            "frame": k,
+            **timed_stats.row(),
+            **(extra or {}),
+            "wall_ms": float(np.median(walls)),
+            "cpu_ms": float(np.median(cpu)) if cpu else float("nan"),
+            "gpu_ms": float(np.median(gpu)) if gpu else float("nan"),
+            "wall_ms_min": float(np.min(walls)),
+            "wall_ms_max": float(np.max(walls)),
+            "wall_ms_repeats": [float(w) for w in walls],
+        }
         if spec.accuracy:
             row.update(_accuracy(spec, r, state, views, k, res, drawn))
         cfg = r.cfg
@@ -300,7 +329,10 @@ def _accuracy(spec: Spec, r: _ConfigRun, state: TaskState, views, k: int, res, d
         row.update(temporal_errors(frame(k - 1), res, ref(k - 1), ref(k)))
     if 0 < k < spec.frames - 1:
         refs = (ref(k - 1), ref(k), ref(k + 1))
-        row.update(popping((frame(k - 1), res, frame(k + 1)), refs, views[k - 1:k + 2]))
-        row["pop_static_px"] = (static_pop_pixels(r.renderer, views[k - 1:k + 2], refs, tau, res)
-                                if np.isfinite(row["pop_px"]) else np.nan)
+        row.update(popping((frame(k - 1), res, frame(k + 1)), refs, views[k - 1 : k + 2]))
+        row["pop_static_px"] = (
+            static_pop_pixels(r.renderer, views[k - 1 : k + 2], refs, tau, res)
+            if np.isfinite(row["pop_px"])
+            else np.nan
+        )
     return row

@@ -1,5 +1,6 @@
 """Charts of an edit run: update cost against brush radius per method, frame time with editing on against off, and
 the images of the last image frame (reference and methods, static and at the largest radius)."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -73,8 +74,17 @@ def on_off_chart(f: pd.DataFrame, folder: Path) -> list[Path]:
         label = "editing off (static)" if radius == 0 else f"r = {radius:g} m"
         ax.bar(x, draw, width, color=colour, label=f"{label}: frame")
         if radius > 0:
-            ax.bar(x, update, width, bottom=draw, color=colour, alpha=0.45, hatch="//", edgecolor="white",
-                   label=f"{label}: + update")
+            ax.bar(
+                x,
+                update,
+                width,
+                bottom=draw,
+                color=colour,
+                alpha=0.45,
+                hatch="//",
+                edgecolor="white",
+                label=f"{label}: + update",
+            )
     ax.set_xticks(np.arange(len(policies)), policies)
     ax.set_ylabel("ms a frame (median over frames)")
     ax.set_title("Frame time with editing off and on (one edit a frame, update stacked on the draw)", fontsize=10)
@@ -87,14 +97,22 @@ def images_chart(run: Path, f: pd.DataFrame, folder: Path, frame: int) -> list[P
     """The reference and every method at ``frame``, on the static terrain and at the largest radius (particles
     drawn into the methods' frames), as one figure."""
     from PIL import Image
+
     radii = sorted(r for r in f["edit_radius"].unique() if r > 0)
     variants = [0.0] + radii[-1:]
     policies = sorted(f["policy"].unique())
     row0 = f.iloc[0]
-    stem = f"{Path(str(row0['dataset'])).stem}-s{row0['seed']}-{Path(str(row0['flight'])).stem}-{row0['size']}-" \
-           f"tau{float(row0['tau']):.4g}"
-    fig, axes = plt.subplots(len(variants), len(policies) + 1, figsize=(2.6 * (len(policies) + 1), 1.7 * len(variants)),
-                             squeeze=False, layout="constrained")
+    stem = (
+        f"{Path(str(row0['dataset'])).stem}-s{row0['seed']}-{Path(str(row0['flight'])).stem}-{row0['size']}-"
+        f"tau{float(row0['tau']):.4g}"
+    )
+    fig, axes = plt.subplots(
+        len(variants),
+        len(policies) + 1,
+        figsize=(2.6 * (len(policies) + 1), 1.7 * len(variants)),
+        squeeze=False,
+        layout="constrained",
+    )
     shown = 0
     for i, radius in enumerate(variants):
         tag = f"r{radius:g}m" if radius > 0 else "static"

@@ -14,6 +14,7 @@ A run folder holds spec.json, env.json, one edit log a radius (``edits-r<radius>
 The edits of a frame depend on every frame before it, so a resumed run replays every frame of the configurations
 it still lacks frames of and journals only those frames.
 """
+
 from __future__ import annotations
 
 import time
@@ -33,14 +34,24 @@ from .metrics import frame_accuracy
 from .progress import Progress
 from .runlock import RunLock
 
-SETTLE_S = 0.3   # seconds of idle before the timed frames
+SETTLE_S = 0.3  # seconds of idle before the timed frames
 
 
 def _copy(hf):
     """A height field with its own heights (edits change them in place)."""
     from hybrid.terrain.heightfield import HeightField
-    return HeightField(hf.heights.copy(), hf.spacing, hf.origin, hf.name, hf.texture, hf.nodata_filled, hf.source,
-                       list(hf.notes), hf.source_step)
+
+    return HeightField(
+        hf.heights.copy(),
+        hf.spacing,
+        hf.origin,
+        hf.name,
+        hf.texture,
+        hf.nodata_filled,
+        hf.source,
+        list(hf.notes),
+        hf.source_step,
+    )
 
 
 def _rotated(items: list, shift: int) -> list:
@@ -56,7 +67,7 @@ class _Member:
 
     def __init__(self, c: dict, todo: list[int], brushes: list[list]):
         self.c, self.todo, self.brushes = c, todo, brushes
-        self.renderer: Any = None         # GPU state, made by open()
+        self.renderer: Any = None  # GPU state, made by open()
         self.editor: Any = None
         self.heights: Any = None
         self.particles: Any = None
@@ -75,6 +86,7 @@ class _Member:
         from hybrid.gl.particles import ParticleParams, ParticleSystem
         from hybrid.renderer import make_renderer
         from hybrid.strategies import mixed_policies
+
         hf = _copy(hf)
         mixed = {"adapt": spec.adapt} if self.c["policy"] in mixed_policies() else {}
         self.renderer = make_renderer(ctx, hf, self.c["policy"], tile_size=spec.tile_size, **mixed)
@@ -137,6 +149,7 @@ class _Reference:
     def __init__(self, ctx, hf, brushes: list[list]):
         from hybrid.editing import TerrainEditor
         from hybrid.reference import ReferenceRenderer
+
         self.hf = _copy(hf)
         self.brushes = brushes
         self.ref = ReferenceRenderer(ctx, self.hf)
@@ -163,11 +176,13 @@ def prepare(spec: EditSpec) -> tuple:
     from hybrid.camera.view import parse_size
 
     from .spec_datasets import check_dataset_paths
+
     check_dataset_paths([spec.dataset], f"spec {spec.name!r}")
     hf = spec.terrain()
     if not isinstance(hf.heights, np.ndarray):
-        raise TerrabenchError(f"spec {spec.name!r}: dataset {spec.label!r} is a tile store; an edit spec edits "
-                              "terrain held in memory")
+        raise TerrabenchError(
+            f"spec {spec.name!r}: dataset {spec.label!r} is a tile store; an edit spec edits terrain held in memory"
+        )
     check_programme(spec, hf)
     w, h = parse_size(spec.sizes[0])
     views = get_flight(spec.flight, hf, frames=spec.frames, width=w, height=h).views()
@@ -194,6 +209,7 @@ def run_edit_spec(spec: EditSpec, runs_dir, ctx=None, progress: bool = True, fai
 
     from .environment import environment
     from .folders import read_json
+
     hf, views, programme = prepare(spec)
     folder = _open_folder(spec, runs_dir)
     with RunLock(folder):
@@ -216,6 +232,7 @@ def run_edit_spec(spec: EditSpec, runs_dir, ctx=None, progress: bool = True, fai
 def _run(spec: EditSpec, folder: Path, ctx, prepared: tuple, progress: bool, fail_fast: bool) -> None:
     """Time every frame of the configurations the journal lacks frames of, then measure and journal them."""
     from hybrid.gl.context import gl_info
+
     hf, views, programme = prepared
     journal = Journal(folder)
     todo = pending(spec, journal)  # type: ignore[arg-type]
@@ -226,7 +243,7 @@ def _run(spec: EditSpec, folder: Path, ctx, prepared: tuple, progress: bool, fai
     try:
         for m in members:
             m.attempt(lambda m=m: m.open(ctx, spec, hf, views[0]), fail_fast)
-        time.sleep(SETTLE_S)           # threads of earlier work (compiles, uploads) go idle before timing
+        time.sleep(SETTLE_S)  # threads of earlier work (compiles, uploads) go idle before timing
         shots: dict = {}
         for k in range(spec.frames if members else 0):
             _time_frame(spec, members, k, views[k], fail_fast)
@@ -258,17 +275,22 @@ def _time_frame(spec: EditSpec, members: list[_Member], k: int, view, fail_fast:
     results: dict = {id(m): [] for m in live}
     for rep in range(spec.repeats):
         for m in _rotated([m for m in live if m.out.error is None], k * spec.repeats + rep):
-            m.attempt(lambda m=m: results[id(m)].append(m.renderer.render(view, spec.tau, overlay=m.overlay)),
-                      fail_fast)
+            m.attempt(
+                lambda m=m: results[id(m)].append(m.renderer.render(view, spec.tau, overlay=m.overlay)), fail_fast
+            )
     for m in live:
         if m.out.error is not None:
             continue
         m.attempt(lambda m=m: m.draw_plain(k, view, spec.tau), fail_fast)
         shown = results[id(m)][-1]
-        m.timed[k] = {"walls": [x.stats.wall_ms for x in results[id(m)]], "stats": shown.stats,
-                      "cpu": [x.stats.cpu_ms for x in results[id(m)] if x.stats.cpu_ms is not None],
-                      "gpu": [x.stats.gpu_ms for x in results[id(m)] if x.stats.gpu_ms is not None],
-                      "draws": list(m.draws), "image": shown if k in spec.image_frames else None}
+        m.timed[k] = {
+            "walls": [x.stats.wall_ms for x in results[id(m)]],
+            "stats": shown.stats,
+            "cpu": [x.stats.cpu_ms for x in results[id(m)] if x.stats.cpu_ms is not None],
+            "gpu": [x.stats.gpu_ms for x in results[id(m)] if x.stats.gpu_ms is not None],
+            "draws": list(m.draws),
+            "image": shown if k in spec.image_frames else None,
+        }
 
 
 def _median(values) -> float:
@@ -282,12 +304,23 @@ def _measure(spec: EditSpec, m: _Member, shots: dict, extra: dict) -> None:
         t = m.timed[k]
         step, draws = m.steps[k], t["draws"]
         gpu = [step.gpu_ms, _median(d.gpu_ms for d in draws)] if step.gpu_ms is not None else None
-        row = {**m.c, "frame": k, **t["stats"].row(), **extra, "wall_ms": _median(t["walls"]),
-               "cpu_ms": _median(t["cpu"]), "gpu_ms": _median(t["gpu"]), "wall_ms_min": float(np.min(t["walls"])),
-               "wall_ms_max": float(np.max(t["walls"])), "wall_ms_repeats": [float(w) for w in t["walls"]],
-               **m.updates[k], "particles_step_ms": step.wall_ms,
-               "particles_draw_ms": _median(d.wall_ms for d in draws),
-               "particles_gpu_ms": float(sum(gpu)) if gpu else float("nan"), **m.gpu_bytes}
+        row = {
+            **m.c,
+            "frame": k,
+            **t["stats"].row(),
+            **extra,
+            "wall_ms": _median(t["walls"]),
+            "cpu_ms": _median(t["cpu"]),
+            "gpu_ms": _median(t["gpu"]),
+            "wall_ms_min": float(np.min(t["walls"])),
+            "wall_ms_max": float(np.max(t["walls"])),
+            "wall_ms_repeats": [float(w) for w in t["walls"]],
+            **m.updates[k],
+            "particles_step_ms": step.wall_ms,
+            "particles_draw_ms": _median(d.wall_ms for d in draws),
+            "particles_gpu_ms": float(sum(gpu)) if gpu else float("nan"),
+            **m.gpu_bytes,
+        }
         row["particles_ms"] = row["particles_step_ms"] + row["particles_draw_ms"]
         row.update(frame_accuracy(m.plain[k], shots[k][m.c["edit_radius"]], flip=spec.flip))
         tiles = [{"config": m.c["config"], "frame": k, "policy": m.c["policy"], **x} for x in t["stats"].tile_rows]

@@ -32,6 +32,7 @@ views and particles throughout. The edits of a run: ``frames * edits_per_frame``
 path by length, the first at its first way-point and the last at its last, ``edits_per_frame`` of them applied
 before each frame's draw.
 """
+
 from __future__ import annotations
 
 import math
@@ -104,10 +105,21 @@ class EditSpec:
             for radius in (*self.edit.radii, 0.0):
                 editing = radius > 0
                 tail = f"r{radius:g}m" if editing else "static"
-                out.append({"config": f"{base}-{policy}-{tail}", "dataset": self.label, "seed": self.seed,
-                            "flight": self.flight, "size": size, "tau": self.tau, "policy": policy,
-                            "editing": editing, "edit_radius": float(radius),
-                            "brush": self.edit.brush if editing else "none", "particles": self.edit.particles})
+                out.append(
+                    {
+                        "config": f"{base}-{policy}-{tail}",
+                        "dataset": self.label,
+                        "seed": self.seed,
+                        "flight": self.flight,
+                        "size": size,
+                        "tau": self.tau,
+                        "policy": policy,
+                        "editing": editing,
+                        "edit_radius": float(radius),
+                        "brush": self.edit.brush if editing else "none",
+                        "particles": self.edit.particles,
+                    }
+                )
         return out
 
     def terrain(self) -> HeightField:
@@ -121,6 +133,7 @@ class EditSpec:
     def same_as(self, stored: dict) -> bool:
         """Whether a stored plain form (a run folder's spec.json) is this spec."""
         import json
+
         return json.loads(json.dumps(self.to_dict())) == stored
 
 
@@ -151,8 +164,10 @@ def _path(v, units: str, where: str) -> tuple[tuple[float, float], ...]:
             raise TerrabenchError(f"{where}: 'path' way-point {k} must be [x, y], got {p!r}")
         x, y = (_number(c, f"{where}: 'path' way-point {k} {a}") for a, c in zip("xy", p))
         if units == "fraction" and not (0.0 <= x <= 1.0 and 0.0 <= y <= 1.0):
-            raise TerrabenchError(f"{where}: 'path' way-point {k} ({x:g}, {y:g}) lies off the terrain: as fractions "
-                                  "of the extent (units = \"fraction\") x and y must lie in [0, 1]")
+            raise TerrabenchError(
+                f"{where}: 'path' way-point {k} ({x:g}, {y:g}) lies off the terrain: as fractions "
+                'of the extent (units = "fraction") x and y must lie in [0, 1]'
+            )
         out.append((x, y))
     return tuple(out)
 
@@ -186,17 +201,27 @@ def parse_programme(d, source: str) -> EditProgramme:
     if ("height" in d) != (brush == "flatten"):
         raise TerrabenchError(f"{where}: 'height' (world z, m) goes with brush = \"flatten\" and only with it")
     height = _number(d["height"], f"{where}: 'height'") if "height" in d else None
-    counts = {k: _int(d, k, 0, hi, where) for k, hi in (("edits_per_frame", MAX_EDITS_PER_FRAME),
-                                                        ("particles", MAX_PARTICLES)) if k in d}
-    return EditProgramme(_path(d["path"], units, where), brush, units, tuple(float(r) for r in radii), strength,
-                         height, **counts)
+    counts = {
+        k: _int(d, k, 0, hi, where)
+        for k, hi in (("edits_per_frame", MAX_EDITS_PER_FRAME), ("particles", MAX_PARTICLES))
+        if k in d
+    }
+    return EditProgramme(
+        _path(d["path"], units, where), brush, units, tuple(float(r) for r in radii), strength, height, **counts
+    )
 
 
 def _scalars(d: dict, source: str) -> dict:
     """The spec's top-level keys other than dataset, edit and name, checked."""
     kw: dict = {}
-    for key, lo, hi in (("frames", 1, 100000), ("repeats", 3, 1000), ("tile_size", 2, 65536), ("supersample", 1, 8),
-                        ("dataset_size", 0, 16385), ("seed", 0, 2**32 - 1)):
+    for key, lo, hi in (
+        ("frames", 1, 100000),
+        ("repeats", 3, 1000),
+        ("tile_size", 2, 65536),
+        ("supersample", 1, 8),
+        ("dataset_size", 0, 16385),
+        ("seed", 0, 2**32 - 1),
+    ):
         if key in d:
             kw[key] = _int(d, key, lo, hi, source)
     if kw.get("tile_size", 2) & (kw.get("tile_size", 2) - 1):
@@ -227,7 +252,9 @@ def _lists(d: dict, source: str) -> dict:
             raise TerrabenchError(f"{source}: 'policies' must be a non-empty list, each once, got {v!r}")
         bad = [p for p in v if p not in EDIT_POLICIES]
         if bad:
-            raise TerrabenchError(f"{source}: policies {bad} do not follow edits; choose from {', '.join(EDIT_POLICIES)}")
+            raise TerrabenchError(
+                f"{source}: policies {bad} do not follow edits; choose from {', '.join(EDIT_POLICIES)}"
+            )
         kw["policies"] = v
     if "sizes" in d:
         v = d["sizes"]
@@ -257,8 +284,9 @@ def parse_edit_spec(d: dict, source: str, base: Path | None = None) -> EditSpec:
     if "dataset" in d:
         kw["dataset"] = check_dataset_entry(d["dataset"], source, base)
         if "@periodic" in str(kw["dataset"] if isinstance(kw["dataset"], str) else kw["dataset"]["path"]):
-            raise TerrabenchError(f"{source}: an edit spec's dataset is held in memory; a periodic tile store "
-                                  "cannot be edited")
+            raise TerrabenchError(
+                f"{source}: an edit spec's dataset is held in memory; a periodic tile store cannot be edited"
+            )
     spec = EditSpec(**kw)
     bad = [f for f in spec.image_frames if not 0 <= f < spec.frames]
     if bad:
@@ -281,12 +309,16 @@ def check_programme(spec: EditSpec, hf: HeightField) -> None:
     w, d = hf.extent
     for r in spec.edit.radii:
         if r > max(w, d):
-            raise TerrabenchError(f"spec {spec.name!r} [edit]: radius {r:g} m is larger than terrain {hf.name!r} "
-                                  f"({w:g} x {d:g} m); radii must lie in (0, {max(w, d):g}] m")
+            raise TerrabenchError(
+                f"spec {spec.name!r} [edit]: radius {r:g} m is larger than terrain {hf.name!r} "
+                f"({w:g} x {d:g} m); radii must lie in (0, {max(w, d):g}] m"
+            )
     for k, (x, y) in enumerate(way_points(spec.edit, hf), start=1):
         if not (ox <= x <= ox + w and oy <= y <= oy + d):
-            raise TerrabenchError(f"spec {spec.name!r} [edit]: path way-point {k} ({x:g}, {y:g}) m lies off terrain "
-                                  f"{hf.name!r}, which spans x {ox:g} .. {ox + w:g} and y {oy:g} .. {oy + d:g} m")
+            raise TerrabenchError(
+                f"spec {spec.name!r} [edit]: path way-point {k} ({x:g}, {y:g}) m lies off terrain "
+                f"{hf.name!r}, which spans x {ox:g} .. {ox + w:g} and y {oy:g} .. {oy + d:g} m"
+            )
     for r in spec.edit.radii:
         for frame in frame_brushes(spec, hf, r):
             for b in frame:
@@ -307,4 +339,4 @@ def frame_brushes(spec: EditSpec, hf: HeightField, radius: float) -> list[list[B
     cls = BRUSHES[p.brush]
     extra = {"height": p.height} if cls is Flatten else {}
     brushes = [cls(centre=(float(x), float(y)), radius=radius, strength=p.strength, **extra) for x, y in zip(xs, ys)]
-    return [brushes[k * p.edits_per_frame:(k + 1) * p.edits_per_frame] for k in range(spec.frames)]
+    return [brushes[k * p.edits_per_frame : (k + 1) * p.edits_per_frame] for k in range(spec.frames)]

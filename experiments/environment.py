@@ -1,5 +1,6 @@
 """What a run records about where it ran: GL renderer, CPU, Python and the versions of the packages that shape
 its numbers."""
+
 from __future__ import annotations
 
 import platform
@@ -9,6 +10,7 @@ from pathlib import Path
 def environment(ctx) -> dict:
     """GL renderer, CPU and package versions of this machine."""
     from hybrid.gl.context import gl_info
+
     info = gl_info(ctx)
     cpu = platform.processor() or ""
     try:
@@ -19,10 +21,18 @@ def environment(ctx) -> dict:
     except OSError:
         pass
     import os
-    return {"gl_renderer": info.renderer, "gl_vendor": info.vendor, "gl_version": info.version,
-            "cpu": cpu, "cpu_count": os.cpu_count(), "python": platform.python_version(),
-            "platform": platform.platform(), "packages": package_versions(),
-            "cost_model": cost_model_fingerprint(info.renderer)}
+
+    return {
+        "gl_renderer": info.renderer,
+        "gl_vendor": info.vendor,
+        "gl_version": info.version,
+        "cpu": cpu,
+        "cpu_count": os.cpu_count(),
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+        "packages": package_versions(),
+        "cost_model": cost_model_fingerprint(info.renderer),
+    }
 
 
 def cost_model_fingerprint(renderer: str, sent: dict | None = None) -> dict:
@@ -33,6 +43,7 @@ def cost_model_fingerprint(renderer: str, sent: dict | None = None) -> dict:
     import json
 
     from hybrid.cost.model import cost_model_from_dict, load_cost_model
+
     if sent and renderer in sent:
         model = cost_model_from_dict(sent[renderer], "costs file sent by the client")
     else:
@@ -51,6 +62,7 @@ def cost_model_line(env: dict) -> str:
     def one(m: dict) -> str:
         rule = f", its raster frames drawn with full_res {m['full_res']!r}" if "full_res" in m else ""
         return f"{m.get('source', '?')} (sha256 {m.get('sha256', '?')}{rule})"
+
     return "; ".join(f"{r + ': ' if r else ''}{one(m)}" for r, m in models.items()) or "not recorded"
 
 
@@ -79,9 +91,20 @@ def resume_mismatch(old: dict, new: dict) -> str | None:
 def package_versions() -> dict[str, str]:
     """Versions of the packages that shape a run's numbers (or 'not installed')."""
     from importlib import metadata
+
     pkgs = {}
-    for name in ("terrabench", "moderngl", "numpy", "pandas", "matplotlib", "scikit-image", "flip-evaluator",
-                 "fast-simplification", "trimesh", "distributed"):
+    for name in (
+        "terrabench",
+        "moderngl",
+        "numpy",
+        "pandas",
+        "matplotlib",
+        "scikit-image",
+        "flip-evaluator",
+        "fast-simplification",
+        "trimesh",
+        "distributed",
+    ):
         try:
             pkgs[name] = metadata.version(name)
         except metadata.PackageNotFoundError:

@@ -5,11 +5,12 @@ line, in order), and the two triangles of each cell it crosses (SW-NE diagonal, 
 intersected in float64 (Moller-Trumbore). Only the samples at the crossed cells' corners are read, so a grid held
 in a tile store is never loaded whole.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
-CELLS_AT_ONCE = 1 << 16             # cells intersected in one vectorized pass of a ray
+CELLS_AT_ONCE = 1 << 16  # cells intersected in one vectorized pass of a ray
 
 
 def _slab(o: float, d: float, lo: float, hi: float) -> tuple[float, float]:
@@ -56,17 +57,26 @@ def _ray_distance(hf, eye, D, near: float, far: float) -> float:
     lo, hi = hf.height_range
     o = np.array([(eye[0] - ox) / sx, (eye[1] - oy) / sy])
     d = np.array([D[0] / sx, D[1] / sy])
-    spans = [_slab(o[0], d[0], 0.0, hf.cols - 1), _slab(o[1], d[1], 0.0, hf.rows - 1),
-             _slab(eye[2] - oz, D[2], lo, hi), (near, far)]
+    spans = [
+        _slab(o[0], d[0], 0.0, hf.cols - 1),
+        _slab(o[1], d[1], 0.0, hf.rows - 1),
+        _slab(eye[2] - oz, D[2], lo, hi),
+        (near, far),
+    ]
     t0, t1 = max(s[0] for s in spans), min(s[1] for s in spans)
     if not t0 <= t1:
         return np.inf
     cells = _track(o, d, t0, t1, hf.rows, hf.cols)
     for k in range(0, len(cells), CELLS_AT_ONCE):
-        r, c = cells[k:k + CELLS_AT_ONCE].T
+        r, c = cells[k : k + CELLS_AT_ONCE].T
         corners = [(r, c), (r, c + 1), (r + 1, c + 1), (r + 1, c)]
-        P = np.stack([np.stack([ox + cc * sx, oy + rr * sy, oz + np.asarray(hf.heights[rr, cc], np.float64)], -1)
-                      for rr, cc in corners], axis=1)
+        P = np.stack(
+            [
+                np.stack([ox + cc * sx, oy + rr * sy, oz + np.asarray(hf.heights[rr, cc], np.float64)], -1)
+                for rr, cc in corners
+            ],
+            axis=1,
+        )
         t = min(_nearest(eye, D, P[:, [0, 1, 2]]), _nearest(eye, D, P[:, [0, 2, 3]]))
         if np.isfinite(t):
             return t

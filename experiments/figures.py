@@ -1,5 +1,6 @@
 """Figure plumbing shared by the chart modules: panel grids of up to MAX_COLS columns, wrapped panel titles, one
 legend for the whole figure, one colour per method, and figures saved as PNG and SVG whole or not at all."""
+
 from __future__ import annotations
 
 import math
@@ -14,7 +15,7 @@ import pandas as pd
 
 from hybrid.atomic import atomic_path
 
-MAX_COLS = 4             # panels a row
+MAX_COLS = 4  # panels a row
 
 
 def save_figure(fig, folder: Path, name: str) -> list[Path]:
@@ -60,8 +61,14 @@ def figure_legend(fig, axes) -> None:
         for h, lab in zip(*ax.get_legend_handles_labels()):
             seen.setdefault(lab, h)
     if seen:
-        fig.legend(list(seen.values()), list(seen), loc="outside upper center", fontsize=8,
-                   ncol=min(len(seen), 4), frameon=False)
+        fig.legend(
+            list(seen.values()),
+            list(seen),
+            loc="outside upper center",
+            fontsize=8,
+            ncol=min(len(seen), 4),
+            frameon=False,
+        )
 
 
 def method_colours(f: pd.DataFrame) -> dict:

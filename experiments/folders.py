@@ -1,4 +1,5 @@
 """Output folders: made if needed and proved writable before anything is computed or written."""
+
 from __future__ import annotations
 
 import tempfile
@@ -22,6 +23,7 @@ def writable_folder(path, what: str) -> Path:
 def read_json(path, what: str):
     """The JSON document at path; a missing, unreadable or corrupt file is a TerrabenchError naming it."""
     import json
+
     path = Path(path)
     try:
         return json.loads(path.read_text(encoding="utf-8"))
@@ -34,14 +36,14 @@ def read_json(path, what: str):
 def read_parquet(path, what: str):
     """The Parquet table at path as a DataFrame; a missing, unreadable or corrupt file is a TerrabenchError."""
     import pandas as pd
+
     path = Path(path)
     try:
         return pd.read_parquet(path)
     except FileNotFoundError:
         raise TerrabenchError(f"{what} {path} is missing") from None
-    except (OSError, ValueError) as exc:          # pyarrow's ArrowInvalid is a ValueError
-        raise TerrabenchError(f"{what} {path} is corrupt: not a readable Parquet table "
-                              f"({_first_line(exc)})") from None
+    except (OSError, ValueError) as exc:  # pyarrow's ArrowInvalid is a ValueError
+        raise TerrabenchError(f"{what} {path} is corrupt: not a readable Parquet table ({_first_line(exc)})") from None
 
 
 def _first_line(exc: BaseException) -> str:

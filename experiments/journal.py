@@ -5,6 +5,7 @@ One finished frame is one line, written in one write and flushed: a kill or a fu
 line, which reading skips. A configuration's result (``experiments.config_task.ConfigResult``) is recorded
 here whoever ran it, this process or a cluster worker, so resuming never repeats or loses a frame.
 """
+
 from __future__ import annotations
 
 import json
@@ -55,7 +56,7 @@ class Journal:
             return
         path = self.folder / f"{name}.jsonl"
         if path.exists() and path.stat().st_size:
-            with path.open("rb") as f:                    # an interruption may have left a torn last line
+            with path.open("rb") as f:  # an interruption may have left a torn last line
                 f.seek(-1, 2)
                 torn = f.read(1) != b"\n"
             if torn:
@@ -63,13 +64,15 @@ class Journal:
                     f.write("\n")
         text = "".join(json.dumps({k: _jsonable(v) for k, v in r.items()}) + "\n" for r in rows)
         try:
-            with path.open("a") as f:          # one write: a kill or a full disk tears at most the last line
+            with path.open("a") as f:  # one write: a kill or a full disk tears at most the last line
                 f.write(text)
                 f.flush()
         except OSError as exc:
             what = "disk full" if disk_full(exc) else (exc.strerror or str(exc))
-            raise JournalError(f"cannot append to the run journal {path} ({what}); the rows written so far "
-                                  "are kept and the run resumes from them") from None
+            raise JournalError(
+                f"cannot append to the run journal {path} ({what}); the rows written so far "
+                "are kept and the run resumes from them"
+            ) from None
 
     def append_frame(self, row: dict, tiles: list[dict]) -> None:
         """Append one frame's row together with its tile rows as one journal line."""

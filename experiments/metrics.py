@@ -12,6 +12,7 @@ Image metrics (PSNR, SSIM, FLIP) are taken over the terrain pixels of either ima
 draw identically neither dilutes nor inflates them. Depth errors are over the pixels both cover.
 Temporal measures (popping) are in ``experiments.popping``.
 """
+
 from __future__ import annotations
 
 import os
@@ -57,9 +58,9 @@ def _any_within(mask: np.ndarray, window: int, axis: int, before: bool) -> np.nd
     n = m.shape[-1]
     c = np.concatenate([np.zeros(m.shape[:-1] + (1,), np.int32), np.cumsum(m, axis=-1)], axis=-1)
     idx = np.arange(n)
-    if before:                                    # pixels idx - window .. idx - 1
+    if before:  # pixels idx - window .. idx - 1
         lo, hi = np.maximum(idx - window, 0), idx
-    else:                                         # pixels idx + 1 .. idx + window
+    else:  # pixels idx + 1 .. idx + window
         lo, hi = np.minimum(idx + 1, n), np.minimum(idx + 1 + window, n)
     return np.moveaxis(c[..., hi] - c[..., lo] > 0, -1, axis)
 
@@ -91,9 +92,16 @@ def coverage_errors(frame, ref) -> dict:
     holes, extra = int(np.count_nonzero(r & ~m)), int(np.count_nonzero(m & ~r))
     cracks = int(np.count_nonzero(crack_pixels(frame, ref)))
     ref_px = int(np.count_nonzero(r))
-    return {"hole_px": holes, "extra_px": extra, "crack_px": cracks, "silhouette_px": holes - cracks + extra,
-            "terrain_as_sky": holes / ref_px if ref_px else np.nan, "coverage_mismatch": (holes + extra) / m.size,
-            "coverage": float(m.mean()), "ref_coverage": float(r.mean())}
+    return {
+        "hole_px": holes,
+        "extra_px": extra,
+        "crack_px": cracks,
+        "silhouette_px": holes - cracks + extra,
+        "terrain_as_sky": holes / ref_px if ref_px else np.nan,
+        "coverage_mismatch": (holes + extra) / m.size,
+        "coverage": float(m.mean()),
+        "ref_coverage": float(r.mean()),
+    }
 
 
 def depth_errors(frame, ref) -> dict:
@@ -105,8 +113,11 @@ def depth_errors(frame, ref) -> dict:
     d = frame.distance[both].astype(np.float64)
     r = ref.distance[both].astype(np.float64)
     rel = np.abs(d - r) / r
-    return {"depth_rel_median": float(np.median(rel)), "depth_rel_p99": float(np.percentile(rel, 99)),
-            "depth_rel_max": float(rel.max())}
+    return {
+        "depth_rel_median": float(np.median(rel)),
+        "depth_rel_p99": float(np.percentile(rel, 99)),
+        "depth_rel_max": float(rel.max()),
+    }
 
 
 def image_errors(frame, ref, flip: bool = True) -> dict:
@@ -114,20 +125,23 @@ def image_errors(frame, ref, flip: bool = True) -> dict:
     either image shows terrain; NaN when neither does. SSIM and FLIP maps are computed on the whole image (their
     windows see the sky next to the terrain) and averaged over those pixels."""
     from skimage.metrics import structural_similarity
+
     check_pair(frame, ref)
     a, b = frame.colour, ref.colour
     terrain = np.isfinite(frame.distance) | np.isfinite(ref.distance)
     if not terrain.any():
         return {"psnr": np.nan, "ssim": np.nan, **({"flip": np.nan} if flip else {})}
     mse = float(np.mean((a[terrain].astype(np.float64) - b[terrain].astype(np.float64)) ** 2))
-    psnr = float("inf") if mse == 0 else float(10 * np.log10(255.0 ** 2 / mse))
+    psnr = float("inf") if mse == 0 else float(10 * np.log10(255.0**2 / mse))
     win = min(7, min(a.shape[:2]) // 2 * 2 - 1)
     _, smap = structural_similarity(b, a, channel_axis=2, data_range=255, win_size=max(win, 3), full=True)
     out = {"psnr": psnr, "ssim": float(smap.mean(axis=2)[terrain].mean())}
     if flip:
         import flip_evaluator
-        fmap, _, _ = flip_evaluator.evaluate(b.astype(np.float32) / 255.0, a.astype(np.float32) / 255.0, "LDR",
-                                             applyMagma=False)
+
+        fmap, _, _ = flip_evaluator.evaluate(
+            b.astype(np.float32) / 255.0, a.astype(np.float32) / 255.0, "LDR", applyMagma=False
+        )
         out["flip"] = float(np.asarray(fmap).reshape(terrain.shape)[terrain].mean())
     return out
 
@@ -139,14 +153,14 @@ def near_silhouettes(distance: np.ndarray) -> np.ndarray:
     edge = np.zeros(d.shape, dtype=bool)
     for a, b in ((d[:, :-1], d[:, 1:]), (d[:-1, :], d[1:, :])):
         with np.errstate(invalid="ignore"):
-            step = ~(np.abs(b - a) <= SILHOUETTE_STEP * np.minimum(a, b))      # inf - inf counts as a step
+            step = ~(np.abs(b - a) <= SILHOUETTE_STEP * np.minimum(a, b))  # inf - inf counts as a step
         if a.shape[1] < d.shape[1]:
             edge[:, :-1] |= step
             edge[:, 1:] |= step
         else:
             edge[:-1, :] |= step
             edge[1:, :] |= step
-    return grow(edge, 1)                          # silhouettes move by a pixel between methods
+    return grow(edge, 1)  # silhouettes move by a pixel between methods
 
 
 def hole_pixels_in_columns(frame) -> np.ndarray:
@@ -158,5 +172,9 @@ def hole_pixels_in_columns(frame) -> np.ndarray:
 
 def frame_accuracy(frame, ref, flip: bool = True) -> dict:
     """All per-frame accuracy metrics in one dict."""
-    return {**coverage_errors(frame, ref), **depth_errors(frame, ref), **image_errors(frame, ref, flip),
-            "nan_px": int(np.count_nonzero(np.isnan(frame.distance)))}
+    return {
+        **coverage_errors(frame, ref),
+        **depth_errors(frame, ref),
+        **image_errors(frame, ref, flip),
+        "nan_px": int(np.count_nonzero(np.isnan(frame.distance))),
+    }

@@ -11,6 +11,7 @@ per-frame medians. Two measures of noise come from the same run:
 A difference is within noise (a tie) when the interval holds 1 or the ratio differs from 1 by less than the
 larger repeat spread of the two methods: what the same frame varies by when drawn again is not a finding.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -18,8 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-BOOTSTRAP = 2000         # bootstrap resamples
-LEVEL = 0.95             # two-sided interval
+BOOTSTRAP = 2000  # bootstrap resamples
+LEVEL = 0.95  # two-sided interval
 
 
 def repeat_matrix(g: pd.DataFrame) -> np.ndarray:
@@ -83,8 +84,10 @@ class Comparison:
     def words(self) -> str:
         """'within noise' or 'N.NNx faster/slower' for a against b, with the interval."""
         if self.tie:
-            return f"within noise (ratio {self.ratio:.2f}, interval {self.low:.2f}-{self.high:.2f}, " \
-                   f"repeats spread {100 * self.spread:.0f} %)"
+            return (
+                f"within noise (ratio {self.ratio:.2f}, interval {self.low:.2f}-{self.high:.2f}, "
+                f"repeats spread {100 * self.spread:.0f} %)"
+            )
         if self.ratio < 1:
             return f"{1 / self.ratio:.2f}x faster (interval {1 / self.high:.2f}-{1 / self.low:.2f}x)"
         return f"{self.ratio:.2f}x slower (interval {self.low:.2f}-{self.high:.2f}x)"
@@ -100,5 +103,13 @@ def compare(a: str, ga: pd.DataFrame, b: str, gb: pd.DataFrame, seed: int = 0) -
     frames = rng.integers(0, len(common), (BOOTSTRAP, len(common)))
     ratios = _resampled_ms(ta, frames, rng) / _resampled_ms(tb, frames, rng)
     q = (1 - LEVEL) / 2
-    return Comparison(a, b, ms_a, ms_b, ms_a / ms_b, float(np.quantile(ratios, q)), float(np.quantile(ratios, 1 - q)),
-                      max(repeat_spread(ta), repeat_spread(tb)))
+    return Comparison(
+        a,
+        b,
+        ms_a,
+        ms_b,
+        ms_a / ms_b,
+        float(np.quantile(ratios, q)),
+        float(np.quantile(ratios, 1 - q)),
+        max(repeat_spread(ta), repeat_spread(tb)),
+    )

@@ -22,15 +22,16 @@ a frame (``image_flow``, 90th percentile over the reference's terrain pixels) ev
 of the surface each frame, and pop_px is left out (NaN). The dolly flight moves the image by about a pixel
 a frame at most; the orbit and flyover presets by tens of pixels.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 from .metrics import check_pair, near_silhouettes
 
-POP_STEP = 1e-3          # a step of the relative depth error (0.1 % of the distance) that counts as popping
-POP_FILTER_PX = 5        # side of the median filter that keeps patches and drops creases (pixels)
-POP_MAX_FLOW_PX = 2.0    # image motion a frame (pixels, 90th percentile) up to which popping is measured
+POP_STEP = 1e-3  # a step of the relative depth error (0.1 % of the distance) that counts as popping
+POP_FILTER_PX = 5  # side of the median filter that keeps patches and drops creases (pixels)
+POP_MAX_FLOW_PX = 2.0  # image motion a frame (pixels, 90th percentile) up to which popping is measured
 
 
 def _ratio(x: float, ref: float) -> float:
@@ -42,6 +43,7 @@ def depth_error_steps(frames, refs) -> np.ndarray:
     """Per pixel (H x W): the 5 x 5 median of |e_{k+1} - 2 e_k + e_{k-1}| for three consecutive frames and their
     references (e the relative depth error), 0 where a pixel is sky or near a silhouette in any of the six."""
     from scipy.ndimage import median_filter
+
     if len(frames) != 3 or len(refs) != 3:
         raise ValueError("depth_error_steps needs three consecutive frames and their three references")
     for f in (*frames, *refs):
@@ -51,7 +53,7 @@ def depth_error_steps(frames, refs) -> np.ndarray:
         ok &= np.isfinite(f.distance) & ~near_silhouettes(f.distance)
     e = []
     for f, r in zip(frames, refs):
-        d, rd = np.where(ok, f.distance, 1.0), np.where(ok, r.distance, 1.0)     # float64, finite
+        d, rd = np.where(ok, f.distance, 1.0), np.where(ok, r.distance, 1.0)  # float64, finite
         e.append((d - rd) / rd)
     step = np.where(ok, np.abs(e[2] - 2.0 * e[1] + e[0]), 0.0)
     return median_filter(step, size=POP_FILTER_PX, mode="constant")

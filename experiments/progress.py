@@ -1,4 +1,5 @@
 """Progress of long runs: one line on a terminal, one line per 10 % in a log file."""
+
 from __future__ import annotations
 
 import sys
@@ -30,7 +31,7 @@ class Progress:
         line = f"[{bar}] {self.done}/{self.total} {100 * frac:5.1f} % left {eta}  {label[:60]:60s}"
         if self.tty:
             sys.stderr.write("\r" + line)
-        elif int(10 * frac) != self.last_decile:      # a log file gets one line per 10 %
+        elif int(10 * frac) != self.last_decile:  # a log file gets one line per 10 %
             self.last_decile = int(10 * frac)
             sys.stderr.write(line.rstrip() + "\n")
         sys.stderr.flush()

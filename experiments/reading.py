@@ -5,6 +5,7 @@ within noise, never ranked. A mixed policy (hybrid, heuristic, oracle) that made
 pure method in every frame is named as such. Accuracy and coverage statements are deterministic (the same frame
 renders the same pixels) and use the measures of ``experiments.metrics`` and ``experiments.popping``.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -33,8 +34,9 @@ def speed_sentence(scene: str, g: pd.DataFrame) -> str:
     rest = [m for m in ms.index[1:] if not cmp[m].tie]
     s = f"**{scene}**: the lowest median frame time is {first}'s ({ms[first]:.1f} ms)"
     if tied:
-        s += (f"; {'within noise of it' if rest else 'every other method within noise of it'}: "
-              + ", ".join(f"{m} ({ms[m]:.1f} ms)" for m in tied))
+        s += f"; {'within noise of it' if rest else 'every other method within noise of it'}: " + ", ".join(
+            f"{m} ({ms[m]:.1f} ms)" for m in tied
+        )
     if rest:
         c = cmp[rest[0]]
         s += f"; the next, {rest[0]} ({c.ms_a:.1f} ms), is {c.words()} than {first}"
@@ -62,13 +64,15 @@ def mixed_sentences(g: pd.DataFrame) -> list[str]:
     for (tau, rec, fr), sub in g.groupby(["tau", "reconstruction", "full_res"]):
         pure = {p: sub[sub["policy"] == p] for p in ("raster", "raster_gs", "raycast")}
         for p in ("raster", "raster_gs", "raycast"):  # raster runs once, with the first reconstruction; ray
-            if pure[p].empty:                          # casting once, with the exact full-resolution rule
+            if pure[p].empty:  # casting once, with the exact full-resolution rule
                 same = (g["policy"] == p) & (g["tau"] == tau)
                 pure[p] = g[same & (g["full_res"] == fr)] if p != "raycast" else g[same & (g["reconstruction"] == rec)]
         pure = {p: r for p, r in pure.items() if not r.empty}
         if not pure:
             continue
-        for pol, name in [(p, m) for p in mixed_policies() for m in sorted(sub.loc[sub["policy"] == p, "method"].unique())]:
+        for pol, name in [
+            (p, m) for p in mixed_policies() for m in sorted(sub.loc[sub["policy"] == p, "method"].unique())
+        ]:
             rows = sub[sub["method"] == name]
             same = _same_choices(rows)
             if same and same in pure:
@@ -88,8 +92,10 @@ def mixed_sentences(g: pd.DataFrame) -> list[str]:
             best = min(pure, key=lambda p: pure[p]["wall_ms"].median())
             c = compare(name, rows, pure[best]["method"].iloc[0], pure[best])
             split = f" ({100 * gs:.0f} % through the geometry shader)" if gs > 0 else ""
-            s = (f"{name}: rasterizes {100 * share:.0f} % of its tiles{split}; against the best pure method "
-                 f"({best}, {c.ms_b:.1f} ms) it takes {c.ms_a:.1f} ms, {c.words()}")
+            s = (
+                f"{name}: rasterizes {100 * share:.0f} % of its tiles{split}; against the best pure method "
+                f"({best}, {c.ms_b:.1f} ms) it takes {c.ms_a:.1f} ms, {c.words()}"
+            )
             oracle = sub[sub["policy"] == "oracle"]
             if pol != "oracle" and not oracle.empty:
                 o = compare(name, rows, oracle["method"].iloc[0], oracle)
@@ -109,10 +115,15 @@ def _popping_sentence(g: pd.DataFrame) -> str:
         if st is None or not np.isfinite(st):
             parts.append(f"{m} {int(v)} px")
         else:
-            parts.append(f"{m} {int(v)} px ({int(st)} with its level of detail held"
-                         + (": no more than without switching" if v <= st else "") + ")")
-    return ("Popping (pixels whose depth error steps by more than 0.1 % of the distance in one frame, on a camera "
-            "slow enough to tell): " + (", ".join(parts) + " over the flight" if parts else "none") + ".")
+            parts.append(
+                f"{m} {int(v)} px ({int(st)} with its level of detail held"
+                + (": no more than without switching" if v <= st else "")
+                + ")"
+            )
+    return (
+        "Popping (pixels whose depth error steps by more than 0.1 % of the distance in one frame, on a camera "
+        "slow enough to tell): " + (", ".join(parts) + " over the flight" if parts else "none") + "."
+    )
 
 
 def accuracy_sentences(g: pd.DataFrame) -> list[str]:
@@ -130,14 +141,23 @@ def accuracy_sentences(g: pd.DataFrame) -> list[str]:
     if "crack_px" in g:
         cracks = g.groupby("method")["crack_px"].max()
         bad = cracks[cracks > 0]
-        out.append("Cracks (sky enclosed by the method's own terrain where the reference has terrain): " +
-                   (", ".join(f"{m} up to {int(v)} px a frame" for m, v in bad.items()) if len(bad) else "none") + ".")
+        out.append(
+            "Cracks (sky enclosed by the method's own terrain where the reference has terrain): "
+            + (", ".join(f"{m} up to {int(v)} px a frame" for m, v in bad.items()) if len(bad) else "none")
+            + "."
+        )
     if "terrain_as_sky" in g:
         miss = g.groupby("method")["terrain_as_sky"].max()
         worst = miss.idxmax()
-        out.append("Reference terrain drawn as sky (cracks and silhouettes): " +
-                   (f"at most {100 * miss[worst]:.3g} % of its terrain pixels in a frame ({worst})" if miss[worst] > 0
-                    else "none") + ".")
+        out.append(
+            "Reference terrain drawn as sky (cracks and silhouettes): "
+            + (
+                f"at most {100 * miss[worst]:.3g} % of its terrain pixels in a frame ({worst})"
+                if miss[worst] > 0
+                else "none"
+            )
+            + "."
+        )
     if "pop_px" in g and g["pop_px"].notna().any():
         out.append(_popping_sentence(g))
     for col, what in (("capped_rays", "capped rays"), ("nan_px", "NaN pixels")):

@@ -5,6 +5,7 @@ the most accurate method), then the speed-against-accuracy chart, then the detai
 nesting, the summary tables per scene (each in its own scrolling box), the other charts, and how the run was
 measured (method, environment as a key/value table, spec). Missing values show as '–', never NaN.
 """
+
 from __future__ import annotations
 
 import html
@@ -17,7 +18,7 @@ from .environment import adaptation_line, cost_model_line
 from .report_html_headline import SceneHeadline
 from .tables import format_number
 
-TOP_CHART = ("speed_vs_accuracy", "frame_time")      # the first of these a run has goes near the top
+TOP_CHART = ("speed_vs_accuracy", "frame_time")  # the first of these a run has goes near the top
 
 CSS = """
 *{box-sizing:border-box}
@@ -62,7 +63,7 @@ def reading_html(lines: list[str]) -> str:
     for i, line in enumerate(lines):
         child = line.startswith("  ") and i > 0
         if child and not open_sub:
-            out[-1] = out[-1].removesuffix("</li>")   # reopen the parent item to nest under it
+            out[-1] = out[-1].removesuffix("</li>")  # reopen the parent item to nest under it
             out.append("<ul>")
             open_sub = True
         elif not child and open_sub:
@@ -84,17 +85,31 @@ def value_html(v) -> str:
     return "–" if v is None or v == "" else html.escape(str(v))
 
 
-ENV_LABELS = {"gl_renderer": "GL renderer", "gl_vendor": "GL vendor", "gl_version": "GL version", "cpu": "CPU",
-              "cpu_count": "CPU cores", "python": "Python", "platform": "Platform", "packages": "Packages",
-              "scheduler": "Dask scheduler", "workers": "Workers"}
+ENV_LABELS = {
+    "gl_renderer": "GL renderer",
+    "gl_vendor": "GL vendor",
+    "gl_version": "GL version",
+    "cpu": "CPU",
+    "cpu_count": "CPU cores",
+    "python": "Python",
+    "platform": "Platform",
+    "packages": "Packages",
+    "scheduler": "Dask scheduler",
+    "workers": "Workers",
+}
 
 
 def environment_html(env: dict, spec: dict) -> str:
     """Where the run ran, as a key/value table: GL, CPU, Python, packages, the hybrid's cost model and adaptation."""
-    rows = [(ENV_LABELS.get(k, k.replace("_", " ").capitalize()), value_html(v))
-            for k, v in env.items() if k != "cost_model"]
-    rows += [("Hybrid cost model", html.escape(cost_model_line(env))),
-             ("Hybrid adapted", html.escape(adaptation_line(spec)))]
+    rows = [
+        (ENV_LABELS.get(k, k.replace("_", " ").capitalize()), value_html(v))
+        for k, v in env.items()
+        if k != "cost_model"
+    ]
+    rows += [
+        ("Hybrid cost model", html.escape(cost_model_line(env))),
+        ("Hybrid adapted", html.escape(adaptation_line(spec))),
+    ]
     body = "".join(f"<tr><td>{html.escape(k)}</td><td>{v}</td></tr>" for k, v in rows)
     return f"<div class='scroll'><table class='kv'><tbody>{body}</tbody></table></div>"
 
@@ -111,8 +126,7 @@ def table_html(df: pd.DataFrame, caption: str = "") -> str:
             cells.append(f"<td class='num'>{text}</td>" if num else f"<td>{html.escape(text)}</td>")
         body.append("<tr>" + "".join(cells) + "</tr>")
     cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
-    return (f"<div class='scroll'><table>{cap}<thead><tr>{head}</tr></thead>"
-            f"<tbody>{''.join(body)}</tbody></table></div>")
+    return f"<div class='scroll'><table>{cap}<thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table></div>"
 
 
 def summary_html(table: pd.DataFrame) -> str:
@@ -133,28 +147,47 @@ def headline_card(h: SceneHeadline) -> str:
         shown = ", ".join(f"{html.escape(m)} ({ms:.1f} ms)" for m, ms in h.tied[:4])
         more = f" and {len(h.tied) - 4} more" if len(h.tied) > 4 else ""
         tied = f"<div class='ties'>within noise of it: {shown}{more}</div>"
-    parts = [f"<div class='card'><h3>{html.escape(h.scene)}</h3>",
-             (f"<div class='label'>Fastest</div><div><b>{html.escape(h.fastest)}</b>, {h.fastest_ms:.1f} ms median "
-              f"a frame</div>{tied}"), "<div class='label'>Hybrid against the better pure method</div>"]
+    parts = [
+        f"<div class='card'><h3>{html.escape(h.scene)}</h3>",
+        (
+            f"<div class='label'>Fastest</div><div><b>{html.escape(h.fastest)}</b>, {h.fastest_ms:.1f} ms median "
+            f"a frame</div>{tied}"
+        ),
+        "<div class='label'>Hybrid against the better pure method</div>",
+    ]
     if h.gains:
-        parts.append("<ul>" + "".join(
-            f"<li>{html.escape(g.hybrid)} ({g.cmp.ms_a:.1f} ms) against {html.escape(g.pure)} ({g.cmp.ms_b:.1f} ms): "
-            f"<span class='{g.verdict}'>{html.escape(g.words())}</span></li>" for g in h.gains) + "</ul>")
+        parts.append(
+            "<ul>"
+            + "".join(
+                f"<li>{html.escape(g.hybrid)} ({g.cmp.ms_a:.1f} ms) against {html.escape(g.pure)} ({g.cmp.ms_b:.1f} ms): "
+                f"<span class='{g.verdict}'>{html.escape(g.words())}</span></li>"
+                for g in h.gains
+            )
+            + "</ul>"
+        )
     else:
         parts.append("<div class='ties'>no hybrid in this scene</div>")
     if h.accurate:
-        parts.append(f"<div class='label'>Most accurate</div><div>{_names(h.accurate)} "
-                     f"(mean FLIP {h.flip:.4f} over terrain pixels)</div>")
+        parts.append(
+            f"<div class='label'>Most accurate</div><div>{_names(h.accurate)} "
+            f"(mean FLIP {h.flip:.4f} over terrain pixels)</div>"
+        )
     return "".join(parts) + "</div>"
 
 
 def headline_html(headlines: list[SceneHeadline]) -> str:
     """The headline section: one card per scene and a line on how to read the intervals."""
-    note = ("<p class='note'>Times are medians over a flight's frames of each frame's median of repeats; intervals "
-            "are 95 % bootstrap intervals of the ratio over frames and repeats; a difference within the run's noise "
-            "is called a tie (see <a href='#method'>How it was measured</a>).</p>")
-    return ("<h2 id='headline'>Answer per scene</h2><div class='cards'>"
-            + "".join(headline_card(h) for h in headlines) + "</div>" + note)
+    note = (
+        "<p class='note'>Times are medians over a flight's frames of each frame's median of repeats; intervals "
+        "are 95 % bootstrap intervals of the ratio over frames and repeats; a difference within the run's noise "
+        "is called a tie (see <a href='#method'>How it was measured</a>).</p>"
+    )
+    return (
+        "<h2 id='headline'>Answer per scene</h2><div class='cards'>"
+        + "".join(headline_card(h) for h in headlines)
+        + "</div>"
+        + note
+    )
 
 
 def chart_html(title: str, files: list, key: str, lazy: bool = True) -> str:
@@ -163,33 +196,58 @@ def chart_html(title: str, files: list, key: str, lazy: bool = True) -> str:
     if not imgs:
         return ""
     load = " loading='lazy'" if lazy else ""
-    figs = "".join(f"<figure><img src='{html.escape(p.name)}' alt='{html.escape(p.stem)}'{load}></figure>"
-                   for p in imgs)
+    figs = "".join(
+        f"<figure><img src='{html.escape(p.name)}' alt='{html.escape(p.stem)}'{load}></figure>" for p in imgs
+    )
     return f"<h2 id='{key}'>{html.escape(title)}</h2>{figs}"
 
 
-def page(title: str, missing: str, spec: dict, env: dict, lines: list[str], table: pd.DataFrame, charts: dict,
-         credits: list[str], headlines: list[SceneHeadline], intro: str, notes: list[str], titles: dict) -> str:
+def page(
+    title: str,
+    missing: str,
+    spec: dict,
+    env: dict,
+    lines: list[str],
+    table: pd.DataFrame,
+    charts: dict,
+    credits: list[str],
+    headlines: list[SceneHeadline],
+    intro: str,
+    notes: list[str],
+    titles: dict,
+) -> str:
     """The whole report page; charts maps name -> files in report order, titles name -> heading."""
     top = next((k for k in TOP_CHART if any(p.suffix == ".png" for p in charts.get(k, []))), None)
     rest = "".join(chart_html(titles[k], v, k) for k, v in charts.items() if k != top)
-    nav = [("headline", "Answer"), (top, titles.get(top, "")), ("reading", "Reading"), ("summary", "Summary"),
-           ("method", "How it was measured")]
-    h = ["<!doctype html><html lang='en'><head><meta charset='utf-8'>",
-         "<meta name='viewport' content='width=device-width, initial-scale=1'>",
-         f"<title>{html.escape(title)}</title><style>{CSS}</style></head><body>",
-         f"<h1>{html.escape(title)}</h1>",
-         "<nav>" + "".join(f"<a href='#{k}'>{html.escape(t)}</a>" for k, t in nav if k) + "</nav>",
-         f"<p class='incomplete'><b>Incomplete:</b> {inline(missing)}</p>" if missing else "",
-         headline_html(headlines),
-         chart_html(titles[top], charts[top], top, lazy=False) if top else "",
-         "<h2 id='reading'>Reading</h2>", reading_html(lines),
-         "<h2 id='summary'>Summary per scene</h2>", summary_html(table),
-         "<ul class='note'>" + "".join(f"<li>{inline(m)}</li>" for m in notes) + "</ul>",
-         rest,
-         "<h2 id='method'>How it was measured</h2>", f"<p>{inline(intro)}</p>",
-         "<h3>Environment</h3>", environment_html(env, spec),
-         "<details><summary>Spec (spec.json)</summary><pre>"
-         + html.escape(json.dumps(spec, indent=1), quote=False) + "</pre></details>",
-         "<footer>" + "".join(f"<p>{inline(c)}</p>" for c in credits) + "</footer></body></html>"]
+    nav = [
+        ("headline", "Answer"),
+        (top, titles.get(top, "")),
+        ("reading", "Reading"),
+        ("summary", "Summary"),
+        ("method", "How it was measured"),
+    ]
+    h = [
+        "<!doctype html><html lang='en'><head><meta charset='utf-8'>",
+        "<meta name='viewport' content='width=device-width, initial-scale=1'>",
+        f"<title>{html.escape(title)}</title><style>{CSS}</style></head><body>",
+        f"<h1>{html.escape(title)}</h1>",
+        "<nav>" + "".join(f"<a href='#{k}'>{html.escape(t)}</a>" for k, t in nav if k) + "</nav>",
+        f"<p class='incomplete'><b>Incomplete:</b> {inline(missing)}</p>" if missing else "",
+        headline_html(headlines),
+        chart_html(titles[top], charts[top], top, lazy=False) if top else "",
+        "<h2 id='reading'>Reading</h2>",
+        reading_html(lines),
+        "<h2 id='summary'>Summary per scene</h2>",
+        summary_html(table),
+        "<ul class='note'>" + "".join(f"<li>{inline(m)}</li>" for m in notes) + "</ul>",
+        rest,
+        "<h2 id='method'>How it was measured</h2>",
+        f"<p>{inline(intro)}</p>",
+        "<h3>Environment</h3>",
+        environment_html(env, spec),
+        "<details><summary>Spec (spec.json)</summary><pre>"
+        + html.escape(json.dumps(spec, indent=1), quote=False)
+        + "</pre></details>",
+        "<footer>" + "".join(f"<p>{inline(c)}</p>" for c in credits) + "</footer></body></html>",
+    ]
     return "\n".join(x for x in h if x)

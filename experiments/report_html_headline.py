@@ -4,6 +4,7 @@ over the better pure method at the same tau (with its bootstrap interval), and t
 Rows are chosen as ``experiments.reading.mixed_sentences`` chooses them, and timings go through
 ``experiments.noise.compare``, so the headline and the reading agree on every number and every tie.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -46,9 +47,9 @@ class SceneHeadline:
     scene: str
     fastest: str
     fastest_ms: float
-    tied: list[tuple[str, float]] = field(default_factory=list)     # within noise of the fastest
+    tied: list[tuple[str, float]] = field(default_factory=list)  # within noise of the fastest
     gains: list[Gain] = field(default_factory=list)
-    accurate: list[str] = field(default_factory=list)               # lowest mean FLIP (equal values together)
+    accurate: list[str] = field(default_factory=list)  # lowest mean FLIP (equal values together)
     flip: float | None = None
 
 

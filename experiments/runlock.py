@@ -3,6 +3,7 @@
 The kernel drops the lock when its process ends however it ends, so a lock left by a killed run is taken over
 without any clean-up; a second live run on the same folder is refused with the holder's PID.
 """
+
 from __future__ import annotations
 
 import fcntl
@@ -34,8 +35,9 @@ class RunLock:
             f.seek(0)
             holder = f.read().strip() or "an unknown process"
             f.close()
-            raise TerrabenchError(f"{self.path.parent} is in use by another run ({holder}); wait for it to end "
-                                  "or choose another --name") from None
+            raise TerrabenchError(
+                f"{self.path.parent} is in use by another run ({holder}); wait for it to end or choose another --name"
+            ) from None
         f.seek(0)
         f.truncate()
         f.write(f"pid {os.getpid()} on {socket.gethostname()}\n")

@@ -18,6 +18,7 @@ How a group of configurations (the same paired views and tau) is drawn, timed in
 (``experiments.cluster``) and this process keeps the journal, so a resumed or distributed run never loses or
 repeats a frame.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -40,6 +41,7 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
     from hybrid.gl.context import shared_context
 
     from .spec_datasets import check_dataset_paths
+
     check_dataset_paths(spec.datasets, f"spec {spec.name!r}")
     runs_dir = Path(runs_dir)
     folder = runs_dir / spec.name
@@ -48,7 +50,7 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
     except OSError as exc:
         raise TerrabenchError(f"cannot create run folder {folder}: {exc.strerror or exc}") from None
     with RunLock(folder):
-        for where in (folder, folder / "images"):           # what a killed run was writing
+        for where in (folder, folder / "images"):  # what a killed run was writing
             remove_stale_temps(where)
         old = folder / "spec.json"
         if old.exists() and not spec.same_as(read_json(old, "run spec")):
@@ -56,6 +58,7 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
         write_json(old, spec.to_dict())
         if client is not None:
             from .cluster import cluster_environment, run_on_cluster
+
             env = cluster_environment(client)
             _check_resume(folder, env)
             write_json(folder / "env.json", env)
@@ -72,13 +75,16 @@ def run_spec(spec: Spec, runs_dir, ctx=None, progress: bool = True, fail_fast: b
 def _check_resume(folder: Path, env: dict) -> None:
     """Refuse to add frames to a run folder whose earlier frames ran on another GL renderer or cost model."""
     from .environment import resume_mismatch
+
     frames, old = folder / "frames.jsonl", folder / "env.json"
     if not (frames.exists() and frames.stat().st_size and old.exists()):
         return
     why = resume_mismatch(read_json(old, "run environment"), env)
     if why:
-        raise TerrabenchError(f"{folder} holds frames run with another setup ({why}); resuming would mix them in "
-                              f"one table: choose another --name or --runs folder, or remove {folder}")
+        raise TerrabenchError(
+            f"{folder} holds frames run with another setup ({why}); resuming would mix them in "
+            f"one table: choose another --name or --runs folder, or remove {folder}"
+        )
 
 
 def _run_configs(spec: Spec, folder: Path, ctx, progress: bool, fail_fast: bool) -> None:
@@ -87,6 +93,7 @@ def _run_configs(spec: Spec, folder: Path, ctx, progress: bool, fail_fast: bool)
     from hybrid.gl.context import gl_info
 
     from .config_task import TaskState, groups, run_group
+
     journal = Journal(folder)
     todo = pending(spec, journal)
     total = len(spec.configs()) * spec.frames
@@ -105,4 +112,5 @@ def _run_configs(spec: Spec, folder: Path, ctx, progress: bool, fail_fast: bool)
     journal.write_tables()
     if state.learned is not None:
         from hybrid.cost.model import save_cost_model
+
         print(f"learned cost model ({state.learned.adapted_frames} frames) saved to {save_cost_model(state.learned)}")

@@ -14,6 +14,7 @@ open (an upper bound of one store's), and each store's host cache (tiles and dec
 store (the raster strategies on a store prepared without node arrays, or on a large periodic extension of one)
 is recorded with the reason.
 """
+
 from __future__ import annotations
 
 import os
@@ -39,6 +40,7 @@ def rss_bytes() -> int:
 def overview(terrain, width: int, height: int):
     """A view from 20 terrain sizes straight above the centre: the whole terrain in a few pixels (the root tile)."""
     from hybrid.camera.view import View
+
     w, d = terrain.extent
     ox, oy, oz = terrain.origin
     c = np.array([ox + w / 2, oy + d / 2, oz])
@@ -51,14 +53,14 @@ def warm_up(r, view, tau: float) -> None:
     policy, the ray caster stopping at an earlier pass's depth, a program of its own), so that the driver compiles
     their shaders before the flight's first frame."""
     from hybrid.gl.target import FrameTarget
+
     plans = r.plan(view, tau)
     target = FrameTarget(r.ctx, view.width, view.height)
     try:
         for name, strategy in r.strategies.items():
             r.time_draw(view, plans, name, target, tau=tau)
-            if "skirts" in strategy.draw_options:          # and the skirt programs of mixed frames
-                strategy.draw_tiles(target, view, r._items(name, plans, set()), tau,
-                                    skirts={p.key: 15 for p in plans})
+            if "skirts" in strategy.draw_options:  # and the skirt programs of mixed frames
+                strategy.draw_tiles(target, view, r._items(name, plans, set()), tau, skirts={p.key: 15 for p in plans})
                 strategy.draw_skirts(target, view)
             if r.mixed and "occluders" in strategy.draw_options:
                 strategy.draw_tiles(target, view, r._items(name, plans, set()), tau, occluders=True)
@@ -85,9 +87,18 @@ class _Flight:
             self.pyramid = None
 
 
-def run_scaling(ctx, stores, frames: int = 48, size=(640, 360), tau: float = 2 / 3, methods=METHODS,
-                gpu_budget_mib: int = 256, upload_budget_ms: float | None = 8.0, host_budget_mib: int = 512,
-                flight: str = "transect") -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+def run_scaling(
+    ctx,
+    stores,
+    frames: int = 48,
+    size=(640, 360),
+    tau: float = 2 / 3,
+    methods=METHODS,
+    gpu_budget_mib: int = 256,
+    upload_budget_ms: float | None = 8.0,
+    host_budget_mib: int = 512,
+    flight: str = "transect",
+) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
     """(frames, refusals, setup) tables of every method over every store (paths), one pass each (streaming within
     ``upload_budget_ms``, or with None each frame's tiles uploaded before it, untimed); setup
     is the one-off time before the first frame (the root tile of each strategy, with the raster strategies'
@@ -101,43 +112,68 @@ def run_scaling(ctx, stores, frames: int = 48, size=(640, 360), tau: float = 2 /
     of the method open."""
     from hybrid.camera.flight import preset
     from hybrid.tiles.periodic import open_any_store
+
     rows, refused, setup = [], [], []
     flights = []
     for path in stores:
         terrain = open_any_store(path)
         flights.append(_Flight(terrain, preset(flight, terrain, frames, *size).views()))
     for method in methods:
-        live = [f for f in flights if _open(ctx, f, method, tau, size, gpu_budget_mib, upload_budget_ms,
-                                            host_budget_mib, refused, setup)]
+        live = [
+            f
+            for f in flights
+            if _open(ctx, f, method, tau, size, gpu_budget_mib, upload_budget_ms, host_budget_mib, refused, setup)
+        ]
         try:
             for k in range(frames):
                 turn = [f for f in live if f.renderer is not None]
                 shift = k % max(len(turn), 1)
                 for f in turn[shift:] + turn[:shift]:
-                    for g in turn:                 # only this store's loader reads while its frame is timed
+                    for g in turn:  # only this store's loader reads while its frame is timed
                         if g.pyramid is not None:
                             g.pyramid.pause(g is not f)
                     _frame(f, method, k, tau, gpu_budget_mib, rows, refused)
         finally:
             for f in flights:
                 f.close()
-    return (pd.DataFrame(rows), pd.DataFrame(refused, columns=["store", "samples", "method", "reason"]),
-            pd.DataFrame(setup, columns=["store", "samples", "method", "setup_s"]))
+    return (
+        pd.DataFrame(rows),
+        pd.DataFrame(refused, columns=["store", "samples", "method", "reason"]),
+        pd.DataFrame(setup, columns=["store", "samples", "method", "setup_s"]),
+    )
 
 
-def _open(ctx, f: _Flight, method: str, tau: float, size, gpu_budget_mib: int, upload_budget_ms, host_budget_mib: int,
-          refused: list, setup: list) -> bool:
+def _open(
+    ctx,
+    f: _Flight,
+    method: str,
+    tau: float,
+    size,
+    gpu_budget_mib: int,
+    upload_budget_ms,
+    host_budget_mib: int,
+    refused: list,
+    setup: list,
+) -> bool:
     """Make f's pyramid and renderer for the method and time its setup; False (the reason recorded) if refused."""
     from hybrid.errors import StoreDamagedError, TerrabenchError
     from hybrid.renderer import Renderer
     from hybrid.tiles.store import StorePyramid
+
     t = f.terrain
     samples = t.rows * t.cols
     f.pyramid = StorePyramid(t, host_bytes=host_budget_mib << 20)
     try:
-        f.renderer = r = Renderer(ctx, t, method, int(t.store.attrs["tile_size"]), pyramid=f.pyramid,
-                                  budget_bytes=gpu_budget_mib << 20, upload_budget_ms=upload_budget_ms)
-        t0 = time.perf_counter()                      # one-off setup (the root tile's upload): not a frame
+        f.renderer = r = Renderer(
+            ctx,
+            t,
+            method,
+            int(t.store.attrs["tile_size"]),
+            pyramid=f.pyramid,
+            budget_bytes=gpu_budget_mib << 20,
+            upload_budget_ms=upload_budget_ms,
+        )
+        t0 = time.perf_counter()  # one-off setup (the root tile's upload): not a frame
         for name in r.strategies:
             r.cache.get(name, r.strategies[name], f.pyramid.root(), lambda: f.pyramid.tile(f.pyramid.root()))
         warm_up(r, overview(t, *size), tau)
@@ -145,7 +181,7 @@ def _open(ctx, f: _Flight, method: str, tau: float, size, gpu_budget_mib: int, u
         return True
     except TerrabenchError as exc:
         f.close()
-        if isinstance(exc, StoreDamagedError):       # a damaged store is the input's fault, not a refusal
+        if isinstance(exc, StoreDamagedError):  # a damaged store is the input's fault, not a refusal
             raise
         refused.append({"store": t.name, "samples": samples, "method": method, "reason": str(exc)})
         return False
@@ -154,6 +190,7 @@ def _open(ctx, f: _Flight, method: str, tau: float, size, gpu_budget_mib: int, u
 def _frame(f: _Flight, method: str, k: int, tau: float, gpu_budget_mib: int, rows: list, refused: list) -> None:
     """Draw frame k of f's flight and append its row; a refusal mid-flight drops the store's rows for the method."""
     from hybrid.errors import StoreDamagedError, TerrabenchError
+
     t = f.terrain
     t0 = time.perf_counter()
     try:
@@ -165,29 +202,50 @@ def _frame(f: _Flight, method: str, k: int, tau: float, gpu_budget_mib: int, row
         rows[:] = [x for x in rows if not (x["store"] == t.name and x["method"] == method)]
         f.close()
         return
-    rows.append({"store": t.name, "samples": t.rows * t.cols, "side": t.cols,
-                 "periodic": bool(t.store.attrs.get("periodic")), "method": method, "frame": k,
-                 "wall_ms": st.wall_ms, "draw_ms": st.draw_ms, "plan_ms": st.plan_ms,
-                 "upload_ms": st.upload_ms, "uploads": st.uploads, "fallback_tiles": st.fallback_tiles,
-                 "pending_uploads": st.pending_uploads, "tiles": st.tiles, "gpu_bytes": st.gpu_bytes,
-                 "resident_bytes": st.gpu_bytes - st.shared_bytes, "prep_ms": st.prep_ms,
-                 "gpu_budget": gpu_budget_mib << 20, "host_cache_bytes": f.pyramid.cache_bytes,
-                 "host_rss": rss_bytes(), "call_ms": (time.perf_counter() - t0) * 1e3})
+    rows.append(
+        {
+            "store": t.name,
+            "samples": t.rows * t.cols,
+            "side": t.cols,
+            "periodic": bool(t.store.attrs.get("periodic")),
+            "method": method,
+            "frame": k,
+            "wall_ms": st.wall_ms,
+            "draw_ms": st.draw_ms,
+            "plan_ms": st.plan_ms,
+            "upload_ms": st.upload_ms,
+            "uploads": st.uploads,
+            "fallback_tiles": st.fallback_tiles,
+            "pending_uploads": st.pending_uploads,
+            "tiles": st.tiles,
+            "gpu_bytes": st.gpu_bytes,
+            "resident_bytes": st.gpu_bytes - st.shared_bytes,
+            "prep_ms": st.prep_ms,
+            "gpu_budget": gpu_budget_mib << 20,
+            "host_cache_bytes": f.pyramid.cache_bytes,
+            "host_rss": rss_bytes(),
+            "call_ms": (time.perf_counter() - t0) * 1e3,
+        }
+    )
 
 
 def summary(frames: pd.DataFrame) -> pd.DataFrame:
     """Per store and method: median and p99 frame time, their ratio, fallback frames, peak GPU bytes (all, and the
     resident tiles' that the budget bounds) and host bytes."""
     g = frames.groupby(["side", "store", "method"], sort=True)
-    out = g.agg(frames=("wall_ms", "size"), median_ms=("wall_ms", "median"),
-                p99_ms=("wall_ms", lambda x: float(np.percentile(x, 99))),
-                spread_iqr_ms=("wall_ms", lambda x: float(np.percentile(x, 75) - np.percentile(x, 25))),
-                uploads=("uploads", "sum"), fallback_frames=("fallback_tiles", lambda x: int((x > 0).sum())),
-                peak_gpu_mib=("gpu_bytes", lambda x: x.max() / 2**20),
-                peak_resident_mib=("resident_bytes", lambda x: x.max() / 2**20),
-                gpu_budget_mib=("gpu_budget", lambda x: x.max() / 2**20),
-                peak_host_rss_mib=("host_rss", lambda x: x.max() / 2**20),
-                peak_host_cache_mib=("host_cache_bytes", lambda x: x.max() / 2**20)).reset_index()
+    out = g.agg(
+        frames=("wall_ms", "size"),
+        median_ms=("wall_ms", "median"),
+        p99_ms=("wall_ms", lambda x: float(np.percentile(x, 99))),
+        spread_iqr_ms=("wall_ms", lambda x: float(np.percentile(x, 75) - np.percentile(x, 25))),
+        uploads=("uploads", "sum"),
+        fallback_frames=("fallback_tiles", lambda x: int((x > 0).sum())),
+        peak_gpu_mib=("gpu_bytes", lambda x: x.max() / 2**20),
+        peak_resident_mib=("resident_bytes", lambda x: x.max() / 2**20),
+        gpu_budget_mib=("gpu_budget", lambda x: x.max() / 2**20),
+        peak_host_rss_mib=("host_rss", lambda x: x.max() / 2**20),
+        peak_host_cache_mib=("host_cache_bytes", lambda x: x.max() / 2**20),
+    ).reset_index()
     out["p99_over_median"] = out["p99_ms"] / out["median_ms"]
     return out
 
@@ -203,5 +261,10 @@ def size_ratio(frames: pd.DataFrame, method: str = "raycast") -> dict | None:
     b = f[f["side"] == sides[0]]["wall_ms"].to_numpy()
     rng = np.random.default_rng(0)
     boot = [np.median(rng.choice(a, len(a))) / np.median(rng.choice(b, len(b))) for _ in range(2000)]
-    return {"large": int(sides[-1]), "small": int(sides[0]), "ratio": float(np.median(a) / np.median(b)),
-            "low": float(np.percentile(boot, 2.5)), "high": float(np.percentile(boot, 97.5))}
+    return {
+        "large": int(sides[-1]),
+        "small": int(sides[0]),
+        "ratio": float(np.median(a) / np.median(b)),
+        "low": float(np.percentile(boot, 2.5)),
+        "high": float(np.percentile(boot, 97.5)),
+    }

@@ -1,5 +1,6 @@
 """The scaling experiment's report: Dick et al.'s Figs. 9-10 (frame time and GPU memory over the flight, per
 method and store), median frame time and peak memory against data size, the tables, and a reading of them."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -24,8 +25,9 @@ def _label(g: pd.DataFrame) -> str:
     return f"{g['store'].iloc[0]} ({side}², {'periodic' if g['periodic'].iloc[0] else 'real samples'})"
 
 
-def over_flight_chart(frames: pd.DataFrame, column: str, ylabel: str, folder: Path, name: str, scale=1.0,
-                      budget=None) -> list[Path]:
+def over_flight_chart(
+    frames: pd.DataFrame, column: str, ylabel: str, folder: Path, name: str, scale=1.0, budget=None
+) -> list[Path]:
     """One panel per store: ``column`` (times ``scale``) over the flight's frames, a line per method."""
     stores = list(frames.groupby("side", sort=True))
     fig, axes = panel_grid(len(stores))
@@ -72,19 +74,28 @@ def _size_sentences(frames: pd.DataFrame) -> list[str]:
     sides = sorted(ray["side"].unique())
     for large in sides[1:]:
         r = size_ratio(ray[ray["side"].isin([sides[0], large])], "raycast")
-        verdict = ("within the noise of this run: independent of the data size here" if r["low"] <= 1.0 <= r["high"]
-                   else "a difference beyond the noise of this run")
+        verdict = (
+            "within the noise of this run: independent of the data size here"
+            if r["low"] <= 1.0 <= r["high"]
+            else "a difference beyond the noise of this run"
+        )
         target = f"; target <= 1.3x at 16385² {'met' if r['ratio'] <= 1.3 else 'missed'}" if large == 16385 else ""
-        out.append(f"Ray casting's median frame time on the {r['large']}² store is {r['ratio']:.2f}x that on the "
-                   f"{r['small']}² store (95 % interval over frames {r['low']:.2f}-{r['high']:.2f}x): {verdict}"
-                   f"{target}.")
+        out.append(
+            f"Ray casting's median frame time on the {r['large']}² store is {r['ratio']:.2f}x that on the "
+            f"{r['small']}² store (95 % interval over frames {r['low']:.2f}-{r['high']:.2f}x): {verdict}"
+            f"{target}."
+        )
     if len(sides) > 1:
         per = ray.groupby("side").agg(tiles=("tiles", "median"), ms=("wall_ms", "median"))
-        out.append("The views select " + ", ".join(f"{t:.0f} tiles at {int(s)}²" for s, t in per["tiles"].items()) +
-                   " (median per frame): on these fractal stores, whose features keep their size in samples, a larger "
-                   "terrain seen from the scaled path shows more detail above the error bound, and the ray caster's "
-                   "time grows with the tiles drawn, less than in proportion (" + ", ".join(f"{m / t:.2f} ms a tile at {int(s)}²" for s, (t, m) in
-                                                             per[["tiles", "ms"]].iterrows()) + ").")
+        out.append(
+            "The views select "
+            + ", ".join(f"{t:.0f} tiles at {int(s)}²" for s, t in per["tiles"].items())
+            + " (median per frame): on these fractal stores, whose features keep their size in samples, a larger "
+            "terrain seen from the scaled path shows more detail above the error bound, and the ray caster's "
+            "time grows with the tiles drawn, less than in proportion ("
+            + ", ".join(f"{m / t:.2f} ms a tile at {int(s)}²" for s, (t, m) in per[["tiles", "ms"]].iterrows())
+            + ")."
+        )
     return out
 
 
@@ -93,22 +104,38 @@ def _flight_sentences(table: pd.DataFrame) -> list[str]:
     out = []
     worst = table.loc[table["p99_over_median"].idxmax()]
     late = table[table["p99_over_median"] > 2]
-    out.append(f"p99 frame time over the median (a flight that streams new tiles all along) is at most {worst['p99_over_median']:.2f}x "
-               f"({worst['method']} on {worst['store']}); target <= 2x met in "
-               f"{len(table) - len(late)} of {len(table)} flights" +
-               ("" if late.empty else "; missed by " + ", ".join(
-                   f"{r['method']} at {int(r['side'])}² ({r['p99_over_median']:.2f}x)" for _, r in late.iterrows())) + ".")
+    out.append(
+        f"p99 frame time over the median (a flight that streams new tiles all along) is at most {worst['p99_over_median']:.2f}x "
+        f"({worst['method']} on {worst['store']}); target <= 2x met in "
+        f"{len(table) - len(late)} of {len(table)} flights"
+        + (
+            ""
+            if late.empty
+            else "; missed by "
+            + ", ".join(f"{r['method']} at {int(r['side'])}² ({r['p99_over_median']:.2f}x)" for _, r in late.iterrows())
+        )
+        + "."
+    )
     over = table[table["peak_resident_mib"] > table["gpu_budget_mib"]]
     shared = (table["peak_gpu_mib"] - table["peak_resident_mib"]).max()
-    out.append(("Resident tiles' GPU bytes stayed within the budget in every frame" if over.empty else
-                f"Resident tiles' GPU bytes passed the budget in {len(over)} flights") +
-               f"; the strategies' shared objects (terrain texture, pre-pass targets, leaf arenas, frame counters) add up to "
-               f"{shared:.0f} MiB on top.")
-    out.append(f"Peak host RSS (the whole process, GL driver included, with every store of a method open, as the "
-               f"stores' flights are interleaved): {table['peak_host_rss_mib'].max():.0f} MiB.")
-    out.append(f"Frames drawing some tile from a coarser ancestor while its upload waited: "
-               f"{int(table['fallback_frames'].sum())} of {int(table['frames'].sum())}; no tile is ever missing "
-               "(a tile without data is drawn from its ancestor).")
+    out.append(
+        (
+            "Resident tiles' GPU bytes stayed within the budget in every frame"
+            if over.empty
+            else f"Resident tiles' GPU bytes passed the budget in {len(over)} flights"
+        )
+        + f"; the strategies' shared objects (terrain texture, pre-pass targets, leaf arenas, frame counters) add up to "
+        f"{shared:.0f} MiB on top."
+    )
+    out.append(
+        f"Peak host RSS (the whole process, GL driver included, with every store of a method open, as the "
+        f"stores' flights are interleaved): {table['peak_host_rss_mib'].max():.0f} MiB."
+    )
+    out.append(
+        f"Frames drawing some tile from a coarser ancestor while its upload waited: "
+        f"{int(table['fallback_frames'].sum())} of {int(table['frames'].sum())}; no tile is ever missing "
+        "(a tile without data is drawn from its ancestor)."
+    )
     return out
 
 
@@ -119,15 +146,18 @@ def _memory_sentences(table: pd.DataFrame, refused: pd.DataFrame) -> list[str]:
     ray = table[table["method"] == "raycast"].set_index("side")["peak_gpu_mib"]
     for side, m in ras.groupby("side"):
         if side in ray.index:
-            out.append(f"{int(side)}²: raster memory {', '.join(f'{x.method} {x.peak_gpu_mib:.0f} MiB' for x in m.itertuples())}"
-                       f" against the ray caster's {ray[side]:.0f} MiB.")
+            out.append(
+                f"{int(side)}²: raster memory {', '.join(f'{x.method} {x.peak_gpu_mib:.0f} MiB' for x in m.itertuples())}"
+                f" against the ray caster's {ray[side]:.0f} MiB."
+            )
     for x in refused.itertuples():
         out.append(f"{x.method} on {x.store}: not drawn ({x.reason}).")
     return out
 
 
-def write_scaling_report(frames: pd.DataFrame, refused: pd.DataFrame, setup: pd.DataFrame, folder: Path,
-                         device: str, notes: list[str]) -> Path:
+def write_scaling_report(
+    frames: pd.DataFrame, refused: pd.DataFrame, setup: pd.DataFrame, folder: Path, device: str, notes: list[str]
+) -> Path:
     """Write reports/<folder>/scaling.md with its charts and tables; returns the markdown path."""
     folder.mkdir(parents=True, exist_ok=True)
     write_parquet(folder / "scaling_frames.parquet", frames)
@@ -144,9 +174,16 @@ def write_scaling_report(frames: pd.DataFrame, refused: pd.DataFrame, setup: pd.
         lines += ["## Not drawn", "", md_table(refused), ""]
     if len(setup):
         lines += ["## One-off setup before the first frame (seconds)", "", md_table(setup), ""]
-    lines += ["## Charts", "", "![frame time over the flight](scaling_frame_time.png)", "",
-              "![GPU memory over the flight](scaling_gpu_memory.png)", "",
-              "![median frame time and peak memory against data size](scaling_size.png)", ""]
+    lines += [
+        "## Charts",
+        "",
+        "![frame time over the flight](scaling_frame_time.png)",
+        "",
+        "![GPU memory over the flight](scaling_gpu_memory.png)",
+        "",
+        "![median frame time and peak memory against data size](scaling_size.png)",
+        "",
+    ]
     path = folder / "scaling.md"
     write_text(path, "\n".join(lines))
     return path

@@ -38,6 +38,7 @@ Relative paths are relative to the spec file's folder. ``STORE@periodicSIZE`` is
 of a tile store to SIZE samples a side, STORE a store's folder or ``puget`` (its store prepared once into the
 cache at the spec's tile size: ``experiments.store_datasets``); e.g. ``puget@periodic16385``.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -114,22 +115,37 @@ class Spec:
         """Every combination, one dict each, with a stable id; frames of one (dataset, seed, flight, size) are paired."""
         out = []
         labels = [dataset_label(d) for d in self.datasets]
-        casting, tilelets, adapting = policies_taking("reconstruction"), policies_taking("full_res"), adapting_policies()
+        casting, tilelets, adapting = (
+            policies_taking("reconstruction"),
+            policies_taking("full_res"),
+            adapting_policies(),
+        )
         for ds, seed, fl, size, tau, rec, fr, pol, sm in itertools.product(
-                labels, self.seeds, self.flights, self.sizes, self.taus, self.reconstructions, self.full_res,
-                self.policies, self.start_models):
+            labels,
+            self.seeds,
+            self.flights,
+            self.sizes,
+            self.taus,
+            self.reconstructions,
+            self.full_res,
+            self.policies,
+            self.start_models,
+        ):
             if pol not in casting and rec != self.reconstructions[0]:
-                continue                      # reconstruction only matters where rays are cast
+                continue  # reconstruction only matters where rays are cast
             if pol not in tilelets and fr != self.full_res[0]:
-                continue                      # the full-resolution rule only where tilelets are drawn
+                continue  # the full-resolution rule only where tilelets are drawn
             if pol == "reference" and tau != self.taus[0]:
                 continue
             if pol not in adapting and sm != self.start_models[0]:
-                continue                      # only the hybrid reads a cost model as it goes
+                continue  # only the hybrid reads a cost model as it goes
             fr = fr if pol in tilelets else PRIOR_FULL_RES
             sm = sm if pol in adapting else START_MODELS[0]
-            cid = f"{Path(str(ds)).stem}-s{seed}-{Path(str(fl)).stem}-{size}-tau{tau:.4g}-{rec}-{pol}" + \
-                ("" if fr == PRIOR_FULL_RES else f"-{fr}") + ("" if sm == START_MODELS[0] else f"-from-{sm}")
+            cid = (
+                f"{Path(str(ds)).stem}-s{seed}-{Path(str(fl)).stem}-{size}-tau{tau:.4g}-{rec}-{pol}"
+                + ("" if fr == PRIOR_FULL_RES else f"-{fr}")
+                + ("" if sm == START_MODELS[0] else f"-from-{sm}")
+            )
             out.append(Config(cid, ds, seed, fl, size, tau, rec, fr, pol, sm).row())
         return out
 
@@ -143,6 +159,7 @@ class Spec:
     def terrain(self, label: str, seed: int):
         """The HeightField a dataset label names (a tile store's periodic extension stays on disk)."""
         from .store_datasets import open_periodic_dataset, split_periodic
+
         source = self.source(label)
         if split_periodic(source.dataset):
             return open_periodic_dataset(source.dataset, self.tile_size)
@@ -180,6 +197,7 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None, overri
         return parse_stress_spec(d, source)
     if kind == "edit":
         from .edit_spec import parse_edit_spec
+
         return parse_edit_spec(d, source, base)
     if kind != "flights":
         raise TerrabenchError(f"{source}: kind must be 'flights' (default), 'stress' or 'edit', got {kind!r}")
@@ -215,8 +233,10 @@ def _datasets(v, source: str, base: Path | None) -> list:
 def _checked(spec: Spec, source: str) -> Spec:
     """The spec, refused by name where its keys disagree with each other."""
     if spec.video and not spec.accuracy:
-        raise TerrabenchError(f"{source}: 'video' shows each method beside the reference, which accuracy = false "
-                              "leaves out; drop one of them")
+        raise TerrabenchError(
+            f"{source}: 'video' shows each method beside the reference, which accuracy = false "
+            "leaves out; drop one of them"
+        )
     bad = [f for f in spec.image_frames if not (0 <= f < spec.frames)]
     if bad:
         raise TerrabenchError(f"{source}: image_frames {bad} outside [0, {spec.frames - 1}]")
@@ -234,8 +254,14 @@ def _overridden(d: dict, overrides: dict, kind: str, source: str) -> dict:
     return out
 
 
-BUNDLED = {"default": "default.toml", "tiny": "tiny.toml", "stress": "stress.toml", "full-res": "full-res.toml",
-           "gpu": "gpu.toml", "edit": "edit.toml"}
+BUNDLED = {
+    "default": "default.toml",
+    "tiny": "tiny.toml",
+    "stress": "stress.toml",
+    "full-res": "full-res.toml",
+    "gpu": "gpu.toml",
+    "edit": "edit.toml",
+}
 
 
 def load_spec(path, overrides: dict | None = None) -> Spec:
@@ -243,8 +269,10 @@ def load_spec(path, overrides: dict | None = None) -> Spec:
     ``overrides`` of its keys (parse_spec)."""
     if str(path) in BUNDLED:
         from importlib import resources
-        return parse_spec((resources.files("experiments") / BUNDLED[str(path)]).read_text(), str(path),
-                          overrides=overrides)
+
+        return parse_spec(
+            (resources.files("experiments") / BUNDLED[str(path)]).read_text(), str(path), overrides=overrides
+        )
     p = Path(path)
     if not p.is_file():
         raise TerrabenchError(f"{path}: no such spec file")

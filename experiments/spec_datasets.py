@@ -6,6 +6,7 @@ number or [east-west, north-south]), ``vertical_scale`` (metres per stored unit)
 A name or path ``STORE@periodicSIZE`` is a tile store's virtual periodic extension (``experiments.store_datasets``):
 STORE a store's folder or ``puget``, whose store is prepared once into the cache.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -31,16 +32,21 @@ def terrain_source(entry) -> TerrainSource:
         return TerrainSource(entry, credit=_periodic_credit(entry))
     spacing = entry.get("spacing")
     crop = entry.get("crop")
-    return TerrainSource(entry["path"], spacing=tuple(spacing) if isinstance(spacing, list) else spacing,
-                         vertical_scale=entry.get("vertical_scale"), crs=entry.get("crs"),
-                         crop=None if crop is None else Crop(**crop),
-                         credit=entry.get("credit") or _periodic_credit(entry["path"]),
-                         name=entry.get("name"))
+    return TerrainSource(
+        entry["path"],
+        spacing=tuple(spacing) if isinstance(spacing, list) else spacing,
+        vertical_scale=entry.get("vertical_scale"),
+        crs=entry.get("crs"),
+        crop=None if crop is None else Crop(**crop),
+        credit=entry.get("credit") or _periodic_credit(entry["path"]),
+        name=entry.get("name"),
+    )
 
 
 def _periodic_credit(path: str) -> str | None:
     """The credit of a bundled dataset's periodic extension (its data, repeated); None for any other entry."""
     from hybrid.terrain.datasets import CREDITS
+
     periodic = split_periodic(path)
     return CREDITS.get(periodic[0]) if periodic else None
 
@@ -67,6 +73,7 @@ def _resolve(path: str, source: str, base: Path | None) -> str:
     """A dataset path resolved against base where it is a relative file (a periodic extension's store folder, its
     size kept); names as given."""
     from hybrid.terrain.datasets import NAMES
+
     periodic = split_periodic(path, f"{source}: ")
     if periodic:
         check_periodic(path, f"{source}: dataset {path!r}")
@@ -99,8 +106,9 @@ def check_dataset_entry(entry, source: str, base: Path | None):
     out = {"path": _resolve(path, source, base)}
     given = [k for k in ("spacing", "vertical_scale", "crs", "crop") if k in entry]
     if (path in NAMES or split_periodic(path)) and given:
-        raise TerrabenchError(f"{what}: {', '.join(given)} apply to files, not the bundled, synthetic or stored "
-                              f"{path!r}")
+        raise TerrabenchError(
+            f"{what}: {', '.join(given)} apply to files, not the bundled, synthetic or stored {path!r}"
+        )
     for key in ("name", "credit", "crs"):
         if key in entry:
             if not isinstance(entry[key], str) or not entry[key].strip():
@@ -114,8 +122,9 @@ def check_dataset_entry(entry, source: str, base: Path | None):
         v = entry["spacing"]
         if isinstance(v, list):
             if len(v) != 2:
-                raise TerrabenchError(f"{what}: 'spacing' must be one number or [east-west, north-south] metres, "
-                                      f"got {v!r}")
+                raise TerrabenchError(
+                    f"{what}: 'spacing' must be one number or [east-west, north-south] metres, got {v!r}"
+                )
             out["spacing"] = [_positive(x, f"{what}: 'spacing'") for x in v]
         else:
             out["spacing"] = _positive(v, f"{what}: 'spacing' (metres)")
@@ -138,6 +147,7 @@ def check_dataset_paths(datasets: list, source: str) -> None:
     so a run stops before it makes its folder."""
     from hybrid.terrain.datasets import NAMES
     from hybrid.terrain.paths import path_problem
+
     for entry in datasets:
         path = entry if isinstance(entry, str) else entry["path"]
         periodic = split_periodic(path)
@@ -149,7 +159,9 @@ def check_dataset_paths(datasets: list, source: str) -> None:
             continue
         problem = path_problem(path)
         if problem == "no such file" and not Path(path).suffix and not periodic:
-            raise TerrabenchError(f"{source}: unknown dataset {path!r}; choose one of {', '.join(NAMES)}, a file "
-                                  "path or a tile store (terrabench prepare)")
+            raise TerrabenchError(
+                f"{source}: unknown dataset {path!r}; choose one of {', '.join(NAMES)}, a file "
+                "path or a tile store (terrabench prepare)"
+            )
         if problem is not None:
             raise TerrabenchError(f"{source}: dataset {dataset_label(entry)!r}: {path}: {problem}")

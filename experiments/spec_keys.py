@@ -3,6 +3,7 @@
 The names a key allows come from the strategy registry where they name policies or strategy options
 (``hybrid.strategies``); the dataset entries have their own checks (``experiments.spec_datasets``).
 """
+
 from __future__ import annotations
 
 from typing import Any
@@ -43,6 +44,7 @@ def list_keys(source: str) -> tuple:
         def check(v):
             if v not in allowed:
                 raise TerrabenchError(f"{source}: unknown {what} {v!r}; choose from {', '.join(allowed)}")
+
         return check
 
     def tau_ok(t):
@@ -56,18 +58,30 @@ def list_keys(source: str) -> tuple:
         if not (0 <= s < 2**32):
             raise TerrabenchError(f"{source}: seeds must lie in [0, 2^32), got {s!r}")
 
-    return (("flights", str, None), ("policies", str, one_of("policy", methods())),
-            ("taus", (int, float), tau_ok), ("sizes", str, size_ok),
-            ("reconstructions", str, one_of("reconstruction", option_choices("reconstruction"))),
-            ("full_res", str, one_of("full_res", option_choices("full_res"))), ("seeds", int, seed_ok),
-            ("start_models", str, one_of("start model", START_MODELS)), ("image_frames", int, None))
+    return (
+        ("flights", str, None),
+        ("policies", str, one_of("policy", methods())),
+        ("taus", (int, float), tau_ok),
+        ("sizes", str, size_ok),
+        ("reconstructions", str, one_of("reconstruction", option_choices("reconstruction"))),
+        ("full_res", str, one_of("full_res", option_choices("full_res"))),
+        ("seeds", int, seed_ok),
+        ("start_models", str, one_of("start model", START_MODELS)),
+        ("image_frames", int, None),
+    )
 
 
 def scalar_keys(d: dict, source: str) -> dict:
     """The spec's integer, number and true/false keys that ``d`` gives, checked."""
     kw: dict[str, Any] = {}
-    for key, lo, hi in (("frames", 1, 100000), ("repeats", 3, 1000), ("tile_size", 2, 65536),
-                        ("supersample", 1, 8), ("dataset_size", 0, 16385), ("gpu_budget_mib", 1, 1 << 20)):
+    for key, lo, hi in (
+        ("frames", 1, 100000),
+        ("repeats", 3, 1000),
+        ("tile_size", 2, 65536),
+        ("supersample", 1, 8),
+        ("dataset_size", 0, 16385),
+        ("gpu_budget_mib", 1, 1 << 20),
+    ):
         if key in d:
             v = d[key]
             if isinstance(v, bool) or not isinstance(v, int) or not (lo <= v <= hi):

@@ -7,6 +7,7 @@ that runs side by side and an interrupted preparation never leave a partial stor
 samples a side, k x the store's cells + 1 (``hybrid.tiles.periodic``): ``puget@periodic16385`` is the Puget
 model repeated 16 x 16 times, 16385² samples (1 GiB of heights) that are never written anywhere.
 """
+
 from __future__ import annotations
 
 import json
@@ -18,8 +19,8 @@ from pathlib import Path
 from hybrid.errors import TerrabenchError
 
 PERIODIC = "@periodic"
-BUNDLED_STORES = {"puget": 1024}      # bundled datasets a store can be made of: their cells a side (the period)
-MAX_SIZE = (1 << 24) + 1              # the largest extension hybrid.tiles.periodic serves, samples a side
+BUNDLED_STORES = {"puget": 1024}  # bundled datasets a store can be made of: their cells a side (the period)
+MAX_SIZE = (1 << 24) + 1  # the largest extension hybrid.tiles.periodic serves, samples a side
 
 
 def split_periodic(text, what: str = "") -> tuple[str, int] | None:
@@ -29,8 +30,10 @@ def split_periodic(text, what: str = "") -> tuple[str, int] | None:
     if not sep:
         return None
     if not base or not rest.isdigit():
-        raise TerrabenchError(f"{what}dataset {text!r}: a periodic extension is written STORE@periodicSIZE, SIZE samples "
-                              "a side (e.g. puget@periodic16385)")
+        raise TerrabenchError(
+            f"{what}dataset {text!r}: a periodic extension is written STORE@periodicSIZE, SIZE samples "
+            "a side (e.g. puget@periodic16385)"
+        )
     return base, int(rest)
 
 
@@ -40,13 +43,16 @@ def check_periodic(text: str, what: str) -> None:
     base, size = split_periodic(text)
     period = BUNDLED_STORES.get(base)
     if period is not None and not (period + 1 < size <= MAX_SIZE and (size - 1) % period == 0):
-        raise TerrabenchError(f"{what}: {base}'s periodic extension must be k x {period} + 1 samples a side, k >= 2, "
-                              f"at most {MAX_SIZE}, got {size} (e.g. {base}{PERIODIC}{16 * period + 1})")
+        raise TerrabenchError(
+            f"{what}: {base}'s periodic extension must be k x {period} + 1 samples a side, k >= 2, "
+            f"at most {MAX_SIZE}, got {size} (e.g. {base}{PERIODIC}{16 * period + 1})"
+        )
 
 
 def open_periodic_dataset(text: str, tile_size: int):
     """The StoredTerrain of 'STORE@periodicSIZE' (a bundled store prepared at tile_size cells when missing)."""
     from hybrid.tiles.periodic import open_periodic
+
     base, size = split_periodic(text)
     return open_periodic(bundled_store(base, tile_size) if base in BUNDLED_STORES else base, size)
 
@@ -58,8 +64,10 @@ def cache_folder() -> Path:
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise TerrabenchError(f"cannot create the cache folder {folder} ({exc.strerror or exc}); set "
-                              "TERRABENCH_CACHE to a writable folder") from None
+        raise TerrabenchError(
+            f"cannot create the cache folder {folder} ({exc.strerror or exc}); set "
+            "TERRABENCH_CACHE to a writable folder"
+        ) from None
     return folder
 
 
@@ -78,6 +86,7 @@ def bundled_store(name: str, tile_size: int) -> Path:
     from hybrid.terrain.grid_sources import HeightFieldSource
     from hybrid.terrain.stored import STORE_VERSION
     from hybrid.tiles.store import prepare_store
+
     folder = cache_folder()
     final = folder / f"{name}-t{int(tile_size)}-v{STORE_VERSION}.store"
     if _complete(final):
@@ -85,13 +94,15 @@ def bundled_store(name: str, tile_size: int) -> Path:
     try:
         tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", dir=folder))
     except OSError as exc:
-        raise TerrabenchError(f"cannot write in the cache folder {folder} ({exc.strerror or exc}); set "
-                              "TERRABENCH_CACHE to a writable folder") from None
+        raise TerrabenchError(
+            f"cannot write in the cache folder {folder} ({exc.strerror or exc}); set "
+            "TERRABENCH_CACHE to a writable folder"
+        ) from None
     try:
         prepare_store(HeightFieldSource(get_dataset(name)), tmp, tile_size)
         try:
             tmp.rename(final)
-        except OSError:                         # another process renamed its copy first: keep that one
+        except OSError:  # another process renamed its copy first: keep that one
             if not _complete(final):
                 raise TerrabenchError(f"{final} exists and is not a finished tile store; remove it") from None
     finally:

@@ -6,6 +6,7 @@ eye below the surface, view directions exactly along the x and y axes, the terra
 the origin (with the same view at the origin as their baseline), and a tiny near / huge far plane. For every method and reconstruction: capped rays, NaN pixels,
 hole pixels against the reference coverage, depth error, steps per ray, triangles and frame time.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -21,10 +22,30 @@ from hybrid.terrain.datasets import get_dataset, puget
 from hybrid.terrain.heightfield import HeightField
 
 SCENES = ("spike", "cliff", "staircase", "ridges", "flat", "puget", "puget_x100")
-VIEWS = ("grazing", "down", "inside_aabb", "below", "axis_x", "axis_y", "origin", "offset_1e6", "offset_1e7",
-         "near_far")
-METHODS = ("raster", "raster_gs", "raster/exact", "raycast/planes", "raycast/linear", "raycast/triangles",
-           "raycast/bilinear", "hybrid", "fullres", "tin")
+VIEWS = (
+    "grazing",
+    "down",
+    "inside_aabb",
+    "below",
+    "axis_x",
+    "axis_y",
+    "origin",
+    "offset_1e6",
+    "offset_1e7",
+    "near_far",
+)
+METHODS = (
+    "raster",
+    "raster_gs",
+    "raster/exact",
+    "raycast/planes",
+    "raycast/linear",
+    "raycast/triangles",
+    "raycast/bilinear",
+    "hybrid",
+    "fullres",
+    "tin",
+)
 
 
 def make_scene(name: str, size: int = 257) -> HeightField:
@@ -33,7 +54,7 @@ def make_scene(name: str, size: int = 257) -> HeightField:
         return puget(size=size)
     if name == "puget_x100":
         p = puget(size=size)
-        step = p.source_step[0] * 100.0               # the 16-bit source at 10 m a unit, as a loader would make it
+        step = p.source_step[0] * 100.0  # the 16-bit source at 10 m a unit, as a loader would make it
         h = (np.rint(p.heights / p.source_step[0]) * step).astype(np.float32)
         return HeightField(h, (p.spacing_x, p.spacing_y), p.origin, "puget_x100", p.texture, source_step=(step, 0.0))
     if name in SCENES:
@@ -71,7 +92,7 @@ def stress_view(hf: HeightField, kind: str, width: int = 320, height: int = 180,
         # lowest sample of the central tile-sized block, eye halfway between it and the block's top
         n = min(tile_size, hf.rows - 1, hf.cols - 1)
         i0, j0 = (hf.rows - 1 - n) // 2, (hf.cols - 1 - n) // 2
-        block = hf.heights[i0:i0 + n + 1, j0:j0 + n + 1]
+        block = hf.heights[i0 : i0 + n + 1, j0 : j0 + n + 1]
         i, j = np.unravel_index(np.argmin(block), block.shape)
         x, y = ox + (j0 + j) * hf.spacing_x, oy + (i0 + i) * hf.spacing_y
         z = g(x, y) + max(0.5 * (float(block.max()) + oz - g(x, y)), 2.0)
@@ -102,6 +123,7 @@ def method_renderer(ctx, hf, method: str, tile_size: int):
     """A method's renderer: POLICY, raycast/RECONSTRUCTION, or raster/FULL_RES (a full-resolution rule)."""
     from hybrid.contract import FULL_RES
     from hybrid.renderer import make_renderer
+
     policy, _, variant = method.partition("/")
     if variant in FULL_RES:
         return make_renderer(ctx, hf, policy, tile_size=tile_size, full_res=variant)
@@ -121,37 +143,61 @@ class StressCase:
 def measure(result, ref) -> dict:
     """Failure measures of a frame against the reference frame."""
     from .metrics import hole_pixels_in_columns
+
     m, r = np.isfinite(result.distance), np.isfinite(ref.distance)
     both = m & r
-    rel = np.abs(result.distance[both].astype(np.float64) - ref.distance[both]) / ref.distance[both] if both.any() \
+    rel = (
+        np.abs(result.distance[both].astype(np.float64) - ref.distance[both]) / ref.distance[both]
+        if both.any()
         else np.array([0.0])
+    )
     s = result.stats.counters
     rays = float(s.get("rays", 0) or 0)
     # the reference's outline: terrain pixels next to sky; a level of detail within tau pixels may move it
     sky = ~r
     near_sky = sky.copy()
-    near_sky[1:] |= sky[:-1]; near_sky[:-1] |= sky[1:]
-    near_sky[:, 1:] |= sky[:, :-1]; near_sky[:, :-1] |= sky[:, 1:]
+    near_sky[1:] |= sky[:-1]
+    near_sky[:-1] |= sky[1:]
+    near_sky[:, 1:] |= sky[:, :-1]
+    near_sky[:, :-1] |= sky[:, 1:]
     band = r & near_sky
-    return {"nan_px": int(np.isnan(result.distance).sum()), "hole_px": int((r & ~m).sum()),
-            "hole_px_strict": int((r & ~m & ~band).sum()),
-            "extra_px": int((m & ~r).sum()), "crack_px": int(hole_pixels_in_columns(result).sum()),
-            "ref_crack_px": int(hole_pixels_in_columns(ref).sum()),
-            "depth_rel_p99": float(np.percentile(rel, 99)), "depth_rel_max": float(rel.max()),
-            "depth_rel_median": float(np.median(rel)),
-            "capped": int(s.get("capped", 0) or 0), "rays": int(rays),
-            "capped_frac": float(s.get("capped", 0) or 0) / rays if rays else 0.0,
-            "mean_steps": float(s.get("mean_steps", np.nan) if rays else np.nan),
-            "max_steps": float(s.get("max_steps", np.nan) if rays else np.nan),
-            "triangles": int(s.get("triangles", 0) or 0), "wall_ms": float(s.get("wall_ms", np.nan)),
-            "tiles_raster": int(s.get("tiles_raster", 0)), "tiles_raycast": int(s.get("tiles_raycast", 0))}
+    return {
+        "nan_px": int(np.isnan(result.distance).sum()),
+        "hole_px": int((r & ~m).sum()),
+        "hole_px_strict": int((r & ~m & ~band).sum()),
+        "extra_px": int((m & ~r).sum()),
+        "crack_px": int(hole_pixels_in_columns(result).sum()),
+        "ref_crack_px": int(hole_pixels_in_columns(ref).sum()),
+        "depth_rel_p99": float(np.percentile(rel, 99)),
+        "depth_rel_max": float(rel.max()),
+        "depth_rel_median": float(np.median(rel)),
+        "capped": int(s.get("capped", 0) or 0),
+        "rays": int(rays),
+        "capped_frac": float(s.get("capped", 0) or 0) / rays if rays else 0.0,
+        "mean_steps": float(s.get("mean_steps", np.nan) if rays else np.nan),
+        "max_steps": float(s.get("max_steps", np.nan) if rays else np.nan),
+        "triangles": int(s.get("triangles", 0) or 0),
+        "wall_ms": float(s.get("wall_ms", np.nan)),
+        "tiles_raster": int(s.get("tiles_raster", 0)),
+        "tiles_raycast": int(s.get("tiles_raycast", 0)),
+    }
 
 
-def run_stress(ctx, scenes=SCENES, views=VIEWS, methods=METHODS, size: int = 257, width: int = 320,
-               height: int = 180, tile_size: int = 64, progress=None) -> pd.DataFrame:
+def run_stress(
+    ctx,
+    scenes=SCENES,
+    views=VIEWS,
+    methods=METHODS,
+    size: int = 257,
+    width: int = 320,
+    height: int = 180,
+    tile_size: int = 64,
+    progress=None,
+) -> pd.DataFrame:
     """Every (scene, view, method): a row of failure measures; a method that raises is recorded, not fatal."""
     from hybrid.camera.clearance import eye_clearance, eye_too_low
     from hybrid.reference import ReferenceRenderer
+
     rows = []
     for sc in scenes:
         base = make_scene(sc, size)
@@ -163,8 +209,13 @@ def run_stress(ctx, scenes=SCENES, views=VIEWS, methods=METHODS, size: int = 257
             for m in methods:
                 # views a user could not give (eye under the ground or within the near plane) are flagged
                 clear = eye_clearance(hf, view.eye)
-                row = {"scene": sc, "view": vk, "method": m, "eye_clearance_m": clear,
-                       "user_refused": eye_too_low(clear, view)}
+                row = {
+                    "scene": sc,
+                    "view": vk,
+                    "method": m,
+                    "eye_clearance_m": clear,
+                    "user_refused": eye_too_low(clear, view),
+                }
                 try:
                     r = method_renderer(ctx, hf, m, tile_size)
                     try:
@@ -180,10 +231,19 @@ def run_stress(ctx, scenes=SCENES, views=VIEWS, methods=METHODS, size: int = 257
     return pd.DataFrame(rows)
 
 
-def stress_table(ctx, scenes=SCENES, views=VIEWS, methods=METHODS, size: int = 257, viewport=(320, 180),
-                 tile_size: int = 64, progress: bool = True) -> pd.DataFrame:
+def stress_table(
+    ctx,
+    scenes=SCENES,
+    views=VIEWS,
+    methods=METHODS,
+    size: int = 257,
+    viewport=(320, 180),
+    tile_size: int = 64,
+    progress: bool = True,
+) -> pd.DataFrame:
     """run_stress with a progress bar on stderr (none when progress is False); viewport is (width, height) px."""
     from .progress import Progress
+
     bar = Progress(len(scenes) * len(views) * len(methods), 0, progress)
     try:
         return run_stress(ctx, scenes, views, methods, size, *viewport, tile_size, progress=bar.step)
@@ -197,10 +257,19 @@ def run_stress_spec(spec, runs_dir, ctx=None, progress: bool = True) -> Path:
     from hybrid.gl.context import shared_context
 
     from .folders import writable_folder
+
     folder = writable_folder(Path(runs_dir) / spec.name, "run folder")
-    remove_stale_temps(folder)                            # what a killed stress run left
+    remove_stale_temps(folder)  # what a killed stress run left
     write_json(folder / "spec.json", spec.to_dict())
-    df = stress_table(ctx or shared_context(), spec.scenes, spec.views, spec.methods, spec.size_samples,
-                      parse_size(spec.size, "spec size"), spec.tile_size, progress)
+    df = stress_table(
+        ctx or shared_context(),
+        spec.scenes,
+        spec.views,
+        spec.methods,
+        spec.size_samples,
+        parse_size(spec.size, "spec size"),
+        spec.tile_size,
+        progress,
+    )
     write_parquet(folder / "stress.parquet", df)
     return folder

@@ -1,4 +1,5 @@
 """Stress specs (kind = "stress" in a spec file): scenes x views x methods of ``experiments.stress``, checked."""
+
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
@@ -30,6 +31,7 @@ class StressSpec:
 def parse_stress_spec(d: dict, source: str) -> StressSpec:
     """Check a kind = "stress" spec: names from experiments.stress, sizes in range."""
     from .stress import METHODS, SCENES, VIEWS
+
     known = set(StressSpec.__dataclass_fields__) | {"kind"}
     if set(d) - known:
         raise TerrabenchError(f"{source}: unknown keys {sorted(set(d) - known)}; known: {sorted(known)}")

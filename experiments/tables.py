@@ -1,4 +1,5 @@
 """Named benchmark tables (title -> DataFrame) as plain text for the terminal and as markdown for files."""
+
 from __future__ import annotations
 
 import math
@@ -9,6 +10,7 @@ import pandas as pd
 
 def md_table(df: pd.DataFrame, floatfmt: str = ".3g") -> str:
     """A pandas frame as a GitHub markdown table (a '|' inside a header or cell escaped, so columns stay put)."""
+
     def text(v) -> str:
         return str(v).replace("|", "\\|")
 
@@ -16,6 +18,7 @@ def md_table(df: pd.DataFrame, floatfmt: str = ".3g") -> str:
         if isinstance(v, (float, np.floating)):
             return "–" if not math.isfinite(v) else format(float(v), floatfmt)
         return text(v)
+
     cols = list(df.columns)
     lines = ["| " + " | ".join(map(text, cols)) + " |", "|" + "---|" * len(cols)]
     for _, r in df.iterrows():

@@ -1,4 +1,5 @@
 """The flight as an animation: the reference and every method side by side, frame by frame (imageio GIF)."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -19,6 +20,7 @@ def write_videos(run: Path, frames: pd.DataFrame, out: Path, fps: int = 6) -> li
     except ImportError:
         raise TerrabenchError("--video needs the imageio package (pip install imageio)") from None
     from PIL import Image, ImageDraw
+
     f = label_columns(frames)
     img = run / "images"
     written = []

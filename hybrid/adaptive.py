@@ -6,6 +6,7 @@ strategies times each pass: on a GPU with a GL timer query per pass (the pass co
 and its CPU issue time, as CPU and GPU work overlap), on a CPU rasterizer with the wall clock and a glFinish
 after each pass (timer queries are wrong there).
 """
+
 from __future__ import annotations
 
 import time
@@ -80,8 +81,9 @@ def explore(online: OnlineModel, plans: list[TilePlan]) -> Exploration | None:
     return found
 
 
-def observe(online: OnlineModel, plans: list[TilePlan], pass_ms: dict, draw_ms: float,
-            explored: Exploration | None) -> None:
+def observe(
+    online: OnlineModel, plans: list[TilePlan], pass_ms: dict, draw_ms: float, explored: Exploration | None
+) -> None:
     """Hand one drawn frame (its plans, each strategy's pass ms and the drawing's ms) to the online model."""
     frame = frame_columns(plans)
     if frame is not None:
@@ -95,12 +97,24 @@ def timed_explore(online: OnlineModel | None, plans: list[TilePlan], learn: bool
     return explored, (time.perf_counter() - t0) * 1e3
 
 
-def learn(online: OnlineModel, clock: PassClock, plans: list[TilePlan], draw_ms: float, gpu_ms: float | None,
-          issue_ms: float, explored: Exploration | None) -> float:
+def learn(
+    online: OnlineModel,
+    clock: PassClock,
+    plans: list[TilePlan],
+    draw_ms: float,
+    gpu_ms: float | None,
+    issue_ms: float,
+    explored: Exploration | None,
+) -> float:
     """Hand the drawn frame to the online model (each pass's ms: the clock's, or the whole drawing for a frame of
     one strategy); its CPU ms back."""
     t0 = time.perf_counter()
-    passes = clock.passes() if clock.split else \
-        {plans[0].choice: draw_ms if gpu_ms is None else max(gpu_ms, issue_ms)} if plans else {}
+    passes = (
+        clock.passes()
+        if clock.split
+        else {plans[0].choice: draw_ms if gpu_ms is None else max(gpu_ms, issue_ms)}
+        if plans
+        else {}
+    )
     observe(online, plans, passes, draw_ms, explored)
     return (time.perf_counter() - t0) * 1e3

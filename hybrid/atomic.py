@@ -4,6 +4,7 @@ A failure while writing (disk full, a killed process, an exception in the writer
 (absent or the previous version) and no partial file; a full disk or another OS error becomes one
 TerrabenchError naming the file.
 """
+
 from __future__ import annotations
 
 import errno
@@ -24,14 +25,15 @@ def atomic_path(path, suffix: str | None = None):
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp{suffix if suffix is not None else path.suffix}")
     try:
         yield tmp
-        with open(tmp, "rb+") as f:            # the bytes are on disk before the name points at them
+        with open(tmp, "rb+") as f:  # the bytes are on disk before the name points at them
             os.fsync(f.fileno())
         os.replace(tmp, path)
     except OSError as exc:
         _remove(tmp)
-        if disk_full(exc) and exc.errno is None:           # a short write: no errno to tell the two apart
-            raise TerrabenchError(f"cannot write {path}: disk full or a file size limit reached ({exc}); nothing "
-                                  "was written there") from None
+        if disk_full(exc) and exc.errno is None:  # a short write: no errno to tell the two apart
+            raise TerrabenchError(
+                f"cannot write {path}: disk full or a file size limit reached ({exc}); nothing was written there"
+            ) from None
         if disk_full(exc):
             raise TerrabenchError(f"disk full while writing {path}; nothing was written there") from None
         raise TerrabenchError(f"cannot write {path}: {exc.strerror or exc}") from None
@@ -106,6 +108,7 @@ def write_json(path, data) -> Path:
 def save_npy(path, array) -> Path:
     """Write a NumPy array (.npy) atomically."""
     import numpy as np
+
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         np.save(f, array)
     return Path(path)
@@ -114,6 +117,7 @@ def save_npy(path, array) -> Path:
 def save_png(path, image) -> Path:
     """Write an 8-bit (H, W[, 3|4]) image as PNG atomically."""
     from PIL import Image
+
     with atomic_path(path) as tmp:
         Image.fromarray(image).save(tmp, format="PNG")
     return Path(path)

@@ -4,6 +4,7 @@ candidates at random) and tiles inside frames every candidate way, one call each
 
 It draws through the renderer, so it sits above it (hybrid.cost holds the model, features and fit).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -39,8 +40,9 @@ def time_view_tiles(r: Renderer, v: View, tau: float, feats: list, times: dict, 
     ``times`` and, to ``frames``, per candidate the tiles' times and the time of drawing all in one call."""
     res = r.render(v, tau, measure=True)
     rows = res.stats.tile_rows
-    frames.append({n: (np.array([row[f"meas_{n}_ms"] for row in rows]), res.stats.together_ms.get(n))
-                   for n in candidates()})
+    frames.append(
+        {n: (np.array([row[f"meas_{n}_ms"] for row in rows]), res.stats.together_ms.get(n)) for n in candidates()}
+    )
     for row in rows:
         feats.append(TileFeatures.from_row(row))
         for n in candidates():
@@ -60,16 +62,21 @@ def time_view_frames(r: Renderer, v: View, tau: float, repeats: int, mixes: int,
         pool = rng.choice(candidates(), size=int(rng.integers(2, len(candidates()) + 1)), replace=False)
         assigns.append(rng.choice(pool, size=len(plans)))
     ms = [[] for _ in assigns]
-    for rep in range(repeats + 1):                   # the first round warms (uploads, compiles)
+    for rep in range(repeats + 1):  # the first round warms (uploads, compiles)
         for a, m in zip(assigns, ms):
             for p, c in zip(plans, a):
                 p.choice = str(c)
             t = r.render(v, tau, plans=plans).stats.draw_ms
             if rep:
                 m.append(t)
-    return [FrameSample({n: bool((a == n).any()) for n in candidates()},
-                        {n: terms[n][a == n].sum(axis=0) for n in candidates()}, float(np.median(m)))
-            for a, m in zip(assigns, ms)]
+    return [
+        FrameSample(
+            {n: bool((a == n).any()) for n in candidates()},
+            {n: terms[n][a == n].sum(axis=0) for n in candidates()},
+            float(np.median(m)),
+        )
+        for a, m in zip(assigns, ms)
+    ]
 
 
 def tile_samples(feats: list[TileFeatures], times: dict) -> list[TileSample]:
@@ -78,9 +85,18 @@ def tile_samples(feats: list[TileFeatures], times: dict) -> list[TileSample]:
     return [TileSample(n, term_values(f, n), float(times[n][i])) for i, f in enumerate(feats) for n in candidates()]
 
 
-def calibrate(ctx, hf: HeightField, views: list[View], tau: float = DEFAULT_TAU, tile_size: int = 256,
-              repeats: int = 3, holdout: float = 0.3, seed: int = 0, mixes: int = 6,
-              full_res: str = DEFAULT_FULL_RES) -> Calibration:
+def calibrate(
+    ctx,
+    hf: HeightField,
+    views: list[View],
+    tau: float = DEFAULT_TAU,
+    tile_size: int = 256,
+    repeats: int = 3,
+    holdout: float = 0.3,
+    seed: int = 0,
+    mixes: int = 6,
+    full_res: str = DEFAULT_FULL_RES,
+) -> Calibration:
     """Time frames of the views and their tiles one call each, and fit the cost model for this context's GL
     renderer to both, its raster tiles drawn by the full-resolution rule ``full_res`` (recorded in the model). A
     view's frames and tiles are timed one after the other, so that a drift of the machine's speed over the run

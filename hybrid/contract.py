@@ -4,6 +4,7 @@ A strategy (``raster.*``, ``raycast``) is a GPU class that satisfies ``TileStrat
 imports nothing above ``hybrid.gl``. The renderer hands it ``TileItem``s front to back and a bound
 ``FrameTarget``; every renderer returns ``FrameStats`` with the same fields whatever the method.
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -68,8 +69,9 @@ class TileStrategy(Protocol):
     def upload(self, tile: Tile) -> GpuTile:
         """Put one tile on the GPU."""
 
-    def draw_tiles(self, target: FrameTarget, view: View, items: Sequence[TileItem], tau: float,
-                   **options) -> dict[str, float]:
+    def draw_tiles(
+        self, target: FrameTarget, view: View, items: Sequence[TileItem], tau: float, **options
+    ) -> dict[str, float]:
         """Draw items (front to back) into the bound target at screen-space error tau px; counters back."""
 
     @property
@@ -101,8 +103,9 @@ class TriangleEstimator(Protocol):
     def __call__(self, key: TileKey, selected: SelectedTile, view: View, tau: float) -> int:
         """Estimated triangle count of tile ``key`` at ``view`` for the bound tau (pixels)."""
 
-    def many(self, selected: Sequence[SelectedTile], view: View, tau: float,
-             budget_ms: float | None = None) -> tuple[Any, Any]:
+    def many(
+        self, selected: Sequence[SelectedTile], view: View, tau: float, budget_ms: float | None = None
+    ) -> tuple[Any, Any]:
         """(triangle counts, share of them inside the view frustum), (B,) float arrays, of the selected tiles at
         ``view`` for the bound tau (pixels); with ``budget_ms``, per-tile preparation stops after that much wall
         time (at least one tile a call) and the tiles left are NaN in both."""

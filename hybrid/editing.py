@@ -22,6 +22,7 @@ deformations are held edits the base under them.
 
 Each step is timed (wall ms, with a GL finish for the GPU's part) per edit, in ``EditReport.ms``.
 """
+
 from __future__ import annotations
 
 import time
@@ -80,7 +81,7 @@ def follow_reference(ref: ReferenceRenderer, win: Window) -> None:
         r0, r1, c0, c1 = max(b.r0, win.i0), min(b.r1, win.i1), max(b.c0, win.j0), min(b.c1, win.j1)
         if r0 >= r1 or c0 >= c1:
             continue
-        ref.lo[k], ref.hi[k] = float(np.min(h[b.r0:b.r1, b.c0:b.c1])), float(np.max(h[b.r0:b.r1, b.c0:b.c1]))
+        ref.lo[k], ref.hi[k] = float(np.min(h[b.r0 : b.r1, b.c0 : b.c1])), float(np.max(h[b.r0 : b.r1, b.c0 : b.c1]))
         if ref.resident:
             data = np.ascontiguousarray(h[r0:r1, c0:c1], dtype=np.float32)
             ref.textures[k].write(data.tobytes(), viewport=(c0 - b.c0, r0 - b.r0, c1 - c0, r1 - r0))
@@ -89,8 +90,9 @@ def follow_reference(ref: ReferenceRenderer, win: Window) -> None:
 class TerrainEditor:
     """The GPU heights of one in-memory terrain and the renderers drawing it, kept up to date edit by edit."""
 
-    def __init__(self, ctx, hf: HeightField, renderer: Renderer | None = None,
-                 reference: ReferenceRenderer | None = None):
+    def __init__(
+        self, ctx, hf: HeightField, renderer: Renderer | None = None, reference: ReferenceRenderer | None = None
+    ):
         for r in (renderer, reference):
             if r is not None and r.hf is not hf:
                 raise TerrabenchError("an editor's renderers must draw the terrain it edits")
@@ -102,7 +104,7 @@ class TerrainEditor:
             _node_state(renderer)
         self.gpu = GpuHeights(ctx, self.cpu)
         self.deforms: GpuDeformations | None = None
-        self.pending: list[Window] = []                     # what deformations changed since the last sync
+        self.pending: list[Window] = []  # what deformations changed since the last sync
 
     def apply(self, brush: Brush) -> EditReport:
         """Apply one brush (world metres, the terrain's frame) and bring every renderer up to date."""
@@ -162,14 +164,20 @@ class TerrainEditor:
         keys = _timed(None, report, "pyramid", lambda: self._follow_pyramid(r, win))
         report.tiles += len(keys)
         for k in keys:
-            r._tiles.pop(k, None)                           # the renderer's CPU copies of the tiles
+            r._tiles.pop(k, None)  # the renderer's CPU copies of the tiles
         raster = [n for n in r.strategies if r.kind(n) == "raster"]
         rewritten: list[Window] = []
         if raster:
-            rewritten = _timed(None, report, "raster_nodes",
-                               lambda: follow_nodes(self.hf, r.pyramid.n, win,
-                                                    getattr(r.strategies[raster[0]], "beta", GPU_BETA))
-                               if self.stored is None else self.stored.rewritten)
+            rewritten = _timed(
+                None,
+                report,
+                "raster_nodes",
+                lambda: (
+                    follow_nodes(self.hf, r.pyramid.n, win, getattr(r.strategies[raster[0]], "beta", GPU_BETA))
+                    if self.stored is None
+                    else self.stored.rewritten
+                ),
+            )
         touched = set(keys)
         for name, strategy in r.strategies.items():
             entries = [(k, g) for (n, k), g in list(r.cache.entries.items()) if n == name]
@@ -181,14 +189,18 @@ class TerrainEditor:
             report.refreshed[name] = done
         forget, known = getattr(r.triangles, "forget", None), getattr(r.triangles, "known", None)
         if forget is not None and known is not None:
-            _timed(None, report, "estimate", lambda: forget(
-                [k for k in known() if k in touched or reads_changed_nodes(k, r.pyramid.n, rewritten)]))
+            _timed(
+                None,
+                report,
+                "estimate",
+                lambda: forget([k for k in known() if k in touched or reads_changed_nodes(k, r.pyramid.n, rewritten)]),
+            )
 
     def _follow_pyramid(self, r: Renderer, win: Window) -> list:
         """The renderer's pyramid after the window changed: updated in place, or for a store the written bounds."""
         if self.stored is None:
             return update_pyramid(r.pyramid, win)
-        assert isinstance(r.pyramid, StorePyramid)          # a stored terrain's renderer reads the store
+        assert isinstance(r.pyramid, StorePyramid)  # a stored terrain's renderer reads the store
         return follow_store_pyramid(r.pyramid, self.stored.pyramid, win)
 
     def _follow_raycast(self, r: Renderer, strategy: RaycastStrategy, entries, win: Window) -> int:
@@ -203,7 +215,7 @@ class TerrainEditor:
         if win.i0 == 0 or win.j0 == 0 or win.i1 == self.hf.rows or win.j1 == self.hf.cols:
             strategy.edges.release()
             strategy.edges = TerrainEdges(self.ctx, self.hf)
-        if strategy.grid is not None:                       # the shadow rays' whole grid: made again when next used
+        if strategy.grid is not None:  # the shadow rays' whole grid: made again when next used
             strategy.grid.tex.release()
             strategy.grid = None
         return done

@@ -2,6 +2,7 @@
 
 Functions of a ``hybrid.renderer.Renderer`` (its strategies, resident tiles and draw options).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -21,7 +22,7 @@ def frame_result(r, target, view, plans, stats, counters, tau, opts, read: bool,
         return RenderResult(None, None, stats, plans=plans)
     result = target.read(view, stats)
     result.plans = plans
-    if "triangles" in counters:          # drawn triangles per pixel that shows terrain
+    if "triangles" in counters:  # drawn triangles per pixel that shows terrain
         counters["triangles_per_pixel"] = counters["triangles"] / max(int(result.mask.sum()), 1)
     if maps:
         result.maps = {"strategy": strategy_map(r, view, plans, tau, opts)}
@@ -46,7 +47,7 @@ def strategy_map(r, view: View, plans: list[TilePlan], tau: float, options: dict
             t.release()
     out = np.zeros((view.height, view.width), np.uint8)
     best = np.zeros((view.height, view.width), np.float32)
-    for name in r._order():             # raster kinds first: they win ties, as in the frame
+    for name in r._order():  # raster kinds first: they win ties, as in the frame
         d = depths[name]
         win = (d > 0) & (d > best) if r.kind(name) == "raycast" else (d > 0) & (d >= best)
         out[win] = STRATEGY_CODES[r.kind(name)]

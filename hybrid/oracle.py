@@ -3,6 +3,7 @@
 Functions of a ``hybrid.renderer.Renderer`` (its strategies, resident tiles and draw options); the renderer's
 ``time_draw``, ``time_in_frame`` and ``time_in_frames`` call them.
 """
+
 from __future__ import annotations
 
 import numpy as np

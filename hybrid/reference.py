@@ -5,6 +5,7 @@ to north-east), the same convention as the pyramid's error and the ray caster's 
 Colour can be supersampled (k x k samples a pixel, box filtered); hit distance and coverage always come
 from one sample at each pixel centre so they compare one to one with any other method.
 """
+
 from __future__ import annotations
 
 from typing import Literal, get_args
@@ -33,13 +34,13 @@ from hybrid.tiles.tiletree import DEFAULT_TAU
 
 ReferenceMode = Literal["texture", "shaded", "height"]
 MODES = {m: i for i, m in enumerate(get_args(ReferenceMode))}
-RESIDENT_SAMPLES = 1 << 26       # a stored grid up to this many samples is read once and kept on the GPU
-HOST_BLOCK_BYTES = 256 << 20     # a streamed grid's blocks kept in host memory between draws, least recently used out
+RESIDENT_SAMPLES = 1 << 26  # a stored grid up to this many samples is read once and kept on the GPU
+HOST_BLOCK_BYTES = 256 << 20  # a streamed grid's blocks kept in host memory between draws, least recently used out
 
 
 def grid_indices(rows: int, cols: int) -> np.ndarray:
     """uint32 triangle indices of a rows x cols sample grid, 2 CCW triangles a cell, SW-NE diagonal."""
-    i, j = np.mgrid[0:rows - 1, 0:cols - 1]
+    i, j = np.mgrid[0 : rows - 1, 0 : cols - 1]
     a = (i * cols + j).ravel().astype(np.uint32)
     b, c, d = a + 1, a + np.uint32(cols) + 1, a + np.uint32(cols)
     return np.stack([a, b, c, a, c, d], axis=1).ravel()
@@ -53,16 +54,17 @@ class ReferenceRenderer:
     ``host_bytes`` (blocks it holds drawn first, so a view that shows more than it holds still reads only the
     rest), else from disk. ``block_reads`` counts the blocks read from disk."""
 
-    def __init__(self, ctx, hf: HeightField, block_samples: int = DEFAULT_BLOCK_SAMPLES,
-                 host_bytes: int = HOST_BLOCK_BYTES):
+    def __init__(
+        self, ctx, hf: HeightField, block_samples: int = DEFAULT_BLOCK_SAMPLES, host_bytes: int = HOST_BLOCK_BYTES
+    ):
         self.ctx, self.hf = ctx, hf
         self.prog = program(ctx, "hybrid", "reference.vert.glsl", "reference.frag.glsl")
         side = min(int(block_samples), max_texture_size(ctx))
         self.blocks = reference_blocks(hf.rows, hf.cols, side)
         self.lo, self.hi = block_bounds(hf, self.blocks)
         self.resident = isinstance(hf.heights, np.ndarray) or hf.rows * hf.cols <= RESIDENT_SAMPLES
-        self.textures: dict = {}                 # block index (resident) or block shape (streamed) -> texture
-        self.vaos: dict = {}                     # block shape -> (index buffer, vertex array)
+        self.textures: dict = {}  # block index (resident) or block shape (streamed) -> texture
+        self.vaos: dict = {}  # block shape -> (index buffer, vertex array)
         self.released = False
         self.drawn_blocks = self.block_reads = 0
         self.host = None if self.resident else ByteLRU(host_bytes)
@@ -74,7 +76,7 @@ class ReferenceRenderer:
 
     def _read(self, b: Block) -> np.ndarray:
         self.block_reads += 1
-        return np.ascontiguousarray(self.hf.heights[b.r0:b.r1, b.c0:b.c1], dtype=np.float32)
+        return np.ascontiguousarray(self.hf.heights[b.r0 : b.r1, b.c0 : b.c1], dtype=np.float32)
 
     def _texture(self, b: Block, reuse=None):
         data = self._read(b) if self.host is None else self.host.get((b.r0, b.c0), lambda: self._read(b))
@@ -114,7 +116,7 @@ class ReferenceRenderer:
             self.prog["tex"].value = 1
         target.use()
         shown = visible_blocks(hf, self.blocks, self.lo, self.hi, view).tolist()
-        if self.host is not None:                  # held blocks first: each is drawn before a read can evict it
+        if self.host is not None:  # held blocks first: each is drawn before a read can evict it
             host = self.host
             shown.sort(key=lambda k: (self.blocks[k].r0, self.blocks[k].c0) not in host)
         for k in shown:
@@ -129,27 +131,41 @@ class ReferenceRenderer:
             self._vao(b.shape).render(self.ctx.TRIANGLES)
         self.drawn_blocks = len(shown)
 
-    def render(self, view: View, tau: float = DEFAULT_TAU, *, mode: str | None = None, supersample: int = 1,
-               maps: bool = False) -> RenderResult:
+    def render(
+        self, view: View, tau: float = DEFAULT_TAU, *, mode: str | None = None, supersample: int = 1, maps: bool = False
+    ) -> RenderResult:
         """Colour (box-filtered over supersample² samples), hit distance and coverage for a view.
 
         Same signature as ``hybrid.renderer.Renderer.render``; tau and maps do not apply (no level of
         detail, one strategy). The draw is timed like any method's (counters: triangles, supersample).
         """
-        if isinstance(supersample, bool) or not isinstance(supersample, (int, np.integer)) or not (1 <= supersample <= 8):
+        if (
+            isinstance(supersample, bool)
+            or not isinstance(supersample, (int, np.integer))
+            or not (1 <= supersample <= 8)
+        ):
             raise TerrabenchError(f"supersample must be an integer in [1, 8], got {supersample!r}")
-        limit = int(self.ctx.info["GL_MAX_TEXTURE_SIZE"])              # the render target's real limit
+        limit = int(self.ctx.info["GL_MAX_TEXTURE_SIZE"])  # the render target's real limit
         if view.width * supersample > limit or view.height * supersample > limit:
-            raise TerrabenchError(f"supersampled viewport {view.width * supersample}x{view.height * supersample} "
-                                  f"exceeds this GL's texture limit of {limit}")
+            raise TerrabenchError(
+                f"supersampled viewport {view.width * supersample}x{view.height * supersample} "
+                f"exceeds this GL's texture limit of {limit}"
+            )
         target = FrameTarget(self.ctx, view.width, view.height)
         try:
             target.clear()
             _, wall, gpu, issue = timed(self.ctx, lambda: self.draw(target, view, mode))
-            stats = FrameStats(wall_ms=wall, plan_ms=0.0, draw_ms=wall, gpu_ms=gpu, issue_ms=issue, tiles=1, gpu_bytes=self.nbytes,
-                               shared_bytes=self.nbytes,
-                               counters={"triangles": self.triangles, "supersample": supersample,
-                                         "blocks": self.drawn_blocks})
+            stats = FrameStats(
+                wall_ms=wall,
+                plan_ms=0.0,
+                draw_ms=wall,
+                gpu_ms=gpu,
+                issue_ms=issue,
+                tiles=1,
+                gpu_bytes=self.nbytes,
+                shared_bytes=self.nbytes,
+                counters={"triangles": self.triangles, "supersample": supersample, "blocks": self.drawn_blocks},
+            )
             result = target.read(view, stats)
         finally:
             target.release()

@@ -5,6 +5,7 @@ texture limit or less), neighbours share their edge row or column of samples, so
 exactly the whole grid's, two a cell, with no seam. Each block's box (its samples' extent and height range) is
 tested against the view's frustum, so a view of part of a large grid reads and draws only the blocks it shows.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -14,7 +15,7 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 from hybrid.tiles.tiletree import box_classes, corner_planes
 
-DEFAULT_BLOCK_SAMPLES = 2049        # 2048² cells a block: a 96 MiB shared index buffer at most
+DEFAULT_BLOCK_SAMPLES = 2049  # 2048² cells a block: a 96 MiB shared index buffer at most
 
 
 @dataclass(frozen=True)
@@ -51,8 +52,8 @@ def block_bounds(hf, blocks: list[Block]) -> tuple[np.ndarray, np.ndarray]:
     heights where they are in memory, from a tile store's per-tile bounds (conservative) otherwise."""
     h = hf.heights
     if isinstance(h, np.ndarray):
-        lo = np.array([np.min(h[b.r0:b.r1, b.c0:b.c1]) for b in blocks], dtype=np.float64)
-        hi = np.array([np.max(h[b.r0:b.r1, b.c0:b.c1]) for b in blocks], dtype=np.float64)
+        lo = np.array([np.min(h[b.r0 : b.r1, b.c0 : b.c1]) for b in blocks], dtype=np.float64)
+        hi = np.array([np.max(h[b.r0 : b.r1, b.c0 : b.c1]) for b in blocks], dtype=np.float64)
         return lo, hi
     r0, r1, c0, c1 = (np.array([getattr(b, k) for b in blocks]) for k in ("r0", "r1", "c0", "c1"))
     return hf.window_extremes(r0, r1 - 1, c0, c1 - 1)
@@ -64,8 +65,17 @@ def visible_blocks(hf, blocks: list[Block], lo: np.ndarray, hi: np.ndarray, view
     ox, oy, oz = (float(v) for v in hf.origin)
     c0, c1 = np.array([b.c0 for b in blocks], float), np.array([b.c1 - 1 for b in blocks], float)
     r0, r1 = np.array([b.r0 for b in blocks], float), np.array([b.r1 - 1 for b in blocks], float)
-    boxes = np.stack([ox + c0 * hf.spacing_x, oy + r0 * hf.spacing_y, oz + lo,
-                      ox + c1 * hf.spacing_x, oy + r1 * hf.spacing_y, oz + hi], axis=1)
+    boxes = np.stack(
+        [
+            ox + c0 * hf.spacing_x,
+            oy + r0 * hf.spacing_y,
+            oz + lo,
+            ox + c1 * hf.spacing_x,
+            oy + r1 * hf.spacing_y,
+            oz + hi,
+        ],
+        axis=1,
+    )
     eye = np.asarray(view.eye, dtype=np.float64)
     classes = box_classes(boxes - np.concatenate([eye, eye]), *corner_planes(view.frustum_planes_rel()))
     return np.flatnonzero(classes >= 0)

@@ -16,6 +16,7 @@ ancestor (``fallback_tiles``); from a tile store, the store's loader thread is a
 for the samples the frame lacks and for the slow host work of uploads and estimates (``hybrid.uploads.host_jobs``),
 and an upload whose host work it has not yet done waits for it.
 """
+
 from __future__ import annotations
 
 import time
@@ -71,26 +72,42 @@ class Renderer:
     after ``release()``.
     """
 
-    def __init__(self, ctx, hf: HeightField, policy: str = "hybrid", tile_size: int = 256, *,
-                 cost_model: CostModel | None = None, budget_bytes: int | None = None, threshold: float = 1.0,
-                 oracle_repeats: int = 3, pyramid: TilePyramid | None = None, upload_budget_ms: float | None = None,
-                 adapt: bool | AdaptOptions = True, **options):
+    def __init__(
+        self,
+        ctx,
+        hf: HeightField,
+        policy: str = "hybrid",
+        tile_size: int = 256,
+        *,
+        cost_model: CostModel | None = None,
+        budget_bytes: int | None = None,
+        threshold: float = 1.0,
+        oracle_repeats: int = 3,
+        pyramid: TilePyramid | None = None,
+        upload_budget_ms: float | None = None,
+        adapt: bool | AdaptOptions = True,
+        **options,
+    ):
         check_policy(policy)
         self.ctx, self.hf, self.policy = ctx, hf, policy
         self.mixed = policy in mixed_policies()
         self.entry = policy_entry(policy) if self.mixed else None
-        self._own_pyramid = pyramid is None              # made here: closed (its loader thread) on release
+        self._own_pyramid = pyramid is None  # made here: closed (its loader thread) on release
         self.pyramid = pyramid or pyramid_for(hf, tile_size)
         self.cache = ResidencyCache(budget_bytes)
         self.strategies = {n: make_strategy(n, ctx, hf) for n in (candidates() if self.mixed else (policy,))}
         self.options = route_options(self.strategies, options)
         self._model = cost_model or (load_cost_model(gl_info(ctx).renderer) if self.mixed else None)
-        self.online = OnlineModel(self._model, adapt if isinstance(adapt, AdaptOptions) else None) \
-            if adapt and self.entry is not None and self.entry.adapts else None
-        self.triangles = triangle_estimator(self.pyramid, full_res=options.get("full_res", DEFAULT_FULL_RES)) \
-            if self.mixed else None
+        self.online = (
+            OnlineModel(self._model, adapt if isinstance(adapt, AdaptOptions) else None)
+            if adapt and self.entry is not None and self.entry.adapts
+            else None
+        )
+        self.triangles = (
+            triangle_estimator(self.pyramid, full_res=options.get("full_res", DEFAULT_FULL_RES)) if self.mixed else None
+        )
         if self.triangles is not None and upload_budget_ms is not None and self.pyramid.background_loader:
-            self.triangles.background = True             # blocks still to cut: the store's loader thread cuts them
+            self.triangles.background = True  # blocks still to cut: the store's loader thread cuts them
         self.threshold = threshold
         self.oracle_repeats = int(oracle_repeats)
         if upload_budget_ms is not None and not (np.isfinite(upload_budget_ms) and upload_budget_ms >= 0):
@@ -142,8 +159,16 @@ class Renderer:
         """The frame's tiles front to back with the policy's choices (and, when mixed, features and costs); when
         streaming, new tiles' estimates are prepared within the upload budget (the rest ray cast this frame)."""
         self._check_live()
-        return plan_frame(self.pyramid, view, self.model, self.triangles, self.policy, tau, self.threshold,
-                          prep_budget_ms=self.upload_budget_ms)
+        return plan_frame(
+            self.pyramid,
+            view,
+            self.model,
+            self.triangles,
+            self.policy,
+            tau,
+            self.threshold,
+            prep_budget_ms=self.upload_budget_ms,
+        )
 
     def skirts(self, plans: list[TilePlan]) -> dict:
         """Edge bits of every raster tile that touches a ray-cast tile: skirts close the seam there."""
@@ -173,36 +198,71 @@ class Renderer:
             anc = self._fallbacks.get(p.key)
             if anc is None:
                 out.append(TileItem(self._resident(name, p.key, pinned), self.tile(p.key), p.selected))
-            else:                                   # drawn from its resident ancestor, clipped to its own area
+            else:  # drawn from its resident ancestor, clipped to its own area
                 z = self.pyramid.zrange(p.key) if self.kind(name) == "raycast" else None
-                out.append(TileItem(self._resident(name, anc, pinned),
-                                    fallback_tile(self.tile(anc), self.pyramid.clip(p.key), z),
-                                    fallback_selection(p.selected, anc)))
+                out.append(
+                    TileItem(
+                        self._resident(name, anc, pinned),
+                        fallback_tile(self.tile(anc), self.pyramid.clip(p.key), z),
+                        fallback_selection(p.selected, anc),
+                    )
+                )
         return out
 
     def _order(self) -> list[str]:
         """Strategy names in drawing order: raster kinds first, ray casting last."""
         return sorted(self.strategies, key=lambda n: self.kind(n) == "raycast")
 
-    def time_draw(self, view: View, plans: list[TilePlan], name: str, target: FrameTarget, pinned=frozenset(),
-                  tau: float = DEFAULT_TAU) -> float:
+    def time_draw(
+        self,
+        view: View,
+        plans: list[TilePlan],
+        name: str,
+        target: FrameTarget,
+        pinned=frozenset(),
+        tau: float = DEFAULT_TAU,
+    ) -> float:
         """Median ms of drawing the plans' tiles with one strategy in one call (``hybrid.oracle.time_draw``)."""
         self._check_live()
         return oracle.time_draw(self, view, plans, name, target, pinned, tau)
 
-    def time_in_frame(self, view: View, plans: list[TilePlan], name: str, target: FrameTarget, pinned=frozenset(),
-                      tau: float = DEFAULT_TAU) -> tuple[np.ndarray, float]:
+    def time_in_frame(
+        self,
+        view: View,
+        plans: list[TilePlan],
+        name: str,
+        target: FrameTarget,
+        pinned=frozenset(),
+        tau: float = DEFAULT_TAU,
+    ) -> tuple[np.ndarray, float]:
         """(per-tile ms, whole-frame ms) of one strategy inside a real frame (``hybrid.oracle.time_in_frames``)."""
         return self.time_in_frames(view, plans, [name], target, pinned, tau)[name]
 
-    def time_in_frames(self, view: View, plans: list[TilePlan], names, target: FrameTarget, pinned=frozenset(),
-                       tau: float = DEFAULT_TAU) -> dict[str, tuple[np.ndarray, float]]:
+    def time_in_frames(
+        self,
+        view: View,
+        plans: list[TilePlan],
+        names,
+        target: FrameTarget,
+        pinned=frozenset(),
+        tau: float = DEFAULT_TAU,
+    ) -> dict[str, tuple[np.ndarray, float]]:
         """``time_in_frame`` of several strategies, their passes interleaved (``hybrid.oracle.time_in_frames``)."""
         self._check_live()
         return oracle.time_in_frames(self, view, plans, names, target, pinned, tau)
 
-    def render(self, view: View, tau: float = DEFAULT_TAU, *, measure: bool | None = None, maps: bool = False,
-               plans: list[TilePlan] | None = None, read: bool = True, overlay=None, **options) -> RenderResult:
+    def render(
+        self,
+        view: View,
+        tau: float = DEFAULT_TAU,
+        *,
+        measure: bool | None = None,
+        maps: bool = False,
+        plans: list[TilePlan] | None = None,
+        read: bool = True,
+        overlay=None,
+        **options,
+    ) -> RenderResult:
         """Draw the view and read it back: colour, distance (m), FrameStats and the plans drawn; ``plans`` (from
         ``plan`` or an earlier result, choices possibly changed, as calibration does) are drawn instead of the
         view's own, with their choices; ``read=False`` leaves the image on the GPU (colour and distance None), as an
@@ -242,7 +302,9 @@ class Renderer:
         """Whether ``render`` times every tile every candidate way (default: a measuring policy planning the view
         itself); refuses arguments that do not go together."""
         if measure and not self.mixed:
-            raise TerrabenchError(f"measure=True needs a mixed policy ({', '.join(mixed_policies())}), not {self.policy!r}")
+            raise TerrabenchError(
+                f"measure=True needs a mixed policy ({', '.join(mixed_policies())}), not {self.policy!r}"
+            )
         if maps and not read:
             raise TerrabenchError("maps=True reads the frame back; it cannot go with read=False")
         if measure is None:
@@ -255,10 +317,11 @@ class Renderer:
         t_plan = time.perf_counter()
         plans = self.plan(view, tau) if plans is None else plans
         prep_ms = (self.triangles.build_ms if self.triangles is not None else 0.0) - prep0
-        return plans, (time.perf_counter() - t_plan) * 1e3 - prep_ms, prep_ms   # first-seen tiles' work apart
+        return plans, (time.perf_counter() - t_plan) * 1e3 - prep_ms, prep_ms  # first-seen tiles' work apart
 
-    def strategy_map(self, view: View, plans: list[TilePlan], tau: float = DEFAULT_TAU,
-                     options: dict | None = None) -> np.ndarray:
+    def strategy_map(
+        self, view: View, plans: list[TilePlan], tau: float = DEFAULT_TAU, options: dict | None = None
+    ) -> np.ndarray:
         """Per pixel: 0 no terrain, 1 drawn by a raster tile, 2 by a ray-cast tile (compares depth per kind)."""
         self._check_live()
         return strategy_map(self, view, plans, tau, options or self.options)

@@ -4,6 +4,7 @@ Each entry is one tile uploaded by one strategy; its size is the strategy's exac
 the buffers and textures it allocated). A resident tile is never uploaded again; when an upload would pass
 the budget, the least recently used entries not needed by the current frame are released first.
 """
+
 from __future__ import annotations
 
 from collections import OrderedDict
@@ -57,7 +58,8 @@ class ResidencyCache:
                 gpu.release()
                 raise BudgetExceeded(
                     f"GPU memory budget of {self.budget} bytes is too small for this frame: the tiles it needs "
-                    f"take {self.bytes + size} bytes; raise the budget")
+                    f"take {self.bytes + size} bytes; raise the budget"
+                )
         self.entries[k] = gpu
         self.bytes += size
         self.stats.uploads += 1

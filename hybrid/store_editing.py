@@ -11,6 +11,7 @@ height range (and its source step, dropped once a sample leaves it) and the mani
 then reads the new files; its pyramid takes the new bounds (``follow_store_pyramid``). Nodes beyond those the
 tiles read (the padded square's far part) are not rewritten: nothing reads them.
 """
+
 from __future__ import annotations
 
 from typing import cast
@@ -35,8 +36,10 @@ def _check(hf: StoredTerrain) -> None:
     if a.get("periodic"):
         raise TerrabenchError(f"{hf.path}: a periodic extension is served from its source store; edit the source")
     if not (a.get("nodes") and a.get("node_blocks") and holds_side_codes(hf.store)):
-        raise TerrabenchError(f"{hf.path}: editing a tile store needs its node arrays with side codes and node "
-                              f"blocks; run terrabench prepare again on its input with --out {hf.path}")
+        raise TerrabenchError(
+            f"{hf.path}: editing a tile store needs its node arrays with side codes and node "
+            f"blocks; run terrabench prepare again on its input with --out {hf.path}"
+        )
 
 
 class StoreEditing:
@@ -45,16 +48,16 @@ class StoreEditing:
     def __init__(self, hf: StoredTerrain):
         _check(hf)
         self.hf, self.mem = hf, hf.load()
-        self.lazy = cast(LazyGrid, hf.heights)          # the store's level 0 as the terrain reads it
+        self.lazy = cast(LazyGrid, hf.heights)  # the store's level 0 as the terrain reads it
         self.n, self.beta = int(hf.store.attrs["tile_size"]), float(dict(hf.store.attrs["nodes"])["beta"])
         self.pyramid = TilePyramid(self.mem, self.n)
-        for side_errors in (True, False):               # before any edit: the state a change is measured against
+        for side_errors in (True, False):  # before any edit: the state a change is measured against
             global_nodes(self.mem, self.n, self.beta, side_errors)
             edit_state(self.mem, self.n, self.beta, side_errors)
         self.step = hf.source_step
-        self.keys: list[TileKey] = []                   # the last write's touched tiles
-        self.rewritten: list[Window] = []               # and its changed node windows per global level
-        self.last = WriteReport()                       # and what it wrote
+        self.keys: list[TileKey] = []  # the last write's touched tiles
+        self.rewritten: list[Window] = []  # and its changed node windows per global level
+        self.last = WriteReport()  # and what it wrote
 
     def write(self, win: Window) -> WriteReport:
         """Bring the in-memory pyramid and node arrays up to date after the samples of ``win`` changed in the copy,
@@ -87,7 +90,7 @@ class StoreEditing:
         """Whether every sample of the window is on the store's source step (the window grown by one sample, so
         each of its samples is a cell's corner; the samples around were on the step)."""
         h = self.mem.heights
-        grown = h[max(win.i0 - 1, 0):min(win.i1 + 1, h.shape[0]), max(win.j0 - 1, 0):min(win.j1 + 1, h.shape[1])]
+        grown = h[max(win.i0 - 1, 0) : min(win.i1 + 1, h.shape[0]), max(win.j0 - 1, 0) : min(win.j1 + 1, h.shape[1])]
         cells = on_step_cells(grown, self.step)
         return cells is not None and bool(cells.all())
 
@@ -106,18 +109,24 @@ class StoreEditing:
                 continue
             at = (slice(rows.start, rows.stop), slice(cols.start, cols.stop))
             for name, arr in (("zmin", p._zmin), ("zmax", p._zmax), ("error", p._err)):
+
                 def fill(data, starts, a=arr[level], at=at):
                     data[at] = a[at]
+
                 w.chunks(f"{name}/{level}", [(0, 0)], fill)
 
     def _blocks(self, w: StoreWrite, nodes) -> None:
         """Stage the node blocks of every tile whose block reads a rewritten node."""
         for level in range(self.pyramid.max_level + 1):
-            ids = [(k.ty, k.tx, 0, 0) for k in self.pyramid.keys(level) if reads_changed_nodes(k, self.n, self.rewritten)]
+            ids = [
+                (k.ty, k.tx, 0, 0) for k in self.pyramid.keys(level) if reads_changed_nodes(k, self.n, self.rewritten)
+            ]
             if ids:
+
                 def fill(data, starts, level=level):
-                    for t in range(data.shape[1]):          # a run of tiles along a row
+                    for t in range(data.shape[1]):  # a run of tiles along a row
                         data[0, t] = tile_node_block(nodes, level, starts[1] + t, starts[0], self.n)[0]
+
                 w.chunks(f"nodes/blocks/{level}", ids, fill, read=False)
 
 
@@ -129,14 +138,17 @@ def _node_chunks(w: StoreWrite, name: str, arrays, rewritten: list[Window]) -> N
             continue
         key, src = f"nodes/{name}/{g}", arrays[g]
         c = w.hf.store[key].chunks[0]
-        ids = [(a, b) for a in range(win.i0 // c, (win.i1 - 1) // c + 1) for b in range(win.j0 // c, (win.j1 - 1) // c + 1)]
+        ids = [
+            (a, b) for a in range(win.i0 // c, (win.i1 - 1) // c + 1) for b in range(win.j0 // c, (win.j1 - 1) // c + 1)
+        ]
 
         def fill(data, starts, src=src):
             r1, c1 = min(src.shape[0], starts[0] + data.shape[0]), min(src.shape[1], starts[1] + data.shape[1])
-            data[:r1 - starts[0], :c1 - starts[1]] = src[starts[0]:r1, starts[1]:c1]
+            data[: r1 - starts[0], : c1 - starts[1]] = src[starts[0] : r1, starts[1] : c1]
 
         def beyond(starts, src=src, c=c, shape=w.hf.store[key].shape):
             return min(starts[0] + c, shape[0]) > src.shape[0] or min(starts[1] + c, shape[1]) > src.shape[1]
+
         w.chunks(key, ids, fill, read=beyond)
 
 
@@ -168,5 +180,5 @@ def follow_store_pyramid(pyramid: StorePyramid, source: TilePyramid, win: Window
 def _chunk_meets(chunk: tuple, n: int, win: Window) -> bool:
     """Whether a StorePyramid's decoded chunk (level, cy, cx) holds samples of a window of level-0 samples."""
     level, cy, cx = chunk
-    s, k = n << level, 1 << level                   # a level's last sample may sit up to k samples before
+    s, k = n << level, 1 << level  # a level's last sample may sit up to k samples before
     return cy * s - k < win.i1 and win.i0 < (cy + 1) * s and cx * s - k < win.j1 and win.j0 < (cx + 1) * s

@@ -18,6 +18,7 @@ it in a module the command line imports). A strategy registers its GPU class the
 This module sits above ``raster`` and ``raycast`` (it imports them) and below the cost model and the
 renderer (which find strategies only through it).
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
@@ -207,24 +208,46 @@ def oracle_rule(columns, predicted, threshold: float = 1.0) -> list[str]:
 
 TILELETS = {"full_res": FULL_RES}
 for _entry in (
-    StrategyEntry("raster", "raster", IndexedTileletStrategy,
-                  "GPU-selected restricted-quadtree tilelets drawn as indexed triangles (no geometry shader)",
-                  TileletTriangleEstimator, candidate=True, choices=TILELETS),
-    StrategyEntry("raster_gs", "raster", TileletStrategy,
-                  "GPU-selected restricted-quadtree tilelets through the geometry shader (the paper's path)",
-                  TileletTriangleEstimator, candidate=True, choices=TILELETS),
-    StrategyEntry("raycast", "raycast", RaycastStrategy, "maximum-mipmap ray casting (Dick et al.)",
-                  candidate=True, choices={"reconstruction": RECONSTRUCTIONS}),
+    StrategyEntry(
+        "raster",
+        "raster",
+        IndexedTileletStrategy,
+        "GPU-selected restricted-quadtree tilelets drawn as indexed triangles (no geometry shader)",
+        TileletTriangleEstimator,
+        candidate=True,
+        choices=TILELETS,
+    ),
+    StrategyEntry(
+        "raster_gs",
+        "raster",
+        TileletStrategy,
+        "GPU-selected restricted-quadtree tilelets through the geometry shader (the paper's path)",
+        TileletTriangleEstimator,
+        candidate=True,
+        choices=TILELETS,
+    ),
+    StrategyEntry(
+        "raycast",
+        "raycast",
+        RaycastStrategy,
+        "maximum-mipmap ray casting (Dick et al.)",
+        candidate=True,
+        choices={"reconstruction": RECONSTRUCTIONS},
+    ),
     StrategyEntry("fullres", "raster", TriangleListStrategy, "full-resolution indexed triangle list per tile"),
     StrategyEntry("tin", "raster", TinStrategy, "decimated TIN per tile (may crack at tile borders)"),
 ):
     register_strategy(_entry)
 for _policy in (
-    PolicyEntry("hybrid", "the candidate the cost model predicts cheapest per tile, hedged by its error",
-                adapts=True),
-    PolicyEntry("heuristic", "Dick et al.'s fixed rule: ray cast where triangles outnumber pixels",
-                rule=heuristic_rule),
-    PolicyEntry("oracle", "each tile timed every candidate way inside frames, the cheapest kept",
-                rule=oracle_rule, measures=True),
+    PolicyEntry("hybrid", "the candidate the cost model predicts cheapest per tile, hedged by its error", adapts=True),
+    PolicyEntry(
+        "heuristic", "Dick et al.'s fixed rule: ray cast where triangles outnumber pixels", rule=heuristic_rule
+    ),
+    PolicyEntry(
+        "oracle",
+        "each tile timed every candidate way inside frames, the cheapest kept",
+        rule=oracle_rule,
+        measures=True,
+    ),
 ):
     register_policy(_policy)

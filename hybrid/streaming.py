@@ -4,6 +4,7 @@ upload budget inside the frame, the rest drawn from a resident ancestor (``hybri
 From a tile store the store's loader thread is first asked for the samples the frame lacks and for the slow host
 work of uploads and estimates (``hybrid.uploads.host_jobs``); an upload whose host work it has not yet done waits.
 """
+
 from __future__ import annotations
 
 from hybrid.uploads import UploadReport, host_jobs, stream_uploads
@@ -14,19 +15,28 @@ def make_resident(r, plans: list, pinned: set, prep_ms: float) -> UploadReport |
     else within the budget less ``prep_ms`` (the report back; ``r._fallbacks`` maps the tiles left to ancestors)."""
     r._fallbacks = {}
     if r.upload_budget_ms is None:
-        for p in plans:                # upload first: the timed frame measures drawing only
+        for p in plans:  # upload first: the timed frame measures drawing only
             r._resident(p.choice, p.key, pinned)
         return None
     ready, deferred = (lambda key: True), (lambda plan: False)
     pyramid = r.pyramid
-    if pyramid.background_loader:      # a store: its loader thread reads what is missing
+    if pyramid.background_loader:  # a store: its loader thread reads what is missing
         missing = [p for p in plans if (p.choice, p.key) not in r.cache.entries]
         work, waiting = host_jobs(r.strategies, r.triangles, missing, pyramid.n)
         pyramid.request([p.key for p in missing] + list(work), work)
         ready = pyramid.cached
         deferred = lambda p: (p.choice, p.key) in waiting and not pyramid.failed(p.key)  # noqa: E731
     # the frame's budget covers the estimate's preparation and the uploads together
-    streamed = stream_uploads(r.cache, r.strategies, plans, pinned, r.tile, pyramid.max_level,
-                              max(r.upload_budget_ms - prep_ms, 0.0), ready, deferred)
+    streamed = stream_uploads(
+        r.cache,
+        r.strategies,
+        plans,
+        pinned,
+        r.tile,
+        pyramid.max_level,
+        max(r.upload_budget_ms - prep_ms, 0.0),
+        ready,
+        deferred,
+    )
     r._fallbacks = {plans[i].key: a for i, a in streamed.fallbacks.items()}
     return streamed

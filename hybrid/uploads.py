@@ -14,6 +14,7 @@ strategy in use is made resident before anything else, whatever the budget, so e
 A fallback draws the ancestor's GPU data clipped to the missing tile's rectangle, without stitching to its
 neighbours (a coarser surface for a few frames, never a hole).
 """
+
 from __future__ import annotations
 
 import time
@@ -76,8 +77,17 @@ def host_jobs(strategies: dict, estimator, plans, n: int) -> tuple[dict, set]:
     return work, waiting
 
 
-def stream_uploads(cache, strategies: dict, plans, pinned: set, make_tile, max_level: int, budget_ms: float,
-                   ready=lambda key: True, deferred=lambda plan: False) -> UploadReport:
+def stream_uploads(
+    cache,
+    strategies: dict,
+    plans,
+    pinned: set,
+    make_tile,
+    max_level: int,
+    budget_ms: float,
+    ready=lambda key: True,
+    deferred=lambda plan: False,
+) -> UploadReport:
     """Run a frame's upload jobs within ``budget_ms`` and pick an ancestor for every tile still missing.
 
     ``plans`` (front to back) carry ``key`` and ``choice``; ``pinned`` gains every (strategy, key) the frame
@@ -89,12 +99,12 @@ def stream_uploads(cache, strategies: dict, plans, pinned: set, make_tile, max_l
     root = TileKey(max_level, 0, 0)
     t0 = time.perf_counter()
     for name in sorted({p.choice for p in plans}):
-        if (name, root) not in cache.entries:           # every tile's last resort: always resident
+        if (name, root) not in cache.entries:  # every tile's last resort: always resident
             cache.get(name, strategies[name], root, lambda: make_tile(root), pinned | {(name, root)})
             report.uploads += 1
         pinned.add((name, root))
     missing = [i for i, p in enumerate(plans) if (p.choice, p.key) not in cache.entries]
-    waiting = {i for i in missing if deferred(plans[i])}           # the loader thread's first: not this frame
+    waiting = {i for i in missing if deferred(plans[i])}  # the loader thread's first: not this frame
     missing_now = [i for i in missing if i not in waiting]
     loaded = [ready(plans[i].key) for i in missing_now]
     # tiles whose samples are loaded first (their job is the GPU's part), then the others (read here too)
@@ -106,7 +116,7 @@ def stream_uploads(cache, strategies: dict, plans, pinned: set, make_tile, max_l
             cache.get(p.choice, strategies[p.choice], p.key, lambda p=p: make_tile(p.key), pinned)
             report.uploads += 1
         except BudgetExceeded:
-            continue                                     # no room this frame: drawn from its ancestor
+            continue  # no room this frame: drawn from its ancestor
     report.upload_ms = (time.perf_counter() - t0) * 1e3
     for i in missing:
         p = plans[i]

@@ -11,30 +11,36 @@ in leaves: a leaf is one 13-word record (geometry-shader path) or 9 vertices and
 lean full-resolution leaves (``full_res`` "lean", raster.tilelets) a 15-word record (the SE and NW cells' turns
 added) or 11 vertices and 36 indices (their centre posts and 4 triangles each).
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 from hybrid.gl.context import gl_bytes
 
-MIN_LEAVES = 4096               # smallest arena, leaves
-GROW = 2.0                      # a grown or shrunk arena holds this many times the frame's leaves
-GROW_ABOVE = 0.75               # grow before the next frame when the frame's leaves fill more than this share
-SHRINK_BELOW = 0.25             # shrink when the calls' leaves fill less than this share ...
-SHRINK_AFTER = 64               # ... in this many draw calls in a row
+MIN_LEAVES = 4096  # smallest arena, leaves
+GROW = 2.0  # a grown or shrunk arena holds this many times the frame's leaves
+GROW_ABOVE = 0.75  # grow before the next frame when the frame's leaves fill more than this share
+SHRINK_BELOW = 0.25  # shrink when the calls' leaves fill less than this share ...
+SHRINK_AFTER = 64  # ... in this many draw calls in a row
 LEAF_SIZES = {"exact": (13, 9, 24), "lean": (15, 11, 36)}
 """A leaf's (record words (raster.selection.LEAF_FORMAT), vec4 vertices, indices) by full-resolution rule."""
 LAYOUTS = {rule: (words * 4, vertices * 16, indices * 4) for rule, (words, vertices, indices) in LEAF_SIZES.items()}
 """Bytes a leaf of (record, vertices, indices) by full-resolution rule."""
-RECORDS_BINDING, VERTICES_BINDING, INDICES_BINDING = 1, 7, 8     # storage bindings
+RECORDS_BINDING, VERTICES_BINDING, INDICES_BINDING = 1, 7, 8  # storage bindings
 
 
 def arena_defines(full_res: str) -> dict:
     """The arena's layout and bindings as select.comp.glsl's defines, for a full-resolution rule."""
     words, vertices, indices = LEAF_SIZES[full_res]
-    return {"LEAF_RECORD_WORDS": f"{words}u", "LEAF_VERTICES": f"{vertices}u", "LEAF_INDICES": f"{indices}u",
-            "RECORDS_BINDING": RECORDS_BINDING, "VERTICES_BINDING": VERTICES_BINDING,
-            "INDICES_BINDING": INDICES_BINDING}
+    return {
+        "LEAF_RECORD_WORDS": f"{words}u",
+        "LEAF_VERTICES": f"{vertices}u",
+        "LEAF_INDICES": f"{indices}u",
+        "RECORDS_BINDING": RECORDS_BINDING,
+        "VERTICES_BINDING": VERTICES_BINDING,
+        "INDICES_BINDING": INDICES_BINDING,
+    }
 
 
 def arena_leaves(need: int) -> int:
@@ -57,7 +63,7 @@ class LeafArena:
 
     def _allocate(self, capacity: int) -> None:
         self._free()
-        mesh = self.writes == "mesh"          # only the output the strategy's draw reads is allocated
+        mesh = self.writes == "mesh"  # only the output the strategy's draw reads is allocated
         self.capacity = capacity
         record, vertex, index = self.leaf_bytes
         self.records = self.ctx.buffer(reserve=(1 if mesh else capacity) * record)

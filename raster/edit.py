@@ -6,6 +6,7 @@ state that takes is made at the terrain's first edit and kept per terrain, tile 
 be uploaded again when its node block (its nodes and a one-node apron at each local level) meets the window of the
 nodes whose values changed, or its own samples changed.
 """
+
 from __future__ import annotations
 
 import weakref
@@ -25,15 +26,19 @@ def edit_state(hf, n: int, beta: float = GPU_BETA, side_errors: bool = True) -> 
     """The rect_nodes state of hf's node arrays for tiles of n cells (made on first use, kept while hf lives);
     ``side_errors`` as in ``raster.nodes.global_nodes``."""
     if isinstance(hf, StoredTerrain):
-        raise TerrabenchError(f"{hf.name!r} is a tile store: its node arrays follow an edit through the in-memory "
-                              "copy the editor keeps (hybrid.editing.TerrainEditor), not here")
+        raise TerrabenchError(
+            f"{hf.name!r} is a tile store: its node arrays follow an edit through the in-memory "
+            "copy the editor keeps (hybrid.editing.TerrainEditor), not here"
+        )
     key = (id(hf), int(n), float(beta), bool(side_errors))
     hit = _STATE.get(key)
     if hit is not None and hit[0]() is hf:
         return hit[1]
     st = node_edits(hf, n, beta, side_errors)
+
     def drop(_ref, k=key) -> None:
         _STATE.pop(k, None)
+
     _STATE[key] = (weakref.ref(hf, drop), st)
     return st
 

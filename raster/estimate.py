@@ -11,6 +11,7 @@ nearest of 32 bins an octave: on Puget's flights, tiles of 64-256 cells, 90 % of
 count, the median equal, frames within 1.5 %; a look-up each, where a binary search among the sorted errors
 missed the cache at nearly every step); a frame's tiles are then estimated together in a handful of array operations.
 """
+
 from __future__ import annotations
 
 import time
@@ -31,24 +32,34 @@ from .quadtree import GPU_BETA, check_full_res
 from .split_tables import BIN_SHIFT, TABLE_BINS, SplitTables, split_tables
 from .tile_nodes import KINDS, TileNodes, block_tile_nodes, tile_nodes
 
-MAX_TILES = 4096                # tiles whose TileNodes are kept (least recently used first out)
-NEAR_TRIANGLES = 7              # a lean leaf near its split draws this many more than 4 (fitted to Puget flights:
-                                # 0.86-1.31x the drawn count a frame; 8 if no neighbour shared its midpoints)
-NEAR_SIDE_TRIANGLES = 1.5       # with side errors: a leaf side near its midpoint's need draws 1 (own) to 2 (and the
-SPLIT1_TRIANGLES = 8            # neighbour's) more, and a split level-1 node of a full-resolution tile 4 leaves that
-                                # keep their midpoints; both fitted to Puget's flyover, orbit and dolly (tiles of
-                                # 128, 320x180, 2/3 px, eight views): 0.98-1.14x the drawn count a frame, per-tile
-                                # median 0.98x (coarser levels' tiles 0.95x). 8 below the 16 drawn: level-1 nodes
-LEAN_SPLIT1_TRIANGLES = -8      # tested at their block's nearest distance split more often than drawn, in the lean
-                                # rule too, whose split level-1 nodes add none (least squares over 24 such views at
-                                # 2/3 and 2 px: -7.5; its full-resolution tiles' median error 0.16 -> 0.08)
+MAX_TILES = 4096  # tiles whose TileNodes are kept (least recently used first out)
+NEAR_TRIANGLES = 7  # a lean leaf near its split draws this many more than 4 (fitted to Puget flights:
+# 0.86-1.31x the drawn count a frame; 8 if no neighbour shared its midpoints)
+NEAR_SIDE_TRIANGLES = 1.5  # with side errors: a leaf side near its midpoint's need draws 1 (own) to 2 (and the
+SPLIT1_TRIANGLES = 8  # neighbour's) more, and a split level-1 node of a full-resolution tile 4 leaves that
+# keep their midpoints; both fitted to Puget's flyover, orbit and dolly (tiles of
+# 128, 320x180, 2/3 px, eight views): 0.98-1.14x the drawn count a frame, per-tile
+# median 0.98x (coarser levels' tiles 0.95x). 8 below the 16 drawn: level-1 nodes
+LEAN_SPLIT1_TRIANGLES = -8  # tested at their block's nearest distance split more often than drawn, in the lean
+# rule too, whose split level-1 nodes add none (least squares over 24 such views at
+# 2/3 and 2 px: -7.5; its full-resolution tiles' median error 0.16 -> 0.08)
 
 
-
-
-def estimate_rows(tables: SplitTables, rows: np.ndarray, coarse: np.ndarray, boxes: np.ndarray, root: np.ndarray, eye,
-                  k_tau: float, planes=None, inside=None, lean: bool = True, beta: float = GPU_BETA, sides=1,
-                  split1_triangles=(SPLIT1_TRIANGLES, 16)) -> tuple[np.ndarray, np.ndarray]:
+def estimate_rows(
+    tables: SplitTables,
+    rows: np.ndarray,
+    coarse: np.ndarray,
+    boxes: np.ndarray,
+    root: np.ndarray,
+    eye,
+    k_tau: float,
+    planes=None,
+    inside=None,
+    lean: bool = True,
+    beta: float = GPU_BETA,
+    sides=1,
+    split1_triangles=(SPLIT1_TRIANGLES, 16),
+) -> tuple[np.ndarray, np.ndarray]:
     """(triangles (B,), visible share (B,)) of B tiles' quadtrees for an eye (world metres) and K / tau (pixels per
     radian over tau), and the share in [0, 1] of their splits in blocks or large nodes inside the frustum
     ``planes`` (eye-relative, as View's; None: all). Without ``lean``: 8 triangles a leaf (a split adds 3
@@ -69,19 +80,35 @@ def estimate_rows(tables: SplitTables, rows: np.ndarray, coarse: np.ndarray, box
         return np.zeros(0, np.int64), np.zeros(0)
     eye = np.asarray(eye, dtype=np.float64)
     if planes is None:
-        w, bias = np.zeros((6, 6)), np.full(6, -np.inf)          # every box passes every plane
+        w, bias = np.zeros((6, 6)), np.full(6, -np.inf)  # every box passes every plane
     else:
         w, bias = _corner_test(planes, eye)
     inside = np.zeros(b, np.bool_) if inside is None else np.asarray(inside, np.bool_)
     sides = np.broadcast_to(np.asarray(sides, np.int64), (b,))
-    return _estimate_tiles(tables.tables, tables.base, np.asarray(rows, np.int64), coarse, boxes,
-                           np.asarray(root, np.int64), eye, float(k_tau), w, bias, inside, lean, float(beta),
-                           np.ascontiguousarray(sides), float(split1_triangles[0]), float(split1_triangles[1]))
+    return _estimate_tiles(
+        tables.tables,
+        tables.base,
+        np.asarray(rows, np.int64),
+        coarse,
+        boxes,
+        np.asarray(root, np.int64),
+        eye,
+        float(k_tau),
+        w,
+        bias,
+        inside,
+        lean,
+        float(beta),
+        np.ascontiguousarray(sides),
+        float(split1_triangles[0]),
+        float(split1_triangles[1]),
+    )
 
 
 @njit(cache=True)
-def _estimate_tiles(tables, base, rows, coarse, boxes, root, eye, k_tau, w, bias, inside, lean, beta, sides,
-                    split1_sides, split1_plain):
+def _estimate_tiles(
+    tables, base, rows, coarse, boxes, root, eye, k_tau, w, bias, inside, lean, beta, sides, split1_sides, split1_plain
+):
     """``estimate_rows`` tile by tile (a loop compiled by numba: a frame has a few dozen tiles, and as array
     operations its time was their number): (triangles (B,) int64, visible share (B,))."""
     b, kinds, nb, width = len(rows), tables.shape[1], tables.shape[2], tables.shape[3]
@@ -91,14 +118,14 @@ def _estimate_tiles(tables, base, rows, coarse, boxes, root, eye, k_tau, w, bias
     factor = np.array([1.0, beta, 1.0]) / k_tau
     thr = np.empty(nb, np.float32)
     for t in range(b):
-        for n in range(nb + nc):                                   # eye to each box, metres
+        for n in range(nb + nc):  # eye to each box, metres
             dx = max(boxes[t, 3, n] - eye[0], eye[0] - boxes[t, 0, n], 0.0)
             dy = max(boxes[t, 4, n] - eye[1], eye[1] - boxes[t, 1, n], 0.0)
             dz = max(boxes[t, 5, n] - eye[2], eye[2] - boxes[t, 2, n], 0.0)
             d[n] = np.sqrt(dx * dx + dy * dy + dz * dz)
         per_kind = np.zeros(kinds)
         splits = shown = 0.0
-        for k in range(kinds):                                     # small nodes: one table look-up a block
+        for k in range(kinds):  # small nodes: one table look-up a block
             for n in range(nb):
                 thr[n] = d[n] * factor[k]
             bins = (thr.view(np.int32).astype(np.int64) >> BIN_SHIFT) - base[rows[t]]
@@ -109,7 +136,7 @@ def _estimate_tiles(tables, base, rows, coarse, boxes, root, eye, k_tau, w, bias
                     splits += count
                     shown += count * _seen(boxes, t, n, w, bias, inside[t])
         near_large = 0.0
-        for c in range(nc):                                        # large nodes: each against its own box
+        for c in range(nc):  # large nodes: each against its own box
             if coarse[t, c] * k_tau > d[nb + c]:
                 splits += 1
                 shown += _seen(boxes, t, nb + c, w, bias, inside[t])
@@ -119,7 +146,7 @@ def _estimate_tiles(tables, base, rows, coarse, boxes, root, eye, k_tau, w, bias
         if not lean:
             tri[t] = 8 * leaves
             continue
-        near = per_kind[1] / sides[t] - splits + near_large        # near leaves
+        near = per_kind[1] / sides[t] - splits + near_large  # near leaves
         weight = 4 * NEAR_SIDE_TRIANGLES if sides[t] == 4 else NEAR_TRIANGLES
         split1 = split1_sides if sides[t] == 4 else split1_plain
         tri[t] = np.int64(np.rint(4 * leaves + weight * near + split1 * per_kind[2]))
@@ -153,15 +180,15 @@ class _Rows:
     indexing per field; beyond ``limit`` tiles the least recently used row is reused (never one of the call at
     hand: ``lookup`` stamps its rows with the call's tick)."""
 
-    FIELDS = ("coarse_error", "boxes", "root", "sides")     # as TileNodes has them; the small nodes' errors of
-                                                    # KINDS as ``split_tables`` in ``tables``
+    FIELDS = ("coarse_error", "boxes", "root", "sides")  # as TileNodes has them; the small nodes' errors of
+    # KINDS as ``split_tables`` in ``tables``
 
     def __init__(self, limit: int):
-        self.limit, self.row = limit, {}                       # key -> row
-        self.keys: list = []                                   # row -> key
-        self.arrays: dict = {}                                 # FIELDS, (rows, ...) each
+        self.limit, self.row = limit, {}  # key -> row
+        self.keys: list = []  # row -> key
+        self.arrays: dict = {}  # FIELDS, (rows, ...) each
         self.tables: SplitTables | None = None
-        self.stamp = np.zeros(0, np.int64)                     # row -> tick of its last use
+        self.stamp = np.zeros(0, np.int64)  # row -> tick of its last use
         self.tick = 0
 
     def lookup(self, keys) -> np.ndarray:
@@ -182,8 +209,8 @@ class _Rows:
     def put(self, key, nodes: TileNodes) -> int:
         """Store a tile's nodes as used by the call at hand; returns its row."""
         if len(self.row) >= self.limit:
-            r = int(self.stamp[:len(self.keys)].argmin())      # the least recently used
-            self.row.pop(self.keys[r], None)                   # (absent when forgotten)
+            r = int(self.stamp[: len(self.keys)].argmin())  # the least recently used
+            self.row.pop(self.keys[r], None)  # (absent when forgotten)
             self.keys[r] = key
         else:
             r = len(self.keys)
@@ -200,13 +227,16 @@ class _Rows:
     def _grow(self, nodes: TileNodes) -> None:
         """Double the rows (at least 16, at most ``limit``); rows not yet filled count no splits."""
         cap = len(self.stamp)
-        new = min(max(2 * cap, 16), self.limit)          # the call's own rows fit: limit >= its tiles
+        new = min(max(2 * cap, 16), self.limit)  # the call's own rows fit: limit >= its tiles
         vals = {f: np.asarray(getattr(nodes, f)) for f in self.FIELDS}
-        grown = {f: np.zeros((new, *v.shape), v.dtype if f not in ("root", "sides") else np.int64)
-                 for f, v in vals.items()}
-        most = max(getattr(nodes, kind).shape[1] for kind in KINDS)       # a block's nodes of one kind
-        tables = SplitTables(np.zeros(new, np.int64), np.zeros((new, len(KINDS), nodes.fine.shape[0], TABLE_BINS),
-                                                               np.uint16 if most < 1 << 16 else np.uint32))
+        grown = {
+            f: np.zeros((new, *v.shape), v.dtype if f not in ("root", "sides") else np.int64) for f, v in vals.items()
+        }
+        most = max(getattr(nodes, kind).shape[1] for kind in KINDS)  # a block's nodes of one kind
+        tables = SplitTables(
+            np.zeros(new, np.int64),
+            np.zeros((new, len(KINDS), nodes.fine.shape[0], TABLE_BINS), np.uint16 if most < 1 << 16 else np.uint32),
+        )
         if self.arrays:
             for f in grown:
                 grown[f][:cap] = self.arrays[f]
@@ -225,21 +255,25 @@ class TileletTriangleEstimator:
     (hybrid.contract.FULL_RES; "lean": level-0 tiles' leaves counted as every other tile's).
     """
 
-    def __init__(self, pyramid: TilePyramid, beta: float = GPU_BETA, lean: bool = True,
-                 full_res: str = DEFAULT_FULL_RES):
+    def __init__(
+        self, pyramid: TilePyramid, beta: float = GPU_BETA, lean: bool = True, full_res: str = DEFAULT_FULL_RES
+    ):
         self.pyramid = pyramid
         self.beta, self.lean, self.full_res = float(beta), bool(lean), check_full_res(full_res)
         self._rows = _Rows(MAX_TILES)
         self.build_ms, self.builds = 0.0, 0
         self.background = False
-        self.waiting: dict = {}     # tiles of the last call left unknown for their block's cut -> the cut (callable)
+        self.waiting: dict = {}  # tiles of the last call left unknown for their block's cut -> the cut (callable)
         hf = pyramid.hf
         # a tile store whose nodes (as the GPU reads them) come in per-tile blocks: each tile's is one read, no
         # heights, no error pyramid (a periodic extension's near its seams is cut first, as the GPU's upload
         # cuts it); stores without them are not opened here (nodes_for may refuse or load them)
         self._blocks = None
-        if isinstance(hf, StoredTerrain) and hf.store.attrs.get("node_blocks") and \
-                int(hf.store.attrs["tile_size"]) == pyramid.n:
+        if (
+            isinstance(hf, StoredTerrain)
+            and hf.store.attrs.get("node_blocks")
+            and int(hf.store.attrs["tile_size"]) == pyramid.n
+        ):
             nodes = nodes_for(hf, pyramid.n, beta)
             self._blocks = nodes if nodes.blocks is not None else None
 
@@ -249,17 +283,23 @@ class TileletTriangleEstimator:
         ready = self._block_ready(key)
         if ready is False and self.background:
             cut = pending_cut(self.pyramid.hf, self.pyramid.n, self.beta, key)
-            if cut is not None:                                 # (None: the loader has just cut it)
+            if cut is not None:  # (None: the loader has just cut it)
                 self.waiting[key] = cut
                 return -1
         t0 = time.perf_counter()
         if deadline is not None and t0 >= deadline:
             return -1
         source = self._blocks if ready is not None else self._global_nodes()
-        if source is not None:                                  # the block the GPU reads (cut here if need be)
+        if source is not None:  # the block the GPU reads (cut here if need be)
             data, offsets = tile_node_block(source, key.level, key.tx, key.ty, self.pyramid.n)
-            nodes = block_tile_nodes(data, offsets, self.pyramid.n, *self.pyramid.placement(key),
-                                     self.full_res if key.level == 0 else None, self.beta)
+            nodes = block_tile_nodes(
+                data,
+                offsets,
+                self.pyramid.n,
+                *self.pyramid.placement(key),
+                self.full_res if key.level == 0 else None,
+                self.beta,
+            )
         else:
             nodes = tile_nodes(self.pyramid.tile(key), self.beta, self.full_res if key.level == 0 else None)
         r = self._rows.put(key, nodes)
@@ -300,9 +340,10 @@ class TileletTriangleEstimator:
         ready = getattr(self._blocks.blocks, "ready", None)
         return ready is None or ready(key.level, key.tx, key.ty)
 
-    def _estimate(self, keys, view: View, tau: float, budget_ms: float | None = None,
-                  inside=None) -> tuple[np.ndarray, np.ndarray]:
-        self._rows.limit = max(self._rows.limit, len(keys))    # a frame's own rows are never reused for it
+    def _estimate(
+        self, keys, view: View, tau: float, budget_ms: float | None = None, inside=None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        self._rows.limit = max(self._rows.limit, len(keys))  # a frame's own rows are never reused for it
         deadline = None if budget_ms is None else time.perf_counter() + budget_ms / 1e3
         builds, self.waiting = self.builds, {}
         rows = self._rows.lookup(keys)
@@ -311,24 +352,36 @@ class TileletTriangleEstimator:
         ok = rows >= 0
         if not ok.all():
             missing = [i for i in np.flatnonzero(~ok) if not self.background or self._block_ready(keys[i])]
-            if missing and self.builds == builds:               # at least one build a call: the queue drains
+            if missing and self.builds == builds:  # at least one build a call: the queue drains
                 rows[missing[0]] = self._row(keys[missing[0]])  # (blocks left to cut: the loader's, not here)
                 ok = rows >= 0
         a, r = self._rows.arrays, rows[ok]
         if not len(r):
             return np.full(len(rows), np.nan), np.full(len(rows), np.nan)
-        est = estimate_rows(self._rows.tables, r, a["coarse_error"][r], a["boxes"][r], a["root"][r], view.eye,
-                            float(view.pixels_per_radian) / tau, view.frustum_planes_rel(),
-                            None if inside is None else inside[ok], self.lean, self.beta, a["sides"][r],
-                            (SPLIT1_TRIANGLES, 16) if self.full_res == "exact" else (LEAN_SPLIT1_TRIANGLES, 0))
+        est = estimate_rows(
+            self._rows.tables,
+            r,
+            a["coarse_error"][r],
+            a["boxes"][r],
+            a["root"][r],
+            view.eye,
+            float(view.pixels_per_radian) / tau,
+            view.frustum_planes_rel(),
+            None if inside is None else inside[ok],
+            self.lean,
+            self.beta,
+            a["sides"][r],
+            (SPLIT1_TRIANGLES, 16) if self.full_res == "exact" else (LEAN_SPLIT1_TRIANGLES, 0),
+        )
         if len(r) == len(rows):
             return est[0].astype(np.float64), est[1]
         tri, vis = np.full(len(rows), np.nan), np.full(len(rows), np.nan)
         tri[ok], vis[ok] = est
         return tri, vis
 
-    def many(self, selected: list[SelectedTile], view: View, tau: float,
-             budget_ms: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def many(
+        self, selected: list[SelectedTile], view: View, tau: float, budget_ms: float | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(triangles (B,) float, visible share (B,)) of the selected tiles at ``view`` for the bound tau (pixels).
 
         With ``budget_ms``, new tiles' nodes are built front to back only until that much wall time is spent (at

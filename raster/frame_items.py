@@ -9,6 +9,7 @@ word, pass 0's table (one word a work group: item | group << 16, written here), 
 as each item's leaves are counted). Buffers grow to the frame's needs and are kept; ``version`` counts
 reallocations of the segment buffer (vertex arrays over it are stale when it changed).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -16,20 +17,31 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 from hybrid.gl.context import gl_bytes
 
-CONTROL_WORDS = 20              # control words a item
+CONTROL_WORDS = 20  # control words a item
 COMMANDS_PER_ITEM = CONTROL_WORDS // 5
 BASE_WORD, DONE_WORD, GROUPS_WORD, FOUND_WORD = 15, 16, 17, 18
 CMD_POINTS, CMD_TEMPLATE, CMD_SKIRTS = 0, 1, 2
-SEGMENT_WORDS = 6               # skirt segment: x, y, height of both ends
-WORK_HEADER = 4                 # pass 1's dispatch (x, y, z) and an unused word
-LOCAL = 64                      # work group size (select.comp.glsl)
-MAX_ITEMS = 1 << 16             # items and work groups per item a work-table word can name
-CONTROL_BINDING, SEGMENTS_BINDING, FOUND_BINDING, WORK_BINDING = 2, 3, 6, 10   # storage bindings
-ITEM_DEFINES = {"CONTROL_WORDS": CONTROL_WORDS, "BASE_WORD": BASE_WORD, "DONE_WORD": DONE_WORD,
-                "GROUPS_WORD": GROUPS_WORD, "FOUND_WORD": FOUND_WORD, "CMD_POINTS_": CMD_POINTS,
-                "CMD_TEMPLATE_": CMD_TEMPLATE, "WORK_HEADER": f"{WORK_HEADER}u", "LOCAL": LOCAL,
-                "SEGMENT_WORDS": SEGMENT_WORDS, "CONTROL_BINDING": CONTROL_BINDING,
-                "SEGMENTS_BINDING": SEGMENTS_BINDING, "FOUND_BINDING": FOUND_BINDING, "WORK_BINDING": WORK_BINDING}
+SEGMENT_WORDS = 6  # skirt segment: x, y, height of both ends
+WORK_HEADER = 4  # pass 1's dispatch (x, y, z) and an unused word
+LOCAL = 64  # work group size (select.comp.glsl)
+MAX_ITEMS = 1 << 16  # items and work groups per item a work-table word can name
+CONTROL_BINDING, SEGMENTS_BINDING, FOUND_BINDING, WORK_BINDING = 2, 3, 6, 10  # storage bindings
+ITEM_DEFINES = {
+    "CONTROL_WORDS": CONTROL_WORDS,
+    "BASE_WORD": BASE_WORD,
+    "DONE_WORD": DONE_WORD,
+    "GROUPS_WORD": GROUPS_WORD,
+    "FOUND_WORD": FOUND_WORD,
+    "CMD_POINTS_": CMD_POINTS,
+    "CMD_TEMPLATE_": CMD_TEMPLATE,
+    "WORK_HEADER": f"{WORK_HEADER}u",
+    "LOCAL": LOCAL,
+    "SEGMENT_WORDS": SEGMENT_WORDS,
+    "CONTROL_BINDING": CONTROL_BINDING,
+    "SEGMENTS_BINDING": SEGMENTS_BINDING,
+    "FOUND_BINDING": FOUND_BINDING,
+    "WORK_BINDING": WORK_BINDING,
+}
 """The layout above as select.comp.glsl's defines: the shader's only source of these numbers."""
 
 
@@ -47,11 +59,11 @@ def control_blank(groups0: np.ndarray, segment_base: np.ndarray) -> np.ndarray:
     """Control words (items * CONTROL_WORDS,) before selection: instance counts 1, the counts the selection
     fills in (draws, leaves) 0, each skirt command's first instance at its item's segments, each item's pass-0 work groups."""
     words = np.zeros((len(groups0), CONTROL_WORDS), np.uint32)
-    words[:, 5 * CMD_POINTS + 1] = 1                    # leaf points: one instance of (leaf count) points
-    words[:, 5 * CMD_TEMPLATE + 1] = 1                  # mesh: one instance of (24 x leaf count) indices,
-    words[:, 5 * CMD_TEMPLATE + 4] = np.arange(len(groups0))   # its base instance the item (raster.indexed)
-    words[:, 5 * CMD_SKIRTS] = 6                        # skirts: (segment count) instances of a 6-vertex quad
-    words[:, 5 * CMD_SKIRTS + 3] = np.asarray(segment_base) // SEGMENT_WORDS     # first instance
+    words[:, 5 * CMD_POINTS + 1] = 1  # leaf points: one instance of (leaf count) points
+    words[:, 5 * CMD_TEMPLATE + 1] = 1  # mesh: one instance of (24 x leaf count) indices,
+    words[:, 5 * CMD_TEMPLATE + 4] = np.arange(len(groups0))  # its base instance the item (raster.indexed)
+    words[:, 5 * CMD_SKIRTS] = 6  # skirts: (segment count) instances of a 6-vertex quad
+    words[:, 5 * CMD_SKIRTS + 3] = np.asarray(segment_base) // SEGMENT_WORDS  # first instance
     words[:, GROUPS_WORD] = groups0
     return words.reshape(-1)
 
@@ -60,8 +72,10 @@ def work_table(groups0: np.ndarray) -> np.ndarray:
     """Pass 0's work table: for each item, one word per work group (item | group << 16)."""
     groups0 = np.asarray(groups0, dtype=np.int64)
     if len(groups0) > MAX_ITEMS or (len(groups0) and groups0.max() > MAX_ITEMS):
-        raise TerrabenchError(f"a frame's leaf selection handles at most {MAX_ITEMS} tiles of at most "
-                              f"{MAX_ITEMS * LOCAL} nodes each, got {len(groups0)} tiles")
+        raise TerrabenchError(
+            f"a frame's leaf selection handles at most {MAX_ITEMS} tiles of at most "
+            f"{MAX_ITEMS * LOCAL} nodes each, got {len(groups0)} tiles"
+        )
     item = np.repeat(np.arange(len(groups0)), groups0)
     group = np.arange(len(item)) - np.repeat(np.cumsum(groups0) - groups0, groups0)
     return (item | (group << 16)).astype(np.uint32)
@@ -95,7 +109,7 @@ class FrameItems:
         seg_base = np.arange(items, dtype=np.int64) * segment_words(int(n))
         table0 = work_table(groups0)
         table1_start = WORK_HEADER + len(table0)
-        table1 = -(-int(arena_capacity) // LOCAL) + items          # pass 1's groups at most
+        table1 = -(-int(arena_capacity) // LOCAL) + items  # pass 1's groups at most
         self._fit("control", max(items, 1) * CONTROL_WORDS * 4)
         self._fit("found", max(items * found_words(int(n)), 1) * 4)
         if self._fit("segments", max(items * segment_words(int(n)), 1) * 4):

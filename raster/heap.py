@@ -6,18 +6,19 @@ carries where (raster.tileblock). A heap grows by doubling (a GPU copy of the us
 leaves it under a quarter full it is made again for twice what it holds, its tiles moved down to the first
 slots. Bytes: a tile counts its slot's; what the heaps hold unused is shared (``spare_nbytes``).
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 from hybrid.gl.context import gl_bytes
 
-NODES_BINDING, HEIGHTS_BINDING = 0, 5     # storage bindings
+NODES_BINDING, HEIGHTS_BINDING = 0, 5  # storage bindings
 HEAP_DEFINES = {"NODES_BINDING": NODES_BINDING, "HEIGHTS_BINDING": HEIGHTS_BINDING}
 """The heap's bindings as select.comp.glsl's defines."""
 
-MIN_SLOTS = 4                   # smallest heap, tiles
-SHRINK_BELOW = 0.25             # remake a heap whose tiles fill less than this share of it ...
+MIN_SLOTS = 4  # smallest heap, tiles
+SHRINK_BELOW = 0.25  # remake a heap whose tiles fill less than this share of it ...
 
 
 class HeapSlot:
@@ -69,10 +70,12 @@ class TileHeap:
     def alloc(self, heights: np.ndarray, nodes: np.ndarray) -> HeapSlot:
         """A slot holding one tile's heights ((n+1)² float32) and node rows ((node_rows, 4) float32)."""
         if heights.size != self.height_words or nodes.shape != (self.node_rows, 4):
-            raise ValueError(f"a {self.n}-cell tile's heap slot holds {self.height_words} heights and "
-                             f"{self.node_rows} node rows, got {heights.size} and {nodes.shape[0]}")
+            raise ValueError(
+                f"a {self.n}-cell tile's heap slot holds {self.height_words} heights and "
+                f"{self.node_rows} node rows, got {heights.size} and {nodes.shape[0]}"
+            )
         free = [i for i, s in enumerate(self.owners) if s is None]
-        if not free:                        # full: its tiles keep their slots in a heap twice the size
+        if not free:  # full: its tiles keep their slots in a heap twice the size
             free = [self.capacity]
             self._remake(2 * self.capacity)
         slot = HeapSlot(self, free[0])

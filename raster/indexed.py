@@ -8,6 +8,7 @@ frame however many tiles it draws. Skirts are a small instanced draw of one quad
 that has them. Per leaf this is the paper's 9-post template; drawn without instancing because a CPU rasterizer
 runs its vertex pipeline once per instance. Wireframe draws polygon edges.
 """
+
 from __future__ import annotations
 
 from hybrid.gl.context import multi_draw_indirect
@@ -29,10 +30,16 @@ class IndexedTileletStrategy(TileletDrawing):
 
     def __init__(self, ctx, hf, **options):
         super().__init__(ctx, hf, **options)
-        self.prog = program(ctx, "raster", "template.vert.glsl", "tilelet.frag.glsl",
-                            defines={"MULTI_DRAW": 1, "TILE_BLOCK_ATTRIBUTES": 1, "SURFACE_FROM_VERTEX": 1, **BLOCK_DEFINES})
-        self.skirt_prog = program(ctx, "raster", "skirt.vert.glsl", "tilelet.frag.glsl",
-                                 defines={"SKIRT_PROGRAM": 1, **BLOCK_DEFINES})
+        self.prog = program(
+            ctx,
+            "raster",
+            "template.vert.glsl",
+            "tilelet.frag.glsl",
+            defines={"MULTI_DRAW": 1, "TILE_BLOCK_ATTRIBUTES": 1, "SURFACE_FROM_VERTEX": 1, **BLOCK_DEFINES},
+        )
+        self.skirt_prog = program(
+            ctx, "raster", "skirt.vert.glsl", "tilelet.frag.glsl", defines={"SKIRT_PROGRAM": 1, **BLOCK_DEFINES}
+        )
 
     def programs(self) -> tuple:
         """The mesh and skirt programs."""
@@ -42,10 +49,15 @@ class IndexedTileletStrategy(TileletDrawing):
         """The arena's leaf vertices with their index buffer, and the frame's skirt segments, one instance each
         (an item's first instance is in its command)."""
         a = self.arena
-        return {"mesh": self.ctx.vertex_array(self.prog, [(a.vertices, "4f", "a_vertex"),
-                                                          (self.blocks.buffer, BLOCK_ATTRIBUTES, *BLOCK_NAMES)],
-                                              index_buffer=a.indices, index_element_size=4),
-                "skirts": self.ctx.vertex_array(self.skirt_prog, [(self.items.segments, "3f 3f/i", "a_p", "a_q")])}
+        return {
+            "mesh": self.ctx.vertex_array(
+                self.prog,
+                [(a.vertices, "4f", "a_vertex"), (self.blocks.buffer, BLOCK_ATTRIBUTES, *BLOCK_NAMES)],
+                index_buffer=a.indices,
+                index_element_size=4,
+            ),
+            "skirts": self.ctx.vertex_array(self.skirt_prog, [(self.items.segments, "3f 3f/i", "a_p", "a_q")]),
+        }
 
     def draw_items(self, items: int, wireframe: bool = False) -> None:
         """Every item's leaves as indexed triangles in one multi-draw (each item's count and first index from the
@@ -56,12 +68,19 @@ class IndexedTileletStrategy(TileletDrawing):
             return
         ctx.wireframe = bool(wireframe)
         try:
-            multi_draw_indirect(self.arena_vaos()["mesh"], self.items.control, ctx.TRIANGLES,
-                                20 * self.command(0, CMD_TEMPLATE), items, 4 * CONTROL_WORDS)
+            multi_draw_indirect(
+                self.arena_vaos()["mesh"],
+                self.items.control,
+                ctx.TRIANGLES,
+                20 * self.command(0, CMD_TEMPLATE),
+                items,
+                4 * CONTROL_WORDS,
+            )
         finally:
             ctx.wireframe = False
 
     def draw_tile_skirts(self, item: int) -> None:
         """The item's skirt quads (one instance a segment)."""
-        self.arena_vaos()["skirts"].render_indirect(self.items.control, mode=self.ctx.TRIANGLES, count=1,
-                                                    first=self.command(item, CMD_SKIRTS))
+        self.arena_vaos()["skirts"].render_indirect(
+            self.items.control, mode=self.ctx.TRIANGLES, count=1, first=self.command(item, CMD_SKIRTS)
+        )

@@ -14,6 +14,7 @@ tilelet strategies' skirts). Those rays see a seam from below: for them the same
 instead (a second pass, only when some ray may start under the sheet), hidden from them by the sheet in turn.
 Side order W, E, S, N as ``SelectedTile.edge_deltas``.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -21,8 +22,8 @@ import numpy as np
 from hybrid.terrain.edges import eye_under, grid_frame
 from hybrid.tiles.tiletree import NO_NEIGHBOUR, edge_neighbours
 
-STEPS = ((-1, 0), (1, 0), (0, -1), (0, 1))   # tile steps to the W, E, S, N neighbours
-MARGIN = 0.01                                # of the tile's larger sample spacing: the skirt passes the lower edge
+STEPS = ((-1, 0), (1, 0), (0, -1), (0, 1))  # tile steps to the W, E, S, N neighbours
+MARGIN = 0.01  # of the tile's larger sample spacing: the skirt passes the lower edge
 
 
 def clip_polygon(polygon: np.ndarray, planes: np.ndarray) -> np.ndarray:
@@ -52,10 +53,17 @@ def rays_may_start_under(hf, view, edge_tops) -> bool:
     x0, y0, z0 = (float(c) for c in hf.origin)
     x1, y1 = x0 + hf.extent[0], y0 + hf.extent[1]
     low = float(view.eye[2]) - view.far
-    sides = ((o[1] < 0, (x0, y0), (x1, y0)), (o[1] > hf.rows - 1, (x0, y1), (x1, y1)),    # S, N
-             (o[0] < 0, (x0, y0), (x0, y1)), (o[0] > hf.cols - 1, (x1, y0), (x1, y1)))    # W, E
-    walls = [np.array([[*a, low], [*b, low], [*b, z0 + top], [*a, z0 + top]]) - view.eye
-             for top, (faces, a, b) in zip(edge_tops, sides) if faces]
+    sides = (
+        (o[1] < 0, (x0, y0), (x1, y0)),
+        (o[1] > hf.rows - 1, (x0, y1), (x1, y1)),  # S, N
+        (o[0] < 0, (x0, y0), (x0, y1)),
+        (o[0] > hf.cols - 1, (x1, y0), (x1, y1)),
+    )  # W, E
+    walls = [
+        np.array([[*a, low], [*b, low], [*b, z0 + top], [*a, z0 + top]]) - view.eye
+        for top, (faces, a, b) in zip(edge_tops, sides)
+        if faces
+    ]
     planes = view.frustum_planes_rel()[[0, 1, 2, 3, 5]]
     return any(len(clip_polygon(w, planes)) for w in walls)
 
@@ -90,7 +98,7 @@ def side_skirt(vertices: np.ndarray, edges: np.ndarray, side: int, extent) -> tu
     border edge to its image on the line, and the nearest vertex to each corner, covering what the mesh leaves
     open there. Vertices already on the line (a grid's) are kept bit for bit.
     """
-    a = 1 if side < 2 else 0                             # the coordinate along the side (W, E run north)
+    a = 1 if side < 2 else 0  # the coordinate along the side (W, E run north)
     c = 0.0 if side % 2 == 0 else float(extent[1 - a])  # the side's line: W, S at 0, E, N at the far edge
     if not len(edges):
         return np.zeros((0, 3)), np.zeros((0, 3, 3))
@@ -103,8 +111,10 @@ def side_skirt(vertices: np.ndarray, edges: np.ndarray, side: int, extent) -> tu
     order = np.argsort(Q[:, a], kind="stable")
     e = np.searchsorted(u, edges)
     strayed = e[moved[e].any(axis=1)]
-    flange = [np.stack([P[strayed[:, 0]], P[strayed[:, 1]], Q[strayed[:, 1]]], 1),
-              np.stack([P[strayed[:, 0]], Q[strayed[:, 1]], Q[strayed[:, 0]]], 1)]
+    flange = [
+        np.stack([P[strayed[:, 0]], P[strayed[:, 1]], Q[strayed[:, 1]]], 1),
+        np.stack([P[strayed[:, 0]], Q[strayed[:, 1]], Q[strayed[:, 0]]], 1),
+    ]
     line = [Q[order]]
     for end, at in ((order[0], 0.0), (order[-1], float(extent[a]))):
         if abs(Q[end, a] - at) > 1e-6 * max(extent):
@@ -134,12 +144,17 @@ def skirt_arrays(vertices: np.ndarray, sides: list[np.ndarray], extent) -> tuple
     for k, edges in enumerate(sides):
         line, flange = side_skirt(vertices, edges, k, extent)
         m, t = len(line), len(flange)
-        block = [np.column_stack([pts, np.full(len(pts), k), np.full(len(pts), flag)])
-                 for pts, flag in ((line, 0.0), (line, 1.0), (flange.reshape(-1, 3), 0.0))]
+        block = [
+            np.column_stack([pts, np.full(len(pts), k), np.full(len(pts), flag)])
+            for pts, flag in ((line, 0.0), (line, 1.0), (flange.reshape(-1, 3), 0.0))
+        ]
         top = base + np.arange(m - 1)
         low = top + m
-        faces = [np.stack([top, low, low + 1], 1), np.stack([top, low + 1, top + 1], 1),
-                 base + 2 * m + np.arange(3 * t).reshape(t, 3)]
+        faces = [
+            np.stack([top, low, low + 1], 1),
+            np.stack([top, low + 1, top + 1], 1),
+            base + 2 * m + np.arange(3 * t).reshape(t, 3),
+        ]
         verts += block
         tris += faces
         count = 3 * sum(len(f) for f in faces)
@@ -160,15 +175,17 @@ class SkirtMesh:
         h = np.asarray(tile.heights)
         extent = ((h.shape[1] - 1) * float(tile.spacing_x), (h.shape[0] - 1) * float(tile.spacing_y))
         v, f, self.ranges, lines = skirt_arrays(vertices, sides, extent)
-        self.profiles = [(float(tile.origin[1 if k < 2 else 0]) + ln[:, 1 if k < 2 else 0], ln[:, 2])
-                         for k, ln in enumerate(lines)]
+        self.profiles = [
+            (float(tile.origin[1 if k < 2 else 0]) + ln[:, 1 if k < 2 else 0], ln[:, 2]) for k, ln in enumerate(lines)
+        ]
         self.top = np.array([p[1].max(initial=-np.inf) for p in self.profiles])
         self.clip = tuple(float(c) for c in tile.clip)
         self.spacing = max(float(tile.spacing_x), float(tile.spacing_y))
         self.vbo = ctx.buffer(v.tobytes() or b"\0" * 20)
         self.ibo = ctx.buffer(f.tobytes() or b"\0" * 12)
-        self.vao = ctx.vertex_array(prog, [(self.vbo, "3f 2f", "a_pos", "a_skirt")], index_buffer=self.ibo,
-                                    index_element_size=4)
+        self.vao = ctx.vertex_array(
+            prog, [(self.vbo, "3f 2f", "a_pos", "a_skirt")], index_buffer=self.ibo, index_element_size=4
+        )
 
     @property
     def nbytes(self) -> int:
@@ -204,9 +221,9 @@ class SeamDepths:
     of tiles is kept (tile keys and side: their meshes do not change)."""
 
     def __init__(self, low: float):
-        self.low = float(low)           # lowest height (metres above the origin z) a surface can have
+        self.low = float(low)  # lowest height (metres above the origin z) a surface can have
         self.gaps: dict = {}
-        self.last: tuple = ((), np.zeros((0, 4)))   # the last frame's items (keys, edge levels, clips), depths
+        self.last: tuple = ((), np.zeros((0, 4)))  # the last frame's items (keys, edge levels, clips), depths
 
     def __call__(self, items) -> np.ndarray:
         """(B, 4) depths (metres; 0: no skirt) for (gpu, tile, selected) items, on each side facing a selected

@@ -7,6 +7,7 @@ The baselines draw each selected tile at its own level without stitching (by des
 mesh per tile costs). Seams between tiles whose surfaces differ along a shared side are closed by skirts hung
 from those sides, deep as the measured difference (draw option ``seam_skirts``, on by default).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -67,10 +68,15 @@ class MeshStrategyBase:
         register_tile_block(ctx)
         self.blocks = TileBlocks(ctx)
         self.prog = program(ctx, "raster", "mesh.vert.glsl", "tilelet.frag.glsl", defines=BLOCK_DEFINES)
-        self.skirt_prog = program(ctx, "raster", "mesh.vert.glsl", "tilelet.frag.glsl",
-                                  defines={"SEAM_SKIRT": 1, "SKIRT_PROGRAM": 1, **BLOCK_DEFINES})
+        self.skirt_prog = program(
+            ctx,
+            "raster",
+            "mesh.vert.glsl",
+            "tilelet.frag.glsl",
+            defines={"SEAM_SKIRT": 1, "SKIRT_PROGRAM": 1, **BLOCK_DEFINES},
+        )
         self.texture = terrain_texture(ctx, hf)
-        self.edges = TerrainEdges(ctx, hf)   # which rays start under the sheet (skirts rise for those)
+        self.edges = TerrainEdges(ctx, hf)  # which rays start under the sheet (skirts rise for those)
         self.edge_tops = edge_profiles(hf.heights).max(axis=1)
         self.depths = SeamDepths(hf.height_range[0])
 
@@ -109,14 +115,22 @@ class MeshStrategyBase:
         if self.texture is not None:
             self.texture.use(1)
 
-    def draw_tiles(self, target, view, items, tau: float | None = None, mode: str | None = None,
-                   wireframe: bool = False, seam_skirts: bool = True) -> dict:
+    def draw_tiles(
+        self,
+        target,
+        view,
+        items,
+        tau: float | None = None,
+        mode: str | None = None,
+        wireframe: bool = False,
+        seam_skirts: bool = True,
+    ) -> dict:
         """Draw (mesh_tile, tile, selected) items into target, then (``seam_skirts``, not in wireframe) their
         skirts; counters: triangles (GL query and CPU sum, meshes only), skirt_triangles (issued)."""
         mode = resolve_mode(self.hf, mode, MODES)
         ctx = self.ctx
         self.set_frame_uniforms(view, mode)
-        self.blocks.write(tile_blocks(self.hf, view, items, unit_spacing=True))   # positions are metres
+        self.blocks.write(tile_blocks(self.hf, view, items, unit_spacing=True))  # positions are metres
         target.use()
         ctx.wireframe = bool(wireframe)
         for i in range(4):

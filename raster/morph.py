@@ -14,6 +14,7 @@ already at alpha = 0 when it turns into a finer leaf's unmorphed corner. Both le
 use E = min of their parents' errors, so they compute the same alpha. Across tile borders (two tolerances)
 the larger of the two sides' factors is used, which is still continuous but only exact within a tile.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -33,16 +34,18 @@ def morph_factor(tolerance: float, error, beta: float) -> np.ndarray:
     return np.clip((ratio - beta) / (1.0 - beta), 0.0, 1.0)
 
 
-def morphed_posts(posts: np.ndarray, i0: np.ndarray, j0: np.ndarray, level: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+def morphed_posts(
+    posts: np.ndarray, i0: np.ndarray, j0: np.ndarray, level: np.ndarray, alpha: np.ndarray
+) -> np.ndarray:
     """CPU mirror of the vertex shader: (count, 3, 3) post heights (metres) after geomorphing with alpha (count, 5)."""
     P = np.array(posts, dtype=np.float64)
     a = np.asarray(alpha, dtype=np.float64)
     lerp = lambda x, y, t: x + (y - x) * t  # noqa: E731
     out = P.copy()
-    out[:, 1, 0] = lerp(P[:, 1, 0], 0.5 * (P[:, 0, 0] + P[:, 2, 0]), a[:, 0])   # W
-    out[:, 1, 2] = lerp(P[:, 1, 2], 0.5 * (P[:, 0, 2] + P[:, 2, 2]), a[:, 1])   # E
-    out[:, 0, 1] = lerp(P[:, 0, 1], 0.5 * (P[:, 0, 0] + P[:, 0, 2]), a[:, 2])   # S
-    out[:, 2, 1] = lerp(P[:, 2, 1], 0.5 * (P[:, 2, 0] + P[:, 2, 2]), a[:, 3])   # N
+    out[:, 1, 0] = lerp(P[:, 1, 0], 0.5 * (P[:, 0, 0] + P[:, 2, 0]), a[:, 0])  # W
+    out[:, 1, 2] = lerp(P[:, 1, 2], 0.5 * (P[:, 0, 2] + P[:, 2, 2]), a[:, 1])  # E
+    out[:, 0, 1] = lerp(P[:, 0, 1], 0.5 * (P[:, 0, 0] + P[:, 0, 2]), a[:, 2])  # S
+    out[:, 2, 1] = lerp(P[:, 2, 1], 0.5 * (P[:, 2, 0] + P[:, 2, 2]), a[:, 3])  # N
     m = np.asarray(level)
     qx = (np.asarray(j0) >> (m + 1)) & 1
     qy = (np.asarray(i0) >> (m + 1)) & 1

@@ -17,6 +17,7 @@ The measurement is one loop compiled by numba over the samples (``_deviations`` 
 ``hybrid.tiles.fans.fans_at``'s floating-point operations in its order, so the values are the same): as array
 operations an edit's few small windows a level cost their number of NumPy calls, not their samples.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -26,7 +27,7 @@ from hybrid.terrain.edits import Window
 
 from . import rect_nodes as rn
 
-SUB_CELLS = 32                  # cells a side of a sub-block whose maxima are kept
+SUB_CELLS = 32  # cells a side of a sub-block whose maxima are kept
 
 
 def uses_blocks(g: int, bound: bool) -> bool:
@@ -121,8 +122,9 @@ def _measure(h: np.ndarray, g: int, R: int, side_errors: bool, rows: tuple, cols
     return out
 
 
-def measure(h: np.ndarray, ax_r: tuple, ax_c: tuple, g: int, R: int, side_errors: bool, ar: np.ndarray,
-            ac: np.ndarray) -> np.ndarray:
+def measure(
+    h: np.ndarray, ax_r: tuple, ax_c: tuple, g: int, R: int, side_errors: bool, ar: np.ndarray, ac: np.ndarray
+) -> np.ndarray:
     """(channels, len(ar) * per, len(ac) * per) float64: the sub-block maxima of the level-g representatives at
     compact positions ar x ac (sorted; per = node side / ``block_cells(g)`` sub-blocks a side), one pass over
     each run of consecutive nodes."""
@@ -131,8 +133,9 @@ def measure(h: np.ndarray, ax_r: tuple, ax_c: tuple, g: int, R: int, side_errors
     out = np.zeros((5 if side_errors else 1, ar.size * per, ac.size * per))
     for a0, a1, i in rn._segments(ax_r[1][g][ar]):
         for b0, b1, j in rn._segments(ax_c[1][g][ac]):
-            out[:, i * per:(i + a1 - a0) * per, j * per:(j + b1 - b0) * per] = \
-                _measure(h, g, R, side_errors, (a0 * s, a1 * s), (b0 * s, b1 * s))
+            out[:, i * per : (i + a1 - a0) * per, j * per : (j + b1 - b0) * per] = _measure(
+                h, g, R, side_errors, (a0 * s, a1 * s), (b0 * s, b1 * s)
+            )
     return out
 
 
@@ -153,8 +156,18 @@ def _hits(ax: tuple, g: int, idx: np.ndarray, samples: int, lo: int, hi: int) ->
     return ranges, ((posts >= lo) & (posts < hi)).any(axis=1)
 
 
-def refresh(vals: np.ndarray, h: np.ndarray, ax_r: tuple, ax_c: tuple, g: int, R: int, side_errors: bool,
-            mr: np.ndarray, mc: np.ndarray, win: Window) -> int:
+def refresh(
+    vals: np.ndarray,
+    h: np.ndarray,
+    ax_r: tuple,
+    ax_c: tuple,
+    g: int,
+    R: int,
+    side_errors: bool,
+    mr: np.ndarray,
+    mc: np.ndarray,
+    win: Window,
+) -> int:
     """Re-measure, in the sub-block maxima of every level-g representative (``measure``'s layout), those of the
     representatives mr x mc (compact positions whose samples meet the window of changed samples) that the window
     reaches; returns how many sub-blocks."""
@@ -170,8 +183,9 @@ def refresh(vals: np.ndarray, h: np.ndarray, ax_r: tuple, ax_c: tuple, g: int, R
             if r1 <= r0 or c1 <= c0:
                 continue
             a, b = int(ax_r[1][g][i]) * s, int(ax_c[1][g][j]) * s
-            vals[:, i * per + r0:i * per + r1, j * per + c0:j * per + c1] = _measure(
-                h, g, R, side_errors, (a + r0 * B, a + r1 * B), (b + c0 * B, b + c1 * B))
+            vals[:, i * per + r0 : i * per + r1, j * per + c0 : j * per + c1] = _measure(
+                h, g, R, side_errors, (a + r0 * B, a + r1 * B), (b + c0 * B, b + c1 * B)
+            )
             done += (r1 - r0) * (c1 - c0)
     return done
 

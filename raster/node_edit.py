@@ -16,6 +16,7 @@ Levels of nodes larger than a sub-block keep their measured errors (the fans' de
 the kept ones elsewhere; small nodes are measured again whole. The level below is handed to the combination over
 the classes it reads only.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -88,7 +89,7 @@ def _compute(st: NodeEdits, h: np.ndarray, g: int, ar: np.ndarray, ac: np.ndarra
     if g == 0:
         e, sides, (zmin, zmax) = rn._direct(h, sr, sc, 0, st.R, st.side_errors)
         return {"e": e, "eff": e, "sides": sides, "zmin": zmin, "zmax": zmax}
-    assert rows is not None and cols is not None          # a level above 0 reads the one below
+    assert rows is not None and cols is not None  # a level above 0 reads the one below
     below = _below(st.levels[g - 1], rows, cols)
     if st.bound[g]:
         return rn._level(below, sr, sc, g, rn._post_bound(h, sr, sc, g, st.R), st.beta, st.margin)
@@ -100,8 +101,15 @@ def node_edits(grid, n: int, beta: float, side_errors: bool = True) -> NodeEdits
     h = np.asarray(grid.heights)
     R, _ = rn.square_cells(grid.rows, grid.cols, n)
     count = int(np.log2(R))
-    st = NodeEdits(int(n), float(beta), bool(side_errors), R, rn._axis(grid.rows, R, count),
-                   rn._axis(grid.cols, R, count), margin=_margin(h))
+    st = NodeEdits(
+        int(n),
+        float(beta),
+        bool(side_errors),
+        R,
+        rn._axis(grid.rows, R, count),
+        rn._axis(grid.cols, R, count),
+        margin=_margin(h),
+    )
     for g in range(count):
         st.bound.append((2 << g) > rn.EXACT_SPAN)
         ar, ac = np.arange(st.ax_r[1][g].size), np.arange(st.ax_c[1][g].size)
@@ -113,7 +121,7 @@ def node_edits(grid, n: int, beta: float, side_errors: bool = True) -> NodeEdits
 
 def _member(values: np.ndarray, idx: np.ndarray, size: int) -> np.ndarray:
     """Whether each of values (compact positions in [0, size), or -1) is in idx."""
-    mask = np.zeros(size + 1, bool)                      # the last entry: -1, never a member
+    mask = np.zeros(size + 1, bool)  # the last entry: -1, never a member
     mask[idx] = True
     return mask[values]
 
@@ -145,19 +153,21 @@ def _rewrite(st: NodeEdits, nodes: GlobalNodes, g: int, r: tuple[int, int], c: t
     eff = rn._float32(lv["eff"][np.ix_(mr[r0:r1], mc[c0:c1])], st.bound[g])
     moved = nodes.effective[g][r0:r1, c0:c1] != eff
     nodes.effective[g][r0:r1, c0:c1] = eff
-    gr0, gr1 = max(r0 - 1, 0), min(r1 + 1, H + 1, mr.size)   # one node more for the 3x3 boxes
+    gr0, gr1 = max(r0 - 1, 0), min(r1 + 1, H + 1, mr.size)  # one node more for the 3x3 boxes
     gc0, gc1 = max(c0 - 1, 0), min(c1 + 1, W + 1, mc.size)
     for arr, kind, fn in ((nodes.zlo, "zmin", np.minimum), (nodes.zhi, "zmax", np.maximum)):
         grown = rn.grow3(lv[kind][np.ix_(mr[gr0:gr1], mc[gc0:gc1])], fn)
-        new = grown[r0 - gr0:r1 - gr0, c0 - gc0:c1 - gc0].astype(np.float32)
+        new = grown[r0 - gr0 : r1 - gr0, c0 - gc0 : c1 - gc0].astype(np.float32)
         moved |= arr[g][r0:r1, c0:c1] != new
         arr[g][r0:r1, c0:c1] = new
     if nodes.sides is not None and lv["sides"] is not None:
         parent = None
         if g + 1 < len(st.levels):
             up = st.levels[g + 1]["eff"]
-            parent = rn._float32(up[np.ix_(st.ax_r[0][g + 1][np.arange(r0, r1) // 2],
-                                           st.ax_c[0][g + 1][np.arange(c0, c1) // 2])], st.bound[g + 1])
+            parent = rn._float32(
+                up[np.ix_(st.ax_r[0][g + 1][np.arange(r0, r1) // 2], st.ax_c[0][g + 1][np.arange(c0, c1) // 2])],
+                st.bound[g + 1],
+            )
         sides = lv["sides"][:, mr[r0:r1][:, None], mc[None, c0:c1]]
         codes = rn.side_codes_each(sides, eff, parent)
         moved |= nodes.sides[g][r0:r1, c0:c1] != codes
@@ -173,7 +183,7 @@ def update_nodes(st: NodeEdits, nodes: GlobalNodes, grid, win: Window) -> list[W
     heights; returns per level the window of nodes whose values changed (rows and columns of node indices, maybe
     empty)."""
     h = np.asarray(grid.heights)
-    if any(st.bound) and _margin(h) != st.margin:         # the bounded levels' margin moved: rebuild all
+    if any(st.bound) and _margin(h) != st.margin:  # the bounded levels' margin moved: rebuild all
         vars(st).update(vars(node_edits(grid, st.n, st.beta, st.side_errors)))
         win = Window(0, grid.rows, 0, grid.cols)
     changed, below_r, below_c = [], None, None
@@ -199,9 +209,11 @@ def _rewrite_all(st: NodeEdits, nodes: GlobalNodes, changed: list) -> list[Windo
         r, c = _node_range(st.ax_r, g, ar, H), _node_range(st.ax_c, g, ac, W)
         if r[1] > r[0] and c[1] > c[0]:
             r, c = (max(r[0] - 1, 0), min(r[1] + 1, H)), (max(c[0] - 1, 0), min(c[1] + 1, W))
-        if g + 1 < len(changed):                          # children of changed parents: their side codes
-            pr, pc = _node_range(st.ax_r, g + 1, changed[g + 1][0], (H + 1) // 2), \
-                _node_range(st.ax_c, g + 1, changed[g + 1][1], (W + 1) // 2)
+        if g + 1 < len(changed):  # children of changed parents: their side codes
+            pr, pc = (
+                _node_range(st.ax_r, g + 1, changed[g + 1][0], (H + 1) // 2),
+                _node_range(st.ax_c, g + 1, changed[g + 1][1], (W + 1) // 2),
+            )
             if pr[1] > pr[0] and pc[1] > pc[0]:
                 pr, pc = (2 * pr[0], min(2 * pr[1], H)), (2 * pc[0], min(2 * pc[1], W))
                 r = (min(r[0], pr[0]), max(r[1], pr[1])) if r[1] > r[0] else pr

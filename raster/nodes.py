@@ -28,6 +28,7 @@ and slicing, computed window by window from its source's (``hybrid.tiles.periodi
 away from the seams, never below the exact ones near them, where its nodes hold the combined form's bounds),
 and its tiles' blocks are the source's blocks away from the seams (``hybrid.tiles.periodic_blocks``).
 """
+
 from __future__ import annotations
 
 import weakref
@@ -65,9 +66,9 @@ class GlobalNodes:
     effective: tuple
     zlo: tuple
     zhi: tuple
-    blocks: Any = None           # a store's per-tile blocks, [level][ty, tx] (hybrid.tiles.store_blocks)
-    sides: tuple | None = None      # the blocks' fourth column per level (``side_codes``); None: 1 (a store
-                                    # prepared before side errors: one error over both fans)
+    blocks: Any = None  # a store's per-tile blocks, [level][ty, tx] (hybrid.tiles.store_blocks)
+    sides: tuple | None = None  # the blocks' fourth column per level (``side_codes``); None: 1 (a store
+    # prepared before side errors: one error over both fans)
 
 
 def square_nodes(hf, tile_size: int, beta: float = GPU_BETA, side_errors: bool = True) -> GlobalNodes:
@@ -80,8 +81,14 @@ def square_nodes(hf, tile_size: int, beta: float = GPU_BETA, side_errors: bool =
     zlo = tuple(_grow(z, np.minimum).astype(np.float32) for z in pyr.zmin)
     zhi = tuple(_grow(z, np.maximum).astype(np.float32) for z in pyr.zmax)
     effective = tuple(e.astype(np.float32) for e in pyr.effective)
-    sides = tuple(side_codes(d, e, effective[g + 1] if g + 1 < len(effective) else None)
-                  for g, (d, e) in enumerate(zip(pyr.sides, effective))) if side_errors else None
+    sides = (
+        tuple(
+            side_codes(d, e, effective[g + 1] if g + 1 < len(effective) else None)
+            for g, (d, e) in enumerate(zip(pyr.sides, effective))
+        )
+        if side_errors
+        else None
+    )
     return GlobalNodes(pyr.n, float(beta), effective, zlo, zhi, sides=sides)
 
 
@@ -95,7 +102,7 @@ def global_nodes(hf, tile_size: int, beta: float = GPU_BETA, side_errors: bool =
     hit = _CACHE.get(key)
     if hit is not None and hit[0]() is hf:
         return hit[1]
-    grid = hf.load() if isinstance(hf, StoredTerrain) else hf     # a store without usable node arrays, if it fits
+    grid = hf.load() if isinstance(hf, StoredTerrain) else hf  # a store without usable node arrays, if it fits
     R, effective, zlo, zhi, sides = rect_nodes(grid, int(tile_size), float(beta), bool(side_errors))
     nodes = GlobalNodes(R, float(beta), effective, zlo, zhi, sides=sides)
     ref = weakref.ref(hf, lambda _r, k=key: _CACHE.pop(k, None))
@@ -110,7 +117,7 @@ def nodes_for(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
     if not isinstance(hf, StoredTerrain):
         return global_nodes(hf, tile_size, beta)
     periodic = hf.store.attrs.get("periodic")
-    path = periodic["source"] if periodic else hf.path              # the store that prepare writes
+    path = periodic["source"] if periodic else hf.path  # the store that prepare writes
     small = hf.rows * hf.cols <= MAX_LOAD_SAMPLES
     info = hf.store.attrs.get("nodes")
     if not info:
@@ -118,12 +125,15 @@ def nodes_for(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
             return global_nodes(hf, tile_size, beta)
         raise TerrabenchError(
             f"{path}: this tile store was prepared without the raster strategies' node arrays; run terrabench "
-            f"prepare again on the same input with --out {path} to add them (the ray caster draws it as it is)")
+            f"prepare again on the same input with --out {path} to add them (the ray caster draws it as it is)"
+        )
     if int(tile_size) != int(hf.store.attrs["tile_size"]) or float(beta) != float(info["beta"]):
         if not small:
-            raise TerrabenchError(f"{path}: node arrays were prepared for tiles of {hf.store.attrs['tile_size']} "
-                                  f"and beta {info['beta']}, not {tile_size} and {beta}; the grid is too large to "
-                                  "build them in memory")
+            raise TerrabenchError(
+                f"{path}: node arrays were prepared for tiles of {hf.store.attrs['tile_size']} "
+                f"and beta {info['beta']}, not {tile_size} and {beta}; the grid is too large to "
+                "build them in memory"
+            )
         return global_nodes(hf, tile_size, beta)
     key = (id(hf), int(tile_size), float(beta))
     hit = _CACHE.get(key)
@@ -136,10 +146,17 @@ def nodes_for(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
     blocks = None
     if hf.store.attrs.get("node_blocks"):
         tiers = range(int(hf.store.attrs["max_level"]) + 1)
-        if periodic:                            # the source's blocks away from the seams, cut near them
+        if periodic:  # the source's blocks away from the seams, cut near them
             src, src_levels = g.source, range(int(g.source.attrs["max_level"]) + 1)
-            blocks = PeriodicBlocks(tuple(src[f"nodes/blocks/{lev}"] for lev in src_levels), arrays, int(tile_size),
-                                    int(periodic["period_cells"]), int(periodic["size"]) - 1, len(tiers), codes)
+            blocks = PeriodicBlocks(
+                tuple(src[f"nodes/blocks/{lev}"] for lev in src_levels),
+                arrays,
+                int(tile_size),
+                int(periodic["period_cells"]),
+                int(periodic["size"]) - 1,
+                len(tiers),
+                codes,
+            )
         else:
             blocks = tuple(g[f"nodes/blocks/{lev}"] for lev in tiers)
     nodes = GlobalNodes(int(info["square"]), float(beta), *arrays, blocks, codes)
@@ -150,8 +167,12 @@ def nodes_for(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
 def pending_cut(hf, n: int, beta: float, key):
     """The slow part of reading tile ``key``'s node block as a callable a loader thread can run ahead (cutting a
     periodic extension's block near a seam from its node arrays), or None where the block is one read."""
-    if not isinstance(hf, StoredTerrain) or not hf.store.attrs.get("periodic") or \
-            not hf.store.attrs.get("node_blocks") or int(hf.store.attrs["tile_size"]) != int(n):
+    if (
+        not isinstance(hf, StoredTerrain)
+        or not hf.store.attrs.get("periodic")
+        or not hf.store.attrs.get("node_blocks")
+        or int(hf.store.attrs["tile_size"]) != int(n)
+    ):
         return None
     blocks = nodes_for(hf, n, beta).blocks
     if not isinstance(blocks, PeriodicBlocks) or blocks.ready(key.level, key.tx, key.ty):

@@ -29,6 +29,7 @@ Leaf levels are kept as a map over level-0 tilelets ("units", (n/2) x (n/2)): th
 covering each unit. Restriction: edge-adjacent units differ by at most one level; caps (max level per
 unit, from neighbouring tiles) force extra splits.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -158,9 +159,9 @@ def error_pyramid(heights: np.ndarray, beta: float = DEFAULT_BETA, side_errors: 
                 sides[0] = with_cell_centres(h, sides[0])
         else:
             e = _block(cell_max(np.maximum(np.abs(full - h), np.abs(stitched - h))), b, np.max)
-            if m == 0:                                      # a drop's turn of the SE and NW cells' diagonals
+            if m == 0:  # a drop's turn of the SE and NW cells' diagonals
                 e = np.maximum(e, cell_centre_error(h))
-            sides.append(np.zeros((4,) + e.shape))          # toward coarser neighbours: within e already
+            sides.append(np.zeros((4,) + e.shape))  # toward coarser neighbours: within e already
         del full, stitched
         zmin.append(_block(cmin, b, np.min))
         zmax.append(_block(cmax, b, np.max))
@@ -172,12 +173,14 @@ def error_pyramid(heights: np.ndarray, beta: float = DEFAULT_BETA, side_errors: 
             eff = e
         errors.append(e)
         effective.append(eff)
-    return ErrorPyramid(n, float(beta), tuple(errors), tuple(effective), tuple(zmin), tuple(zmax),
-                        tuple(sides) if side_errors else ())
+    return ErrorPyramid(
+        n, float(beta), tuple(errors), tuple(effective), tuple(zmin), tuple(zmax), tuple(sides) if side_errors else ()
+    )
 
 
-def leaf_levels(pyr: ErrorPyramid, tolerance: float, cap: np.ndarray | None = None,
-                use_effective: bool = True) -> np.ndarray:
+def leaf_levels(
+    pyr: ErrorPyramid, tolerance: float, cap: np.ndarray | None = None, use_effective: bool = True
+) -> np.ndarray:
     """Map (n/2)² of leaf local levels: split while error > tolerance (metres), restricted, level <= cap."""
     tol = float(tolerance)
     if not (tol >= 0.0) or tol == np.inf:
@@ -287,8 +290,12 @@ def fan_at(P: np.ndarray, u: np.ndarray, v: np.ndarray, dropped) -> np.ndarray:
     out = np.zeros(lead + np.broadcast(u, v).shape)
     # per sector: the edge's corners a, b and midpoint, coordinate s along it, distance w from the centre
     # line (1 on the edge, 0 at the centre); the fan is linear along rays from the centre
-    sectors = ((0, (0, 0), (0, 1), (0, 2), u, 1.0 - v, 4), (1, (0, 2), (1, 2), (2, 2), v, u - 1.0, 2),
-               (2, (2, 0), (2, 1), (2, 2), u, v - 1.0, 8), (3, (0, 0), (1, 0), (2, 0), v, 1.0 - u, 1))
+    sectors = (
+        (0, (0, 0), (0, 1), (0, 2), u, 1.0 - v, 4),
+        (1, (0, 2), (1, 2), (2, 2), v, u - 1.0, 2),
+        (2, (2, 0), (2, 1), (2, 2), u, v - 1.0, 8),
+        (3, (0, 0), (1, 0), (2, 0), v, 1.0 - u, 1),
+    )
     for sec, ia, im, ib, s, w, bit in sectors:
         a, mid, b = P[..., ia[0], ia[1]][ex], P[..., im[0], im[1]][ex], P[..., ib[0], ib[1]][ex]
         with np.errstate(divide="ignore", invalid="ignore"):

@@ -20,6 +20,7 @@ Nodes of up to EXACT_SPAN cells get their errors measured exactly (equal bit for
 ones are bounded as the tile store bounds them (``hybrid.tiles.store_nodes``: the fan's deviation at the
 children's posts plus the children's error plus 16 ulps, rounded up to float32), never below the exact value.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -36,9 +37,9 @@ from hybrid.tiles.fans import (
 )
 from hybrid.tiles.sidecodes import side_codes_each
 
-EXACT_SPAN = 1024               # node sides (level-0 cells) up to which errors are measured exactly
-SLICE_SAMPLES = 1 << 18         # samples whose fan deviations are held at once (memory bound)
-BLOCK_CELLS = 512               # cells a side of a window of samples read at once (memory bound)
+EXACT_SPAN = 1024  # node sides (level-0 cells) up to which errors are measured exactly
+SLICE_SAMPLES = 1 << 18  # samples whose fan deviations are held at once (memory bound)
+BLOCK_CELLS = 512  # cells a side of a window of samples read at once (memory bound)
 
 
 def square_cells(rows: int, cols: int, n: int) -> tuple[int, int]:
@@ -67,7 +68,7 @@ def _axis(samples: int, R: int, levels: int) -> tuple[list, list, list]:
     maps[g]: node index -> index of its class's representative in reps[g] (sorted node indices, each class's
     first node); near[g] (4, reps): the compact indices at level g-1 of nodes 2a-1 .. 2a+2 of each
     representative a (-1 beyond the square)."""
-    prev = np.minimum(np.arange(R + 1), samples - 1)          # sample classes: the padding repeats the last row
+    prev = np.minimum(np.arange(R + 1), samples - 1)  # sample classes: the padding repeats the last row
     maps, reps, near = [], [], []
     for g in range(levels):
         N = R >> (g + 1)
@@ -115,7 +116,7 @@ def _window_errors(w: np.ndarray, r0: int, c0: int, g: int, R: int, side_errors:
     total, width = w.shape[0] - 1, w.shape[1]
     Nr, Nc = total // s, (width - 1) // s
     S = max(2, 1 << int(np.log2(max(SLICE_SAMPLES // width, 1))))
-    S = min(S, total) if S >= s else S                   # whole nodes a slice, or a power-of-two part of one
+    S = min(S, total) if S >= s else S  # whole nodes a slice, or a power-of-two part of one
     cols = np.arange(c0, c0 + width)
     e, sides = np.zeros((Nr, Nc)), np.zeros((4, Nr, Nc)) if side_errors else None
     for i0 in range(0, total, S):
@@ -124,10 +125,10 @@ def _window_errors(w: np.ndarray, r0: int, c0: int, g: int, R: int, side_errors:
         sr, a = min(s, i1 - i0), i0 // s
         dev = df if side_errors else np.maximum(df, ds)
         part = cell_max(dev).reshape((i1 - i0) // sr, sr, Nc, s).max(axis=(1, 3))
-        np.maximum(e[a:a + part.shape[0]], part, out=e[a:a + part.shape[0]])
+        np.maximum(e[a : a + part.shape[0]], part, out=e[a : a + part.shape[0]])
         if side_errors:
             part = side_maxima(ds, g, i0 % s if i1 - i0 < s else 0)
-            np.maximum(sides[:, a:a + part.shape[1]], part, out=sides[:, a:a + part.shape[1]])
+            np.maximum(sides[:, a : a + part.shape[1]], part, out=sides[:, a : a + part.shape[1]])
         del df, ds, dev
     if g == 0:
         if side_errors:
@@ -176,7 +177,7 @@ def _post_bound(h, ax_r, ax_c, g: int, R: int) -> np.ndarray:
             p, q = np.arange(4 * a0, 4 * a1 + 1), np.arange(4 * b0, 4 * b1 + 1)
             hp = _samples(h, p * step, q * step)
             dev = block2(cell_max(fan_deviation(hp, 4 * a0, 4 * b0, p, q, 1, R >> (g - 1))), np.max)
-            out[i:i + a1 - a0, :, j:j + b1 - b0, :] = dev.reshape(a1 - a0, 2, b1 - b0, 2)
+            out[i : i + a1 - a0, :, j : j + b1 - b0, :] = dev.reshape(a1 - a0, 2, b1 - b0, 2)
     return out
 
 
@@ -191,29 +192,41 @@ def _take(arr: np.ndarray, ri: np.ndarray, ci: np.ndarray) -> np.ndarray:
 def _level(below: dict, ax_r, ax_c, g: int, direct, beta: float, margin: float | None) -> dict:
     """Level g's compact arrays (e, eff, sides or None, zmin, zmax) from level g-1's and its own measured errors
     ``direct`` ((e, sides) exact) or, with ``margin``, its children's post deviations (a bound)."""
-    nr, nc = ax_r[2][g], ax_c[2][g]                  # (4, reps) level-(g-1) indices of 2a-1 .. 2a+2
+    nr, nc = ax_r[2][g], ax_c[2][g]  # (4, reps) level-(g-1) indices of 2a-1 .. 2a+2
+
     def kid(arr, d, e):
         return _take(arr, nr[d + 1], nc[e + 1])
 
     pairs = [(d, e) for d in (0, 1) for e in (0, 1)]
     kids = np.max([kid(below["e"], d, e) for d, e in pairs], axis=0)
-    dil = np.max([kid(below["eff"], d, e) for d in range(-1, 3) for e in range(-1, 3)
-                  if not (d in (-1, 2) and e in (-1, 2))], axis=0)
+    dil = np.max(
+        [kid(below["eff"], d, e) for d in range(-1, 3) for e in range(-1, 3) if not (d in (-1, 2) and e in (-1, 2))],
+        axis=0,
+    )
     facing = 0.0
     if below["sides"] is not None:
         W, E, S, N = below["sides"]
-        facing = np.max([kid(E, d, -1) for d in (0, 1)] + [kid(W, d, 2) for d in (0, 1)]
-                        + [kid(N, -1, e) for e in (0, 1)] + [kid(S, 2, e) for e in (0, 1)], axis=0)
+        facing = np.max(
+            [kid(E, d, -1) for d in (0, 1)]
+            + [kid(W, d, 2) for d in (0, 1)]
+            + [kid(N, -1, e) for e in (0, 1)]
+            + [kid(S, 2, e) for e in (0, 1)],
+            axis=0,
+        )
     if margin is None:
         e, sides = np.maximum(np.maximum(direct[0], kids), facing), direct[1]
-    else:                                           # a bound of both fans, so of every side too
+    else:  # a bound of both fans, so of every side too
         each = np.stack([np.stack([kid(below["e"], d, x) for x in (0, 1)], axis=-1) for d in (0, 1)], axis=1)
         e = (direct + each).max(axis=(1, 3)) + margin
         sides = None if below["sides"] is None else np.broadcast_to(e, (4,) + e.shape).copy()
         e = np.maximum(e, facing)
-    return {"e": e, "eff": np.maximum(e, np.maximum(dil, facing) / beta), "sides": sides,
-            "zmin": np.min([kid(below["zmin"], d, e) for d, e in pairs], axis=0),
-            "zmax": np.max([kid(below["zmax"], d, e) for d, e in pairs], axis=0)}
+    return {
+        "e": e,
+        "eff": np.maximum(e, np.maximum(dil, facing) / beta),
+        "sides": sides,
+        "zmin": np.min([kid(below["zmin"], d, e) for d, e in pairs], axis=0),
+        "zmax": np.max([kid(below["zmax"], d, e) for d, e in pairs], axis=0),
+    }
 
 
 def _float32(a: np.ndarray, bound: bool) -> np.ndarray:
@@ -228,19 +241,19 @@ def _output(lv: dict, parent32, ax_r, ax_c, g: int, H: int, W: int, bound: bool)
     mr, mc = ax_r[0][g][:H], ax_c[0][g][:W]
     eff = _float32(lv["eff"], bound)
     out = [eff[np.ix_(mr, mc)]]
-    rows, cols = ax_r[0][g][:H + 1], ax_c[0][g][:W + 1]      # one more node for the 3x3 boxes, where there is one
+    rows, cols = ax_r[0][g][: H + 1], ax_c[0][g][: W + 1]  # one more node for the 3x3 boxes, where there is one
     for kind, fn in (("zmin", np.minimum), ("zmax", np.maximum)):
         out.append(grow3(lv[kind][np.ix_(rows, cols)], fn)[:H, :W].astype(np.float32))
     codes = None
     if lv["sides"] is not None:
         codes = np.empty((H, W), np.float32)
-        step = max(1, SLICE_SAMPLES // max(W, 1))           # rows at once (memory: a few 4 x float64 arrays)
+        step = max(1, SLICE_SAMPLES // max(W, 1))  # rows at once (memory: a few 4 x float64 arrays)
         for a0 in range(0, H, step):
             a = np.arange(a0, min(a0 + step, H))
             parent = None
             if parent32 is not None:
                 parent = parent32[np.ix_(ax_r[0][g + 1][a // 2], ax_c[0][g + 1][np.arange(W) // 2])]
-            codes[a0:a0 + a.size] = side_codes_each(lv["sides"][:, mr[a][:, None], mc[None, :]], out[0][a], parent)
+            codes[a0 : a0 + a.size] = side_codes_each(lv["sides"][:, mr[a][:, None], mc[None, :]], out[0][a], parent)
     return (*out, codes)
 
 
@@ -265,8 +278,9 @@ def rect_nodes(grid, n: int, beta: float, side_errors: bool = True):
         else:
             lv = _level(prev, ax_r, ax_c, g, _direct(h, ax_r, ax_c, g, R, side_errors)[:2], beta, None)
         if prev is not None:
-            outs.append(_output(prev, _float32(lv["eff"], bound), ax_r, ax_c, g - 1, ext_r[g - 1], ext_c[g - 1],
-                                prev_bound))
+            outs.append(
+                _output(prev, _float32(lv["eff"], bound), ax_r, ax_c, g - 1, ext_r[g - 1], ext_c[g - 1], prev_bound)
+            )
         prev, prev_bound = lv, bound
     outs.append(_output(prev, None, ax_r, ax_c, levels - 1, ext_r[-1], ext_c[-1], prev_bound))
     eff, zlo, zhi, codes = zip(*outs)

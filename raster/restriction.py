@@ -11,6 +11,7 @@ Inputs are plain: for each tile its key (level, tx, ty), cells per side n, its E
 (metres). Tiles are assumed restricted among themselves (edge neighbours differ by at most one level), as
 hybrid's tile tree guarantees; otherwise a TerrabenchError says so.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -100,7 +101,7 @@ class _Frame:
                 prof = values(nk, OPPOSITE[edge]) if values else self.profile(nk, OPPOSITE[edge])
                 s0 = along * sp
                 lo, hi = max(s0, a0), min(s0 + sp, a0 + span)
-                out[lo - a0:hi - a0] = prof[lo - s0:hi - s0]
+                out[lo - a0 : hi - a0] = prof[lo - s0 : hi - s0]
         return out
 
     def cap_profile(self, key, edge: int) -> np.ndarray:
@@ -132,8 +133,10 @@ class _Frame:
             big = np.where(nb < 0, 1 << 20, nb).reshape(U, 2 << l).min(axis=1)
             local = np.where(big >= 1 << 20, 1 << 14, big + 1 - l)
             if local.min() < 0:
-                raise TerrabenchError(f"tile {key} borders a tile two or more levels finer on edge {'WESN'[edge]}; "
-                                 "the tiles of a frame must be restricted")
+                raise TerrabenchError(
+                    f"tile {key} borders a tile two or more levels finer on edge {'WESN'[edge]}; "
+                    "the tiles of a frame must be restricted"
+                )
             allow = self.neighbour_profile(key, edge, values=self.cap_profile)
             allow = np.where(allow < 0, 1 << 20, allow).reshape(U, 2 << l).min(axis=1)
             local = np.minimum(local, np.maximum(np.where(allow >= 1 << 20, 1 << 14, allow - l), 0))
@@ -145,8 +148,13 @@ class _Frame:
         return changed
 
 
-def restrict_frame(tiles: list[TileLod], morph: bool = True, use_effective: bool | None = None,
-                   lean: bool = False, exact_full_resolution: bool = True) -> dict:
+def restrict_frame(
+    tiles: list[TileLod],
+    morph: bool = True,
+    use_effective: bool | None = None,
+    lean: bool = False,
+    exact_full_resolution: bool = True,
+) -> dict:
     """Restricted leaf sets of all tiles of a frame: {key tuple: TileletSet}; morph=False gives zero morph.
 
     use_effective (default: same as morph) splits on the morph-safe effective errors instead of the plain ones.
@@ -189,5 +197,3 @@ def _neighbour_keys(fr: _Frame, key) -> set:
         if ax0 <= bx0 + s2 and bx0 <= ax0 + s1 and ay0 <= by0 + s2 and by0 <= ay0 + s1:
             out.add(k)
     return out
-
-

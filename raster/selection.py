@@ -9,6 +9,7 @@ culls, writes the leaves into the frame's arena (raster.arena, shared by the fra
 the view selects) and fills each item's indirect commands; the draw (geometry shader or indexed triangles, see
 raster.tilelets and raster.indexed) reads them.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -40,10 +41,10 @@ from .tileblock import (
     view_fields,
 )
 
-LEAF_FORMAT = "4i 4f 4f 1f"             # a leaf record: j0, i0, level, dropped edges, nine post heights
-LEAN_LEAF_FORMAT = "4i 4f 4f 1f 2f"     # full_res "lean": and the SE and NW cells' turns (15 words)
+LEAF_FORMAT = "4i 4f 4f 1f"  # a leaf record: j0, i0, level, dropped edges, nine post heights
+LEAN_LEAF_FORMAT = "4i 4f 4f 1f 2f"  # full_res "lean": and the SE and NW cells' turns (15 words)
 FRAME_FIELDS = ("triangles", "tilelets", "tilelets_culled", "skirt_segments", "arena_leaves", "arena_overflow")
-FRAME_BINDING = 4                       # storage binding of the frame's counters (FRAME_FIELDS)
+FRAME_BINDING = 4  # storage binding of the frame's counters (FRAME_FIELDS)
 
 
 def full_res_defines(full_res: str) -> dict:
@@ -54,9 +55,18 @@ def full_res_defines(full_res: str) -> dict:
 def select_defines(full_res: str, k: int) -> dict:
     """Every define of selection pass ``k`` (select.comp.glsl): buffer layouts and bindings, the full-resolution
     rule's and the pass's."""
-    return {"PASS": k, "TILE_BLOCKS_STORAGE": 1, **BLOCK_DEFINES, "FRAME_BINDING": FRAME_BINDING, "ARENA_FIELD": FRAME_FIELDS.index("arena_leaves"),
-            "OVERFLOW_FIELD": FRAME_FIELDS.index("arena_overflow"), **ITEM_DEFINES, **HEAP_DEFINES,
-            **arena_defines(full_res), **full_res_defines(full_res)}
+    return {
+        "PASS": k,
+        "TILE_BLOCKS_STORAGE": 1,
+        **BLOCK_DEFINES,
+        "FRAME_BINDING": FRAME_BINDING,
+        "ARENA_FIELD": FRAME_FIELDS.index("arena_leaves"),
+        "OVERFLOW_FIELD": FRAME_FIELDS.index("arena_overflow"),
+        **ITEM_DEFINES,
+        **HEAP_DEFINES,
+        **arena_defines(full_res),
+        **full_res_defines(full_res),
+    }
 
 
 def level_starts(n: int) -> np.ndarray:
@@ -75,7 +85,7 @@ def level_bounds(data: np.ndarray, offsets: np.ndarray, n: int, spacing_xy: tupl
     err, lo, hi = np.zeros(levels), np.zeros((levels, 3)), np.zeros((levels, 3))
     for m in range(levels):
         side = n >> (m + 1)
-        own = data[offsets[m]:offsets[m + 1]].reshape(side + 2, side + 2, 4)[1:-1, 1:-1]
+        own = data[offsets[m] : offsets[m + 1]].reshape(side + 2, side + 2, 4)[1:-1, 1:-1]
         grow = (2 << m) * sp
         err[m] = own[..., 0].max()
         lo[m] = (*(-grow), own[..., 1].min())
@@ -89,11 +99,11 @@ def first_levels(bounds: np.ndarray, eye_local: np.ndarray, k_tau: float) -> np.
     (B, 3) is the eye minus each tile's origin, metres."""
     lo, hi, err = bounds[..., 0:3], bounds[..., 3:6], bounds[..., 6]
     gap = np.maximum(np.maximum(lo - eye_local[:, None], eye_local[:, None] - hi), 0.0)
-    can = err * k_tau > np.sqrt(np.einsum("bmk,bmk->bm", gap, gap))    # (B, levels): a parent here can split
+    can = err * k_tau > np.sqrt(np.einsum("bmk,bmk->bm", gap, gap))  # (B, levels): a parent here can split
     top = can.shape[1] - 1
     if top <= 0:
         return np.zeros(len(bounds), dtype=np.int64)
-    inner = can[:, 1:top]                                 # level m + 1 for m = 0 .. top - 2
+    inner = can[:, 1:top]  # level m + 1 for m = 0 .. top - 2
     hit = inner.any(axis=1)
     return np.where(hit, np.argmax(inner, axis=1) if inner.shape[1] else 0, top - 1)
 
@@ -110,17 +120,19 @@ class SelectedTileletTile:
         self.key = tile.key
         nodes = nodes_for(strategy.hf, self.n, strategy.beta)
         data, self.offsets = tile_node_block(nodes, int(tile.key.level), int(tile.key.tx), int(tile.key.ty), self.n)
-        self.side_errors = nodes.sides is not None          # the terrain's nodes carry side codes
+        self.side_errors = nodes.sides is not None  # the terrain's nodes carry side codes
         self.starts = level_starts(self.n)
         if len(self.starts) > MAX_STARTS:
-            raise TerrabenchError(f"tiles of {self.n} cells have {len(self.starts) - 1} local levels; the raster "
-                                  f"selection handles at most {MAX_STARTS - 1}")
+            raise TerrabenchError(
+                f"tiles of {self.n} cells have {len(self.starts) - 1} local levels; the raster "
+                f"selection handles at most {MAX_STARTS - 1}"
+            )
         err, lo, hi = level_bounds(data, self.offsets, self.n, tile.spacing_xy)
-        constants, self.clip = tile_constants(tile), tile.clip                  # the tile block's own part ...
-        block = static_blocks(strategy.hf, constants[None])                     # ... and what the view leaves
-        block["shape"][:, 0], block["shape"][:, 1] = self.n, tile_levels(self.n) - 1   # as it is (node offsets
-        block["offsets"][:, :len(self.offsets)] = self.offsets                  # within the slot's)
-        block["starts"][:, :len(self.starts)] = self.starts
+        constants, self.clip = tile_constants(tile), tile.clip  # the tile block's own part ...
+        block = static_blocks(strategy.hf, constants[None])  # ... and what the view leaves
+        block["shape"][:, 0], block["shape"][:, 1] = self.n, tile_levels(self.n) - 1  # as it is (node offsets
+        block["offsets"][:, : len(self.offsets)] = self.offsets  # within the slot's)
+        block["starts"][:, : len(self.starts)] = self.starts
         # both joined as bytes per frame (concatenating structured arrays is slow): the block, and the constants
         # followed by the level bounds (levels, 7: lo, hi, error, tile-local metres) that first_levels reads
         self.block = block.tobytes()
@@ -143,7 +155,7 @@ class TileletSelection:
     tiles, the frame's item buffers and leaf arena."""
 
     kind = "raster"
-    writes = "records"          # what the selection writes for the draw: leaf records or a mesh
+    writes = "records"  # what the selection writes for the draw: leaf records or a mesh
 
     def __init__(self, ctx, hf, beta: float = GPU_BETA):
         if not (0.0 < beta < 1.0):
@@ -158,14 +170,15 @@ class TileletSelection:
         self.blocks = TileBlocks(ctx)
         self.arena = LeafArena(ctx, self.writes)
         self.items = FrameItems(ctx)
-        self.heaps: dict[int, TileHeap] = {}                 # cell count -> heap of resident tiles
-        self.item_of: dict[int, int] = {}                    # id(tile) -> its first item in the last selection
-        self.uniforms = UniformCache()                        # the selection passes' and the draw programs'
+        self.heaps: dict[int, TileHeap] = {}  # cell count -> heap of resident tiles
+        self.item_of: dict[int, int] = {}  # id(tile) -> its first item in the last selection
+        self.uniforms = UniformCache()  # the selection passes' and the draw programs'
 
     def _compile_passes(self, full_res: str) -> tuple:
         """The selection's two passes for a full-resolution rule."""
-        return tuple(compute_shader(self.ctx, "raster", "select.comp.glsl", select_defines(full_res, k))
-                     for k in (0, 1))
+        return tuple(
+            compute_shader(self.ctx, "raster", "select.comp.glsl", select_defines(full_res, k)) for k in (0, 1)
+        )
 
     def use_full_res(self, full_res: str) -> None:
         """Select and lay out leaves by the full-resolution rule ``full_res`` (hybrid.contract.FULL_RES) from now on."""
@@ -186,8 +199,12 @@ class TileletSelection:
     def shared_nbytes(self) -> int:
         """GPU bytes shared by all tiles, as the driver reports them: colour texture, frame counters, tile
         blocks, item buffers, leaf arena, and the heaps' bytes no tile holds."""
-        return (gl_bytes(self.texture, self.frame, self.blocks.buffer) + self.arena.nbytes + self.items.nbytes +
-                sum(h.spare_nbytes for h in self.heaps.values()))
+        return (
+            gl_bytes(self.texture, self.frame, self.blocks.buffer)
+            + self.arena.nbytes
+            + self.items.nbytes
+            + sum(h.spare_nbytes for h in self.heaps.values())
+        )
 
     def upload(self, tile) -> SelectedTileletTile:
         """Put one tile on the GPU: heights, node errors and boxes, in its heap."""
@@ -208,29 +225,36 @@ class TileletSelection:
         item's pass-0 work groups (from ``lod_eye``, world metres). What a tile's block holds whatever the view was
         made at its upload."""
         gs = [g for g, _, _ in items]
-        g0 = gs[0]                                        # every item has g0's cell count (select_leaves)
+        g0 = gs[0]  # every item has g0's cell count (select_leaves)
         numbers = np.frombuffer(bytearray(b"".join([g.numbers for g in gs])), np.float64).reshape(len(gs), -1)
         constants = numbers[:, :CONSTANT_WORDS]
         for i, (g, t, _) in enumerate(items):
-            if g.clip != t.clip:        # a tile drawn for a missing one (hybrid.uploads) has that one's clip
+            if g.clip != t.clip:  # a tile drawn for a missing one (hybrid.uploads) has that one's clip
                 constants[i] = tile_constants(t)
-        blocks = view_fields(np.frombuffer(bytearray(b"".join([g.block for g in gs])), BLOCK), view, constants,
-                             [s for _, _, s in items], skirts, culling)
+        blocks = view_fields(
+            np.frombuffer(bytearray(b"".join([g.block for g in gs])), BLOCK),
+            view,
+            constants,
+            [s for _, _, s in items],
+            skirts,
+            culling,
+        )
         eye_local = lod_eye - constants[:, 0:3]
         bounds = numbers[:, CONSTANT_WORDS:].reshape(len(gs), -1, 7)
         first = g0.starts[first_levels(bounds, eye_local, float(view.pixels_per_radian) / float(tau))]
         groups0 = (int(g0.starts[-1]) - first + LOCAL - 1) // LOCAL
         blocks["shape"][:, 2] = first
-        nodes_base, heights_base = g0.slot.heap.bases([g.slot for g in gs])       # slots move when heaps do
-        blocks["offsets"][:, :len(g0.offsets)] += nodes_base[:, None]
+        nodes_base, heights_base = g0.slot.heap.bases([g.slot for g in gs])  # slots move when heaps do
+        blocks["offsets"][:, : len(g0.offsets)] += nodes_base[:, None]
         blocks["starts"][:, STARTS_HEIGHTS] = heights_base
         found_base, seg_base, table1_start = self.items.prepare(g0.n, groups0, self.arena.capacity)
         blocks["starts"][:, STARTS_FOUND], blocks["starts"][:, STARTS_SEGMENTS] = found_base, seg_base
         self.blocks.write(blocks)
         return blocks, groups0, table1_start
 
-    def select_leaves(self, view, items, tau: float, culling: bool = True, skirts: dict | None = None,
-                      lod_eye=None) -> None:
+    def select_leaves(
+        self, view, items, tau: float, culling: bool = True, skirts: dict | None = None, lod_eye=None
+    ) -> None:
         """Run the leaf selection of every item for the view at tau pixels; fills each item's commands.
         ``lod_eye`` (world metres; default the view's eye) is where the leaves' distances, and so their levels
         and morph factors, are measured from: another eye holds a level of detail while the view moves.
@@ -252,7 +276,7 @@ class TileletSelection:
             raise TerrabenchError(f"a frame's raster tiles must have one cell count, got {ns}")
         if lod_eye is None:
             lod_eye = np.asarray(view.eye, dtype=np.float64)
-        else:                                             # a view's eye is checked where the view is made
+        else:  # a view's eye is checked where the view is made
             lod_eye = np.asarray(lod_eye, dtype=np.float64)
             if lod_eye.shape != (3,) or not np.isfinite(lod_eye).all():
                 raise TerrabenchError(f"lod_eye must be three finite metres (x, y, z), got {lod_eye.tolist()}")
@@ -287,8 +311,9 @@ class TileletSelection:
 
     def control_words(self, item: int) -> np.ndarray:
         """Item ``item``'s control words of the last selection (CONTROL_WORDS,), read back (for tests)."""
-        return np.frombuffer(self.items.control.read(size=CONTROL_WORDS * 4, offset=CONTROL_WORDS * 4 * item),
-                             dtype=np.uint32)
+        return np.frombuffer(
+            self.items.control.read(size=CONTROL_WORDS * 4, offset=CONTROL_WORDS * 4 * item), dtype=np.uint32
+        )
 
     def frame_counters(self) -> dict:
         """Counters of the last selection, summed over its tiles (one read of a small buffer, after a wait that

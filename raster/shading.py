@@ -1,4 +1,5 @@
 """Shading modes of the raster strategies (the colour code itself is the shared include "shading")."""
+
 from __future__ import annotations
 
 from typing import Literal, get_args

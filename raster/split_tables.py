@@ -1,5 +1,6 @@
 """Tables of split counts by threshold: a tile's small-node errors, binned once, so that the triangle estimate
 (``raster.estimate``) counts a block's nodes whose error exceeds a threshold with one look-up."""
+
 from __future__ import annotations
 
 import functools
@@ -7,8 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-BIN_SHIFT = 18                       # float32 bits below the bin: 32 bins an octave, 1.6-3.1 % apart
-TABLE_BINS = 640                     # a tile's tables span 20 octaves up to its largest error
+BIN_SHIFT = 18  # float32 bits below the bin: 32 bins an octave, 1.6-3.1 % apart
+TABLE_BINS = 640  # a tile's tables span 20 octaves up to its largest error
 
 
 def _bins(x: np.ndarray, nearest: bool = False) -> np.ndarray:
@@ -30,9 +31,13 @@ def split_tables(errors: list[np.ndarray]) -> tuple[int, np.ndarray]:
     rounded = [_bins(np.maximum(e, 0.0), nearest=True) for e in errors]
     positive = [e > 0 for e in errors]
     top = max((int(r[p].max()) for r, p in zip(rounded, positive) if p.any()), default=0)
-    low = top + 2 - TABLE_BINS                                   # the table's first bin; its last counts nothing
-    hist = np.stack([np.bincount((np.arange(nb)[:, None] * TABLE_BINS + np.maximum(r - low, 0))[p],
-                                 minlength=nb * TABLE_BINS) for r, p in zip(rounded, positive)])
+    low = top + 2 - TABLE_BINS  # the table's first bin; its last counts nothing
+    hist = np.stack(
+        [
+            np.bincount((np.arange(nb)[:, None] * TABLE_BINS + np.maximum(r - low, 0))[p], minlength=nb * TABLE_BINS)
+            for r, p in zip(rounded, positive)
+        ]
+    )
     return low - 1, np.cumsum(hist.reshape(-1, nb, TABLE_BINS)[..., ::-1], axis=-1)[..., ::-1]
 
 
@@ -55,7 +60,7 @@ def kind_splits(tables: SplitTables, rows: np.ndarray, threshold: np.ndarray) ->
     bin edge) exceeds its ``threshold`` (metres, (B, kinds, blocks)), one table look-up each (int64 counts)."""
     _, kinds, nb, width = tables.tables.shape
     i = _bins(threshold) - tables.base[rows][:, None, None]
-    np.minimum(np.maximum(i, 0, out=i), width - 1, out=i)                  # the ends count all and none: exact
+    np.minimum(np.maximum(i, 0, out=i), width - 1, out=i)  # the ends count all and none: exact
     i += rows[:, None, None] * (kinds * nb * width) + _table_offsets(kinds, nb, width)
     return tables.tables.reshape(-1).take(i).astype(np.int64)
 

@@ -1,5 +1,6 @@
 """What the triangle estimate (``raster.estimate``) keeps of one tile's quadtree: its small nodes' errors by block,
 its large nodes' errors and boxes, built once per tile from its heights or from the node block the GPU reads."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -10,7 +11,7 @@ from hybrid.tiles.sidecodes import decoded_sides, per_child
 
 from .quadtree import GPU_BETA, error_pyramid
 
-BLOCKS = 4                      # blocks a tile side for the small nodes' distances
+BLOCKS = 4  # blocks a tile side for the small nodes' distances
 
 
 @dataclass(frozen=True)
@@ -48,42 +49,52 @@ def tile_nodes(tile, beta: float = GPU_BETA, full_res: str | None = None) -> Til
     its own heights' error pyramid in the combined form (both fans in one error: the tiles built this way are a
     store's prepared before side errors); ``full_res``: a level-0 tile's rule (hybrid.contract.FULL_RES)."""
     pyr = error_pyramid(tile.heights, beta, side_errors=False)
-    return _tile_nodes(pyr.effective, pyr.zmin, pyr.zmax, tile.n, tile.origin, (tile.spacing_x, tile.spacing_y),
-                       full_res)
+    return _tile_nodes(
+        pyr.effective, pyr.zmin, pyr.zmax, tile.n, tile.origin, (tile.spacing_x, tile.spacing_y), full_res
+    )
 
 
-def block_tile_nodes(data: np.ndarray, offsets: np.ndarray, n: int, origin, spacing,
-                     full_res: str | None = None, beta: float = GPU_BETA) -> TileNodes:
+def block_tile_nodes(
+    data: np.ndarray, offsets: np.ndarray, n: int, origin, spacing, full_res: str | None = None, beta: float = GPU_BETA
+) -> TileNodes:
     """The estimate's data of an n-cell tile at world ``origin`` with ``spacing`` (x, y) metres, from its node
     block (``raster.nodes.tile_node_block``): the saturated errors and grown box ranges the GPU selection reads
     (from a tile store, one read and no error pyramid)."""
-    grids = [data[offsets[m]:offsets[m + 1]].reshape((n >> (m + 1)) + 2, (n >> (m + 1)) + 2, 4)[1:-1, 1:-1]
-             for m in range(len(offsets) - 1)]
+    grids = [
+        data[offsets[m] : offsets[m + 1]].reshape((n >> (m + 1)) + 2, (n >> (m + 1)) + 2, 4)[1:-1, 1:-1]
+        for m in range(len(offsets) - 1)
+    ]
     effective = [g[..., 0].astype(np.float64) for g in grids]
     sides = None
-    if any(np.any(g[..., 3] > 1.0) for g in grids):          # side codes (``hybrid.tiles.sidecodes``)
-        parents = [data[offsets[m + 1]:offsets[m + 2]].reshape((n >> (m + 2)) + 2, -1, 4)[1:-1, 1:-1, 0]
-                   if m + 1 < len(grids) else None for m in range(len(grids))]
+    if any(np.any(g[..., 3] > 1.0) for g in grids):  # side codes (``hybrid.tiles.sidecodes``)
+        parents = [
+            data[offsets[m + 1] : offsets[m + 2]].reshape((n >> (m + 2)) + 2, -1, 4)[1:-1, 1:-1, 0]
+            if m + 1 < len(grids)
+            else None
+            for m in range(len(grids))
+        ]
         sides = [decoded_sides(g[..., 3], p) for g, p in zip(grids, parents)]
-    return _tile_nodes(effective, [g[..., 1] for g in grids], [g[..., 2] for g in grids], n, origin, spacing,
-                       full_res, sides, beta)
+    return _tile_nodes(
+        effective, [g[..., 1] for g in grids], [g[..., 2] for g in grids], n, origin, spacing, full_res, sides, beta
+    )
 
 
-def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing, full_res: str | None = None, sides=None,
-                beta: float = GPU_BETA) -> TileNodes:
+def _tile_nodes(
+    effective, zmin, zmax, n: int, origin, spacing, full_res: str | None = None, sides=None, beta: float = GPU_BETA
+) -> TileNodes:
     """TileNodes from per local level effective errors, height ranges (metres above the origin z) and, where the
     nodes have them, side errors ((4, ...) per level, metres, at least the effective error)."""
     top = len(effective) - 1
     nb = max(1, min(BLOCKS, n // 8))
-    cells = n // nb                                              # block side, tile cells
+    cells = n // nb  # block side, tile cells
     org = np.asarray(origin, dtype=np.float64)
     sp = np.asarray(spacing, dtype=np.float64)
     fine, coarse_e, coarse_lo, coarse_hi = [np.zeros((nb * nb, 0))], [], [], []
     for m in range(top):
-        side = 2 << m                                            # node side, tile cells
+        side = 2 << m  # node side, tile cells
         e = effective[m]
         a, b = np.indices(e.shape)
-        if side <= cells:                                        # (block, node in block): blocks hold equal shares
+        if side <= cells:  # (block, node in block): blocks hold equal shares
             per = cells // side
             fine.append(np.asarray(e, np.float64).reshape(nb, per, nb, per).transpose(0, 2, 1, 3).reshape(nb * nb, -1))
         else:
@@ -105,21 +116,28 @@ def _tile_nodes(effective, zmin, zmax, n: int, origin, spacing, full_res: str | 
         if parts:
             return np.concatenate(parts).astype(dtype)
         return np.zeros((0,) if width is None else (0, width), dtype)
+
     empty = np.zeros((nb * nb, 0))
     level0, rest = (fine[1], fine[2:]) if len(fine) > 1 else (empty, [])
     above = np.concatenate([empty, *rest], axis=1)
     level1 = rest[0] if rest else empty
     exact = full_res == "exact"
-    lean = np.concatenate([np.zeros_like(level0) if exact else level0, above], axis=1)   # errors 0 never count
+    lean = np.concatenate([np.zeros_like(level0) if exact else level0, above], axis=1)  # errors 0 never count
     split1 = level1 if full_res is not None else np.zeros_like(level1)
     if sides is not None:
         lean = _lean_sides(effective, sides, len(fine) - 1, nb, beta)
-        if exact:                                                # level-0 leaves keep every midpoint: split1's
-            lean[:, :4 * level0.shape[1]] = 0.0
-    return TileNodes(above, lean, split1, cat(coarse_e, np.float64),
-                     np.concatenate([block_lo, cat(coarse_lo, np.float64, 3)]),
-                     np.concatenate([block_hi, cat(coarse_hi, np.float64, 3)]), int(top >= 1),
-                     1 if sides is None else 4)
+        if exact:  # level-0 leaves keep every midpoint: split1's
+            lean[:, : 4 * level0.shape[1]] = 0.0
+    return TileNodes(
+        above,
+        lean,
+        split1,
+        cat(coarse_e, np.float64),
+        np.concatenate([block_lo, cat(coarse_lo, np.float64, 3)]),
+        np.concatenate([block_hi, cat(coarse_hi, np.float64, 3)]),
+        int(top >= 1),
+        1 if sides is None else 4,
+    )
 
 
 def _lean_sides(effective, sides, levels: int, nb: int, beta: float) -> np.ndarray:
@@ -128,10 +146,10 @@ def _lean_sides(effective, sides, levels: int, nb: int, beta: float) -> np.ndarr
     for m in range(levels):
         parent = effective[m + 1] if m + 1 < len(effective) else np.full((1, 1), np.inf)
         v = np.minimum(sides[m], beta * per_child(parent))
-        v[np.isinf(v)] = 0.0                                     # a tile's root: split by the tile tree
+        v[np.isinf(v)] = 0.0  # a tile's root: split by the tile tree
         per = v.shape[1] // nb
         out.append(v.reshape(4, nb, per, nb, per).transpose(1, 3, 0, 2, 4).reshape(nb * nb, -1))
     return np.concatenate(out, axis=1)
 
 
-KINDS = ("fine", "lean", "split1")   # the small-node error sets a tile keeps (``TileNodes`` fields), one table each
+KINDS = ("fine", "lean", "split1")  # the small-node error sets a tile keeps (``TileNodes`` fields), one table each

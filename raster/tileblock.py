@@ -5,23 +5,35 @@ A frame's blocks are built as one numpy array (what the view leaves unchanged ma
 tile binds its 256-byte range (the geometry-shader path, skirts); the selection reads all of them as storage;
 the indexed path's one multi-draw reads each tile's first fields as instanced attributes.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 from hybrid.gl.programs import register_include
 
-BLOCK_BYTES = 256              # one block per tile, at a range offset every GL implementation accepts
-TILE_BLOCKS_BINDING = 9        # the storage binding of a frame's blocks (tile_block.glsl TILE_BLOCKS_STORAGE)
-TILE_BLOCK_BINDING = 0         # the uniform binding of the drawn tile's block (tile_block.glsl TileBlock)
+BLOCK_BYTES = 256  # one block per tile, at a range offset every GL implementation accepts
+TILE_BLOCKS_BINDING = 9  # the storage binding of a frame's blocks (tile_block.glsl TILE_BLOCKS_STORAGE)
+TILE_BLOCK_BINDING = 0  # the uniform binding of the drawn tile's block (tile_block.glsl TileBlock)
 BLOCK_DEFINES = {"TILE_BLOCK_BINDING": TILE_BLOCK_BINDING, "TILE_BLOCKS_BINDING": TILE_BLOCKS_BINDING}
 """The bindings as defines of every program that includes tile_block.glsl."""
-BLOCK = np.dtype([("origin", "<f4", 4), ("spacing", "<f4", 4), ("clip_rel", "<f4", 4), ("uv", "<f4", 4),
-                  ("shape", "<i4", 4), ("nb_delta", "<i4", 4), ("flags", "<i4", 4), ("skirt", "<f4", 4),
-                  ("offsets", "<i4", 16), ("starts", "<i4", 16)])
+BLOCK = np.dtype(
+    [
+        ("origin", "<f4", 4),
+        ("spacing", "<f4", 4),
+        ("clip_rel", "<f4", 4),
+        ("uv", "<f4", 4),
+        ("shape", "<i4", 4),
+        ("nb_delta", "<i4", 4),
+        ("flags", "<i4", 4),
+        ("skirt", "<f4", 4),
+        ("offsets", "<i4", 16),
+        ("starts", "<i4", 16),
+    ]
+)
 assert BLOCK.itemsize == BLOCK_BYTES
-MAX_STARTS = 13                 # "starts" entries for level starts; the last three hold where the selection finds
-STARTS_HEIGHTS, STARTS_FOUND, STARTS_SEGMENTS = 13, 14, 15   # the tile's heights, its leaf list, its skirts
+MAX_STARTS = 13  # "starts" entries for level starts; the last three hold where the selection finds
+STARTS_HEIGHTS, STARTS_FOUND, STARTS_SEGMENTS = 13, 14, 15  # the tile's heights, its leaf list, its skirts
 
 
 def register_tile_block(ctx) -> None:
@@ -32,7 +44,7 @@ def register_tile_block(ctx) -> None:
     register_include(ctx, "raster/select_append", "raster", "select_append.glsl")
 
 
-CONSTANT_WORDS = 13            # tile_constants: origin 3, spacing 2, clip 4, zmin, level, level-0 cell (column, row)
+CONSTANT_WORDS = 13  # tile_constants: origin 3, spacing 2, clip 4, zmin, level, level-0 cell (column, row)
 
 
 def tile_constants(tile) -> np.ndarray:
@@ -40,8 +52,19 @@ def tile_constants(tile) -> np.ndarray:
     of sample [0, 0], spacing x and y, clip rectangle (metres), zmin (metres), pyramid level and the level-0 cell
     (column, row) of sample [0, 0]."""
     k = tile.key
-    return np.array([*tile.origin, tile.spacing_x, tile.spacing_y, *tile.clip, tile.zmin, k.level,
-                     k.tx * tile.n << k.level, k.ty * tile.n << k.level], dtype=np.float64)
+    return np.array(
+        [
+            *tile.origin,
+            tile.spacing_x,
+            tile.spacing_y,
+            *tile.clip,
+            tile.zmin,
+            k.level,
+            k.tx * tile.n << k.level,
+            k.ty * tile.n << k.level,
+        ],
+        dtype=np.float64,
+    )
 
 
 def static_blocks(hf, constants: np.ndarray, unit_spacing: bool = False) -> np.ndarray:
@@ -60,8 +83,9 @@ def static_blocks(hf, constants: np.ndarray, unit_spacing: bool = False) -> np.n
     return out
 
 
-def view_fields(blocks: np.ndarray, view, constants: np.ndarray, sels, skirts: dict | None = None,
-                culling: bool = True) -> np.ndarray:
+def view_fields(
+    blocks: np.ndarray, view, constants: np.ndarray, sels, skirts: dict | None = None, culling: bool = True
+) -> np.ndarray:
     """Fill in the view's fields of a frame's blocks (in place; returned): origin, clip rectangle and skirt bottom
     relative to the eye (metres), from the items' ``tile_constants`` (B, CONSTANT_WORDS); neighbour level deltas,
     skirt edges and culling from their selections ``sels`` (B ``SelectedTile``s)."""
@@ -77,15 +101,17 @@ def view_fields(blocks: np.ndarray, view, constants: np.ndarray, sels, skirts: d
     return blocks
 
 
-def tile_blocks(hf, view, items, skirts: dict | None = None, culling: bool = True,
-                unit_spacing: bool = False) -> np.ndarray:
+def tile_blocks(
+    hf, view, items, skirts: dict | None = None, culling: bool = True, unit_spacing: bool = False
+) -> np.ndarray:
     """The blocks of a frame's (gpu, tile, selected) items, built as arrays over all items (``static_blocks`` and
     ``view_fields``); ``unit_spacing`` for meshes whose positions are metres."""
     if not len(items):
         return np.zeros(0, BLOCK)
     constants = np.stack([tile_constants(t) for _, t, _ in items])
-    return view_fields(static_blocks(hf, constants, unit_spacing), view, constants, [s for _, _, s in items],
-                       skirts, culling)
+    return view_fields(
+        static_blocks(hf, constants, unit_spacing), view, constants, [s for _, _, s in items], skirts, culling
+    )
 
 
 class TileBlocks:
@@ -95,7 +121,7 @@ class TileBlocks:
     def __init__(self, ctx):
         self.ctx = ctx
         self.buffer = ctx.buffer(reserve=BLOCK_BYTES * 16)
-        self.version = 0                # counts reallocations (vertex arrays over the buffer are stale then)
+        self.version = 0  # counts reallocations (vertex arrays over the buffer are stale then)
 
     def write(self, blocks: np.ndarray) -> None:
         """Upload a frame's blocks."""

@@ -5,6 +5,7 @@ drops of the GPU selection's lean leaves.
 Functions of the frame pass's state (``raster.restriction``: its tiles, their solved leaf levels and the
 neighbours' profiles along each edge), with the per-leaf helpers it shares.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -68,17 +69,18 @@ def lean_set(fr, key, ts: TileletSet, morph: bool, exact_full_resolution: bool =
 
     def factor(a, b, level, side):
         e = errors_at(E, a, b, level)
-        if t.pyramid.sides:                             # the side's own stitched error, where larger
+        if t.pyramid.sides:  # the side's own stitched error, where larger
             e = np.maximum(e, errors_at([d[side] for d in t.pyramid.sides], a, b, level))
         with np.errstate(divide="ignore"):
             r = np.where(e > 0, t.tolerance / np.where(e > 0, e, 1.0), np.inf)
-        if not morph:                                   # level-0 leaves may exceed the tolerance: kept
+        if not morph:  # level-0 leaves may exceed the tolerance: kept
             f = (r >= 1.0).astype(np.float64)
         else:
             f = np.clip((r - 1.0) / (1.0 / beta - 1.0), 0.0, 1.0)
         if not exact_full_resolution:
             return f
-        return np.where((level == 0) & (key[0] == 0), 0.0, f)     # full resolution keeps the reference's cells
+        return np.where((level == 0) & (key[0] == 0), 0.0, f)  # full resolution keeps the reference's cells
+
     dropped = ts.coarser.copy()
     am = np.zeros((len(lv), 4))
     for edge, (inside, na, nb_, along) in enumerate(edge_neighbours(lv, U)):
@@ -88,16 +90,21 @@ def lean_set(fr, key, ts: TileletSet, morph: bool, exact_full_resolution: bool =
         same = inside & (ts.level_map[na_c, nb_c] == m)
         le = np.zeros(len(lv))
         le[same] = np.minimum(own[same], factor(na_c[same], nb_c[same], m[same], OPPOSITE[edge]))
-        edge_of_terrain = ~inside & ((ts.finer & bit) == 0) & \
-            (fr.neighbour_profile(key, edge)[along.astype(np.int64) << key[0]] < 0)
+        edge_of_terrain = (
+            ~inside & ((ts.finer & bit) == 0) & (fr.neighbour_profile(key, edge)[along.astype(np.int64) << key[0]] < 0)
+        )
         le[edge_of_terrain] = own[edge_of_terrain]
         am[:, edge] = np.maximum(ts.morph[:, edge], le)
         dropped[np.maximum(ts.morph[:, edge], le) >= 1.0] |= bit
     if exact_full_resolution:
         return replace(ts, dropped=dropped)
-    level0 = m == 0                                     # edges W, E, S, N: the SE cell's are E and S, the NW's W and N
-    turns = np.column_stack([np.where(level0 & (dropped & 6 == 0), turn_factor(np.maximum(am[:, 1], am[:, 2])), 0.0),
-                             np.where(level0 & (dropped & 9 == 0), turn_factor(np.maximum(am[:, 0], am[:, 3])), 0.0)])
+    level0 = m == 0  # edges W, E, S, N: the SE cell's are E and S, the NW's W and N
+    turns = np.column_stack(
+        [
+            np.where(level0 & (dropped & 6 == 0), turn_factor(np.maximum(am[:, 1], am[:, 2])), 0.0),
+            np.where(level0 & (dropped & 9 == 0), turn_factor(np.maximum(am[:, 0], am[:, 3])), 0.0),
+        ]
+    )
     return replace(ts, dropped=dropped, turns=turns)
 
 
@@ -114,8 +121,12 @@ def edge_neighbours(lv: Leaves, U: int) -> tuple:
     """Per edge W, E, S, N of every leaf: (neighbour inside the tile, unit row and column just outside the edge,
     the leaf's border cell index along the edge, for neighbours across the tile border)."""
     ua, ub, su = lv.i0 // 2, lv.j0 // 2, 1 << lv.level.astype(np.int64)
-    return ((ub > 0, ua, ub - 1, lv.i0), (ub + su < U, ua, ub + su, lv.i0),
-            (ua > 0, ua - 1, ub, lv.j0), (ua + su < U, ua + su, ub, lv.j0))
+    return (
+        (ub > 0, ua, ub - 1, lv.i0),
+        (ub + su < U, ua, ub + su, lv.i0),
+        (ua > 0, ua - 1, ub, lv.j0),
+        (ua + su < U, ua + su, ub, lv.j0),
+    )
 
 
 def _own_alpha(fr, key, levels: np.ndarray, ua: np.ndarray, ub: np.ndarray) -> np.ndarray:
@@ -132,7 +143,9 @@ def _own_alpha(fr, key, levels: np.ndarray, ua: np.ndarray, ub: np.ndarray) -> n
 def border_units(U: int, edge: int) -> tuple[np.ndarray, np.ndarray]:
     """(rows, columns) of the U units along a tile's edge W, E, S or N (0..3), in order along it."""
     r = np.arange(U)
-    return ((r, np.zeros_like(r)), (r, np.full_like(r, U - 1)), (np.zeros_like(r), r), (np.full_like(r, U - 1), r))[edge]
+    return ((r, np.zeros_like(r)), (r, np.full_like(r, U - 1)), (np.zeros_like(r), r), (np.full_like(r, U - 1), r))[
+        edge
+    ]
 
 
 def _alpha_profile(fr, key, edge: int) -> np.ndarray:
@@ -192,7 +205,7 @@ def tilelet_set(fr, key, morph: bool) -> TileletSet:
             other = fr.neighbour_profile(key, edge, values=lambda k, e: _alpha_profile(fr, k, e))
             a[s_out] = np.maximum(own[s_out], other[cells[s_out]])
         # terrain edge (no neighbour): own parent only
-        s_none = (nlev < 0)
+        s_none = nlev < 0
         a[s_none] = own[s_none]
         a[(coarser & bit) != 0] = 1.0
         a[(finer & bit) != 0] = 0.0

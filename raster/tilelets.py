@@ -6,6 +6,7 @@ expanded by the geometry shader into its 8-triangle fan (stitched where the neig
 SW-NE cells at full resolution) with skirts on edges that face ray-cast tiles. Nothing about the mesh is
 computed on the CPU per frame; the CPU sets uniforms and issues two dispatches a frame and one draw per tile.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -36,17 +37,25 @@ def read_leaves(strategy, g: SelectedTileletTile) -> dict:
         if not count:
             return np.zeros(0, dtype)
         return np.frombuffer(buf.read(size=count * nbytes, offset=base * nbytes), dtype)
+
     if g.writes == "mesh":
         v, i = read(a.vertices, vertex_bytes, np.float32), read(a.indices, index_bytes, np.uint32)
         tri = i.reshape(count, index_bytes // 12, 3)
         solid = (tri[..., 0] != tri[..., 1]) & (tri[..., 1] != tri[..., 2]) & (tri[..., 0] != tri[..., 2])
-        return {"level": v.reshape(count, vertex_bytes // 16, 4)[:, 0, 3].astype(np.int32),
-                "triangles": solid.sum(axis=1)}
+        return {
+            "level": v.reshape(count, vertex_bytes // 16, 4)[:, 0, 3].astype(np.int32),
+            "triangles": solid.sum(axis=1),
+        }
     raw = read(a.records, record_bytes, np.uint32).reshape(count, record_bytes // 4)
     drop = raw[:, 3].astype(np.int32)
-    out = {"j0": raw[:, 0].astype(np.int32), "i0": raw[:, 1].astype(np.int32), "level": raw[:, 2].astype(np.int32),
-           "drop": drop, "heights": raw[:, 4:13].view(np.float32).copy(),
-           "triangles": 8 - np.unpackbits(drop.astype(np.uint8)[:, None], axis=1).sum(axis=1)}
+    out = {
+        "j0": raw[:, 0].astype(np.int32),
+        "i0": raw[:, 1].astype(np.int32),
+        "level": raw[:, 2].astype(np.int32),
+        "drop": drop,
+        "heights": raw[:, 4:13].view(np.float32).copy(),
+        "triangles": 8 - np.unpackbits(drop.astype(np.uint8)[:, None], axis=1).sum(axis=1),
+    }
     if raw.shape[1] > 13:
         out["turns"] = raw[:, 13:15].view(np.float32).copy()
         out["triangles"] = out["triangles"] + 2 * (out["turns"] > 0).sum(axis=1)
@@ -56,15 +65,16 @@ def read_leaves(strategy, g: SelectedTileletTile) -> dict:
 class TileletDrawing(TileletSelection):
     """Uniforms and state shared by both tilelet draws; subclasses issue the draw of one tile."""
 
-    draw_options = frozenset({"mode", "wireframe", "morph", "stitching", "lean", "culling", "leaf_tau", "skirts",
-                              "full_res", "lod_eye"})
+    draw_options = frozenset(
+        {"mode", "wireframe", "morph", "stitching", "lean", "culling", "leaf_tau", "skirts", "full_res", "lod_eye"}
+    )
 
     def __init__(self, ctx, hf, **options):
         super().__init__(ctx, hf, **options)
-        self._skirted: list = []          # items of the last draw_tiles call that hang skirts
-        self.edges = TerrainEdges(ctx, hf)   # skirts are not drawn for rays from under the sheet
-        self.skirt_prog = None                # the program that draws skirts (subclasses)
-        self._arena_vaos = (None, {})         # ((arena, item buffers) versions, vertex arrays over them)
+        self._skirted: list = []  # items of the last draw_tiles call that hang skirts
+        self.edges = TerrainEdges(ctx, hf)  # skirts are not drawn for rays from under the sheet
+        self.skirt_prog = None  # the program that draws skirts (subclasses)
+        self._arena_vaos = (None, {})  # ((arena, item buffers) versions, vertex arrays over them)
 
     @property
     def shared_nbytes(self) -> int:
@@ -120,10 +130,23 @@ class TileletDrawing(TileletSelection):
             for i in range(4):
                 ctx.disable_direct(GL_CLIP_DISTANCE0 + i)
 
-    def draw_tiles(self, target, view, items, tau: float | None = None, mode: str | None = None,
-                   wireframe: bool = False, morph: bool = True, stitching: bool = True, lean: bool = True,
-                   culling: bool = True, leaf_tau: float | None = None, skirts: dict | None = None,
-                   full_res: str = DEFAULT_FULL_RES, lod_eye=None) -> dict:
+    def draw_tiles(
+        self,
+        target,
+        view,
+        items,
+        tau: float | None = None,
+        mode: str | None = None,
+        wireframe: bool = False,
+        morph: bool = True,
+        stitching: bool = True,
+        lean: bool = True,
+        culling: bool = True,
+        leaf_tau: float | None = None,
+        skirts: dict | None = None,
+        full_res: str = DEFAULT_FULL_RES,
+        lod_eye=None,
+    ) -> dict:
         """Select and draw (gpu_tile, tile, selected) items into target at tau px (``leaf_tau`` overrides it).
 
         ``skirts`` {tile key: edge bits} are selected here and drawn by ``draw_skirts``, which the renderer
@@ -141,16 +164,18 @@ class TileletDrawing(TileletSelection):
         self.set_selection("morph", bool(morph))
         self.set_selection("stitch", bool(stitching))
         self.set_selection("lean", bool(lean))
-        self.arena.prepare()                # sized for the recent calls' leaves, with room to grow
+        self.arena.prepare()  # sized for the recent calls' leaves, with room to grow
         counters = self._select_draw(target, view, items, tau, mode, wireframe, culling, skirts, lod_eye)
         regrown = 0
-        if counters["arena_overflow"]:       # some tiles did not fit and drew nothing: grow, draw them
+        if counters["arena_overflow"]:  # some tiles did not fit and drew nothing: grow, draw them
             self.arena.remake(counters["arena_leaves"])
             regrown = 1
             counters = self._select_draw(target, view, items, tau, mode, wireframe, culling, skirts, lod_eye)
             if counters["arena_overflow"]:
-                raise RuntimeError(f"leaf arena of {self.arena.capacity} leaves overflowed after growing for "
-                                   f"{counters['arena_leaves']}")
+                raise RuntimeError(
+                    f"leaf arena of {self.arena.capacity} leaves overflowed after growing for "
+                    f"{counters['arena_leaves']}"
+                )
         self.arena.note(counters["arena_leaves"])
         counters["arena_regrown"] = regrown
         return counters
@@ -199,9 +224,17 @@ class TileletStrategy(TileletDrawing):
 
     def _compile(self, full_res: str) -> tuple:
         """The geometry-shader program and its skirt-pass variant for a full-resolution rule's leaf records."""
-        progs = tuple(program(self.ctx, "raster", "leaf.vert.glsl", "tilelet.frag.glsl", "tilelet.geom.glsl",
-                              defines={**full_res_defines(full_res), **BLOCK_DEFINES, **skirt})
-                      for skirt in ({}, {"SKIRT_PROGRAM": 1}))
+        progs = tuple(
+            program(
+                self.ctx,
+                "raster",
+                "leaf.vert.glsl",
+                "tilelet.frag.glsl",
+                "tilelet.geom.glsl",
+                defines={**full_res_defines(full_res), **BLOCK_DEFINES, **skirt},
+            )
+            for skirt in ({}, {"SKIRT_PROGRAM": 1})
+        )
         progs[0]["skirt_pass"].value = False
         progs[1]["skirt_pass"].value = True
         return progs
@@ -230,8 +263,10 @@ class TileletStrategy(TileletDrawing):
         attrs = [(self.arena.records, LEAF_FORMAT, "a_node", "a_h0", "a_h1", "a_h8")]
         if self.full_res == "lean":
             attrs = [(self.arena.records, LEAN_LEAF_FORMAT, "a_node", "a_h0", "a_h1", "a_h8", "a_turn")]
-        return {"points": self.ctx.vertex_array(self.prog, attrs),
-                "skirt_points": self.ctx.vertex_array(self.skirt_prog, attrs)}
+        return {
+            "points": self.ctx.vertex_array(self.prog, attrs),
+            "skirt_points": self.ctx.vertex_array(self.skirt_prog, attrs),
+        }
 
     def draw_items(self, items: int, wireframe: bool = False) -> None:
         """Each item's leaves as points through the geometry shader (count and first leaf from the selection)."""
@@ -242,5 +277,6 @@ class TileletStrategy(TileletDrawing):
 
     def draw_tile_skirts(self, item: int) -> None:
         """The item's leaves again through the geometry shader's skirt program, emitting only their skirts."""
-        self.arena_vaos()["skirt_points"].render_indirect(self.items.control, mode=self.ctx.POINTS, count=1,
-                                                          first=self.command(item, CMD_POINTS))
+        self.arena_vaos()["skirt_points"].render_indirect(
+            self.items.control, mode=self.ctx.POINTS, count=1, first=self.command(item, CMD_POINTS)
+        )

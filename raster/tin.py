@@ -12,6 +12,7 @@ a flat region (a sea) at a tile's border is pulled in until most of it is gone. 
 vertices on the outline, not all: some stray a few cells inside, near corners most, leaving a sliver of the
 tile uncovered (``tin_max_error`` counts its samples), which the skirts' flange covers.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -59,7 +60,7 @@ def surface_at(vertices: np.ndarray, faces: np.ndarray, x: np.ndarray, y: np.nda
     row_of = np.rint((y - ys[0]) / dy).astype(np.int64)
     grid = np.full((ys.size, xs.size), -1, np.int64)
     grid[row_of, col_of] = np.arange(x.size)
-    P = V[F]                                   # (f, 3, 3)
+    P = V[F]  # (f, 3, 3)
     c0 = np.clip(np.floor((P[:, :, 0].min(1) - xs[0]) / dx - 1e-9).astype(np.int64), 0, xs.size - 1)
     c1 = np.clip(np.ceil((P[:, :, 0].max(1) - xs[0]) / dx + 1e-9).astype(np.int64), 0, xs.size - 1)
     r0 = np.clip(np.floor((P[:, :, 1].min(1) - ys[0]) / dy - 1e-9).astype(np.int64), 0, ys.size - 1)
@@ -94,7 +95,7 @@ def tin_max_error(mesh: TinMesh, heights: np.ndarray, spacing) -> tuple[float, i
     spacing in metres, one number or an (x, y) pair."""
     h = np.asarray(heights, dtype=np.float64)
     sx, sy = spacing_pair(spacing, "TIN grid")
-    i, j = np.mgrid[0:h.shape[0], 0:h.shape[1]]
+    i, j = np.mgrid[0 : h.shape[0], 0 : h.shape[1]]
     z, hits = surface_at(mesh.vertices, mesh.faces, j.ravel() * sx, i.ravel() * sy)
     cov = hits > 0
     return float(np.abs(z[cov] - h.ravel()[cov]).max(initial=0.0)), int(np.count_nonzero(~cov))
@@ -104,7 +105,7 @@ def _walled(pts: np.ndarray, faces: np.ndarray, rows: int, cols: int, depth: flo
     """The grid mesh with a vertical wall ``depth`` metres deep hanging outward-facing from each side of its
     outline; the walls' lower vertices follow the grid's vertices."""
     idx = np.arange(rows * cols).reshape(rows, cols)
-    sides = (idx[0], idx[:, -1], idx[-1, ::-1], idx[::-1, 0])      # counter-clockwise around the tile from above
+    sides = (idx[0], idx[:, -1], idx[-1, ::-1], idx[::-1, 0])  # counter-clockwise around the tile from above
     out_pts, out_faces, base = [pts], [faces], len(pts)
     for top in sides:
         bot = base + np.arange(len(top))
@@ -123,8 +124,14 @@ def _unwalled(v: np.ndarray, f: np.ndarray, floor: float) -> TinMesh:
     return TinMesh(np.asarray(v, dtype=np.float64)[used], f.reshape(-1, 3))
 
 
-def build_tin(heights: np.ndarray, spacing, target_count: int | None = None, max_error: float | None = None,
-              preserve_border: bool = False, agg: float = 7.0) -> TinMesh:
+def build_tin(
+    heights: np.ndarray,
+    spacing,
+    target_count: int | None = None,
+    max_error: float | None = None,
+    preserve_border: bool = False,
+    agg: float = 7.0,
+) -> TinMesh:
     """TIN of a tile's heights: simplify the full grid to about ``target_count`` triangles or to <= ``max_error``
     metres; spacing in metres, one number or an (x, y) pair.
 
@@ -133,6 +140,7 @@ def build_tin(heights: np.ndarray, spacing, target_count: int | None = None, max
     covers (samples it leaves uncovered are cracks; ``tin_max_error`` counts them).
     """
     import fast_simplification
+
     h = np.asarray(heights)
     if h.ndim != 2 or min(h.shape) < 2:
         raise TerrabenchError(f"heights must be a 2-D grid of at least 2x2 samples, got shape {h.shape}")
@@ -142,7 +150,9 @@ def build_tin(heights: np.ndarray, spacing, target_count: int | None = None, max
     faces = grid_faces(h.shape[0], h.shape[1]).astype(np.int32)
     full = len(faces)
     lo_z = float(np.min(h))
-    depth = 10.0 * (float(np.ptp(h)) + max(spacing_pair(spacing, "TIN grid"))) + 1.0          # far below anything a collapse can reach
+    depth = (
+        10.0 * (float(np.ptp(h)) + max(spacing_pair(spacing, "TIN grid"))) + 1.0
+    )  # far below anything a collapse can reach
     grid = (pts, faces) if preserve_border else _walled(pts, faces, h.shape[0], h.shape[1], depth)
     walls = len(grid[1]) - full
 
@@ -151,7 +161,11 @@ def build_tin(heights: np.ndarray, spacing, target_count: int | None = None, max
         return _unwalled(v, f, lo_z - 0.5 * depth)
 
     if target_count is not None:
-        if isinstance(target_count, bool) or not isinstance(target_count, (int, np.integer)) or not (2 <= target_count <= full):
+        if (
+            isinstance(target_count, bool)
+            or not isinstance(target_count, (int, np.integer))
+            or not (2 <= target_count <= full)
+        ):
             raise TerrabenchError(f"target_count must be an integer in [2, {full}] triangles, got {target_count!r}")
         if not walls:
             return simplify(target_count=int(target_count))
@@ -161,8 +175,12 @@ def build_tin(heights: np.ndarray, spacing, target_count: int | None = None, max
         return simplify(target_count=min(int(target_count) + max(kept_walls, 0), full + walls))
     if not (np.isfinite(max_error) and max_error >= 0):
         raise TerrabenchError(f"max_error must be finite and >= 0 metres, got {max_error!r}")
-    return _bisect_reduction(simplify, TinMesh(pts, faces.astype(np.int64)), 1.0 - 2.0 / (full + walls),
-                             lambda m: tin_max_error(m, h, spacing)[0] <= max_error)
+    return _bisect_reduction(
+        simplify,
+        TinMesh(pts, faces.astype(np.int64)),
+        1.0 - 2.0 / (full + walls),
+        lambda m: tin_max_error(m, h, spacing)[0] <= max_error,
+    )
 
 
 def _bisect_reduction(simplify, full: TinMesh, most: float, good) -> TinMesh:
@@ -182,12 +200,16 @@ def _bisect_reduction(simplify, full: TinMesh, most: float, good) -> TinMesh:
 def to_trimesh(mesh: TinMesh, origin=(0.0, 0.0, 0.0)):
     """The TIN as a trimesh.Trimesh placed at a world origin (metres)."""
     import trimesh
-    return trimesh.Trimesh(vertices=mesh.vertices + np.asarray(origin, dtype=np.float64), faces=mesh.faces, process=False)
+
+    return trimesh.Trimesh(
+        vertices=mesh.vertices + np.asarray(origin, dtype=np.float64), faces=mesh.faces, process=False
+    )
 
 
 def export_tin(mesh: TinMesh, path, origin=(0.0, 0.0, 0.0)) -> None:
     """Write the TIN as OBJ or PLY (by the path's suffix), vertices in world metres."""
     from pathlib import Path
+
     p = Path(path)
     if p.suffix.lower() not in (".obj", ".ply"):
         raise TerrabenchError(f"TIN export path must end in .obj or .ply, got {str(path)!r}")
@@ -225,8 +247,7 @@ class TinStrategy(MeshStrategyBase):
     """Draws each tile as a decimated TIN (built at upload): ``reduction`` of the triangles removed, or to
     ``max_error`` metres when given."""
 
-    def __init__(self, ctx, hf, reduction: float = 0.9, max_error: float | None = None,
-                 preserve_border: bool = False):
+    def __init__(self, ctx, hf, reduction: float = 0.9, max_error: float | None = None, preserve_border: bool = False):
         if not (0.0 <= reduction < 1.0):
             raise TerrabenchError(f"reduction must lie in [0, 1), got {reduction!r}")
         super().__init__(ctx, hf)
@@ -240,7 +261,11 @@ class TinStrategy(MeshStrategyBase):
         if self.max_error is not None:
             m = build_tin(h, tile.spacing_xy, max_error=self.max_error, preserve_border=self.preserve_border)
         else:
-            m = build_tin(h, tile.spacing_xy, target_count=max(2, int(round(full * (1 - self.reduction)))),
-                          preserve_border=self.preserve_border)
+            m = build_tin(
+                h,
+                tile.spacing_xy,
+                target_count=max(2, int(round(full * (1 - self.reduction)))),
+                preserve_border=self.preserve_border,
+            )
         self.meshes[(int(tile.key.level), int(tile.key.tx), int(tile.key.ty))] = (m, tile.spacing_xy)
         return m.vertices, m.faces

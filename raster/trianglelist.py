@@ -5,6 +5,7 @@ close the seam's T-junctions (raster.mesh_skirts). Cells are split along the (i,
 the reference. Also builds the indexed list of exactly the triangles a tilelet set draws, for comparing the
 geometry-shader path's throughput.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -20,13 +21,13 @@ def grid_vertices(heights: np.ndarray, spacing) -> np.ndarray:
     metres, one number or an (x, y) pair (columns x apart, rows y apart)."""
     h = np.asarray(heights)
     sx, sy = spacing_pair(spacing, "grid")
-    i, j = np.mgrid[0:h.shape[0], 0:h.shape[1]]
+    i, j = np.mgrid[0 : h.shape[0], 0 : h.shape[1]]
     return np.stack([j.ravel() * sx, i.ravel() * sy, h.ravel()], axis=1).astype(np.float32)
 
 
 def grid_faces(rows: int, cols: int) -> np.ndarray:
     """(2*(rows-1)*(cols-1), 3) uint32 CCW triangles of a sample grid, SW-NE diagonal."""
-    i, j = np.mgrid[0:rows - 1, 0:cols - 1]
+    i, j = np.mgrid[0 : rows - 1, 0 : cols - 1]
     a = (i * cols + j).ravel().astype(np.uint32)
     b, c, d = a + 1, a + np.uint32(cols) + 1, a + np.uint32(cols)
     return np.stack([np.stack([a, b, c], 1), np.stack([a, c, d], 1)], axis=1).reshape(-1, 3)
@@ -45,7 +46,7 @@ def tilelet_faces(tset, n: int, stitching: bool = True) -> np.ndarray:
     ring = [post(0, 0), post(1, 0), post(2, 0), post(2, 1), post(2, 2), post(1, 2), post(0, 2), post(0, 1)]
     drop = tset.coarser if stitching else np.zeros(len(lv), np.int32)
     tris = []
-    for side, bit in enumerate((4, 2, 8, 1)):            # S, E, N, W: ring indices 0-1-2, 2-3-4, 4-5-6, 6-7-0
+    for side, bit in enumerate((4, 2, 8, 1)):  # S, E, N, W: ring indices 0-1-2, 2-3-4, 4-5-6, 6-7-0
         a, m, b = ring[2 * side], ring[2 * side + 1], ring[(2 * side + 2) % 8]
         d = (drop & bit) != 0
         tris.append(np.stack([C[d], a[d], b[d]], 1))

@@ -4,17 +4,23 @@ the frame's counters read back from it.
 Each tile's counters are kept in STAT_SLOTS copies, one per screen bin (modulo), so that the fragments of one
 tile rarely add to the same words at once; reading back sums the copies (``max_steps``: their maximum).
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 STAT_FIELDS = ("rays", "hits", "steps", "max_steps", "capped", "shadow_rays", "shadow_steps", "shadow_capped")
-STAT_SLOTS = 64          # copies of each tile's counters (one per screen bin, modulo)
-STAT_STRIDE = 64         # bytes between copies (16 uints: one cache line, 8 used)
-STAT_BIN_SHIFT = 6       # screen bins of 2^6 = 64 pixels a side
-STATS_BINDING, TILE_PARAMS_BINDING = 0, 3     # storage binding of the counters, uniform binding of a tile's block
-LAYOUT_DEFINES = {"STAT_SLOTS": STAT_SLOTS, "STAT_WORDS": STAT_STRIDE // 4, "STAT_BIN_SHIFT": STAT_BIN_SHIFT,
-                  "STATS_BINDING": STATS_BINDING, "TILE_PARAMS_BINDING": TILE_PARAMS_BINDING}
+STAT_SLOTS = 64  # copies of each tile's counters (one per screen bin, modulo)
+STAT_STRIDE = 64  # bytes between copies (16 uints: one cache line, 8 used)
+STAT_BIN_SHIFT = 6  # screen bins of 2^6 = 64 pixels a side
+STATS_BINDING, TILE_PARAMS_BINDING = 0, 3  # storage binding of the counters, uniform binding of a tile's block
+LAYOUT_DEFINES = {
+    "STAT_SLOTS": STAT_SLOTS,
+    "STAT_WORDS": STAT_STRIDE // 4,
+    "STAT_BIN_SHIFT": STAT_BIN_SHIFT,
+    "STATS_BINDING": STATS_BINDING,
+    "TILE_PARAMS_BINDING": TILE_PARAMS_BINDING,
+}
 """The layout above as the shaders' defines (raycast.frag.glsl, tile_block.glsl): their only source of it."""
 
 
@@ -22,7 +28,7 @@ def read_tile_stats(buf, n_items: int) -> np.ndarray:
     """Per tile, its counters (n_items, len(STAT_FIELDS)) int64 from the counters' buffer: copies summed,
     ``max_steps`` their maximum."""
     raw = np.frombuffer(buf.read(size=STAT_SLOTS * STAT_STRIDE * n_items), dtype=np.uint32)
-    raw = raw.reshape(n_items, STAT_SLOTS, STAT_STRIDE // 4)[:, :, :len(STAT_FIELDS)].astype(np.int64)
+    raw = raw.reshape(n_items, STAT_SLOTS, STAT_STRIDE // 4)[:, :, : len(STAT_FIELDS)].astype(np.int64)
     st = raw.sum(axis=1)
     st[:, 3] = raw[:, :, 3].max(axis=1)
     return st

@@ -3,6 +3,7 @@
 Texture units: 0 and 1 a tile's heights and max mipmap (bound per tile), 2 the colour texture, 3 and 5 the
 shadow grid's heights and max mipmap, 4 the tile IDs, 6 the terrain's edges, 8 the earlier passes' depth.
 """
+
 from __future__ import annotations
 
 import numpy as np

@@ -12,6 +12,7 @@ pixel-centre ray (from the camera basis, as View.pixel_dirs_eye), traverses the 
 texel space (mirrored so Dir_x, Dir_y >= 0), intersects the chosen reconstruction, shades the hit and writes
 gl_FragDepth = clip.z / clip.w with the view's reversed-Z ``view_proj_rel``. Misses and capped rays discard.
 """
+
 from __future__ import annotations
 
 from dataclasses import fields
@@ -45,12 +46,14 @@ from .tile_params import TILE_BLOCK, block_stride, outer_bits, tile_params, tile
 
 def _cube_back_face_triangles() -> np.ndarray:
     """36 unit-cube corners (float32), 12 triangles wound counter-clockwise seen from outside the cube."""
-    quads = [((0, 0, 0), (0, 1, 0), (1, 1, 0), (1, 0, 0)),   # bottom, normal -z
-             ((0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)),   # top, +z
-             ((0, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1)),   # south, -y
-             ((0, 1, 0), (0, 1, 1), (1, 1, 1), (1, 1, 0)),   # north, +y
-             ((0, 0, 0), (0, 0, 1), (0, 1, 1), (0, 1, 0)),   # west, -x
-             ((1, 0, 0), (1, 1, 0), (1, 1, 1), (1, 0, 1))]   # east, +x
+    quads = [
+        ((0, 0, 0), (0, 1, 0), (1, 1, 0), (1, 0, 0)),  # bottom, normal -z
+        ((0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)),  # top, +z
+        ((0, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1)),  # south, -y
+        ((0, 1, 0), (0, 1, 1), (1, 1, 1), (1, 1, 0)),  # north, +y
+        ((0, 0, 0), (0, 0, 1), (0, 1, 1), (0, 1, 0)),  # west, -x
+        ((1, 0, 0), (1, 1, 0), (1, 1, 1), (1, 0, 1)),
+    ]  # east, +x
     tris = []
     for a, b, c, d in quads:
         tris += [a, b, c, a, c, d]
@@ -84,8 +87,8 @@ class RaycastStrategy:
         self.stats_buf = ctx.buffer(reserve=STAT_SLOTS * STAT_STRIDE)
         self.edges = TerrainEdges(ctx, hf)
         self.ids = None
-        self.prior = None                       # the frame's earlier passes, for occluded passes
-        self.tile_buf = None                    # the frame's TileParams blocks (tile_params)
+        self.prior = None  # the frame's earlier passes, for occluded passes
+        self.tile_buf = None  # the frame's TileParams blocks (tile_params)
         self._stride = block_stride(ctx.info.get("GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT", 256))
         self._next_id = 1
         self.grid: ShadowGrid | None = None
@@ -101,13 +104,28 @@ class RaycastStrategy:
 
     def _program(self, opts: CastOptions, mode: str):
         opts = self._resolved(opts)
-        key = (opts.reconstruction, opts.traversal, opts.lod is not None, opts.prepass, opts.stats, opts.shadows, mode,
-               opts.occluders)
+        key = (
+            opts.reconstruction,
+            opts.traversal,
+            opts.lod is not None,
+            opts.prepass,
+            opts.stats,
+            opts.shadows,
+            mode,
+            opts.occluders,
+        )
         if key not in self.programs:
-            defines = {"RECON": RECONSTRUCTIONS.index(opts.reconstruction), "NAIVE": int(opts.traversal == "naive"),
-                       "LOD": int(opts.lod is not None), "PREPASS": int(opts.prepass), "STATS": int(opts.stats),
-                       "SHADOWS": int(opts.shadows), "MODE": MODES.index(mode), "OCCLUDERS": int(opts.occluders),
-                       **LAYOUT_DEFINES}
+            defines = {
+                "RECON": RECONSTRUCTIONS.index(opts.reconstruction),
+                "NAIVE": int(opts.traversal == "naive"),
+                "LOD": int(opts.lod is not None),
+                "PREPASS": int(opts.prepass),
+                "STATS": int(opts.stats),
+                "SHADOWS": int(opts.shadows),
+                "MODE": MODES.index(mode),
+                "OCCLUDERS": int(opts.occluders),
+                **LAYOUT_DEFINES,
+            }
             prog = program(self.ctx, "raycast", "box.vert.glsl", "raycast.frag.glsl", defines=defines)
             vao = self.ctx.vertex_array(prog, [(self.cube, "3f", "corner")])
             self.programs[key] = (prog, vao)
@@ -119,7 +137,10 @@ class RaycastStrategy:
         the copy of a frame's earlier passes, terrain edges, shadow grid."""
         grid = (self.grid.tex.heights, self.grid.tex.maxmip) if self.grid is not None else ()
         prior = (*self.prior.color_attachments, self.prior.depth_attachment) if self.prior is not None else ()
-        return gl_bytes(self.texture, self.cube, self.stats_buf, self.ids, self.tile_buf, *prior, *grid) + self.edges.nbytes
+        return (
+            gl_bytes(self.texture, self.cube, self.stats_buf, self.ids, self.tile_buf, *prior, *grid)
+            + self.edges.nbytes
+        )
 
     # --- tiles ------------------------------------------------------------------------------------
     @staticmethod
@@ -160,7 +181,9 @@ class RaycastStrategy:
             self._release_prior()
             depth = depth32f_texture(self.ctx, tuple(size))
             depth.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
-            self.prior = self.ctx.framebuffer(color_attachments=[self.ctx.texture(tuple(size), 4)], depth_attachment=depth)
+            self.prior = self.ctx.framebuffer(
+                color_attachments=[self.ctx.texture(tuple(size), 4)], depth_attachment=depth
+            )
         return self.prior
 
     def _release_prior(self) -> None:
@@ -206,7 +229,7 @@ class RaycastStrategy:
     def _occluder_uniforms(self, prog, target, view) -> None:
         """A copy of the depth drawn so far this frame, bound for the rays to stop behind it."""
         prior = self._prior_target(tuple(target.size))
-        self.ctx.copy_framebuffer(prior, target.fbo)       # depth (and colour) drawn so far this frame
+        self.ctx.copy_framebuffer(prior, target.fbo)  # depth (and colour) drawn so far this frame
         prior.depth_attachment.use(8)
         set_uniform(prog, "prior_depth", 8)
         n, f = float(view.near), float(view.far)
@@ -215,7 +238,7 @@ class RaycastStrategy:
     def _id_framebuffer(self, prog, target, size: tuple[int, int], n_items: int):
         """The tile-ID pre-pass's framebuffer over the target's depth, its IDs texture bound for the cast pass."""
         ids = self._ids_texture(size)
-        if self._next_id + n_items >= 2 ** 32 - 1:
+        if self._next_id + n_items >= 2**32 - 1:
             ids.write(np.zeros(size[0] * size[1], np.uint32).tobytes())
             self._next_id = 1
         ids.use(4)
@@ -233,8 +256,9 @@ class RaycastStrategy:
         try:
             self._tile_blocks(view, items, opts)
             for k, (g, _tile, _sel) in enumerate(items):
-                self.tile_buf.bind_to_uniform_block(TILE_PARAMS_BINDING, offset=k * self._stride,
-                                                    size=TILE_BLOCK.itemsize)
+                self.tile_buf.bind_to_uniform_block(
+                    TILE_PARAMS_BINDING, offset=k * self._stride, size=TILE_BLOCK.itemsize
+                )
                 if id_fbo is not None:
                     id_fbo.use()
                     ctx.depth_func = ">"
@@ -258,8 +282,16 @@ class RaycastStrategy:
         lod_scale = K / float(opts.lod) if opts.lod else 0.0
         eye = np.asarray(view.eye, dtype=np.float64)
         # a tile drawn for a missing one (hybrid.uploads) has that one's clip and heights: its row is made here
-        rows = np.stack([g.row if g.row is not None and g.bounds == (t.clip, t.zmin, t.zmax) else tile_row(g, t)
-                         for g, t, _ in items]) if items else None
+        rows = (
+            np.stack(
+                [
+                    g.row if g.row is not None and g.bounds == (t.clip, t.zmin, t.zmax) else tile_row(g, t)
+                    for g, t, _ in items
+                ]
+            )
+            if items
+            else None
+        )
         blocks = tile_params(items, eye, self.hf, lod_scale, opts.max_steps, self._next_id, self._stride, rows)
         if self.tile_buf is None or self.tile_buf.size < blocks.nbytes:
             if self.tile_buf is not None:
@@ -272,7 +304,7 @@ class RaycastStrategy:
         ``last_tile_stats``."""
         if not (opts.stats and items):
             return frame_counters(None, opts, items, grid)
-        gl_finish(self.ctx)                 # the wait lets other threads (the tile loader) run
+        gl_finish(self.ctx)  # the wait lets other threads (the tile loader) run
         self.last_tile_stats = read_tile_stats(self.stats_buf, len(items))
         return frame_counters(self.last_tile_stats, opts, items, grid)
 
@@ -282,8 +314,16 @@ class RaycastStrategy:
             vao.release()
             prog.release()
         self.programs.clear()
-        for o in (self.prepass_vao, self.prepass_prog, self.cube, self.stats_buf, self.texture, self.ids, self.edges,
-                  self.tile_buf):
+        for o in (
+            self.prepass_vao,
+            self.prepass_prog,
+            self.cube,
+            self.stats_buf,
+            self.texture,
+            self.ids,
+            self.edges,
+            self.tile_buf,
+        ):
             if o is not None:
                 o.release()
         if self.grid is not None:

@@ -6,6 +6,7 @@ bounds them. planes: the cell's box top at H; linear: the ray's height above the
 linear between the segment's ends; triangles: the cell's two triangles, split along its diagonal from corner
 (0, 0) to (1, 1); bilinear: the bilinear patch, exactly (a quadratic along the segment).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -18,8 +19,9 @@ FAR = 1e30
 
 
 def _bilin(hc, f):
-    return (hc[:, 0] * (1 - f[:, 0]) + hc[:, 1] * f[:, 0]) * (1 - f[:, 1]) + \
-           (hc[:, 2] * (1 - f[:, 0]) + hc[:, 3] * f[:, 0]) * f[:, 1]
+    return (hc[:, 0] * (1 - f[:, 0]) + hc[:, 1] * f[:, 0]) * (1 - f[:, 1]) + (
+        hc[:, 2] * (1 - f[:, 0]) + hc[:, 3] * f[:, 0]
+    ) * f[:, 1]
 
 
 def _tri(hc, f, lower):

@@ -8,6 +8,7 @@ coordinate exactly to the texel edge, descends the max mipmap on a possible hit 
 2x2 block (Dick et al. 3.1-3.2), and intersects the chosen reconstruction in the final cells
 (``raycast.cpu_traversal``, ``raycast.cell_hits``).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -39,8 +40,23 @@ class RayHits:
         return self.status == HIT
 
 
-def cast_rays(heights, ext, zr, O, D, *, reconstruction="triangles", traversal="maxmip", tmin=0.0, lmin=0,
-              spacing=1.0, lod_k=None, max_steps=None, outer=0, under=False) -> RayHits:
+def cast_rays(
+    heights,
+    ext,
+    zr,
+    O,
+    D,
+    *,
+    reconstruction="triangles",
+    traversal="maxmip",
+    tmin=0.0,
+    lmin=0,
+    spacing=1.0,
+    lod_k=None,
+    max_steps=None,
+    outer=0,
+    under=False,
+) -> RayHits:
     """Cast rays O + t D (M x 3, texel space) through a grid of (N+1)² heights (metres) covering [0, ext] in
     x, y and zr in z; first hits with t >= tmin. spacing: metres per texel, one number or an (x, y) pair;
     lod_k = max(spacing) * K / tau turns on the LOD stop (maxmip only); outer is the mask (W 1, E 2, S 4, N 8)
@@ -84,8 +100,7 @@ def cast_tile_rays(tile, eye, dirs, *, near=0.0, outer=0, under=False, **options
     hybrid.tiles.quantize); options as cast_rays. Points in tile texels."""
     O, D, ext, zr = tile_frame(tile, eye, dirs)
     h = quantized_heights(tile.heights, getattr(tile, "source_step", None))
-    return cast_rays(h, ext, zr, O, D, tmin=near, spacing=tile.spacing_xy, outer=outer, under=under,
-                     **options)
+    return cast_rays(h, ext, zr, O, D, tmin=near, spacing=tile.spacing_xy, outer=outer, under=under, **options)
 
 
 def texel_to_world(tile, point) -> np.ndarray:

@@ -7,6 +7,7 @@ reconstruction in a final cell (``raycast.cell_hits``), descends the max mipmap 
 the cell's exit, ascending when the ray leaves a 2x2 block (Dick et al. 3.1-3.2); with the LOD stop a cell is
 final once it is fine enough for the distance from the eye.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -29,10 +30,10 @@ class CastGrid:
 
     h: np.ndarray
     flat: np.ndarray
-    offs: np.ndarray           # where each max-mip level starts in flat
+    offs: np.ndarray  # where each max-mip level starts in flat
     n: int
-    ltop: int                  # the coarsest level a ray climbs to
-    lmin: int                  # the level whose cells are intersected
+    ltop: int  # the coarsest level a ray climbs to
+    lmin: int  # the level whose cells are intersected
     ext: np.ndarray
     zr0: float
     zr1: float
@@ -52,16 +53,16 @@ class RayState:
     point: np.ndarray
     level: np.ndarray
     steps: np.ndarray
-    P: np.ndarray              # where the ray stands, at s = sP past the entry point P0: every exit is P0 + s D
+    P: np.ndarray  # where the ray stands, at s = sP past the entry point P0: every exit is P0 + s D
     P0: np.ndarray
     sP: np.ndarray
     D: np.ndarray
-    Om: np.ndarray             # the origin, mirrored (the LOD's distances)
-    lvl: np.ndarray            # the max-mip level of its cell
-    moved: np.ndarray          # left its entry point
-    mx: np.ndarray             # mirrored in x, in y
+    Om: np.ndarray  # the origin, mirrored (the LOD's distances)
+    lvl: np.ndarray  # the max-mip level of its cell
+    moved: np.ndarray  # left its entry point
+    mx: np.ndarray  # mirrored in x, in y
     my: np.ndarray
-    hi_xy: np.ndarray          # the grid's far sides, mirrored
+    hi_xy: np.ndarray  # the grid's far sides, mirrored
     under: np.ndarray
     no_entry_hit: np.ndarray
 
@@ -95,11 +96,23 @@ def cast_grid(heights, ext, zr, reconstruction, traversal, lmin, spacing, lod_k,
     levels = maxmip_levels(h32)
     n = h32.shape[0] - 1
     ltop = max(level_count(n) - 2, 0)
-    return CastGrid(h=h32.astype(np.float64), flat=np.concatenate([a.ravel() for a in levels]).astype(np.float64),
-                 offs=np.cumsum([0] + [a.size for a in levels]), n=n, ltop=ltop, lmin=min(int(lmin), ltop),
-                 ext=np.asarray(ext, dtype=np.float64), zr0=float(zr[0]), zr1=float(zr[1]), spacing=spacing,
-                 lod_k=lod_k, lod=lod_k is not None and traversal == "maxmip", reconstruction=reconstruction,
-                 traversal=traversal, cap=int(max_steps or default_max_steps(n)))
+    return CastGrid(
+        h=h32.astype(np.float64),
+        flat=np.concatenate([a.ravel() for a in levels]).astype(np.float64),
+        offs=np.cumsum([0] + [a.size for a in levels]),
+        n=n,
+        ltop=ltop,
+        lmin=min(int(lmin), ltop),
+        ext=np.asarray(ext, dtype=np.float64),
+        zr0=float(zr[0]),
+        zr1=float(zr[1]),
+        spacing=spacing,
+        lod_k=lod_k,
+        lod=lod_k is not None and traversal == "maxmip",
+        reconstruction=reconstruction,
+        traversal=traversal,
+        cap=int(max_steps or default_max_steps(n)),
+    )
 
 
 def _box_entry(g: CastGrid, O, D, tmin: float):
@@ -150,9 +163,24 @@ def enter(g: CastGrid, O, D, tmin: float, outer: int, under) -> tuple[RayState, 
     P[:, :2] = np.clip(P[:, :2], lo_xy, hi_xy)
     # rays under the sheet step every lmin texel (no ascent, no LOD), as traverse.glsl
     lvl = np.where(under | (g.traversal == "naive"), g.lmin, g.ltop).astype(np.int64)
-    rays = RayState(status=np.zeros(M, np.int8), point=np.full((M, 3), np.nan), level=np.zeros(M, np.int64),
-                 steps=np.zeros(M, np.int64), P=P, P0=P.copy(), sP=np.zeros(M), D=D, Om=Om, lvl=lvl,
-                 moved=np.zeros(M, bool), mx=mx, my=my, hi_xy=hi_xy, under=under, no_entry_hit=no_entry_hit)
+    rays = RayState(
+        status=np.zeros(M, np.int8),
+        point=np.full((M, 3), np.nan),
+        level=np.zeros(M, np.int64),
+        steps=np.zeros(M, np.int64),
+        P=P,
+        P0=P.copy(),
+        sP=np.zeros(M),
+        D=D,
+        Om=Om,
+        lvl=lvl,
+        moved=np.zeros(M, bool),
+        mx=mx,
+        my=my,
+        hi_xy=hi_xy,
+        under=under,
+        no_entry_hit=no_entry_hit,
+    )
     return rays, np.nonzero(~dead)[0]
 
 
@@ -200,8 +228,9 @@ def _cells(g: CastGrid, r: RayState, act: np.ndarray) -> _Cells:
     with np.errstate(divide="ignore", invalid="ignore"):
         dtx = np.where(Da[:, 0] > 0, (e[:, 0] - P0a[:, 0]) / Da[:, 0], FAR)
         dty = np.where(Da[:, 1] > 0, (e[:, 1] - P0a[:, 1]) / Da[:, 1], FAR)
-        dtz = np.where(Da[:, 2] < 0, (g.zr0 - P0a[:, 2]) / Da[:, 2],
-                       np.where(Da[:, 2] > 0, (g.zr1 - P0a[:, 2]) / Da[:, 2], FAR))
+        dtz = np.where(
+            Da[:, 2] < 0, (g.zr0 - P0a[:, 2]) / Da[:, 2], np.where(Da[:, 2] > 0, (g.zr1 - P0a[:, 2]) / Da[:, 2], FAR)
+        )
     dt = np.maximum(np.minimum(np.minimum(dtx, dty), dtz), r.sP[act])
     cx, cy, cz = dtx <= dt, dty <= dt, dtz <= dt
     X = P0a + dt[:, None] * Da
@@ -256,8 +285,15 @@ def _test_cells(g: CastGrid, r: RayState, c: _Cells, test: np.ndarray) -> tuple[
     Am, Bm = A.copy(), B.copy()
     Am[:, 2] *= sg
     Bm[:, 2] *= sg
-    u = cell_hit(g.reconstruction, Am, Bm, np.stack([cx0, cy0], 1).astype(np.float64), S.astype(np.float64),
-                 hc * sg[:, None], c.H[ti] * sg)
+    u = cell_hit(
+        g.reconstruction,
+        Am,
+        Bm,
+        np.stack([cx0, cy0], 1).astype(np.float64),
+        S.astype(np.float64),
+        hc * sg[:, None],
+        c.H[ti] * sg,
+    )
     got = u >= 0
     gi = ti[got]
     ug = u[got]
@@ -319,4 +355,4 @@ def _lod_final(l, ij, H, Om, zlo, spacing, lod_k):
     hi = lo + s[:, None]
     dxy = np.maximum(np.maximum(lo - Om[:, :2], Om[:, :2] - hi), 0.0) * spacing
     dz = np.maximum(np.maximum(zlo - Om[:, 2], Om[:, 2] - H), 0.0)
-    return s * lod_k <= np.sqrt((dxy ** 2).sum(axis=1) + dz ** 2)
+    return s * lod_k <= np.sqrt((dxy**2).sum(axis=1) + dz**2)

@@ -5,6 +5,7 @@ the same: then only the codes of the changed samples are written and only the ma
 (``raycast.maxmip.texel_windows``). An edit that changes the tile's quantisation (its height range, or heights
 leaving the source's step) changes every code, and the whole tile is written again into the same textures.
 """
+
 from __future__ import annotations
 
 from typing import Any, cast
@@ -23,9 +24,9 @@ def follow_tile(strategy: RaycastStrategy, gpu: GpuTile, tile, win: Window) -> b
     over ``win`` (tile-local rows and columns, clipped to the tile); True when only the window was written."""
     qz = quantize(tile.heights, getattr(tile, "source_step", None))
     same = (qz.offset, qz.step, qz.base) == (gpu.offset, gpu.step, gpu.base)
-    n, heights = gpu.n, cast(Any, gpu.heights)             # a moderngl texture
+    n, heights = gpu.n, cast(Any, gpu.heights)  # a moderngl texture
     if same and win.empty:
-        pass                                            # none of the tile's own samples changed
+        pass  # none of the tile's own samples changed
     elif same:
         codes = np.ascontiguousarray(qz.q[win.slices()])
         heights.write(codes.tobytes(), viewport=(win.j0, win.i0, win.j1 - win.j0, win.i1 - win.i0))
@@ -46,8 +47,9 @@ def local_window(win: Window, key, n: int, rows: int, cols: int) -> Window:
 
     def axis(lo: int, hi: int, first: int, count: int) -> tuple[int, int]:
         a = max(-(-(lo - first) // k), 0)
-        b = n + 1 if hi >= count else min((hi - 1 - first) // k + 1, n + 1)   # samples past the grid repeat its last
+        b = n + 1 if hi >= count else min((hi - 1 - first) // k + 1, n + 1)  # samples past the grid repeat its last
         return a, max(a, b)
+
     a0, a1 = axis(win.i0, win.i1, i0, rows)
     b0, b1 = axis(win.j0, win.j1, j0, cols)
     return Window(a0, a1, b0, b1)

@@ -4,6 +4,7 @@ A tile is 16-bit height codes (hybrid.tiles.quantize: exact on a 16-bit source's
 the error measured) in an R16UI (N+1)² texture, and its max mipmap of codes without level 0 in an R16UI (N/2)²
 texture (raycast.maxmip), built on the GPU.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -22,7 +23,7 @@ class GpuTile:
     """One tile on the GPU: R16UI (N+1)² height codes and their R16UI (N/2)² max mipmap (levels 1..log2 N);
     exact byte count; metres = offset + step * (code + base); quant_error: largest |height - dequantised| (m)."""
 
-    heights: Any                        # moderngl textures
+    heights: Any  # moderngl textures
     maxmip: Any
     n: int
     nbytes: int
@@ -30,8 +31,8 @@ class GpuTile:
     step: float = 1.0
     base: int = 0
     quant_error: float = 0.0
-    row: np.ndarray | None = None       # tile_row of the tile uploaded (None: a grid, not a tile)
-    bounds: tuple = ()                  # that tile's clip, zmin and zmax, to tell it from a tile drawn in its place
+    row: np.ndarray | None = None  # tile_row of the tile uploaded (None: a grid, not a tile)
+    bounds: tuple = ()  # that tile's clip, zmin and zmax, to tell it from a tile drawn in its place
 
     @property
     def bytes_per_sample(self) -> float:

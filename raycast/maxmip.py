@@ -11,6 +11,7 @@ k+1; the traversal takes level 0 from the four corner heights. Dequantisation is
 of codes is the code of the maximum, and the GPU builder (compute shaders) gives exactly ``maxmip_levels``
 of the codes. Bytes: 2 (N+1)² + 2 (N²/4) 4/3, about 2.67 a sample.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -71,10 +72,10 @@ def update_levels(levels: list[np.ndarray], heights, win: Window) -> None:
     h = _check_heights(heights)
     n = h.shape[0] - 1
     a0, a1, b0, b1 = max(win.i0 - 1, 0), min(win.i1, n), max(win.j0 - 1, 0), min(win.j1, n)
-    s = h[a0:a1 + 1, b0:b1 + 1]
+    s = h[a0 : a1 + 1, b0 : b1 + 1]
     levels[0][a0:a1, b0:b1] = np.maximum(np.maximum(s[:-1, :-1], s[:-1, 1:]), np.maximum(s[1:, :-1], s[1:, 1:]))
     for k, (r0, r1, c0, c1) in enumerate(texel_windows(n, win), start=1):
-        below = levels[k - 1][2 * r0:2 * r1, 2 * c0:2 * c1]
+        below = levels[k - 1][2 * r0 : 2 * r1, 2 * c0 : 2 * c1]
         m0, m1 = r1 - r0, c1 - c0
         levels[k][r0:r1, c0:c1] = below.reshape(m0, 2, m1, 2).max(axis=(1, 3))
 

@@ -1,4 +1,5 @@
 """Options of the ray caster (reconstruction, traversal, pre-pass, LOD, shading mode, shadows, caps), checked."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
@@ -47,7 +48,9 @@ class CastOptions:
 
     def __post_init__(self):
         if self.reconstruction not in RECONSTRUCTIONS:
-            raise TerrabenchError(f"reconstruction must be one of {', '.join(RECONSTRUCTIONS)}, got {self.reconstruction!r}")
+            raise TerrabenchError(
+                f"reconstruction must be one of {', '.join(RECONSTRUCTIONS)}, got {self.reconstruction!r}"
+            )
         if self.traversal not in TRAVERSALS:
             raise TerrabenchError(f"traversal must be one of {', '.join(TRAVERSALS)}, got {self.traversal!r}")
         if self.mode is not None and self.mode not in MODES:
@@ -62,8 +65,11 @@ class CastOptions:
                 raise TerrabenchError(f"lod must be None or a tau in pixels in (0, 1e6), got {self.lod!r}")
             if self.traversal == "naive":
                 raise TerrabenchError("lod needs traversal='maxmip' (naive stepping stays at level 0)")
-        if self.max_steps is not None and (isinstance(self.max_steps, bool) or not isinstance(self.max_steps, int)
-                                           or not (1 <= self.max_steps <= 1_000_000)):
+        if self.max_steps is not None and (
+            isinstance(self.max_steps, bool)
+            or not isinstance(self.max_steps, int)
+            or not (1 <= self.max_steps <= 1_000_000)
+        ):
             raise TerrabenchError(f"max_steps must be None or an integer in [1, 1000000], got {self.max_steps!r}")
         if isinstance(self.heat_max, bool) or not isinstance(self.heat_max, (int, float)) or not self.heat_max > 0:
             raise TerrabenchError(f"heat_max must be a number of steps > 0, got {self.heat_max!r}")

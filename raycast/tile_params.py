@@ -4,6 +4,7 @@ tile_block.glsl, one block a tile, so that a tile's draw binds a range instead o
 Every field is computed for all of the frame's tiles at once; only the tiles' own attributes are gathered
 tile by tile.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -13,15 +14,58 @@ from .options import default_max_steps
 
 # std140 offsets of TileParams (tile_block.glsl): dvec2 and vec3 align to 16 bytes, vec2 to 8, scalars to 4;
 # a scalar may follow a vec3 in its last 4 bytes; the block's size rounds up to 16
-TILE_BLOCK = np.dtype({
-    "names": ["dq", "box_lo", "dq_base", "box_hi", "n_cells", "eye_tex", "n_levels", "origin_rel", "tile_level",
-              "ext_lo", "ext", "zr", "spacing", "uv_off", "uv_scale", "g_tile_off", "lod_k", "max_steps", "outer",
-              "tile_index", "tile_id"],
-    "formats": [("<f8", 2), ("<f4", 3), "<i4", ("<f4", 3), "<i4", ("<f4", 3), "<i4", ("<f4", 3), "<i4",
-                ("<f4", 2), ("<f4", 2), ("<f4", 2), ("<f4", 2), ("<f4", 2), ("<f4", 2), ("<f4", 2), "<f4", "<i4",
-                "<i4", "<i4", "<u4"],
-    "offsets": [0, 16, 28, 32, 44, 48, 60, 64, 76, 80, 88, 96, 104, 112, 120, 128, 136, 140, 144, 148, 152],
-    "itemsize": 160})
+TILE_BLOCK = np.dtype(
+    {
+        "names": [
+            "dq",
+            "box_lo",
+            "dq_base",
+            "box_hi",
+            "n_cells",
+            "eye_tex",
+            "n_levels",
+            "origin_rel",
+            "tile_level",
+            "ext_lo",
+            "ext",
+            "zr",
+            "spacing",
+            "uv_off",
+            "uv_scale",
+            "g_tile_off",
+            "lod_k",
+            "max_steps",
+            "outer",
+            "tile_index",
+            "tile_id",
+        ],
+        "formats": [
+            ("<f8", 2),
+            ("<f4", 3),
+            "<i4",
+            ("<f4", 3),
+            "<i4",
+            ("<f4", 3),
+            "<i4",
+            ("<f4", 3),
+            "<i4",
+            ("<f4", 2),
+            ("<f4", 2),
+            ("<f4", 2),
+            ("<f4", 2),
+            ("<f4", 2),
+            ("<f4", 2),
+            ("<f4", 2),
+            "<f4",
+            "<i4",
+            "<i4",
+            "<i4",
+            "<u4",
+        ],
+        "offsets": [0, 16, 28, 32, 44, 48, 60, 64, 76, 80, 88, 96, 104, 112, 120, 128, 136, 140, 144, 148, 152],
+        "itemsize": 160,
+    }
+)
 
 
 def outer_bits(clip: np.ndarray, hf) -> np.ndarray:
@@ -31,8 +75,12 @@ def outer_bits(clip: np.ndarray, hf) -> np.ndarray:
     ox, oy = float(hf.origin[0]), float(hf.origin[1])
     w, d = hf.extent
     tol = 1e-6 * min(hf.spacing_x, hf.spacing_y)
-    return ((np.abs(clip[:, 0] - ox) <= tol) * 1 | (np.abs(clip[:, 2] - (ox + w)) <= tol) * 2
-            | (np.abs(clip[:, 1] - oy) <= tol) * 4 | (np.abs(clip[:, 3] - (oy + d)) <= tol) * 8)
+    return (
+        (np.abs(clip[:, 0] - ox) <= tol) * 1
+        | (np.abs(clip[:, 2] - (ox + w)) <= tol) * 2
+        | (np.abs(clip[:, 1] - oy) <= tol) * 4
+        | (np.abs(clip[:, 3] - (oy + d)) <= tol) * 8
+    )
 
 
 def block_stride(alignment: int) -> int:
@@ -42,7 +90,7 @@ def block_stride(alignment: int) -> int:
     return -(-TILE_BLOCK.itemsize // a) * a
 
 
-ROW_WORDS = 17                 # tile_row: clip 4, origin 3, spacing 2, zmin, zmax, offset, step, error, n, base, level
+ROW_WORDS = 17  # tile_row: clip 4, origin 3, spacing 2, zmin, zmax, offset, step, error, n, base, level
 
 
 def tile_row(gt, tile) -> np.ndarray:
@@ -50,12 +98,34 @@ def tile_row(gt, tile) -> np.ndarray:
     float64 clip rectangle, origin of sample [0, 0] (world metres), spacing x and y, zmin, zmax (metres), the
     codes' offset, step and largest error (metres), cells a side, code base and pyramid level."""
     level = int(tile.key.level) if hasattr(tile, "key") else 0
-    return np.array([*tile.clip, *tile.origin, *tile.spacing_xy, tile.zmin, tile.zmax, gt.offset, gt.step,
-                     gt.quant_error, gt.n, gt.base, level], dtype=np.float64)
+    return np.array(
+        [
+            *tile.clip,
+            *tile.origin,
+            *tile.spacing_xy,
+            tile.zmin,
+            tile.zmax,
+            gt.offset,
+            gt.step,
+            gt.quant_error,
+            gt.n,
+            gt.base,
+            level,
+        ],
+        dtype=np.float64,
+    )
 
 
-def tile_params(items, eye, hf, lod_k_scale: float, max_steps: int | None, first_id: int, stride: int,
-                rows: np.ndarray | None = None) -> np.ndarray:
+def tile_params(
+    items,
+    eye,
+    hf,
+    lod_k_scale: float,
+    max_steps: int | None,
+    first_id: int,
+    stride: int,
+    rows: np.ndarray | None = None,
+) -> np.ndarray:
     """The TileParams blocks (bytes laid out ``stride`` apart, as a (B, stride) uint8 array) of the frame's
     (gpu_tile, tile, selected) items for an eye (world metres); ``lod_k_scale`` is K / lod (0: no LOD),
     ``first_id`` the first tile's pre-pass ID; ``rows`` (B, ROW_WORDS), the items' ``tile_row`` where the caller
@@ -69,17 +139,21 @@ def tile_params(items, eye, hf, lod_k_scale: float, max_steps: int | None, first
     ox, oy = float(hf.origin[0]), float(hf.origin[1])
     ext_w, ext_d = hf.extent
     pad = 1e-3 * sp.max(axis=1) + 0.01
-    zq = g[:, 2]                                    # the codes' heights lie within zq of the tile's bounds
+    zq = g[:, 2]  # the codes' heights lie within zq of the tile's bounds
     out = np.zeros(b, TILE_BLOCK)
     out["dq"] = g[:, :2]
     out["box_lo"] = np.stack([clip[:, 0] - pad, clip[:, 1] - pad, z[:, 0] - zq - pad], axis=1) - eye
     out["box_hi"] = np.stack([clip[:, 2] + pad, clip[:, 3] + pad, z[:, 1] + zq + pad], axis=1) - eye
     out["n_cells"], out["dq_base"], out["tile_level"] = ints[:, 0], ints[:, 1], ints[:, 2]
-    per_n = {int(n): (level_count(int(n)) - 1, max_steps or default_max_steps(int(n))) for n in set(ints[:, 0].tolist())}
+    per_n = {
+        int(n): (level_count(int(n)) - 1, max_steps or default_max_steps(int(n))) for n in set(ints[:, 0].tolist())
+    }
     out["n_levels"] = [per_n[n][0] for n in ints[:, 0].tolist()]
-    out["eye_tex"] = np.column_stack([(eye[0] - org[:, 0]) / sp[:, 0], (eye[1] - org[:, 1]) / sp[:, 1], eye[2] - org[:, 2]])
+    out["eye_tex"] = np.column_stack(
+        [(eye[0] - org[:, 0]) / sp[:, 0], (eye[1] - org[:, 1]) / sp[:, 1], eye[2] - org[:, 2]]
+    )
     out["origin_rel"] = org - eye
-    out["ext_lo"] = (clip[:, :2] - org[:, :2]) / sp            # texels from the tile's origin
+    out["ext_lo"] = (clip[:, :2] - org[:, :2]) / sp  # texels from the tile's origin
     out["ext"] = (clip[:, 2:] - org[:, :2]) / sp
     out["zr"] = np.column_stack([z[:, 0] - zq - org[:, 2], z[:, 1] + zq - org[:, 2]])
     out["spacing"] = sp
@@ -92,5 +166,5 @@ def tile_params(items, eye, hf, lod_k_scale: float, max_steps: int | None, first
     out["tile_index"] = np.arange(b)
     out["tile_id"] = first_id + np.arange(b)
     blocks = np.zeros((b, stride), np.uint8)
-    blocks[:, :TILE_BLOCK.itemsize] = out.view(np.uint8).reshape(b, TILE_BLOCK.itemsize)
+    blocks[:, : TILE_BLOCK.itemsize] = out.view(np.uint8).reshape(b, TILE_BLOCK.itemsize)
     return blocks

@@ -4,6 +4,7 @@ Every test that needs the GL context (through the ``ctx`` fixture, directly or t
 is marked ``gl``: it is skipped where no headless EGL context can be made, and fails when it leaves a GL
 error behind. Tests without the marker run without any GL context.
 """
+
 import os
 import tempfile
 
@@ -30,6 +31,7 @@ def ctx():
     """The one headless GL context of the test session (reversed-Z clip control set); skip without one."""
     from hybrid.errors import GLContextError
     from hybrid.gl.context import shared_context
+
     try:
         return shared_context()
     except GLContextError as exc:
@@ -62,8 +64,11 @@ def gl_error_check(request):
     ctx = request.getfixturevalue("ctx")
     stale = gl_errors(ctx)
     if stale:
-        pytest.fail(f"GL error(s) {stale} pending before {request.node.nodeid}: raised by fixture setup or "
-                    f"by an earlier test's teardown", pytrace=False)
+        pytest.fail(
+            f"GL error(s) {stale} pending before {request.node.nodeid}: raised by fixture setup or "
+            f"by an earlier test's teardown",
+            pytrace=False,
+        )
     yield
     raised = gl_errors(ctx)
     if raised:
@@ -91,4 +96,5 @@ def synthetic():
         if (name, size, seed) not in cache:
             cache[(name, size, seed)] = get_dataset(name, size=size, seed=seed)
         return cache[(name, size, seed)]
+
     return make

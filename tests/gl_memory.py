@@ -4,6 +4,7 @@ The expected byte counts of the memory tests come from here, not from the size f
 buffer's size is moderngl's ``Buffer.size``; a texture's is its texel size (components x the byte size of
 its moderngl dtype) times the texels of every mip level the driver reports (glGetTextureLevelParameteriv).
 """
+
 import ctypes
 import dataclasses
 
@@ -42,15 +43,24 @@ def gl_objects(obj):
     it holds, directly or as a dict's values, such as a dataclass of textures or a holder of a uniform
     buffer)."""
     held = (w for v in vars(obj).values() for w in (v.values() if isinstance(v, dict) else (v,)))
-    for v in held:                                                # a dict: e.g. a strategy's heaps by cell count
+    for v in held:  # a dict: e.g. a strategy's heaps by cell count
         if isinstance(v, (moderngl.Buffer, moderngl.Texture)):
             yield v
-        elif isinstance(v, moderngl.Framebuffer):                  # a held render target: its attachments
+        elif isinstance(v, moderngl.Framebuffer):  # a held render target: its attachments
             yield from (t for t in (*v.color_attachments, v.depth_attachment) if isinstance(t, moderngl.Texture))
-        elif ((dataclasses.is_dataclass(v) and not isinstance(v, type)) or
-                (type(v).__module__.split(".")[0] in ("raster", "raycast", "hybrid") and hasattr(v, "__dict__")
-                 and not callable(v) and not isinstance(v, type))) \
-                and v is not obj and not hasattr(v, "hf"):       # strategies hold the terrain, not its GPU copies
+        elif (
+            (
+                (dataclasses.is_dataclass(v) and not isinstance(v, type))
+                or (
+                    type(v).__module__.split(".")[0] in ("raster", "raycast", "hybrid")
+                    and hasattr(v, "__dict__")
+                    and not callable(v)
+                    and not isinstance(v, type)
+                )
+            )
+            and v is not obj
+            and not hasattr(v, "hf")
+        ):  # strategies hold the terrain, not its GPU copies
             yield from gl_objects(v)
 
 

@@ -1,4 +1,5 @@
 """Helpers shared by the raster tests: views along tile borders and across level transitions, hole counts."""
+
 import numpy as np
 
 from hybrid.camera.view import View

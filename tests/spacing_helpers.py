@@ -1,4 +1,5 @@
 """Terrains and views for the non-square ground spacing tests: one seeded 129² height grid under several spacings."""
+
 from functools import cache
 
 import numpy as np
@@ -29,13 +30,23 @@ def views(hf: HeightField, width: int = SIZE[0], height: int = SIZE[1]) -> list[
     lo, hi = hf.height_range
     size = max(w, d)
     c = np.array([ox + 0.5 * w, oy + 0.5 * d, oz + lo])
-    out = [View(c + [-0.3 * w, -0.4 * d, hi - lo + 0.6 * size], c + [0.05 * w, 0.1 * d, 0.0], 60, width, height,
-                near=1.0, far=1e5)]
+    out = [
+        View(
+            c + [-0.3 * w, -0.4 * d, hi - lo + 0.6 * size],
+            c + [0.05 * w, 0.1 * d, 0.0],
+            60,
+            width,
+            height,
+            near=1.0,
+            far=1e5,
+        )
+    ]
     for (fx, fy), lift, (tx, ty) in (((0.9, 0.4), 120.0, (0.1, 0.6)), ((0.35, 0.85), 150.0, (0.6, 0.1))):
         x, y = ox + fx * w, oy + fy * d
         z = float(hf.ground_height(x, y)) + lift
         out.append(View([x, y, z], [ox + tx * w, oy + ty * d, oz + lo], 60, width, height, near=1.0, far=1e5))
     x, y = ox + 0.2 * w, oy + 0.3 * d
-    out.append(View([x, y, oz + hi + 100.0], [ox + 0.8 * w, oy + 0.75 * d, oz + lo], 60, width, height,
-                    near=1.0, far=1e5))
+    out.append(
+        View([x, y, oz + hi + 100.0], [ox + 0.8 * w, oy + 0.75 * d, oz + lo], 60, width, height, near=1.0, far=1e5)
+    )
     return out

@@ -1,5 +1,6 @@
 """Bad input everywhere a user can reach: one clear message naming the argument, exit code 2 for the CLI,
 a TerrabenchError for the API, and nothing partially written."""
+
 import numpy as np
 import pytest
 
@@ -7,60 +8,97 @@ from experiments.cli import main
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.heightfield import HeightField
 
-UNWRITABLE = "/proc/terrabench-out"          # not writable, even for root
+UNWRITABLE = "/proc/terrabench-out"  # not writable, even for root
 
 
-@pytest.mark.parametrize("argv, match", [
-    (["render", "--out", UNWRITABLE + "/a.png"], "does not exist"),
-    (["render", "--out", "/proc/a.png"], "not a writable folder"),
-    (["render", "--out", "OUT/a.png", "--method", "raycast", "--reconstruction", "cubic"], "reconstruction"),
-    (["render", "--out", "OUT/a.png", "--method", "raycast", "--traversal", "teleport"], "traversal"),
-    (["render", "--out", "OUT/a.png", "--method", "raster", "--shadows"], "--method raycast only"),
-    (["render", "--out", "OUT/a.png", "--method", "raycast", "--wireframe"], "raster methods"),
-    (["render", "--out", "OUT/a.png", "--method", "raycast", "--no-lean"], "--no-lean applies"),
-    (["render", "--out", "OUT/a.png", "--method", "raycast", "--full-res", "exact"], "--full-res applies"),
-    (["render", "--out", "OUT/a.png", "--method", "raster", "--show-strategy"], "mixed policy"),
-    (["render", "--out", "OUT/a.png", "--tile-size", "100"], "power of two"),
-    (["render", "--out", "OUT/a.png", "--dataset", "fbm", "--size-samples", "2"], "dataset size"),
-    (["render", "--out", "OUT/a.png", "--method", "raster", "--shading", "sparkly"], "sparkly"),
-    (["run", "OUT/missing.toml"], "no such spec"),
-    (["run", "BADSPEC"], "not valid TOML"),
-    (["run", "tiny", "--runs", UNWRITABLE], "not a writable folder"),
-    (["report", "OUT"], "not a run folder"),
-    (["calibrate", "--tau", "0"], "tau"),
-    (["calibrate", "--flights", "loop"], "unknown flight"),
-    (["calibrate", "--size", "0x0"], "width"),
-    (["calibrate", "--frames", "0"], "--frames"),
-    (["calibrate", "--save", UNWRITABLE + "/c.json"], "not a writable folder"),
-    (["stress", "--scenes", "moon"], "--scenes"),
-    (["stress", "--views", "sideways"], "--views"),
-    (["stress", "--methods", "magic"], "--methods"),
-    (["stress", "--size-samples", "5"], "--size-samples"),
-    (["stress", "--out", UNWRITABLE], "not a writable folder"),
-    (["bench", "--which", "gpu"], "--which"),
-    (["bench", "--frames", "0"], "--frames"),
-    (["info", "OUT/corrupt.tif", "--no-gl"], "not a readable raster"),
-    (["info", "--dataset", "fbm", "--size-samples", "99999", "--no-gl"], "dataset size"),
-    (["render", "--out", "OUT/a.png", "--dataset", "HUGE", "--spacing", "30"], "beyond ±1e+07 m"),
-    (["render", "--out", "OUT/a.png", "--offset", "1e20,0,0"], "beyond the world limit"),
-    (["info", "--dataset", "HUGE", "--spacing", "30", "--vertical-scale", "0", "--no-gl"], "--vertical-scale"),
-    (["info", "--dataset", "HUGE", "--spacing", "30", "--vertical-scale", "-1", "--no-gl"], "must be"),
-    (["render", "--out", "OUT/a.png", "--dataset", "fbm", "--size-samples", "65", "--eye", "960,960,-500",
-      "--target", "1500,1500,-500"], "below the terrain surface"),
-    (["render", "--out", "OUT/a.png", "--dataset", "flat", "--size-samples", "65", "--eye", "960,960,0.5",
-      "--target", "1500,1500,0", "--near", "2"], "within the near plane"),
-])
+@pytest.mark.parametrize(
+    "argv, match",
+    [
+        (["render", "--out", UNWRITABLE + "/a.png"], "does not exist"),
+        (["render", "--out", "/proc/a.png"], "not a writable folder"),
+        (["render", "--out", "OUT/a.png", "--method", "raycast", "--reconstruction", "cubic"], "reconstruction"),
+        (["render", "--out", "OUT/a.png", "--method", "raycast", "--traversal", "teleport"], "traversal"),
+        (["render", "--out", "OUT/a.png", "--method", "raster", "--shadows"], "--method raycast only"),
+        (["render", "--out", "OUT/a.png", "--method", "raycast", "--wireframe"], "raster methods"),
+        (["render", "--out", "OUT/a.png", "--method", "raycast", "--no-lean"], "--no-lean applies"),
+        (["render", "--out", "OUT/a.png", "--method", "raycast", "--full-res", "exact"], "--full-res applies"),
+        (["render", "--out", "OUT/a.png", "--method", "raster", "--show-strategy"], "mixed policy"),
+        (["render", "--out", "OUT/a.png", "--tile-size", "100"], "power of two"),
+        (["render", "--out", "OUT/a.png", "--dataset", "fbm", "--size-samples", "2"], "dataset size"),
+        (["render", "--out", "OUT/a.png", "--method", "raster", "--shading", "sparkly"], "sparkly"),
+        (["run", "OUT/missing.toml"], "no such spec"),
+        (["run", "BADSPEC"], "not valid TOML"),
+        (["run", "tiny", "--runs", UNWRITABLE], "not a writable folder"),
+        (["report", "OUT"], "not a run folder"),
+        (["calibrate", "--tau", "0"], "tau"),
+        (["calibrate", "--flights", "loop"], "unknown flight"),
+        (["calibrate", "--size", "0x0"], "width"),
+        (["calibrate", "--frames", "0"], "--frames"),
+        (["calibrate", "--save", UNWRITABLE + "/c.json"], "not a writable folder"),
+        (["stress", "--scenes", "moon"], "--scenes"),
+        (["stress", "--views", "sideways"], "--views"),
+        (["stress", "--methods", "magic"], "--methods"),
+        (["stress", "--size-samples", "5"], "--size-samples"),
+        (["stress", "--out", UNWRITABLE], "not a writable folder"),
+        (["bench", "--which", "gpu"], "--which"),
+        (["bench", "--frames", "0"], "--frames"),
+        (["info", "OUT/corrupt.tif", "--no-gl"], "not a readable raster"),
+        (["info", "--dataset", "fbm", "--size-samples", "99999", "--no-gl"], "dataset size"),
+        (["render", "--out", "OUT/a.png", "--dataset", "HUGE", "--spacing", "30"], "beyond ±1e+07 m"),
+        (["render", "--out", "OUT/a.png", "--offset", "1e20,0,0"], "beyond the world limit"),
+        (["info", "--dataset", "HUGE", "--spacing", "30", "--vertical-scale", "0", "--no-gl"], "--vertical-scale"),
+        (["info", "--dataset", "HUGE", "--spacing", "30", "--vertical-scale", "-1", "--no-gl"], "must be"),
+        (
+            [
+                "render",
+                "--out",
+                "OUT/a.png",
+                "--dataset",
+                "fbm",
+                "--size-samples",
+                "65",
+                "--eye",
+                "960,960,-500",
+                "--target",
+                "1500,1500,-500",
+            ],
+            "below the terrain surface",
+        ),
+        (
+            [
+                "render",
+                "--out",
+                "OUT/a.png",
+                "--dataset",
+                "flat",
+                "--size-samples",
+                "65",
+                "--eye",
+                "960,960,0.5",
+                "--target",
+                "1500,1500,0",
+                "--near",
+                "2",
+            ],
+            "within the near plane",
+        ),
+    ],
+)
 def test_cli_bad_input(tmp_path, capsys, ctx, argv, match):
     (tmp_path / "bad.toml").write_text("frames = [")
     (tmp_path / "corrupt.tif").write_bytes(b"II*\x00garbage")
     np.save(tmp_path / "huge.npy", np.full((8, 8), 1e30))
     before = set(tmp_path.rglob("*"))
-    argv = [a.replace("OUT", str(tmp_path)).replace("BADSPEC", str(tmp_path / "bad.toml"))
-            .replace("HUGE", str(tmp_path / "huge.npy")) for a in argv]
+    argv = [
+        a.replace("OUT", str(tmp_path))
+        .replace("BADSPEC", str(tmp_path / "bad.toml"))
+        .replace("HUGE", str(tmp_path / "huge.npy"))
+        for a in argv
+    ]
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert match in err and "Traceback" not in err, err
-    assert set(tmp_path.rglob("*")) == before                  # nothing partially written
+    assert set(tmp_path.rglob("*")) == before  # nothing partially written
 
 
 def test_api_bad_input(ctx, puget257):
@@ -68,6 +106,7 @@ def test_api_bad_input(ctx, puget257):
     from hybrid.renderer import Renderer, make_renderer
     from hybrid.tiles.pyramid import TilePyramid
     from hybrid.tiles.tiletree import select_tiles
+
     with pytest.raises(TerrabenchError, match="unknown policy 'magic'"):
         make_renderer(ctx, puget257, "magic")
     with pytest.raises(TerrabenchError, match=r"unknown draw option.*colour_depth"):
@@ -88,8 +127,10 @@ def test_api_bad_input(ctx, puget257):
         HeightField(np.zeros((4, 4)), 30.0, origin=(1e20, 0, 0))
     with pytest.raises(TerrabenchError, match="full_res must be one of exact, lean, got 'half'"):
         Renderer(ctx, puget257, "hybrid", tile_size=64, full_res="half")
-    with (make_renderer(ctx, puget257, "raster", tile_size=64) as r,
-          pytest.raises(TerrabenchError, match="full_res must be one of exact, lean, got 'half'")):
+    with (
+        make_renderer(ctx, puget257, "raster", tile_size=64) as r,
+        pytest.raises(TerrabenchError, match="full_res must be one of exact, lean, got 'half'"),
+    ):
         r.render(default_view(puget257, 32, 18), full_res="half")
     r = make_renderer(ctx, puget257, "raycast", tile_size=64)
     with pytest.raises(TerrabenchError, match="tau"):

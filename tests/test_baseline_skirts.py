@@ -2,6 +2,7 @@
 through, the full-resolution list without skirts shows crack pixels and with them none, the filled pixels lie on
 a seam between levels, and nothing else changes; the decimated TIN's seams close as well; views from under the
 sheet gain no walls; a TIN's strayed border is covered by the flange."""
+
 import numpy as np
 import pytest
 from test_phantom_walls import canyon
@@ -17,11 +18,13 @@ from raster.tin import build_tin, surface_at, tin_max_error
 
 TILE = 16
 SIZE = (320, 180)
-TAU = 3.0                      # px: coarse enough that level-1 tiles meet level-0 ones in the view
+TAU = 3.0  # px: coarse enough that level-1 tiles meet level-0 ones in the view
 # grazing views across the rough terrain (metres from its origin): from over its east edge and from west of it
 # (that one also sends rays in under the outer edge)
-VIEWS = {"east": ((7821.7, 4414.9, 2192.5), (3406.9, 6026.4, 605.2)),
-         "west": ((-1581.7, 1250.0, 1723.2), (2372.4, 4937.4, 180.2))}
+VIEWS = {
+    "east": ((7821.7, 4414.9, 2192.5), (3406.9, 6026.4, 605.2)),
+    "west": ((-1581.7, 1250.0, 1723.2), (2372.4, 4937.4, 180.2)),
+}
 
 
 def rough():
@@ -45,8 +48,12 @@ def level_seams(plans, n: int) -> list:
     for p in plans:
         span = n << p.key.level
         x0, y0 = p.key.tx * span, p.key.ty * span
-        ends = (((x0, y0), (x0, y0 + span)), ((x0 + span, y0), (x0 + span, y0 + span)),
-                ((x0, y0), (x0 + span, y0)), ((x0, y0 + span), (x0 + span, y0 + span)))
+        ends = (
+            ((x0, y0), (x0, y0 + span)),
+            ((x0 + span, y0), (x0 + span, y0 + span)),
+            ((x0, y0), (x0 + span, y0)),
+            ((x0, y0 + span), (x0 + span, y0 + span)),
+        )
         out += [ends[k] for k, d in enumerate(p.selected.edge_deltas) if d in (-1, 1)]
     return out
 
@@ -95,6 +102,7 @@ def test_skirt_depth_is_the_largest_step_of_a_t_junction(ctx):
     from hybrid.strategies import make_strategy
     from hybrid.tiles.pyramid import TilePyramid
     from hybrid.tiles.tiletree import select_tiles
+
     hf = rough()
     o = np.asarray(hf.origin)
     eye, target = VIEWS["east"]
@@ -109,7 +117,7 @@ def test_skirt_depth_is_the_largest_step_of_a_t_junction(ctx):
         for it in items:
             it.gpu.release()
         s.release()
-    steps = {}                 # (fine key, side) -> the largest step along it
+    steps = {}  # (fine key, side) -> the largest step along it
     for it in items:
         h = np.asarray(it.tile.heights, dtype=np.float64)
         for k, e in enumerate((h[:, 0], h[:, -1], h[0], h[-1])):
@@ -119,12 +127,16 @@ def test_skirt_depth_is_the_largest_step_of_a_t_junction(ctx):
         key, sp = it.selected.key, max(it.tile.spacing_x, it.tile.spacing_y)
         for k, (dx, dy) in enumerate(((-1, 0), (1, 0), (0, -1), (0, 1))):
             delta = it.selected.edge_deltas[k]
-            if delta == 1:             # this tile is the finer: its own samples make the step
+            if delta == 1:  # this tile is the finer: its own samples make the step
                 want = steps[key, k]
-            elif delta == -1:          # the two finer tiles across make it
-                fine = [f for f in (t.selected.key for t in items) if f.level == key.level - 1 and
-                        (f.tx >> 1, f.ty >> 1) == (key.tx + dx, key.ty + dy) and
-                        (f.tx & 1 == (dx < 0) if dx else f.ty & 1 == (dy < 0))]
+            elif delta == -1:  # the two finer tiles across make it
+                fine = [
+                    f
+                    for f in (t.selected.key for t in items)
+                    if f.level == key.level - 1
+                    and (f.tx >> 1, f.ty >> 1) == (key.tx + dx, key.ty + dy)
+                    and (f.tx & 1 == (dx < 0) if dx else f.ty & 1 == (dy < 0))
+                ]
                 want = max(steps[f, k ^ 1] for f in fine)
             elif delta == 0:
                 assert dep[k] == 0
@@ -140,6 +152,7 @@ def test_skirts_close_the_tins_seams(ctx, puget257):
     """Decimated apart, neighbouring TINs part along their shared sides at every level: crack pixels without
     skirts, none with them, and the coverage agreement rises (to 99.9 % or more)."""
     from hybrid.camera.flight import preset
+
     views = [default_view(puget257, *SIZE)] + preset("orbit", puget257, 6, *SIZE).views()[:3]
     for view in views:
         want, bare, skirted = frames(ctx, puget257, view, "tin", 64, 2 / 3)
@@ -178,13 +191,14 @@ def test_rays_may_start_under_whenever_a_pixel_does():
     from hybrid.terrain.datasets import puget
     from hybrid.terrain.edges import edge_profiles, starts_under
     from raster.mesh_skirts import rays_may_start_under
+
     hf = canyon()
     tops = edge_profiles(hf.heights).max(axis=1)
     views = list(canyon_views(hf).values())
     ox, oy, oz = hf.origin
     w, d = hf.extent
     far_above = View([ox - 0.5 * w, oy + 0.5 * d, oz + 5000.0], [ox + 0.5 * w, oy + 0.5 * d, oz + 4000.0], 40.0, *SIZE)
-    views.append(far_above)                    # outside, looking over the terrain: no ray under its edge
+    views.append(far_above)  # outside, looking over the terrain: no ray under its edge
     said = []
     for v in views:
         under = starts_under(hf, v.eye, v.pixel_rays().reshape(-1, 3)).any()
@@ -200,10 +214,10 @@ def test_a_strayed_tin_border_is_covered_by_the_flange():
     covered, and each side's skirt line runs from corner to corner on the side."""
     hf = rough()
     n = TILE
-    h = hf.heights[:n + 1, :n + 1]
+    h = hf.heights[: n + 1, : n + 1]
     sp = (hf.spacing_x, hf.spacing_y)
     m = build_tin(h, sp, target_count=int(0.1 * 2 * n * n))
-    assert tin_max_error(m, h, sp)[1] > 0                  # the border strayed: samples left uncovered
+    assert tin_max_error(m, h, sp)[1] > 0  # the border strayed: samples left uncovered
     extent = (n * sp[0], n * sp[1])
     tris = [m.vertices[m.faces]]
     for k, edges in enumerate(mesh_border_edges(m.vertices, m.faces, extent)):
@@ -213,13 +227,16 @@ def test_a_strayed_tin_border_is_covered_by_the_flange():
         assert line[0, a] == 0.0 and line[-1, a] == extent[a] and np.all(np.diff(line[:, a]) >= 0)
         tris.append(flange)
     soup = np.concatenate(tris)
-    i, j = np.mgrid[0:n + 1, 0:n + 1]
-    _, hits = surface_at(soup.reshape(-1, 3), np.arange(3 * len(soup)).reshape(-1, 3), j.ravel() * sp[0], i.ravel() * sp[1])
+    i, j = np.mgrid[0 : n + 1, 0 : n + 1]
+    _, hits = surface_at(
+        soup.reshape(-1, 3), np.arange(3 * len(soup)).reshape(-1, 3), j.ravel() * sp[0], i.ravel() * sp[1]
+    )
     assert (hits > 0).all()
     # a grid's border is on its sides already: its skirt line is its border samples, bit for bit, and no flange
     rows, cols = 5, 7
-    v = np.stack([np.tile(np.arange(cols) * 2.0, rows), np.repeat(np.arange(rows) * 3.0, cols),
-                  np.arange(rows * cols) * 0.1], 1).astype(np.float32)
+    v = np.stack(
+        [np.tile(np.arange(cols) * 2.0, rows), np.repeat(np.arange(rows) * 3.0, cols), np.arange(rows * cols) * 0.1], 1
+    ).astype(np.float32)
     for k, edges in enumerate(grid_border_edges(rows, cols)):
         line, flange = side_skirt(v, edges, k, (12.0, 12.0))
         assert len(flange) == 0 and np.array_equal(line.astype(np.float32), v[np.unique(edges)])
@@ -227,8 +244,8 @@ def test_a_strayed_tin_border_is_covered_by_the_flange():
 
 def test_seam_gap_is_the_largest_distance_between_two_profiles():
     """Two piecewise-linear side profiles: the gap is taken at every vertex of either, within the shared stretch."""
-    fine = (np.array([0.0, 1.0, 2.0, 3.0, 4.0]), np.array([0.0, 5.0, 0.0, -3.0, 0.0]))   # a level's samples
-    coarse = (np.array([0.0, 2.0, 4.0]), np.array([0.0, 0.0, 0.0]))                     # every other one
+    fine = (np.array([0.0, 1.0, 2.0, 3.0, 4.0]), np.array([0.0, 5.0, 0.0, -3.0, 0.0]))  # a level's samples
+    coarse = (np.array([0.0, 2.0, 4.0]), np.array([0.0, 0.0, 0.0]))  # every other one
     assert seam_gap(fine, coarse, 0.0, 4.0) == 5.0
     assert seam_gap(fine, coarse, 2.0, 4.0) == 3.0
     assert seam_gap(coarse, coarse, 0.0, 4.0) == 0.0

@@ -1,4 +1,5 @@
 """The bench's reading of the cost model's per-tile error: raw, and with the run's one scale factor."""
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -11,8 +12,13 @@ STRATEGIES = ("raster", "raster_gs", "raycast")
 
 def _model() -> CostModel:
     coef = {"const": 0.1}
-    return CostModel("test", raster=dict(coef), raycast=dict(coef), raster_gs=dict(coef),
-                     call_overhead=dict.fromkeys(STRATEGIES, 0.0))
+    return CostModel(
+        "test",
+        raster=dict(coef),
+        raycast=dict(coef),
+        raster_gs=dict(coef),
+        call_overhead=dict.fromkeys(STRATEGIES, 0.0),
+    )
 
 
 def _tiles(factor: dict, noise: float = 0.0, n: int = 400, seed: int = 3) -> pd.DataFrame:
@@ -40,7 +46,7 @@ def test_a_uniform_drift_is_the_whole_raw_error_and_none_of_the_scaled():
 def test_the_scale_leaves_per_tile_scatter():
     err = tile_errors(_tiles(dict.fromkeys(STRATEGIES, 0.75), noise=0.2), _model()).set_index("strategy")
     for s in STRATEGIES:
-        assert 7.0 < err.loc[s, SCALED] < 13.0          # |uniform(-0.2, 0.2)| has median 0.1
+        assert 7.0 < err.loc[s, SCALED] < 13.0  # |uniform(-0.2, 0.2)| has median 0.1
         assert err.loc[s, "median |relative error| %"] > 20.0
 
 

@@ -1,4 +1,5 @@
 """The cheapest assignment of tiles to strategies: hand cases and a brute force over every assignment."""
+
 import itertools
 
 import numpy as np
@@ -38,6 +39,7 @@ def test_matches_brute_force(n_tiles, n_strategies, seed, mixed):
     def frame(assign):
         used = set(assign)
         return sum(costs[c][i] for i, c in enumerate(assign)) + sum(overhead[c] for c in used) + mixed * (len(used) > 1)
+
     best = min(frame(assign) for assign in itertools.product(names, repeat=n_tiles))
     chosen, total = best_assignment(costs, overhead, mixed=mixed)
     assert np.isclose(total, best) and np.isclose(frame(chosen), best)
@@ -46,21 +48,27 @@ def test_matches_brute_force(n_tiles, n_strategies, seed, mixed):
 def test_hedged_choices_leave_the_base_only_beyond_the_model_error():
     from hybrid.cost.model import CostModel
     from hybrid.cost.planner import hedged_choices
+
     zero = {"const": 0.0, "triangles": 0.0, "visible_triangles": 0.0, "pixels": 0.0}
-    m = CostModel("t", zero, {"const": 0.0, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0},
-                  fit_error={"raster": 0.15, "raycast": 0.10}, overhead={"raster": 0.0, "raycast": 0.0})
+    m = CostModel(
+        "t",
+        zero,
+        {"const": 0.0, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0},
+        fit_error={"raster": 0.15, "raycast": 0.10},
+        overhead={"raster": 0.0, "raycast": 0.0},
+    )
     # ray casting is the cheaper pure frame (9 vs 10.5 ms): the base. Tile 0 is 17 % cheaper rasterized (inside
     # 0.15 + 0.10 of error: stays), tile 1 is 60 % cheaper (leaves), tile 2 is cheaper ray cast anyway
     pred = {"raster": np.array([2.5, 1.0, 7.0]), "raycast": np.array([3.0, 2.5, 3.5])}
     assert hedged_choices(pred, m) == ["raycast", "raster", "raycast"]
-    pred["raster"][0] = 2.4 / 1.25                           # 36 % cheaper: beyond the error, it leaves too
+    pred["raster"][0] = 2.4 / 1.25  # 36 % cheaper: beyond the error, it leaves too
     assert hedged_choices(pred, m) == ["raster", "raster", "raycast"]
     # a tile that leaves by more than the error, but a frame that saves less than the base's 10 %: stays pure
-    few = {"raster": np.array([2.5, 1.2, 7.0]), "raycast": np.array([3.0, 2.0, 3.5])}    # 7.7 against 8.5 ms
+    few = {"raster": np.array([2.5, 1.2, 7.0]), "raycast": np.array([3.0, 2.0, 3.5])}  # 7.7 against 8.5 ms
     assert hedged_choices(few, m) == ["raycast", "raycast", "raycast"]
-    few["raster"][1] = 1.0                                    # 7.5 against 8.5: beyond 10 %, it mixes
+    few["raster"][1] = 1.0  # 7.5 against 8.5: beyond 10 %, it mixes
     assert hedged_choices(few, m) == ["raycast", "raster", "raycast"]
-    m.mix_error = 0.2                                         # unless mixed frames were predicted worse than that
+    m.mix_error = 0.2  # unless mixed frames were predicted worse than that
     assert hedged_choices(few, m) == ["raycast", "raycast", "raycast"]
     m.mix_error = 0.0
     # per-tile errors, where the model has them, set the tile's hedge: 1.0 against 2.0 is inside 0.6 + 0.5
@@ -83,6 +91,7 @@ def test_hedged_picks_shortcut_agrees_with_pricing_every_subset():
     one strategy cheapest everywhere) the picks are those of the full computation (the shortcut turned off)."""
     import hybrid.cost.planner as planner
     from hybrid.cost.model import CostModel
+
     rng = np.random.default_rng(7)
     original, taken = planner._pure_base_wins, 0
     for _ in range(3000):
@@ -92,10 +101,17 @@ def test_hedged_picks_shortcut_agrees_with_pricing_every_subset():
         if rng.random() < 0.5:
             table[0] = table.min(axis=0)
         errs = {n: float(rng.choice([0.0, 0.1])) for n in names}
-        model = CostModel("test", {"const": 0.0}, {"const": 0.0}, fit_error=dict(errs), tile_error=dict(errs),
-                          overhead={n: float(rng.choice([0.0, 1.0, 3.0])) for n in names},
-                          raster_gs={"const": 0.0} if s > 2 else {}, mix_overhead=float(rng.choice([0.0, 0.5])),
-                          mix_error=float(rng.choice([0.0, 0.05])))
+        model = CostModel(
+            "test",
+            {"const": 0.0},
+            {"const": 0.0},
+            fit_error=dict(errs),
+            tile_error=dict(errs),
+            overhead={n: float(rng.choice([0.0, 1.0, 3.0])) for n in names},
+            raster_gs={"const": 0.0} if s > 2 else {},
+            mix_overhead=float(rng.choice([0.0, 0.5])),
+            mix_error=float(rng.choice([0.0, 0.05])),
+        )
         calls = []
         planner._pure_base_wins = lambda *a, calls=calls: calls.append(original(*a)) or calls[-1]
         try:
@@ -106,7 +122,7 @@ def test_hedged_picks_shortcut_agrees_with_pricing_every_subset():
             planner._pure_base_wins = original
         assert fast == full, (table, model.overhead, model.mix_overhead)
         taken += any(calls)
-    assert 500 < taken < 2500                  # the shortcut is taken often, and often not
+    assert 500 < taken < 2500  # the shortcut is taken often, and often not
 
 
 def test_hedged_picks_shortcut_needs_the_base_overhead_least():
@@ -114,7 +130,13 @@ def test_hedged_picks_shortcut_needs_the_base_overhead_least():
     half the tiles each and cost no overhead: their mix is the cheapest frame, which the shortcut must not hide."""
     from hybrid.cost.model import CostModel
     from hybrid.cost.planner import hedged_picks
+
     table = np.array([[1.0, 1.0, 9.0, 9.0], [1.0, 1.0, 1.0, 1.0], [9.0, 9.0, 1.0, 1.0]])
-    model = CostModel("test", {"const": 0.0}, {"const": 0.0}, raster_gs={"const": 0.0},
-                      overhead={"raster": 0.0, "raycast": 5.0, "raster_gs": 0.0})
+    model = CostModel(
+        "test",
+        {"const": 0.0},
+        {"const": 0.0},
+        raster_gs={"const": 0.0},
+        overhead={"raster": 0.0, "raycast": 5.0, "raster_gs": 0.0},
+    )
     assert hedged_picks(table, ["raster", "raycast", "raster_gs"], model).tolist() == [0, 0, 2, 2]

@@ -1,5 +1,6 @@
 """Specs on a Dask cluster of 2 local processes: the serial run's rows, nothing lost when a worker dies
 mid-task, and a worker without a GL context reported by name instead of a hang."""
+
 import json
 import os
 import signal
@@ -21,7 +22,8 @@ from hybrid.errors import TerrabenchError  # noqa: E402
 # the tiny spec at two taus: two groups of configurations, one task each, for the two workers; the hybrid frozen,
 # as an adapting one's choices follow the times it measures, which no two runs share
 TWO_GROUPS = (Path(__file__).parents[1] / "experiments" / "tiny.toml").read_text().replace(
-    "taus = [0.6667]", "taus = [0.6667, 2.0]") + "adapt = false\n"
+    "taus = [0.6667]", "taus = [0.6667, 2.0]"
+) + "adapt = false\n"
 
 
 def two_groups():
@@ -29,8 +31,21 @@ def two_groups():
 
 
 # columns that depend on timing or on where a frame ran; every other column must match the serial run
-TIMED = {"wall_ms", "wall_ms_min", "wall_ms_max", "wall_ms_repeats", "plan_ms", "draw_ms", "gpu_ms", "issue_ms",
-         "cpu_ms", "upload_ms", "adapt_ms", "worker", "device"}
+TIMED = {
+    "wall_ms",
+    "wall_ms_min",
+    "wall_ms_max",
+    "wall_ms_repeats",
+    "plan_ms",
+    "draw_ms",
+    "gpu_ms",
+    "issue_ms",
+    "cpu_ms",
+    "upload_ms",
+    "adapt_ms",
+    "worker",
+    "device",
+}
 
 
 def frames(folder):
@@ -55,8 +70,10 @@ def serial(ctx, tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def cluster():
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
-            distributed.Client(cl) as client:
+    with (
+        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl,
+        distributed.Client(cl) as client,
+    ):
         yield cl, client
 
 
@@ -65,7 +82,7 @@ def test_cluster_run_has_the_serial_rows(serial, cluster, tmp_path):
     folder = run_spec(two_groups(), tmp_path, progress=False, client=client)
     f = frames(folder)
     same_rows(f, serial)
-    assert f["worker"].nunique() == 2 and (f.groupby("tau")["worker"].nunique() == 1).all()   # a group, one worker
+    assert f["worker"].nunique() == 2 and (f.groupby("tau")["worker"].nunique() == 1).all()  # a group, one worker
     assert f["device"].str.contains("llvmpipe|NVIDIA|Mesa", regex=True).all()
     assert set(serial["worker"]) == {"local"}
     env = json.loads((folder / "env.json").read_text())
@@ -77,9 +94,12 @@ def test_a_cluster_run_is_not_resumed_under_another_cost_model(cluster, tmp_path
     """env.json names the cost model each renderer's workers chose with; a resume whose client would send another
     (a recalibrated costs file) is refused before any task runs, and the journal is left as it was."""
     from hybrid.cost.model import load_cost_model, save_cost_model
+
     _, client = cluster
-    spec = parse_spec(TWO_GROUPS.replace("frames = 3", "frames = 1").replace("image_frames = [1]", "image_frames = [0]"),
-                      "tiny, one frame")
+    spec = parse_spec(
+        TWO_GROUPS.replace("frames = 3", "frames = 1").replace("image_frames = [1]", "image_frames = [0]"),
+        "tiny, one frame",
+    )
     monkeypatch.setenv("TERRABENCH_COSTS", str(tmp_path / "none.json"))
     folder = run_spec(spec, tmp_path / "runs", progress=False, client=client)
     env = json.loads((folder / "env.json").read_text())
@@ -104,7 +124,7 @@ def test_a_worker_killed_mid_task_loses_nothing(serial, cluster, tmp_path):
         while time.time() < deadline and not killed:
             busy = [a for a, tasks in client.processing().items() if tasks]
             if busy:
-                time.sleep(0.3)                      # inside the task: its frames are being drawn
+                time.sleep(0.3)  # inside the task: its frames are being drawn
                 pid = client.run(worker_info, workers=[busy[0]])[busy[0]]["pid"]
                 os.kill(pid, signal.SIGKILL)
                 killed["pid"] = pid
@@ -118,28 +138,41 @@ def test_a_worker_killed_mid_task_loses_nothing(serial, cluster, tmp_path):
     f = frames(folder)
     journal = [json.loads(line) for line in (folder / "frames.jsonl").read_text().splitlines()]
     keys = [(r["config"], r["frame"]) for r in journal]
-    assert len(keys) == len(set(keys)) == 2 * 3 * 3                  # every frame once: nothing lost, nothing twice
+    assert len(keys) == len(set(keys)) == 2 * 3 * 3  # every frame once: nothing lost, nothing twice
     same_rows(f, serial)
     assert not (folder / "errors.jsonl").exists()
-    client.wait_for_workers(2, timeout=60)                        # the nanny brought the worker back
+    client.wait_for_workers(2, timeout=60)  # the nanny brought the worker back
     pids = {i["pid"] for i in client.run(worker_info).values()}
     assert killed["pid"] not in pids and len(pids) == 2
 
 
 def test_a_worker_without_gl_is_reported_not_hung(tmp_path, capsys):
     from distributed import Nanny, Scheduler, SpecCluster
-    workers = {"good": {"cls": Nanny, "options": {"nthreads": 1}},
-               "bad": {"cls": Nanny, "options": {"nthreads": 1, "env": {"TERRABENCH_GL_DEVICE": "99"}}}}
-    with SpecCluster(workers=workers, scheduler={"cls": Scheduler, "options": {"dashboard": False}}) as cl, \
-            distributed.Client(cl) as client:
+
+    workers = {
+        "good": {"cls": Nanny, "options": {"nthreads": 1}},
+        "bad": {"cls": Nanny, "options": {"nthreads": 1, "env": {"TERRABENCH_GL_DEVICE": "99"}}},
+    }
+    with (
+        SpecCluster(workers=workers, scheduler={"cls": Scheduler, "options": {"dashboard": False}}) as cl,
+        distributed.Client(cl) as client,
+    ):
         client.wait_for_workers(2, timeout=60)
         folder = run_spec(two_groups(), tmp_path / "mixed", progress=False, client=client)
         out = capsys.readouterr().out
         assert "has no GL context and gets no task" in out and "99" in out
         f = frames(folder)
         assert len(f) == 18 and f["worker"].nunique() == 1
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
-                                  env={"TERRABENCH_GL_DEVICE": "99"}) as cl, distributed.Client(cl) as client:
+    with (
+        distributed.LocalCluster(
+            n_workers=1,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            env={"TERRABENCH_GL_DEVICE": "99"},
+        ) as cl,
+        distributed.Client(cl) as client,
+    ):
         t0 = time.time()
         with pytest.raises(TerrabenchError, match=r"no worker of the cluster could make a GL context.*99"):
             run_spec(two_groups(), tmp_path / "none", progress=False, client=client)
@@ -150,6 +183,7 @@ def test_calibrate_on_a_cluster_fits_one_model_per_device(cluster):
     from experiments.cli.options import TerrainOptions
     from experiments.cluster import calibrate_on_cluster
     from hybrid.strategies import candidates
+
     _, client = cluster
     args = (TerrainOptions("fbm", size_samples=129), ("flyover",), 2, (160, 90), 2 / 3, 32, 1, 0.3)
     models = calibrate_on_cluster(client, args)

@@ -13,19 +13,28 @@ from hybrid.cost.planner import choose
 from hybrid.errors import TerrabenchError
 from hybrid.residency import ResidencyCache
 
-TRUE = CostModel("test", {"const": 0.3, "triangles": 5e-5, "visible_triangles": 1.5e-4, "pixels": 1e-5,
-                          "surface_pixels": 2e-5},
-                 {"const": 0.5, "pixels": 2e-5, "surface_pixels": 1e-5, "pixel_steps": 1e-5},
-                 raster_gs={"const": 0.2, "triangles": 2e-4, "visible_triangles": 3e-4, "pixels": 1e-5,
-                            "surface_pixels": 2.5e-5})
+TRUE = CostModel(
+    "test",
+    {"const": 0.3, "triangles": 5e-5, "visible_triangles": 1.5e-4, "pixels": 1e-5, "surface_pixels": 2e-5},
+    {"const": 0.5, "pixels": 2e-5, "surface_pixels": 1e-5, "pixel_steps": 1e-5},
+    raster_gs={"const": 0.2, "triangles": 2e-4, "visible_triangles": 3e-4, "pixels": 1e-5, "surface_pixels": 2.5e-5},
+)
 
 
 def synthetic_tiles(n=300, seed=0):
     rng = np.random.default_rng(seed)
-    return [TileFeatures(float(rng.uniform(10, 50000)), float(rng.uniform(0, 130000)), float(rng.uniform(0, 300)),
-                         int(rng.integers(0, 3)), float(rng.uniform(1e3, 1e5)), float(rng.uniform(0.05, 1.0)),
-                         float(rng.uniform(0, 40000)))
-            for _ in range(n)]
+    return [
+        TileFeatures(
+            float(rng.uniform(10, 50000)),
+            float(rng.uniform(0, 130000)),
+            float(rng.uniform(0, 300)),
+            int(rng.integers(0, 3)),
+            float(rng.uniform(1e3, 1e5)),
+            float(rng.uniform(0.05, 1.0)),
+            float(rng.uniform(0, 40000)),
+        )
+        for _ in range(n)
+    ]
 
 
 OVERHEAD = {"raster": 2.0, "raster_gs": 3.0, "raycast": 1.5}
@@ -43,10 +52,17 @@ def synthetic_frames(n=240, seed=0, noise=0.005, names=NAMES, mix=MIX):
         feats = synthetic_tiles(count, seed=seed * 1000 + k)
         a = np.array([names[k % len(names)]] * count) if k % 4 == 0 else rng.choice(names, size=count)
         terms = {s: np.array([term_values(f, s) for f in feats]) for s in names}
-        ms = sum(OVERHEAD[s] + sum(TRUE.predict(f)[s] for f, c in zip(feats, a) if c == s) for s in names if (a == s).any())
+        ms = sum(
+            OVERHEAD[s] + sum(TRUE.predict(f)[s] for f, c in zip(feats, a) if c == s) for s in names if (a == s).any()
+        )
         ms += mix * (len(set(a.tolist())) > 1)
-        out.append(FrameSample({s: bool((a == s).any()) for s in names}, {s: terms[s][a == s].sum(axis=0) for s in names},
-                               float(ms * rng.normal(1, noise))))
+        out.append(
+            FrameSample(
+                {s: bool((a == s).any()) for s in names},
+                {s: terms[s][a == s].sum(axis=0) for s in names},
+                float(ms * rng.normal(1, noise)),
+            )
+        )
     return out
 
 
@@ -57,13 +73,13 @@ def test_frame_fit_recovers_known_coefficients_and_overheads():
     total = np.mean([f.ms for f in frames])
     for s in NAMES:
         for i, (t, v) in enumerate(getattr(TRUE, s).items()):
-            share = v * np.mean([f.sums[s][i] for f in frames]) / total      # of the frames' time
+            share = v * np.mean([f.sums[s][i] for f in frames]) / total  # of the frames' time
             # a term under a tenth of the time is weakly seen at this noise (0.5 %): within 60 %, else 25 %
             assert np.isclose(getattr(m, s)[t], v, rtol=0.25 if share >= 0.1 else 0.6), (s, t, getattr(m, s)[t], v)
         assert np.isclose(m.overhead[s], OVERHEAD[s], rtol=0.25), (s, m.overhead[s])
-        assert m.fit_error[s] < 0.01                          # held-out frames: about the noise
+        assert m.fit_error[s] < 0.01  # held-out frames: about the noise
     assert np.isclose(m.mix_overhead, MIX, rtol=0.25), m.mix_overhead
-    assert 0 < m.mix_error < 0.01 and "of mixed frames" in m.explain()   # the frames given tiles at random
+    assert 0 < m.mix_error < 0.01 and "of mixed frames" in m.explain()  # the frames given tiles at random
     assert "a frame mixing strategies adds 1." in m.explain()
     # frames whose mixing costs nothing more get no mixed-frame overhead; one that costs more, ignored, is
     # predicted worse than the noise: the column is what takes it up
@@ -73,8 +89,9 @@ def test_frame_fit_recovers_known_coefficients_and_overheads():
     costly = fit_frames(synthetic_frames(mix=4.0), "test", holdout=0.3)
     assert np.isclose(costly.mix_overhead, 4.0, rtol=0.1) and costly.mix_error < 0.01
     mixed = {"raster", "raycast"}
-    assert costly.frame_ms([1.0, 2.0], mixed) == pytest.approx(3.0 + costly.overhead["raster"]
-                                                               + costly.overhead["raycast"] + costly.mix_overhead)
+    assert costly.frame_ms([1.0, 2.0], mixed) == pytest.approx(
+        3.0 + costly.overhead["raster"] + costly.overhead["raycast"] + costly.mix_overhead
+    )
     assert costly.frame_ms([1.0, 2.0], {"raster"}) == pytest.approx(3.0 + costly.overhead["raster"])
     assert "of 240 frames' times" in m.explain() and "raster_gs ms = " in m.explain()
     two = fit_frames(synthetic_frames(names=("raster", "raycast")), "test", names=("raster", "raycast"))
@@ -87,8 +104,11 @@ CALL = {"raster": 0.8, "raster_gs": 0.6, "raycast": 0.9}
 def synthetic_single_calls(n=150, seed=1, noise=0.005):
     """Tiles drawn one call each: TRUE's per-tile cost plus CALL, every candidate way."""
     rng = np.random.default_rng(seed)
-    return [TileSample(s, term_values(f, s), float((TRUE.predict(f)[s] + CALL[s]) * rng.normal(1, noise)))
-            for f in synthetic_tiles(n, seed) for s in NAMES]
+    return [
+        TileSample(s, term_values(f, s), float((TRUE.predict(f)[s] + CALL[s]) * rng.normal(1, noise)))
+        for f in synthetic_tiles(n, seed)
+        for s in NAMES
+    ]
 
 
 def test_joint_fit_recovers_the_per_call_overhead_and_holds_tiles_out():
@@ -147,7 +167,9 @@ def test_choice_follows_predicted_costs():
     assert choose("hybrid", flat_small, a) == "raster"
     assert choose("hybrid", rough_big, b) == "raycast"
     # the same tiles under a device where rays are very expensive go to raster both
-    costly_rays = CostModel("x", TRUE.raster, {"const": 5.0, "pixels": 1e-3, "surface_pixels": 0.0, "pixel_steps": 1e-3})
+    costly_rays = CostModel(
+        "x", TRUE.raster, {"const": 5.0, "pixels": 1e-3, "surface_pixels": 0.0, "pixel_steps": 1e-3}
+    )
     assert choose("hybrid", rough_big, costly_rays.predict(rough_big)) == "raster"
     assert choose("heuristic", rough_big, b) == "raycast" and choose("heuristic", flat_small, a) == "raster"
     with pytest.raises(TerrabenchError, match="unknown policy"):
@@ -159,14 +181,22 @@ def test_save_load_by_renderer(tmp_path):
     save_cost_model(TRUE, p)
     got = load_cost_model("test", p)
     assert got.raster == TRUE.raster and got.raycast == TRUE.raycast and got.raster_gs == TRUE.raster_gs
-    fitted = CostModel("fitted", TRUE.raster, TRUE.raycast, raster_gs=TRUE.raster_gs, call_overhead=dict(CALL),
-                       tile_error={"raster": 0.1}, mix_overhead=1.25, full_res="lean")
+    fitted = CostModel(
+        "fitted",
+        TRUE.raster,
+        TRUE.raycast,
+        raster_gs=TRUE.raster_gs,
+        call_overhead=dict(CALL),
+        tile_error={"raster": 0.1},
+        mix_overhead=1.25,
+        full_res="lean",
+    )
     save_cost_model(fitted, p)
     again = load_cost_model("fitted", p)
     assert again.call_overhead == CALL and again.tile_error == {"raster": 0.1} and again.mix_overhead == 1.25
     assert again.full_res == "lean" and "full_res 'lean'" in again.explain()
     data = json.loads(p.read_text())
-    del data["fitted"]["full_res"]                              # saved before models named their rule
+    del data["fitted"]["full_res"]  # saved before models named their rule
     p.write_text(json.dumps(data))
     assert load_cost_model("fitted", p).full_res == "exact"
     data["fitted"]["full_res"] = "half"
@@ -200,7 +230,7 @@ def test_footprint_of_box():
     assert np.isclose(a, 1.0, rtol=1e-6)
     # a box reaching behind the eye is cut at the near plane: the 2 x 2 m section 1 m ahead fills the view
     assert np.isclose(footprint_pixels(v, np.array([-1, -200, -1.0]), np.array([1, 0, 1.0])), 100 * 100)
-    assert footprint_pixels(v, np.array([-1, -200, -1.0]), np.array([1, -150, 1.0])) == 0.0     # wholly behind
+    assert footprint_pixels(v, np.array([-1, -200, -1.0]), np.array([1, -150, 1.0])) == 0.0  # wholly behind
     # eye inside a long box: the near-plane section (2 x 2 m at 1 m) covers the whole 90-degree view
     assert np.isclose(footprint_pixels(v, np.array([-1, -101, -1.0]), np.array([1, 0, 1.0])), 100 * 100)
 
@@ -223,8 +253,8 @@ def test_residency_budget_and_lru():
     s = _Strategy()
     a = c.get("raster", s, "a", lambda: 100)
     c.get("raster", s, "b", lambda: 100)
-    assert c.get("raster", s, "a", lambda: 100) is a and c.stats.hits == 1     # resident: not uploaded again
-    c.get("raycast", s, "c", lambda: 100)                                       # evicts b (least recent)
+    assert c.get("raster", s, "a", lambda: 100) is a and c.stats.hits == 1  # resident: not uploaded again
+    c.get("raycast", s, "c", lambda: 100)  # evicts b (least recent)
     assert c.bytes == 200 and c.stats.evictions == 1 and ("raster", "b") not in c.entries
     assert c.bytes_by_strategy() == {"raster": 100, "raycast": 100}
     with pytest.raises(TerrabenchError, match="too small"):

@@ -1,5 +1,6 @@
 """Every strategy draws the terrain as deformed at a time, after a sync, as a renderer made afresh on it would,
 without cracks against the reference of the deformed heights."""
+
 import numpy as np
 import pytest
 
@@ -22,8 +23,10 @@ def _copy(hf):
 
 def _deformations(hf):
     ox, oy, _ = hf.origin
-    return [(Wave((ox + 20480.0, oy + 20480.0), 9000.0, 400.0, 3000.0, 600.0), 0.0, 20.0),   # across 4 tiles
-            (Uplift((ox + 10240.0, oy + 30000.0), 5000.0, 40.0), 2.0, 30.0)]                # on a tile border
+    return [
+        (Wave((ox + 20480.0, oy + 20480.0), 9000.0, 400.0, 3000.0, 600.0), 0.0, 20.0),  # across 4 tiles
+        (Uplift((ox + 10240.0, oy + 30000.0), 5000.0, 40.0), 2.0, 30.0),
+    ]  # on a tile border
 
 
 @pytest.mark.parametrize("policy", ["raster", "raster_gs", "raycast", "hybrid"])
@@ -35,18 +38,20 @@ def test_strategies_follow_deformations_across_tile_borders(ctx, policy):
     ref = ReferenceRenderer(ctx, hf)
     editor = TerrainEditor(ctx, hf, r, ref)
     try:
-        before = [r.render(v) for v in views]                           # tiles resident before the deformation
+        before = [r.render(v) for v in views]  # tiles resident before the deformation
         for d, start, end in _deformations(hf):
             editor.deform(d, start, end)
-        for t in (1.0, 4.0, 9.5, 14.0):                                 # frames: the GPU heights only
+        for t in (1.0, 4.0, 9.5, 14.0):  # frames: the GPU heights only
             editor.step(t)
         report = editor.sync()
         assert report.tiles > 0 and any(report.refreshed.get(n, 0) for n in r.strategies)
         np.testing.assert_array_equal(hf.heights, editor.gpu.read())
         after = [r.render(v) for v in views]
         fresh_hf = _copy(hf)
-        with Renderer(ctx, fresh_hf, policy, tile_size=64, adapt=False, cost_model=r.model) as fresh, \
-                ReferenceRenderer(ctx, fresh_hf) as fresh_ref:
+        with (
+            Renderer(ctx, fresh_hf, policy, tile_size=64, adapt=False, cost_model=r.model) as fresh,
+            ReferenceRenderer(ctx, fresh_hf) as fresh_ref,
+        ):
             for v, a, b in zip(views, after, before, strict=True):
                 want = fresh.render(v)
                 np.testing.assert_allclose(a.distance, want.distance, rtol=1e-5)
@@ -55,7 +60,7 @@ def test_strategies_follow_deformations_across_tile_borders(ctx, policy):
                 np.testing.assert_array_equal(got_ref.distance, fresh_ref.render(v).distance)
                 assert int(crack_pixels(a, got_ref).sum()) == 0
                 moved = np.isfinite(a.distance) & np.isfinite(b.distance)
-                assert np.abs(a.distance[moved] - b.distance[moved]).max() > 100.0     # the deformation is in view
+                assert np.abs(a.distance[moved] - b.distance[moved]).max() > 100.0  # the deformation is in view
     finally:
         for x in (editor, ref, r):
             x.release()
@@ -82,6 +87,7 @@ def test_render_replays_deformations_and_refuses_bad_ones_with_exit_2(tmp_path, 
     from experiments.cli import main
     from experiments.scene_options import TerrainOptions
     from hybrid.terrain.edit_log import write_log
+
     args = ["render", "--dataset", "puget", "--size-samples", "129", "--size", "160x90", "--method", "raster"]
     terrain = TerrainOptions(dataset="puget", size_samples=129).load()
     ox, oy, _ = terrain.origin
@@ -92,14 +98,16 @@ def test_render_replays_deformations_and_refuses_bad_ones_with_exit_2(tmp_path, 
     assert main([*args, "--out", str(tmp_path / "lifted.png"), "--edit", str(log)]) == 0
     a, b = np.load(tmp_path / "plain.depth.npy"), np.load(tmp_path / "lifted.depth.npy")
     both = np.isfinite(a) & np.isfinite(b)
-    assert np.count_nonzero(np.abs(a[both] - b[both]) > 10.0) > 100      # the uplift is in the frame
+    assert np.count_nonzero(np.abs(a[both] - b[both]) > 10.0) > 100  # the uplift is in the frame
     header, good = log.read_text().splitlines()
     out = tmp_path / "out"
     out.mkdir()
-    for change, words in (({"rate": float("nan")}, "rate must be finite"),
-                          ({"start": 20.0}, "start and end must satisfy"),
-                          ({"radius": 0.0}, "radius must lie in"),
-                          ({"centre": [ox - 500.0, oy]}, "lies off terrain")):
+    for change, words in (
+        ({"rate": float("nan")}, "rate must be finite"),
+        ({"start": 20.0}, "start and end must satisfy"),
+        ({"radius": 0.0}, "radius must lie in"),
+        ({"centre": [ox - 500.0, oy]}, "lies off terrain"),
+    ):
         bad = tmp_path / "bad.jsonl"
         bad.write_text(header + "\n" + json.dumps({**json.loads(good), **change}) + "\n")
         assert main([*args, "--out", str(out / "a.png"), "--edit", str(bad)]) == 2, change

@@ -1,5 +1,6 @@
 """The documentation stays true: the examples run, the CLI reference matches the parsers, links resolve, and the
 README stays a short user's page."""
+
 import re
 import subprocess
 import sys
@@ -29,8 +30,13 @@ def test_every_example_is_listed():
 @pytest.mark.parametrize("name", sorted(WRITES))
 def test_example_runs_and_writes_its_files(name, tmp_path, ctx):
     """Each example runs as a user runs it (its own process, cwd a fresh folder) and writes what it says."""
-    proc = subprocess.run([sys.executable, str(DOCS / "examples" / name), "out"], cwd=tmp_path,
-                          capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(
+        [sys.executable, str(DOCS / "examples" / name), "out"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     for f in WRITES[name]:
         path = tmp_path / "out" / f
@@ -45,16 +51,17 @@ def test_example_runs_and_writes_its_files(name, tmp_path, ctx):
 
 def test_cli_reference_matches_the_parsers():
     """docs/cli.md is what experiments.cli_reference makes now: regenerate it when --help changes."""
-    proc = subprocess.run([sys.executable, "-m", "experiments.cli_reference"], cwd=ROOT, capture_output=True,
-                          text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "experiments.cli_reference"], cwd=ROOT, capture_output=True, text=True, timeout=120
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     committed = (DOCS / "cli.md").read_text()
-    assert proc.stdout == committed, \
-        "docs/cli.md is stale: run `python -m experiments.cli_reference > docs/cli.md`"
+    assert proc.stdout == committed, "docs/cli.md is stale: run `python -m experiments.cli_reference > docs/cli.md`"
 
 
 def test_cli_reference_names_every_subcommand_and_option():
     from experiments.cli import COMMANDS, build_parser
+
     text = (DOCS / "cli.md").read_text()
     sub = next(a for a in build_parser()._actions if a.__class__.__name__ == "_SubParsersAction")
     for name in COMMANDS:
@@ -80,8 +87,13 @@ LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
 
 
 def _pages():
-    return [ROOT / "README.md", ROOT / "CHANGELOG.md", ROOT / "reports" / "FINDINGS.md", *sorted(DOCS.glob("*.md")),
-            DOCS / "examples" / "README.md"]
+    return [
+        ROOT / "README.md",
+        ROOT / "CHANGELOG.md",
+        ROOT / "reports" / "FINDINGS.md",
+        *sorted(DOCS.glob("*.md")),
+        DOCS / "examples" / "README.md",
+    ]
 
 
 @pytest.mark.parametrize("page", _pages(), ids=lambda p: str(p.relative_to(ROOT)))
@@ -102,6 +114,7 @@ def test_spec_reference_lists_every_key():
     import dataclasses
 
     from experiments.spec import Spec
+
     text = (DOCS / "experiments.md").read_text()
     missing = [f.name for f in dataclasses.fields(Spec) if f"| `{f.name}` |" not in text]
     assert not missing, f"docs/experiments.md lacks spec keys {missing}"

@@ -1,4 +1,5 @@
 """`terrabench render --edit FILE.jsonl`: renders after replaying the edits; a bad log exits 2, nothing written."""
+
 import json
 
 import numpy as np
@@ -27,19 +28,42 @@ def _log(terrain, path, brushes):
 def test_render_replays_the_edits(tmp_path, ctx, terrain, method):
     ox, oy, _ = terrain.origin
     w, d = terrain.extent
-    log = _log(terrain, tmp_path / "e.jsonl", [Crater((ox + w / 2, oy + d / 2), w / 4, 2000.0),
-                                               Raise((ox + w / 3, oy + d / 2), w / 8, -800.0)])
+    log = _log(
+        terrain,
+        tmp_path / "e.jsonl",
+        [Crater((ox + w / 2, oy + d / 2), w / 4, 2000.0), Raise((ox + w / 3, oy + d / 2), w / 8, -800.0)],
+    )
     plain, edited = tmp_path / "plain.png", tmp_path / "edited.png"
     assert main([*ARGS, "--method", method, "--out", str(plain)]) == 0
     assert main([*ARGS, "--method", method, "--out", str(edited), "--edit", str(log)]) == 0
     a, b = np.load(tmp_path / "plain.depth.npy"), np.load(tmp_path / "edited.depth.npy")
     both = np.isfinite(a) & np.isfinite(b)
-    assert np.count_nonzero(np.abs(a[both] - b[both]) > 10.0) > 100      # the crater is in the frame
-    assert main(["render", "--dataset", "puget", "--size-samples", "129", "--size", "160x90", "--method", "reference",
-                 "--out", str(tmp_path / "ref.png"), "--edit", str(log)]) == 0
+    assert np.count_nonzero(np.abs(a[both] - b[both]) > 10.0) > 100  # the crater is in the frame
+    assert (
+        main(
+            [
+                "render",
+                "--dataset",
+                "puget",
+                "--size-samples",
+                "129",
+                "--size",
+                "160x90",
+                "--method",
+                "reference",
+                "--out",
+                str(tmp_path / "ref.png"),
+                "--edit",
+                str(log),
+            ]
+        )
+        == 0
+    )
     ref = np.load(tmp_path / "ref.depth.npy")
-    assert np.median(np.abs(b[both & np.isfinite(ref)] - ref[both & np.isfinite(ref)])
-                     / ref[both & np.isfinite(ref)]) < 2e-3                # drawn against the edited reference
+    assert (
+        np.median(np.abs(b[both & np.isfinite(ref)] - ref[both & np.isfinite(ref)]) / ref[both & np.isfinite(ref)])
+        < 2e-3
+    )  # drawn against the edited reference
 
 
 def _bad_logs(terrain, folder):
@@ -48,13 +72,17 @@ def _bad_logs(terrain, folder):
     ok = _log(terrain, folder / "ok.jsonl", [Raise((ox + 1000.0, oy + 1000.0), 500.0, 5.0)])
     header = ok.read_text().splitlines()[0]
     other = TerrainOptions(dataset="fbm", size_samples=129).load()
-    cases = {"malformed": (header + "\n{\"frame\": 0,\n", "line 2: not JSON"),
-             "nan": (header + "\n" + json.dumps({**good, "strength": float("nan")}) + "\n", "strength must be finite"),
-             "radius": (header + "\n" + json.dumps({**good, "radius": 0.0}) + "\n", "radius must lie in"),
-             "huge": (header + "\n" + json.dumps({**good, "radius": 1e9}) + "\n", "radius must lie in"),
-             "off": (header + "\n" + json.dumps({**good, "centre": [ox - 5.0, oy]}) + "\n", "lies off terrain"),
-             "other": (_log(other, folder / "o.jsonl", [Raise((1000.0, 1000.0), 500.0, 5.0)]).read_text(),
-                       "was made for terrain")}
+    cases = {
+        "malformed": (header + '\n{"frame": 0,\n', "line 2: not JSON"),
+        "nan": (header + "\n" + json.dumps({**good, "strength": float("nan")}) + "\n", "strength must be finite"),
+        "radius": (header + "\n" + json.dumps({**good, "radius": 0.0}) + "\n", "radius must lie in"),
+        "huge": (header + "\n" + json.dumps({**good, "radius": 1e9}) + "\n", "radius must lie in"),
+        "off": (header + "\n" + json.dumps({**good, "centre": [ox - 5.0, oy]}) + "\n", "lies off terrain"),
+        "other": (
+            _log(other, folder / "o.jsonl", [Raise((1000.0, 1000.0), 500.0, 5.0)]).read_text(),
+            "was made for terrain",
+        ),
+    }
     return cases
 
 

@@ -1,4 +1,5 @@
 """What each structure pays to follow an edit equals a full rebuild: the pyramid, the max mipmap, the node arrays."""
+
 import numpy as np
 import pytest
 
@@ -11,7 +12,7 @@ from hybrid.tiles.tile_table import tile_table
 
 @pytest.fixture(scope="module")
 def small_puget():
-    return crop(puget(with_texture=False), 97)          # 16-bit source: tiles exact on the step until edited
+    return crop(puget(with_texture=False), 97)  # 16-bit source: tiles exact on the step until edited
 
 
 def _edit(hf, brushes):
@@ -28,8 +29,13 @@ def _pyramid_arrays(p):
     for level in range(p.max_level + 1):
         rows, cols = p.tile_counts(level)
         ty, tx = np.divmod(np.arange(rows * cols), cols)
-        out += [p._zmax[level], p._zmin[level], p._err[level], p.level_table(level),
-                p.quantization_errors_at(level, tx, ty)]
+        out += [
+            p._zmax[level],
+            p._zmin[level],
+            p._err[level],
+            p.level_table(level),
+            p.quantization_errors_at(level, tx, ty),
+        ]
     return out
 
 
@@ -37,11 +43,17 @@ def _pyramid_arrays(p):
 def test_pyramid_after_edits_equals_a_rebuild(small_puget, name):
     hf = crop(small_puget, 97) if name == "puget" else get_dataset("fbm", 97)
     p = TilePyramid(hf, 16)
-    _pyramid_arrays(p)                                   # every cache made before the edit
+    _pyramid_arrays(p)  # every cache made before the edit
     tile_table(p)
     cx, cy = hf.origin[0] + 32 * hf.spacing_x, hf.origin[1] + 48 * hf.spacing_y
-    win = _edit(hf, [Raise((cx, cy), 9 * hf.spacing_x, 40.0), Crater((cx + 30 * hf.spacing_x, cy), 6 * hf.spacing_x, 25.0),
-                     Smooth((hf.origin[0], hf.origin[1]), 5 * hf.spacing_x, 1.0)])
+    win = _edit(
+        hf,
+        [
+            Raise((cx, cy), 9 * hf.spacing_x, 40.0),
+            Crater((cx + 30 * hf.spacing_x, cy), 6 * hf.spacing_x, 25.0),
+            Smooth((hf.origin[0], hf.origin[1]), 5 * hf.spacing_x, 1.0),
+        ],
+    )
     keys = update_pyramid(p, win)
     fresh = TilePyramid(hf, 16)
     for a, b in zip(_pyramid_arrays(p), _pyramid_arrays(fresh), strict=True):
@@ -49,13 +61,13 @@ def test_pyramid_after_edits_equals_a_rebuild(small_puget, name):
     np.testing.assert_array_equal(tile_table(p).boxes, tile_table(fresh).boxes)
     assert hf.height_range == (float(hf.heights.min()), float(hf.heights.max()))
     assert {k.level for k in keys} == set(range(p.max_level + 1))
-    assert len([k for k in keys if k.level == 0]) < len(p.keys(0))     # not every tile
+    assert len([k for k in keys if k.level == 0]) < len(p.keys(0))  # not every tile
 
 
 def test_touched_keys_include_both_tiles_of_a_shared_border():
     hf = get_dataset("fbm", 65)
     p = TilePyramid(hf, 16)
-    win = _edit(hf, [Raise((16 * 30.0, 40 * 30.0), 20.0, 5.0)])          # one sample: the border column 16
+    win = _edit(hf, [Raise((16 * 30.0, 40 * 30.0), 20.0, 5.0)])  # one sample: the border column 16
     assert (win.j0, win.j1, win.i0, win.i1) == (16, 17, 40, 41)
     level0 = sorted((k.tx, k.ty) for k in touched_keys(p, win) if k.level == 0)
     assert level0 == [(0, 2), (1, 2)]
@@ -64,6 +76,7 @@ def test_touched_keys_include_both_tiles_of_a_shared_border():
 def test_max_mipmap_updated_over_the_window_equals_a_rebuild():
     from hybrid.terrain.edits import Window
     from raycast.maxmip import maxmip_levels, update_levels
+
     rng = np.random.default_rng(4)
     h = rng.integers(0, 60000, (65, 65)).astype(np.uint16)
     levels = maxmip_levels(h)
@@ -78,6 +91,7 @@ def test_local_window_of_a_coarse_tile_includes_its_repeated_edge_samples():
     from hybrid.terrain.edits import Window
     from hybrid.tiles.pyramid import TileKey
     from raycast.edit import local_window
+
     # a 90-sample grid, tiles of 16 cells: the level-2 tile (1, 0) starts at column 64, samples every 4th
     assert local_window(Window(0, 3, 70, 75), TileKey(2, 1, 0), 16, 90, 90) == Window(0, 1, 2, 3)
     assert local_window(Window(0, 3, 88, 90), TileKey(2, 1, 0), 16, 90, 90) == Window(0, 1, 6, 17)
@@ -87,6 +101,7 @@ def test_local_window_of_a_coarse_tile_includes_its_repeated_edge_samples():
 def test_gpu_max_mipmap_updated_over_the_window_equals_a_rebuild(ctx):
     from hybrid.terrain.edits import Window
     from raycast.maxmip import MaxMipBuilder, read_maxmip
+
     rng = np.random.default_rng(5)
     n = 64
     h = rng.integers(0, 60000, (n + 1, n + 1)).astype(np.uint16)
@@ -109,27 +124,35 @@ def test_gpu_max_mipmap_updated_over_the_window_equals_a_rebuild(ctx):
             o.release()
 
 
-@pytest.mark.parametrize("exact_span", [1024, 8])       # 8: levels of bounded errors too
+@pytest.mark.parametrize("exact_span", [1024, 8])  # 8: levels of bounded errors too
 def test_node_arrays_after_edits_equal_a_rebuild(monkeypatch, exact_span):
     import raster.rect_nodes as rn
     from raster.node_edit import node_edits, update_nodes
     from raster.nodes import GlobalNodes
+
     monkeypatch.setattr(rn, "EXACT_SPAN", exact_span)
-    hf = get_dataset("fbm", 97)                  # tiles of 16: a 128-cell square, so padding classes beyond the grid
+    hf = get_dataset("fbm", 97)  # tiles of 16: a 128-cell square, so padding classes beyond the grid
     R, eff, zlo, zhi, sides = rn.rect_nodes(hf, 16, 0.9)
-    nodes = GlobalNodes(R, 0.9, tuple(a.copy() for a in eff), tuple(a.copy() for a in zlo),
-                        tuple(a.copy() for a in zhi), sides=tuple(a.copy() for a in sides))
+    nodes = GlobalNodes(
+        R,
+        0.9,
+        tuple(a.copy() for a in eff),
+        tuple(a.copy() for a in zlo),
+        tuple(a.copy() for a in zhi),
+        sides=tuple(a.copy() for a in sides),
+    )
     st = node_edits(hf, 16, 0.9)
-    edits = [Raise((16 * 30.0, 32 * 30.0), 100.0, 60.0),            # across a tile border
-             Crater((96 * 30.0, 96 * 30.0), 200.0, 40.0),           # the grid's corner: padding classes change
-             Smooth((50 * 30.0, 20 * 30.0), 150.0, 1.0)]
+    edits = [
+        Raise((16 * 30.0, 32 * 30.0), 100.0, 60.0),  # across a tile border
+        Crater((96 * 30.0, 96 * 30.0), 200.0, 40.0),  # the grid's corner: padding classes change
+        Smooth((50 * 30.0, 20 * 30.0), 150.0, 1.0),
+    ]
     for brush in edits:
         win = _edit(hf, [brush])
         rewritten = update_nodes(st, nodes, hf, win)
         want = rn.rect_nodes(hf, 16, 0.9)
-        for got_arrays, want_arrays in zip((nodes.effective, nodes.zlo, nodes.zhi, nodes.sides), want[1:],
-                                           strict=True):
+        for got_arrays, want_arrays in zip((nodes.effective, nodes.zlo, nodes.zhi, nodes.sides), want[1:], strict=True):
             for g, (a, b) in enumerate(zip(got_arrays, want_arrays, strict=True)):
                 np.testing.assert_array_equal(a, b, err_msg=f"level {g} after {brush}")
-        assert rewritten[0].i1 - rewritten[0].i0 < nodes.effective[0].shape[0]      # not the whole level 0
+        assert rewritten[0].i1 - rewritten[0].i0 < nodes.effective[0].shape[0]  # not the whole level 0
     assert not np.array_equal(nodes.zhi[0], zhi[0]) and not np.array_equal(nodes.effective[2], eff[2])

@@ -1,4 +1,5 @@
 """The GPU brush pass: the same heights as the CPU reference, over the touched window only, written through."""
+
 import numpy as np
 import pytest
 
@@ -6,14 +7,19 @@ from hybrid.gl.brush import GpuHeights
 from hybrid.terrain.datasets import get_dataset
 from hybrid.terrain.edits import Crater, Flatten, Raise, Smooth, apply_brush, brush_params
 
-BRUSHES = [Raise((900.0, 700.0), 400.0, 50.0), Raise((0.0, 1920.0), 300.0, -80.0),
-           Flatten((1000.0, 1000.0), 500.0, 0.8, 200.0), Smooth((960.0, 960.0), 600.0, 1.0),
-           Crater((1500.0, 400.0), 450.0, 120.0), Smooth((0.0, 0.0), 300.0, 0.7)]
+BRUSHES = [
+    Raise((900.0, 700.0), 400.0, 50.0),
+    Raise((0.0, 1920.0), 300.0, -80.0),
+    Flatten((1000.0, 1000.0), 500.0, 0.8, 200.0),
+    Smooth((960.0, 960.0), 600.0, 1.0),
+    Crater((1500.0, 400.0), 450.0, 120.0),
+    Smooth((0.0, 0.0), 300.0, 0.7),
+]
 
 
 @pytest.fixture
 def hf():
-    return get_dataset("fbm", 65)          # 64 cells of 30 m; tiles of 16 cells have borders every 480 m
+    return get_dataset("fbm", 65)  # 64 cells of 30 m; tiles of 16 cells have borders every 480 m
 
 
 def test_gpu_brushes_equal_the_cpu_reference_in_sequence(ctx, hf):
@@ -25,15 +31,15 @@ def test_gpu_brushes_equal_the_cpu_reference_in_sequence(ctx, hf):
             win = gpu.edit(brush)
             assert win == apply_brush(cpu, brush_params(brush, hf))
             tol = 1e-5 * max(1.0, float(np.abs(cpu).max()))
-            np.testing.assert_allclose(hf.heights, cpu, rtol=0, atol=tol)      # the CPU copy followed
-            np.testing.assert_allclose(gpu.read(), cpu, rtol=0, atol=tol)      # and the GPU's own heights
+            np.testing.assert_allclose(hf.heights, cpu, rtol=0, atol=tol)  # the CPU copy followed
+            np.testing.assert_allclose(gpu.read(), cpu, rtol=0, atol=tol)  # and the GPU's own heights
         assert np.abs(hf.heights - before).max() > 10.0
     finally:
         gpu.release()
 
 
 def test_gpu_brush_crossing_tile_borders_changes_its_window_only(ctx, hf):
-    brush = Crater((960.0, 480.0), 700.0, 90.0)     # centre on a corner of four 16-cell tiles
+    brush = Crater((960.0, 480.0), 700.0, 90.0)  # centre on a corner of four 16-cell tiles
     before = hf.heights.copy()
     gpu = GpuHeights(ctx, hf)
     try:

@@ -1,4 +1,5 @@
 """An edit run end to end at a tiny size: every method follows the same edits, its tables, 0 cracks, the report."""
+
 import dataclasses
 
 import numpy as np
@@ -16,10 +17,15 @@ POLICIES = {"raster", "raster_gs", "raycast", "hybrid"}
 @pytest.fixture(scope="module")
 def run(ctx, tmp_path_factory):
     spec = load_spec("edit", {"frames": 3, "sizes": ["96x54"]})
-    spec = dataclasses.replace(spec, dataset_size=129, tile_size=32, image_frames=[2], name="edit-tiny",
-                               policies=sorted(POLICIES),
-                               edit=dataclasses.replace(spec.edit, radii=(1500.0, 3000.0), strength=300.0,
-                                                        particles=512))
+    spec = dataclasses.replace(
+        spec,
+        dataset_size=129,
+        tile_size=32,
+        image_frames=[2],
+        name="edit-tiny",
+        policies=sorted(POLICIES),
+        edit=dataclasses.replace(spec.edit, radii=(1500.0, 3000.0), strength=300.0, particles=512),
+    )
     base = tmp_path_factory.mktemp("runs")
     return spec, run_edit_spec(spec, base, ctx, progress=False)
 
@@ -28,10 +34,28 @@ def test_tables_hold_updates_frames_particles_and_accuracy(run):
     spec, folder = run
     f = pd.read_parquet(folder / "frames.parquet")
     assert len(f) == len(POLICIES) * 3 * 3 and set(f["policy"]) == POLICIES
-    for col in ("wall_ms", "wall_ms_repeats", "update_ms", "update_brush_ms", "update_pyramid_ms", "edits",
-                "edit_tiles", "particles", "particles_ms", "particles_step_ms", "particles_draw_ms", "particles_gpu_ms",
-                "crack_px", "coverage_mismatch", "depth_rel_median", "flip", "gpu_bytes", "edit_gpu_bytes",
-                "editing", "edit_radius"):
+    for col in (
+        "wall_ms",
+        "wall_ms_repeats",
+        "update_ms",
+        "update_brush_ms",
+        "update_pyramid_ms",
+        "edits",
+        "edit_tiles",
+        "particles",
+        "particles_ms",
+        "particles_step_ms",
+        "particles_draw_ms",
+        "particles_gpu_ms",
+        "crack_px",
+        "coverage_mismatch",
+        "depth_rel_median",
+        "flip",
+        "gpu_bytes",
+        "edit_gpu_bytes",
+        "editing",
+        "edit_radius",
+    ):
         assert col in f, col
     e, s = f[f["editing"]], f[~f["editing"]]
     assert (e["edits"] == 1).all() and (s["edits"] == 0).all() and (s["update_ms"] == 0).all()
@@ -42,7 +66,7 @@ def test_tables_hold_updates_frames_particles_and_accuracy(run):
     assert (e.groupby(["edit_radius", "frame"])["edit_tiles"].nunique() == 1).all()
     assert f["particles"].eq(512).all() and f["particles_ms"].gt(0).all() and f["particles_bytes"].gt(0).all()
     assert f["wall_ms"].gt(0).all() and all(len(r) == spec.repeats for r in f["wall_ms_repeats"])
-    assert int(f["crack_px"].max()) == 0                                  # no crack after the edits
+    assert int(f["crack_px"].max()) == 0  # no crack after the edits
     assert f["coverage_mismatch"].max() < 0.01 and f["depth_rel_median"].max() < 0.02
     assert (folder / "tiles.parquet").exists()
 

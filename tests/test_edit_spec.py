@@ -1,5 +1,6 @@
 """Edit specs (kind = "edit"): the programme replayed alike for every method, bad values refused by name (exit 2,
 no run folder made)."""
+
 import itertools
 
 import pytest
@@ -36,8 +37,9 @@ def test_the_bundled_edit_spec_parses_with_overrides():
     assert spec.edit.brush == "crater" and len(spec.edit.radii) >= 2 and spec.edit.particles > 0
     configs = spec.configs()
     assert len(configs) == len(spec.policies) * (len(spec.edit.radii) + 1)
-    assert {c["config"] for c in configs if not c["editing"]} == \
-        {c["config"] for c in configs if c["edit_radius"] == 0.0}
+    assert {c["config"] for c in configs if not c["editing"]} == {
+        c["config"] for c in configs if c["edit_radius"] == 0.0
+    }
     assert len({c["config"] for c in configs}) == len(configs)
 
 
@@ -53,42 +55,60 @@ def test_the_programme_is_the_same_brushes_along_the_path():
     assert flat[0].centre == pytest.approx((ox + 0.2 * w, oy + 0.2 * d))
     assert flat[-1].centre == pytest.approx((ox + 0.8 * w, oy + 0.8 * d))
     steps = [abs(a.centre[0] - b.centre[0]) + abs(a.centre[1] - b.centre[1]) for a, b in itertools.pairwise(flat)]
-    assert max(steps) == pytest.approx(min(steps), rel=1e-6)              # evenly spaced by length, round the corner
-    assert frame_brushes(spec, hf, 500.0) == frames                        # replayed identically
-    metres = parse_spec(BASE + EDIT.replace("[[0.2, 0.2], [0.8, 0.2], [0.8, 0.8]]", f"[[{ox + 1000}, {oy + 2000}]]")
-                        .replace("path", 'units = "metres"\npath').replace("strength = 40.0", "strength = 0.5")
-                        .replace("[edit]", '[edit]\nbrush = "flatten"\nheight = 100.0'))
+    assert max(steps) == pytest.approx(min(steps), rel=1e-6)  # evenly spaced by length, round the corner
+    assert frame_brushes(spec, hf, 500.0) == frames  # replayed identically
+    metres = parse_spec(
+        BASE
+        + EDIT.replace("[[0.2, 0.2], [0.8, 0.2], [0.8, 0.8]]", f"[[{ox + 1000}, {oy + 2000}]]")
+        .replace("path", 'units = "metres"\npath')
+        .replace("strength = 40.0", "strength = 0.5")
+        .replace("[edit]", '[edit]\nbrush = "flatten"\nheight = 100.0')
+    )
     b = frame_brushes(metres, hf, 1500.0)[3][1]
     assert isinstance(b, Flatten) and b.centre == (ox + 1000.0, oy + 2000.0) and b.height == 100.0
 
 
-@pytest.mark.parametrize("change, words", [
-    (("radii = [500.0, 1500.0]", "radii = [0.0]"), "'radii' must be > 0 m"),
-    (("radii = [500.0, 1500.0]", "radii = [-5.0, 10.0]"), "'radii' must be > 0 m"),
-    (("strength = 40.0", "strength = nan"), "'strength' must be a finite number"),
-    (("[0.8, 0.8]]", "[1.5, 0.8]]"), "way-point 3 (1.5, 0.8) lies off the terrain"),
-    (("edits_per_frame = 2", "edits_per_frame = -1"), "'edits_per_frame' must be an integer in [0,"),
-    (("particles = 64", "particles = -3"), "'particles' must be an integer in [0,"),
-    (("particles = 64", "particles = 1.5"), "'particles' must be an integer"),
-    (("strength = 40.0", "strength = 40.0\nspeed = 2"), "unknown keys ['speed']"),
-    (("strength = 40.0", 'strength = 40.0\nbrush = "stamp"'), "'brush' must be one of"),
-    (("strength = 40.0", "strength = 40.0\nheight = 3.0"), "'height' (world z, m) goes with brush"),
-    (('name = "e"', 'name = "e"\npolicies = ["reference"]'), "do not follow edits"),
-    (('sizes = ["64x36"]', 'sizes = ["64x36", "32x18"]'), "an edit spec takes one viewport"),
-    (("frames = 4", "frames = 0"), "'frames' must be an integer in [1,"),
-])
+@pytest.mark.parametrize(
+    "change, words",
+    [
+        (("radii = [500.0, 1500.0]", "radii = [0.0]"), "'radii' must be > 0 m"),
+        (("radii = [500.0, 1500.0]", "radii = [-5.0, 10.0]"), "'radii' must be > 0 m"),
+        (("strength = 40.0", "strength = nan"), "'strength' must be a finite number"),
+        (("[0.8, 0.8]]", "[1.5, 0.8]]"), "way-point 3 (1.5, 0.8) lies off the terrain"),
+        (("edits_per_frame = 2", "edits_per_frame = -1"), "'edits_per_frame' must be an integer in [0,"),
+        (("particles = 64", "particles = -3"), "'particles' must be an integer in [0,"),
+        (("particles = 64", "particles = 1.5"), "'particles' must be an integer"),
+        (("strength = 40.0", "strength = 40.0\nspeed = 2"), "unknown keys ['speed']"),
+        (("strength = 40.0", 'strength = 40.0\nbrush = "stamp"'), "'brush' must be one of"),
+        (("strength = 40.0", "strength = 40.0\nheight = 3.0"), "'height' (world z, m) goes with brush"),
+        (('name = "e"', 'name = "e"\npolicies = ["reference"]'), "do not follow edits"),
+        (('sizes = ["64x36"]', 'sizes = ["64x36", "32x18"]'), "an edit spec takes one viewport"),
+        (("frames = 4", "frames = 0"), "'frames' must be an integer in [1,"),
+    ],
+)
 def test_bad_values_are_refused_by_name(change, words):
     with pytest.raises(TerrabenchError) as exc:
         parse_spec((BASE + EDIT).replace(*change))
     assert words in str(exc.value)
 
 
-@pytest.mark.parametrize("change, words", [
-    (("radii = [500.0, 1500.0]", "radii = [500.0, 1e9]"), "radius 1e+09 m is larger than terrain 'puget-129' (20480 x 20480 m)"),
-    (("path = [[0.2, 0.2], [0.8, 0.2], [0.8, 0.8]]", 'units = "metres"\npath = [[120000.0, 80000.0], [117000.0, 80000.0]]'),
-     "way-point 2 (117000, 80000) m lies off terrain 'puget-129'"),
-    (("strength = 40.0", "strength = 2e7"), "strength must lie within"),
-])
+@pytest.mark.parametrize(
+    "change, words",
+    [
+        (
+            ("radii = [500.0, 1500.0]", "radii = [500.0, 1e9]"),
+            "radius 1e+09 m is larger than terrain 'puget-129' (20480 x 20480 m)",
+        ),
+        (
+            (
+                "path = [[0.2, 0.2], [0.8, 0.2], [0.8, 0.8]]",
+                'units = "metres"\npath = [[120000.0, 80000.0], [117000.0, 80000.0]]',
+            ),
+            "way-point 2 (117000, 80000) m lies off terrain 'puget-129'",
+        ),
+        (("strength = 40.0", "strength = 2e7"), "strength must lie within"),
+    ],
+)
 def test_values_that_do_not_fit_the_terrain_exit_2_before_a_run_folder(tmp_path, capsys, change, words):
     path = tmp_path / "e.toml"
     path.write_text((BASE + EDIT).replace(*change))

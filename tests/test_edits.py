@@ -1,4 +1,5 @@
 """Terrain edits: brushes checked against the terrain, their CPU reference, and the edit log."""
+
 import json
 
 import numpy as np
@@ -13,7 +14,7 @@ from hybrid.terrain.heightfield import HeightField
 
 @pytest.fixture
 def hf():
-    return get_dataset("fbm", 65)          # 64 x 30 m = 1920 m a side, origin 0
+    return get_dataset("fbm", 65)  # 64 x 30 m = 1920 m a side, origin 0
 
 
 def _slow(brush, hf):
@@ -23,7 +24,7 @@ def _slow(brush, hf):
     for i in range(hf.rows):
         for j in range(hf.cols):
             d2 = (j * hf.spacing_x - brush.centre[0]) ** 2 + (i * hf.spacing_y - brush.centre[1]) ** 2
-            t = d2 / brush.radius ** 2
+            t = d2 / brush.radius**2
             if t >= 1:
                 continue
             w = (1 - t) ** 2
@@ -44,9 +45,16 @@ def _slow(brush, hf):
     return out
 
 
-@pytest.mark.parametrize("brush", [Raise((900.0, 700.0), 400.0, 50.0), Raise((0.0, 1920.0), 300.0, -80.0),
-                                   Flatten((1000.0, 1000.0), 500.0, 0.8, 200.0), Smooth((960.0, 960.0), 600.0, 1.0),
-                                   Crater((1500.0, 400.0), 450.0, 120.0)])
+@pytest.mark.parametrize(
+    "brush",
+    [
+        Raise((900.0, 700.0), 400.0, 50.0),
+        Raise((0.0, 1920.0), 300.0, -80.0),
+        Flatten((1000.0, 1000.0), 500.0, 0.8, 200.0),
+        Smooth((960.0, 960.0), 600.0, 1.0),
+        Crater((1500.0, 400.0), 450.0, 120.0),
+    ],
+)
 def test_cpu_brush_matches_its_definition_and_stays_in_window(hf, brush):
     want = _slow(brush, hf)
     h = hf.heights.copy()
@@ -55,12 +63,12 @@ def test_cpu_brush_matches_its_definition_and_stays_in_window(hf, brush):
     np.testing.assert_allclose(h, want, rtol=0, atol=2e-3 * max(1.0, abs(brush.strength)))
     outside = np.ones(h.shape, bool)
     outside[win.slices()] = False
-    assert np.array_equal(h[outside], hf.heights[outside])          # nothing beyond the window moves
+    assert np.array_equal(h[outside], hf.heights[outside])  # nothing beyond the window moves
     assert np.abs(h - hf.heights).max() > 0.1
 
 
 def test_window_is_the_radius_in_samples(hf):
-    p = brush_params(Raise((900.0, 600.0), 95.0, 1.0), hf)         # 3.17 samples east-west and north-south
+    p = brush_params(Raise((900.0, 600.0), 95.0, 1.0), hf)  # 3.17 samples east-west and north-south
     win = touched(p, hf.rows, hf.cols)
     assert (win.i0, win.i1, win.j0, win.j1) == (17, 24, 27, 34)
 
@@ -70,17 +78,24 @@ def test_raise_with_falloff_is_seamless_at_the_rim(hf):
     apply_brush(h, brush_params(Raise((960.0, 960.0), 600.0, 100.0), hf))
     d = h.astype(np.float64) - hf.heights
     assert d[32, 32] == pytest.approx(100.0, abs=1e-3)
-    assert d[32, 32 + 19] == pytest.approx(100.0 * (1 - 0.9025) ** 2, abs=1e-3)   # 570 m of 600
-    assert d[32, 32 + 20] == 0.0 and d[32, 32 - 20] == 0.0                     # the rim itself: weight 0
+    assert d[32, 32 + 19] == pytest.approx(100.0 * (1 - 0.9025) ** 2, abs=1e-3)  # 570 m of 600
+    assert d[32, 32 + 20] == 0.0 and d[32, 32 - 20] == 0.0  # the rim itself: weight 0
 
 
-@pytest.mark.parametrize("brush, words", [
-    (Raise((100.0, 100.0), 0.0, 1.0), "radius"), (Raise((100.0, 100.0), -5.0, 1.0), "radius"),
-    (Raise((100.0, 100.0), 5000.0, 1.0), "larger extent"), (Raise((100.0, 100.0), 50.0, float("nan")), "strength"),
-    (Raise((-10.0, 100.0), 50.0, 1.0), "off terrain"), (Raise((100.0, 2000.0), 50.0, 1.0), "off terrain"),
-    (Smooth((100.0, 100.0), 50.0, 1.5), "[0, 1]"), (Flatten((100.0, 100.0), 50.0, 0.5, float("inf")), "height"),
-    (Raise((float("nan"), 100.0), 50.0, 1.0), "centre x"),
-])
+@pytest.mark.parametrize(
+    "brush, words",
+    [
+        (Raise((100.0, 100.0), 0.0, 1.0), "radius"),
+        (Raise((100.0, 100.0), -5.0, 1.0), "radius"),
+        (Raise((100.0, 100.0), 5000.0, 1.0), "larger extent"),
+        (Raise((100.0, 100.0), 50.0, float("nan")), "strength"),
+        (Raise((-10.0, 100.0), 50.0, 1.0), "off terrain"),
+        (Raise((100.0, 2000.0), 50.0, 1.0), "off terrain"),
+        (Smooth((100.0, 100.0), 50.0, 1.5), "[0, 1]"),
+        (Flatten((100.0, 100.0), 50.0, 0.5, float("inf")), "height"),
+        (Raise((float("nan"), 100.0), 50.0, 1.0), "centre x"),
+    ],
+)
 def test_bad_brushes_are_refused_by_name(hf, brush, words):
     with pytest.raises(TerrabenchError, match="brush") as info:
         check_brush(brush, hf)
@@ -88,9 +103,14 @@ def test_bad_brushes_are_refused_by_name(hf, brush, words):
 
 
 def _log(hf):
-    return EditLog(terrain_id(hf), (LoggedEdit(0, Raise((900.0, 700.0), 400.0, 50.0)),
-                                    LoggedEdit(2, Flatten((1000.0, 1000.0), 500.0, 0.8, 200.0)),
-                                    LoggedEdit(2, Crater((1500.0, 400.0), 450.0, 120.0))))
+    return EditLog(
+        terrain_id(hf),
+        (
+            LoggedEdit(0, Raise((900.0, 700.0), 400.0, 50.0)),
+            LoggedEdit(2, Flatten((1000.0, 1000.0), 500.0, 0.8, 200.0)),
+            LoggedEdit(2, Crater((1500.0, 400.0), 450.0, 120.0)),
+        ),
+    )
 
 
 def test_log_round_trips(hf, tmp_path):
@@ -102,17 +122,20 @@ def test_log_round_trips(hf, tmp_path):
     assert len((tmp_path / "e.jsonl").read_text().splitlines()) == 4
 
 
-@pytest.mark.parametrize("line, words", [
-    ("{not json", "line 3: not JSON"), ('{"frame": 0, "brush": "melt", "centre": [1, 2], "radius": 1, "strength": 1}',
-                                       "line 3: brush must be one of"),
-    ('{"frame": 0, "brush": "raise", "centre": [1, 2], "radius": 1}', "line 3: a raise edit has keys"),
-    ('{"frame": -1, "brush": "raise", "centre": [1, 2], "radius": 1, "strength": 1}', "line 3: frame"),
-    ('{"frame": 0, "brush": "raise", "centre": [1], "radius": 1, "strength": 1}', "line 3: centre"),
-    ('{"frame": 0, "brush": "raise", "centre": [1, 2], "radius": "big", "strength": 1}', "line 3: radius"),
-    ('[1, 2]', "line 3: an edit must be a JSON object"),
-])
+@pytest.mark.parametrize(
+    "line, words",
+    [
+        ("{not json", "line 3: not JSON"),
+        ('{"frame": 0, "brush": "melt", "centre": [1, 2], "radius": 1, "strength": 1}', "line 3: brush must be one of"),
+        ('{"frame": 0, "brush": "raise", "centre": [1, 2], "radius": 1}', "line 3: a raise edit has keys"),
+        ('{"frame": -1, "brush": "raise", "centre": [1, 2], "radius": 1, "strength": 1}', "line 3: frame"),
+        ('{"frame": 0, "brush": "raise", "centre": [1], "radius": 1, "strength": 1}', "line 3: centre"),
+        ('{"frame": 0, "brush": "raise", "centre": [1, 2], "radius": "big", "strength": 1}', "line 3: radius"),
+        ("[1, 2]", "line 3: an edit must be a JSON object"),
+    ],
+)
 def test_malformed_lines_are_refused_by_number(hf, tmp_path, line, words):
-    lines = (tmp_path / "ok.jsonl")
+    lines = tmp_path / "ok.jsonl"
     write_log(lines, _log(hf))
     text = lines.read_text().splitlines()
     text.insert(2, line)
@@ -152,7 +175,9 @@ def test_a_log_for_another_terrain_is_refused(hf, tmp_path):
 
 
 def test_a_logged_brush_off_the_terrain_is_refused_by_edit_number(hf, tmp_path):
-    log = EditLog(terrain_id(hf), (LoggedEdit(0, Raise((900.0, 700.0), 400.0, 50.0)),
-                                   LoggedEdit(1, Raise((9000.0, 700.0), 400.0, 50.0))))
+    log = EditLog(
+        terrain_id(hf),
+        (LoggedEdit(0, Raise((900.0, 700.0), 400.0, 50.0)), LoggedEdit(1, Raise((9000.0, 700.0), 400.0, 50.0))),
+    )
     with pytest.raises(TerrabenchError, match="edit 2: raise brush centre"):
         check_log(log, hf)

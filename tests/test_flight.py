@@ -1,4 +1,5 @@
 """Flights: presets keep their promises, interpolation is smooth, files round-trip, bad files are named."""
+
 import numpy as np
 import pytest
 
@@ -16,7 +17,7 @@ def test_presets(puget257):
     g = preset("grazing", puget257, frames=6)
     for v in g.views():
         assert v.eye[2] - puget257.ground_height(*v.eye[:2]) >= 2.0
-        assert abs(v.forward[2]) < 1e-9                       # a level view
+        assert abs(v.forward[2]) < 1e-9  # a level view
     down = preset("lookdown", puget257, frames=3).view(1)
     assert down.forward[2] < -0.999
 
@@ -28,7 +29,7 @@ def test_interpolation_passes_keyframes_smoothly():
     assert np.allclose(f.view(10).eye, eyes[1])
     path = np.array([f.view(k).eye for k in range(31)])
     step = np.linalg.norm(np.diff(path, axis=0), axis=1)
-    assert step.max() / step.min() < 3.0                      # no jumps
+    assert step.max() / step.min() < 3.0  # no jumps
 
 
 def test_save_load_roundtrip(tmp_path, puget257):
@@ -70,12 +71,12 @@ def test_dolly_moves_slowly_and_steadily_above_the_terrain(puget257):
     # above the ground under the eye by the margin (30 m or a fifth of the local relief), at every frame
     assert clearance.min() >= 30.0
     step = np.linalg.norm(np.diff(eyes, axis=0), axis=1)
-    assert np.allclose(step, step[0], rtol=1e-6) and 0.1 <= step[0] <= 2.0        # at most a few metres, steadily
-    assert np.allclose(np.diff(eyes[:, 2]), 0.0)                                   # level
+    assert np.allclose(step, step[0], rtol=1e-6) and 0.1 <= step[0] <= 2.0  # at most a few metres, steadily
+    assert np.allclose(np.diff(eyes[:, 2]), 0.0)  # level
     for v in views[::6]:
-        assert -0.2 < v.forward[2] < -0.05                                          # ahead and slightly down
+        assert -0.2 < v.forward[2] < -0.05  # ahead and slightly down
         hit = _ground_along_ray(hf, v.eye, v.forward, 60000.0)
-        assert np.isfinite(hit) and step[0] / hit < 0.01            # motion small against the distance in view
+        assert np.isfinite(hit) and step[0] / hit < 0.01  # motion small against the distance in view
     assert step[0] / clearance.min() < 0.2
     again = preset("dolly", hf, frames=24).views()
     assert all(np.array_equal(a.eye, b.eye) and np.array_equal(a.target, b.target) for a, b in zip(views, again))
@@ -85,7 +86,7 @@ def _local_relief(hf, x, y, cells):
     """Highest minus lowest height sample within ``cells`` cells (a square window) of the sample nearest (x, y)."""
     i = int(round((y - hf.origin[1]) / hf.spacing_y))
     j = int(round((x - hf.origin[0]) / hf.spacing_x))
-    w = hf.heights[max(i - cells, 0):i + cells + 1, max(j - cells, 0):j + cells + 1]
+    w = hf.heights[max(i - cells, 0) : i + cells + 1, max(j - cells, 0) : j + cells + 1]
     return float(w.max() - w.min()) if w.size else 0.0
 
 
@@ -105,6 +106,7 @@ def test_every_eye_clears_the_ground_by_a_margin_of_the_local_relief(request, sy
 @pytest.mark.parametrize("terrain", STEEP + ("fbm", "puget257", "puget_full"))
 def test_grazing_sees_sky_above_and_terrain_below(ctx, request, synthetic, terrain):
     from hybrid.reference import ReferenceRenderer
+
     hf = request.getfixturevalue(terrain) if terrain.startswith("puget") else synthetic(terrain)
     with ReferenceRenderer(ctx, hf) as ref:
         for k, v in enumerate(preset("grazing", hf, frames=6, width=160, height=90).views()):

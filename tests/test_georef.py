@@ -1,6 +1,7 @@
 """GeoTIFFs written with rasterio in geographic, Web-Mercator, UTM and compound CRSs load with the right ground
 spacing (checked against textbook values, ellipsoid formulas and Geod distances made here), orientation,
 extent, vertical units and no-data; bad georeferencing is refused by name."""
+
 import math
 import warnings
 
@@ -16,14 +17,24 @@ from hybrid.terrain.loaders import NoDataWarning, load_terrain
 from hybrid.terrain.window import Crop
 
 WGS84_A, WGS84_F = 6378137.0, 1 / 298.257223563
-ARCSEC3 = 3 / 3600                                    # degrees
+ARCSEC3 = 3 / 3600  # degrees
 
 
 def write_tif(path, north_up, crs, transform, nodata=None, dtype="float32"):
     """A single-band GeoTIFF of a north-up array (first row = north edge)."""
     rows, cols = north_up.shape
-    with rasterio.open(path, "w", driver="GTiff", width=cols, height=rows, count=1, dtype=dtype, crs=crs,
-                       transform=transform, nodata=nodata) as dst:
+    with rasterio.open(
+        path,
+        "w",
+        driver="GTiff",
+        width=cols,
+        height=rows,
+        count=1,
+        dtype=dtype,
+        crs=crs,
+        transform=transform,
+        nodata=nodata,
+    ) as dst:
         dst.write(north_up.astype(dtype), 1)
     return path
 
@@ -45,15 +56,16 @@ def bump(rows, cols, at_row, at_col):
 @pytest.mark.parametrize("lat", [35.0, 60.0])
 def test_geographic_3_arcsecond_spacing_extent_and_north_up(tmp_path, lat):
     rows, cols = 81, 101
-    lat_top = lat + (rows / 2) * ARCSEC3                 # grid centre on `lat`
-    p = write_tif(tmp_path / "srtm.tif", bump(rows, cols, 5, 70), "EPSG:4326",
-                  from_origin(-120.0, lat_top, ARCSEC3, ARCSEC3))
+    lat_top = lat + (rows / 2) * ARCSEC3  # grid centre on `lat`
+    p = write_tif(
+        tmp_path / "srtm.tif", bump(rows, cols, 5, 70), "EPSG:4326", from_origin(-120.0, lat_top, ARCSEC3, ARCSEC3)
+    )
     hf = load_terrain(p)
     m, n = radii(lat)
     want_x = n * math.cos(math.radians(lat)) * math.radians(ARCSEC3)
     want_y = m * math.radians(ARCSEC3)
     assert hf.spacing_x == pytest.approx(want_x, rel=1e-6) and hf.spacing_y == pytest.approx(want_y, rel=1e-6)
-    if lat == 35.0:                                      # textbook: 3" of latitude ~92.4 m, of longitude ~76 m here
+    if lat == 35.0:  # textbook: 3" of latitude ~92.4 m, of longitude ~76 m here
         assert 92.3 < hf.spacing_y < 92.6 and 75.9 < hf.spacing_x < 76.2
     else:
         assert 92.7 < hf.spacing_y < 92.9 and 46.4 < hf.spacing_x < 46.6
@@ -74,17 +86,21 @@ def test_web_mercator_ground_spacing_is_projected_times_cos_latitude(tmp_path):
     to_ll = pyproj.Transformer.from_crs("EPSG:3857", "EPSG:4326", always_xy=True)
     geod = pyproj.Geod(ellps="WGS84")
     c = (cols / 2, rows / 2)
-    (lon_a, lat_a), (lon_b, lat_b) = (to_ll.transform(*(transform @ (c[0] - 0.5, c[1]))),
-                                      to_ll.transform(*(transform @ (c[0] + 0.5, c[1]))))
+    (lon_a, lat_a), (lon_b, lat_b) = (
+        to_ll.transform(*(transform @ (c[0] - 0.5, c[1]))),
+        to_ll.transform(*(transform @ (c[0] + 0.5, c[1]))),
+    )
     ew = geod.inv(lon_a, lat_a, lon_b, lat_b)[2]
-    (lon_a, lat_a), (lon_b, lat_b) = (to_ll.transform(*(transform @ (c[0], c[1] - 0.5))),
-                                      to_ll.transform(*(transform @ (c[0], c[1] + 0.5))))
+    (lon_a, lat_a), (lon_b, lat_b) = (
+        to_ll.transform(*(transform @ (c[0], c[1] - 0.5))),
+        to_ll.transform(*(transform @ (c[0], c[1] + 0.5))),
+    )
     ns = geod.inv(lon_a, lat_a, lon_b, lat_b)[2]
     assert hf.spacing_x == pytest.approx(ew, rel=1e-6) and hf.spacing_y == pytest.approx(ns, rel=1e-6)
     # and the textbook rule: ground = projected x cos(latitude), within the ellipsoid's 0.4 %
     assert hf.spacing_x == pytest.approx(px * math.cos(math.radians(36.0)), rel=4e-3)
     assert hf.spacing_y == pytest.approx(px * math.cos(math.radians(36.0)), rel=4e-3)
-    assert hf.spacing_x < 0.82 * px                       # not the projected 30 m (24 % too wide)
+    assert hf.spacing_x < 0.82 * px  # not the projected 30 m (24 % too wide)
 
 
 def test_utm_on_and_off_the_central_meridian(tmp_path):
@@ -106,11 +122,11 @@ def test_utm_on_and_off_the_central_meridian(tmp_path):
 def test_compound_crs_in_us_feet_converts_heights_and_spacing(tmp_path):
     ftus = 1200 / 3937
     rows, cols = 20, 30
-    t = from_origin(6000000, 2100000, 10.0, 10.0)          # NAD83 / California zone 3 (ftUS), 10 ft pixels
-    a = np.full((rows, cols), 1000.0, np.float32)            # 1000 US survey feet
+    t = from_origin(6000000, 2100000, 10.0, 10.0)  # NAD83 / California zone 3 (ftUS), 10 ft pixels
+    a = np.full((rows, cols), 1000.0, np.float32)  # 1000 US survey feet
     hf = load_terrain(write_tif(tmp_path / "ft.tif", a, "EPSG:2227+6360", t))
     assert np.allclose(hf.heights, 1000 * ftus, rtol=1e-6)
-    assert hf.spacing_x == pytest.approx(10 * ftus, rel=2e-4)      # state-plane scale factor is within 1e-4
+    assert hf.spacing_x == pytest.approx(10 * ftus, rel=2e-4)  # state-plane scale factor is within 1e-4
     assert any("US survey foot" in n for n in hf.notes)
     # --vertical-scale overrides the CRS's unit, and says so
     hf = load_terrain(tmp_path / "ft.tif", vertical_scale=1.0)
@@ -125,12 +141,15 @@ def test_nodata_voids_filled_and_out_of_range_nodata_ignored(tmp_path):
     a[40, 10] = -32768
     utm = from_origin(500000, 5e6, 30, 30)
     p = write_tif(tmp_path / "void.tif", a, "EPSG:32610", utm, nodata=-32768, dtype="int16")
-    with pytest.warns(NoDataWarning, match=r"25 no-data samples .* in 2 voids \(largest 24 samples\) filled by "
-                                           r"biharmonic inpainting"):
+    with pytest.warns(
+        NoDataWarning,
+        match=r"25 no-data samples .* in 2 voids \(largest 24 samples\) filled by "
+        r"biharmonic inpainting",
+    ):
         hf = load_terrain(p)
     assert hf.nodata_filled == 25
     filled = hf.heights[::-1][20:26, 30:34]
-    assert np.allclose(filled, (200 + 2 * i + 3 * j)[20:26, 30:34], atol=1e-3)    # a plane is filled exactly
+    assert np.allclose(filled, (200 + 2 * i + 3 * j)[20:26, 30:34], atol=1e-3)  # a plane is filled exactly
     # the issue's UTM DEM: int16 with GDAL_NODATA 32767, and a tag out of int16's range: no spurious message
     b = (200 + i).astype(np.int16)
     b[5, 5] = 32767
@@ -139,7 +158,7 @@ def test_nodata_voids_filled_and_out_of_range_nodata_ignored(tmp_path):
         assert load_terrain(p).heights[::-1][5, 5] == pytest.approx(205.0, abs=0.01)
     p = write_tif(tmp_path / "oor.tif", b, "EPSG:32610", utm, dtype="int16")
     with rasterio.open(p, "r+") as dst:
-        dst.nodata = 99999                                  # no int16 sample can hold it
+        dst.nodata = 99999  # no int16 sample can hold it
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         hf = load_terrain(p)
@@ -150,7 +169,7 @@ def test_crop_window_crs_override_and_spacing_pair(tmp_path):
     rows, cols = 40, 50
     a = bump(rows, cols, 12, 20)
     p = write_tif(tmp_path / "w.tif", a, "EPSG:32610", from_origin(500000 - 750, 5e6, 30, 30))
-    hf = load_terrain(p, crop=Crop(10, 15, 8, 12))             # rows 10..17 as stored (north first), cols 15..26
+    hf = load_terrain(p, crop=Crop(10, 15, 8, 12))  # rows 10..17 as stored (north first), cols 15..26
     assert hf.heights.shape == (8, 12)
     i, j = np.unravel_index(np.argmax(hf.heights), hf.heights.shape)
     assert (i, j) == (8 - 1 - 2, 5)
@@ -158,13 +177,14 @@ def test_crop_window_crs_override_and_spacing_pair(tmp_path):
         load_terrain(p, crop=Crop(35, 0, 8, 8))
     # an Esri ASCII grid has no CRS: refused without --spacing, read with a CRS override or a spacing pair
     asc = tmp_path / "g.asc"
-    asc.write_text("ncols 3\nnrows 2\nxllcorner 500000\nyllcorner 5000000\ncellsize 10\nNODATA_value -9999\n"
-                   "1 2 3\n4 5 6\n")
+    asc.write_text(
+        "ncols 3\nnrows 2\nxllcorner 500000\nyllcorner 5000000\ncellsize 10\nNODATA_value -9999\n1 2 3\n4 5 6\n"
+    )
     with pytest.raises(TerrainLoadError, match=r"no CRS.*--spacing"):
         load_terrain(asc)
     assert load_terrain(asc, crs="EPSG:32610").spacing == pytest.approx(10 / 0.9996, rel=1e-6)
     hf = load_terrain(asc, spacing=(10.0, 12.5))
-    assert (hf.spacing_x, hf.spacing_y) == (10.0, 12.5) and hf.heights[1, 0] == 1.0     # north-up file
+    assert (hf.spacing_x, hf.spacing_y) == (10.0, 12.5) and hf.heights[1, 0] == 1.0  # north-up file
     with pytest.raises(TerrainLoadError, match="not a CRS pyproj knows"):
         load_terrain(asc, crs="EPSG:999999")
 
@@ -175,7 +195,7 @@ def test_rotated_and_ungeoreferenced_grids_are_refused(tmp_path):
     with pytest.raises(TerrainLoadError, match="rotated or sheared"):
         load_terrain(p)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")                       # rasterio's NotGeoreferencedWarning on writing
+        warnings.simplefilter("ignore")  # rasterio's NotGeoreferencedWarning on writing
         q = write_tif(tmp_path / "plain.tif", a, None, Affine.identity())
     with pytest.raises(TerrainLoadError, match=r"no geotransform.*--spacing"):
         load_terrain(q)
@@ -184,8 +204,12 @@ def test_rotated_and_ungeoreferenced_grids_are_refused(tmp_path):
 
 def test_info_prints_crs_spacing_extent_and_conversion(tmp_path, capsys):
     rows, cols = 81, 101
-    p = write_tif(tmp_path / "g35.tif", bump(rows, cols, 5, 5), "EPSG:4326",
-                  from_origin(-120.0, 35.0 + rows / 2 * ARCSEC3, ARCSEC3, ARCSEC3))
+    p = write_tif(
+        tmp_path / "g35.tif",
+        bump(rows, cols, 5, 5),
+        "EPSG:4326",
+        from_origin(-120.0, 35.0 + rows / 2 * ARCSEC3, ARCSEC3, ARCSEC3),
+    )
     assert main(["info", str(p), "--no-gl"]) == 0
     out = capsys.readouterr().out
     m, n = radii(35.0)
@@ -206,4 +230,4 @@ def test_info_refuses_a_grid_without_crs_or_spacing_with_exit_2(tmp_path, capsys
     assert main(["info", str(p), "--no-gl", "--spacing", "10,x"]) == 2
     assert "--spacing (metres) must be a number" in capsys.readouterr().err
     assert main(["info", str(p), "--no-gl", "--spacing", "10", "--size-samples", "5"]) == 2
-    assert "--crop" in capsys.readouterr().err                    # a file is cut with a window, not a size
+    assert "--crop" in capsys.readouterr().err  # a file is cut with a window, not a size

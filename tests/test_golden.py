@@ -1,5 +1,6 @@
 """Golden arrays: the error pyramid, the leaf set and CPU ray hits of tiny fixed grids, compared with files
 made by tests/golden/make_golden.py, and every stored value checked on its own terms as well."""
+
 from pathlib import Path
 
 import numpy as np
@@ -46,12 +47,16 @@ def test_error_pyramid_golden():
     want = np.zeros((4, 4, 4))
     for a in range(4):
         for b in range(4):
-            s = h[2 * a:2 * a + 3, 2 * b:2 * b + 3]
+            s = h[2 * a : 2 * a + 3, 2 * b : 2 * b + 3]
             flip = abs(s[1, 1] - (s[0, 0] + s[2, 2]) / 2) / 2
             se = max(abs((s[1, 1] + s[0, 2]) / 2 - (s[0, 1] + s[1, 2]) / 2), flip)
             nw = max(abs((s[1, 1] + s[2, 0]) / 2 - (s[1, 0] + s[2, 1]) / 2), flip)
-            want[:, a, b] = (max(abs(s[1, 0] - (s[0, 0] + s[2, 0]) / 2), nw), max(abs(s[1, 2] - (s[0, 2] + s[2, 2]) / 2), se),
-                             max(abs(s[0, 1] - (s[0, 0] + s[0, 2]) / 2), se), max(abs(s[2, 1] - (s[2, 0] + s[2, 2]) / 2), nw))
+            want[:, a, b] = (
+                max(abs(s[1, 0] - (s[0, 0] + s[2, 0]) / 2), nw),
+                max(abs(s[1, 2] - (s[0, 2] + s[2, 2]) / 2), se),
+                max(abs(s[0, 1] - (s[0, 0] + s[0, 2]) / 2), se),
+                max(abs(s[2, 1] - (s[2, 0] + s[2, 2]) / 2), nw),
+            )
     assert np.array_equal(g["sides0"], want)
     # a parent's error is at least its children's and the side errors facing it from outside (the W
     # neighbour's E side, ...); the effective error at least the error
@@ -59,7 +64,7 @@ def test_error_pyramid_golden():
         kids = g[f"errors{m - 1}"].reshape(g[f"errors{m}"].shape[0], 2, -1, 2).max(axis=(1, 3))
         assert np.all(g[f"errors{m}"] >= kids) and np.all(g[f"effective{m}"] >= g[f"errors{m}"])
     W, E = g["sides0"][0], g["sides0"][1]
-    assert g["errors1"][0, 1] >= max(E[0, 1], E[1, 1])         # node (0, 1)'s W edge faces level-0 nodes (0..1, 1)
+    assert g["errors1"][0, 1] >= max(E[0, 1], E[1, 1])  # node (0, 1)'s W edge faces level-0 nodes (0..1, 1)
     assert g["errors1"][0, 0] >= max(W[0, 2], W[1, 2])
 
 
@@ -75,8 +80,8 @@ def test_leaf_set_golden():
     level_of = np.full((n, n), -1)
     for i0, j0, m in zip(g["i0"], g["j0"], g["level"]):
         s = 2 << int(m)
-        cover[i0:i0 + s, j0:j0 + s] += 1
-        level_of[i0:i0 + s, j0:j0 + s] = m
+        cover[i0 : i0 + s, j0 : j0 + s] += 1
+        level_of[i0 : i0 + s, j0 : j0 + s] = m
     assert np.all(cover == 1)
     assert set(np.unique(g["level"])) == {0, 1, 2}
     # restricted: edge-adjacent cells' leaves differ by at most one level
@@ -108,8 +113,8 @@ def test_cpu_ray_hits_golden():
     assert np.array_equal(r.status, g["status"])
     assert_close(r.point, g["point"])
     status, point = g["status"], g["point"]
-    assert status[-1] == MISS                               # points up from above the highest sample
-    assert status[6] == HIT and point[6, 0] == O[6, 0] and point[6, 1] == O[6, 1]     # straight down
+    assert status[-1] == MISS  # points up from above the highest sample
+    assert status[6] == HIT and point[6, 0] == O[6, 0] and point[6, 1] == O[6, 1]  # straight down
     assert (status == HIT).sum() >= 7
     hit = status == HIT
     # a hit lies on the surface and on its ray, ahead of the origin
@@ -126,4 +131,3 @@ def test_cpu_ray_hits_golden():
         p = o + s[:, None] * d
         inside = (p[:, 0] >= 0) & (p[:, 0] <= n) & (p[:, 1] >= 0) & (p[:, 1] <= n)
         assert np.all(p[inside, 2] >= triangle_height(h, p[inside, 0], p[inside, 1]) - 1e-9)
-

@@ -1,6 +1,7 @@
 """The bundled gpu spec: Puget and its 16385² periodic extension named in a spec, the store prepared once into the
 cache, run end to end through `terrabench run gpu` (kept cheap with --sizes and --frames), timing only, reported
 without accuracy tables; GPU ms beside CPU ms in the summary wherever the GL timed it."""
+
 import math
 
 import numpy as np
@@ -33,18 +34,21 @@ def test_the_gpu_spec_pairs_both_sizes_datasets_flights_and_taus_without_accurac
     assert len(spec.configs()) == 2 * 2 * 3 * 2 * 4 and spec.upload_budget_ms == 8.0
     cheap = load_spec("gpu", {"frames": 2, "sizes": ["160x90"]})
     assert cheap.frames == 2 and cheap.sizes == ["160x90"] and cheap.image_frames == [0]
-    assert load_spec("default", {"frames": 3}).image_frames == [0]          # its frame 4 falls outside
+    assert load_spec("default", {"frames": 3}).image_frames == [0]  # its frame 4 falls outside
 
 
-@pytest.mark.parametrize("text, match", [
-    ('datasets = ["puget@periodic16000"]', "k x 1024 \\+ 1 samples"),
-    ('datasets = ["puget@periodic1025"]', "k >= 2"),
-    ('datasets = ["puget@periodic"]', "written STORE@periodicSIZE"),
-    ('datasets = ["puget@periodicbig"]', "written STORE@periodicSIZE"),
-    ('datasets = [{path = "puget@periodic2049", crs = "EPSG:32610"}]', "apply to files"),
-    ('accuracy = "no"', "'accuracy' must be true or false"),
-    ('accuracy = false\nvideo = true', "'video' shows each method beside the reference"),
-])
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ('datasets = ["puget@periodic16000"]', "k x 1024 \\+ 1 samples"),
+        ('datasets = ["puget@periodic1025"]', "k >= 2"),
+        ('datasets = ["puget@periodic"]', "written STORE@periodicSIZE"),
+        ('datasets = ["puget@periodicbig"]', "written STORE@periodicSIZE"),
+        ('datasets = [{path = "puget@periodic2049", crs = "EPSG:32610"}]', "apply to files"),
+        ('accuracy = "no"', "'accuracy' must be true or false"),
+        ("accuracy = false\nvideo = true", "'video' shows each method beside the reference"),
+    ],
+)
 def test_bad_store_datasets_and_accuracy_values_are_refused_by_name(text, match):
     with pytest.raises(TerrabenchError, match=match):
         parse_spec(text)
@@ -64,16 +68,33 @@ def test_bad_values_exit_2_from_the_command_line(tmp_path, capsys):
 def test_the_bundled_store_is_prepared_once_and_renamed_whole(cache):
     path = bundled_store("puget", 128)
     assert path.parent == cache and path.name == "puget-t128-v1.store"
-    assert [p.name for p in cache.iterdir()] == [path.name]           # no temporary folder left behind
+    assert [p.name for p in cache.iterdir()] == [path.name]  # no temporary folder left behind
     stamp = (path / "zarr.json").stat().st_mtime_ns
     assert bundled_store("puget", 128) == path and (path / "zarr.json").stat().st_mtime_ns == stamp
 
 
 def _frames(gpu_ms):
-    rows = [{"config": f"c-{p}", "dataset": "puget", "seed": 0, "flight": "orbit", "size": "160x90", "tau": 0.25,
-             "reconstruction": "triangles", "full_res": "lean", "policy": p, "frame": k, "wall_ms": 10.0 + k,
-             "wall_ms_repeats": [9.0 + k, 10.0 + k, 11.0 + k], "cpu_ms": 4.0, "gpu_ms": gpu_ms, "gpu_bytes": 1 << 20}
-            for p in ("raster", "raycast") for k in range(3)]
+    rows = [
+        {
+            "config": f"c-{p}",
+            "dataset": "puget",
+            "seed": 0,
+            "flight": "orbit",
+            "size": "160x90",
+            "tau": 0.25,
+            "reconstruction": "triangles",
+            "full_res": "lean",
+            "policy": p,
+            "frame": k,
+            "wall_ms": 10.0 + k,
+            "wall_ms_repeats": [9.0 + k, 10.0 + k, 11.0 + k],
+            "cpu_ms": 4.0,
+            "gpu_ms": gpu_ms,
+            "gpu_bytes": 1 << 20,
+        }
+        for p in ("raster", "raycast")
+        for k in range(3)
+    ]
     return pd.DataFrame(rows)
 
 
@@ -88,9 +109,27 @@ def test_run_gpu_times_both_datasets_and_reports_without_accuracy(ctx, cache, tm
     """`terrabench run gpu` at 48x27 and 2 frames: every configuration's rows, finite times, the hybrid's tiles
     on the periodic extension, and a report that says accuracy was not measured instead of showing NaN."""
     from hybrid.gl.context import gl_info
+
     runs, reports = tmp_path / "runs", tmp_path / "reports"
-    assert main(["run", "gpu", "--frames", "2", "--sizes", "48x27", "--runs", str(runs), "--report",
-                 "--reports", str(reports), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "gpu",
+                "--frames",
+                "2",
+                "--sizes",
+                "48x27",
+                "--runs",
+                str(runs),
+                "--report",
+                "--reports",
+                str(reports),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     f = pd.read_parquet(runs / "gpu" / "frames.parquet")
     tiles = pd.read_parquet(runs / "gpu" / "tiles.parquet")
     assert not (runs / "gpu" / "errors.jsonl").exists() or not (runs / "gpu" / "errors.jsonl").read_text()
@@ -104,10 +143,10 @@ def test_run_gpu_times_both_datasets_and_reports_without_accuracy(ctx, cache, tm
     assert len(hyb) == 3 * 2 * 2 and (hyb["tiles"] > 0).all()
     assert (hyb["tiles_raster"] + hyb["tiles_raycast"] == hyb["tiles"]).all()
     mine = tiles[tiles["config"].isin(hyb["config"])]
-    assert len(mine) == hyb["tiles"].sum()                    # a tile row for every tile the hybrid drew
+    assert len(mine) == hyb["tiles"].sum()  # a tile row for every tile the hybrid drew
     big = f[f["dataset"] == PERIODIC].groupby("flight")["tiles"].max()
     small = f[f["dataset"] == "puget"].groupby("flight")["tiles"].max()
-    assert (big > small).all() and (small <= 85).all()         # Puget has 85 tile places in tiles of 128
+    assert (big > small).all() and (small <= 85).all()  # Puget has 85 tile places in tiles of 128
     text = (reports / "gpu" / "report.md").read_text()
     assert "accuracy not measured (accuracy = false)" in text
     summary = text.split("## Summary")[1].split("\n- ")[0]

@@ -2,6 +2,7 @@
 context, and a test may lower it), every method draws a grid one sample past it, and the reference agrees with
 an exact CPU intersection of its triangles at sampled pixels; the block layout covers every cell once; a stored
 grid streams its blocks out of core into the same image; a colour texture past the limit is resampled to fit."""
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -41,9 +42,15 @@ def along(hf: HeightField, width: int = 160, height: int = 96) -> View:
 def cpu_distances(hf: HeightField, view: View, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
     """Eye-to-surface distance (metres; inf for a miss) of the pixel-centre rays, by intersecting every triangle
     of the grid (two a cell, SW-NE diagonal) in float64 (Moller-Trumbore)."""
-    i, j = np.mgrid[0:hf.rows, 0:hf.cols]
-    P = np.stack([hf.origin[0] + j * hf.spacing_x, hf.origin[1] + i * hf.spacing_y,
-                  hf.origin[2] + hf.heights.astype(np.float64)], axis=-1)
+    i, j = np.mgrid[0 : hf.rows, 0 : hf.cols]
+    P = np.stack(
+        [
+            hf.origin[0] + j * hf.spacing_x,
+            hf.origin[1] + i * hf.spacing_y,
+            hf.origin[2] + hf.heights.astype(np.float64),
+        ],
+        axis=-1,
+    )
     a, b, c, d = P[:-1, :-1], P[:-1, 1:], P[1:, 1:], P[1:, :-1]
     tris = np.concatenate([np.stack([a, b, c], -2).reshape(-1, 3, 3), np.stack([a, c, d], -2).reshape(-1, 3, 3)])
     v0, e1, e2 = tris[:, 0], tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
@@ -74,6 +81,7 @@ def small_limit(ctx):
 
 def test_the_exact_track_walk_agrees_with_every_triangle():
     from experiments.exact_hits import exact_distances
+
     hf = hills(33, 129)
     view = along(hf)
     rng = np.random.default_rng(5)
@@ -90,7 +98,7 @@ def test_blocks_cover_every_cell_once():
         count = np.zeros((rows - 1, cols - 1), int)
         for b in blocks:
             assert b.shape[0] <= side and b.shape[1] <= side
-            count[b.r0:b.r1 - 1, b.c0:b.c1 - 1] += 1
+            count[b.r0 : b.r1 - 1, b.c0 : b.c1 - 1] += 1
         assert (count == 1).all()
 
 
@@ -101,13 +109,14 @@ def test_every_method_draws_a_grid_past_the_texture_limit(ctx, small_limit, shap
     rng = np.random.default_rng(7)
     rows, cols = rng.integers(0, view.height, 240), rng.integers(0, view.width, 240)
     cpu = cpu_distances(hf, view, rows, cols)
-    assert 0.15 < np.isfinite(cpu).mean() < 0.97                # the view shows terrain and sky
+    assert 0.15 < np.isfinite(cpu).mean() < 0.97  # the view shows terrain and sky
     results = {}
     for method in METHODS:
         opts = {} if method == "reference" else {"tau": 0.25} if method != "raycast" else {}
         with make_renderer(ctx, hf, method, tile_size=32) as r:
-            results[method] = r.render(view, mode="shaded", **opts) if method == "reference" else \
-                r.render(view, 0.25, mode="shaded")
+            results[method] = (
+                r.render(view, mode="shaded", **opts) if method == "reference" else r.render(view, 0.25, mode="shaded")
+            )
     ref = results["reference"]
     assert ref.stats.counters["blocks"] >= 1
     clear = ~near_silhouettes(ref.distance)[rows, cols]
@@ -149,6 +158,7 @@ def test_a_stored_grid_streams_its_blocks_into_the_same_image(ctx, tmp_path, mon
     from hybrid.terrain.grid_sources import HeightFieldSource
     from hybrid.terrain.stored import open_store
     from hybrid.tiles.store import prepare_store
+
     store = open_store(prepare_store(HeightFieldSource(hills(97, 161)), tmp_path / "hills", tile_size=32))
     hf = store.load()
     view = along(hf)
@@ -167,20 +177,23 @@ def test_a_streamed_grid_reads_only_the_blocks_its_host_cache_lacks(ctx, tmp_pat
     from hybrid.terrain.grid_sources import HeightFieldSource
     from hybrid.terrain.stored import open_store
     from hybrid.tiles.store import prepare_store
+
     store = open_store(prepare_store(HeightFieldSource(hills(97, 161)), tmp_path / "hills", tile_size=32))
     view = along(store.load())
     monkeypatch.setattr(reference, "RESIDENT_SAMPLES", 0)
-    with ReferenceRenderer(ctx, store, block_samples=33) as all_held, \
-            ReferenceRenderer(ctx, store, block_samples=33, host_bytes=2 * 33 * 33 * 4) as two_held:
+    with (
+        ReferenceRenderer(ctx, store, block_samples=33) as all_held,
+        ReferenceRenderer(ctx, store, block_samples=33, host_bytes=2 * 33 * 33 * 4) as two_held,
+    ):
         first = all_held.render(view, mode="shaded")
         shown = all_held.drawn_blocks
         assert all_held.block_reads == shown > 4
         again = all_held.render(view, mode="shaded")
-        assert all_held.block_reads == shown                     # the second draw read nothing from disk
+        assert all_held.block_reads == shown  # the second draw read nothing from disk
         assert np.array_equal(first.distance, again.distance)
         two_held.render(view, mode="shaded")
         two_held.render(view, mode="shaded")
-        assert two_held.block_reads == 2 * shown - 2              # it held two blocks between the draws
+        assert two_held.block_reads == 2 * shown - 2  # it held two blocks between the draws
 
 
 def test_a_texture_past_the_limit_is_resampled_to_fit(ctx, small_limit):
@@ -203,16 +216,18 @@ def test_a_texture_past_the_limit_is_resampled_to_fit(ctx, small_limit):
 @pytest.mark.parametrize("shape", [(2, 2000), (3000, 2), (8, 600)], ids=["2x2000", "3000x2", "8x600"])
 def test_the_default_view_of_a_thin_strip_frames_it(ctx, shape):
     from hybrid.camera.view import default_view
+
     hf = hills(*shape, spacing=10.0)
     view = default_view(hf, 160, 90)
     with ReferenceRenderer(ctx, hf) as r:
         res = r.render(view, mode="shaded")
     assert res.mask.mean() > 0.08
-    assert res.mask[-1].mean() > 0.3                            # the strip runs from the bottom of the image
+    assert res.mask[-1].mean() > 0.3  # the strip runs from the bottom of the image
 
 
 def test_the_default_view_of_a_square_terrain_is_unchanged():
     from hybrid.camera.view import default_view
+
     hf = hills(65, 65)
     v = default_view(hf, 160, 90)
     w, d = hf.extent
@@ -223,17 +238,35 @@ def test_render_draws_a_tile_store_with_every_method(ctx, tmp_path):
     """``render --dataset STORE`` with each method at the store's own tile size, against its reference."""
     from experiments.cli import main
     from experiments.metrics import coverage_errors
+
     assert main(["prepare", "--synthetic", "129", "--tile-size", "32", "--out", str(tmp_path / "s"), "--quiet"]) == 0
     frames = {}
     for method in METHODS:
         out = tmp_path / f"{method}.png"
-        assert main(["render", "--dataset", str(tmp_path / "s"), "--method", method, "--size", "160x90",
-                     "--shading", "shaded", "--out", str(out)]) == 0, method
+        assert (
+            main(
+                [
+                    "render",
+                    "--dataset",
+                    str(tmp_path / "s"),
+                    "--method",
+                    method,
+                    "--size",
+                    "160x90",
+                    "--shading",
+                    "shaded",
+                    "--out",
+                    str(out),
+                ]
+            )
+            == 0
+        ), method
         frames[method] = np.load(tmp_path / f"{method}.depth.npy")
 
     class Frame:
         def __init__(self, d):
             self.distance, self.colour = d, np.zeros(d.shape + (3,), np.uint8)
+
     ref = Frame(frames["reference"])
     assert np.isfinite(ref.distance).mean() > 0.3
     for method, d in frames.items():
@@ -270,11 +303,14 @@ def test_a_run_on_a_tile_store_measures_accuracy_against_its_reference(ctx, tmp_
     import pandas as pd
 
     from experiments.cli import main
+
     assert main(["prepare", "--synthetic", "129", "--tile-size", "32", "--out", str(tmp_path / "st"), "--quiet"]) == 0
     spec = tmp_path / "s.toml"
-    spec.write_text(f'name = "s"\ndatasets = ["{tmp_path / "st"}"]\nflights = ["flyover"]\nframes = 2\n'
-                    'policies = ["raycast", "raster"]\nsizes = ["96x64"]\nrepeats = 3\ntile_size = 32\n'
-                    'supersample = 1\nimage_frames = [0]\n')
+    spec.write_text(
+        f'name = "s"\ndatasets = ["{tmp_path / "st"}"]\nflights = ["flyover"]\nframes = 2\n'
+        'policies = ["raycast", "raster"]\nsizes = ["96x64"]\nrepeats = 3\ntile_size = 32\n'
+        "supersample = 1\nimage_frames = [0]\n"
+    )
     assert main(["run", str(spec), "--runs", str(tmp_path / "runs"), "--quiet"]) == 0
     frames = pd.read_parquet(tmp_path / "runs" / "s" / "frames.parquet")
     assert len(frames) == 4
@@ -285,10 +321,25 @@ def test_a_run_on_a_tile_store_measures_accuracy_against_its_reference(ctx, tmp_
 def test_prepare_says_when_an_elongated_grid_pays_for_its_square(tmp_path, capsys):
     from experiments.cli import main
     from experiments.cli.prepare import square_note
+
     assert square_note(16385, 16385, 256) is None and square_note(1025, 513, 256) is None
     assert "6711x its samples" in square_note(8, 20000, 256)
     np.save(tmp_path / "strip.npy", hills(3, 257).heights)
-    assert main(["prepare", str(tmp_path / "strip.npy"), "--spacing", "10", "--tile-size", "16", "--quiet",
-                 "--out", str(tmp_path / "s")]) == 0
+    assert (
+        main(
+            [
+                "prepare",
+                str(tmp_path / "strip.npy"),
+                "--spacing",
+                "10",
+                "--tile-size",
+                "16",
+                "--quiet",
+                "--out",
+                str(tmp_path / "s"),
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     assert "257x3 samples" in err and "86x its samples" in err

@@ -1,5 +1,6 @@
 """The hybrid frame: strategies share one colour + depth buffer without holes; choices, memory (every policy, against
 the buffers and textures each tile and strategy holds), budget."""
+
 import numpy as np
 import pytest
 from gl_memory import allocated_bytes
@@ -19,13 +20,18 @@ from hybrid.renderer import Renderer, make_renderer
 from hybrid.strategies import STRATEGIES, candidates
 
 SIZE = (320, 180)
+
+
 # a model under which raster wins for tiles with few triangles and ray casting for the rest, so the
 # frames below really mix both strategies with shared borders
 def split_model(triangles: float) -> CostModel:
     """A model under which raster wins for tiles of fewer than ``triangles`` and ray casting for the rest (1e-3 ms
     a triangle against a constant a tile, no per-frame overheads), so frames really mix both strategies."""
-    return CostModel("split", {"const": 0.0, "triangles": 1e-3, "visible_triangles": 0.0, "pixels": 0.0},
-                     {"const": 1e-3 * triangles, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0})
+    return CostModel(
+        "split",
+        {"const": 0.0, "triangles": 1e-3, "visible_triangles": 0.0, "pixels": 0.0},
+        {"const": 1e-3 * triangles, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0},
+    )
 
 
 SPLIT = split_model(4000)
@@ -35,8 +41,9 @@ def median_split(pyramid, view) -> CostModel:
     """split_model between the two distinct triangle estimates nearest the middle of the view's tiles: about half
     the tiles either way, and both ways however many tiles share a count."""
     from hybrid.cost.planner import plan_frame
+
     t = np.sort([p.features.triangles for p in plan_frame(pyramid, view, SPLIT)])
-    cuts = np.nonzero(t[1:] > t[:-1])[0] + 1                     # k: t[k - 1] < t[k]
+    cuts = np.nonzero(t[1:] > t[:-1])[0] + 1  # k: t[k - 1] < t[k]
     k = int(cuts[np.argmin(np.abs(cuts - len(t) / 2))]) if len(cuts) else len(t) // 2
     return split_model(0.5 * (t[k - 1] + t[k]))
 
@@ -54,8 +61,7 @@ def frames(ctx, puget_full):
     hy = Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT, adapt=False)
     for v in _views(puget_full):
         hy.model = median_split(hy.pyramid, v)
-        out.append({"ref": ref.render(v), "hybrid": hy.render(v, maps=True),
-                    **{p: r.render(v) for p, r in rs.items()}})
+        out.append({"ref": ref.render(v), "hybrid": hy.render(v, maps=True), **{p: r.render(v) for p, r in rs.items()}})
     for r in list(rs.values()) + [hy, ref]:
         r.release()
     return out
@@ -82,16 +88,19 @@ def test_no_hole_at_strategy_borders(frames):
         a, b = smap == 1, smap == 2
         border = np.zeros_like(a)
         for dy, dx in ((0, 1), (1, 0)):
-            border[:-dy or None, :-dx or None] |= (a[:-dy or None, :-dx or None] & b[dy:, dx:]) | \
-                                                  (b[:-dy or None, :-dx or None] & a[dy:, dx:])
+            border[: -dy or None, : -dx or None] |= (a[: -dy or None, : -dx or None] & b[dy:, dx:]) | (
+                b[: -dy or None, : -dx or None] & a[dy:, dx:]
+            )
         near = np.zeros_like(border)
         for dy in range(-3, 4):
             near |= np.roll(border, dy, axis=0)
-        assert near.sum() > 20                                  # there are strategy borders to check
+        assert near.sum() > 20  # there are strategy borders to check
+
         # a seam is a hole or crack the mixed frame has and neither pure frame has (LOD silhouettes at the
         # horizon and the terrain's outer edge are the pure methods' own, measured elsewhere)
         def holes(x, ref=ref):
             return (np.isfinite(ref.distance) & ~np.isfinite(x.distance)) | hole_pixels_in_columns(x)
+
         seam = holes(h) & ~holes(f["raster"]) & ~holes(f["raycast"]) & ~hole_pixels_in_columns(ref)
         assert not (seam & near).any(), np.argwhere(seam & near)[:5]
         assert coverage_errors(h, ref)["hole_px"] <= coverage_errors(f["raster"], ref)["hole_px"] + 5
@@ -119,11 +128,17 @@ def seam_ratios(frames) -> tuple[int, float, float]:
             ok &= np.isfinite(f[key].distance) & ~near_silhouettes(f[key].distance)
         band = grow((grow(a, 1) & b) | (grow(b, 1) & a), SEAM_BAND_PX) & ok
         rd = np.where(ok, ref.distance, 1.0).astype(np.float64)
-        colour = {k: np.abs(f[k].colour.astype(np.float64) - ref.colour).mean(axis=2) for k in ("hybrid", "raster", "raycast")}
+        colour = {
+            k: np.abs(f[k].colour.astype(np.float64) - ref.colour).mean(axis=2) for k in ("hybrid", "raster", "raycast")
+        }
         depth = {k: np.abs(np.where(ok, f[k].distance, 1.0) - rd) / rd for k in ("hybrid", "raster", "raycast")}
         drew = {k: np.where(a, v["raster"], v["raycast"]) for k, v in (("colour", colour), ("depth", depth))}
-        sums += [colour["hybrid"][band].sum(), drew["colour"][band].sum(), depth["hybrid"][band].sum(),
-                 drew["depth"][band].sum()]
+        sums += [
+            colour["hybrid"][band].sum(),
+            drew["colour"][band].sum(),
+            depth["hybrid"][band].sum(),
+            drew["depth"][band].sum(),
+        ]
         n += int(band.sum())
     return n, sums[0] / sums[1], sums[2] / sums[3]
 
@@ -178,7 +193,7 @@ def test_memory_accounting_is_what_was_allocated(ctx, puget257, policy):
             assert allocated["raster"] > 0 and allocated["raycast"] > 0
         uploads = r.cache.stats.uploads
         r.render(v)
-        assert r.cache.stats.uploads == uploads               # resident tiles are not uploaded again
+        assert r.cache.stats.uploads == uploads  # resident tiles are not uploaded again
     finally:
         r.release()
 
@@ -221,8 +236,10 @@ def test_pure_hybrid_and_heuristic_policies_follow_their_rules(ctx, puget_full):
     assert [p.choice for p in plans] == ["raycast" if p.features.triangles > n else "raster" for p in plans]
     assert {p.choice for p in plans} == {"raster", "raycast"}
     # Dick et al.'s rule: ray cast where the tile's triangles outnumber threshold x its pixels
-    for threshold in (1.0, 4.0):                            # both split this view's tiles
-        with Renderer(ctx, puget_full, "heuristic", tile_size=128, cost_model=SPLIT, adapt=False, threshold=threshold) as r:
+    for threshold in (1.0, 4.0):  # both split this view's tiles
+        with Renderer(
+            ctx, puget_full, "heuristic", tile_size=128, cost_model=SPLIT, adapt=False, threshold=threshold
+        ) as r:
             plans = r.plan(v)
         for p in plans:
             f = p.features
@@ -240,7 +257,7 @@ def test_oracle_picks_the_strategy_that_is_faster_when_timed_apart(ctx, puget257
     with Renderer(ctx, puget257, "oracle", tile_size=64, cost_model=SPLIT, adapt=False, oracle_repeats=5) as o:
         rows = o.render(v).stats.tile_rows
     chosen = {(row["level"], row["tx"], row["ty"]): row["strategy"] for row in rows}
-    for row in rows:                              # every tile timed inside frames every candidate way
+    for row in rows:  # every tile timed inside frames every candidate way
         assert all(row[f"meas_{n}_ms"] > 0 for n in candidates())
     apart = {}
     target = FrameTarget(ctx, v.width, v.height)
@@ -253,9 +270,12 @@ def test_oracle_picks_the_strategy_that_is_faster_when_timed_apart(ctx, puget257
         target.release()
     assert apart.keys() == chosen.keys()
     used = set(chosen.values())
-    clear = {k: min(t, key=t.get) for k, t in apart.items()
-             if sorted(t.values())[1] > 3 * min(t.values()) and min(t, key=t.get) in used}
-    if not clear:                                 # every tile a near tie: nothing this test can decide
+    clear = {
+        k: min(t, key=t.get)
+        for k, t in apart.items()
+        if sorted(t.values())[1] > 3 * min(t.values()) and min(t, key=t.get) in used
+    }
+    if not clear:  # every tile a near tie: nothing this test can decide
         pytest.skip(f"no tile is 3x faster one way on this device: {apart}")
     wrong = {k: (chosen[k], apart[k]) for k, faster in clear.items() if chosen[k] != faster}
     assert not wrong, wrong
@@ -273,15 +293,19 @@ def test_in_frame_timing_interleaves_the_strategies(ctx, puget257):
             plans = r.plan(v)
             for name, strategy in r.strategies.items():
                 draw = strategy.draw_tiles
-                strategy.draw_tiles = (lambda d, n: lambda t, view, items, *a, **k: calls.append((n, len(items)))
-                                       or d(t, view, items, *a, **k))(draw, name)
+                strategy.draw_tiles = (
+                    lambda d, n: (
+                        lambda t, view, items, *a, **k: calls.append((n, len(items))) or d(t, view, items, *a, **k)
+                    )
+                )(draw, name)
             runs = r.time_in_frames(v, plans, candidates(), target)
     finally:
         target.release()
     b = len(plans)
     assert b > 1
-    expected = [(n, 1) for _ in range(2) for n in candidates() for _ in range(b)] + \
-               [(n, b) for _ in range(2) for n in candidates()]
+    expected = [(n, 1) for _ in range(2) for n in candidates() for _ in range(b)] + [
+        (n, b) for _ in range(2) for n in candidates()
+    ]
     assert calls == expected
     for n in candidates():
         per, together = runs[n]
@@ -306,7 +330,7 @@ def test_a_frame_drawn_without_read_back_draws_the_same_tiles(ctx, puget_full):
 
 
 def test_shading_mode_reaches_both_strategies(ctx, puget_full):
-    v = _views(puget_full)[0]                               # a view the split model draws both ways
+    v = _views(puget_full)[0]  # a view the split model draws both ways
     frames = {}
     for mode in (None, "height"):
         h = Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT, adapt=False, mode=mode)
@@ -317,7 +341,7 @@ def test_shading_mode_reaches_both_strategies(ctx, puget_full):
     smap = height.maps["strategy"]
     assert (smap == 1).any() and (smap == 2).any()
     assert np.array_equal(tex.mask, height.mask)
-    for code in (1, 2):                                     # both raster and ray-cast pixels changed colour
+    for code in (1, 2):  # both raster and ray-cast pixels changed colour
         sel = smap == code
         assert np.abs(tex.colour[sel].astype(int) - height.colour[sel]).mean() > 5
 
@@ -326,15 +350,23 @@ def test_rays_stop_behind_the_raster_tiles_drawn_before_them(ctx, puget_full):
     """In a mixed frame whose near tiles are rasterized, the ray-cast tiles behind them bound each ray by the depth
     the raster pass left (occluders): the same image and depths as casting every ray to its end, in fewer steps."""
     from hybrid.cost.planner import plan_frame
+
     v = preset("dolly", puget_full, 6, *SIZE).view(2)
     with Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT, adapt=False) as r:
         px = np.median([p.features.pixels for p in plan_frame(r.pyramid, v, SPLIT)])
         # raster a flat 1 ms a tile, ray casting 1 ms per px pixels: the big near tiles are rasterized
-        r.model = CostModel("near-raster", {"const": 1.0, "triangles": 0.0, "visible_triangles": 0.0, "pixels": 0.0},
-                            {"const": 0.0, "pixels": 1.0 / px, "surface_pixels": 0.0, "pixel_steps": 0.0})
+        r.model = CostModel(
+            "near-raster",
+            {"const": 1.0, "triangles": 0.0, "visible_triangles": 0.0, "pixels": 0.0},
+            {"const": 0.0, "pixels": 1.0 / px, "surface_pixels": 0.0, "pixel_steps": 0.0},
+        )
         plans = r.plan(v)
         kinds = [r.kind(p.choice) for p in plans]
-        assert "raster" in kinds and "raycast" in kinds and kinds.index("raster") < len(kinds) - 1 - kinds[::-1].index("raycast")
+        assert (
+            "raster" in kinds
+            and "raycast" in kinds
+            and kinds.index("raster") < len(kinds) - 1 - kinds[::-1].index("raycast")
+        )
         bounded, full = r.render(v), r.render(v, occluders=False)
     assert np.array_equal(bounded.colour, full.colour) and np.array_equal(bounded.distance, full.distance)
     assert bounded.stats.counters["rays"] == full.stats.counters["rays"] > 0
@@ -348,9 +380,13 @@ def test_a_ray_meeting_the_water_just_short_of_a_raster_edge_is_not_lost(ctx, pu
     edges to 1/256 px, leaves it out, and the ray reaches the ray-cast neighbour (1, 1, 3) below its box (the
     water is its lowest point). That was the one crack pixel of the run; the neighbour now draws the wall."""
     from experiments.metrics import coverage_errors
+
     v = preset("flyover", puget_full, 8, 640, 360).view(2)
     raster = {(0, 2, 3), (0, 2, 4), (0, 3, 4), (0, 2, 5), (0, 3, 5)}
-    with Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT, adapt=False) as r, ReferenceRenderer(ctx, puget_full) as ref:
+    with (
+        Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT, adapt=False) as r,
+        ReferenceRenderer(ctx, puget_full) as ref,
+    ):
         plans = r.plan(v)
         assert raster <= {tuple(p.key) for p in plans}
         for p in plans:
@@ -374,24 +410,28 @@ def test_a_sea_at_a_strategy_border_seen_head_on_has_no_crack(ctx, height_m, pre
     from experiments.metrics import coverage_errors
     from hybrid.camera.view import View
     from hybrid.terrain.heightfield import HeightField
+
     yy, xx = np.mgrid[0:257, 0:257]
     hf = HeightField((600.0 * np.exp(-((xx - 220) ** 2 + (yy - 230) ** 2) / 200.0)).astype(np.float32), 160.0)
     edge_y, col, row = 128 * 160.0, 320, 200
 
     def view(shift):
         return View(eye=(10000.0, edge_y - 30000.0 + shift, height_m), target=(10000.0, edge_y + 20000.0 + shift, 0.0))
+
     d = np.asarray(view(0.0).pixel_rays(np.array([row]), np.array([col]))).reshape(3)
-    t = -height_m / d[2]                                     # where the pixel's ray meets the sea
+    t = -height_m / d[2]  # where the pixel's ray meets the sea
     metres_per_px = t / (view(0.0).pixels_per_radian * -d[2])
     v = view(edge_y - 6e-4 * metres_per_px - (view(0.0).eye[1] + t * d[1]))
-    with Renderer(ctx, hf, "hybrid", tile_size=32, cost_model=SPLIT, adapt=False, prepass=prepass) as r, \
-            ReferenceRenderer(ctx, hf) as ref:
+    with (
+        Renderer(ctx, hf, "hybrid", tile_size=32, cost_model=SPLIT, adapt=False, prepass=prepass) as r,
+        ReferenceRenderer(ctx, hf) as ref,
+    ):
         plans = r.plan(v)
-        for p in plans:                                      # raster south of the border, ray casting north of it
+        for p in plans:  # raster south of the border, ray casting north of it
             south = (p.key.ty + 1) * (32 << p.key.level) <= 128
             p.choice = "raster" if south else "raycast"
         assert {p.choice for p in plans} == {"raster", "raycast"}
         frame, want = r.render(v, plans=plans), ref.render(v)
-    sea = np.isfinite(want.distance[row])                  # the row's pixels over the terrain (not off its west edge)
+    sea = np.isfinite(want.distance[row])  # the row's pixels over the terrain (not off its west edge)
     assert sea.sum() > 500 and np.isfinite(frame.distance[row][sea]).all()
     assert coverage_errors(frame, want)["crack_px"] == 0

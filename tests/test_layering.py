@@ -4,6 +4,7 @@ Layers, lowest first: errors -> terrain -> camera -> tiles -> gl -> contract -> 
 raycast; never each other) -> strategies registry -> cost -> reference, residency, renderer -> calibrate ->
 experiments. The ``hybrid`` package root imports only the lower layers eagerly (the rest on first use).
 """
+
 import ast
 import itertools
 import subprocess
@@ -16,16 +17,26 @@ LAYERS = [
     ("hybrid.errors", "hybrid.atomic"),
     ("hybrid.terrain",),
     ("hybrid.camera",),
-    ("hybrid.tiles", "hybrid"),        # the package root: eager names of the layers up to here
+    ("hybrid.tiles", "hybrid"),  # the package root: eager names of the layers up to here
     ("hybrid.gl",),
     ("hybrid.contract",),
     ("raster", "raycast"),
     ("hybrid.strategies",),
     ("hybrid.cost",),
-    ("hybrid.oracle", "hybrid.adaptive"),   # the renderer's in-frame timing and online adaptation
-    ("hybrid.reference_blocks", "hybrid.reference", "hybrid.residency", "hybrid.uploads", "hybrid.streaming",
-     "hybrid.frame_draw", "hybrid.frame_stats", "hybrid.frame_readback", "hybrid.renderer", "hybrid.store_editing",
-     "hybrid.editing"),
+    ("hybrid.oracle", "hybrid.adaptive"),  # the renderer's in-frame timing and online adaptation
+    (
+        "hybrid.reference_blocks",
+        "hybrid.reference",
+        "hybrid.residency",
+        "hybrid.uploads",
+        "hybrid.streaming",
+        "hybrid.frame_draw",
+        "hybrid.frame_stats",
+        "hybrid.frame_readback",
+        "hybrid.renderer",
+        "hybrid.store_editing",
+        "hybrid.editing",
+    ),
     ("hybrid.calibrate",),
     ("experiments",),
 ]
@@ -51,7 +62,7 @@ def layer_of(name: str) -> tuple[int, str]:
         for prefix in group:
             if name == prefix or name.startswith(prefix + "."):
                 if prefix == "hybrid" and name != "hybrid":
-                    continue                      # only the root itself sits with the tiles layer
+                    continue  # only the root itself sits with the tiles layer
                 if best is None or len(prefix) > len(best[1]):
                     best = (i, prefix)
     assert best is not None, f"{name} is in no layer"
@@ -73,7 +84,7 @@ def imports(name: str, path: Path, known: set[str]) -> set[str]:
         elif isinstance(node, ast.ImportFrom):
             mod = node.module or ""
             if node.level:
-                mod = ".".join(base[:len(base) - node.level + 1] + ([mod] if mod else []))
+                mod = ".".join(base[: len(base) - node.level + 1] + ([mod] if mod else []))
             # "from pkg import mod" imports the module pkg.mod; "from mod import name" imports mod
             targets = [f"{mod}.{a.name}" if f"{mod}.{a.name}" in known else mod for a in node.names]
         for t in targets:
@@ -112,7 +123,7 @@ def test_no_import_cycle():
     g = graph()
     index, low, stack, on, cycles = {}, {}, [], set(), []
 
-    def visit(v):                       # Tarjan's strongly connected components
+    def visit(v):  # Tarjan's strongly connected components
         index[v] = low[v] = len(index)
         stack.append(v)
         on.add(v)
@@ -145,7 +156,7 @@ def test_package_inits_and_function_imports_count(tmp_path):
     f = tmp_path / "toy.py"
     f.write_text("def later():\n    from experiments.cli.options import from_args\n")
     assert {"experiments.cli.options", "experiments.cli"} <= imports("experiments.toy", f, known)
-    assert "experiments.cli" not in imports("experiments.cli.toy", f, known)    # its own package ran already
+    assert "experiments.cli" not in imports("experiments.cli.toy", f, known)  # its own package ran already
     assert "hybrid" in graph()["raster.tilelets"]
 
 
@@ -161,7 +172,7 @@ def third_party() -> set[str]:
         for node in ast.walk(ast.parse(f.read_text())):
             if isinstance(node, ast.Import):
                 names = [a.name for a in node.names]
-            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:     # a name may be a module
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:  # a name may be a module
                 names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
             else:
                 names = []
@@ -178,7 +189,7 @@ def _import_each(names: list[list[str]]) -> list[str]:
         f"for lib in {sorted(third_party())!r}:\n"
         "    try:\n"
         "        importlib.import_module(lib)\n"
-        "    except Exception:\n"                 # not a module, or not installed: the children say so
+        "    except Exception:\n"  # not a module, or not installed: the children say so
         "        pass\n"
         "bad = []\n"
         f"for group in {names!r}:\n"

@@ -1,5 +1,6 @@
 """Accuracy metrics on constructed images: zero for identical frames, cracks apart from silhouette differences,
 image errors over terrain only, known depth offsets recovered."""
+
 import numpy as np
 
 from experiments.metrics import (
@@ -18,7 +19,7 @@ def frame(h=40, w=60, dist=100.0, seed=0):
     rng = np.random.default_rng(seed)
     c = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
     d = np.full((h, w), dist, np.float32)
-    d[:10] = np.inf                                          # sky in the top rows
+    d[:10] = np.inf  # sky in the top rows
     return RenderResult(c, d)
 
 
@@ -46,8 +47,8 @@ def test_identical_frames_have_zero_error():
 def test_hole_inside_terrain_is_a_crack_and_a_floating_pixel_a_silhouette_difference():
     ref = frame()
     f = copy(ref)
-    f.distance[20:23, 5:9] = np.inf                          # 12-pixel hole, terrain all around it
-    f.distance[2, 2] = 50.0                                  # 1 extra pixel in the sky
+    f.distance[20:23, 5:9] = np.inf  # 12-pixel hole, terrain all around it
+    f.distance[2, 2] = 50.0  # 1 extra pixel in the sky
     c = coverage_errors(f, ref)
     assert c["hole_px"] == 12 and c["extra_px"] == 1
     assert c["crack_px"] == 12 and c["silhouette_px"] == 1
@@ -60,13 +61,13 @@ def test_hole_inside_terrain_is_a_crack_and_a_floating_pixel_a_silhouette_differ
 def test_one_pixel_crack_counts_and_a_crack_reaching_the_outline_counts_below_it():
     ref = frame()
     f = copy(ref)
-    f.distance[25, 30] = np.inf                              # a one-pixel crack deep inside terrain
+    f.distance[25, 30] = np.inf  # a one-pixel crack deep inside terrain
     c = coverage_errors(f, ref)
     assert c["crack_px"] == 1 and c["silhouette_px"] == 0
     g = copy(ref)
-    g.distance[10:18, 40] = np.inf                           # a one-pixel-wide crack open to the sky above
+    g.distance[10:18, 40] = np.inf  # a one-pixel-wide crack open to the sky above
     cracks = crack_pixels(g, ref)
-    assert cracks[12:18, 40].all() and cracks.sum() == 6     # all but the two pixels next to the reference's sky
+    assert cracks[12:18, 40].all() and cracks.sum() == 6  # all but the two pixels next to the reference's sky
 
 
 def test_shifted_silhouette_is_no_crack():
@@ -87,7 +88,9 @@ def test_identical_sky_does_not_inflate_image_metrics():
     small = image_errors(f, ref)
     # the same terrain under 60 more rows of sky that both images draw identically
     sky = np.full((60, 60, 3), 200, np.uint8)
-    tall_ref = RenderResult(np.concatenate([sky, ref.colour]), np.concatenate([np.full((60, 60), np.inf), ref.distance]))
+    tall_ref = RenderResult(
+        np.concatenate([sky, ref.colour]), np.concatenate([np.full((60, 60), np.inf), ref.distance])
+    )
     tall = RenderResult(np.concatenate([sky, f.colour]), np.concatenate([np.full((60, 60), np.inf), f.distance]))
     big = image_errors(tall, tall_ref)
     assert np.isclose(big["psnr"], small["psnr"], rtol=1e-9)
@@ -127,5 +130,5 @@ def _ramp(h=48, w=64, ridge_rows=None):
 def test_near_silhouettes_marks_depth_steps_and_sky_borders():
     f = _ramp(ridge_rows=slice(20, 26))
     m = near_silhouettes(f.distance)
-    assert m[4:8].all() and not m[9:18].any()               # the horizon (sky above row 6), two pixels each side
+    assert m[4:8].all() and not m[9:18].any()  # the horizon (sky above row 6), two pixels each side
     assert m[18:22].all() and m[24:28].all() and not m[22:24].any() and not m[29:].any()

@@ -11,20 +11,27 @@ from hybrid.cost.model import TERMS, CostModel, all_term_values, load_cost_model
 from hybrid.cost.online import AdaptOptions, OnlineModel, fit_rows
 from hybrid.errors import TerrabenchError
 
-TRUE = CostModel("test", {"const": 0.3, "triangles": 5e-5, "visible_triangles": 1.5e-4, "pixels": 1e-5,
-                          "surface_pixels": 2e-5},
-                 {"const": 0.5, "pixels": 2e-5, "surface_pixels": 1e-5, "pixel_steps": 1e-5},
-                 overhead={"raster": 2.0, "raster_gs": 3.0, "raycast": 1.5},
-                 raster_gs={"const": 0.2, "triangles": 2e-4, "visible_triangles": 3e-4, "pixels": 1e-5,
-                            "surface_pixels": 2.5e-5}, mix_overhead=0.8)
+TRUE = CostModel(
+    "test",
+    {"const": 0.3, "triangles": 5e-5, "visible_triangles": 1.5e-4, "pixels": 1e-5, "surface_pixels": 2e-5},
+    {"const": 0.5, "pixels": 2e-5, "surface_pixels": 1e-5, "pixel_steps": 1e-5},
+    overhead={"raster": 2.0, "raster_gs": 3.0, "raycast": 1.5},
+    raster_gs={"const": 0.2, "triangles": 2e-4, "visible_triangles": 3e-4, "pixels": 1e-5, "surface_pixels": 2.5e-5},
+    mix_overhead=0.8,
+)
 
 
 def columns(rng, n):
     """Feature columns of n synthetic tiles."""
-    return {"pixels": rng.uniform(500, 40000, n), "triangles": rng.uniform(0, 100000, n),
-            "slab_cells": rng.uniform(0, 300, n), "level": rng.integers(0, 3, n).astype(float),
-            "distance": rng.uniform(1e3, 1e5, n), "visible": rng.uniform(0.1, 1.0, n),
-            "surface_pixels": rng.uniform(0, 30000, n)}
+    return {
+        "pixels": rng.uniform(500, 40000, n),
+        "triangles": rng.uniform(0, 100000, n),
+        "slab_cells": rng.uniform(0, 300, n),
+        "level": rng.integers(0, 3, n).astype(float),
+        "distance": rng.uniform(1e3, 1e5, n),
+        "visible": rng.uniform(0.1, 1.0, n),
+        "surface_pixels": rng.uniform(0, 30000, n),
+    }
 
 
 def true_passes(cols, picks, rng, noise=0.03):
@@ -68,26 +75,27 @@ def run_frames(online, rng, frames, explore=True):
 def test_fit_rows_recovers_coefficients_from_a_wrong_prior():
     rng = np.random.default_rng(1)
     theta = np.r_[TRUE.overhead["raycast"], [TRUE.raycast[t] for t in TERMS["raycast"]]]
-    X = np.c_[np.ones(48), np.array([all_term_values(columns(rng, 20))[:, [0, 3, 4, 5]].sum(axis=0)
-                                      for _ in range(48)])]
+    X = np.c_[
+        np.ones(48), np.array([all_term_values(columns(rng, 20))[:, [0, 3, 4, 5]].sum(axis=0) for _ in range(48)])
+    ]
     y = X @ theta * (1 + 0.01 * rng.standard_normal(48))
     fitted = fit_rows(X, y, theta / 5, prior_weight=2.0)
     assert np.all(fitted >= 0)
     rel = np.abs(X @ fitted - y) / y
-    assert np.median(rel) < 0.02                      # the prior was 5x off: 80 % error before the fit
+    assert np.median(rel) < 0.02  # the prior was 5x off: 80 % error before the fit
     assert np.median(np.abs(X @ (theta / 5) - y) / y) > 0.7
 
 
 def test_fit_rows_keeps_the_prior_shape_from_passes_of_a_few_explored_tiles():
     rng = np.random.default_rng(7)
-    theta = np.array([2.0, 0.3, 1e-4])                 # overhead, per tile, per pixel
+    theta = np.array([2.0, 0.3, 1e-4])  # overhead, per tile, per pixel
     X = np.c_[np.ones(40), rng.integers(1, 3, 40), rng.uniform(1e3, 2e4, 40)]
-    y = (X @ np.array([0.5, 1.5, 1e-4])) * (1 + 0.05 * rng.standard_normal(40))   # another split, same level
+    y = (X @ np.array([0.5, 1.5, 1e-4])) * (1 + 0.05 * rng.standard_normal(40))  # another split, same level
     fitted = fit_rows(X, y, theta, prior_weight=2.0, shape_rows=12, few_tiles=2)
     ratio = fitted / theta
-    assert np.allclose(ratio, ratio[0])                # the prior's split kept, only its level moved
+    assert np.allclose(ratio, ratio[0])  # the prior's split kept, only its level moved
     assert 0.8 < np.median((X @ fitted) / y) < 1.25
-    X[:, 1] = rng.integers(5, 30, 40)                  # passes of many tiles: the split is learnt
+    X[:, 1] = rng.integers(5, 30, 40)  # passes of many tiles: the split is learnt
     y = (X @ np.array([0.5, 1.5, 1e-4])) * (1 + 0.01 * rng.standard_normal(40))
     fitted = fit_rows(X, y, theta, prior_weight=2.0, shape_rows=12, few_tiles=2)
     assert fitted[1] / fitted[0] > 2 * theta[1] / theta[0]
@@ -96,8 +104,8 @@ def test_fit_rows_keeps_the_prior_shape_from_passes_of_a_few_explored_tiles():
 def test_prior_share_damps_a_split_the_rows_barely_tell():
     rng = np.random.default_rng(8)
     theta = np.array([1.0, 0.25, 1e-4])
-    X = np.c_[np.ones(48), rng.integers(11, 14, 48), rng.uniform(1e4, 2e4, 48)]   # tile counts nearly constant
-    y = (X @ theta) * (1 + 0.15 * rng.standard_normal(48))                         # noisy passes, same model
+    X = np.c_[np.ones(48), rng.integers(11, 14, 48), rng.uniform(1e4, 2e4, 48)]  # tile counts nearly constant
+    y = (X @ theta) * (1 + 0.15 * rng.standard_normal(48))  # noisy passes, same model
     free = fit_rows(X, y, theta, prior_weight=2.0)
     damped = fit_rows(X, y, theta, prior_weight=2.0, prior_share=0.5)
     assert abs(damped[0] - theta[0]) < abs(free[0] - theta[0])
@@ -106,22 +114,22 @@ def test_prior_share_damps_a_split_the_rows_barely_tell():
 
 def test_a_strategy_that_could_not_pay_is_not_explored_once_its_level_is_known():
     rng = np.random.default_rng(9)
-    online = OnlineModel(TRUE, AdaptOptions(explore_share=0.05, hold_error=0.0))   # predictions never 'hold'
+    online = OnlineModel(TRUE, AdaptOptions(explore_share=0.05, hold_error=0.0))  # predictions never 'hold'
     online.credit = 1e9
     cols = columns(rng, 20)
     names = TRUE.candidates
     table = TRUE.predict_table(cols)
     g = names.index("raster_gs")
     hopeless = table.copy()
-    hopeless[g] = 10 * table.min(axis=0) + 10.0        # 10x the best of every tile
+    hopeless[g] = 10 * table.min(axis=0) + 10.0  # 10x the best of every tile
     picks = np.delete(hopeless, g, axis=0).argmin(axis=0)
     picks = np.where(picks >= g, picks + 1, picks)
-    assert online.explore(hopeless, picks.copy(), names) is not None   # level unknown yet: it might pay
+    assert online.explore(hopeless, picks.copy(), names) is not None  # level unknown yet: it might pay
     for _ in range(AdaptOptions().hold_rows):
         online.rows["raster_gs"].add(np.ones(1 + len(TERMS["raster_gs"])), 5.0)
     assert all(online.explore(hopeless, picks.copy(), names) is None for _ in range(10))
     cheap = table.copy()
-    cheap[g] = 0.2 * table.min(axis=0)                 # a fifth of the best: worth a look
+    cheap[g] = 0.2 * table.min(axis=0)  # a fifth of the best: worth a look
     assert any(online.explore(cheap, picks.copy(), names) is not None for _ in range(10))
 
 
@@ -130,7 +138,7 @@ def test_fit_rows_drops_an_outlier():
     theta = np.array([1.0, 0.2, 1e-4])
     X = np.c_[np.ones(30), rng.uniform(5, 30, 30), rng.uniform(1e3, 5e4, 30)]
     y = X @ theta
-    y[3] *= 8                                          # one frame stalled
+    y[3] *= 8  # one frame stalled
     fitted = fit_rows(X, y, theta * 2, prior_weight=1.0)
     ok = np.arange(30) != 3
     assert np.median(np.abs(X[ok] @ fitted - y[ok]) / y[ok]) < 0.02
@@ -141,10 +149,10 @@ def test_adaptation_moves_predictions_toward_measured(wrong):
     rng = np.random.default_rng(3)
     online = OnlineModel(scaled(TRUE, wrong, 0.2))
     errors = run_frames(online, rng, 60)
-    assert errors[0] > 0.5                             # the wrong strategy is chosen and mispredicted
+    assert errors[0] > 0.5  # the wrong strategy is chosen and mispredicted
     assert np.median(errors[-20:]) < 0.08
     m = online.model
-    for s in m.candidates:                              # every candidate learned, the unused ones by exploration
+    for s in m.candidates:  # every candidate learned, the unused ones by exploration
         cols = columns(rng, 20)
         t = TRUE.predict_table(cols)[TRUE.candidates.index(s)].sum() + TRUE.overhead[s]
         p = m.predict_table(cols)[m.candidates.index(s)].sum() + m.overhead[s]
@@ -162,7 +170,7 @@ def test_exploration_stays_within_its_budget_and_stops_once_predictions_hold():
     assert online.settled
     before = st.explored_frames
     run_frames(online, rng, 40)
-    assert online.stats.explored_frames == before           # settled: no more exploration
+    assert online.stats.explored_frames == before  # settled: no more exploration
 
 
 def test_no_exploration_without_budget():

@@ -42,7 +42,7 @@ def test_adaptation_from_a_wrong_model_moves_predictions_toward_measured(ctx, pu
         assert r.model.adapted_frames > 0 and "adapted online" in r.model.source
     with Renderer(ctx, puget257, "hybrid", 64, cost_model=skewed(ctx), adapt=False) as frozen:
         frozen_errors = prediction_errors(frozen, flight)
-    assert np.median(frozen_errors[8:]) > 0.4                 # the wrong model stays wrong when frozen
+    assert np.median(frozen_errors[8:]) > 0.4  # the wrong model stays wrong when frozen
     assert np.median(errors[8:]) < 0.5 * np.median(frozen_errors[8:])
 
 
@@ -59,6 +59,7 @@ def test_exploration_keeps_to_its_budget(ctx, puget257, flight):
 
 def test_mixed_frames_time_each_pass(ctx, puget257, flight):
     from hybrid import adaptive
+
     seen = []
     with Renderer(ctx, puget257, "hybrid", 64, cost_model=skewed(ctx)) as r:
         real = adaptive.observe
@@ -66,17 +67,18 @@ def test_mixed_frames_time_each_pass(ctx, puget257, flight):
         def spy(online, plans, passes, draw_ms, explored):
             seen.append((sorted({p.choice for p in plans}), passes, draw_ms))
             real(online, plans, passes, draw_ms, explored)
+
         adaptive.observe = spy
         try:
             for v in flight:
                 r.render(v, 2 / 3, read=False)
         finally:
             adaptive.observe = real
-    assert any(len(used) > 1 for used, _, _ in seen)            # exploration mixes frames, if nothing else
+    assert any(len(used) > 1 for used, _, _ in seen)  # exploration mixes frames, if nothing else
     for used, passes, draw in seen:
-        assert sorted(passes) == used                            # one timed pass per strategy drawn
+        assert sorted(passes) == used  # one timed pass per strategy drawn
         assert all(ms > 0 for ms in passes.values())
-        assert sum(passes.values()) <= draw * 1.05 + 0.5         # the passes lie inside the drawing
+        assert sum(passes.values()) <= draw * 1.05 + 0.5  # the passes lie inside the drawing
 
 
 def test_frozen_hybrid_chooses_the_same_every_run(ctx, puget257, flight):

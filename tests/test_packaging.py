@@ -1,4 +1,5 @@
 """Every file the packages load at run time is declared as package data, so an installed copy works."""
+
 import fnmatch
 import tomllib
 from pathlib import Path

@@ -1,4 +1,5 @@
 """Particles on the GPU heights: above the surface, on the terrain, following edits, drawn where they project."""
+
 import numpy as np
 import pytest
 
@@ -11,12 +12,12 @@ from hybrid.terrain.datasets import puget
 from hybrid.terrain.edits import Crater, Raise
 from hybrid.terrain.heightfield import HeightField
 
-TOL = 0.05            # metres: float32 positions over heights of a few hundred metres
+TOL = 0.05  # metres: float32 positions over heights of a few hundred metres
 
 
 @pytest.fixture
 def hf():
-    p = puget(size=129)               # 128 cells of 160 m
+    p = puget(size=129)  # 128 cells of 160 m
     return HeightField(p.heights.copy(), p.spacing, p.origin, p.name, p.texture, source_step=p.source_step)
 
 
@@ -42,9 +43,9 @@ def test_particles_stay_above_the_surface_and_on_the_terrain(ctx, hf, gpu, recon
         pos, vel = ps.read()
         gaps = _clearances(ps, gpu, params)
     assert np.isfinite(pos).all() and np.isfinite(vel).all()
-    assert gaps.min() > -TOL                                        # every particle above the surface
-    assert np.median(gaps) < 1.0                                    # and most have come down to it
-    assert np.abs(pos - start).max() > 25.0                         # they moved: fell 30 m
+    assert gaps.min() > -TOL  # every particle above the surface
+    assert np.median(gaps) < 1.0  # and most have come down to it
+    assert np.abs(pos - start).max() > 25.0  # they moved: fell 30 m
     w, d = hf.extent
     assert pos[:, 0].min() >= 0 and pos[:, 0].max() <= w and pos[:, 1].min() >= 0 and pos[:, 1].max() <= d
 
@@ -62,21 +63,21 @@ def test_particles_rise_with_a_raise_and_fall_into_a_crater(ctx, hf, gpu):
     centre = np.array([10240.0, 10240.0])
     with _settled(ctx, gpu, params) as ps:
         before = ps.read()[0]
-        near = np.linalg.norm(before[:, :2] - centre, axis=1) < 1000.0          # inside 1/3 of the radius
+        near = np.linalg.norm(before[:, :2] - centre, axis=1) < 1000.0  # inside 1/3 of the radius
         far = np.linalg.norm(before[:, :2] - centre, axis=1) > 3500.0
         assert near.sum() > 20
         gpu.edit(Raise((ox + centre[0], oy + centre[1]), 3000.0, 200.0))
         ps.step()
         after = ps.read()[0]
         rise = after[:, 2] - before[:, 2]
-        assert rise[near].min() > 0.7 * 200.0                       # w >= 0.79 within r/3: pushed up with it
-        assert np.abs(rise[far]).max() < 5.0                        # the rest of the terrain did not move
+        assert rise[near].min() > 0.7 * 200.0  # w >= 0.79 within r/3: pushed up with it
+        assert np.abs(rise[far]).max() < 5.0  # the rest of the terrain did not move
         assert _clearances(ps, gpu, params).min() > -TOL
         gpu.edit(Crater((ox + centre[0], oy + centre[1]), 3000.0, 400.0))
         for _ in range(120):
             ps.step()
         fell = ps.read()[0][:, 2] - after[:, 2]
-        assert fell[near].max() < -200.0                            # the bowl is 400 m deep at its centre
+        assert fell[near].max() < -200.0  # the bowl is 400 m deep at its centre
         assert _clearances(ps, gpu, params).min() > -TOL
 
 
@@ -104,20 +105,28 @@ def test_drawn_particles_appear_where_they_project(ctx, gpu):
 
     def magenta(img):
         return (img[..., 1] < 30) & (img[..., 0] > 100) & (img[..., 2] > 100)
+
     assert not magenta(plain.colour).any()
     shown = magenta(drawn.colour)
     inside = (pts[:, 0] >= 4) & (pts[:, 0] < 316) & (pts[:, 1] >= 4) & (pts[:, 1] < 176)
-    front = [np.linalg.norm(w - view.eye) < plain.distance[int(r), int(c)] - 100.0
-             for w, (c, r, _) in zip(world[inside], pts[inside])]
+    front = [
+        np.linalg.norm(w - view.eye) < plain.distance[int(r), int(c)] - 100.0
+        for w, (c, r, _) in zip(world[inside], pts[inside])
+    ]
     hits = [bool(shown[int(r), int(c)]) for c, r, _ in pts[inside][front]]
-    assert len(hits) > 10 and all(hits)                             # each in front of the terrain: drawn there
-    assert shown.sum() <= 64 * 49                                    # and nowhere else
-    assert np.all(drawn.distance[shown] <= plain.distance[shown] + 1.0)     # depth-tested against the terrain
+    assert len(hits) > 10 and all(hits)  # each in front of the terrain: drawn there
+    assert shown.sum() <= 64 * 49  # and nowhere else
+    assert np.all(drawn.distance[shown] <= plain.distance[shown] + 1.0)  # depth-tested against the terrain
 
 
 def test_bad_particle_parameters_are_refused_by_name():
-    for kw, words in (({"count": -1}, "particle count"), ({"substeps": 0}, "particle substeps"),
-                      ({"substeps": 1000}, "particle substeps"), ({"dt": float("nan")}, "particle dt"),
-                      ({"restitution": 1.5}, "particle restitution"), ({"reconstruction": "planes"}, "reconstruction")):
+    for kw, words in (
+        ({"count": -1}, "particle count"),
+        ({"substeps": 0}, "particle substeps"),
+        ({"substeps": 1000}, "particle substeps"),
+        ({"dt": float("nan")}, "particle dt"),
+        ({"restitution": 1.5}, "particle restitution"),
+        ({"reconstruction": "planes"}, "reconstruction"),
+    ):
         with pytest.raises(TerrabenchError, match=words):
             check_particles(ParticleParams(**kw))

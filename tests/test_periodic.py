@@ -1,5 +1,6 @@
 """A virtual periodic extension of a store: its tiles are those of the source wrapped (checked against the
 extension built in memory), its bounds and errors never below the exact ones, and it is labelled periodic."""
+
 import numpy as np
 import pytest
 from test_store import ArraySource
@@ -17,7 +18,7 @@ def test_periodic_extension_wraps_the_source_and_bounds_hold(tmp_path):
     prepare_store(src, tmp_path / "s", 32)
     ext = open_periodic(tmp_path / "s", 1025)
     h = src.read_rows(0, 257)
-    wrapped = np.pad(np.tile(h[:-1, :-1], (4, 4)), ((0, 1), (0, 1)), mode="wrap")     # sample (i, j) -> (i, j) mod 256
+    wrapped = np.pad(np.tile(h[:-1, :-1], (4, 4)), ((0, 1), (0, 1)), mode="wrap")  # sample (i, j) -> (i, j) mod 256
     assert np.array_equal(np.asarray(ext.heights[:, :]), wrapped)
     assert ext.name.endswith("-periodic-1025") and ext.store.attrs["periodic"]["period_cells"] == 256
     stored, mem = StorePyramid(ext), TilePyramid(HeightField(wrapped, 10.0), 32)
@@ -28,18 +29,18 @@ def test_periodic_extension_wraps_the_source_and_bounds_hold(tmp_path):
         assert (stored._zmin[level] <= mem._zmin[level] + 1e-4).all()
         assert (stored._zmax[level] >= mem._zmax[level] - 1e-4).all()
         assert (stored._err[level] >= mem._err[level] - 1e-4).all()
-    inside = np.s_[:7, :7]                                  # level-0 and -1 tiles off the seams: the source's own
+    inside = np.s_[:7, :7]  # level-0 and -1 tiles off the seams: the source's own
     assert np.allclose(stored._err[1][:3, :3], mem._err[1][:3, :3]) and np.all(stored._err[0][inside] == 0)
     assert open_any_store(f"{tmp_path / 's'}@periodic1025").name == ext.name
-    for bad in (1000, 257, 2 ** 30):
+    for bad in (1000, 257, 2**30):
         with pytest.raises(TerrabenchError, match="periodic size"):
             open_periodic(tmp_path / "s", bad)
 
 
 def test_a_seamless_source_extends_without_seam_error(tmp_path):
-    src = FractalSource(513, seed=2, period=512, feature_cells=256)     # the smallest period takes features of 256
+    src = FractalSource(513, seed=2, period=512, feature_cells=256)  # the smallest period takes features of 256
     h = src.read_rows(0, 513)
-    assert np.array_equal(h[:, 0], h[:, -1]) and np.array_equal(h[0], h[-1])       # seamless by construction
+    assert np.array_equal(h[:, 0], h[:, -1]) and np.array_equal(h[0], h[-1])  # seamless by construction
     prepare_store(src, tmp_path / "s", 64)
     ext, plain = StorePyramid(open_periodic(tmp_path / "s", 2049)), StorePyramid(tmp_path / "s")
     # tiles inside a period keep the source's errors exactly: no seam step to add
@@ -65,7 +66,7 @@ def _bounds_hold(ext, n):
 
 def test_seam_corner_tiles_take_in_the_source_corner_sample(tmp_path):
     h = FractalSource(129, seed=4).read_rows(0, 129)
-    h[0, 0], h[0, 1] = h.min() - 500.0, h.max() + 500.0          # a pit at the corner, where four seams meet
+    h[0, 0], h[0, 1] = h.min() - 500.0, h.max() + 500.0  # a pit at the corner, where four seams meet
     prepare_store(ArraySource(h, 10.0), tmp_path / "s", 16)
     _bounds_hold(open_periodic(tmp_path / "s", 257), 16)
 

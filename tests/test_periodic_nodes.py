@@ -1,6 +1,7 @@
 """The raster strategies' node arrays of a periodic extension, served from its source store's: never below the exact
 arrays of the extension's whole grid (``global_nodes`` in memory), equal to them away from the seams, saturated and
 nested as the restricted quadtree needs, read a window at a time, and drawn without holes."""
+
 import numpy as np
 import pytest
 from raster_helpers import border_views, holes
@@ -53,7 +54,7 @@ def _check_against_exact(ext, n, P, exact_levels):
         assert np.all(e >= re) and np.all(lo <= rlo) and np.all(hi >= rhi), g
         w = np.asarray(got.sides[g][:, :])
         read = decoded_sides(w, _levels(got, g + 1)[0] if g < top else None)
-        assert np.all(read >= sides[g]), g                                # a dropped midpoint's error is bounded
+        assert np.all(read >= sides[g]), g  # a dropped midpoint's error is bounded
         T = P >> (g + 1)
         if T >= 4:
             far = _far_from_seams(e.shape[0], T, periods * T)
@@ -67,8 +68,8 @@ def _check_against_exact(ext, n, P, exact_levels):
         if g:
             pe, plo, phi = _levels(got, g - 1)
             need = block2(dilate4(pe.astype(np.float64)), np.max) / got.beta
-            assert np.all(e >= need * (1 - 1e-6)), g                # saturated: no crack between nodes
-            assert np.all(lo <= block2(plo, np.min)) and np.all(hi >= block2(phi, np.max)), g    # boxes nested
+            assert np.all(e >= need * (1 - 1e-6)), g  # saturated: no crack between nodes
+            assert np.all(lo <= block2(plo, np.min)) and np.all(hi >= block2(phi, np.max)), g  # boxes nested
     return ref, got
 
 
@@ -76,8 +77,9 @@ def _check_against_exact(ext, n, P, exact_levels):
 def test_periodic_node_arrays_bound_the_exact_ones_and_equal_them_off_the_seams(tmp_path, periods):
     prepare_store(_rough(), tmp_path / "s", 16)
     ext = open_periodic(tmp_path / "s", 128 * periods + 1)
-    assert ext.store.attrs["nodes"]["periodic"] and ext.store.attrs["nodes"]["square"] == 128 * (4 if periods > 2
-                                                                                                   else 2)
+    assert ext.store.attrs["nodes"]["periodic"] and ext.store.attrs["nodes"]["square"] == 128 * (
+        4 if periods > 2 else 2
+    )
     _check_against_exact(ext, 16, 128, 99)
 
 
@@ -91,14 +93,14 @@ def test_a_seamless_source_gives_the_exact_finest_errors_at_the_seams(tmp_path):
     e, re, ce = _levels(got, 0)[0], _levels(ref, 0)[0], _levels(combined, 0)[0]
     seam = (np.arange(e.shape[0]) % 64 == 63) & (np.arange(e.shape[0]) < 256)
     near = seam[:, None] | seam[None, :]
-    assert np.allclose(e[near], ce[near], rtol=1e-5, atol=1e-6)     # no seam step, no saturation at level 0
+    assert np.allclose(e[near], ce[near], rtol=1e-5, atol=1e-6)  # no seam step, no saturation at level 0
     assert np.array_equal(e[~near], re[~near])
     e, ce = _levels(got, 3)[0].astype(np.float64), _levels(combined, 3)[0].astype(np.float64)
-    assert np.median(e / np.maximum(ce, 1e-3)) < 1.01                  # near the seams too, mostly
+    assert np.median(e / np.maximum(ce, 1e-3)) < 1.01  # near the seams too, mostly
 
 
 def test_bounded_source_levels_stay_bounds_in_the_extension(tmp_path, monkeypatch):
-    monkeypatch.setattr(store_nodes, "NODE_EXACT_SPAN", 32)              # source nodes of 64 cells and up bounded
+    monkeypatch.setattr(store_nodes, "NODE_EXACT_SPAN", 32)  # source nodes of 64 cells and up bounded
     prepare_store(_rough(seed=5), tmp_path / "s", 16)
     _check_against_exact(open_periodic(tmp_path / "s", 385), 16, 128, 4)
 
@@ -134,12 +136,16 @@ def test_tile_blocks_away_from_the_seams_are_the_sources_and_equal_the_cut_ones(
     got = nodes_for(ext, 16)
     assert isinstance(got.blocks, PeriodicBlocks)
     # a row and a column of level 0 (8 tiles a period), a row of every coarser level
-    keys = [(0, tx, 11) for tx in range(24)] + [(0, 3, ty) for ty in range(24)] + [(1, tx, 5) for tx in range(12)] + \
-        [(level, tx, 0) for level in (2, 3, 4) for tx in range(24 >> level)]
+    keys = (
+        [(0, tx, 11) for tx in range(24)]
+        + [(0, 3, ty) for ty in range(24)]
+        + [(1, tx, 5) for tx in range(12)]
+        + [(level, tx, 0) for level in (2, 3, 4) for tx in range(24 >> level)]
+    )
     reused = 0
     for level, tx, ty in keys:
         block = tile_node_block(got, level, tx, ty, 16)[0]
-        assert np.array_equal(block, _cut(got, level, tx, ty)), (level, tx, ty)   # the source's is the extension's
+        assert np.array_equal(block, _cut(got, level, tx, ty)), (level, tx, ty)  # the source's is the extension's
         reused += source_block_tile(level, tx, ty, 16, 128, 384) is not None
     # level 0: residues 2..4 in the row (ty 11: residue 3) and the column; from level 1 every tile has a node
     # (apron included) at local index T-2, T-1 or 0 of some node level, so every block is cut
@@ -148,11 +154,11 @@ def test_tile_blocks_away_from_the_seams_are_the_sources_and_equal_the_cut_ones(
 
 def test_blocks_cut_near_seams_repeat_every_period_inside_the_extension(tmp_path):
     prepare_store(_rough(seed=4), tmp_path / "s", 16)
-    ext = open_periodic(tmp_path / "s", 128 * 5 + 1)           # periods 1..3 are inside
+    ext = open_periodic(tmp_path / "s", 128 * 5 + 1)  # periods 1..3 are inside
     got = nodes_for(ext, 16)
     for level, tx, ty in ((0, 8, 8), (0, 15, 9), (0, 12, 15), (1, 4, 7), (2, 3, 2), (3, 1, 1)):
         span = 16 << level
-        shift = max(128 // span, 1)                                  # a period, in tiles of this level
+        shift = max(128 // span, 1)  # a period, in tiles of this level
         where = period_residue(level, tx, ty, 16, 128, 640)
         assert where is not None and source_block_tile(level, tx, ty, 16, 128, 640) is None
         first = _cut(got, level, tx, ty)
@@ -167,19 +173,30 @@ def test_blocks_cut_near_seams_repeat_every_period_inside_the_extension(tmp_path
 
 def test_a_large_extension_serves_tile_windows_without_building_a_level(tmp_path):
     import tracemalloc
+
     prepare_store(_rough(257), tmp_path / "s", 64)
-    ext = open_periodic(tmp_path / "s", 256 * 256 + 1)                  # 65537²: 32768² nodes at level 0
+    ext = open_periodic(tmp_path / "s", 256 * 256 + 1)  # 65537²: 32768² nodes at level 0
     tracemalloc.start()
     try:
         nodes = nodes_for(ext, 64)
         assert nodes.effective[0].shape == (32768, 32768) and nodes.cells == 65536
         top = int(ext.store.attrs["max_level"])
-        blocks = [tile_node_block(nodes, lev, tx, ty, 64)[0] for lev, tx, ty in
-                  ((top, 0, 0), (top - 3, 3, 5), (2, 0, 0), (0, 3, 3), (0, 4, 4), (0, 1023, 1023), (1, 7, 2))]
+        blocks = [
+            tile_node_block(nodes, lev, tx, ty, 64)[0]
+            for lev, tx, ty in (
+                (top, 0, 0),
+                (top - 3, 3, 5),
+                (2, 0, 0),
+                (0, 3, 3),
+                (0, 4, 4),
+                (0, 1023, 1023),
+                (1, 7, 2),
+            )
+        ]
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
-    assert peak < 32 * 2**20, peak                                       # a level 0 would be 4 GiB
+    assert peak < 32 * 2**20, peak  # a level 0 would be 4 GiB
     for b in blocks:
         assert np.all(np.isfinite(b)) and np.all(b[:, 1] <= b[:, 2]) and np.all(b[:, 0] >= 0)
     with pytest.raises(TerrabenchError, match="a window at a time"):
@@ -190,14 +207,15 @@ def test_an_extension_of_a_store_without_node_arrays_is_loaded_or_refused_by_the
     import shutil
 
     import zarr
+
     prepare_store(_rough(), tmp_path / "old", 16)
-    g = zarr.open_group(str(tmp_path / "old"), mode="r+")               # as a store prepared before node arrays
+    g = zarr.open_group(str(tmp_path / "old"), mode="r+")  # as a store prepared before node arrays
     del g.attrs["nodes"]
-    del g.attrs["manifest"]                                             # (and so before manifests)
+    del g.attrs["manifest"]  # (and so before manifests)
     shutil.rmtree(tmp_path / "old" / "nodes")
     ext = open_periodic(tmp_path / "old", 257)
     assert "nodes" not in ext.store.attrs
-    assert nodes_for(ext, 16).cells == 256                              # small: built over the loaded grid
+    assert nodes_for(ext, 16).cells == 256  # small: built over the loaded grid
     monkeypatch.setattr(nodes_mod, "MAX_LOAD_SAMPLES", 1000)
     with pytest.raises(TerrabenchError, match=f"{tmp_path / 'old'}: .*without the raster.*--out {tmp_path / 'old'} "):
         nodes_for(open_periodic(tmp_path / "old", 257), 16)
@@ -208,23 +226,26 @@ def test_an_extension_of_a_store_without_node_arrays_is_loaded_or_refused_by_the
 
 @pytest.mark.parametrize("period", [128, None])
 @pytest.mark.parametrize("full_res", ["exact", "lean"])
-def test_a_periodic_extension_draws_with_the_raster_strategies_without_holes(ctx, tmp_path, monkeypatch, period, full_res):
+def test_a_periodic_extension_draws_with_the_raster_strategies_without_holes(
+    ctx, tmp_path, monkeypatch, period, full_res
+):
     # seamless, and with seam cliffs (rough borders between tiles of different levels: morph on and off)
     from hybrid.reference import ReferenceRenderer
     from hybrid.renderer import Renderer
+
     prepare_store(_rough(seed=4, period=period), tmp_path / "s", 16)
     ext = open_periodic(tmp_path / "s", 385)
     whole = ext.load()
-    views = border_views(ext)                                             # along x = 128 cells: a seam
+    views = border_views(ext)  # along x = 128 cells: a seam
     with ReferenceRenderer(ctx, whole) as ref:
         refs = [ref.render(v, mode="shaded") for v in views]
     with Renderer(ctx, whole, "raster", 16) as mem:
         counts = [mem.render(v, morph=False, full_res=full_res).stats.counters["triangles"] for v in views]
-    monkeypatch.setattr(stored_mod, "MAX_LOAD_SAMPLES", 1000)            # nothing may gather the grid now
+    monkeypatch.setattr(stored_mod, "MAX_LOAD_SAMPLES", 1000)  # nothing may gather the grid now
     for policy in ("raster", "raster_gs"):
         with Renderer(ctx, ext, policy, 16) as r:
             for v, rf, count in zip(views, refs, counts):
                 for morph in (True, False):
                     res = r.render(v, mode="shaded", morph=morph, full_res=full_res)
                     assert holes(res, rf, v, whole) == 0, (policy, morph)
-                    assert res.stats.counters["triangles"] >= count > 0   # nodes split no later than exact ones
+                    assert res.stats.counters["triangles"] >= count > 0  # nodes split no later than exact ones

@@ -2,6 +2,7 @@
 node block from the extension's node arrays) runs in the store's loader thread, never inside a frame; the tile is
 drawn from its resident ancestor (or ray cast, for the estimate) meanwhile, with no hole, and once the loader is done
 the frame is the one a renderer that cut everything first draws."""
+
 import threading
 
 import numpy as np
@@ -38,6 +39,7 @@ def _cuts(monkeypatch) -> list:
     def spy(effective, zlo, zhi, level, ty, n, tx0, tx1, inside=None):
         seen.append((threading.current_thread().name, level, tx0, ty))
         return real(effective, zlo, zhi, level, ty, n, tx0, tx1, inside)
+
     monkeypatch.setattr(periodic_blocks, "band_blocks", spy)
     return seen
 
@@ -55,7 +57,7 @@ def test_near_seam_blocks_are_cut_in_the_loader_thread_not_in_frames(ctx, tmp_pa
         plans = full.plan(v, 2.0)
         choices = [p.choice for p in plans]
         estimates = [p.features.triangles for p in plans] if policy == "hybrid" else []
-    ext = open_periodic(tmp_path / "s", 385)                  # a fresh extension: nothing cut yet
+    ext = open_periodic(tmp_path / "s", 385)  # a fresh extension: nothing cut yet
     pyramid = StorePyramid(ext)
     cuts = _cuts(monkeypatch)
     heights_built = []
@@ -66,7 +68,7 @@ def test_near_seam_blocks_are_cut_in_the_loader_thread_not_in_frames(ctx, tmp_pa
         for _ in range(50):
             res = r.render(v, 2.0, mode="shaded")
             history.append(res.stats)
-            waited.append(len(r.triangles.waiting) if policy == "hybrid" else 0)   # estimates left to the loader
+            waited.append(len(r.triangles.waiting) if policy == "hybrid" else 0)  # estimates left to the loader
             # waiting tiles drawn from their ancestor: no hole but a few pixels where the ancestor meets finer
             # tiles unstitched (as in test_uploads); once drained the frame of the renderer that cut everything first
             gaps.append(holes(res, rf, v, whole))
@@ -75,16 +77,16 @@ def test_near_seam_blocks_are_cut_in_the_loader_thread_not_in_frames(ctx, tmp_pa
             unknown.append(int(np.isnan([p.features.triangles for p in plans] if policy == "hybrid" else []).sum()))
             if res.stats.pending_uploads == 0 and not unknown[-1]:
                 break
-            assert pyramid.idle(120)                          # the loader has cut what this frame asked for
+            assert pyramid.idle(120)  # the loader has cut what this frame asked for
     root = pyramid.max_level
     in_frames = [c for c in cuts if c[0] != "terrabench-tile-loader"]
     loader = [c for c in cuts if c[0] == "terrabench-tile-loader"]
-    assert loader and all(c[1] == root for c in in_frames), in_frames    # only the always-resident root
-    assert not heights_built                                  # the estimate never fell back to the tile's heights
-    assert history[0].fallback_tiles > 0 or policy == "hybrid"           # near-seam raster tiles waited
+    assert loader and all(c[1] == root for c in in_frames), in_frames  # only the always-resident root
+    assert not heights_built  # the estimate never fell back to the tile's heights
+    assert history[0].fallback_tiles > 0 or policy == "hybrid"  # near-seam raster tiles waited
     assert res.stats.pending_uploads == 0 and res.stats.fallback_tiles == 0
     assert unknown[-1] == 0 and [p.choice for p in plans] == choices
-    if policy == "hybrid":                                    # estimates waited for the loader, then caught up
+    if policy == "hybrid":  # estimates waited for the loader, then caught up
         assert waited[0] > 0 and [p.features.triangles for p in plans] == estimates
     assert np.array_equal(res.colour, want.colour)
     both = np.isfinite(want.distance)
@@ -93,14 +95,15 @@ def test_near_seam_blocks_are_cut_in_the_loader_thread_not_in_frames(ctx, tmp_pa
 
 def test_a_cut_reads_each_source_chunk_once_and_cuts_again_from_them(tmp_path):
     from raster.nodes import nodes_for
+
     prepare_store(_rough(seed=4), tmp_path / "s", 16)
     ext = open_periodic(tmp_path / "s", 385)
     blocks = nodes_for(ext, 16).blocks
     chunks = ext.store["nodes/effective/0"].nodes.source_chunks
-    assert not blocks.ready(0, 7, 3)                          # next to the seam at x = 128 cells
+    assert not blocks.ready(0, 7, 3)  # next to the seam at x = 128 cells
     first = blocks[0][3, 7].copy()
     reads = chunks.chunks.made
-    assert 0 < reads == len(chunks.chunks) and blocks.ready(0, 7, 3)      # each chunk decoded once
+    assert 0 < reads == len(chunks.chunks) and blocks.ready(0, 7, 3)  # each chunk decoded once
     blocks.cut.clear()
     assert not blocks.ready(0, 7, 3)
     assert np.array_equal(blocks[0][3, 7], first) and chunks.chunks.made == reads  # no chunk read twice
@@ -108,12 +111,13 @@ def test_a_cut_reads_each_source_chunk_once_and_cuts_again_from_them(tmp_path):
 
 def test_byte_lru_keeps_the_newest_within_its_bytes_and_makes_each_once():
     from hybrid.tiles.byte_lru import ByteLRU
+
     lru, made = ByteLRU(3 * 800), []
-    make = lambda k: (lambda: made.append(k) or np.full(100, k, np.float64))      # noqa: E731  (800 bytes)
+    make = lambda k: lambda: made.append(k) or np.full(100, k, np.float64)  # noqa: E731  (800 bytes)
     for k in (1, 2, 3):
         assert lru.get(k, make(k))[0] == k
-    assert lru.get(1, make(1))[0] == 1 and made == [1, 2, 3]          # a hit makes nothing and refreshes 1
-    lru.get(4, make(4))                                                 # over budget: 2, the least recent, goes
+    assert lru.get(1, make(1))[0] == 1 and made == [1, 2, 3]  # a hit makes nothing and refreshes 1
+    lru.get(4, make(4))  # over budget: 2, the least recent, goes
     assert 2 not in lru and all(k in lru for k in (1, 3, 4)) and lru.nbytes == 2400
     big = ByteLRU(10)
-    assert big.get("a", make(5))[0] == 5 and "a" in big and len(big) == 1     # the newest stays, even too big
+    assert big.get("a", make(5))[0] == 5 and "a" in big and len(big) == 1  # the newest stays, even too big

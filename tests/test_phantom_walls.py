@@ -1,6 +1,7 @@
 """No phantom walls: rays that start under the terrain sheet (an eye below the ground, or a ray entering the
 footprint below the terrain's outer edge) see what the two-sided reference sheet shows, at every tile size,
 for the ray caster, the hybrid and both raster strategies; skirts are not drawn for such rays."""
+
 import numpy as np
 import pytest
 from test_hybrid import SPLIT, median_split
@@ -40,6 +41,7 @@ def views(hf: HeightField) -> dict:
 
     def view(eye, target):
         return View(eye, target, 60.0, *SIZE, near=0.5, far=1e5)
+
     return {
         # south of the terrain on the canyon's axis, 15 m up: the canyon walls' cut ends fill the sides
         "outside_floor": view([cx, oy - 300, oz + 15], [cx, oy + 3000, oz + 100]),
@@ -69,7 +71,7 @@ def agreement(ref, res) -> tuple[float, float]:
 
 
 def pixel_dirs(view):
-    rows, cols = np.mgrid[0:view.height, 0:view.width]
+    rows, cols = np.mgrid[0 : view.height, 0 : view.width]
     return view.pixel_dirs_eye(rows.ravel(), cols.ravel()) @ view.rotation()
 
 
@@ -104,7 +106,7 @@ def test_hybrid_draws_no_phantom_walls(ctx, scene, tile_size):
         for name, v in vs.items():
             r.model = median_split(r.pyramid, v)
             kinds = {r.kind(p.choice) for p in r.plan(v)}
-            assert kinds == {"raster", "raycast"}, (name, tile_size, kinds)   # raster skirts face ray-cast tiles
+            assert kinds == {"raster", "raycast"}, (name, tile_size, kinds)  # raster skirts face ray-cast tiles
             cover, med = agreement(refs[name], r.render(v, mode="shaded"))
             assert cover >= 0.999 and med <= 1e-3, (name, tile_size, cover, med)
 
@@ -137,7 +139,7 @@ def test_skirts_are_drawn_only_for_rays_from_above_the_sheet(ctx, scene, method)
             try:
                 target.clear()
                 s.draw_tiles(target, v, items, 2 / 3, mode="shaded", skirts={t.key: 15 for t in sel})
-                target.clear()                       # the skirts alone, with no surface in front of them
+                target.clear()  # the skirts alone, with no surface in front of them
                 s.draw_skirts(target, v)
                 drawn = target.read(v).mask.ravel()
             finally:
@@ -153,8 +155,8 @@ def test_skirts_are_drawn_only_for_rays_from_above_the_sheet(ctx, scene, method)
 
 
 def test_starts_under_follows_the_outer_edge_and_the_eye():
-    h = np.tile(np.linspace(0.0, 100.0, 5, dtype=np.float32), (5, 1))      # rises eastward, 0 .. 100 m
-    hf = HeightField(h, 10.0, (100.0, 200.0, 50.0))                        # footprint x 100..140, y 200..240
+    h = np.tile(np.linspace(0.0, 100.0, 5, dtype=np.float32), (5, 1))  # rises eastward, 0 .. 100 m
+    hf = HeightField(h, 10.0, (100.0, 200.0, 50.0))  # footprint x 100..140, y 200..240
     north = np.array([[0.0, 1.0, 0.0]])
     # from the south, horizontal: under where the south edge (50 + 2.5 m per metre east) is above the eye
     for x, z, want in ((110.0, 60.0, True), (110.0, 80.0, False), (135.0, 130.0, True), (135.0, 140.0, False)):
@@ -167,7 +169,7 @@ def test_starts_under_follows_the_outer_edge_and_the_eye():
     # over the footprint: the eye against the triangulated ground, for every ray
     assert eye_under(hf, [120.0, 220.0, 99.0]) and not eye_under(hf, [120.0, 220.0, 101.0])
     assert starts_under(hf, [120.0, 220.0, 99.0], np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])).all()
-    assert not eye_under(hf, [90.0, 220.0, -1e3])                         # off the footprint: never
+    assert not eye_under(hf, [90.0, 220.0, -1e3])  # off the footprint: never
 
 
 def test_edge_profiles_wrap_at_the_texture_limit(ctx, scene):
@@ -175,6 +177,7 @@ def test_edge_profiles_wrap_at_the_texture_limit(ctx, scene):
     to 50 texels (the canyon's profiles are 129 long) as without, for rays from under the sheet."""
     from hybrid.gl.context import context_extra
     from hybrid.gl.edges import fold_profiles
+
     prof = np.arange(4 * 129, dtype=np.float32).reshape(4, 129)
     folded = fold_profiles(prof, 50)
     assert folded.shape == (12, 50)

@@ -1,6 +1,7 @@
 """Property-based tests (hypothesis) over what users feed the toolkit: height arrays and files, views, tile
 pyramids, specs and command-line arguments. The property everywhere: a clear TerrabenchError, or a correct
 result; never another exception, a hang, NaNs or a blank image of terrain in view."""
+
 import math
 
 import numpy as np
@@ -20,19 +21,26 @@ from hybrid.tiles.pyramid import TilePyramid
 FAST = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 GL = settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 
-extreme_floats = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.sampled_from([0.0, -0.0, 1e-300,
-                                                                                            1e300, -1e30, 5e6]))
+extreme_floats = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True), st.sampled_from([0.0, -0.0, 1e-300, 1e300, -1e30, 5e6])
+)
 dtypes = st.sampled_from(["<i1", "<u1", "<i2", "<u2", "<i4", "<f2", "<f4", "<f8", "?", "<c8"])
-shapes = st.one_of(hnp.array_shapes(min_dims=1, max_dims=3, min_side=0, max_side=7),
-                   st.tuples(st.integers(1, 3), st.integers(1, 300)))
+shapes = st.one_of(
+    hnp.array_shapes(min_dims=1, max_dims=3, min_side=0, max_side=7), st.tuples(st.integers(1, 3), st.integers(1, 300))
+)
 
 
 def _arrays(draw):
     dtype = np.dtype(draw(dtypes))
     shape = draw(shapes)
     if dtype.kind in "fc":
-        return draw(hnp.arrays(dtype, shape, elements=st.floats(allow_nan=True, allow_infinity=True, width=32)
-                               if dtype.kind == "c" else None))
+        return draw(
+            hnp.arrays(
+                dtype,
+                shape,
+                elements=st.floats(allow_nan=True, allow_infinity=True, width=32) if dtype.kind == "c" else None,
+            )
+        )
     return draw(hnp.arrays(dtype, shape))
 
 
@@ -49,8 +57,12 @@ def _check_field(hf: HeightField) -> None:
 
 
 @FAST
-@given(height_arrays(), st.one_of(extreme_floats, st.tuples(extreme_floats, extreme_floats), st.none(),
-                                  st.just("30"), st.just((1.0, 2.0, 3.0))))
+@given(
+    height_arrays(),
+    st.one_of(
+        extreme_floats, st.tuples(extreme_floats, extreme_floats), st.none(), st.just("30"), st.just((1.0, 2.0, 3.0))
+    ),
+)
 def test_height_field_is_valid_or_refused(heights, spacing):
     try:
         hf = HeightField(heights, spacing)
@@ -76,8 +88,12 @@ def test_numpy_files_load_or_are_refused(tmp_path_factory, heights, suffix):
 
 
 @FAST
-@given(st.binary(max_size=4096), st.sampled_from([".png", ".tif", ".npy", ".npz", ".hgt", ".raw"]),
-       st.tuples(st.integers(-3, 70), st.integers(-3, 70)), st.sampled_from(["<u2", "<f4", "float99", "<i1"]))
+@given(
+    st.binary(max_size=4096),
+    st.sampled_from([".png", ".tif", ".npy", ".npz", ".hgt", ".raw"]),
+    st.tuples(st.integers(-3, 70), st.integers(-3, 70)),
+    st.sampled_from(["<u2", "<f4", "float99", "<i1"]),
+)
 def test_garbage_files_are_refused_by_name(tmp_path_factory, data, suffix, shape, dtype):
     path = tmp_path_factory.mktemp("junk") / f"junk{suffix}"
     path.write_bytes(data)
@@ -96,8 +112,16 @@ coords = st.tuples(extreme_floats, extreme_floats, extreme_floats)
 
 
 @FAST
-@given(coords, coords, coords, extreme_floats, st.integers(-2, MAX_VIEWPORT + 2), st.integers(-2, 40),
-       extreme_floats, extreme_floats)
+@given(
+    coords,
+    coords,
+    coords,
+    extreme_floats,
+    st.integers(-2, MAX_VIEWPORT + 2),
+    st.integers(-2, 40),
+    extreme_floats,
+    extreme_floats,
+)
 def test_views_are_valid_or_refused(eye, target, up, fov, width, height, near, far):
     try:
         v = View(eye, target, fov, width, height, near, far, up)
@@ -128,17 +152,42 @@ def test_pyramids_cover_the_grid_and_bound_its_heights(rows, cols, tile_size, se
     assert max(t.aabb[1][2] for t in tiles) >= float(h.max()) - 1e-3
 
 
-spec_values = st.one_of(st.integers(-5, 5), st.floats(allow_nan=True), st.text(max_size=6), st.booleans(),
-                        st.lists(st.one_of(st.integers(-2, 3), st.text(max_size=5)), max_size=3))
-spec_keys = st.sampled_from(["name", "datasets", "dataset_size", "flights", "frames", "policies", "taus", "sizes",
-                             "reconstructions", "full_res", "repeats", "seeds", "tile_size", "supersample", "flip",
-                             "image_frames", "video", "colour"])
+spec_values = st.one_of(
+    st.integers(-5, 5),
+    st.floats(allow_nan=True),
+    st.text(max_size=6),
+    st.booleans(),
+    st.lists(st.one_of(st.integers(-2, 3), st.text(max_size=5)), max_size=3),
+)
+spec_keys = st.sampled_from(
+    [
+        "name",
+        "datasets",
+        "dataset_size",
+        "flights",
+        "frames",
+        "policies",
+        "taus",
+        "sizes",
+        "reconstructions",
+        "full_res",
+        "repeats",
+        "seeds",
+        "tile_size",
+        "supersample",
+        "flip",
+        "image_frames",
+        "video",
+        "colour",
+    ]
+)
 
 
 @FAST
 @given(st.dictionaries(spec_keys, spec_values, max_size=5))
 def test_specs_parse_or_are_refused(entries):
     import json
+
     text = "\n".join(f"{k} = {json.dumps(v)}" for k, v in entries.items())
     try:
         spec = parse_spec(text)
@@ -149,17 +198,23 @@ def test_specs_parse_or_are_refused(entries):
     assert spec.frames >= 1 and spec.repeats >= 1 and all(s >= 0 for s in spec.seeds)
 
 
-arg_text = st.one_of(st.text(max_size=12), st.sampled_from(["0", "-1", "nan", "inf", "1e400", "3x", "x3", "0x0",
-                                                            "1,2", "1,2,nan", "65536", "99999x1", ""]))
+arg_text = st.one_of(
+    st.text(max_size=12),
+    st.sampled_from(["0", "-1", "nan", "inf", "1e400", "3x", "x3", "0x0", "1,2", "1,2,nan", "65536", "99999x1", ""]),
+)
 
 
 @FAST
-@given(st.sampled_from(["--size-samples", "--seed", "--vertical-scale", "--spacing", "--raw-shape", "--offset",
-                        "--dataset"]), arg_text)
+@given(
+    st.sampled_from(
+        ["--size-samples", "--seed", "--vertical-scale", "--spacing", "--raw-shape", "--offset", "--dataset"]
+    ),
+    arg_text,
+)
 def test_info_arguments_exit_0_or_2_with_one_line(capsys, option, value):
     try:
         rc = main(["info", "--no-gl", "--dataset", "fbm", "--size-samples", "33", option, value])
-    except SystemExit as exc:                          # argparse's own usage errors exit directly
+    except SystemExit as exc:  # argparse's own usage errors exit directly
         rc = exc.code
     err = capsys.readouterr().err
     assert rc in (0, 2)
@@ -169,11 +224,19 @@ def test_info_arguments_exit_0_or_2_with_one_line(capsys, option, value):
 
 @pytest.mark.gl
 @GL
-@given(st.integers(0, 2**31), st.floats(0.05, 0.95), st.floats(0.05, 0.95), st.floats(5.0, 80.0),
-       st.floats(0.0, 2 * math.pi), st.floats(0.2, 2.0), st.sampled_from(["raster", "raycast", "hybrid"]))
+@given(
+    st.integers(0, 2**31),
+    st.floats(0.05, 0.95),
+    st.floats(0.05, 0.95),
+    st.floats(5.0, 80.0),
+    st.floats(0.0, 2 * math.pi),
+    st.floats(0.2, 2.0),
+    st.sampled_from(["raster", "raycast", "hybrid"]),
+)
 def test_a_terrain_point_at_the_centre_of_view_is_drawn(ctx, seed, fx, fy, elev_deg, azimuth, dist_km, policy):
     from hybrid.renderer import make_renderer
     from hybrid.terrain.datasets import fbm
+
     hf = fbm(size=65, spacing=60.0, seed=seed % 1000, amplitude=400.0)
     w, d = hf.extent
     # off the grid lines: a centre ray running exactly along cell edges onto a grid vertex is a rasterizer's
@@ -185,12 +248,14 @@ def test_a_terrain_point_at_the_centre_of_view_is_drawn(ctx, seed, fx, fy, elev_
     e = math.radians(elev_deg)
     eye = target + r * np.array([math.cos(e) * math.cos(azimuth), math.cos(e) * math.sin(azimuth), math.sin(e)])
     from hybrid.camera.clearance import eye_clearance
+
     clear = eye_clearance(hf, eye)
-    assume(np.isfinite(clear) and clear > 5.0)          # an eye over the terrain, above the ground
-    beyond = eye + (r + 5.0) * (target - eye) / r        # the ray enters the ground at the target: 5 m on it is
-    assume(float(hf.ground_height(beyond[0], beyond[1])) > beyond[2] + 0.05)   # under the surface (not grazing a crest)
+    assume(np.isfinite(clear) and clear > 5.0)  # an eye over the terrain, above the ground
+    beyond = eye + (r + 5.0) * (target - eye) / r  # the ray enters the ground at the target: 5 m on it is
+    assume(float(hf.ground_height(beyond[0], beyond[1])) > beyond[2] + 0.05)  # under the surface (not grazing a crest)
     view = View(eye, target, 40.0, 33, 33, 1.0, 1e6)
     from hybrid.reference import ReferenceRenderer
+
     with make_renderer(ctx, hf, policy, tile_size=16) as renderer:
         res = renderer.render(view, 2 / 3)
     reference = ReferenceRenderer(ctx, hf)

@@ -1,4 +1,5 @@
 """The tile pyramid (errors, AABBs, padding) and per-view selection (culling, restriction, order)."""
+
 import itertools
 
 import numpy as np
@@ -32,8 +33,8 @@ def test_error_is_exact_deviation(puget_full, pyr):
     t = pyr.tile(k)
     coarse = HeightField(t.heights, t.spacing_xy)
     n0 = 128
-    i, j = np.mgrid[0:n0 + 1, 0:n0 + 1]
-    fine = puget_full.heights[3 * n0:4 * n0 + 1, 2 * n0:3 * n0 + 1]
+    i, j = np.mgrid[0 : n0 + 1, 0 : n0 + 1]
+    fine = puget_full.heights[3 * n0 : 4 * n0 + 1, 2 * n0 : 3 * n0 + 1]
     dev = np.abs(coarse.sample_triangles(i / 2, j / 2) - fine).max()
     kids_max = max(pyr.error(c) for c in k.children())
     assert np.isclose(pyr.error(k), max(dev, kids_max), rtol=1e-6)
@@ -42,9 +43,11 @@ def test_error_is_exact_deviation(puget_full, pyr):
 def test_aabb_bounds_samples(puget_full, pyr):
     for k in pyr.keys(1):
         lo, hi = pyr.aabb(k)
-        j0 = int(round((lo[0] - puget_full.origin[0]) / 160)); j1 = int(round((hi[0] - puget_full.origin[0]) / 160))
-        i0 = int(round((lo[1] - puget_full.origin[1]) / 160)); i1 = int(round((hi[1] - puget_full.origin[1]) / 160))
-        block = puget_full.heights[i0:i1 + 1, j0:j1 + 1]
+        j0 = int(round((lo[0] - puget_full.origin[0]) / 160))
+        j1 = int(round((hi[0] - puget_full.origin[0]) / 160))
+        i0 = int(round((lo[1] - puget_full.origin[1]) / 160))
+        i1 = int(round((hi[1] - puget_full.origin[1]) / 160))
+        block = puget_full.heights[i0 : i1 + 1, j0 : j1 + 1]
         assert lo[2] == block.min() and hi[2] == block.max()
 
 
@@ -56,7 +59,7 @@ def test_any_size_is_padded_not_drawn():
         for k in p.keys(level):
             x0, y0, x1, y1 = p.clip(k)
             assert x1 <= 4990 and y1 <= 2990 and x1 > x0 and y1 > y0
-    assert not p.exists(TileKey(0, 7, 5))        # wholly in the padding
+    assert not p.exists(TileKey(0, 7, 5))  # wholly in the padding
     with pytest.raises(TerrabenchError, match="does not exist"):
         p.tile(TileKey(0, 7, 5))
     with pytest.raises(TerrabenchError, match="power of two"):
@@ -83,9 +86,9 @@ def test_selection_restricted_and_complete(puget_full, pyr):
         sel = select_tiles(pyr, view)
         keys = [s.key for s in sel]
         assert len(set(keys)) == len(keys)
-        for a in keys:                                       # no overlaps
+        for a in keys:  # no overlaps
             assert not any(_covers(a, b) for b in keys if b != a)
-        for s in sel:                                        # restricted: edge neighbours within one level
+        for s in sel:  # restricted: edge neighbours within one level
             k = s.key
             for bit, dx, dy in ((EDGE_W, -1, 0), (EDGE_E, 1, 0), (EDGE_S, 0, -1), (EDGE_N, 0, 1)):
                 for o in keys:
@@ -128,7 +131,14 @@ def test_culled_tiles_are_outside(puget_full, pyr):
         p = view.project(g)
         rel = g - view.eye
         in_front = rel @ view.forward > view.near
-        inside = in_front & (p[:, 0] >= 0) & (p[:, 0] <= view.width) & (p[:, 1] >= 0) & (p[:, 1] <= view.height) & (p[:, 2] >= 0)
+        inside = (
+            in_front
+            & (p[:, 0] >= 0)
+            & (p[:, 0] <= view.width)
+            & (p[:, 1] >= 0)
+            & (p[:, 1] <= view.height)
+            & (p[:, 2] >= 0)
+        )
         assert not inside.any(), k
 
 
@@ -142,12 +152,15 @@ def test_tau_drives_refinement(puget_full, pyr):
 
 
 @pytest.mark.parametrize("dense", [True, False])
-@pytest.mark.parametrize("name, size, tile", [("puget", 257, 32), ("fbm", 257, 16), ("spike", 129, 8), ("cliff", 129, 4)])
+@pytest.mark.parametrize(
+    "name, size, tile", [("puget", 257, 32), ("fbm", 257, 16), ("spike", 129, 8), ("cliff", 129, 4)]
+)
 def test_vectorised_selection_equals_the_per_tile_traversal(name, size, tile, dense):
     from tiletree_reference import select_tiles_by_traversal
 
     from hybrid.camera.flight import get_flight
     from hybrid.terrain.datasets import get_dataset
+
     hf = get_dataset(name, size=size)
     pyr = TilePyramid(hf, tile)
     checked = splits = 0
@@ -155,10 +168,10 @@ def test_vectorised_selection_equals_the_per_tile_traversal(name, size, tile, de
         for view in get_flight(flight, hf, frames=6, width=240, height=135).views():
             for tau in (0.25, 2 / 3, 4.0):
                 fast, slow = select_tiles(pyr, view, tau, dense=dense), select_tiles_by_traversal(pyr, view, tau)
-                assert fast == slow                  # the same tiles, order, distances, errors and edge levels
+                assert fast == slow  # the same tiles, order, distances, errors and edge levels
                 checked += 1
                 splits += len({s.level for s in fast}) > 1
-    assert checked == 54 and splits > 10             # mixed-level selections (restriction, stitching) were seen
+    assert checked == 54 and splits > 10  # mixed-level selections (restriction, stitching) were seen
 
 
 @pytest.mark.parametrize("rows, cols, tile", [(190, 131, 16), (70, 301, 8), (33, 33, 64)])
@@ -170,6 +183,7 @@ def test_dense_and_level_by_level_selections_agree_on_ragged_grids(rows, cols, t
     from hybrid.camera.flight import get_flight
     from hybrid.terrain.datasets import get_dataset
     from hybrid.tiles.tile_table import square_tiles
+
     h = get_dataset("fbm", size=513).heights[:rows, :cols] * 3.0
     hf = HeightField(h, (20.0, 35.0))
     pyr = TilePyramid(hf, tile)
@@ -188,17 +202,19 @@ def test_dense_and_level_by_level_selections_agree_on_ragged_grids(rows, cols, t
 def test_a_table_of_every_tile_place_is_refused_beyond_its_limit():
     from hybrid.camera.view import View
     from hybrid.tiles.tile_table import MAX_TABLE_TILES, square_tiles
+
     hf = HeightField(np.zeros((2, 4097), np.float32), 10.0)
     pyr = TilePyramid(hf, 2)
     assert square_tiles(pyr) > MAX_TABLE_TILES
     view = View(eye=(100.0, -500.0, 300.0), target=(2000.0, 5.0, 0.0))
     with pytest.raises(TerrabenchError, match=f"would hold {square_tiles(pyr)} places, beyond {MAX_TABLE_TILES}"):
         select_tiles(pyr, view, dense=True)
-    assert len(select_tiles(pyr, view)) > 0                   # the automatic choice walks it level by level
+    assert len(select_tiles(pyr, view)) > 0  # the automatic choice walks it level by level
 
 
 def test_a_thin_grid_costs_what_its_samples_do():
     import tracemalloc
+
     h = np.random.default_rng(0).normal(100.0, 10.0, (2, 20000)).astype(np.float32)
     hf = HeightField(h, 30.0)
     tracemalloc.start()
@@ -206,10 +222,10 @@ def test_a_thin_grid_costs_what_its_samples_do():
     tiles = [pyr.tile(k) for k in pyr.keys(0)]
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
-    assert peak < 100 * 2**20                       # the addressing square (32769², 4 GiB) is never built
+    assert peak < 100 * 2**20  # the addressing square (32769², 4 GiB) is never built
     assert len(tiles) == 79 and pyr.max_level == 7 and len(pyr.keys(pyr.max_level)) == 1
     assert sum(t.clip[2] - t.clip[0] for t in tiles) == pytest.approx(hf.extent[0])
-    np.testing.assert_array_equal(tiles[3].heights[0], h[0, 3 * 256:4 * 256 + 1])
-    np.testing.assert_array_equal(tiles[3].heights[5], h[1, 3 * 256:4 * 256 + 1])   # rows beyond repeat the edge
+    np.testing.assert_array_equal(tiles[3].heights[0], h[0, 3 * 256 : 4 * 256 + 1])
+    np.testing.assert_array_equal(tiles[3].heights[5], h[1, 3 * 256 : 4 * 256 + 1])  # rows beyond repeat the edge
     with pytest.raises(TerrabenchError, match="padded square of 32769² samples"):
         _ = pyr.padded

@@ -1,5 +1,6 @@
 """Baselines: the full-resolution triangle list matches the reference; the TIN is decimated, exports, and
 its border cracks are measured; the indexed list of a tilelet set matches the GS count."""
+
 import numpy as np
 import pytest
 
@@ -34,7 +35,7 @@ def test_tin_decimates_exports_and_cracks_are_measured(ctx, puget257, tmp_path):
         res = r.render(view, mode="shaded")
         assert res.stats.counters["triangles"] == res.stats.counters["triangles_cpu"] < 0.15 * 2 * 256 * 256
         gaps = border_gaps(r.strategies["tin"].meshes, 64)
-        assert len(gaps) == 24 and max(gaps.values()) > 1.0      # independent decimation cracks: measured, not hidden
+        assert len(gaps) == 24 and max(gaps.values()) > 1.0  # independent decimation cracks: measured, not hidden
         mesh, sp = next(iter(r.strategies["tin"].meshes.values()))
         export_tin(mesh, tmp_path / "tile.obj")
         export_tin(mesh, tmp_path / "tile.ply")
@@ -79,10 +80,10 @@ def test_tin_keeps_a_flat_sea(ctx):
     sea = uncovered = 0
     for (level, tx, ty), (mesh, sp) in r.strategies["tin"].meshes.items():
         h = r.pyramid.tile(TileKey(level, tx, ty)).heights
-        i, j = np.mgrid[0:h.shape[0], 0:h.shape[1]]
+        i, j = np.mgrid[0 : h.shape[0], 0 : h.shape[1]]
         sx, sy = sp
         _, hits = surface_at(mesh.vertices, mesh.faces, j * sx, i * sy)
         flat = (h == 0).ravel()
         sea, uncovered = sea + int(flat.sum()), uncovered + int((hits[flat] == 0).sum())
-        assert mesh.triangles < 0.15 * 2 * 32 * 32   # still decimated to about 10 %
+        assert mesh.triangles < 0.15 * 2 * 32 * 32  # still decimated to about 10 %
     assert sea > 1000 and uncovered <= 0.01 * sea, (uncovered, sea)

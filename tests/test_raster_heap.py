@@ -2,6 +2,7 @@
 tile's slot holds its heights and node block as uploaded, also after the heap grew and after eviction made it
 smaller and moved its tiles; frames drawn after that are the frames drawn before. (One tile drawn as many items
 of a frame, each clipped to a missing tile's rectangle: test_uploads' first frames, all drawn from the root.)"""
+
 import numpy as np
 import pytest
 
@@ -24,6 +25,7 @@ def slot_contents(g) -> tuple[np.ndarray, np.ndarray]:
 
 def test_slots_hold_their_tiles_through_growth_and_compaction(ctx, puget257):
     from hybrid.tiles.pyramid import TilePyramid
+
     pyr = TilePyramid(puget257, 32)
     s = IndexedTileletStrategy(ctx, puget257)
     try:
@@ -31,19 +33,20 @@ def test_slots_hold_their_tiles_through_growth_and_compaction(ctx, puget257):
         tiles = {k: pyr.tile(k) for k in keys}
         gs = {k: s.upload(t) for k, t in tiles.items()}
         heap = s.heaps[32]
-        assert heap.capacity >= 20 > MIN_SLOTS                  # grew from MIN_SLOTS by copies on the GPU
+        assert heap.capacity >= 20 > MIN_SLOTS  # grew from MIN_SLOTS by copies on the GPU
         nodes = nodes_for(puget257, 32, s.beta)
 
         def check(k):
             h, nd = slot_contents(gs[k])
             np.testing.assert_array_equal(h, np.asarray(tiles[k].heights, np.float32))
             np.testing.assert_array_equal(nd, tile_node_block(nodes, k.level, k.tx, k.ty, 32)[0])
+
         for k in keys:
             check(k)
         before = heap.capacity
         for k in keys[:17]:
             gs.pop(k).release()
-        assert heap.capacity < before and heap.used == 3        # compacted: fewer slots, tiles moved down
+        assert heap.capacity < before and heap.used == 3  # compacted: fewer slots, tiles moved down
         assert sorted(g.slot.index for g in gs.values()) == [0, 1, 2]
         for k in gs:
             check(k)
@@ -69,7 +72,7 @@ def test_frames_after_eviction_equal_frames_before(ctx, puget257, strategy):
         assert r.cache.stats.evictions > 0
     assert np.isfinite(want.distance).sum() > 0.5 * want.distance.size
     np.testing.assert_array_equal(out[0].colour, want.colour)
-    np.testing.assert_array_equal(out[2].colour, want.colour)       # drawn again from moved and new slots
+    np.testing.assert_array_equal(out[2].colour, want.colour)  # drawn again from moved and new slots
     np.testing.assert_array_equal(out[2].distance, want.distance)
 
 
@@ -77,6 +80,7 @@ def test_one_selection_of_tiles_of_two_cell_counts_is_refused_by_name(ctx, puget
     from hybrid.errors import TerrabenchError
     from hybrid.tiles.pyramid import TilePyramid
     from hybrid.tiles.tiletree import select_tiles
+
     view = preset("flyover", puget257, 6, *SIZE).view(2)
     s = IndexedTileletStrategy(ctx, puget257)
     try:

@@ -1,5 +1,6 @@
 """CPU tests of the restricted tilelet quadtree: error pyramid, restriction inside and across tiles, error
 bound of the drawn (stitched) mesh, crack-free morphed vertices, input checks."""
+
 import numpy as np
 import pytest
 from raster_helpers import border_views
@@ -30,9 +31,12 @@ def test_error_pyramid_monotone_and_exact_at_level0(synthetic):
         assert np.all(p.errors[m] >= kids)
         assert np.all(p.effective[m] >= p.errors[m])
         # effective error grows by at least 1/beta over every child and every finer edge neighbour
-        assert np.all(p.effective[m] * p.beta >= p.effective[m - 1].reshape(p.errors[m].shape[0], 2, -1, 2).max(axis=(1, 3)) - 1e-9)
+        assert np.all(
+            p.effective[m] * p.beta
+            >= p.effective[m - 1].reshape(p.errors[m].shape[0], 2, -1, 2).max(axis=(1, 3)) - 1e-9
+        )
     full, _ = fan_surfaces(h, 0)
-    assert np.allclose(full, h)        # level-0 posts are the tile's samples
+    assert np.allclose(full, h)  # level-0 posts are the tile's samples
 
 
 def test_leaf_levels_restricted_partition_and_caps(synthetic):
@@ -42,10 +46,10 @@ def test_leaf_levels_restricted_partition_and_caps(synthetic):
         L = leaf_levels(p, tol)
         assert np.abs(np.diff(L, axis=0)).max(initial=0) <= 1 and np.abs(np.diff(L, axis=1)).max(initial=0) <= 1
         lv = leaves_from_levels(L)
-        assert int(np.sum((2 << lv.level.astype(np.int64)) ** 2)) == 128 * 128      # leaves tile the tile exactly
+        assert int(np.sum((2 << lv.level.astype(np.int64)) ** 2)) == 128 * 128  # leaves tile the tile exactly
     assert len(leaves_from_levels(leaf_levels(p, 1e9))) == 1
     cap = np.full((64, 64), p.top, np.int16)
-    cap[:, 0] = 0                                                                    # west border at level 0
+    cap[:, 0] = 0  # west border at level 0
     L = leaf_levels(p, 1e9, cap)
     assert np.all(L[:, 0] == 0) and np.abs(np.diff(L, axis=1)).max() <= 1
 
@@ -73,10 +77,14 @@ def _global_vertices(tiles, sets):
         for r in range(3):
             for c in range(3):
                 keep = np.ones(len(lv), bool)
-                if (r, c) == (1, 0): keep = (ts.coarser & 1) == 0
-                if (r, c) == (1, 2): keep = (ts.coarser & 2) == 0
-                if (r, c) == (0, 1): keep = (ts.coarser & 4) == 0
-                if (r, c) == (2, 1): keep = (ts.coarser & 8) == 0
+                if (r, c) == (1, 0):
+                    keep = (ts.coarser & 1) == 0
+                if (r, c) == (1, 2):
+                    keep = (ts.coarser & 2) == 0
+                if (r, c) == (0, 1):
+                    keep = (ts.coarser & 4) == 0
+                if (r, c) == (2, 1):
+                    keep = (ts.coarser & 8) == 0
                 x = base_x + lv.j0 * step + c * kk
                 y = base_y + lv.i0 * step + r * kk
                 out.append(np.stack([x[keep], y[keep], P[keep, r, c]], axis=1))
@@ -96,7 +104,9 @@ def test_frame_restricted_across_tiles_and_vertices_agree(name, puget257, synthe
             cells = np.repeat(np.repeat(ts.level_map + k.level, 2 << k.level, 0), 2 << k.level, 1)
             s = t.n << k.level
             y0, x0 = k.ty * s, k.tx * s
-            G[y0:y0 + s, x0:x0 + s][:min(s, size - y0), :min(s, size - x0)] = cells[:min(s, size - y0), :min(s, size - x0)]
+            G[y0 : y0 + s, x0 : x0 + s][: min(s, size - y0), : min(s, size - x0)] = cells[
+                : min(s, size - y0), : min(s, size - x0)
+            ]
         covered = G >= 0
         dx = np.abs(np.diff(G, axis=1))[covered[:, 1:] & covered[:, :-1]]
         dy = np.abs(np.diff(G, axis=0))[covered[1:] & covered[:-1]]
@@ -127,15 +137,18 @@ def test_a_cell_turns_late_in_its_midpoints_morph_and_completes_at_the_drop(puge
     TURN_FROM and reaches 1 exactly where the midpoint drops (morph 1), rising steadily between; a Puget frame's
     full-resolution tiles in the CPU mirror have cells turning, each turn within [0, 1]."""
     from raster.morph import TURN_FROM, turn_factor
+
     a = np.linspace(0.0, 1.0, 201)
     t = turn_factor(a)
     assert np.all(t[a <= TURN_FROM] == 0.0) and t[-1] == 1.0 and np.all(np.diff(t[a >= TURN_FROM]) > 0)
-    assert np.abs(np.diff(t)).max() <= 1.01 * (a[1] - a[0]) / (1.0 - TURN_FROM)       # no step
+    assert np.abs(np.diff(t)).max() <= 1.01 * (a[1] - a[0]) / (1.0 - TURN_FROM)  # no step
     view = border_views(puget257)[0]
     pyr = TilePyramid(puget257, 64)
     sel = [s for s in select_tiles(pyr, view) if s.key.level == 0]
-    lods = [TileLod(s.key, error_pyramid(pyr.tile(s.key).heights, 0.5), 2 / 3 * s.distance / view.pixels_per_radian)
-            for s in sel]
+    lods = [
+        TileLod(s.key, error_pyramid(pyr.tile(s.key).heights, 0.5), 2 / 3 * s.distance / view.pixels_per_radian)
+        for s in sel
+    ]
     sets = restrict_frame(lods, morph=True, use_effective=True, lean=True, exact_full_resolution=False)
     turns = np.concatenate([ts.turns.ravel() for ts in sets.values()])
     assert turns.min() >= 0.0 and turns.max() <= 1.0 and (turns > 0).any()
@@ -151,6 +164,7 @@ def test_triangle_estimate_follows_the_drawn_count(ctx, puget_full):
     from hybrid.renderer import Renderer
     from raster.estimate import TileletTriangleEstimator
     from raster.tilelets import read_leaves
+
     ratios, frames, nearest, shown, coarse = [], [], [], [], []
     with Renderer(ctx, puget_full, "raster", 128) as r:
         est = TileletTriangleEstimator(r.pyramid)
@@ -158,14 +172,24 @@ def test_triangle_estimate_follows_the_drawn_count(ctx, puget_full):
             r.render(v, culling=False)
             plans = r.plan(v)
             many = est.many([p.selected for p in plans], v, 2 / 3)
-            drawn = np.array([read_leaves(r.strategies["raster"], r.cache.entries[("raster", p.key)])["triangles"].sum() for p in plans])
+            drawn = np.array(
+                [
+                    read_leaves(r.strategies["raster"], r.cache.entries[("raster", p.key)])["triangles"].sum()
+                    for p in plans
+                ]
+            )
             single = np.array([est(p.key, p.selected, v, 2 / 3) for p in plans])
-            assert np.array_equal(many[0], single)                 # the frame's batch is the tiles' estimates
+            assert np.array_equal(many[0], single)  # the frame's batch is the tiles' estimates
             ratios += list(many[0] / drawn)
             coarse += [t / d for p, t, d in zip(plans, many[0], drawn) if p.key.level > 0]
             frames.append(many[0].sum() / drawn.sum())
-            r.render(v)                                             # with tilelet culling: the visible share
-            culled = np.array([read_leaves(r.strategies["raster"], r.cache.entries[("raster", p.key)])["triangles"].sum() for p in plans])
+            r.render(v)  # with tilelet culling: the visible share
+            culled = np.array(
+                [
+                    read_leaves(r.strategies["raster"], r.cache.entries[("raster", p.key)])["triangles"].sum()
+                    for p in plans
+                ]
+            )
             shown.append(np.sum(many[0] * many[1]) / culled.sum())
             assert shown[-1] < 0.9 * many[0].sum() / culled.sum()  # the share is nearer than taking all as seen
             assert culled.sum() < 0.9 * drawn.sum() and np.all((many[1] > 0) & (many[1] <= 1))
@@ -177,14 +201,14 @@ def test_triangle_estimate_follows_the_drawn_count(ctx, puget_full):
                 old.append(8 * (1 + 3 * sum(int(np.sum(e > tol)) for e in eff)))
             nearest.append(np.sum(old) / drawn.sum())
     assert len(ratios) > 20
-    assert all(0.85 <= f <= 1.15 for f in frames), frames       # lean leaves' kept midpoints follow their
-    assert 0.9 <= np.median(ratios) <= 1.15, sorted(ratios)      # neighbours, which the counts do not see
+    assert all(0.85 <= f <= 1.15 for f in frames), frames  # lean leaves' kept midpoints follow their
+    assert 0.9 <= np.median(ratios) <= 1.15, sorted(ratios)  # neighbours, which the counts do not see
     # coarser pyramid levels' tiles too: their nodes are the level-0 quadtree's, errors saturated across borders
     # (0.73-0.88 when they were not); a little under the level-0 tiles', as their leaves keep every midpoint
     # toward tiles of another pyramid level, which the counts do not see
     assert len(coarse) >= 5 and 0.85 <= np.median(coarse) <= 1.1, sorted(coarse)
-    assert min(nearest) > max(frames), (nearest, frames)         # the per-node distances are what the fit sees
-    assert all(0.95 <= f <= 1.4 for f in shown), shown            # blocks reaching into the frustum count whole
+    assert min(nearest) > max(frames), (nearest, frames)  # the per-node distances are what the fit sees
+    assert all(0.95 <= f <= 1.4 for f in shown), shown  # blocks reaching into the frustum count whole
 
 
 def test_triangle_estimate_follows_lean_full_resolution_leaves(ctx, puget_full):
@@ -196,6 +220,7 @@ def test_triangle_estimate_follows_lean_full_resolution_leaves(ctx, puget_full):
     from hybrid.renderer import Renderer
     from raster.estimate import TileletTriangleEstimator
     from raster.tilelets import read_leaves
+
     frames, fine_ratios = [], []
     with Renderer(ctx, puget_full, "raster", 128, culling=False) as r:
         est = TileletTriangleEstimator(r.pyramid, full_res="lean")
@@ -205,8 +230,12 @@ def test_triangle_estimate_follows_lean_full_resolution_leaves(ctx, puget_full):
             counts = {}
             for full_res in ("exact", "lean"):
                 r.render(v, full_res=full_res)
-                counts[full_res] = np.array([read_leaves(r.strategies["raster"], r.cache.entries[("raster", p.key)])
-                                             ["triangles"].sum() for p in plans])
+                counts[full_res] = np.array(
+                    [
+                        read_leaves(r.strategies["raster"], r.cache.entries[("raster", p.key)])["triangles"].sum()
+                        for p in plans
+                    ]
+                )
             assert len(fine) >= 3 and counts["lean"][fine].sum() < 0.95 * counts["exact"][fine].sum()
             many = est.many([p.selected for p in plans], v, 2 / 3)[0]
             frames.append(many.sum() / counts["lean"].sum())
@@ -226,8 +255,10 @@ def test_triangle_estimate_from_a_stores_node_blocks_follows_the_drawn_count(ctx
     from hybrid.tiles.store import StorePyramid, prepare_store
     from raster.estimate import TileletTriangleEstimator
     from raster.tilelets import read_leaves
-    prepare_store(ArraySource(np.asarray(puget_full.heights), (puget_full.spacing_x, puget_full.spacing_y)),
-                  tmp_path / "s", 128)
+
+    prepare_store(
+        ArraySource(np.asarray(puget_full.heights), (puget_full.spacing_x, puget_full.spacing_y)), tmp_path / "s", 128
+    )
     pyramid = StorePyramid(tmp_path / "s")
     frames = []
     with Renderer(ctx, pyramid.hf, "raster", 128, pyramid=pyramid) as r:
@@ -237,8 +268,12 @@ def test_triangle_estimate_from_a_stores_node_blocks_follows_the_drawn_count(ctx
             r.render(v, culling=False)
             plans = r.plan(v)
             tri = est.many([p.selected for p in plans], v, 2 / 3)[0]
-            drawn = np.array([read_leaves(r.strategies["raster"], r.cache.entries[("raster", p.key)])["triangles"].sum()
-                              for p in plans])
+            drawn = np.array(
+                [
+                    read_leaves(r.strategies["raster"], r.cache.entries[("raster", p.key)])["triangles"].sum()
+                    for p in plans
+                ]
+            )
             frames.append(tri.sum() / drawn.sum())
     assert all(0.9 <= f <= 1.2 for f in frames), frames
 
@@ -252,6 +287,7 @@ def test_triangle_estimate_reuses_rows_of_tiles_least_recently_used():
     from hybrid.tiles.pyramid import TilePyramid
     from hybrid.tiles.tiletree import select_tiles
     from raster.estimate import TileletTriangleEstimator, _Rows
+
     hf = fbm(257, seed=4)
     pyramid = TilePyramid(hf, 32)
     small, full = TileletTriangleEstimator(pyramid), TileletTriangleEstimator(pyramid)

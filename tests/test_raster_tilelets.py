@@ -1,6 +1,7 @@
 """GPU tests of the two tilelet strategies (indexed triangles and geometry shader), both selected on the GPU:
 crack-free images (and cracks when stitching is off), counts against the leaves read back, culling that
 changes no pixel, morph continuity, convergence to the reference as tau -> 0, modes."""
+
 import numpy as np
 import pytest
 from raster_helpers import border_views, holes
@@ -30,7 +31,11 @@ def renderers(ctx, puget257, synthetic):
 def leaf_sets(r, name, view):
     """The leaves every tile of the view's frame drew: {(level, tx, ty): read_leaves dict}."""
     keys = {p.key for p in r.plan(view)}
-    return {(k.level, k.tx, k.ty): read_leaves(r.strategies[name], g) for (s, k), g in r.cache.entries.items() if s == name and k in keys}
+    return {
+        (k.level, k.tx, k.ty): read_leaves(r.strategies[name], g)
+        for (s, k), g in r.cache.entries.items()
+        if s == name and k in keys
+    }
 
 
 @pytest.mark.parametrize("name", ["puget", "cliff", "spike", "staircase"])
@@ -50,7 +55,7 @@ def test_crack_free_and_unstitched_holes(renderers, name, strategy, full_res):
             assert res.stats.counters["triangles"] == drawn
             assert res.stats.counters["tilelets"] == sum(len(s["level"]) for s in sets.values())
         levels = {k[0] + int(m) for k, s in sets.items() for m in np.unique(s["level"])}
-        assert len(levels) >= 2                          # the view crosses level transitions
+        assert len(levels) >= 2  # the view crosses level transitions
         bad = r.render(view, mode="shaded", stitching=False, morph=False, full_res=full_res)
         unstitched += holes(bad, rf, view, hf)
     assert unstitched >= 5, f"{name}: dropping the stitching should open cracks, found {unstitched} hole pixels"
@@ -63,12 +68,14 @@ def test_culling_changes_no_pixel(renderers, strategy):
     w, d = hf.extent
     ox, oy, oz = hf.origin
     _lo, hi = hf.height_range
-    eye = np.array([ox + 0.3 * w, oy + 0.3 * d, oz + hi + 30])     # a low view: much of each tile outside
+    eye = np.array([ox + 0.3 * w, oy + 0.3 * d, oz + hi + 30])  # a low view: much of each tile outside
     view = View(eye, eye + np.array([3000.0, 1000.0, -800.0]), 40, 320, 180, near=1.0, far=10 * w)
     on = r.render(view, mode="shaded")
     off = r.render(view, mode="shaded", culling=False)
     assert on.stats.counters["tilelets_culled"] > 0.2 * on.stats.counters["tilelets"]
-    assert off.stats.counters["tilelets_culled"] == 0 and off.stats.counters["triangles"] > on.stats.counters["triangles"]
+    assert (
+        off.stats.counters["tilelets_culled"] == 0 and off.stats.counters["triangles"] > on.stats.counters["triangles"]
+    )
     assert np.array_equal(on.colour, off.colour) and np.array_equal(on.mask, off.mask)
 
 
@@ -99,6 +106,7 @@ def test_converges_to_the_reference(ctx, renderers, synthetic):
         both = res.mask & rf.mask
         assert (res.mask == rf.mask).mean() > 0.999
         return np.percentile(np.abs(res.distance[both] - rf.distance[both]) / rf.distance[both], 99)
+
     for view in border_views(hf, 640, 360)[:3]:
         rf = ref.render(view, mode="shaded")
         lean, exact = (r.render(view, tau=0.05, mode="shaded", full_res=fr) for fr in ("lean", "exact"))
@@ -122,7 +130,7 @@ def test_morph_continuity_across_level_switch(renderers):
     w, d = hf.extent
     ox, oy, oz = hf.origin
     hi = hf.height_range[1]
-    leaf_tau = 8.0          # coarse leaves: a switch without morphing is plainly visible
+    leaf_tau = 8.0  # coarse leaves: a switch without morphing is plainly visible
 
     def view(t):
         eye = np.array([ox + 0.5 * w, oy - 0.3 * d + t, oz + hi + 1500])
@@ -132,7 +140,7 @@ def test_morph_continuity_across_level_switch(renderers):
         r.render(view(t), mode="shaded", leaf_tau=leaf_tau, morph=morph, culling=False)
         return {k: (len(s["level"]), int(s["level"].sum())) for k, s in leaf_sets(r, "raster", view(t)).items()}
 
-    def colour_change(a, b):                              # pixels whose colour changes by more than 8 levels
+    def colour_change(a, b):  # pixels whose colour changes by more than 8 levels
         return int(np.count_nonzero(np.abs(a.colour.astype(int) - b.colour.astype(int)).max(axis=2) > 8))
 
     changes = {}
@@ -146,7 +154,7 @@ def test_morph_continuity_across_level_switch(renderers):
                 break
             prev = s
         lo_t, hi_t = t - 25.0, t
-        for _ in range(10):                               # bisect the switch to a 2.5 cm eye step
+        for _ in range(10):  # bisect the switch to a 2.5 cm eye step
             mid = 0.5 * (lo_t + hi_t)
             lo_t, hi_t = (mid, hi_t) if leaves(mid, morph) == prev else (lo_t, mid)
         a, b = view(lo_t), view(hi_t)
@@ -157,7 +165,7 @@ def test_morph_continuity_across_level_switch(renderers):
     got, ref_change = changes[True]
     assert got <= ref_change + 2, changes
     popped, ref_change = changes[False]
-    assert popped >= ref_change + 10, changes               # without morphing the same check fails
+    assert popped >= ref_change + 10, changes  # without morphing the same check fails
 
 
 def test_modes_and_far_origin(ctx, renderers):
@@ -185,6 +193,7 @@ def test_arena_overflow_grows_and_draws_every_leaf(ctx, puget257, strategy):
     """A frame whose leaves do not fit the arena is drawn again into a grown one: the image is the image of a
     frame that fitted, pixel for pixel, and the counters say it grew."""
     from raster.arena import LeafArena, arena_leaves
+
     view = border_views(puget257)[0]
     roomy = Renderer(ctx, puget257, strategy, tile_size=64)
     tight = Renderer(ctx, puget257, strategy, tile_size=64)
@@ -201,7 +210,7 @@ def test_arena_overflow_grows_and_draws_every_leaf(ctx, puget257, strategy):
         assert np.array_equal(got.colour, want.colour)
         assert np.array_equal(got.distance, want.distance)
         again = tight.render(view, mode="shaded", tau=0.5)
-        assert again.stats.counters["arena_regrown"] == 0            # it fits now
+        assert again.stats.counters["arena_regrown"] == 0  # it fits now
     finally:
         roomy.release()
         tight.release()
@@ -213,6 +222,7 @@ def test_arena_follows_the_view_not_the_tiles(ctx, puget257):
     SHRINK_AFTER calls in a row fill under a quarter of it."""
     from hybrid.gl.target import FrameTarget
     from raster.arena import GROW, MIN_LEAVES, SHRINK_AFTER
+
     view = border_views(puget257)[0]
     r = Renderer(ctx, puget257, "raster", tile_size=64)
     try:
@@ -225,7 +235,7 @@ def test_arena_follows_the_view_not_the_tiles(ctx, puget257):
         items = r._items("raster", r.plan(view, 0.3), set())
         target = FrameTarget(ctx, view.width, view.height)
         try:
-            for _ in range(3):                    # a timing pass: each tile alone, then the frame again
+            for _ in range(3):  # a timing pass: each tile alone, then the frame again
                 for item in items:
                     s.draw_tiles(target, view, [item], 0.3)
                 r.render(view, mode="shaded", tau=0.3)
@@ -248,6 +258,7 @@ def test_no_crack_where_a_morphing_tile_meets_a_finer_one(ctx, strategy):
     edge, silhouette, in one view: the same with morph)."""
     from hybrid.terrain.grid_sources import FractalSource
     from hybrid.terrain.heightfield import HeightField
+
     base = FractalSource(129, seed=4, feature_cells=32, relief=800).read_rows(0, 129)
     idx = np.arange(385) % 128
     hf = HeightField(np.ascontiguousarray(base[np.ix_(idx, idx)], dtype=np.float32), (10.0, 10.0))
@@ -259,7 +270,7 @@ def test_no_crack_where_a_morphing_tile_meets_a_finer_one(ctx, strategy):
             rf = ref.render(view, mode="shaded")
             still = holes(r.render(view, mode="shaded", morph=False), rf, view, hf)
             assert holes(r.render(view, mode="shaded", morph=True), rf, view, hf) == still <= 2
-        assert mixed > 10                              # borders between tiles of different levels were drawn
+        assert mixed > 10  # borders between tiles of different levels were drawn
 
 
 @pytest.mark.parametrize("strategy", STRATEGIES)
@@ -277,7 +288,7 @@ def test_lean_leaves_drop_midpoints_only(renderers, strategy):
         thin = leaf_sets(r, strategy, view)
         assert set(full) == set(thin)
         for k in full:
-            if "j0" not in full[k]:                      # the indexed path keeps no records: levels and counts
+            if "j0" not in full[k]:  # the indexed path keeps no records: levels and counts
                 assert np.array_equal(np.sort(full[k]["level"]), np.sort(thin[k]["level"])), k
                 assert thin[k]["triangles"].sum() <= full[k]["triangles"].sum(), k
                 continue

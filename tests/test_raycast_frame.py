@@ -1,4 +1,5 @@
 """Whole-frame ray casting through hybrid.renderer: reference agreement, hard terrains, shading, pre-pass, LOD."""
+
 import numpy as np
 import pytest
 
@@ -31,6 +32,7 @@ def compare(ref, res):
 
 def test_registered():
     from hybrid.strategies import STRATEGIES
+
     assert "raycast" in STRATEGIES
 
 
@@ -142,8 +144,14 @@ def test_shadow_rays_match_cpu(ctx, synthetic, spacing):
     rows, cols = np.nonzero(lit.mask)
     dirs = view.pixel_rays(rows, cols)
     pts = view.eye + dirs * lit.distance[rows, cols, None]
-    tex = np.stack([(pts[:, 0] - hf.origin[0]) / hf.spacing_x, (pts[:, 1] - hf.origin[1]) / hf.spacing_y,
-                    pts[:, 2] - hf.origin[2]], 1)
+    tex = np.stack(
+        [
+            (pts[:, 0] - hf.origin[0]) / hf.spacing_x,
+            (pts[:, 1] - hf.origin[1]) / hf.spacing_y,
+            pts[:, 2] - hf.origin[2],
+        ],
+        1,
+    )
     h = hf.heights.astype(np.float64)
     i = np.clip(np.floor(tex[:, 1]).astype(int), 0, hf.rows - 2)
     j = np.clip(np.floor(tex[:, 0]).astype(int), 0, hf.cols - 2)
@@ -153,7 +161,7 @@ def test_shadow_rays_match_cpu(ctx, synthetic, spacing):
     gy = np.where(lower, h[i + 1, j + 1] - h[i, j + 1], h[i + 1, j] - h[i, j]) / hf.spacing_y
     n = np.stack([-gx, -gy, np.ones_like(gx)], 1)
     cosl = (n @ LIGHT_DIR) / np.linalg.norm(n, axis=1)
-    clear = cosl > 0.1                      # lit side, away from the self-shadow terminator
+    clear = cosl > 0.1  # lit side, away from the self-shadow terminator
     o = tex[clear] + np.array([0, 0, 1e-3 * max(hf.spacing_x, hf.spacing_y) + 0.01])
     L = np.array([LIGHT_DIR[0] / hf.spacing_x, LIGHT_DIR[1] / hf.spacing_y, LIGHT_DIR[2]])
     lo, hi = hf.height_range
@@ -178,12 +186,12 @@ def test_prepass_same_image_fewer_rays(ctx, puget_full):
     assert np.allclose(a.distance[a.mask], b.distance[b.mask], rtol=1e-6)
     assert b.stats.counters["rays"] < a.stats.counters["rays"]
     assert b.stats.counters["hits"] == a.mask.sum()
-    r = Renderer(ctx, puget_full, "raycast")                   # no choice made: the device's default
+    r = Renderer(ctx, puget_full, "raycast")  # no choice made: the device's default
     try:
         c = r.render(view, mode="shaded")
     finally:
         r.release()
-    software = gl_info(ctx).is_software                        # off on a CPU rasterizer, on on a GPU
+    software = gl_info(ctx).is_software  # off on a CPU rasterizer, on on a GPU
     assert c.stats.counters["rays"] == (a if software else b).stats.counters["rays"]
     assert np.array_equal(c.mask, a.mask)
 
@@ -200,7 +208,7 @@ def test_lod_fewer_steps_close_image(ctx, puget_full):
         r.release()
         ref.release()
     assert lod.stats.counters["mean_steps"] < full.stats.counters["mean_steps"]
-    assert not np.array_equal(full.colour, lod.colour)          # coarser levels are used inside tiles
+    assert not np.array_equal(full.colour, lod.colour)  # coarser levels are used inside tiles
     cover, med = compare(rr, lod)
     assert cover >= 0.99 and med <= 2e-3, (cover, med)
 
@@ -208,10 +216,16 @@ def test_lod_fewer_steps_close_image(ctx, puget_full):
 def test_bad_options(ctx, puget257, synthetic):
     s = RaycastStrategy(ctx, puget257)
     try:
-        for kw, word in [({"reconstruction": "voxels"}, "reconstruction"), ({"traversal": "fast"}, "traversal"),
-                         ({"mode": "fancy"}, "mode"), ({"lod": 1.0, "traversal": "naive"}, "lod"),
-                         ({"lod": -1.0}, "lod"), ({"max_steps": 0}, "max_steps"), ({"shadows": 1}, "shadows"),
-                         ({"colour": "red"}, "unknown")]:
+        for kw, word in [
+            ({"reconstruction": "voxels"}, "reconstruction"),
+            ({"traversal": "fast"}, "traversal"),
+            ({"mode": "fancy"}, "mode"),
+            ({"lod": 1.0, "traversal": "naive"}, "lod"),
+            ({"lod": -1.0}, "lod"),
+            ({"max_steps": 0}, "max_steps"),
+            ({"shadows": 1}, "shadows"),
+            ({"colour": "red"}, "unknown"),
+        ]:
             with pytest.raises(TerrabenchError, match=word):
                 s.draw_tiles(None, default_view(puget257, 32, 18), [], **kw)
     finally:
@@ -226,6 +240,7 @@ def test_step_cap_counts_capped_rays(ctx, puget257):
     tile = pyr.tile(pyr.root())
     g = s.upload(tile)
     from hybrid.gl.target import FrameTarget
+
     view = default_view(puget257, 160, 90)
     t = FrameTarget(ctx, 160, 90)
     try:

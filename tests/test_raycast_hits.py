@@ -1,4 +1,5 @@
 """GPU ray-cast hits against the numpy caster (same semantics, float64), on ordinary and degenerate rays."""
+
 import numpy as np
 import pytest
 
@@ -10,7 +11,7 @@ from raycast import RaycastStrategy
 from raycast.caster import outer_faces
 from raycast.cpu import cast_tile_rays, texel_to_world
 
-TOL = 1e-3      # texels (z compared in texels too: metres / spacing)
+TOL = 1e-3  # texels (z compared in texels too: metres / spacing)
 
 
 class HitTarget:
@@ -37,7 +38,7 @@ class HitTarget:
         return aux, depth, colour, counters
 
     def release(self):
-        if self.ctx.fbo is self.fbo:                  # never leave a deleted framebuffer bound
+        if self.ctx.fbo is self.fbo:  # never leave a deleted framebuffer bound
             self.ctx.detect_framebuffer(0).use()
         for o in (self.fbo, self.colour, self.aux, self.depth):
             o.release()
@@ -56,7 +57,7 @@ def setup(ctx, puget257):
 
 def pixel_dirs(view):
     """World ray directions through every pixel centre, view depth 1 per unit of t (as the shader builds them)."""
-    rows, cols = np.mgrid[0:view.height, 0:view.width]
+    rows, cols = np.mgrid[0 : view.height, 0 : view.width]
     return view.pixel_dirs_eye(rows.ravel(), cols.ravel()) @ view.rotation()
 
 
@@ -69,8 +70,15 @@ def gpu_and_cpu(ctx, setup, view, **options):
         t.release()
     kw = {k: options[k] for k in ("reconstruction", "traversal") if k in options}
     dirs = pixel_dirs(view)
-    cpu = cast_tile_rays(tile, view.eye, dirs, near=view.near, outer=outer_faces(tile.clip, hf),
-                         under=starts_under(hf, view.eye, dirs), **kw)
+    cpu = cast_tile_rays(
+        tile,
+        view.eye,
+        dirs,
+        near=view.near,
+        outer=outer_faces(tile.clip, hf),
+        under=starts_under(hf, view.eye, dirs),
+        **kw,
+    )
     return aux, depth, colour, counters, cpu
 
 
@@ -99,10 +107,13 @@ def special_views(hf):
         "default": default_view(hf, 320, 180),
         "north_dirx0": View([cx, oy - 0.1 * d, oz + hi + 2000], [cx, cy, oz + lo], 60, 321, 181, near=1.0, far=4e5),
         "east_diry0": View([ox - 0.1 * w, cy, oz + hi + 2000], [cx, cy, oz + lo], 60, 321, 181, near=1.0, far=4e5),
-        "vertical": View([cx + 13.3, cy + 7.1, oz + hi + 3000], [cx + 13.3, cy + 7.1, oz + lo], 60, 321, 181,
-                         near=1.0, far=4e5),
+        "vertical": View(
+            [cx + 13.3, cy + 7.1, oz + hi + 3000], [cx + 13.3, cy + 7.1, oz + lo], 60, 321, 181, near=1.0, far=4e5
+        ),
         "grazing_inside": View([gx, gy, g + 2.0], [gx + w, gy + 0.8 * d, g + 2.0], 60, 320, 181, near=0.25, far=4e5),
-        "inside_above": View([gx, gy, g + 300.0], [gx + 0.3 * w, gy + 0.2 * d, g - 500], 70, 320, 180, near=0.5, far=4e5),
+        "inside_above": View(
+            [gx, gy, g + 300.0], [gx + 0.3 * w, gy + 0.2 * d, g - 500], 70, 320, 180, near=0.5, far=4e5
+        ),
     }
 
 
@@ -135,7 +146,7 @@ def test_degenerate_rays(ctx, setup, name):
         assert np.all(dirs[mid_r, mid_c, :2] == 0.0)
         special[mid_r, mid_c] = True
     elif name == "grazing_inside":
-        assert np.all(dirs[mid_r, :, 2] == 0.0)       # horizontal rays, 2 m above the ground
+        assert np.all(dirs[mid_r, :, 2] == 0.0)  # horizontal rays, 2 m above the ground
         special[mid_r, :] = True
     lo, hi = tile.aabb
     if name in ("grazing_inside", "inside_above"):
@@ -167,7 +178,7 @@ def test_eye_below_surface_is_defined(ctx, setup):
     # draws it), not at the near plane; rays that stay under it miss
     assert 0.1 < hit.mean() < 0.9
     dist = view.distance_from_depth(depth)
-    assert np.all(dist[hit] > 40.0)        # the surface is 50 m above the eye
+    assert np.all(dist[hit] > 40.0)  # the surface is 50 m above the eye
     p = texel_to_world(tile, cpu.point[cpu.hit])
     assert np.abs(p[:, 2] - hf.ground_height(p[:, 0], p[:, 1])).max() < 1e-3 * min(tile.spacing_x, tile.spacing_y)
     assert counters["capped"] == 0
@@ -199,7 +210,9 @@ def test_rays_from_under_the_sheet_agree_with_cpu(ctx, setup, name):
     ox, oy, oz = hf.origin
     if name == "outside_below_edge":
         z = oz + float(np.median(hf.heights[0]))
-        view = View([ox + 0.5 * w, oy - 0.05 * d, z], [ox + 0.5 * w, oy + d, z + 0.1 * d], 60, 160, 90, near=0.5, far=4e5)
+        view = View(
+            [ox + 0.5 * w, oy - 0.05 * d, z], [ox + 0.5 * w, oy + d, z + 0.1 * d], 60, 160, 90, near=0.5, far=4e5
+        )
     else:
         gx, gy = ox + 0.4 * w, oy + 0.3 * d
         z = float(hf.ground_height(gx, gy)) - 30.0
@@ -219,4 +232,4 @@ def test_rays_from_under_the_sheet_agree_with_cpu(ctx, setup, name):
         assert frac >= 0.999, (name, key, frac)
         assert counters["capped"] == 0
         hits_under += int((cpu.hit & under).sum())
-    assert hits_under > 100                  # the sheet's underside is seen through these tiles
+    assert hits_under > 100  # the sheet's underside is seen through these tiles

@@ -1,5 +1,6 @@
 """Max mipmaps: numpy reference against a brute-force definition, GPU builder (16-bit codes) level for level,
 byte counts."""
+
 import numpy as np
 import pytest
 from gl_memory import allocated_bytes, level_texels, object_bytes
@@ -24,7 +25,7 @@ def test_numpy_levels_match_definition():
         s = 1 << l
         for i in range(16 >> l):
             for j in range(16 >> l):
-                assert lv[l][i, j] == h[i * s:(i + 1) * s + 1, j * s:(j + 1) * s + 1].max()
+                assert lv[l][i, j] == h[i * s : (i + 1) * s + 1, j * s : (j + 1) * s + 1].max()
 
 
 def _codes_texture(ctx, q):
@@ -39,9 +40,11 @@ def test_gpu_builder_equals_numpy_every_level(ctx, puget257, n):
     # the stored levels 1..log2 N read back equal the numpy max mip of the codes, level for level
     b = MaxMipBuilder(ctx)
     rng = np.random.default_rng(n)
-    cases = [quantize(rng.normal(-50, 300, size=(n + 1, n + 1)).astype(np.float32)).q,
-             quantize(puget257.heights[:n + 1, :n + 1], puget257.source_step).q,
-             rng.integers(0, 65536, size=(n + 1, n + 1)).astype(np.uint16)]
+    cases = [
+        quantize(rng.normal(-50, 300, size=(n + 1, n + 1)).astype(np.float32)).q,
+        quantize(puget257.heights[: n + 1, : n + 1], puget257.source_step).q,
+        rng.integers(0, 65536, size=(n + 1, n + 1)).astype(np.uint16),
+    ]
     try:
         for q in cases:
             ht = _codes_texture(ctx, q)
@@ -59,13 +62,13 @@ def test_gpu_builder_equals_numpy_every_level(ctx, puget257, n):
 
 def test_byte_counts(ctx, puget257):
     # the stored levels 1.. add a third of a quarter of the cells (less the 1x1 remainder)
-    assert maxmip_nbytes(256) == pytest.approx(2 * 256 ** 2 / 4 * 4 / 3, rel=1e-4)
+    assert maxmip_nbytes(256) == pytest.approx(2 * 256**2 / 4 * 4 / 3, rel=1e-4)
     s = RaycastStrategy(ctx, puget257)
     try:
         pyr = TilePyramid(puget257, 128)
         tile = pyr.tile(pyr.keys(0)[0])
         g = s.upload(tile)
-        assert len(level_texels(g.maxmip)) == level_count(128) - 1         # levels 1..log2 N, no more
+        assert len(level_texels(g.maxmip)) == level_count(128) - 1  # levels 1..log2 N, no more
         assert level_texels(g.maxmip)[0] == 64 * 64 and level_texels(g.heights) == [129 * 129]
         assert object_bytes(g.maxmip) == maxmip_nbytes(128)
         assert g.nbytes == allocated_bytes(g) == object_bytes(g.heights) + object_bytes(g.maxmip)

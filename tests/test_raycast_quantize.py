@@ -1,4 +1,5 @@
 """16-bit heights: exact on Puget's 0.1 m step, bounded and reported error on float terrain, GPU against CPU."""
+
 import numpy as np
 import pytest
 from test_raycast_hits import HitTarget, agreement, pixel_dirs
@@ -25,7 +26,7 @@ def test_puget_round_trip_is_exact():
     z = quantize(hf.heights, hf.source_step)
     assert z.exact and z.q.dtype == np.uint16 and int(z.q.max()) == 43798
     back = dequantize(z.q, z.offset, z.step, z.base)
-    assert np.array_equal(back.view(np.uint32), hf.heights.view(np.uint32))      # bit for bit
+    assert np.array_equal(back.view(np.uint32), hf.heights.view(np.uint32))  # bit for bit
     pyr = TilePyramid(hf, 128)
     for level in range(pyr.max_level + 1):
         for key in pyr.keys(level)[::3]:
@@ -51,9 +52,9 @@ def test_float_terrain_error_is_measured_within_half_a_step_and_the_bound():
             assert z.offset == lo and z.step == pytest.approx((hi - lo) / Q_MAX, rel=1e-12) and z.base == 0
             assert int(z.q.min()) == 0 and int(z.q.max()) == Q_MAX
             got = np.abs(dequantize(z.q, z.offset, z.step).astype(np.float64) - t.heights).max()
-            assert z.error == got > 0                                   # measured, reported
-            assert z.error <= z.step / 2 + hi * 2.0 ** -24
-            assert z.error <= pyr.quantization_error(key)              # the selection's bound holds
+            assert z.error == got > 0  # measured, reported
+            assert z.error <= z.step / 2 + hi * 2.0**-24
+            assert z.error <= pyr.quantization_error(key)  # the selection's bound holds
             errors.append(z.error)
     assert max(errors) < 2500.0 / Q_MAX
 
@@ -61,7 +62,7 @@ def test_float_terrain_error_is_measured_within_half_a_step_and_the_bound():
 def test_flat_tile_and_on_step_terrain_beyond_16_bits():
     z = quantize(np.full((5, 5), 12.5, np.float32))
     assert z.step == 1.0 and not z.q.any() and z.exact and z.offset == 12.5
-    h = (np.arange(25).reshape(5, 5) * 4000.0 * 0.1).astype(np.float32)       # on 0.1 m, 96000 steps apart
+    h = (np.arange(25).reshape(5, 5) * 4000.0 * 0.1).astype(np.float32)  # on 0.1 m, 96000 steps apart
     z = quantize(h, (0.1, 0.0))
     assert not z.exact and z.base == 0 and z.error <= z.step / 2 + 1e-3
 
@@ -91,8 +92,15 @@ def test_steep_float_frame_matches_cpu_on_the_same_heights(ctx, recon):
         assert g.quant_error == quantize(tile.heights).error > 0
         assert counters["quant_error_max_m"] == g.quant_error
         dirs = pixel_dirs(view)
-        cpu = cast_tile_rays(tile, view.eye, dirs, near=view.near, outer=outer_faces(tile.clip, hf),
-                             under=starts_under(hf, view.eye, dirs), reconstruction=recon)
+        cpu = cast_tile_rays(
+            tile,
+            view.eye,
+            dirs,
+            near=view.near,
+            outer=outer_faces(tile.clip, hf),
+            under=starts_under(hf, view.eye, dirs),
+            reconstruction=recon,
+        )
         frac, _ = agreement(aux, cpu, min(tile.spacing_xy))
         assert cpu.hit.sum() > 0.3 * view.width * view.height
         assert frac >= 0.999, f"{recon}: only {frac:.5f} of rays agree"

@@ -1,4 +1,5 @@
 """The reference image against an exact CPU ray/triangle intersection, and the far-from-origin case."""
+
 import numpy as np
 import pytest
 from spacing_helpers import NON_SQUARE, terrain
@@ -12,14 +13,20 @@ SIZE = (320, 180)
 
 def cpu_hits(hf, origins, dirs):
     """Nearest hit distance of each ray with the full triangulated surface (brute force, float64)."""
-    i, j = np.mgrid[0:hf.rows, 0:hf.cols]
-    verts = np.stack([hf.origin[0] + j * hf.spacing_x, hf.origin[1] + i * hf.spacing_y,
-                      hf.origin[2] + hf.heights.astype(np.float64)], -1).reshape(-1, 3)
+    i, j = np.mgrid[0 : hf.rows, 0 : hf.cols]
+    verts = np.stack(
+        [
+            hf.origin[0] + j * hf.spacing_x,
+            hf.origin[1] + i * hf.spacing_y,
+            hf.origin[2] + hf.heights.astype(np.float64),
+        ],
+        -1,
+    ).reshape(-1, 3)
     tri = grid_indices(hf.rows, hf.cols).reshape(-1, 3).astype(np.int64)
     v0, v1, v2 = verts[tri[:, 0]], verts[tri[:, 1]], verts[tri[:, 2]]
     e1, e2 = v1 - v0, v2 - v0
     out = np.full(len(dirs), np.inf)
-    for r, (o, d) in enumerate(zip(origins, dirs)):       # Moller-Trumbore over all triangles, one ray at a time
+    for r, (o, d) in enumerate(zip(origins, dirs)):  # Moller-Trumbore over all triangles, one ray at a time
         p = np.cross(d, e2)
         det = np.einsum("ij,ij->i", e1, p)
         ok = np.abs(det) > 1e-12
@@ -69,7 +76,7 @@ def test_reference_matches_cpu_intersection(ctx, puget257, spacing):
 
 def test_far_from_origin_renders_the_same(ctx, puget257):
     view = list(_views(puget257))[1]
-    offset = np.array([5.0e6, 5.0e6, 0.0])                   # 5,000 km east and north
+    offset = np.array([5.0e6, 5.0e6, 0.0])  # 5,000 km east and north
     a = ReferenceRenderer(ctx, puget257)
     b = ReferenceRenderer(ctx, puget257.moved(np.array(puget257.origin) + offset))
     ra, rb = a.render(view), b.render(view.moved(offset))
@@ -78,7 +85,8 @@ def test_far_from_origin_renders_the_same(ctx, puget257):
     rel = np.abs(ra.distance[m] - rb.distance[m]) / ra.distance[m]
     assert np.median(rel) < 1e-5 and rel.max() < 1e-3
     assert np.abs(ra.colour.astype(int) - rb.colour.astype(int)).mean() < 1.0
-    a.release(); b.release()
+    a.release()
+    b.release()
 
 
 def test_supersampling_and_outputs(ctx, puget257, tmp_path):
@@ -86,7 +94,7 @@ def test_supersampling_and_outputs(ctx, puget257, tmp_path):
     view = default_view(puget257, 160, 90)
     r1 = ref.render(view)
     r3 = ref.render(view, supersample=3)
-    assert np.array_equal(r1.distance, r3.distance)          # depth and coverage at pixel centres
+    assert np.array_equal(r1.distance, r3.distance)  # depth and coverage at pixel centres
     assert r1.colour.shape == r3.colour.shape == (90, 160, 3)
     assert 0 < np.abs(r1.colour.astype(int) - r3.colour.astype(int)).mean() < 30
     assert np.all(np.isinf(r1.distance[~r1.mask])) and np.all(r1.distance[r1.mask] > 0)

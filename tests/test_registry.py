@@ -1,4 +1,5 @@
 """The strategy and policy registry: every list of names reads it, and a registration shows up everywhere."""
+
 from typing import get_args
 
 import pytest
@@ -18,7 +19,9 @@ class ToyCaster(RaycastStrategy):
 @pytest.fixture
 def toys():
     register_strategy(StrategyEntry("toycast", "raycast", ToyCaster, "a toy", choices={"reconstruction": ("toy",)}))
-    register_policy(PolicyEntry("toymix", "a toy mixed policy", rule=lambda cols, pred, t: ["raycast"] * len(cols["pixels"])))
+    register_policy(
+        PolicyEntry("toymix", "a toy mixed policy", rule=lambda cols, pred, t: ["raycast"] * len(cols["pixels"]))
+    )
     yield
     unregister("toycast")
     unregister("toymix")
@@ -48,7 +51,7 @@ def test_registered_toys_pass_the_spec_checks(toys):
     configs = spec.configs()
     recs = {(c["policy"], c["reconstruction"]) for c in configs}
     assert {("toycast", "toy"), ("toymix", "toy"), ("raster", "triangles")} <= recs
-    assert ("raster", "toy") not in recs                  # raster casts no rays: one reconstruction only
+    assert ("raster", "toy") not in recs  # raster casts no rays: one reconstruction only
     assert "toymix" in strategies.mixed_policies() and "toycast" in strategies.pure_policies()
 
 
@@ -71,6 +74,7 @@ def test_the_planner_follows_a_registered_rule(toys):
     import numpy as np
 
     from hybrid.cost.planner import choices
+
     cols = {"pixels": np.ones(3), "triangles": np.ones(3)}
     assert choices("toymix", cols, {}) == ["raycast"] * 3
     assert choices("toycast", cols, {}) == ["toycast"] * 3

@@ -1,4 +1,5 @@
 """The report on an adapting hybrid: starting models named apart, the convergence chart, GPU against CPU time."""
+
 import pandas as pd
 import pytest
 
@@ -50,10 +51,10 @@ def test_the_hybrids_predictions_are_recorded_per_frame_for_the_chart(folder):
 
 def test_no_gpu_chart_without_timer_queries_and_one_with_them(folder, tmp_path):
     f = label_columns(pd.read_parquet(folder / "frames.parquet"))
-    if f["gpu_ms"].isna().all():                        # a software rasterizer: nothing to tell apart
+    if f["gpu_ms"].isna().all():  # a software rasterizer: nothing to tell apart
         assert gpu_cpu_chart(f, tmp_path) == [] and gpu_cpu_sentence(f) == NO_GPU_TIME
     g = f.copy()
-    cpu = g["cpu_ms"].astype(float)                    # GPU time twice the CPU's for ray casting, half for the rest
+    cpu = g["cpu_ms"].astype(float)  # GPU time twice the CPU's for ray casting, half for the rest
     g["gpu_ms"] = cpu.where(g["policy"] != "raycast", 2 * cpu).where(g["policy"] == "raycast", 0.5 * cpu)
     paths = gpu_cpu_chart(g, tmp_path)
     assert [p.name for p in paths] == ["gpu_vs_cpu.png", "gpu_vs_cpu.svg"] and paths[0].stat().st_size > 5_000

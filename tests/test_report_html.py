@@ -1,5 +1,6 @@
 """The HTML report a person reads: headline per scene first, then the speed-against-accuracy chart, then the
 nested reading, tables each in a scrolling box, '–' for missing values, the environment as a key/value table."""
+
 import math
 import shutil
 import subprocess
@@ -56,13 +57,13 @@ def check_page(text: str, folder=None) -> Tree:
     tree = Tree(text)
     assert "NaN" not in text and "nan<" not in text.lower() and "{'" not in text and "{&#x27;" not in text
     head, first_table = text.index("id='headline'"), text.index("<table")
-    assert head < text.index("<img") < first_table                  # headline, then the chart, then tables
+    assert head < text.index("<img") < first_table  # headline, then the chart, then tables
     assert text.index("id='reading'") < text.index("id='summary'") < text.index("id='method'")
     imgs = [a for t, a, _, _ in tree.tags if t == "img"]
     assert imgs and imgs[0]["src"] == "speed_vs_accuracy.png"
     if folder is not None:
         assert all((folder / a["src"]).is_file() for a in imgs)
-    for tag, _, _, attrs in tree.tags:                 # every table inside a scrolling box
+    for tag, _, _, attrs in tree.tags:  # every table inside a scrolling box
         if tag == "table":
             assert any("scroll" in a.get("class", "").split() for a in attrs)
     return tree
@@ -70,8 +71,9 @@ def check_page(text: str, folder=None) -> Tree:
 
 def nested_reading(tree: Tree) -> bool:
     """A <ul> inside an <li> inside the reading's list."""
-    return any(t == "ul" and "li" in anc and any(a.get("class") == "reading" for a in attrs)
-               for t, _, anc, attrs in tree.tags)
+    return any(
+        t == "ul" and "li" in anc and any(a.get("class") == "reading" for a in attrs) for t, _, anc, attrs in tree.tags
+    )
 
 
 def frame_rows(policy, ms, tau, tiles_raster=0, tiles_raycast=10, seed=0, flip=0.01, frames=6):
@@ -80,19 +82,40 @@ def frame_rows(policy, ms, tau, tiles_raster=0, tiles_raycast=10, seed=0, flip=0
     out = []
     for k in range(frames):
         reps = list(ms * (1 + 0.01 * (rng.random(3) - 0.5)))
-        out.append({"config": f"{policy}{tau}", "dataset": "fbm", "flight": "orbit", "size": "160x90", "tau": tau,
-                    "reconstruction": "triangles", "policy": policy, "frame": k, "wall_ms": float(np.median(reps)),
-                    "wall_ms_repeats": reps, "tiles": tiles_raster + tiles_raycast, "tiles_raster": tiles_raster,
-                    "tiles_raycast": tiles_raycast, "tiles_gs": 0, "gpu_bytes": 2**20, "flip": flip,
-                    "pop_px": math.nan})
+        out.append(
+            {
+                "config": f"{policy}{tau}",
+                "dataset": "fbm",
+                "flight": "orbit",
+                "size": "160x90",
+                "tau": tau,
+                "reconstruction": "triangles",
+                "policy": policy,
+                "frame": k,
+                "wall_ms": float(np.median(reps)),
+                "wall_ms_repeats": reps,
+                "tiles": tiles_raster + tiles_raycast,
+                "tiles_raster": tiles_raster,
+                "tiles_raycast": tiles_raycast,
+                "tiles_gs": 0,
+                "gpu_bytes": 2**20,
+                "flip": flip,
+                "pop_px": math.nan,
+            }
+        )
     return out
 
 
 def synthetic() -> pd.DataFrame:
     """Two taus: at 2/3 px the hybrid is clearly faster than the better pure method, at 2 px it is slower."""
-    parts = [frame_rows("raster", 30.0, 0.6667, 10, 0, 1), frame_rows("raycast", 20.0, 0.6667, seed=2, flip=0.005),
-             frame_rows("hybrid", 10.0, 0.6667, 4, 6, 3), frame_rows("raster", 8.0, 2.0, 10, 0, 4, flip=0.02),
-             frame_rows("raycast", 19.0, 2.0, seed=5), frame_rows("hybrid", 16.0, 2.0, 5, 5, 6)]
+    parts = [
+        frame_rows("raster", 30.0, 0.6667, 10, 0, 1),
+        frame_rows("raycast", 20.0, 0.6667, seed=2, flip=0.005),
+        frame_rows("hybrid", 10.0, 0.6667, 4, 6, 3),
+        frame_rows("raster", 8.0, 2.0, 10, 0, 4, flip=0.02),
+        frame_rows("raycast", 19.0, 2.0, seed=5),
+        frame_rows("hybrid", 16.0, 2.0, 5, 5, 6),
+    ]
     return pd.DataFrame([r for p in parts for r in p])
 
 
@@ -109,16 +132,31 @@ def test_a_page_from_a_constructed_table_has_the_reading_order_and_no_raw_values
     f = synthetic()
     charts = {"frame_time": [tmp_path / "frame_time.png"], "speed_vs_accuracy": [tmp_path / "speed_vs_accuracy.png"]}
     lines = ["**a scene**: fast.", "  a finding.", "  another.", "Adaptation: none."]
-    env = {"gl_renderer": "llvmpipe", "packages": {"terrabench": "0.1.0", "numpy": "2"},
-           "cost_model": {"source": "shipped", "sha256": "abc"}}
+    env = {
+        "gl_renderer": "llvmpipe",
+        "packages": {"terrabench": "0.1.0", "numpy": "2"},
+        "cost_model": {"source": "shipped", "sha256": "abc"},
+    }
     spec = {"name": "x", "repeats": 3}
-    text = page("t", "", spec, env, lines, summary_table(f), charts, ["credit"], scene_headlines(f), intro(spec),
-                measures(True), TITLES)
+    text = page(
+        "t",
+        "",
+        spec,
+        env,
+        lines,
+        summary_table(f),
+        charts,
+        ["credit"],
+        scene_headlines(f),
+        intro(spec),
+        measures(True),
+        TITLES,
+    )
     tree = check_page(text)
     assert nested_reading(tree) and "<strong>a scene</strong>" in text
-    assert text.index("speed_vs_accuracy.png") < text.index("frame_time.png")      # the top chart, then the rest
+    assert text.index("speed_vs_accuracy.png") < text.index("frame_time.png")  # the top chart, then the rest
     assert "<li><b>terrabench</b> 0.1.0</li>" in text and "shipped (sha256 abc)" in text
-    assert "2.00× faster (interval" in text and ">–<" in text                      # pop_px missing: a dash
+    assert "2.00× faster (interval" in text and ">–<" in text  # pop_px missing: a dash
 
 
 def test_reading_keeps_its_nesting_and_tables_show_a_dash_for_missing_values():
@@ -150,23 +188,49 @@ def _browser() -> str | None:
 
 @pytest.mark.skipif(_browser() is None, reason="no headless Chromium to lay the page out")
 def test_the_page_does_not_overflow_1400_px(report, tmp_path):
-    probe = ("<script>window.onload=()=>document.body.setAttribute('data-over',"
-             "String(document.documentElement.scrollWidth>document.documentElement.clientWidth))</script>")
+    probe = (
+        "<script>window.onload=()=>document.body.setAttribute('data-over',"
+        "String(document.documentElement.scrollWidth>document.documentElement.clientWidth))</script>"
+    )
     page_file = report / "probe.html"
     page_file.write_text((report / "report.html").read_text().replace("</body>", probe + "</body>"))
-    out = subprocess.run([_browser(), "--headless", "--disable-gpu", "--no-sandbox", "--window-size=1400,900",
-                          "--virtual-time-budget=3000", "--dump-dom", page_file.as_uri()],
-                         capture_output=True, text=True, timeout=60, check=False).stdout
-    assert "data-over=\"false\"" in out, out[-500:]
+    out = subprocess.run(
+        [
+            _browser(),
+            "--headless",
+            "--disable-gpu",
+            "--no-sandbox",
+            "--window-size=1400,900",
+            "--virtual-time-budget=3000",
+            "--dump-dom",
+            page_file.as_uri(),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    ).stdout
+    assert 'data-over="false"' in out, out[-500:]
 
 
 def test_without_accuracy_the_frame_time_chart_leads_and_no_accuracy_is_claimed(tmp_path):
     f = synthetic().drop(columns="flip")
     charts = {"frame_time": [tmp_path / "frame_time.png"], "speed_vs_accuracy": []}
     spec = {"name": "x", "repeats": 3, "accuracy": False}
-    text = page("t", "2 of 9 frames are missing", spec, {"gl_renderer": ["a", "b"], "workers": {"w1": {"ok": 1}}},
-                ["**s**: fast."], summary_table(f), charts, [], scene_headlines(f), intro(spec), measures(False),
-                TITLES)
+    text = page(
+        "t",
+        "2 of 9 frames are missing",
+        spec,
+        {"gl_renderer": ["a", "b"], "workers": {"w1": {"ok": 1}}},
+        ["**s**: fast."],
+        summary_table(f),
+        charts,
+        [],
+        scene_headlines(f),
+        intro(spec),
+        measures(False),
+        TITLES,
+    )
     Tree(text)
     assert text.index("id='headline'") < text.index("frame_time.png") < text.index("<table")
     assert "Most accurate" not in text and "Incomplete:" in text and "<td>a, b</td>" in text

@@ -1,5 +1,6 @@
 """Runs lose nothing and succeed on nothing silently: the folder lock, resuming at every journal write point,
 exit codes of failed configurations, and outputs that land whole or not at all (disk full included)."""
+
 import errno
 import json
 import shutil
@@ -50,7 +51,7 @@ def test_a_second_run_is_refused_by_pid_and_a_dead_holders_lock_is_taken(tmp_pat
     finally:
         p.kill()
         p.wait()
-    with RunLock(tmp_path) as lock:                       # the killed holder's lock is free again
+    with RunLock(tmp_path) as lock:  # the killed holder's lock is free again
         assert f"pid {__import__('os').getpid()}" in lock.path.read_text()
 
 
@@ -74,7 +75,7 @@ def test_resume_after_a_kill_at_every_journal_write_equals_an_uninterrupted_run(
     frozen = SMALL + "adapt = false\n"
     whole = run_spec(parse_spec(frozen), tmp_path / "whole", ctx, progress=False)
     lines = (whole / "frames.jsonl").read_text().splitlines()
-    assert len(lines) == 6 and all("tiles_rows" in json.loads(line) for line in lines)   # a frame with its tiles
+    assert len(lines) == 6 and all("tiles_rows" in json.loads(line) for line in lines)  # a frame with its tiles
     frames, tiles = _comparable(whole, "frames"), _comparable(whole, "tiles")
     # the hybrid's rows: a candidate strategy and the features it chose from, for every tile of every frame
     assert len(tiles) >= 6 and tiles["strategy"].isin(candidates()).all() and (tiles["f_pixels"] > 0).any()
@@ -82,7 +83,7 @@ def test_resume_after_a_kill_at_every_journal_write_equals_an_uninterrupted_run(
         folder = tmp_path / f"cut{kept}" / "s"
         folder.mkdir(parents=True)
         shutil.copy(whole / "spec.json", folder / "spec.json")
-        torn = lines[kept][:25]                                  # killed while writing the next record
+        torn = lines[kept][:25]  # killed while writing the next record
         (folder / "frames.jsonl").write_text("".join(line + "\n" for line in lines[:kept]) + torn)
         run_spec(parse_spec(frozen), folder.parent, ctx, progress=False)
         pd.testing.assert_frame_equal(_comparable(folder, "frames"), frames, check_exact=False, rtol=1e-6)
@@ -95,8 +96,9 @@ def test_resuming_with_another_cost_model_is_refused(ctx, tmp_path, monkeypatch)
     as it was. Under the first model again it resumes."""
     from hybrid.cost.model import load_cost_model, save_cost_model
     from hybrid.gl.context import gl_info
+
     spec = parse_spec(SMALL.replace("frames = 3", "frames = 1"))
-    monkeypatch.setenv("TERRABENCH_COSTS", str(tmp_path / "none.json"))      # the shipped model
+    monkeypatch.setenv("TERRABENCH_COSTS", str(tmp_path / "none.json"))  # the shipped model
     folder = run_spec(spec, tmp_path / "runs", ctx, progress=False)
     journal = (folder / "frames.jsonl").read_bytes()
     renderer = gl_info(ctx).renderer
@@ -109,23 +111,34 @@ def test_resuming_with_another_cost_model_is_refused(ctx, tmp_path, monkeypatch)
     assert (folder / "frames.jsonl").read_bytes() == journal
     monkeypatch.setenv("TERRABENCH_COSTS", str(tmp_path / "none.json"))
     run_spec(spec, tmp_path / "runs", ctx, progress=False)
-    assert (folder / "frames.jsonl").read_bytes() == journal             # nothing left to run, nothing added
+    assert (folder / "frames.jsonl").read_bytes() == journal  # nothing left to run, nothing added
 
 
 def test_run_exits_nonzero_naming_the_failed_configuration(tmp_path, capsys):
     spec = tmp_path / "bad.toml"
-    (tmp_path / "broken.tif").write_bytes(b"not a raster")                 # there, so the run starts; unreadable
-    spec.write_text(SMALL.replace('datasets = ["fbm"]', f'datasets = ["fbm", "{tmp_path / "broken.tif"}"]')
-                    .replace("frames = 3", "frames = 1"))
+    (tmp_path / "broken.tif").write_bytes(b"not a raster")  # there, so the run starts; unreadable
+    spec.write_text(
+        SMALL.replace('datasets = ["fbm"]', f'datasets = ["fbm", "{tmp_path / "broken.tif"}"]').replace(
+            "frames = 3", "frames = 1"
+        )
+    )
     rc = main(["run", str(spec), "--runs", str(tmp_path / "runs"), "--quiet"])
     err = capsys.readouterr().err
     assert rc == 1
-    assert "2 configuration(s) failed" in err and "broken-s0-flyover-96x64-tau0.6667-triangles-raycast: " in err and "broken.tif: not a readable raster" in err
-    assert len(pd.read_parquet(tmp_path / "runs" / "s" / "frames.parquet")) == 2      # the good ones went on
+    assert (
+        "2 configuration(s) failed" in err
+        and "broken-s0-flyover-96x64-tau0.6667-triangles-raycast: " in err
+        and "broken.tif: not a readable raster" in err
+    )
+    assert len(pd.read_parquet(tmp_path / "runs" / "s" / "frames.parquet")) == 2  # the good ones went on
 
 
-WRITERS = {"png": "save_png(p, np.random.default_rng(0).integers(0, 255, (64, 64, 3), dtype=np.uint8))", "npy": "save_npy(p, np.arange(5000.0))",
-           "parquet": "write_parquet(p, pd.DataFrame({'a': np.arange(5000)}))", "text": "write_text(p, 'x' * 9000)"}
+WRITERS = {
+    "png": "save_png(p, np.random.default_rng(0).integers(0, 255, (64, 64, 3), dtype=np.uint8))",
+    "npy": "save_npy(p, np.arange(5000.0))",
+    "parquet": "write_parquet(p, pd.DataFrame({'a': np.arange(5000)}))",
+    "text": "write_text(p, 'x' * 9000)",
+}
 FILE_LIMIT = """
 import resource, signal, sys
 import numpy as np, pandas as pd
@@ -149,17 +162,23 @@ def test_outputs_land_whole_or_not_at_all(tmp_path, kind):
     out = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.startswith("refused: cannot write") and str(path) in out.stdout
-    assert path.read_bytes() == b"earlier"                   # the earlier version is untouched
-    assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]    # and no partial file beside it
-    done = subprocess.run([sys.executable, "-c", code.replace("(600, 600)", "(10**9, 10**9)"), str(path)],
-                          capture_output=True, text=True, timeout=120)
+    assert path.read_bytes() == b"earlier"  # the earlier version is untouched
+    assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]  # and no partial file beside it
+    done = subprocess.run(
+        [sys.executable, "-c", code.replace("(600, 600)", "(10**9, 10**9)"), str(path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert done.returncode == 0 and not done.stdout and path.stat().st_size > 600
 
 
 def test_a_full_disk_is_one_message_and_leaves_nothing(tmp_path):
     path = tmp_path / "img.png"
-    with (pytest.raises(TerrabenchError, match=f"disk full while writing {path}; nothing was written"),
-          atomic_path(path) as tmp):
+    with (
+        pytest.raises(TerrabenchError, match=f"disk full while writing {path}; nothing was written"),
+        atomic_path(path) as tmp,
+    ):
         tmp.write_bytes(b"partial")
         raise OSError(errno.ENOSPC, "No space left on device")
     assert not list(tmp_path.iterdir())
@@ -182,8 +201,9 @@ sys.exit(main(["render", "--dataset", "fbm", "--size-samples", "129", "--size", 
 
 
 def test_render_on_a_full_disk_writes_neither_image_nor_depth(tmp_path):
-    out = subprocess.run([sys.executable, "-c", RENDER_FULL, str(tmp_path / "a.png")], capture_output=True,
-                         text=True, timeout=300)
+    out = subprocess.run(
+        [sys.executable, "-c", RENDER_FULL, str(tmp_path / "a.png")], capture_output=True, text=True, timeout=300
+    )
     assert out.returncode == 2, out.stderr
     assert "cannot write" in out.stderr and "a.depth.npy" in out.stderr and "Traceback" not in out.stderr
     assert list(tmp_path.iterdir()) == []
@@ -191,6 +211,7 @@ def test_render_on_a_full_disk_writes_neither_image_nor_depth(tmp_path):
 
 def test_a_report_on_a_half_written_run_says_so(ctx, tmp_path):
     from experiments.report import write_report
+
     folder = run_spec(parse_spec(SMALL.replace("frames = 3", "frames = 2")), tmp_path / "runs", ctx, progress=False)
     whole = write_report(folder, tmp_path / "whole").read_text()
     assert "INCOMPLETE" not in whole and "Incomplete" not in whole
@@ -205,6 +226,7 @@ def test_a_report_on_a_half_written_run_says_so(ctx, tmp_path):
 
 def test_a_full_disk_during_a_run_is_one_message_and_the_journal_stays_whole(ctx, tmp_path, monkeypatch, capsys):
     import experiments.runner as runner
+
     spec = tmp_path / "s.toml"
     spec.write_text(SMALL)
     real_open = runner.Path.open
@@ -223,4 +245,4 @@ def test_a_full_disk_during_a_run_is_one_message_and_the_journal_stays_whole(ctx
     assert rc == 2 and err.count("error:") == 1 and "Traceback" not in err
     assert "disk full" in err and "frames.jsonl" in err
     lines = (tmp_path / "runs" / "s" / "frames.jsonl").read_text().splitlines()
-    assert len(lines) == 2 and all("tiles_rows" in json.loads(line) for line in lines)   # whole lines
+    assert len(lines) == 2 and all("tiles_rows" in json.loads(line) for line in lines)  # whole lines

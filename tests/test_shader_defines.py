@@ -1,4 +1,5 @@
 """Shader layout constants and bindings are defined once, in Python, and reach the GLSL only as defines."""
+
 import re
 from importlib import resources
 

@@ -2,6 +2,7 @@
 
 A module's lines are its text's lines; a function's run from its ``def`` to its last line (decorators not
 counted), methods and nested functions included. Tests are not under the rule."""
+
 import ast
 from pathlib import Path
 
@@ -24,6 +25,9 @@ def test_the_packages_have_modules():
 def test_module_and_function_sizes(path):
     text = path.read_text()
     assert len(text.splitlines()) <= MAX_MODULE, f"{path.name}: over {MAX_MODULE} lines"
-    long = [(node.name, node.end_lineno - node.lineno + 1) for node in ast.walk(ast.parse(text))
-            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and node.end_lineno - node.lineno + 1 > MAX_FUNCTION]
+    long = [
+        (node.name, node.end_lineno - node.lineno + 1)
+        for node in ast.walk(ast.parse(text))
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and node.end_lineno - node.lineno + 1 > MAX_FUNCTION
+    ]
     assert not long, f"functions over {MAX_FUNCTION} lines: {long}"

@@ -1,5 +1,6 @@
 """Non-square ground spacing (spacing_x != spacing_y) through the whole pipeline: tiles and their boxes, cost
 features, every drawing method against the reference, GPU ray-cast hits against the CPU caster, and .npz files."""
+
 import numpy as np
 import pytest
 from spacing_helpers import NON_SQUARE, terrain, views
@@ -45,7 +46,7 @@ def test_tiles_span_their_cells_per_axis(spacing):
             assert t.clip == (k.tx * cells * sx, k.ty * cells * sy, (k.tx + 1) * cells * sx, (k.ty + 1) * cells * sy)
             assert np.array_equal(lo[n], pyr.aabb(k)[0]) and np.array_equal(hi[n], pyr.aabb(k)[1])
             # the box bounds every level-0 sample under the tile, at its world position
-            i, j = np.mgrid[k.ty * cells:(k.ty + 1) * cells + 1, k.tx * cells:(k.tx + 1) * cells + 1]
+            i, j = np.mgrid[k.ty * cells : (k.ty + 1) * cells + 1, k.tx * cells : (k.tx + 1) * cells + 1]
             p = hf.world_of(i, j)
             assert np.all(p >= lo[n] - 1e-9) and np.all(p <= hi[n] + 1e-9)
         # the level's tiles cover the terrain's rectangle exactly once
@@ -98,7 +99,7 @@ def test_npz_stores_and_reads_both_spacings(tmp_path):
     square = HeightField(hf.heights, 12.5)
     save_npz(square, tmp_path / "s.npz")
     assert load_terrain(tmp_path / "s.npz").spacing == 12.5
-    np.savez(tmp_path / "one.npz", heights=hf.heights, spacing=np.float64(7.0))   # one number: square cells
+    np.savez(tmp_path / "one.npz", heights=hf.heights, spacing=np.float64(7.0))  # one number: square cells
     assert (load_terrain(tmp_path / "one.npz").spacing_x, load_terrain(tmp_path / "one.npz").spacing_y) == (7.0, 7.0)
     np.savez(tmp_path / "bad.npz", heights=hf.heights, spacing=np.ones(3))
     with pytest.raises(TerrainLoadError, match=r"bad\.npz.*spacing"):
@@ -112,8 +113,11 @@ def test_npz_stores_and_reads_both_spacings(tmp_path):
 def split_model(pixels: float) -> CostModel:
     """Raster for tiles whose box covers fewer than ``pixels`` (1e-3 ms a pixel), ray casting (a constant) for the
     rest, so a frame really mixes both strategies."""
-    return CostModel("split", {"const": 0.0, "triangles": 0.0, "visible_triangles": 0.0, "pixels": 1e-3},
-                     {"const": 1e-3 * pixels, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0})
+    return CostModel(
+        "split",
+        {"const": 0.0, "triangles": 0.0, "visible_triangles": 0.0, "pixels": 1e-3},
+        {"const": 1e-3 * pixels, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0},
+    )
 
 
 @pytest.fixture(scope="module")
@@ -155,9 +159,11 @@ def test_every_method_draws_the_reference_surface(ctx, references, spacing, meth
     does (texel rows north, columns east); at tau 0.05 px all but the TIN draw the reference's surface with its
     shading (normals from x and y slopes in metres); the hybrid mixes both strategies in every frame."""
     hf = terrain(spacing)
-    r = Renderer(ctx, hf, method, tile_size=TILE, cost_model=split_model(1.0) if method == "hybrid" else None, adapt=False)
+    r = Renderer(
+        ctx, hf, method, tile_size=TILE, cost_model=split_model(1.0) if method == "hybrid" else None, adapt=False
+    )
     if method == "tin":
-        r.strategies["tin"].max_error, r.strategies["tin"].preserve_border = 1.0, True   # a TIN within 1 m
+        r.strategies["tin"].max_error, r.strategies["tin"].preserve_border = 1.0, True  # a TIN within 1 m
     try:
         for view, ref, ref_tex in zip(views(hf), references[(spacing, spacing)], references[(spacing, "texture")]):
             tex = r.render(view, mode="texture")
@@ -165,7 +171,7 @@ def test_every_method_draws_the_reference_surface(ctx, references, spacing, meth
             diff = np.abs(tex.colour.astype(int) - ref_tex.colour.astype(int)).max(axis=2)[ok]
             assert diff.mean() < 1.0 and np.percentile(diff, 99) <= 3, (method, diff.mean(), np.percentile(diff, 99))
             for tau, bar in COVER.items():
-                if method == "hybrid":   # about half the tiles each way: split at the median box footprint
+                if method == "hybrid":  # about half the tiles each way: split at the median box footprint
                     px = [p.features.pixels for p in plan_frame(r.pyramid, view, split_model(1.0), tau=tau)]
                     r.model = split_model(float(np.median(px)))
                 res = r.render(view, tau=tau, mode="shaded", maps=method == "hybrid")
@@ -180,7 +186,7 @@ def test_every_method_draws_the_reference_surface(ctx, references, spacing, meth
                 if method == "hybrid":
                     smap = res.maps["strategy"]
                     assert (smap == 1).any() and (smap == 2).any()
-            if method != "tin":   # at full resolution: the reference's surface, normals and shading
+            if method != "tin":  # at full resolution: the reference's surface, normals and shading
                 fine = r.render(view, tau=0.05, mode="shaded")
                 both = fine.mask & ref.mask
                 rel = np.abs(fine.distance[both] - ref.distance[both]) / ref.distance[both]
@@ -252,8 +258,9 @@ def test_gpu_ray_caster_hits_equal_cpu_hits(ctx, spacing):
                         aux, _, _, counters = t.draw(s, view, [(g, tile, None)], mode="shaded")
                     finally:
                         t.release()
-                    cpu = cast_tile_rays(tile, view.eye, pixel_dirs(view), near=view.near,
-                                         outer=outer_faces(tile.clip, hf))
+                    cpu = cast_tile_rays(
+                        tile, view.eye, pixel_dirs(view), near=view.near, outer=outer_faces(tile.clip, hf)
+                    )
                     frac, _ = agreement(aux, cpu, min(tile.spacing_xy))
                     assert frac >= 0.999, (key, frac)
                     assert counters["capped"] == 0

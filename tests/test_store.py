@@ -1,5 +1,6 @@
 """Tile stores: built out of core, equal to the in-memory pyramid, resumable, read on demand within a host budget,
 refusing what they cannot be, and drawn by the renderer without holes."""
+
 import json
 import resource
 
@@ -46,7 +47,7 @@ def test_store_equals_the_in_memory_pyramid(grid, tmp_path):
     for level in range(mem.max_level + 1):
         assert np.array_equal(stored._zmin[level], mem._zmin[level])
         assert np.array_equal(stored._zmax[level], mem._zmax[level])
-        assert np.allclose(stored._err[level], mem._err[level], rtol=1e-9, atol=1e-9)      # exact at these spans
+        assert np.allclose(stored._err[level], mem._err[level], rtol=1e-9, atol=1e-9)  # exact at these spans
         for key in mem.keys(level):
             a, b = stored.tile(key), mem.tile(key)
             assert np.array_equal(a.heights, b.heights) and a.clip == b.clip and a.error == b.error, key
@@ -54,15 +55,15 @@ def test_store_equals_the_in_memory_pyramid(grid, tmp_path):
 
 def test_error_bound_above_exact_span_is_never_below_the_exact_error(grid, tmp_path, monkeypatch):
     h, sp = grid
-    monkeypatch.setattr(store_mod, "EXACT_SPAN", 32)            # levels >= 1 of tiles of 32: bounded
+    monkeypatch.setattr(store_mod, "EXACT_SPAN", 32)  # levels >= 1 of tiles of 32: bounded
     prepare_store(ArraySource(h, sp), tmp_path / "s", 32)
     stored, mem = StorePyramid(tmp_path / "s"), TilePyramid(HeightField(h, sp), 32)
-    assert np.allclose(stored._err[1], mem._err[1])             # level 1 against level 0 is exact either way
+    assert np.allclose(stored._err[1], mem._err[1])  # level 1 against level 0 is exact either way
     loose = 1.0
     for level in (2, 3):
         assert np.all(stored._err[level] >= mem._err[level] - 1e-6)
         loose = max(loose, float((stored._err[level] / np.maximum(mem._err[level], 1e-9)).max()))
-    assert loose > 1.0                                          # the bound is a bound, not the exact value
+    assert loose > 1.0  # the bound is a bound, not the exact value
 
 
 def test_prepare_resumes_after_an_interruption_and_refuses_other_input(grid, tmp_path):
@@ -74,7 +75,7 @@ def test_prepare_resumes_after_an_interruption_and_refuses_other_input(grid, tmp
         open_store(tmp_path / "s")
     first = src.reads
     prepare_store(src, tmp_path / "s", 32)
-    assert src.reads - first == -(-(h.shape[0] - 1) // 32) - 5       # level 0's remaining bands only
+    assert src.reads - first == -(-(h.shape[0] - 1) // 32) - 5  # level 0's remaining bands only
     whole = tmp_path / "w"
     prepare_store(ArraySource(h, sp), whole, 32)
     a, b = StorePyramid(tmp_path / "s"), StorePyramid(whole)
@@ -96,7 +97,7 @@ def test_tiles_on_demand_within_a_host_budget_and_a_loader_thread(grid, tmp_path
     tile_bytes = 33 * 33 * 4
     p = StorePyramid(tmp_path / "s", host_bytes=3 * tile_bytes)
     keys = p.keys(0)
-    assert p.cache_bytes == 0                                   # opening reads no tile
+    assert p.cache_bytes == 0  # opening reads no tile
     for k in keys[:5]:
         p.tile(k)
     assert p.stats["reads"] == 5 and p.stats["evictions"] == 2 and p.cache_bytes == 3 * tile_bytes
@@ -113,23 +114,35 @@ def test_neighbouring_tiles_decode_each_chunk_once(grid, tmp_path):
     p, mem = StorePyramid(tmp_path / "s", host_bytes=64 << 20), TilePyramid(HeightField(h, sp), 32)
     chunks = 0
     for level in range(mem.max_level + 1):
-        for key in mem.keys(level):         # a tile's apron comes from its neighbours' chunks, decoded before
+        for key in mem.keys(level):  # a tile's apron comes from its neighbours' chunks, decoded before
             assert np.array_equal(p.tile(key).heights, mem.tile(key).heights), key
         rows, cols = p._levels[level].shape
         chunks += -(-rows // 32) * -(-cols // 32)
-    assert p.stats["chunk_reads"] == chunks                      # every chunk of every level decoded once
+    assert p.stats["chunk_reads"] == chunks  # every chunk of every level decoded once
     tiles = sum(len(mem.keys(level)) for level in range(mem.max_level + 1))
     assert p.cache_bytes == tiles * 33 * 33 * 4 + p.chunk_bytes and 0 < p.chunk_bytes <= p.chunk_budget
 
 
 def test_geotiffs_in_two_crs_prepare_like_loading_them_whole(tmp_path):
     from hybrid.terrain.loaders import load_terrain
-    h = puget(size=129).heights[::-1]                          # north-up rows as a file stores them
-    for crs, transform in (("EPSG:32610", from_origin(500000, 5200000, 30, 30)),
-                           ("EPSG:4326", from_origin(-122.5, 47.5, 1 / 3600, 1 / 3600))):
+
+    h = puget(size=129).heights[::-1]  # north-up rows as a file stores them
+    for crs, transform in (
+        ("EPSG:32610", from_origin(500000, 5200000, 30, 30)),
+        ("EPSG:4326", from_origin(-122.5, 47.5, 1 / 3600, 1 / 3600)),
+    ):
         path = tmp_path / f"{crs.replace(':', '')}.tif"
-        with rasterio.open(path, "w", driver="GTiff", height=h.shape[0], width=h.shape[1], count=1, dtype="float32",
-                           crs=crs, transform=transform) as dst:
+        with rasterio.open(
+            path,
+            "w",
+            driver="GTiff",
+            height=h.shape[0],
+            width=h.shape[1],
+            count=1,
+            dtype="float32",
+            crs=crs,
+            transform=transform,
+        ) as dst:
             dst.write(h.astype(np.float32), 1)
         src = GdalGridSource(path)
         whole = load_terrain(path)
@@ -155,7 +168,7 @@ def test_a_store_keeps_its_source_height_step_and_its_16_bit_tiles_are_exact(tmp
     prepare_store(ArraySource(h, 10.0, source_step=(0.1, 5.0)), tmp_path / "s", 32)
     t = open_store(tmp_path / "s")
     assert t.source_step == (0.1, 5.0) and t.load().source_step == (0.1, 5.0)
-    for terrain in (t, open_periodic(tmp_path / "s", 385)):       # the extension's samples are the source's
+    for terrain in (t, open_periodic(tmp_path / "s", 385)):  # the extension's samples are the source's
         assert terrain.source_step == (0.1, 5.0)
         pyr = StorePyramid(terrain)
         for level in range(pyr.max_level + 1):
@@ -182,8 +195,9 @@ def test_a_store_keeps_its_source_height_step_and_its_16_bit_tiles_are_exact(tmp
 
 def test_a_store_without_a_recorded_step_reads_as_one_without_step(tmp_path):
     import zarr
+
     prepare_store(ArraySource(_stepped(65), 10.0, source_step=(0.1, 5.0)), tmp_path / "s", 32)
-    g = zarr.open_group(str(tmp_path / "s"), mode="r+")            # as a store written before the attribute
+    g = zarr.open_group(str(tmp_path / "s"), mode="r+")  # as a store written before the attribute
     del g.attrs["source_step"]
     assert open_store(tmp_path / "s").source_step is None
     assert StorePyramid(tmp_path / "s").quantization_error(StorePyramid(tmp_path / "s").root()) > 0
@@ -191,10 +205,20 @@ def test_a_store_without_a_recorded_step_reads_as_one_without_step(tmp_path):
 
 def test_a_16_bit_geotiff_source_carries_its_step_into_the_store(tmp_path):
     from hybrid.terrain.loaders import load_terrain
+
     k = np.arange(65 * 65, dtype=np.int16).reshape(65, 65) % 977
     path = tmp_path / "dem.tif"
-    with rasterio.open(path, "w", driver="GTiff", height=65, width=65, count=1, dtype="int16", crs="EPSG:32610",
-                       transform=from_origin(500000, 5200000, 30, 30)) as dst:
+    with rasterio.open(
+        path,
+        "w",
+        driver="GTiff",
+        height=65,
+        width=65,
+        count=1,
+        dtype="int16",
+        crs="EPSG:32610",
+        transform=from_origin(500000, 5200000, 30, 30),
+    ) as dst:
         dst.write(k, 1)
         dst.scales = (0.1,)
     src = GdalGridSource(path)
@@ -207,8 +231,18 @@ def test_nodata_is_refused_by_name(tmp_path):
     h = np.ones((40, 40), np.float32)
     h[5, 7] = -9999
     path = tmp_path / "holes.tif"
-    with rasterio.open(path, "w", driver="GTiff", height=40, width=40, count=1, dtype="float32", crs="EPSG:32610",
-                       transform=from_origin(0, 400, 10, 10), nodata=-9999) as dst:
+    with rasterio.open(
+        path,
+        "w",
+        driver="GTiff",
+        height=40,
+        width=40,
+        count=1,
+        dtype="float32",
+        crs="EPSG:32610",
+        transform=from_origin(0, 400, 10, 10),
+        nodata=-9999,
+    ) as dst:
         dst.write(h, 1)
     with pytest.raises(TerrabenchError, match=r"1 no-data samples.*fill them first"):
         prepare_store(GdalGridSource(path), tmp_path / "s", 16)
@@ -226,7 +260,7 @@ def test_synthetic_terrain_is_window_independent_and_prepare_stays_small(tmp_pat
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     prepare_store(FractalSource(2049, seed=0), tmp_path / "s", 128)
     grown_mib = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
-    assert grown_mib < 150, grown_mib                            # bands of 129 rows, not the 16 MiB grid x copies
+    assert grown_mib < 150, grown_mib  # bands of 129 rows, not the 16 MiB grid x copies
     t = open_store(tmp_path / "s")
     assert t.heights.shape == (2049, 2049) and np.array_equal(t.heights[:1025, :1025], whole)
 
@@ -235,11 +269,12 @@ def test_synthetic_terrain_is_window_independent_and_prepare_stays_small(tmp_pat
 def test_a_store_renders_as_its_grid_does(ctx, grid, tmp_path):
     from hybrid.camera.flight import preset
     from hybrid.renderer import Renderer
+
     h, sp = grid
     prepare_store(ArraySource(h, sp), tmp_path / "s", 32)
     stored, mem = open_store(tmp_path / "s"), HeightField(h, sp)
     v = preset("flyover", mem, 6, 160, 90).view(2)
-    assert np.allclose(preset("flyover", stored, 6, 160, 90).view(2).eye, v.eye)      # presets read it lazily
+    assert np.allclose(preset("flyover", stored, 6, 160, 90).view(2).eye, v.eye)  # presets read it lazily
     for policy in ("raycast", "raster"):
         with Renderer(ctx, stored, policy, 32) as a, Renderer(ctx, mem, policy, 32) as b:
             x, y = a.render(v), b.render(v)
@@ -254,12 +289,12 @@ def test_close_stops_the_loader_thread_and_frees_the_host_cache(grid, tmp_path):
     p = StorePyramid(tmp_path / "s")
     keys = p.keys(0)
     assert p.request(keys[:4]).wait(10) and p.cache_bytes > 0
-    p.request(keys)                                             # still reading when closed
+    p.request(keys)  # still reading when closed
     loader = p._loader
     p.close()
     assert not loader.is_alive()
     assert p.cache_bytes == 0 and not p.cached(keys[0])
-    assert p.request(keys[:2]).wait(10) and p.cached(keys[1])   # a new loader on the next request
+    assert p.request(keys[:2]).wait(10) and p.cached(keys[1])  # a new loader on the next request
     p.close()
 
 
@@ -279,5 +314,5 @@ def test_a_paused_loader_reads_nothing_until_let_go(grid, tmp_path):
     p.pause()
     p.request(keys[4:])
     loader = p._loader
-    p.close()                                                   # ends though paused
+    p.close()  # ends though paused
     assert not loader.is_alive()

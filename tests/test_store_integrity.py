@@ -1,6 +1,7 @@
 """A tile store's manifest: a deleted, truncated or garbled file of any kind makes `render` (each method that reads
 it) and `info --verify` exit 2 with one message naming the file, and write no image; a clean store renders and
 verifies; a store prepared before manifests reads as before, cannot be verified, and gets one when prepared again."""
+
 import shutil
 
 import pytest
@@ -33,6 +34,7 @@ def _render(store, method, out):
 def reads(clean, ctx, tmp_path_factory):
     """Per method, the chunk keys its render reads beyond those read to place the camera (the frame's own)."""
     from experiments.cli.options import TerrainOptions, ViewOptions
+
     cls, seen = store_manifest._checked_class(), []
     original = cls.get
 
@@ -57,11 +59,11 @@ def _damage(path, how):
     if how == "delete":
         path.unlink()
     elif how == "truncate":
-        path.write_bytes(path.read_bytes()[:len(path.read_bytes()) // 2])
+        path.write_bytes(path.read_bytes()[: len(path.read_bytes()) // 2])
     else:
         b = bytearray(path.read_bytes())
         mid = len(b) // 2
-        b[mid:mid + 4] = bytes(x ^ 0xA5 for x in b[mid:mid + 4])
+        b[mid : mid + 4] = bytes(x ^ 0xA5 for x in b[mid : mid + 4])
         path.write_bytes(bytes(b))
 
 
@@ -70,13 +72,29 @@ def _key(kind, method, reads):
     prefix = {"level chunk": "levels/", "node block chunk": "nodes/blocks/"}.get(kind)
     if prefix:
         return next(k for k in reads[method] if k.startswith(prefix))
-    return {"zmin chunk": "zmin/0/c/0/0", "zmax chunk": "zmax/1/c/0/0", "error chunk": "error/2/c/0/0",
-            "node array chunk": "nodes/effective/0/c/1/2", "array zarr.json": "levels/1/zarr.json",
-            "group zarr.json": "zarr.json", "subgroup zarr.json": "nodes/zarr.json", "manifest": MANIFEST}[kind]
+    return {
+        "zmin chunk": "zmin/0/c/0/0",
+        "zmax chunk": "zmax/1/c/0/0",
+        "error chunk": "error/2/c/0/0",
+        "node array chunk": "nodes/effective/0/c/1/2",
+        "array zarr.json": "levels/1/zarr.json",
+        "group zarr.json": "zarr.json",
+        "subgroup zarr.json": "nodes/zarr.json",
+        "manifest": MANIFEST,
+    }[kind]
 
 
-KINDS = ("level chunk", "zmin chunk", "zmax chunk", "error chunk", "node block chunk", "array zarr.json",
-         "group zarr.json", "subgroup zarr.json", "manifest")
+KINDS = (
+    "level chunk",
+    "zmin chunk",
+    "zmax chunk",
+    "error chunk",
+    "node block chunk",
+    "array zarr.json",
+    "group zarr.json",
+    "subgroup zarr.json",
+    "manifest",
+)
 # who reads what: the raster strategies read a tile's node block, never the node arrays a store with blocks holds
 READERS = {"node block chunk": ("raster", "hybrid"), "node array chunk": ()}
 
@@ -98,7 +116,7 @@ def test_a_damaged_file_is_refused_by_name_by_every_reader(clean, reads, tmp_pat
         assert rc == 2, (method, key, err)
         assert err.startswith("terrabench: error: ") and "Traceback" not in err, err
         assert key in err and str(store) in err and "prepare" in err, (method, key, err)
-        assert not any(out.parent.iterdir()), method                 # no image, no depth
+        assert not any(out.parent.iterdir()), method  # no image, no depth
 
 
 def test_a_clean_store_renders_and_verifies(clean, reads, tmp_path, capsys):
@@ -107,7 +125,7 @@ def test_a_clean_store_renders_and_verifies(clean, reads, tmp_path, capsys):
     n = len(load_manifest(clean, _header(clean, clean)))
     assert f"verified:    {n} files match" in text and "tiles:       32 cells, levels 0..2, 21 tiles" in text
     assert "node arrays: 7 levels" in text and f"manifest:    {n} files" in text and "bytes:" in text
-    for method in METHODS:                                       # every method's frame reads level chunks
+    for method in METHODS:  # every method's frame reads level chunks
         assert any(k.startswith("levels/") for k in reads[method]), method
     assert any(k.startswith("nodes/blocks/") for k in reads["raster"])
     assert not any(k.startswith("nodes/blocks/") for k in reads["raycast"])
@@ -129,6 +147,7 @@ def test_info_verify_lists_every_damaged_file(clean, tmp_path, capsys):
 
 def test_a_store_from_before_manifests_reads_and_gets_one_when_prepared_again(clean, tmp_path, capsys):
     import zarr
+
     store = tmp_path / "old"
     shutil.copytree(clean, store)
     g = zarr.open_group(str(store), mode="r+")
@@ -140,7 +159,7 @@ def test_a_store_from_before_manifests_reads_and_gets_one_when_prepared_again(cl
     assert "manifest:    none (prepared before manifests" in capsys.readouterr().out
     assert main(["info", str(store), "--no-gl", "--verify"]) == 2
     assert "has no manifest" in capsys.readouterr().err
-    prepare_store(FractalSource(129, seed=3), store, 32)              # the same prepare records one
+    prepare_store(FractalSource(129, seed=3), store, 32)  # the same prepare records one
     assert main(["info", str(store), "--no-gl", "--verify"]) == 0
     (store / "levels/0/c/0/0").unlink()
     with pytest.raises(TerrabenchError, match=r"levels/0, chunk \(0, 0\).*is missing"):
@@ -155,12 +174,12 @@ def test_any_truncation_or_changed_byte_of_any_file_is_found(clean, data):
     original = (clean / key).read_bytes()
     raw = bytearray(original)
     if data.draw(st.booleans(), label="truncate"):
-        raw = raw[:data.draw(st.integers(0, len(raw) - 1), label="keep")]
+        raw = raw[: data.draw(st.integers(0, len(raw) - 1), label="keep")]
     else:
         at = data.draw(st.integers(0, len(raw) - 1), label="at")
         raw[at] ^= data.draw(st.integers(1, 255), label="xor")
     (clean / key).write_bytes(bytes(raw))
-    try:                                                        # damaged in place, restored before the next example
+    try:  # damaged in place, restored before the next example
         assert [k for k, _ in bad_files(clean, files)] == [key]
     finally:
         (clean / key).write_bytes(original)
@@ -169,34 +188,67 @@ def test_any_truncation_or_changed_byte_of_any_file_is_found(clean, data):
 
 def _spec(tmp_path, store, name="s"):
     path = tmp_path / f"{name}.toml"
-    path.write_text(f'name = "{name}"\ndatasets = ["{store}"]\nflights = ["flyover"]\nframes = 2\n'
-                    'policies = ["raster", "raycast", "hybrid"]\ntaus = [0.6667]\nsizes = ["64x36"]\n'
-                    'repeats = 3\ntile_size = 32\naccuracy = false\n')
+    path.write_text(
+        f'name = "{name}"\ndatasets = ["{store}"]\nflights = ["flyover"]\nframes = 2\n'
+        'policies = ["raster", "raycast", "hybrid"]\ntaus = [0.6667]\nsizes = ["64x36"]\n'
+        "repeats = 3\ntile_size = 32\naccuracy = false\n"
+    )
     return path
 
 
 def test_run_and_scale_take_a_store_and_refuse_a_damaged_one_by_name(clean, ctx, tmp_path, capsys):
     import pandas as pd
+
     runs = tmp_path / "runs"
     assert main(["run", str(_spec(tmp_path, clean)), "--runs", str(runs), "--quiet"]) == 0
     f = pd.read_parquet(runs / "s" / "frames.parquet")
     assert sorted(set(f["policy"])) == ["hybrid", "raster", "raycast"] and len(f) == 6
     assert set(f["dataset"]) == {str(clean)} and (f["tiles"] > 0).all() and (f["wall_ms"] > 0).all()
-    assert main(["scale", str(clean), "--frames", "2", "--size", "64x36", "--methods", "raycast,raster",
-                 "--out", str(tmp_path / "scale")]) == 0
+    assert (
+        main(
+            [
+                "scale",
+                str(clean),
+                "--frames",
+                "2",
+                "--size",
+                "64x36",
+                "--methods",
+                "raycast,raster",
+                "--out",
+                str(tmp_path / "scale"),
+            ]
+        )
+        == 0
+    )
     text = (tmp_path / "scale" / "scaling.md").read_text()
     assert "| 129 | fractal-129-s3 | raycast | 2 |" in text and "| 129 | fractal-129-s3 | raster | 2 |" in text
     bad = tmp_path / "bad"
     shutil.copytree(clean, bad)
-    _damage(bad / "levels/2/c/0/0", "garble")                   # the root tile's chunk: every method reads it
+    _damage(bad / "levels/2/c/0/0", "garble")  # the root tile's chunk: every method reads it
     capsys.readouterr()
-    assert main(["scale", str(bad), "--frames", "2", "--size", "64x36", "--methods", "raster",
-                 "--out", str(tmp_path / "scale-bad")]) == 2
+    assert (
+        main(
+            [
+                "scale",
+                str(bad),
+                "--frames",
+                "2",
+                "--size",
+                "64x36",
+                "--methods",
+                "raster",
+                "--out",
+                str(tmp_path / "scale-bad"),
+            ]
+        )
+        == 2
+    )
     assert "levels/2, chunk (0, 0)" in capsys.readouterr().err and not (tmp_path / "scale-bad").exists()
-    for chunk in (bad / "levels/1/c").rglob("*"):                # a flight of few pixels draws coarse tiles
+    for chunk in (bad / "levels/1/c").rglob("*"):  # a flight of few pixels draws coarse tiles
         if chunk.is_file():
             _damage(chunk, "garble")
     assert main(["run", str(_spec(tmp_path, bad, "b")), "--runs", str(runs), "--quiet"]) == 1
-    err = capsys.readouterr().err                               # each configuration failed, by name
+    err = capsys.readouterr().err  # each configuration failed, by name
     assert err.count("fails its checksum") == 3 and err.count(f"{bad}: tile store is damaged: array levels/") == 3
     assert not (runs / "b" / "frames.parquet").exists() or pd.read_parquet(runs / "b" / "frames.parquet").empty

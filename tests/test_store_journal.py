@@ -1,4 +1,5 @@
 """A store's journal: staged files reach the store all at once or not at all, whatever step a crash interrupts."""
+
 import pytest
 
 import hybrid.terrain.store_journal as journal
@@ -14,7 +15,7 @@ def _store(tmp_path):
 
 def _state(root):
     texts = {(root / k).read_text().split()[0] for k in ("a/c/0", "a/c/1", "manifest.json", "zarr.json")}
-    assert len(texts) == 1, texts                        # never a mixture
+    assert len(texts) == 1, texts  # never a mixture
     return texts.pop()
 
 
@@ -25,9 +26,17 @@ def _change(root):
     return tx
 
 
-@pytest.mark.parametrize(("where", "count", "state"), [("_write", 2, "old"), ("_write", 5, "old"),
-                                                       ("_move", 0, "old"), ("_move", 1, "new"),
-                                                       ("_move", 3, "new"), ("_move", 5, "new")])
+@pytest.mark.parametrize(
+    ("where", "count", "state"),
+    [
+        ("_write", 2, "old"),
+        ("_write", 5, "old"),
+        ("_move", 0, "old"),
+        ("_move", 1, "new"),
+        ("_move", 3, "new"),
+        ("_move", 5, "new"),
+    ],
+)
 def test_a_crash_at_any_step_leaves_all_old_or_all_new_after_recovery(tmp_path, monkeypatch, where, count, state):
     root = _store(tmp_path)
     real, calls = getattr(journal, where), []
@@ -37,6 +46,7 @@ def test_a_crash_at_any_step_leaves_all_old_or_all_new_after_recovery(tmp_path, 
         if len(calls) > count:
             raise OSError("simulated crash")
         return real(*args)
+
     monkeypatch.setattr(journal, where, crash)
     with pytest.raises(OSError):
         _change(root).commit()
@@ -56,6 +66,7 @@ def test_a_commit_replaces_every_file_and_an_abort_none(tmp_path, monkeypatch):
     def move(src, dst):
         order.append(dst.relative_to(root).as_posix())
         real(src, dst)
+
     monkeypatch.setattr(journal, "_move", move)
     _change(root).commit()
-    assert _state(root) == "new" and order[-2:] == ["manifest.json", "zarr.json"]     # the header last
+    assert _state(root) == "new" and order[-2:] == ["manifest.json", "zarr.json"]  # the header last

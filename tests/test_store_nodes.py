@@ -2,6 +2,7 @@
 their full fans' errors, with side codes; bit for bit where measured, never below where bounded), the combined form
 (both fans in one error, for periodic extensions' seams) likewise, resumable, read a tile at a time, and drawn as the
 grid is; a store prepared without them is refused by path."""
+
 import numpy as np
 import pytest
 import rasterio
@@ -32,6 +33,7 @@ def _arrays(nodes, lev):
 def open_store_attrs(path):
     """A store's attributes, complete or not."""
     import zarr
+
     return zarr.open_group(str(path), mode="r").attrs
 
 
@@ -41,6 +43,7 @@ def _compare(store_path, hf, n, exact_span):
     ones and the codes read back never below the exact side errors (ranges always equal); returns the largest
     bound / exact ratio."""
     import zarr
+
     ref, combined = square_nodes(hf, n), square_nodes(hf, n, side_errors=False)
     got = nodes_for(open_store(store_path), n)
     stored = zarr.open_group(str(store_path), mode="r")
@@ -66,13 +69,13 @@ def _compare(store_path, hf, n, exact_span):
 
 @pytest.mark.parametrize("shape", [(513, 513), pytest.param((300, 700), marks=pytest.mark.slow)])
 def test_node_arrays_equal_global_nodes_bit_for_bit(tmp_path, shape):
-    h = np.ascontiguousarray(puget().heights[200:200 + shape[0], 100:100 + shape[1]])
+    h = np.ascontiguousarray(puget().heights[200 : 200 + shape[0], 100 : 100 + shape[1]])
     prepare_store(ArraySource(h, SP), tmp_path / "s", 64)
     hf = HeightField(h, SP)
-    assert _compare(tmp_path / "s", hf, 64, 1 << 30) == 1.0        # every level measured: squares of 512, 1024
+    assert _compare(tmp_path / "s", hf, 64, 1 << 30) == 1.0  # every level measured: squares of 512, 1024
     stored, ref = nodes_for(open_store(tmp_path / "s"), 64), global_nodes(hf, 64)
     pyr = TilePyramid(hf, 64)
-    for level in range(pyr.max_level + 1):                          # every tile's block, apron included
+    for level in range(pyr.max_level + 1):  # every tile's block, apron included
         for key in pyr.keys(level):
             a, b = (tile_node_block(x, level, key.tx, key.ty, 64) for x in (stored, ref))
             assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]), key
@@ -80,19 +83,19 @@ def test_node_arrays_equal_global_nodes_bit_for_bit(tmp_path, shape):
 
 def test_bounded_levels_never_below_the_exact_errors(tmp_path, monkeypatch):
     h = puget(size=513).heights
-    monkeypatch.setattr(store_nodes, "NODE_EXACT_SPAN", 128)         # blocks of 128 cells; nodes of 256, 512 bounded
+    monkeypatch.setattr(store_nodes, "NODE_EXACT_SPAN", 128)  # blocks of 128 cells; nodes of 256, 512 bounded
     prepare_store(ArraySource(h, SP), tmp_path / "s", 64)
     assert open_store(tmp_path / "s").store.attrs["nodes"]["exact_span"] == 128
-    assert _compare(tmp_path / "s", HeightField(h, SP), 64, 128) > 1.0       # a bound, not the exact value
+    assert _compare(tmp_path / "s", HeightField(h, SP), 64, 128) > 1.0  # a bound, not the exact value
 
 
 def test_an_interrupted_node_build_resumes_to_the_same_arrays(tmp_path, monkeypatch):
     h = puget(size=257).heights
-    monkeypatch.setattr(store_nodes, "NODE_EXACT_SPAN", 64)          # 4 direct bands, then bounded levels
-    monkeypatch.setattr(store_nodes, "NODE_BAND", 512)               # levels 0, 1 in several bands
+    monkeypatch.setattr(store_nodes, "NODE_EXACT_SPAN", 64)  # 4 direct bands, then bounded levels
+    monkeypatch.setattr(store_nodes, "NODE_BAND", 512)  # levels 0, 1 in several bands
     prepare_store(ArraySource(h, SP), tmp_path / "whole", 32)
     level_bands = 8 + 4 + 2 + 1
-    for stop in (level_bands + 2, 5, 3):                             # in the direct bands, in level passes
+    for stop in (level_bands + 2, 5, 3):  # in the direct bands, in level passes
         with pytest.raises(KeyboardInterrupt):
             prepare_store(ArraySource(h, SP), tmp_path / "s", 32, stop_after=stop)
         assert "nodes" not in dict(open_store_attrs(tmp_path / "s"))
@@ -109,16 +112,17 @@ def test_a_store_without_node_arrays_is_refused_by_path_until_prepared_again(tmp
     import shutil
 
     import zarr
+
     h = puget(size=129).heights
     prepare_store(ArraySource(h, SP), tmp_path / "old", 32)
-    g = zarr.open_group(str(tmp_path / "old"), mode="r+")           # as a store prepared before node arrays
+    g = zarr.open_group(str(tmp_path / "old"), mode="r+")  # as a store prepared before node arrays
     del g.attrs["nodes"]
-    del g.attrs["manifest"]                                         # (and so before manifests)
+    del g.attrs["manifest"]  # (and so before manifests)
     g.attrs.update({"progress": {k: v for k, v in dict(g.attrs["progress"]).items() if not k.startswith("nodes")}})
     shutil.rmtree(tmp_path / "old" / "nodes")
     with pytest.raises(TerrabenchError, match=f"{tmp_path / 'old'}.*without the raster.*prepare again"):
         nodes_for(open_store(tmp_path / "old"), 32)
-    prepare_store(ArraySource(h, SP), tmp_path / "old", 32)          # the same prepare adds them
+    prepare_store(ArraySource(h, SP), tmp_path / "old", 32)  # the same prepare adds them
     assert _compare(tmp_path / "old", HeightField(h, SP), 32, 1 << 30) == 1.0
 
 
@@ -128,6 +132,7 @@ def test_prepare_memory_stays_band_sized(tmp_path, monkeypatch):
 
     from hybrid.terrain.grid_sources import FractalSource
     from hybrid.tiles import store_prepare as store_mod
+
     peaks, build = {}, store_mod.build_nodes
 
     class Measured(Exception):
@@ -158,8 +163,17 @@ def puget_store(tmp_path_factory):
     d = tmp_path_factory.mktemp("puget")
     hf = puget()
     tif = d / "puget.tif"
-    with rasterio.open(tif, "w", driver="GTiff", height=hf.rows, width=hf.cols, count=1, dtype="float32",
-                       crs="EPSG:32610", transform=from_origin(500000, 5300000, 160, 160)) as dst:
+    with rasterio.open(
+        tif,
+        "w",
+        driver="GTiff",
+        height=hf.rows,
+        width=hf.cols,
+        count=1,
+        dtype="float32",
+        crs="EPSG:32610",
+        transform=from_origin(500000, 5300000, 160, 160),
+    ) as dst:
         dst.write(np.ascontiguousarray(hf.heights[::-1]).astype(np.float32), 1)
     return prepare_store(GdalGridSource(tif), d / "puget.store", 128), load_terrain(tif)
 
@@ -173,9 +187,10 @@ def test_puget_store_nodes_equal_the_loaded_grid(puget_store):
 def test_raster_frames_from_the_store_equal_the_grid_without_loading_it(ctx, puget_store, monkeypatch):
     from hybrid.camera.flight import preset
     from hybrid.renderer import Renderer
+
     path, whole = puget_store
     stored = open_store(path)
-    monkeypatch.setattr(stored_mod, "MAX_LOAD_SAMPLES", 1000)       # nothing may gather the grid
+    monkeypatch.setattr(stored_mod, "MAX_LOAD_SAMPLES", 1000)  # nothing may gather the grid
     with pytest.raises(TerrabenchError, match="out of core"):
         stored.load()
     for k in (2, 5):
@@ -200,12 +215,14 @@ def test_stored_blocks_are_the_node_arrays_around_each_tile(tmp_path):
     assert nodes.blocks is not None
     pyr = TilePyramid(HeightField(h, SP), n)
     for level in range(pyr.max_level + 1):
-        arrays = {lev: _arrays(nodes, lev) + [np.asarray(nodes.sides[lev][:, :])] for lev in range(len(nodes.effective))}
+        arrays = {
+            lev: _arrays(nodes, lev) + [np.asarray(nodes.sides[lev][:, :])] for lev in range(len(nodes.effective))
+        }
         for key in pyr.keys(level):
             data, offsets = tile_node_block(nodes, level, key.tx, key.ty, n)
             for m in range(len(offsets) - 1):
                 side = n >> (m + 1)
-                grid = data[offsets[m]:offsets[m + 1]].reshape(side + 2, side + 2, 4)
+                grid = data[offsets[m] : offsets[m + 1]].reshape(side + 2, side + 2, 4)
                 e, lo, hi, w = arrays[level + m]
                 for a in range(-1, side + 1):
                     for b in range(-1, side + 1):
@@ -219,13 +236,14 @@ def test_a_store_without_blocks_gets_them_from_prepare_and_draws_the_same(tmp_pa
     """A store whose node blocks are missing (made before them) reads its nodes by windows; running prepare on
     it again adds the blocks, and both give every tile the same block."""
     import zarr
+
     h = puget(size=129).heights
     prepare_store(ArraySource(h, SP), tmp_path / "s", 32)
     g = zarr.open_group(str(tmp_path / "s"), mode="r+")
     del g["nodes/blocks"]
     attrs = dict(g.attrs)
     attrs.pop("node_blocks")
-    attrs.pop("manifest")                                     # a store made before blocks had no manifest either
+    attrs.pop("manifest")  # a store made before blocks had no manifest either
     attrs["progress"] = {k: v for k, v in attrs["progress"].items() if not k.startswith("blocks:")}
     g.attrs.clear()
     g.attrs.update(attrs)
@@ -246,15 +264,16 @@ def test_side_maxima_over_row_windows_equal_the_whole_grid(m):
     """A store measures side errors in windows of a few sample rows, parts of a node row where the node is taller:
     put together they are the whole grid's, node by node and side by side."""
     from hybrid.tiles.fans import side_maxima
+
     rng = np.random.default_rng(m)
     dev = rng.random((65, 65))
     whole = side_maxima(dev, m)
     s, rows = 2 << m, 8
     got = np.zeros_like(whole)
     for r0 in range(0, 64, rows):
-        part = side_maxima(dev[r0:r0 + rows + 1], m, r0 % s if rows < s else 0)
+        part = side_maxima(dev[r0 : r0 + rows + 1], m, r0 % s if rows < s else 0)
         a = r0 // s
-        np.maximum(got[:, a:a + part.shape[1]], part, out=got[:, a:a + part.shape[1]])
+        np.maximum(got[:, a : a + part.shape[1]], part, out=got[:, a : a + part.shape[1]])
     assert np.array_equal(got, whole)
 
 
@@ -262,17 +281,18 @@ def test_a_store_prepared_before_side_codes_keeps_its_form_and_gets_blocks_of_it
     """A store whose node arrays hold one error over both fans (no ``form``, no side codes) stays so when prepared
     again: its missing blocks are cut in that form (fourth column 1), and it reads without side codes."""
     import zarr
+
     h = puget(size=129).heights
     prepare_store(ArraySource(h, SP), tmp_path / "s", 32)
     g = zarr.open_group(str(tmp_path / "s"), mode="r+")
     combined = [np.asarray(g[f"nodes/combined/{lev}"][:, :]) for lev in range(int(g.attrs["nodes"]["levels"]))]
-    for lev, c in enumerate(combined):                        # the earlier form: its errors, no codes, no blocks
+    for lev, c in enumerate(combined):  # the earlier form: its errors, no codes, no blocks
         g[f"nodes/effective/{lev}"][:, :] = c
     for name in ("nodes/sides", "nodes/combined", "nodes/blocks"):
         del g[name]
     attrs = dict(g.attrs)
     attrs.pop("node_blocks")
-    attrs.pop("manifest")                                     # a store made before blocks had no manifest either
+    attrs.pop("manifest")  # a store made before blocks had no manifest either
     attrs["nodes"] = {k: v for k, v in attrs["nodes"].items() if k != "form"}
     attrs["progress"] = {k: v for k, v in attrs["progress"].items() if not k.startswith("blocks:")}
     g.attrs.clear()

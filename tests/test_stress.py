@@ -1,6 +1,7 @@
 """Stability where methods fail: on every stress view, no NaN, no hang, no hole, few capped rays, and no
 precision loss far from the origin, for stitched raster (both strategies, both full-resolution rules), ray-cast and
 hybrid frames."""
+
 import pandas as pd
 import pytest
 
@@ -41,8 +42,9 @@ def test_no_hole_off_the_silhouette(table):
     # reconstruction's staircase silhouette is exempt, as above.
     stitched = table[table["method"] != "raycast/planes"]
     excess = stitched["crack_px"] - stitched["ref_crack_px"]
-    assert (excess <= WIDTH // 4).all(), stitched.loc[excess > WIDTH // 4, ["scene", "view", "method", "crack_px",
-                                                                              "ref_crack_px"]].to_string()
+    assert (excess <= WIDTH // 4).all(), stitched.loc[
+        excess > WIDTH // 4, ["scene", "view", "method", "crack_px", "ref_crack_px"]
+    ].to_string()
 
 
 def test_crack_count_sees_t_junction_cracks(ctx):
@@ -80,7 +82,7 @@ def test_report_section(table, tmp_path):
     assert "## Reading" in text and "stress_failures.png" in text
     assert (tmp_path / "stress_failures.png").stat().st_size > 10000
     assert len(pd.read_parquet(tmp_path / "stress.parquet")) == len(table)
-    assert text.count("Puget Sound terrain: USGS") == 1                  # the scenes include Puget windows
+    assert text.count("Puget Sound terrain: USGS") == 1  # the scenes include Puget windows
     synthetic = write_stress_report(table[~table["scene"].str.startswith("puget")], tmp_path / "synthetic")
     assert "Puget Sound" not in synthetic.read_text()
 

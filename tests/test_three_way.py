@@ -1,5 +1,6 @@
 """Frames that mix all three candidates (raster, raster_gs, raycast): no hole along any strategy border, and a
 cost model that prefers the geometry-shader path gets it chosen."""
+
 import numpy as np
 
 from experiments.metrics import hole_pixels_in_columns
@@ -23,9 +24,14 @@ def cyclic(plans):
 def test_three_strategies_in_one_frame_leave_no_hole(ctx, puget_full):
     ref = ReferenceRenderer(ctx, puget_full)
     pure = {n: make_renderer(ctx, puget_full, n, tile_size=128) for n in candidates()}
-    mixed = Renderer(ctx, puget_full, "hybrid", tile_size=128,
-                     cost_model=CostModel("flat", FLAT, {"const": 1.0, "pixels": 0.0, "surface_pixels": 0.0,
-                                                          "pixel_steps": 0.0}), adapt=False)
+    mixed = Renderer(
+        ctx,
+        puget_full,
+        "hybrid",
+        tile_size=128,
+        cost_model=CostModel("flat", FLAT, {"const": 1.0, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0}),
+        adapt=False,
+    )
     plan = mixed.plan
     mixed.plan = lambda view, tau: cyclic(plan(view, tau))
     fly = preset("flyover", puget_full, 6, *SIZE)
@@ -39,6 +45,7 @@ def test_three_strategies_in_one_frame_leave_no_hole(ctx, puget_full):
 
             def holes(x, want=want):
                 return (np.isfinite(want.distance) & ~np.isfinite(x.distance)) | hole_pixels_in_columns(x)
+
             seam = holes(r) & ~hole_pixels_in_columns(want)
             for f in frames.values():
                 seam &= ~holes(f)
@@ -58,5 +65,5 @@ def test_hybrid_chooses_the_geometry_shader_path_when_the_model_says_it_is_cheap
     v = preset("flyover", puget257, 6, *SIZE).view(2)
     with Renderer(ctx, puget257, "hybrid", tile_size=64, cost_model=cheap_gs, adapt=False) as h:
         assert {p.choice for p in h.plan(v)} == {"raster_gs"}
-        h.model = no_gs                       # a model without raster_gs coefficients never picks it
+        h.model = no_gs  # a model without raster_gs coefficients never picks it
         assert {p.choice for p in h.plan(v)} == {"raycast"}

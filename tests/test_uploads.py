@@ -1,6 +1,7 @@
 """Uploads as jobs under a per-frame budget: tiles not yet resident are drawn from a resident ancestor (no hole),
 the queue drains one job a frame at a zero budget, the GPU byte budget is never exceeded, and a drained queue
 draws the very frame an unbudgeted renderer draws."""
+
 import numpy as np
 import pytest
 
@@ -34,8 +35,8 @@ def test_zero_budget_drains_one_job_a_frame_without_holes(ctx, puget257, policy)
                 break
     assert cracks[-1] == 0
     first = history[0]
-    assert first.uploads == 1 and first.fallback_tiles == n_tiles          # the root only, every tile from it
-    assert all(s.uploads == 1 for s in history[1:])                         # one job a frame at a zero budget
+    assert first.uploads == 1 and first.fallback_tiles == n_tiles  # the root only, every tile from it
+    assert all(s.uploads == 1 for s in history[1:])  # one job a frame at a zero budget
     pending = [s.pending_uploads for s in history]
     assert pending == sorted(pending, reverse=True) and pending[-1] == 0
     assert [s.fallback_tiles for s in history] == pending
@@ -50,7 +51,7 @@ def test_a_generous_budget_uploads_everything_in_the_first_frame(ctx, puget257):
     v = preset("flyover", puget257, 6, *SIZE).view(2)
     with Renderer(ctx, puget257, "raycast", 32, upload_budget_ms=1e6) as r:
         st = r.render(v).stats
-    assert st.fallback_tiles == 0 and st.pending_uploads == 0 and st.uploads == st.tiles + 1    # + the root
+    assert st.fallback_tiles == 0 and st.pending_uploads == 0 and st.uploads == st.tiles + 1  # + the root
     assert 0 < st.upload_ms <= st.wall_ms
 
 
@@ -68,8 +69,10 @@ def test_gpu_byte_budget_holds_with_fallbacks(ctx, puget257):
             assert r.cache.bytes <= budget and res.stats.gpu_bytes - res.stats.shared_bytes <= budget
             assert (res.stats.fallback_tiles > 0) == (res.stats.tiles + 1 > budget // per_tile)
             assert np.isfinite(res.distance).mean() > 0.3
-    with (Renderer(ctx, puget257, "raycast", 32, budget_bytes=budget) as strict,
-          pytest.raises(TerrabenchError, match="budget")):
+    with (
+        Renderer(ctx, puget257, "raycast", 32, budget_bytes=budget) as strict,
+        pytest.raises(TerrabenchError, match="budget"),
+    ):
         strict.render(fly.view(2))
 
 
@@ -87,8 +90,10 @@ def test_store_uploads_take_what_the_loader_thread_read_first(ctx, puget257, tmp
     from test_store import ArraySource
 
     from hybrid.tiles.store import StorePyramid, prepare_store
-    prepare_store(ArraySource(np.asarray(puget257.heights), (puget257.spacing_x, puget257.spacing_y)),
-                  tmp_path / "s", 32)
+
+    prepare_store(
+        ArraySource(np.asarray(puget257.heights), (puget257.spacing_x, puget257.spacing_y)), tmp_path / "s", 32
+    )
     pyramid = StorePyramid(tmp_path / "s")
     v = preset("flyover", pyramid.hf, 6, *SIZE).view(2)
     with Renderer(ctx, pyramid.hf, policy, 32, pyramid=pyramid) as full:
@@ -97,9 +102,9 @@ def test_store_uploads_take_what_the_loader_thread_read_first(ctx, puget257, tmp
     with Renderer(ctx, pyramid.hf, policy, 32, pyramid=pyramid, upload_budget_ms=0.0) as r:
         keys = [p.key for p in r.plan(v)]
         assert pyramid.request(keys[3:4]).wait(30) and not pyramid.cached(keys[0])
-        r.pyramid.request = lambda keys, work=None: None   # the frame asks for nothing more: only that tile is loaded
-        assert r.render(v, mode="shaded").stats.uploads == 1             # the root: the first frame's job
-        assert r.render(v, mode="shaded").stats.uploads == 1             # then the loaded tile, not the nearest
+        r.pyramid.request = lambda keys, work=None: None  # the frame asks for nothing more: only that tile is loaded
+        assert r.render(v, mode="shaded").stats.uploads == 1  # the root: the first frame's job
+        assert r.render(v, mode="shaded").stats.uploads == 1  # then the loaded tile, not the nearest
         assert (policy, keys[3]) in r.cache.entries and (policy, keys[0]) not in r.cache.entries
         for _ in range(len(keys) + 1):
             res = r.render(v, mode="shaded")
@@ -117,12 +122,15 @@ def test_a_tile_drawn_for_missing_ones_selects_only_their_leaves(ctx, puget257):
     from hybrid.contract import TileItem
     from hybrid.gl.target import FrameTarget
     from hybrid.uploads import fallback_selection
+
     v = preset("flyover", puget257, 6, *SIZE).view(2)
     with Renderer(ctx, puget257, "raster", 32, upload_budget_ms=0.0) as r:
         res = r.render(v)
         assert res.stats.fallback_tiles == res.stats.tiles > 4
         root = r.pyramid.root()
-        item = TileItem(r.cache.entries[("raster", root)], r.tile(root), fallback_selection(r.plan(v)[0].selected, root))
+        item = TileItem(
+            r.cache.entries[("raster", root)], r.tile(root), fallback_selection(r.plan(v)[0].selected, root)
+        )
         target = FrameTarget(ctx, *SIZE)
         try:
             target.clear()
@@ -130,8 +138,10 @@ def test_a_tile_drawn_for_missing_ones_selects_only_their_leaves(ctx, puget257):
         finally:
             target.release()
     assert alone["tilelets"] > 0
-    assert alone["tilelets"] <= res.stats.counters["tilelets"] <= res.stats.tiles * alone["tilelets"] / 4, \
-        (res.stats.counters, alone)
+    assert alone["tilelets"] <= res.stats.counters["tilelets"] <= res.stats.tiles * alone["tilelets"] / 4, (
+        res.stats.counters,
+        alone,
+    )
 
 
 def test_a_ray_cast_tile_drawn_for_a_missing_one_hits_only_inside_its_rectangle(ctx, puget257):
@@ -142,6 +152,7 @@ def test_a_ray_cast_tile_drawn_for_a_missing_one_hits_only_inside_its_rectangle(
     from hybrid.contract import TileItem
     from hybrid.gl.target import FrameTarget
     from hybrid.uploads import fallback_selection, fallback_tile
+
     v = preset("flyover", puget257, 6, *SIZE).view(2)
     rays = v.pixel_rays()
     eye = np.asarray(v.eye)
@@ -174,8 +185,13 @@ def test_a_ray_cast_tile_drawn_for_a_missing_one_hits_only_inside_its_rectangle(
             assert np.all((xy[hit, 0] >= x0 - tol) & (xy[hit, 0] <= x1 + tol)), p.key
             assert np.all((xy[hit, 1] >= y0 - tol) & (xy[hit, 1] <= y1 + tol)), p.key
             cell = whole_tile.spacing_x
-            inside = np.isfinite(whole) & (whole_xy[..., 0] > x0 + cell) & (whole_xy[..., 0] < x1 - cell) & \
-                (whole_xy[..., 1] > y0 + cell) & (whole_xy[..., 1] < y1 - cell)
+            inside = (
+                np.isfinite(whole)
+                & (whole_xy[..., 0] > x0 + cell)
+                & (whole_xy[..., 0] < x1 - cell)
+                & (whole_xy[..., 1] > y0 + cell)
+                & (whole_xy[..., 1] < y1 - cell)
+            )
             assert np.array_equal(hit & inside, inside), p.key
             assert np.allclose(d[inside], whole[inside], rtol=1e-5), p.key
             checked += int(inside.sum())
@@ -190,12 +206,13 @@ def test_hybrid_prepares_estimates_within_the_streaming_budget(ctx, puget257):
     from test_hybrid import median_split
 
     from hybrid.tiles.pyramid import TilePyramid
+
     v = preset("orbit", puget257, 6, *SIZE).view(1)
     model = median_split(TilePyramid(puget257, 32), v)
     with Renderer(ctx, puget257, "hybrid", 32, cost_model=model, adapt=False) as full:
         want = full.render(v, 2.0)
         choices = [p.choice for p in full.plan(v, 2.0)]
-    assert "raster" in choices                                 # the check below needs tiles that want raster
+    assert "raster" in choices  # the check below needs tiles that want raster
     with Renderer(ctx, puget257, "hybrid", 32, cost_model=model, adapt=False, upload_budget_ms=0.0) as r:
         built = []
         for _ in range(3 * len(choices)):
@@ -204,8 +221,8 @@ def test_hybrid_prepares_estimates_within_the_streaming_budget(ctx, puget257):
             assert all(p.choice == "raycast" for p in unknown)
             built.append(len(plans) - len(unknown))
             res = r.render(v, 2.0)
-            assert (np.isfinite(want.distance) & ~np.isfinite(res.distance)).mean() < 0.05     # no hole
+            assert (np.isfinite(want.distance) & ~np.isfinite(res.distance)).mean() < 0.05  # no hole
             if not unknown and res.stats.pending_uploads == 0:
                 break
-        assert built[0] <= 2 and np.all(np.diff(built) <= 2)    # a tile a call (plan, then render's plan)
+        assert built[0] <= 2 and np.all(np.diff(built) <= 2)  # a tile a call (plan, then render's plan)
         assert [p.choice for p in r.plan(v, 2.0)] == choices

@@ -1,4 +1,5 @@
 """Projections against hand-computed cases, depth/distance round trips, and view validation."""
+
 import numpy as np
 import pytest
 
@@ -14,10 +15,10 @@ def make():
 def test_hand_computed_projection():
     v = make()
     p = v.project(np.array([[0, 10, 0], [10, 10, 0], [0, 10, 5], [0, 1, 0], [0, 1000, 0]], float))
-    assert np.allclose(p[0], [100, 50, 990 / (10 * 999)])     # centre; reversed-Z depth n(f-z)/(z(f-n))
-    assert np.allclose(p[1, :2], [150, 50])                   # 45 deg right at aspect 2 -> ndc x = 0.5
-    assert np.allclose(p[2, :2], [100, 25])                   # tan = 0.5 up -> ndc y = 0.5 -> row 25
-    assert np.isclose(p[3, 2], 1.0) and np.isclose(p[4, 2], 0.0)   # near -> 1, far -> 0
+    assert np.allclose(p[0], [100, 50, 990 / (10 * 999)])  # centre; reversed-Z depth n(f-z)/(z(f-n))
+    assert np.allclose(p[1, :2], [150, 50])  # 45 deg right at aspect 2 -> ndc x = 0.5
+    assert np.allclose(p[2, :2], [100, 25])  # tan = 0.5 up -> ndc y = 0.5 -> row 25
+    assert np.isclose(p[3, 2], 1.0) and np.isclose(p[4, 2], 0.0)  # near -> 1, far -> 0
 
 
 def test_distance_from_depth_roundtrip():
@@ -48,12 +49,20 @@ def test_straight_down_view_is_defined():
     assert np.all(np.isfinite(v.view_proj_rel))
 
 
-@pytest.mark.parametrize("kw, match", [
-    (dict(fov_y=0), "fov_y"), (dict(fov_y=180), "fov_y"), (dict(width=0), "width"),
-    (dict(height=100000), "height"), (dict(near=0), "near"), (dict(near=10, far=5), "far"),
-    (dict(target=[0, 0, 0]), "target must differ"), (dict(eye=[0, np.nan, 0]), "eye"),
-    (dict(near=6.6e-247, far=1.0), "far / near is 1.52e\\+246"),
-])
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        (dict(fov_y=0), "fov_y"),
+        (dict(fov_y=180), "fov_y"),
+        (dict(width=0), "width"),
+        (dict(height=100000), "height"),
+        (dict(near=0), "near"),
+        (dict(near=10, far=5), "far"),
+        (dict(target=[0, 0, 0]), "target must differ"),
+        (dict(eye=[0, np.nan, 0]), "eye"),
+        (dict(near=6.6e-247, far=1.0), "far / near is 1.52e\\+246"),
+    ],
+)
 def test_bad_views(kw, match):
     args = dict(eye=[0, 0, 0], target=[0, 10, 0], fov_y=60, width=10, height=10, near=1, far=100)
     args.update(kw)
@@ -63,17 +72,18 @@ def test_bad_views(kw, match):
 
 def test_depth_to_distance_in_bounded_memory_and_exact():
     import tracemalloc
+
     v = View(eye=(0.0, 0.0, 500.0), target=(1000.0, 700.0, 0.0), width=4096, height=4096)
     depth = np.full((4096, 4096), 0.5, np.float32)
-    depth[:10] = 0.0                                          # sky
+    depth[:10] = 0.0  # sky
     tracemalloc.start()
     dist = v.distance_from_depth(depth)
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     assert dist.dtype == np.float32 and np.isinf(dist[:10]).all() and np.isfinite(dist[10:]).all()
-    assert peak < 64 * 2**20 + 200 * 2**20          # the float32 result plus bounded chunks, not (H, W, 3) float64
+    assert peak < 64 * 2**20 + 200 * 2**20  # the float32 result plus bounded chunks, not (H, W, 3) float64
     rows, cols = np.array([10, 2000, 4095]), np.array([0, 3000, 4095])
-    ray = v.pixel_dirs_eye(rows, cols)                         # eye-space ray (x, y, -1): length scales z-distance
+    ray = v.pixel_dirs_eye(rows, cols)  # eye-space ray (x, y, -1): length scales z-distance
     n, f = v.near, v.far
     zdist = n * f / (f - n) / (n / (f - n) + 0.5)
     np.testing.assert_allclose(dist[rows, cols], zdist * np.linalg.norm(ray, axis=-1), rtol=1e-6)

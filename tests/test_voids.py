@@ -1,5 +1,6 @@
 """Void filling: smooth across an irregular void on a curved slope (no grooves), within each void's rim range,
 and the warning names the count, the largest void, the method and what the rim bound moved."""
+
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -57,7 +58,7 @@ def test_fill_is_smooth_and_within_the_rim_range_on_an_irregular_void():
 
 def test_overshoot_is_bounded_by_the_rim_and_reported(tmp_path):
     i, j = np.mgrid[0:61, 0:61].astype(np.float64)
-    dome = 1000.0 - 0.5 * ((i - 30) ** 2 + (j - 30) ** 2)          # the summit lies inside the void
+    dome = 1000.0 - 0.5 * ((i - 30) ** 2 + (j - 30) ** 2)  # the summit lies inside the void
     void = (i - 30) ** 2 + (j - 30) ** 2 <= 36
     second = np.zeros_like(void)
     second[5:7, 50:53] = True
@@ -70,7 +71,7 @@ def test_overshoot_is_bounded_by_the_rim_and_reported(tmp_path):
     assert f"{n + 6} no-data samples" in msg and "in 2 voids" in msg and f"largest {n} samples" in msg
     assert "biharmonic inpainting" in msg and "bounded by its rim's height range" in msg
     held = int(msg.split("(")[-1].split(" samples held")[0])
-    assert held > 0                                               # the continued dome rose above its rim
+    assert held > 0  # the continued dome rose above its rim
     rim = ndimage.binary_dilation(void, np.ones((3, 3))) & ~void
     assert hf.heights[void].max() == pytest.approx(dome[rim].max(), abs=1e-3)
     assert hf.heights[void].min() >= dome[rim].min() - 1e-3
@@ -82,13 +83,23 @@ def srtm_like(tmp_path):
     samples, as an SRTM tile with voids: its path and the holes (north-up)."""
     import rasterio
     from rasterio.transform import from_origin
+
     base = puget(size=257, with_texture=False)
     ints = np.rint(base.heights[::-1]).astype(np.int16)
     holes = blob(257, seed=7) | np.roll(blob(257, seed=11), 60, axis=1)
     path = tmp_path / "srtm_voids.tif"
-    with rasterio.open(path, "w", driver="GTiff", width=257, height=257, count=1, dtype="int16",
-                       crs="EPSG:32610", transform=from_origin(500000.0, 5200000.0, 30.0, 30.0),
-                       nodata=-32768) as dst:
+    with rasterio.open(
+        path,
+        "w",
+        driver="GTiff",
+        width=257,
+        height=257,
+        count=1,
+        dtype="int16",
+        crs="EPSG:32610",
+        transform=from_origin(500000.0, 5200000.0, 30.0, 30.0),
+        nodata=-32768,
+    ) as dst:
         dst.write(np.where(holes, -32768, ints).astype(np.int16), 1)
     return path, holes
 
@@ -99,9 +110,9 @@ def test_an_integer_source_with_voids_stays_on_its_step(tmp_path):
     with pytest.warns(NoDataWarning, match="integer step"):
         hf = load_terrain(path)
     assert hf.nodata_filled == int(holes.sum()) and hf.source_step == (1.0, 0.0)
-    assert np.array_equal(hf.heights, np.rint(hf.heights))              # the fill is whole metres too
+    assert np.array_equal(hf.heights, np.rint(hf.heights))  # the fill is whole metres too
     pyr = TilePyramid(hf, 64)
-    for level in range(pyr.max_level + 1):                              # so every tile's 16-bit codes are exact
+    for level in range(pyr.max_level + 1):  # so every tile's 16-bit codes are exact
         rows, cols = pyr.tile_counts(level)
         ty, tx = np.divmod(np.arange(rows * cols), cols)
         assert not pyr.quantization_errors_at(level, tx, ty).any()

@@ -1,5 +1,6 @@
 """The tile selection as a plain per-tile traversal (one Python step per tile): the independent reference that
 hybrid.tiles.tiletree's vectorised select_tiles is checked against in tests."""
+
 import math
 
 import numpy as np
@@ -21,7 +22,7 @@ def aabb_distance(eye: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
 def classify_aabb(planes: np.ndarray, lo_rel: np.ndarray, hi_rel: np.ndarray) -> int:
     """-1 if the eye-relative box is outside the frustum, 1 if wholly inside, 0 if it crosses a plane."""
     n = planes[:, :3]
-    pos = np.where(n >= 0, hi_rel, lo_rel)   # corner farthest along each normal
+    pos = np.where(n >= 0, hi_rel, lo_rel)  # corner farthest along each normal
     neg = np.where(n >= 0, lo_rel, hi_rel)
     if np.any(np.einsum("ij,ij->i", n, pos) + planes[:, 3] < 0):
         return -1
@@ -43,7 +44,7 @@ def select_tiles_by_traversal(pyramid, view, tau: float = 2 / 3) -> list[Selecte
             lo, hi = pyramid.aabb(key)
             c = classify_aabb(planes, lo - eye, hi - eye)
             d = aabb_distance(eye, lo, hi)
-            err = pyramid.error(key) + pyramid.quantization_error(key)      # geometric + 16-bit heights
+            err = pyramid.error(key) + pyramid.quantization_error(key)  # geometric + 16-bit heights
             pe = err * K / d if d > 0 else (np.inf if err > 0 else 0.0)
             info[key] = (d, pe, c)
         return info[key]

@@ -4,6 +4,7 @@ Every user error (a TerrabenchError, from an option check or from the library) e
 `terrabench: error: ...` naming the argument and exit code 2, before anything is written; any other
 exception is a bug and keeps its traceback.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -15,8 +16,17 @@ from hybrid.errors import TerrabenchError
 
 from . import bench, calibrate, info, prepare, render, report, run, scale, stress
 
-COMMANDS = {"info": info, "render": render, "run": run, "report": report, "calibrate": calibrate,
-            "stress": stress, "bench": bench, "prepare": prepare, "scale": scale}
+COMMANDS = {
+    "info": info,
+    "render": render,
+    "run": run,
+    "report": report,
+    "calibrate": calibrate,
+    "stress": stress,
+    "bench": bench,
+    "prepare": prepare,
+    "scale": scale,
+}
 """Subcommand name -> its module."""
 
 
@@ -31,8 +41,11 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand."""
-    p = _Parser(prog="terrabench", description="Rasterize meshes or ray-cast the height field, tile by tile: "
-                "render, measure and compare on real elevation data.")
+    p = _Parser(
+        prog="terrabench",
+        description="Rasterize meshes or ray-cast the height field, tile by tile: "
+        "render, measure and compare on real elevation data.",
+    )
     p.add_argument("--device", type=int, default=None, help="EGL device index (or TERRABENCH_GL_DEVICE)")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name, module in COMMANDS.items():
@@ -56,7 +69,7 @@ def main(argv=None) -> int:
     except TerrabenchError as exc:
         print(f"terrabench: error: {exc}", file=sys.stderr)
         return 2
-    except BrokenPipeError:                      # the reader of stdout went away (| head): stop quietly
+    except BrokenPipeError:  # the reader of stdout went away (| head): stop quietly
         devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())    # so the interpreter's final flush does not fail again
+        os.dup2(devnull, sys.stdout.fileno())  # so the interpreter's final flush does not fail again
         return 141

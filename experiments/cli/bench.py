@@ -1,4 +1,5 @@
 """`terrabench bench`: the ray-cast, raster, hybrid, planning and CPU benchmarks in one process, tables printed and saved."""
+
 from __future__ import annotations
 
 import argparse
@@ -13,8 +14,10 @@ from hybrid.atomic import write_text
 from ..folders import writable_folder
 from . import argtypes
 
-HELP = ("the ray-cast, triangle-count, raster, hybrid, adaptation, choice, planning and CPU benchmarks in one run, "
-        "with the device named")
+HELP = (
+    "the ray-cast, triangle-count, raster, hybrid, adaptation, choice, planning and CPU benchmarks in one run, "
+    "with the device named"
+)
 BENCHES = ("raycast", "triangles", "raster", "hybrid", "adapt", "choice", "planning", "cpu")
 """In the order they run: triangles (mesh triangle counts against error) and planning use the CPU alone; adapt is
 the hybrid started from wrong cost models (``experiments.bench_adapt``), choice what choosing costs where the
@@ -24,8 +27,12 @@ no-op driver (``experiments.bench_cpu``)."""
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The bench options: which benchmarks, frames per flight, and a markdown file to write."""
-    p.add_argument("--which", type=argtypes.names("--which", BENCHES), default=",".join(BENCHES),
-                   help="comma-separated: " + ", ".join(BENCHES))
+    p.add_argument(
+        "--which",
+        type=argtypes.names("--which", BENCHES),
+        default=",".join(BENCHES),
+        help="comma-separated: " + ", ".join(BENCHES),
+    )
     p.add_argument("--frames", type=argtypes.int_in("--frames", 1, 1000), default=8, help="frames of each flight")
     p.add_argument("--out", default=None, help="also write the tables to this markdown file")
 
@@ -34,26 +41,34 @@ def benchmark(ctx, name: str, frames: int = 8) -> dict[str, pd.DataFrame]:
     """One benchmark's tables keyed by title; frames per flight (the triangle and raster benchmarks have none)."""
     if name == "raycast":
         from ..bench_raycast import run
+
         return run(ctx, frames=frames)
     if name == "triangles":
         from ..bench_raster import triangle_tables
+
         return triangle_tables()
     if name == "raster":
         from ..bench_raster import run
+
         return run(ctx)
     if name == "planning":
         from ..bench_planning import run
+
         return run(ctx, frames=frames)
     if name == "cpu":
         from ..bench_cpu import run
+
         return run(ctx, frames=frames)
     if name == "adapt":
         from ..bench_adapt import run
-        return run(ctx, frames=max(frames, 24))        # its targets read frames 8 to 23 of a 24-frame flight
+
+        return run(ctx, frames=max(frames, 24))  # its targets read frames 8 to 23 of a 24-frame flight
     if name == "choice":
         from ..bench_choice import run
+
         return run(ctx, frames=frames)
     from ..bench_hybrid import run
+
     return run(ctx, frames=frames)
 
 
@@ -62,13 +77,16 @@ def run(which=BENCHES, frames: int = 8, out=None, device: int | None = None) -> 
     from hybrid.gl.context import gl_info, shared_context
 
     from ..tables import markdown_tables, text_tables
+
     out = Path(out) if out else None
     if out is not None:
         writable_folder(out.parent if str(out.parent) else Path("."), "--out folder")
     ctx = shared_context(device)
     info = gl_info(ctx)
-    head = (f"# terrabench benchmarks\n\ndevice: {info.renderer} ({info.version}); CPU cores: {os.cpu_count()}; "
-            f"{platform.platform()}\n")
+    head = (
+        f"# terrabench benchmarks\n\ndevice: {info.renderer} ({info.version}); CPU cores: {os.cpu_count()}; "
+        f"{platform.platform()}\n"
+    )
     print(head)
     md, results = [head], {}
     for name in which:

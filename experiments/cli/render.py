@@ -1,4 +1,5 @@
 """`terrabench render`: one view with one method to PATH.png and PATH.depth.npy (and PATH.strategy.png)."""
+
 from __future__ import annotations
 
 import argparse
@@ -31,19 +32,39 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", default="reference", choices=methods())
     p.add_argument("--out", required=True, help="output PNG path; the depth goes to PATH.depth.npy")
     p.add_argument("--shading", default=None, help="texture, shaded or height (default: texture if present)")
-    p.add_argument("--supersample", type=argtypes.int_in("--supersample", 1, 8), default=1,
-                   help="reference colour supersampling factor (1..8)")
-    p.add_argument("--tau", type=argtypes.positive_float("--tau", "pixels"), default=2 / 3,
-                   help="screen-space error bound in pixels (> 0)")
-    p.add_argument("--tile-size", type=argtypes.power_of_two("--tile-size"), default=None,
-                   help="cells per tile side (power of two; default 256, or a tile store's own)")
+    p.add_argument(
+        "--supersample",
+        type=argtypes.int_in("--supersample", 1, 8),
+        default=1,
+        help="reference colour supersampling factor (1..8)",
+    )
+    p.add_argument(
+        "--tau",
+        type=argtypes.positive_float("--tau", "pixels"),
+        default=2 / 3,
+        help="screen-space error bound in pixels (> 0)",
+    )
+    p.add_argument(
+        "--tile-size",
+        type=argtypes.power_of_two("--tile-size"),
+        default=None,
+        help="cells per tile side (power of two; default 256, or a tile store's own)",
+    )
     _add_ray_arguments(p)
     _add_raster_arguments(p)
     p.add_argument("--show-strategy", action="store_true", help="hybrid: also write PATH.strategy.png")
-    p.add_argument("--edit", type=Path, default=None, metavar="FILE.jsonl",
-                   help="replay this edit log (JSON lines, made for this terrain) on the GPU before rendering")
-    p.add_argument("--freeze-model", action="store_true",
-                   help="hybrid: choose by the loaded cost model as it is (no online refit from the frames drawn)")
+    p.add_argument(
+        "--edit",
+        type=Path,
+        default=None,
+        metavar="FILE.jsonl",
+        help="replay this edit log (JSON lines, made for this terrain) on the GPU before rendering",
+    )
+    p.add_argument(
+        "--freeze-model",
+        action="store_true",
+        help="hybrid: choose by the loaded cost model as it is (no online refit from the frames drawn)",
+    )
 
 
 def _add_ray_arguments(p: argparse.ArgumentParser) -> None:
@@ -52,10 +73,21 @@ def _add_ray_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reconstruction", default="triangles", help=f"ray-cast surface: {', '.join(recs)}")
     p.add_argument("--traversal", default="maxmip", help="ray-cast traversal: maxmip or naive (level-0 stepping)")
     pre = p.add_mutually_exclusive_group()
-    pre.add_argument("--prepass", dest="prepass", action="store_const", const=True, default=None,
-                     help="ray casting with the tile-ID pre-pass (default: on a GPU, not on a CPU rasterizer)")
-    pre.add_argument("--no-prepass", dest="prepass", action="store_const", const=False,
-                     help="ray casting without the tile-ID pre-pass")
+    pre.add_argument(
+        "--prepass",
+        dest="prepass",
+        action="store_const",
+        const=True,
+        default=None,
+        help="ray casting with the tile-ID pre-pass (default: on a GPU, not on a CPU rasterizer)",
+    )
+    pre.add_argument(
+        "--no-prepass",
+        dest="prepass",
+        action="store_const",
+        const=False,
+        help="ray casting without the tile-ID pre-pass",
+    )
     p.add_argument("--lod", action="store_true", help="ray casting stops descending at tau pixels (LOD)")
     p.add_argument("--shadows", action="store_true", help="ray-cast shadow rays toward the light")
 
@@ -63,19 +95,37 @@ def _add_ray_arguments(p: argparse.ArgumentParser) -> None:
 def _add_raster_arguments(p: argparse.ArgumentParser) -> None:
     """The raster draw options: wireframe, lean leaves and the full-resolution rule."""
     p.add_argument("--wireframe", action="store_true", help="raster methods: draw edges only")
-    p.add_argument("--no-lean", dest="lean", action="store_false",
-                   help="raster, raster_gs (and their tiles in mixed policies): every leaf keeps the edge midpoints "
-                        "that only lean leaves drop (those no finer neighbour and no near split needs)")
-    p.add_argument("--full-res", choices=option_choices("full_res"), default=DEFAULT_FULL_RES,
-                   help="raster, raster_gs (and their tiles in mixed policies): full-resolution leaves drop "
-                        "midpoints by their errors as other leaves do (lean: no more triangles than the bound asks "
-                        "for), or keep every midpoint, cells split as the reference's (exact: more triangles, "
-                        "closer to the reference at a given tau)")
+    p.add_argument(
+        "--no-lean",
+        dest="lean",
+        action="store_false",
+        help="raster, raster_gs (and their tiles in mixed policies): every leaf keeps the edge midpoints "
+        "that only lean leaves drop (those no finer neighbour and no near split needs)",
+    )
+    p.add_argument(
+        "--full-res",
+        choices=option_choices("full_res"),
+        default=DEFAULT_FULL_RES,
+        help="raster, raster_gs (and their tiles in mixed policies): full-resolution leaves drop "
+        "midpoints by their errors as other leaves do (lean: no more triangles than the bound asks "
+        "for), or keep every midpoint, cells split as the reference's (exact: more triangles, "
+        "closer to the reference at a given tau)",
+    )
 
 
-def draw_options(method: str, tau: float, shading=None, reconstruction="triangles", traversal="maxmip",
-                 prepass=None, lod=False, shadows=False, wireframe=False, lean=True,
-                 full_res=DEFAULT_FULL_RES) -> dict:
+def draw_options(
+    method: str,
+    tau: float,
+    shading=None,
+    reconstruction="triangles",
+    traversal="maxmip",
+    prepass=None,
+    lod=False,
+    shadows=False,
+    wireframe=False,
+    lean=True,
+    full_res=DEFAULT_FULL_RES,
+) -> dict:
     """Strategy draw options for a method (only those asked for, so the rest stay the strategy's defaults)."""
     opts = {}
     if shading:
@@ -89,8 +139,9 @@ def draw_options(method: str, tau: float, shading=None, reconstruction="triangle
         if lod:
             opts["lod"] = tau
     elif shadows or lod or prepass is not None or traversal != "maxmip":
-        raise TerrabenchError("--shadows, --lod, --prepass, --no-prepass and --traversal apply to --method raycast "
-                              "only")
+        raise TerrabenchError(
+            "--shadows, --lod, --prepass, --no-prepass and --traversal apply to --method raycast only"
+        )
     if method in mixed_policies():
         opts.update(reconstruction=reconstruction, **({} if prepass is None else {"prepass": prepass}))
     if wireframe:
@@ -99,27 +150,45 @@ def draw_options(method: str, tau: float, shading=None, reconstruction="triangle
         opts["wireframe"] = True
     if not lean:
         if method not in policies_taking("lean"):
-            raise TerrabenchError("--no-lean applies to raster, raster_gs and the mixed policies (hybrid, heuristic, "
-                                  "oracle)")
+            raise TerrabenchError(
+                "--no-lean applies to raster, raster_gs and the mixed policies (hybrid, heuristic, oracle)"
+            )
         opts["lean"] = False
     if full_res != DEFAULT_FULL_RES:
         if method not in policies_taking("full_res"):
-            raise TerrabenchError("--full-res applies to raster, raster_gs and the mixed policies (hybrid, heuristic, "
-                                  "oracle)")
+            raise TerrabenchError(
+                "--full-res applies to raster, raster_gs and the mixed policies (hybrid, heuristic, oracle)"
+            )
         opts["full_res"] = full_res
     return opts
 
 
-def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions(),
-        view: ViewOptions = ViewOptions(), shading: str | None = None, supersample: int = 1, tau: float = 2 / 3,
-        tile_size: int | None = None, reconstruction: str = "triangles", traversal: str = "maxmip",
-        prepass: bool | None = None,
-        lod: bool = False, shadows: bool = False, wireframe: bool = False, show_strategy: bool = False,
-        device: int | None = None, lean: bool = True, full_res: str = DEFAULT_FULL_RES, freeze_model: bool = False,
-        edit: Path | None = None):
+def run(
+    out,
+    method: str = "reference",
+    terrain: TerrainOptions = TerrainOptions(),
+    view: ViewOptions = ViewOptions(),
+    shading: str | None = None,
+    supersample: int = 1,
+    tau: float = 2 / 3,
+    tile_size: int | None = None,
+    reconstruction: str = "triangles",
+    traversal: str = "maxmip",
+    prepass: bool | None = None,
+    lod: bool = False,
+    shadows: bool = False,
+    wireframe: bool = False,
+    show_strategy: bool = False,
+    device: int | None = None,
+    lean: bool = True,
+    full_res: str = DEFAULT_FULL_RES,
+    freeze_model: bool = False,
+    edit: Path | None = None,
+):
     """Render one view with a method, after replaying the edit log ``edit`` if given; write out (.png) and its
     .depth.npy; returns the RenderResult."""
     from hybrid.gl.context import shared_context
+
     out = _checked_out(out, method, show_strategy, freeze_model)
     hf = terrain.load()
     log = _checked_log(edit, hf)
@@ -128,13 +197,16 @@ def run(out, method: str = "reference", terrain: TerrainOptions = TerrainOptions
     ctx = shared_context(device)
     if method == "reference":
         from hybrid.reference import ReferenceRenderer
+
         with ReferenceRenderer(ctx, hf) as r:
             _replay(ctx, hf, log, reference=r)
             result = r.render(view.view(hf), mode=shading, supersample=supersample)
     else:
         from hybrid.renderer import Renderer
-        opts = draw_options(method, tau, shading, reconstruction, traversal, prepass, lod, shadows, wireframe, lean,
-                            full_res)
+
+        opts = draw_options(
+            method, tau, shading, reconstruction, traversal, prepass, lod, shadows, wireframe, lean, full_res
+        )
         with Renderer(ctx, hf, method, tile_size, adapt=not freeze_model, **opts) as r:
             _replay(ctx, hf, log, renderer=r)
             v = view.view(hf)
@@ -151,13 +223,15 @@ def _checked_log(edit: Path | None, hf):
     if edit is None:
         return None
     from hybrid.terrain.edit_log import check_log, read_log
+
     return check_log(read_log(edit), hf, str(edit))
 
 
 def _write_outputs(result, out: Path, show_strategy: bool) -> tuple:
     """Write the frame's PNG and depth (and with ``show_strategy`` its strategy map beside them); the two paths."""
     from hybrid.atomic import remove_stale_temps
-    remove_stale_temps(out.parent)                       # what a killed render left beside its output
+
+    remove_stale_temps(out.parent)  # what a killed render left beside its output
     png, depth = result.save(out)
     if show_strategy:
         smap = out.parent / (out.stem + ".strategy.png")
@@ -169,6 +243,7 @@ def _write_outputs(result, out: Path, show_strategy: bool) -> tuple:
 def _checked_out(out, method: str, show_strategy: bool, freeze_model: bool) -> Path:
     """The output PNG path, its folder writable; refuses options the method does not take."""
     from hybrid.gl.target import check_png_path
+
     out = check_png_path(out, "--out")
     writable_folder(out.parent if str(out.parent) else Path("."), "--out folder")
     if show_strategy and method not in mixed_policies():
@@ -192,6 +267,7 @@ def _replay(ctx, hf, log, **renderers) -> None:
     if log is None:
         return
     from hybrid.editing import TerrainEditor, replay
+
     with TerrainEditor(ctx, hf, **renderers) as editor:
         reports = replay(editor, log)
     total: dict = {}
@@ -204,16 +280,35 @@ def _replay(ctx, hf, log, **renderers) -> None:
 
 def run_from_args(args: argparse.Namespace) -> int:
     """The render command from parsed arguments; returns the exit code."""
-    run(args.out, args.method, from_args(TerrainOptions, args), from_args(ViewOptions, args), args.shading,
-        args.supersample, args.tau, args.tile_size, args.reconstruction, args.traversal, args.prepass, args.lod,
-        args.shadows, args.wireframe, args.show_strategy, args.device, args.lean, args.full_res, args.freeze_model,
-        args.edit)
+    run(
+        args.out,
+        args.method,
+        from_args(TerrainOptions, args),
+        from_args(ViewOptions, args),
+        args.shading,
+        args.supersample,
+        args.tau,
+        args.tile_size,
+        args.reconstruction,
+        args.traversal,
+        args.prepass,
+        args.lod,
+        args.shadows,
+        args.wireframe,
+        args.show_strategy,
+        args.device,
+        args.lean,
+        args.full_res,
+        args.freeze_model,
+        args.edit,
+    )
     return 0
 
 
 def save_strategy_map(result, path: Path) -> None:
     """Write the per-pixel strategy map blended over the frame: blue = raster tile, orange = ray-cast tile."""
     from hybrid.atomic import save_png
+
     m = result.maps["strategy"]
     col = result.colour.astype(np.float32)
     tint = np.zeros_like(col)

@@ -1,4 +1,5 @@
 """`terrabench report RUN`: the report of a run folder (paired flights or stress)."""
+
 from __future__ import annotations
 
 import argparse
@@ -20,6 +21,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(folder, reports="reports", name: str | None = None, video: bool = False) -> Path:
     """Write the report of a run folder into reports/<name>/; returns the markdown file."""
     from ..report import write_run_report
+
     path = write_run_report(Path(folder), Path(reports), name, video)
     html = path.with_suffix(".html")
     print(f"wrote {path}" + (f" and {html}" if html.exists() else ""))

@@ -9,6 +9,7 @@ Presets place their eyes from the height samples: over the local relief, and hig
 ahead stays below a given elevation angle (so that a level view shows sky above it); no peak between the
 points of a sparse stencil is missed.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -40,10 +41,11 @@ def check_eye_above(hf: HeightField, view: View, what: str = "view") -> None:
         raise TerrabenchError(
             f"{what}: the eye at ({view.eye[0]:.1f}, {view.eye[1]:.1f}, {view.eye[2]:.1f}) m is {abs(c):.2f} m "
             f"{'below' if c < 0 else 'above'} the ground, {where}; methods and the reference would not draw the "
-            "same scene: raise the eye")
+            "same scene: raise the eye"
+        )
 
 
-_CHUNK = 1 << 22        # elements gathered at once (bounds the memory of long flights on large grids)
+_CHUNK = 1 << 22  # elements gathered at once (bounds the memory of long flights on large grids)
 
 
 def _chunks(n: int, per_item: int):
@@ -64,9 +66,13 @@ def ground_extremes(hf: HeightField, x, y, radius: float) -> tuple[np.ndarray, n
     fj = np.floor((x - hf.origin[0]) / hf.spacing_x).astype(np.int64)
     ki, kj = int(np.ceil(radius / hf.spacing_y)), int(np.ceil(radius / hf.spacing_x))
     bounds = getattr(hf, "window_extremes", None)
-    if bounds is not None and (2 * ki + 3) * (2 * kj + 3) > _CHUNK:     # a stored terrain: its tiles' bounds
-        lo, hi = bounds(np.clip(fi - ki, 0, hf.rows - 1), np.clip(fi + ki + 1, 0, hf.rows - 1),
-                        np.clip(fj - kj, 0, hf.cols - 1), np.clip(fj + kj + 1, 0, hf.cols - 1))
+    if bounds is not None and (2 * ki + 3) * (2 * kj + 3) > _CHUNK:  # a stored terrain: its tiles' bounds
+        lo, hi = bounds(
+            np.clip(fi - ki, 0, hf.rows - 1),
+            np.clip(fi + ki + 1, 0, hf.rows - 1),
+            np.clip(fj - kj, 0, hf.cols - 1),
+            np.clip(fj + kj + 1, 0, hf.cols - 1),
+        )
         return hf.origin[2] + lo, hf.origin[2] + hi
     di, dj = np.arange(-ki, ki + 2), np.arange(-kj, kj + 2)
     lo, hi = np.empty(len(x)), np.empty(len(x))

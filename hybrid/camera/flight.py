@@ -6,6 +6,7 @@ keyframes. Presets keep the eye above the ground by a margin that grows with the
 height samples around every eye: hybrid.camera.clearance), and `grazing` stays low but high enough that the
 ground ahead rises at most GRAZING_RISE_DEG above its level view: sky above, terrain below.
 """
+
 from __future__ import annotations
 
 import csv
@@ -22,8 +23,8 @@ from hybrid.errors import TerrabenchError
 from hybrid.terrain.heightfield import HeightField
 
 PRESETS = ("orbit", "flyover", "grazing", "lookdown", "dolly", "transect")
-GRAZING_RISE_DEG = 10.0         # the ground ahead of a grazing eye rises at most this far above its level view
-GRAZING_RADIUS_CELLS = 4        # the grazing eye clears the samples within this many cells by a tenth of their relief
+GRAZING_RISE_DEG = 10.0  # the ground ahead of a grazing eye rises at most this far above its level view
+GRAZING_RADIUS_CELLS = 4  # the grazing eye clears the samples within this many cells by a tenth of their relief
 
 
 @dataclass
@@ -44,12 +45,16 @@ class Flight:
         self.eyes = np.asarray(self.eyes, dtype=np.float64).reshape(-1, 3)
         self.targets = np.asarray(self.targets, dtype=np.float64).reshape(-1, 3)
         if len(self.eyes) < 1 or len(self.eyes) != len(self.targets):
-            raise TerrabenchError(f"flight {self.name!r}: needs matching eye and target keyframes, got "
-                                  f"{len(self.eyes)} and {len(self.targets)}")
+            raise TerrabenchError(
+                f"flight {self.name!r}: needs matching eye and target keyframes, got "
+                f"{len(self.eyes)} and {len(self.targets)}"
+            )
         if not (np.all(np.isfinite(self.eyes)) and np.all(np.isfinite(self.targets))):
             raise TerrabenchError(f"flight {self.name!r}: keyframes must be finite numbers")
         if isinstance(self.frames, bool) or int(self.frames) != self.frames or not (1 <= int(self.frames) <= 100000):
-            raise TerrabenchError(f"flight {self.name!r}: frames must be an integer in [1, 100000], got {self.frames!r}")
+            raise TerrabenchError(
+                f"flight {self.name!r}: frames must be an integer in [1, 100000], got {self.frames!r}"
+            )
         self.frames = int(self.frames)
         self.view(0)  # validates camera settings
 
@@ -62,15 +67,26 @@ class Flight:
         t = u - i
         p0, p1, p2, p3 = pts[max(i - 1, 0)], pts[i], pts[i + 1], pts[min(i + 2, k - 1)]
         t2, t3 = t * t, t * t * t
-        return 0.5 * ((2 * p1) + (-p0 + p2) * t + (2 * p0 - 5 * p1 + 4 * p2 - p3) * t2 + (-p0 + 3 * p1 - 3 * p2 + p3) * t3)
+        return 0.5 * (
+            (2 * p1) + (-p0 + p2) * t + (2 * p0 - 5 * p1 + 4 * p2 - p3) * t2 + (-p0 + 3 * p1 - 3 * p2 + p3) * t3
+        )
 
     def view(self, k: int, width: int | None = None, height: int | None = None) -> View:
         """The view of frame k (0-based), optionally at another viewport size."""
         if isinstance(k, bool) or int(k) != k or not (0 <= int(k) < self.frames):
-            raise TerrabenchError(f"frame must be an integer in [0, {self.frames - 1}] for flight {self.name!r}, got {k!r}")
+            raise TerrabenchError(
+                f"frame must be an integer in [0, {self.frames - 1}] for flight {self.name!r}, got {k!r}"
+            )
         s = 0.0 if self.frames == 1 else int(k) / (self.frames - 1)
-        return View(self._spline(self.eyes, s), self._spline(self.targets, s), self.fov_y,
-                    width or self.width, height or self.height, self.near, self.far)
+        return View(
+            self._spline(self.eyes, s),
+            self._spline(self.targets, s),
+            self.fov_y,
+            width or self.width,
+            height or self.height,
+            self.near,
+            self.far,
+        )
 
     def views(self, width: int | None = None, height: int | None = None) -> list[View]:
         """All frames' views."""
@@ -79,9 +95,16 @@ class Flight:
     # --- files -------------------------------------------------------------------------------
     def to_dict(self) -> dict:
         """Plain-data form (JSON-ready)."""
-        return {"name": self.name, "frames": self.frames, "fov_y": self.fov_y, "width": self.width,
-                "height": self.height, "near": self.near, "far": self.far,
-                "keyframes": [{"eye": e.tolist(), "target": t.tolist()} for e, t in zip(self.eyes, self.targets)]}
+        return {
+            "name": self.name,
+            "frames": self.frames,
+            "fov_y": self.fov_y,
+            "width": self.width,
+            "height": self.height,
+            "near": self.near,
+            "far": self.far,
+            "keyframes": [{"eye": e.tolist(), "target": t.tolist()} for e, t in zip(self.eyes, self.targets)],
+        }
 
     def save(self, path) -> None:
         """Write the flight as JSON (.json) or CSV (.csv: one keyframe a row; settings in a '#' header)."""
@@ -143,7 +166,7 @@ def _stencil_heights(hf: HeightField, x: np.ndarray, y: np.ndarray, radius: floa
 DOLLY_PITCH_DEG = 8.0
 
 
-DOLLY_FLOW_PX = 0.6             # the dolly's image motion a frame at the bottom of its view over flat ground (px)
+DOLLY_FLOW_PX = 0.6  # the dolly's image motion a frame at the bottom of its view over flat ground (px)
 
 
 def _dolly_line(hf: HeightField, k: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
@@ -198,15 +221,16 @@ def _dolly(hf: HeightField, k: np.ndarray, fov_y: float, height: int) -> tuple[n
     step = max(2.0, min(hf.spacing_x, hf.spacing_y) / 40.0)
     px_per_rad = height / (2.0 * np.tan(np.radians(fov_y) / 2))
     sin2 = np.sin(np.radians(DOLLY_PITCH_DEG + fov_y / 2)) ** 2
-    for _ in range(2):                  # the line's height depends on its length: settle the step twice
+    for _ in range(2):  # the line's height depends on its length: settle the step twice
         eyes, _targets = _dolly_line(hf, k, step)
         clearance = float(np.min(eyes[:, 2] - hf.ground_height(eyes[:, 0], eyes[:, 1])))
         step = min(step, DOLLY_FLOW_PX * clearance / (sin2 * px_per_rad))
     return _dolly_line(hf, k, step)
 
 
-def preset(name: str, hf: HeightField, frames: int = 60, width: int = 640, height: int = 360,
-           fov_y: float = 60.0) -> Flight:
+def preset(
+    name: str, hf: HeightField, frames: int = 60, width: int = 640, height: int = 360, fov_y: float = 60.0
+) -> Flight:
     """A named flight over hf: orbit, flyover (low), grazing (low, level, the horizon in view), lookdown, dolly
     (slow, straight and level, low over the terrain, looking ahead and slightly down) or transect (straight and
     level across the terrain, looking ahead and down: like content every frame, new tiles all along)."""
@@ -240,8 +264,10 @@ def preset(name: str, hf: HeightField, frames: int = 60, width: int = 640, heigh
         heading = np.array([w, 0.8 * d]) / np.hypot(w, 0.8 * d)
         radius = GRAZING_RADIUS_CELLS * max(hf.spacing_x, hf.spacing_y)
         half_width = np.arctan(np.tan(np.radians(fov_y) / 2) * width / height)
-        z = np.maximum(clear_heights(hf, x, y, radius, floor=2.0, relief_frac=0.1),
-                       horizon_heights(hf, x, y, heading, half_width, np.radians(GRAZING_RISE_DEG)))
+        z = np.maximum(
+            clear_heights(hf, x, y, radius, floor=2.0, relief_frac=0.1),
+            horizon_heights(hf, x, y, heading, half_width, np.radians(GRAZING_RISE_DEG)),
+        )
         eyes = np.stack([x, y, z], 1)
         targets = np.stack([x + w, y + d * 0.8, z], 1)
         near = 0.25
@@ -270,4 +296,6 @@ def get_flight(name_or_path: str, hf: HeightField, frames: int = 60, width: int 
     p = Path(name_or_path)
     if p.suffix.lower() in (".json", ".csv"):
         return Flight.load(p)
-    raise TerrabenchError(f"unknown flight {name_or_path!r}; choose one of {', '.join(PRESETS)} or give a .json/.csv file")
+    raise TerrabenchError(
+        f"unknown flight {name_or_path!r}; choose one of {', '.join(PRESETS)} or give a .json/.csv file"
+    )

@@ -6,6 +6,7 @@ relative to the eye: ``view_proj_rel`` maps (world - eye) to clip space, so terr
 origin loses no float32 precision. Images are stored top row first; pixel (r, c) has its centre at
 (c + 0.5, r + 0.5) from the top-left corner.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -14,10 +15,10 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError, check_positive, check_range
 
-MAX_DEPTH_RATIO = 1e12          # far / near at most: beyond it the far plane's normal underflows
+MAX_DEPTH_RATIO = 1e12  # far / near at most: beyond it the far plane's normal underflows
 MAX_VIEWPORT = 16384
-MAX_COORDINATE = 1.0e9             # metres: |eye|, |target| and terrain origins stay within (float64 ~1e-7 m steps)
-DEPTH_CHUNK_PIXELS = 1 << 22        # pixels converted at a time from depth to distance (bounded temporaries)
+MAX_COORDINATE = 1.0e9  # metres: |eye|, |target| and terrain origins stay within (float64 ~1e-7 m steps)
+DEPTH_CHUNK_PIXELS = 1 << 22  # pixels converted at a time from depth to distance (bounded temporaries)
 
 
 def parse_size(text, what: str = "size") -> tuple[int, int]:
@@ -27,8 +28,9 @@ def parse_size(text, what: str = "size") -> tuple[int, int]:
     except ValueError:
         w = h = 0
     if not (1 <= w <= MAX_VIEWPORT and 1 <= h <= MAX_VIEWPORT):
-        raise TerrabenchError(f"{what} must be WIDTHxHEIGHT in pixels with width and height in [1, {MAX_VIEWPORT}], "
-                              f"got {text!r}")
+        raise TerrabenchError(
+            f"{what} must be WIDTHxHEIGHT in pixels with width and height in [1, {MAX_VIEWPORT}], got {text!r}"
+        )
     return w, h
 
 
@@ -62,12 +64,14 @@ class View:
         scale = float(np.abs(self.up).max())
         if scale == 0.0:
             raise TerrabenchError("up must be a non-zero vector, got (0, 0, 0)")
-        object.__setattr__(self, "up", self.up / scale)          # only its direction matters; no overflow
+        object.__setattr__(self, "up", self.up / scale)  # only its direction matters; no overflow
         for name in ("eye", "target"):
             far_off = float(np.abs(getattr(self, name)).max())
             if far_off > MAX_COORDINATE:
-                raise TerrabenchError(f"{name} coordinate {far_off:g} m is beyond the world limit of "
-                                      f"±{MAX_COORDINATE:g} m (float64 keeps sub-millimetre steps only within it)")
+                raise TerrabenchError(
+                    f"{name} coordinate {far_off:g} m is beyond the world limit of "
+                    f"±{MAX_COORDINATE:g} m (float64 keeps sub-millimetre steps only within it)"
+                )
         check_range("fov_y (degrees)", self.fov_y, 0.0, 180.0)
         for name in ("width", "height"):
             v = getattr(self, name)
@@ -79,8 +83,10 @@ class View:
         if not self.far > self.near:
             raise TerrabenchError(f"far ({self.far}) must be greater than near ({self.near})")
         if self.far > MAX_DEPTH_RATIO * self.near:
-            raise TerrabenchError(f"far / near is {self.far / self.near:.3g}, above {MAX_DEPTH_RATIO:g}: the frustum's "
-                                  f"planes and a depth buffer cannot resolve that; raise near ({self.near}) or lower far")
+            raise TerrabenchError(
+                f"far / near is {self.far / self.near:.3g}, above {MAX_DEPTH_RATIO:g}: the frustum's "
+                f"planes and a depth buffer cannot resolve that; raise near ({self.near}) or lower far"
+            )
         d = self.target - self.eye
         if np.linalg.norm(d) <= 1e-9 * max(1.0, np.linalg.norm(self.eye)):
             raise TerrabenchError("target must differ from eye")
@@ -188,7 +194,7 @@ class View:
     def pixel_dirs_eye(self, rows=None, cols=None) -> np.ndarray:
         """Eye-space directions (x, y, -1) through pixel centres; full image (H, W, 3) if rows/cols None."""
         if rows is None:
-            rows, cols = np.mgrid[0:self.height, 0:self.width]
+            rows, cols = np.mgrid[0 : self.height, 0 : self.width]
         rows = np.asarray(rows, dtype=np.float64)
         cols = np.asarray(cols, dtype=np.float64)
         ndc_x = (cols + 0.5) / self.width * 2.0 - 1.0
@@ -205,8 +211,9 @@ class View:
         """Eye-to-surface distance in metres from a reversed-Z depth image (top row first); inf where 0."""
         depth = np.asarray(depth)
         if depth.shape != (self.height, self.width):
-            raise TerrabenchError(f"depth image of shape {depth.shape} does not match the view's "
-                                  f"{self.height}x{self.width} pixels")
+            raise TerrabenchError(
+                f"depth image of shape {depth.shape} does not match the view's {self.height}x{self.width} pixels"
+            )
         n, f = self.near, self.far
         a, b = n / (f - n), n * f / (f - n)
         t = self.tan_half_fov
@@ -215,11 +222,11 @@ class View:
         y2 = ((1.0 - (np.arange(self.height) + 0.5) / self.height * 2.0) * t) ** 2
         out = np.empty(depth.shape, np.float32)
         step = max(1, DEPTH_CHUNK_PIXELS // max(self.width, 1))
-        for r in range(0, self.height, step):                # bounded float64 temporaries on huge images
-            d = depth[r:r + step].astype(np.float64)
+        for r in range(0, self.height, step):  # bounded float64 temporaries on huge images
+            d = depth[r : r + step].astype(np.float64)
             with np.errstate(divide="ignore", invalid="ignore"):
-                dist = b / (a + d) * np.sqrt(1.0 + x2[None, :] + y2[r:r + step, None])
-            out[r:r + step] = np.where(d > 0.0, dist, np.inf)
+                dist = b / (a + d) * np.sqrt(1.0 + x2[None, :] + y2[r : r + step, None])
+            out[r : r + step] = np.where(d > 0.0, dist, np.inf)
         return out
 
     def project(self, points: np.ndarray) -> np.ndarray:
@@ -241,7 +248,7 @@ class View:
         return View(self.eye + o, self.target + o, self.fov_y, self.width, self.height, self.near, self.far, self.up)
 
 
-STRIP_ASPECT = 8.0              # a terrain this many times longer than wide is viewed along its length
+STRIP_ASPECT = 8.0  # a terrain this many times longer than wide is viewed along its length
 
 
 def default_view(hf, width=640, height=360, fov_y=60.0) -> View:

@@ -1,4 +1,5 @@
 """Per-tile features known before drawing, for the cost model: footprint, triangles, ray-step proxy, level, distance."""
+
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
@@ -56,6 +57,7 @@ def _convex_hull(pts) -> list[tuple[float, float]]:
 
     def cross(o, a, b):
         return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
     lower, upper = [], []
     for p in pts:
         while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
@@ -102,7 +104,7 @@ def footprint_pixels(view: View, lo: np.ndarray, hi: np.ndarray) -> float:
     vertices: the corners in front of the plane and the points where box edges cross it.
     """
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    rel = (corners - view.eye) @ view.rotation().T            # eye space, camera looks down -z
+    rel = (corners - view.eye) @ view.rotation().T  # eye space, camera looks down -z
     depth = -rel[:, 2]
     near = view.near * (1 + 1e-9)
     pts = [rel[i] for i in range(8) if depth[i] >= near]
@@ -132,20 +134,28 @@ def slab_cells(view: View, lo: np.ndarray, hi: np.ndarray, spacing_xy, n: int) -
         return 0.0 if dz == 0.0 else 1.0
     if tan_el == 0.0:
         return float(diag)
-    cells_per_m = float(np.hypot(d[0] / spacing_xy[0], d[1] / spacing_xy[1])) / horiz   # along the ray's heading
+    cells_per_m = float(np.hypot(d[0] / spacing_xy[0], d[1] / spacing_xy[1])) / horiz  # along the ray's heading
     return float(min(dz / tan_el * cells_per_m, diag))
 
 
-def tile_features(pyramid: TilePyramid, view: View, sel: SelectedTile, triangles: float,
-                  visible: float = 1.0) -> TileFeatures:
+def tile_features(
+    pyramid: TilePyramid, view: View, sel: SelectedTile, triangles: float, visible: float = 1.0
+) -> TileFeatures:
     """Features of one selected tile; ``triangles`` and their ``visible`` share come from the raster strategy's
     estimate for this view."""
     lo, hi = pyramid.aabb(sel.key)
     k = 1 << sel.key.level
     spacing = (pyramid.hf.spacing_x * k, pyramid.hf.spacing_y * k)
     mid = np.array([lo[0], lo[1], 0.5 * (lo[2] + hi[2])]), np.array([hi[0], hi[1], 0.5 * (lo[2] + hi[2])])
-    return TileFeatures(footprint_pixels(view, lo, hi), float(triangles), slab_cells(view, lo, hi, spacing, pyramid.n),
-                        sel.key.level, sel.distance, float(visible), footprint_pixels(view, *mid))
+    return TileFeatures(
+        footprint_pixels(view, lo, hi),
+        float(triangles),
+        slab_cells(view, lo, hi, spacing, pyramid.n),
+        sel.key.level,
+        sel.distance,
+        float(visible),
+        footprint_pixels(view, *mid),
+    )
 
 
 def slab_cells_batch(view: View, lo: np.ndarray, hi: np.ndarray, spacing: np.ndarray, n: int) -> np.ndarray:
@@ -157,18 +167,17 @@ def slab_cells_batch(view: View, lo: np.ndarray, hi: np.ndarray, spacing: np.nda
     dz = hi[:, 2] - lo[:, 2]
     along = np.hypot(d[:, 0] / spacing[:, 0], d[:, 1] / spacing[:, 1])
     with np.errstate(divide="ignore", invalid="ignore"):
-        cells = np.minimum(dz * along / np.abs(d[:, 2]), n * np.sqrt(2.0))     # level eye: the diagonal
-    return np.where(dz == 0.0, 0.0, np.where(along == 0.0, 1.0, cells))         # flat: none; eye straight above: 1
+        cells = np.minimum(dz * along / np.abs(d[:, 2]), n * np.sqrt(2.0))  # level eye: the diagonal
+    return np.where(dz == 0.0, 0.0, np.where(along == 0.0, 1.0, cells))  # flat: none; eye straight above: 1
 
 
-def feature_columns(pyramid: TilePyramid, view: View, selected: list[SelectedTile], triangles,
-                    visible=None) -> dict:
+def feature_columns(pyramid: TilePyramid, view: View, selected: list[SelectedTile], triangles, visible=None) -> dict:
     """The features of all selected tiles of a frame as arrays, one per ``TileFeatures`` field (B,) each.
 
     Equal to ``tile_features`` of each tile (within float rounding); ``triangles`` gives each tile's count and
     ``visible`` their share inside the frustum (default 1).
     """
-    if isinstance(selected, TileSelection):          # select_tiles' own arrays
+    if isinstance(selected, TileSelection):  # select_tiles' own arrays
         keys, lo, hi, distance = selected.keys, selected.lo, selected.hi, selected.distance
     else:
         keys = np.array([(s.key.level, s.key.tx, s.key.ty) for s in selected], dtype=np.int64).reshape(-1, 3)
@@ -181,11 +190,15 @@ def feature_columns(pyramid: TilePyramid, view: View, selected: list[SelectedTil
     area = footprints(view, np.concatenate([lo, mid_lo]), np.concatenate([hi, mid_hi]))
     k = (1 << keys[:, 0]).astype(np.float64)
     spacing = k[:, None] * np.array([pyramid.hf.spacing_x, pyramid.hf.spacing_y])
-    return {"pixels": area[:b], "triangles": np.asarray(triangles, dtype=np.float64).reshape(b),
-            "slab_cells": slab_cells_batch(view, lo, hi, spacing, pyramid.n), "level": keys[:, 0],
-            "distance": distance,
-            "visible": np.ones(b) if visible is None else np.asarray(visible, dtype=np.float64).reshape(b),
-            "surface_pixels": area[b:]}
+    return {
+        "pixels": area[:b],
+        "triangles": np.asarray(triangles, dtype=np.float64).reshape(b),
+        "slab_cells": slab_cells_batch(view, lo, hi, spacing, pyramid.n),
+        "level": keys[:, 0],
+        "distance": distance,
+        "visible": np.ones(b) if visible is None else np.asarray(visible, dtype=np.float64).reshape(b),
+        "surface_pixels": area[b:],
+    }
 
 
 def features_from_columns(columns: dict) -> list[TileFeatures]:
@@ -195,7 +208,8 @@ def features_from_columns(columns: dict) -> list[TileFeatures]:
     return [TileFeatures(**dict(zip(names, r))) for r in rows]
 
 
-def tile_features_batch(pyramid: TilePyramid, view: View, selected: list[SelectedTile], triangles,
-                        visible=None) -> list[TileFeatures]:
+def tile_features_batch(
+    pyramid: TilePyramid, view: View, selected: list[SelectedTile], triangles, visible=None
+) -> list[TileFeatures]:
     """``tile_features`` of every selected tile of a frame in one vectorized computation."""
     return features_from_columns(feature_columns(pyramid, view, selected, triangles, visible))

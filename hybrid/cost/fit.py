@@ -21,6 +21,7 @@ error is reported on frames (and tiles) held out of the fit.
 
 ``estimate_overhead`` recovers a per-call overhead from frames timed tile by tile and in one call (the oracle's).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -70,13 +71,25 @@ class TileSample:
 def frame_design(samples: list[FrameSample], names) -> np.ndarray:
     """(frames, columns) rows of ``fit_frames``: per strategy of ``names``, used (0/1), then its terms' sums; last,
     mixed (1 where the frame uses more than one strategy of ``names``)."""
-    return np.array([np.concatenate([np.r_[float(f.used[s]), np.asarray(f.sums[s], dtype=np.float64)]
-                                     for s in names] + [[float(sum(bool(f.used[s]) for s in names) > 1)]])
-                     for f in samples])
+    return np.array(
+        [
+            np.concatenate(
+                [np.r_[float(f.used[s]), np.asarray(f.sums[s], dtype=np.float64)] for s in names]
+                + [[float(sum(bool(f.used[s]) for s in names) > 1)]]
+            )
+            for f in samples
+        ]
+    )
 
 
-def fit_frames(samples: list[FrameSample], renderer: str, holdout: float = 0.3, seed: int = 0,
-               names=("raster", "raster_gs", "raycast"), tiles: list[TileSample] = ()) -> CostModel:
+def fit_frames(
+    samples: list[FrameSample],
+    renderer: str,
+    holdout: float = 0.3,
+    seed: int = 0,
+    names=("raster", "raster_gs", "raycast"),
+    tiles: list[TileSample] = (),
+) -> CostModel:
     """Coefficients and per-frame overheads of every strategy in ``names``, and the overhead of a frame that mixes
     strategies (``mix_overhead``), fitted together on a random
     (1 - holdout) share of whole frames' times (non-negative, relative error); ``fit_error`` is the held-out median
@@ -84,7 +97,7 @@ def fit_frames(samples: list[FrameSample], renderer: str, holdout: float = 0.3, 
     ``tiles`` (timed one call each), a random (1 - holdout) share of them joins the fit with a per-call overhead
     per strategy (``call_overhead``), and ``tile_error`` is the held-out median relative error of the rest per
     strategy."""
-    width = sum(1 + len(TERMS[s]) for s in names) + 1          # the strategies' columns, then mixed
+    width = sum(1 + len(TERMS[s]) for s in names) + 1  # the strategies' columns, then mixed
     tiles = [t for t in tiles if t.strategy in names]
     ms, tms = _checked_times(samples, tiles, names, width, holdout)
     offsets = np.cumsum([0] + [1 + len(TERMS[s]) for s in names])
@@ -95,7 +108,7 @@ def fit_frames(samples: list[FrameSample], renderer: str, holdout: float = 0.3, 
     test, train = _split(rng, len(samples), holdout)
     t_test, t_train = _split(rng, len(tiles), holdout)
     rows, b = [X[train] / ms[train, None]], [np.ones(len(train))]
-    if len(t_train):                           # the tiles' rows weigh TILE_WEIGHT of the frames' in all
+    if len(t_train):  # the tiles' rows weigh TILE_WEIGHT of the frames' in all
         k = TILE_WEIGHT * np.sqrt(len(train) / len(t_train))
         rows.append(k * T[t_train] / tms[t_train, None])
         b.append(np.full(len(t_train), k))
@@ -105,9 +118,17 @@ def fit_frames(samples: list[FrameSample], renderer: str, holdout: float = 0.3, 
     coef, overhead = {}, dict.fromkeys(TERMS, 0.0)
     for j, s in enumerate(names):
         overhead[s] = float(x[offsets[j]])
-        coef[s] = dict(zip(TERMS[s], map(float, x[offsets[j] + 1:offsets[j + 1]])))
-    model = CostModel(renderer, coef["raster"], coef["raycast"], overhead=overhead, raster_gs=coef.get("raster_gs", {}),
-                      frames=len(samples), tiles=len(tiles), mix_overhead=float(x[width - 1]))
+        coef[s] = dict(zip(TERMS[s], map(float, x[offsets[j] + 1 : offsets[j + 1]])))
+    model = CostModel(
+        renderer,
+        coef["raster"],
+        coef["raycast"],
+        overhead=overhead,
+        raster_gs=coef.get("raster_gs", {}),
+        frames=len(samples),
+        tiles=len(tiles),
+        mix_overhead=float(x[width - 1]),
+    )
     if calls:
         model.call_overhead = {s: float(x[width + j]) for j, s in enumerate(names)}
     if len(test):
@@ -126,8 +147,9 @@ def _checked_times(samples: list, tiles: list, names: tuple, width: int, holdout
         raise TerrabenchError(f"holdout must lie in [0, 1), got {holdout}")
     ms = np.array([f.ms for f in samples], dtype=np.float64)
     if len(samples) < width or not np.all(np.isfinite(ms)) or np.any(ms <= 0):
-        raise TerrabenchError(f"need at least {width} frames with finite times > 0 ms to fit {', '.join(names)}, "
-                              f"got {len(samples)}")
+        raise TerrabenchError(
+            f"need at least {width} frames with finite times > 0 ms to fit {', '.join(names)}, got {len(samples)}"
+        )
     tms = np.array([t.ms for t in tiles], dtype=np.float64)
     if not np.all(np.isfinite(tms)) or np.any(tms <= 0):
         raise TerrabenchError("tiles timed one call each need finite times > 0 ms")
@@ -140,13 +162,14 @@ def _tile_design(tiles: list, names: tuple, offsets: np.ndarray, width: int) -> 
     T = np.zeros((len(tiles), width))
     for k, t in enumerate(tiles):
         j = names.index(t.strategy)
-        T[k, offsets[j] + 1:offsets[j + 1]] = t.terms
+        T[k, offsets[j] + 1 : offsets[j + 1]] = t.terms
         T[k, width - len(names) + j] = 1.0
     return T
 
 
-def _held_out_frame_errors(model: CostModel, predicted: np.ndarray, ms: np.ndarray, used: np.ndarray,
-                           names: tuple) -> None:
+def _held_out_frame_errors(
+    model: CostModel, predicted: np.ndarray, ms: np.ndarray, used: np.ndarray, names: tuple
+) -> None:
     """Set the model's held-out median relative frame error per strategy (frames using it: ``used`` (F, S)) and
     that of the frames mixing strategies, from predicted and measured frame ms (F,)."""
     err = np.abs(predicted - ms) / ms

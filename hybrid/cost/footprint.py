@@ -14,6 +14,7 @@ A frame has a few dozen tiles: as numpy array operations the time was set by the
 so the boxes are walked one by one in a loop compiled by numba, with the same steps. The viewport clip is a
 clamp integrated in closed form (``_clipped_area``).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -39,7 +40,7 @@ def _silhouettes() -> tuple[np.ndarray, np.ndarray]:
     for code in range(64):
         states = [(code >> (2 * a)) & 3 for a in range(3)]
         if any(st != 3 and st == 0 for st in states) or all(st == 3 for st in states):
-            continue                            # an axis on which the box has no extent, or the eye inside it
+            continue  # an axis on which the box has no extent, or the eye inside it
         count: dict = {}
         for f, (axis, hi_side) in enumerate(zip(_FACE_AXIS, _FACE_HI)):
             if (states[axis] >> int(hi_side)) & 1:
@@ -53,7 +54,7 @@ def _silhouettes() -> tuple[np.ndarray, np.ndarray]:
             nxt = next(e for e in rest if cycle[-1] in e)
             rest.remove(nxt)
             cycle.append(nxt[0] if nxt[1] == cycle[-1] else nxt[1])
-        cycle = cycle[:-1]                      # back at the start
+        cycle = cycle[:-1]  # back at the start
         table[code] = cycle + [cycle[-1]] * (6 - len(cycle))
         ok[code] = True
     return table, ok
@@ -74,13 +75,14 @@ def _near(view: View) -> float:
 
 def near_cut(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """(B,) whether each box (world metres) reaches behind the near plane."""
-    return np.any(-_eye_space(view, np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))[2]
-                  < _near(view), axis=1)
+    return np.any(
+        -_eye_space(view, np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))[2] < _near(view), axis=1
+    )
 
 
 _OUTLINE, _HAS_OUTLINE = _silhouettes()
-_FACE_SIDE = np.array([0, 3, 1, 4, 2, 5])                  # face f's column of ``side`` (faces in _FACES order)
-_FLAT_OUTLINE = np.array([0, 2, 6, 4])                     # a box flat in z: its low z face
+_FACE_SIDE = np.array([0, 3, 1, 4, 2, 5])  # face f's column of ``side`` (faces in _FACES order)
+_FLAT_OUTLINE = np.array([0, 2, 6, 4])  # a box flat in z: its low z face
 
 
 @njit(cache=True)
@@ -205,11 +207,21 @@ def footprints(view: View, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     near plane when any corner reaches behind it, their signed areas summed."""
     lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
     tan = view.tan_half_fov
-    scale = np.array([-0.5 * view.width / (tan * view.aspect), 0.5 * view.height / tan,
-                      0.5 * view.width, 0.5 * view.height])
-    return _box_areas(np.ascontiguousarray(view.rotation(), dtype=np.float64), np.asarray(view.eye, dtype=np.float64),
-                      np.ascontiguousarray(lo.reshape(-1, 3)), np.ascontiguousarray(hi.reshape(-1, 3)), _near(view),
-                      scale, float(view.width), float(view.height), _OUTLINE, _HAS_OUTLINE)
+    scale = np.array(
+        [-0.5 * view.width / (tan * view.aspect), 0.5 * view.height / tan, 0.5 * view.width, 0.5 * view.height]
+    )
+    return _box_areas(
+        np.ascontiguousarray(view.rotation(), dtype=np.float64),
+        np.asarray(view.eye, dtype=np.float64),
+        np.ascontiguousarray(lo.reshape(-1, 3)),
+        np.ascontiguousarray(hi.reshape(-1, 3)),
+        _near(view),
+        scale,
+        float(view.width),
+        float(view.height),
+        _OUTLINE,
+        _HAS_OUTLINE,
+    )
 
 
 @njit(cache=True)

@@ -20,6 +20,7 @@ saves the model keyed by the GL renderer string. ``load_cost_model`` finds it ag
 ~/.config/terrabench/costs.json), then the defaults shipped in hybrid/cost/costs_default.json; in either, the
 renderer string itself or else the longest key contained in it, ignoring case ('llvmpipe', 'NVIDIA H200').
 """
+
 from __future__ import annotations
 
 import json
@@ -41,8 +42,11 @@ RASTER_TERMS = ("const", "triangles", "visible_triangles", "pixels", "surface_pi
 hold-out draws each) the term took the held-out frame error from 9.8 to 7.8 % and the raster per-tile error from
 21.6 to 18.0 % (raster_gs 19.2 to 16.6 %), and the pure raster frames' median predicted / measured from 0.75 to
 0.83 on the orbit (surface 0.9 of the box, median tile) and 1.14 to 1.03 on the dolly (0.1)."""
-TERMS = {"raster": RASTER_TERMS, "raster_gs": RASTER_TERMS,
-         "raycast": ("const", "pixels", "surface_pixels", "pixel_steps")}
+TERMS = {
+    "raster": RASTER_TERMS,
+    "raster_gs": RASTER_TERMS,
+    "raycast": ("const", "pixels", "surface_pixels", "pixel_steps"),
+}
 """The model's terms per candidate strategy (hybrid.strategies.candidates())."""
 
 
@@ -55,8 +59,17 @@ def all_term_values(f) -> np.ndarray:
     columns as from ``hybrid.cost.features.feature_columns``, all of one shape: shape (B, 6))."""
     g = f if isinstance(f, dict) else vars(f)
     tri, px = np.asarray(g["triangles"], dtype=np.float64), np.asarray(g["pixels"], dtype=np.float64)
-    return np.stack([np.ones_like(px), tri, tri * g["visible"], px, np.asarray(g["surface_pixels"], dtype=np.float64),
-                     px * np.log2(1.0 + np.asarray(g["slab_cells"], dtype=np.float64))], axis=-1)
+    return np.stack(
+        [
+            np.ones_like(px),
+            tri,
+            tri * g["visible"],
+            px,
+            np.asarray(g["surface_pixels"], dtype=np.float64),
+            px * np.log2(1.0 + np.asarray(g["slab_cells"], dtype=np.float64)),
+        ],
+        axis=-1,
+    )
 
 
 def term_values(f, strategy: str) -> np.ndarray:
@@ -85,13 +98,13 @@ class CostModel:
     source: str = ""
     overhead: dict = field(default_factory=lambda: dict.fromkeys(TERMS, 0.0))
     raster_gs: dict = field(default_factory=dict)
-    frames: int = 0                 # whole frames fitted (0: fitted on per-tile times)
-    tile_error: dict = field(default_factory=dict)   # held-out per-tile error against tiles timed a call each
-    call_overhead: dict = field(default_factory=dict)   # ms one tile drawn as its own call adds (fitted with the tiles)
-    mix_error: float = 0.0          # held-out median relative error of the frames that use more than one strategy
-    mix_overhead: float = 0.0       # ms a frame that uses more than one strategy adds (fitted with the frames)
+    frames: int = 0  # whole frames fitted (0: fitted on per-tile times)
+    tile_error: dict = field(default_factory=dict)  # held-out per-tile error against tiles timed a call each
+    call_overhead: dict = field(default_factory=dict)  # ms one tile drawn as its own call adds (fitted with the tiles)
+    mix_error: float = 0.0  # held-out median relative error of the frames that use more than one strategy
+    mix_overhead: float = 0.0  # ms a frame that uses more than one strategy adds (fitted with the frames)
     full_res: str = PRIOR_FULL_RES  # the full-resolution rule its raster frames were drawn by
-    adapted_frames: int = 0         # frames it learned from online after it was loaded (hybrid.cost.online)
+    adapted_frames: int = 0  # frames it learned from online after it was loaded (hybrid.cost.online)
 
     @property
     def candidates(self) -> tuple[str, ...]:
@@ -120,14 +133,18 @@ class CostModel:
         terms = all_term_values(columns)
         shape, terms = terms.shape[:-1], terms.reshape(-1, len(ALL_TERMS))
         cands = self.candidates
-        coef = self._memo("coef", lambda: np.array(
-            [[getattr(self, s).get(t, 0.0) if t in TERMS[s] else 0.0 for t in ALL_TERMS] for s in cands],
-            dtype=np.float64))
+        coef = self._memo(
+            "coef",
+            lambda: np.array(
+                [[getattr(self, s).get(t, 0.0) if t in TERMS[s] else 0.0 for t in ALL_TERMS] for s in cands],
+                dtype=np.float64,
+            ),
+        )
         nan = np.isnan(terms[:, 1])
         unknown_any = bool(nan.any())
         if unknown_any:
             terms = terms.copy()
-            terms[nan, 1:3] = 0.0                   # triangle terms only: the ray caster's prediction stays known
+            terms[nan, 1:3] = 0.0  # triangle terms only: the ray caster's prediction stays known
         table = coef @ terms.T
         if unknown_any:
             table[np.ix_(["triangles" in TERMS[s] for s in cands], nan)] = unknown
@@ -136,13 +153,17 @@ class CostModel:
     def choice_arrays(self, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per strategy of ``names`` (S,): per-frame overhead (ms), held-out frame error and per-tile error (the
         frame error where no tile error was fitted), as the choice reads them; read-only."""
+
         def build():
-            out = (np.array([self.overhead.get(n, 0.0) for n in names], dtype=np.float64),
-                   np.array([self.fit_error.get(n, 0.0) for n in names], dtype=np.float64),
-                   np.array([self.tile_error.get(n, self.fit_error.get(n, 0.0)) for n in names], dtype=np.float64))
+            out = (
+                np.array([self.overhead.get(n, 0.0) for n in names], dtype=np.float64),
+                np.array([self.fit_error.get(n, 0.0) for n in names], dtype=np.float64),
+                np.array([self.tile_error.get(n, self.fit_error.get(n, 0.0)) for n in names], dtype=np.float64),
+            )
             for a in out:
                 a.setflags(write=False)
             return out
+
         return self._memo(("choice", tuple(names)), build)
 
     def _memo(self, key, build):
@@ -157,16 +178,21 @@ class CostModel:
 
     def explain(self) -> str:
         """The formulas with their coefficients, and the held-out error."""
+
         def fmt(s):
             c = getattr(self, s)
             parts = [f"{c['const']:.4g}"] + [f"{c[t]:.4g}*{t}" for t in TERMS[s][1:]]
             return f"{s:9s} ms = " + " + ".join(parts)
-        lines = [f"cost model for {self.renderer} ({self.source or 'unsaved'}, {self.tiles} tiles)",
-                 *(fmt(s) for s in self.candidates),
-                 "  pixel_steps = pixels * log2(1 + slab_cells); visible_triangles = triangles * visible",
-                 "  per-frame overhead: " + ", ".join(f"{s} {self.overhead.get(s, 0):.3g} ms" for s in self.candidates)
-                 + f"; a frame mixing strategies adds {self.mix_overhead:.3g} ms",
-                 f"  raster frames drawn with full_res {self.full_res!r}"]
+
+        lines = [
+            f"cost model for {self.renderer} ({self.source or 'unsaved'}, {self.tiles} tiles)",
+            *(fmt(s) for s in self.candidates),
+            "  pixel_steps = pixels * log2(1 + slab_cells); visible_triangles = triangles * visible",
+            "  per-frame overhead: "
+            + ", ".join(f"{s} {self.overhead.get(s, 0):.3g} ms" for s in self.candidates)
+            + f"; a frame mixing strategies adds {self.mix_overhead:.3g} ms",
+            f"  raster frames drawn with full_res {self.full_res!r}",
+        ]
         if self.adapted_frames:
             lines.append(f"  adapted online over {self.adapted_frames} frames")
         if "raster_gs" not in self.candidates:
@@ -175,14 +201,20 @@ class CostModel:
         for s, e in self.fit_error.items():
             lines.append(f"  held-out median |relative error| {what} using {s}: {100 * e:.1f} %")
         if self.mix_error:
-            lines.append(f"  held-out median |relative error| of mixed frames (more than one strategy): "
-                         f"{100 * self.mix_error:.1f} %")
+            lines.append(
+                f"  held-out median |relative error| of mixed frames (more than one strategy): "
+                f"{100 * self.mix_error:.1f} %"
+            )
         if self.call_overhead:
-            lines.append("  per-call overhead of a tile drawn as its own call: " +
-                         ", ".join(f"{s} {v:.3g} ms" for s, v in self.call_overhead.items()))
+            lines.append(
+                "  per-call overhead of a tile drawn as its own call: "
+                + ", ".join(f"{s} {v:.3g} ms" for s, v in self.call_overhead.items())
+            )
         for s, e in self.tile_error.items():
-            lines.append(f"  held-out median |relative error| per tile against tiles timed one call each (with the "
-                         f"call's overhead) {s}: {100 * e:.1f} %")
+            lines.append(
+                f"  held-out median |relative error| per tile against tiles timed one call each (with the "
+                f"call's overhead) {s}: {100 * e:.1f} %"
+            )
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
@@ -208,8 +240,10 @@ def read_costs_file(path: Path | None = None) -> dict:
     except OSError as exc:
         raise TerrabenchError(f"{path}: cannot read costs file ({exc.strerror or exc})") from None
     if not isinstance(data, dict) or not all(isinstance(k, str) and isinstance(v, dict) for k, v in data.items()):
-        raise TerrabenchError(f"{path}: not a terrabench costs file (a JSON object of cost models keyed by GL "
-                              "renderer); fix or move it away")
+        raise TerrabenchError(
+            f"{path}: not a terrabench costs file (a JSON object of cost models keyed by GL "
+            "renderer); fix or move it away"
+        )
     return data
 
 
@@ -231,17 +265,28 @@ def save_cost_model(model: CostModel, path: Path | None = None) -> Path:
 def cost_model_from_dict(d: dict, source: str) -> CostModel:
     """A CostModel from its saved form (as in a costs file); ``source`` names where it came from."""
     try:
-        m = CostModel(d["renderer"], dict(d["raster"]), dict(d["raycast"]), dict(d.get("fit_error", {})),
-                      int(d.get("tiles", 0)), source, {**dict.fromkeys(TERMS, 0.0), **d.get("overhead", {})},
-                      dict(d.get("raster_gs") or {}), int(d.get("frames", 0)), dict(d.get("tile_error", {})),
-                      {s: float(v) for s, v in (d.get("call_overhead") or {}).items()}, float(d.get("mix_error", 0.0)),
-                      float(d.get("mix_overhead", 0.0)), d.get("full_res", PRIOR_FULL_RES),
-                      int(d.get("adapted_frames", 0)))
+        m = CostModel(
+            d["renderer"],
+            dict(d["raster"]),
+            dict(d["raycast"]),
+            dict(d.get("fit_error", {})),
+            int(d.get("tiles", 0)),
+            source,
+            {**dict.fromkeys(TERMS, 0.0), **d.get("overhead", {})},
+            dict(d.get("raster_gs") or {}),
+            int(d.get("frames", 0)),
+            dict(d.get("tile_error", {})),
+            {s: float(v) for s, v in (d.get("call_overhead") or {}).items()},
+            float(d.get("mix_error", 0.0)),
+            float(d.get("mix_overhead", 0.0)),
+            d.get("full_res", PRIOR_FULL_RES),
+            int(d.get("adapted_frames", 0)),
+        )
         if m.full_res not in FULL_RES:
             raise ValueError(f"full_res must be one of {', '.join(FULL_RES)}, got {m.full_res!r}")
         for s in m.candidates:
             for t in TERMS[s]:
-                getattr(m, s).setdefault(t, 0.0)     # a model saved before a term existed has it at 0
+                getattr(m, s).setdefault(t, 0.0)  # a model saved before a term existed has it at 0
                 float(getattr(m, s)[t])
         return m
     except (KeyError, TypeError, ValueError) as exc:

@@ -22,6 +22,7 @@ were fitted) holds, and is explored no more while it holds.
 A mixed frame's own overhead is the median of (frame ms - its passes' ms) over the window's mixed frames less
 that of its one-strategy frames.
 """
+
 from __future__ import annotations
 
 import copy
@@ -112,9 +113,9 @@ class OnlineModel:
         self.model.source = f"{start.source or 'unsaved'}, adapted online"
         names = self.model.candidates
         self.rows = {s: RowWindow(self.options.window, 1 + len(TERMS[s])) for s in names}
-        self._fresh = dict.fromkeys(names, 0)          # rows since the strategy's last refit
-        self._seen: set = set()                       # strategies whose first pass (compiles, first use) went by
-        self._spent: dict = {}                        # the last measured cost of exploring each strategy
+        self._fresh = dict.fromkeys(names, 0)  # rows since the strategy's last refit
+        self._seen: set = set()  # strategies whose first pass (compiles, first use) went by
+        self._spent: dict = {}  # the last measured cost of exploring each strategy
         self.errors = {s: deque(maxlen=self.options.hold_rows) for s in names}
         self.residual = {"pure": deque(maxlen=self.options.window), "mixed": deque(maxlen=self.options.window)}
         self.credit = 0.0
@@ -149,10 +150,10 @@ class OnlineModel:
         base = table[picks, np.arange(len(picks))]
         ratio = np.where(np.isfinite(table[i]), table[i] / np.maximum(base, 1e-9), np.inf)
         k = min(self.options.explore_tiles, int(np.isfinite(ratio).sum()))
-        pool = np.argsort(ratio, kind="stable")[:max(2 * k, 1)]
+        pool = np.argsort(ratio, kind="stable")[: max(2 * k, 1)]
         tiles = np.sort(self._rng.choice(pool, size=k, replace=False))
         m = self.model
-        cost = (m.overhead.get(names[i], 0.0) + m.mix_overhead + float(table[i, tiles].sum() - base[tiles].sum()))
+        cost = m.overhead.get(names[i], 0.0) + m.mix_overhead + float(table[i, tiles].sum() - base[tiles].sum())
         if max(cost, self._spent.get(names[i], 0.0)) > self.credit or not self._might_pay(table[i], base, names[i]):
             return None
         picks[tiles] = i
@@ -170,8 +171,9 @@ class OnlineModel:
         gain = float(np.maximum(base[finite] - OPTIMISM * costs[finite], 0.0).sum())
         return gain > OPTIMISM * self.model.overhead.get(strategy, 0.0) + self.model.mix_overhead
 
-    def observe(self, columns: dict, picks: list[str], pass_ms: dict, frame_ms: float,
-                explored: Exploration | None = None) -> None:
+    def observe(
+        self, columns: dict, picks: list[str], pass_ms: dict, frame_ms: float, explored: Exploration | None = None
+    ) -> None:
         """Learn from one drawn frame: feature columns of its tiles ((B,) arrays), each tile's strategy, each
         strategy's measured pass ms and the whole drawing's ms; refits the strategies drawn."""
         if not np.isfinite(frame_ms) or frame_ms <= 0:
@@ -183,7 +185,7 @@ class OnlineModel:
         for s, ms in pass_ms.items():
             if s not in self.rows or not (np.isfinite(ms) and ms > 0):
                 continue
-            if s not in self._seen:                   # a strategy's first pass pays one-off costs: not a row
+            if s not in self._seen:  # a strategy's first pass pays one-off costs: not a row
                 self._seen.add(s)
                 continue
             x = np.concatenate([[1.0], terms[picks == s][:, _TERM_INDEX[s]].sum(axis=0)])
@@ -200,14 +202,16 @@ class OnlineModel:
         self.stats.frames += 1
         m.adapted_frames += 1
         self.stats.frame_ms += frame_ms
-        self.credit = min(self.credit + self.options.explore_share * frame_ms, 20 * self.options.explore_share * frame_ms)
+        self.credit = min(
+            self.credit + self.options.explore_share * frame_ms, 20 * self.options.explore_share * frame_ms
+        )
         if explored is not None and explored.strategy in pass_ms:
             spent = self._spent[explored.strategy] = max(pass_ms[explored.strategy] - explored.base_ms, 0.0)
             self.credit -= spent
             self.stats.explored_frames += 1
             self.stats.explored_tiles += len(explored.tiles)
             self.stats.explore_ms += spent
-        if learnt:          # one refit a frame, the strategy with the most rows since its last: a bounded cost
+        if learnt:  # one refit a frame, the strategy with the most rows since its last: a bounded cost
             self._refit([max(learnt, key=self._fresh.get)])
 
     def _cadence(self, s: str) -> int:
@@ -229,8 +233,9 @@ class OnlineModel:
             self._fresh[s] = 0
             X, y = self.rows[s].arrays()
             o = self.options
-            theta = fit_rows(X, y, self._theta(self.start, s), o.prior_weight, o.prior_share, 2 * o.hold_rows,
-                             o.explore_tiles)
+            theta = fit_rows(
+                X, y, self._theta(self.start, s), o.prior_weight, o.prior_share, 2 * o.hold_rows, o.explore_tiles
+            )
             m.overhead = {**m.overhead, s: float(theta[0])}
             setattr(m, s, dict(zip(TERMS[s], map(float, theta[1:]))))
         mixed, pure = self.residual["mixed"], self.residual["pure"]
@@ -266,8 +271,15 @@ class RowWindow:
         return min(self.n, len(self.y))
 
 
-def fit_rows(X: np.ndarray, y: np.ndarray, prior: np.ndarray, prior_weight: float,
-             prior_share: float = 0.0, shape_rows: int = 0, few_tiles: int = 0) -> np.ndarray:
+def fit_rows(
+    X: np.ndarray,
+    y: np.ndarray,
+    prior: np.ndarray,
+    prior_weight: float,
+    prior_share: float = 0.0,
+    shape_rows: int = 0,
+    few_tiles: int = 0,
+) -> np.ndarray:
     """Non-negative [overhead, coefficients] of one strategy from rows of terms X (n, p; column 1 the tile
     count) and measured ms y (n,), on relative error, with a ridge toward ``prior`` scaled by the rows' median
     measured / predicted, worth the larger of ``prior_weight`` rows and ``prior_share`` of the rows; outliers

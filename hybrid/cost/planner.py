@@ -10,6 +10,7 @@ Policies:
                 with the pure frames (an evaluation bound: the choice is filled in by the renderer, which
                 measures).
 """
+
 from __future__ import annotations
 
 import weakref
@@ -60,8 +61,16 @@ class TilePlan:
 
     __slots__ = ("_features", "_frame", "_predicted", "_row", "choice", "measured", "selected")
 
-    def __init__(self, selected: SelectedTile, features: TileFeatures | None, predicted: dict | None, choice: str,
-                 measured: dict | None = None, frame: FrameColumns | None = None, row: int = -1):
+    def __init__(
+        self,
+        selected: SelectedTile,
+        features: TileFeatures | None,
+        predicted: dict | None,
+        choice: str,
+        measured: dict | None = None,
+        frame: FrameColumns | None = None,
+        row: int = -1,
+    ):
         self.selected, self.choice, self.measured = selected, choice, {} if measured is None else measured
         self._features, self._predicted, self._frame, self._row = features, predicted, frame, row
 
@@ -91,10 +100,15 @@ class TilePlan:
         """A flat dict for the tiles table."""
         k = self.selected.key
         features = self.features.as_dict() if self.features is not None else {}
-        return {"level": k.level, "tx": k.tx, "ty": k.ty, "strategy": self.choice,
-                **{f"f_{n}": v for n, v in features.items() if n != "level"},
-                **{f"pred_{s}_ms": self.predicted.get(s) for s in candidates()},
-                **{f"meas_{s}_ms": self.measured.get(s) for s in candidates()}}
+        return {
+            "level": k.level,
+            "tx": k.tx,
+            "ty": k.ty,
+            "strategy": self.choice,
+            **{f"f_{n}": v for n, v in features.items() if n != "level"},
+            **{f"pred_{s}_ms": self.predicted.get(s) for s in candidates()},
+            **{f"meas_{s}_ms": self.measured.get(s) for s in candidates()},
+        }
 
 
 def frame_columns(plans: list[TilePlan]) -> FrameColumns | None:
@@ -111,7 +125,7 @@ def choices(policy: str, columns: dict, predicted: dict, threshold: float = 1.0)
     rule = policy_entry(policy).rule
     if rule is not None:
         return rule(columns, predicted, threshold)
-    names = list(predicted)                     # the model's cheapest, unhedged
+    names = list(predicted)  # the model's cheapest, unhedged
     costs = np.stack([np.asarray(predicted[n], dtype=np.float64) for n in names])
     return [names[i] for i in np.argmin(costs, axis=0)]
 
@@ -141,14 +155,14 @@ def hedged_choices(predicted: dict, model: CostModel) -> list[str]:
 def hedged_picks(table: np.ndarray, names: list[str], model: CostModel) -> np.ndarray:
     """``hedged_choices`` as indices into ``names`` (B,), from an (S, B) table of predicted ms in ``names`` order."""
     overhead, err, tile_err = model.choice_arrays(tuple(names))
-    known = np.isfinite(table).all(axis=0)                          # tiles every strategy can draw
+    known = np.isfinite(table).all(axis=0)  # tiles every strategy can draw
     base = int((np.where(known, table, 0.0).sum(axis=1) + overhead).argmin())
     factor = 1.0 + tile_err + tile_err[base]
     factor[base] = 1.0
     scaled = table * factor[:, None]
     if known.all() and _pure_base_wins(scaled, base, overhead, model.mix_overhead):
         return np.full(table.shape[1], base, dtype=np.int64)
-    order = np.array([base] + [i for i in range(len(names)) if i != base])   # ties stay with the base
+    order = np.array([base] + [i for i in range(len(names)) if i != base])  # ties stay with the base
     pick, _ = best_assignment_table(scaled[order], overhead[order], mixed=model.mix_overhead)
     picks = order[pick]
     pure = np.where(known, base, picks)
@@ -185,9 +199,17 @@ def default_estimator(pyramid: TilePyramid) -> TriangleEstimator:
     return _ESTIMATORS[pyramid]
 
 
-def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
-               triangles_fn: TriangleEstimator | None = None, policy: str = "hybrid", tau: float = DEFAULT_TAU,
-               threshold: float = 1.0, batch: bool = True, prep_budget_ms: float | None = None) -> list[TilePlan]:
+def plan_frame(
+    pyramid: TilePyramid,
+    view: View,
+    model: CostModel | None = None,
+    triangles_fn: TriangleEstimator | None = None,
+    policy: str = "hybrid",
+    tau: float = DEFAULT_TAU,
+    threshold: float = 1.0,
+    batch: bool = True,
+    prep_budget_ms: float | None = None,
+) -> list[TilePlan]:
     """Selected tiles front to back with the policy's choice of strategy for each.
 
     A pure policy (one strategy for every tile) needs no features: its plans carry none. A mixed policy gets
@@ -207,12 +229,12 @@ def plan_frame(pyramid: TilePyramid, view: View, model: CostModel | None = None,
     if not selected:
         return []
     triangles_fn = triangles_fn or default_estimator(pyramid)
-    hedged = policy_entry(policy).rule is None          # the cost model's choice, hedged by its error
+    hedged = policy_entry(policy).rule is None  # the cost model's choice, hedged by its error
     if batch:
         triangles, visible = triangles_fn.many(selected, view, tau, prep_budget_ms)
         columns = feature_columns(pyramid, view, selected, triangles, visible)
         names = model.candidates
-        table = model.predict_table(columns, unknown=np.inf)   # unknown triangles: raster infinite, so ray cast
+        table = model.predict_table(columns, unknown=np.inf)  # unknown triangles: raster infinite, so ray cast
         pred = dict(zip(names, table))
         if hedged:
             chosen = [names[i] for i in hedged_picks(table, names, model).tolist()]

@@ -6,6 +6,7 @@ a texture in place with two compute dispatches over the touched window only (a s
 sample, then the brush reading it), in the CPU reference's float32 arithmetic. ``edit`` runs it and then writes the
 window back to the height field's CPU array (write-through: the GPU changes first, the CPU copy follows).
 """
+
 from __future__ import annotations
 
 import ctypes
@@ -18,7 +19,7 @@ from hybrid.gl.programs import compute_shader
 from hybrid.terrain.edits import Brush, BrushParams, Window, brush_params, touched
 from hybrid.terrain.heightfield import HeightField
 
-GROUP = 8                       # the pass's work group side
+GROUP = 8  # the pass's work group side
 
 
 def read_r32f_window(tex, win: Window) -> np.ndarray:
@@ -26,7 +27,7 @@ def read_r32f_window(tex, win: Window) -> np.ndarray:
     u, i = ctypes.c_uint, ctypes.c_int
     rows, cols = win.i1 - win.i0, win.j1 - win.j0
     out = np.zeros((rows, cols), np.float32)
-    _gl_function(b"glPixelStorei", u, i)(0x0D05, 4)                     # GL_PACK_ALIGNMENT
+    _gl_function(b"glPixelStorei", u, i)(0x0D05, 4)  # GL_PACK_ALIGNMENT
     sub = _gl_function(b"glGetTextureSubImage", u, i, i, i, i, i, i, i, u, u, i, ctypes.c_void_p)
     sub(tex.glo, 0, win.j0, win.i0, 0, cols, rows, 1, 0x1903, 0x1406, out.nbytes, out.ctypes.data)  # RED, FLOAT
     return out
@@ -63,9 +64,17 @@ class BrushPass:
         tex.bind_to_image(0, read=True, write=True)
         scratch.bind_to_image(1, read=True, write=True)
         for prog in (self.snapshot, self.brush):
-            values = {"win0": (win.j0, win.i0), "win_size": size, "grid": (cols, rows), "centre": (p.cj, p.ci),
-                      "spacing": (p.sx, p.sy), "radius2": float(np.float32(p.radius * p.radius)),
-                      "strength": p.strength, "target": p.target, "code": p.code}
+            values = {
+                "win0": (win.j0, win.i0),
+                "win_size": size,
+                "grid": (cols, rows),
+                "centre": (p.cj, p.ci),
+                "spacing": (p.sx, p.sy),
+                "radius2": float(np.float32(p.radius * p.radius)),
+                "strength": p.strength,
+                "target": p.target,
+                "code": p.code,
+            }
             for k, v in values.items():
                 if k in prog:
                     prog[k].value = v
@@ -93,8 +102,10 @@ class GpuHeights:
     def __init__(self, ctx, hf: HeightField):
         limit = max_texture_size(ctx)
         if hf.rows > limit or hf.cols > limit:
-            raise TerrabenchError(f"editing {hf.name!r} ({hf.cols}x{hf.rows} samples) needs its heights in one "
-                                  f"texture, beyond this GL's limit of {limit} a side")
+            raise TerrabenchError(
+                f"editing {hf.name!r} ({hf.cols}x{hf.rows} samples) needs its heights in one "
+                f"texture, beyond this GL's limit of {limit} a side"
+            )
         self.ctx, self.hf = ctx, hf
         h = np.ascontiguousarray(hf.heights, dtype=np.float32)
         self.texture = ctx.texture((hf.cols, hf.rows), 1, h.tobytes(), dtype="f4")

@@ -5,6 +5,7 @@ set once when the context is made, projections map the near plane to depth 1 and
 depth buffer is 32-bit float, cleared to 0, and the depth test is GREATER. This keeps the relative depth
 precision near 1e-7 at every distance, so raster and ray-cast tiles resolve the same way at 100 km.
 """
+
 from __future__ import annotations
 
 import ctypes
@@ -92,11 +93,15 @@ def create_context(device: int | None = None, require: int = 430):
             raise GLContextError(
                 f"cannot open a headless EGL context ({text}); install Mesa's EGL (libegl1, libgl1-mesa-dri)"
             ) from None
-        raise GLContextError(f"cannot create an OpenGL {require // 100}.{require % 100 // 10} core context: {text}") from None
+        raise GLContextError(
+            f"cannot create an OpenGL {require // 100}.{require % 100 // 10} core context: {text}"
+        ) from None
     if ctx.version_code < require:
         ver = ctx.info.get("GL_VERSION", "?")
         ctx.release()
-        raise GLContextError(f"OpenGL {require // 100}.{require % 100 // 10} or newer is needed, the driver gives {ver}")
+        raise GLContextError(
+            f"OpenGL {require // 100}.{require % 100 // 10} or newer is needed, the driver gives {ver}"
+        )
     _set_clip_control()
     register_shared_includes(ctx)
     ctx.extra = {"device_index": device}
@@ -129,7 +134,7 @@ def shared_context(device: int | None = None):
     return _SHARED[device]
 
 
-_WAITED = [0.0]                 # ms spent waiting for the GL by this process (the GL runs on one thread)
+_WAITED = [0.0]  # ms spent waiting for the GL by this process (the GL runs on one thread)
 
 
 def gl_finish(ctx) -> None:
@@ -203,7 +208,8 @@ def multi_draw_indirect(vao, commands, mode: int, first_byte: int, count: int, s
     _gl_function(b"glBindVertexArray", u)(vao.glo)
     _gl_function(b"glBindBuffer", u, u)(GL_DRAW_INDIRECT_BUFFER, commands.glo)
     _gl_function(b"glMultiDrawElementsIndirect", u, u, ctypes.c_void_p, ctypes.c_int, ctypes.c_int)(
-        mode, GL_UNSIGNED_INT, first_byte, count, stride)
+        mode, GL_UNSIGNED_INT, first_byte, count, stride
+    )
 
 
 def depth32f_texture(ctx, size: tuple[int, int]):
@@ -224,8 +230,20 @@ def depth32f_texture(ctx, size: tuple[int, int]):
     return tex
 
 
-_BYTES_PER_TEXEL = {0x822E: 4, 0x8058: 4, 0x8051: 3, 0x8236: 4, 0x8CAC: 4, 0x81A6: 4, 0x8229: 1, 0x822D: 2,
-                    0x8814: 16, 0x8815: 12, 0x8230: 8, 0x8234: 2}
+_BYTES_PER_TEXEL = {
+    0x822E: 4,
+    0x8058: 4,
+    0x8051: 3,
+    0x8236: 4,
+    0x8CAC: 4,
+    0x81A6: 4,
+    0x8229: 1,
+    0x822D: 2,
+    0x8814: 16,
+    0x8815: 12,
+    0x8230: 8,
+    0x8234: 2,
+}
 # R32F RGBA8 RGB8 R32UI DEPTH32F DEPTH24 R8 R16F RGBA32F RGB32F RG32F R16UI
 
 
@@ -240,7 +258,13 @@ def r16ui_mip_texture(ctx, size: int, levels: int):
     bind = _gl_function(b"glBindTexture", u, u)
     image = _gl_function(b"glTexImage2D", u, i, i, i, i, i, u, u, ctypes.c_void_p)
     param = _gl_function(b"glTexParameteri", u, u, i)
-    GL_TEXTURE_2D, GL_R16UI, GL_RED_INTEGER, GL_UNSIGNED_SHORT, GL_TEXTURE_MAX_LEVEL = 0x0DE1, 0x8234, 0x8D94, 0x1403, 0x813D
+    GL_TEXTURE_2D, GL_R16UI, GL_RED_INTEGER, GL_UNSIGNED_SHORT, GL_TEXTURE_MAX_LEVEL = (
+        0x0DE1,
+        0x8234,
+        0x8D94,
+        0x1403,
+        0x813D,
+    )
     bind(GL_TEXTURE_2D, tex.glo)
     for level in range(1, int(levels)):
         m = max(int(size) >> level, 1)
@@ -261,9 +285,9 @@ def read_r16ui_level(tex, level: int) -> np.ndarray:
     get(tex.glo, int(level), 0x1000, ctypes.byref(w))
     get(tex.glo, int(level), 0x1001, ctypes.byref(h))
     out = np.zeros((h.value, w.value), np.uint16)
-    _gl_function(b"glPixelStorei", u, i)(0x0D05, 1)                     # GL_PACK_ALIGNMENT
+    _gl_function(b"glPixelStorei", u, i)(0x0D05, 1)  # GL_PACK_ALIGNMENT
     image = _gl_function(b"glGetTextureImage", u, i, u, u, i, ctypes.c_void_p)
-    image(tex.glo, int(level), 0x8D94, 0x1403, out.nbytes, out.ctypes.data)   # GL_RED_INTEGER, GL_UNSIGNED_SHORT
+    image(tex.glo, int(level), 0x8D94, 0x1403, out.nbytes, out.ctypes.data)  # GL_RED_INTEGER, GL_UNSIGNED_SHORT
     return out
 
 
@@ -274,11 +298,11 @@ def driver_texture_bytes(tex) -> int:
     total, level = 0, 0
     while level < 32:
         w, h, f = i(), i(), i()
-        get(tex.glo, level, 0x1000, ctypes.byref(w))      # GL_TEXTURE_WIDTH
+        get(tex.glo, level, 0x1000, ctypes.byref(w))  # GL_TEXTURE_WIDTH
         if w.value == 0:
             break
-        get(tex.glo, level, 0x1001, ctypes.byref(h))      # GL_TEXTURE_HEIGHT
-        get(tex.glo, level, 0x1003, ctypes.byref(f))      # GL_TEXTURE_INTERNAL_FORMAT
+        get(tex.glo, level, 0x1001, ctypes.byref(h))  # GL_TEXTURE_HEIGHT
+        get(tex.glo, level, 0x1003, ctypes.byref(f))  # GL_TEXTURE_INTERNAL_FORMAT
         if f.value not in _BYTES_PER_TEXEL:
             raise GLContextError(f"unknown texture internal format 0x{f.value:x}")
         total += w.value * h.value * _BYTES_PER_TEXEL[f.value]

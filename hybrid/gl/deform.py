@@ -8,6 +8,7 @@ over the windows of the deformations whose own time moved, on the GPU only. A br
 through to the CPU heights. The heights at a time are a function of (base, deformations, time) alone, so every
 run draws the same frames whatever the steps before.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -19,7 +20,7 @@ from hybrid.gl.programs import compute_shader
 from hybrid.terrain.deform import DeformParams, deform_window
 from hybrid.terrain.edits import Brush, Window, brush_params
 
-MAX_DEFORMATIONS = 16           # deformations a terrain holds at once (the composing loop's cap)
+MAX_DEFORMATIONS = 16  # deformations a terrain holds at once (the composing loop's cap)
 
 
 class GpuDeformations:
@@ -31,8 +32,8 @@ class GpuDeformations:
         self.base = self.ctx.texture((hf.cols, hf.rows), 1, gpu.read().tobytes(), dtype="f4")
         self.prog = compute_shader(self.ctx, "hybrid.gl", "deform.comp.glsl", {"MAX_DEF": MAX_DEFORMATIONS})
         self.params: list[DeformParams] = []
-        self.taus: list[float | None] = []             # each deformation's own time (s) as last composed
-        self.time = 0.0                                # the clock time (s) of the last step
+        self.taus: list[float | None] = []  # each deformation's own time (s) as last composed
+        self.time = 0.0  # the clock time (s) of the last step
 
     def add(self, p: DeformParams) -> None:
         """Add a deformation (texel space); it changes the heights from the next ``step``."""
@@ -51,8 +52,12 @@ class GpuDeformations:
             disc[k] = (q.cj, q.ci, np.float32(q.radius * q.radius), p.code)
             motion[k] = (p.amplitude, p.wavelength, p.speed, p.tau(self.time))
         prog = self.prog
-        for name, value in (("win0", (win.j0, win.i0)), ("win_size", (win.j1 - win.j0, win.i1 - win.i0)),
-                            ("spacing", (self.gpu.hf.spacing_x, self.gpu.hf.spacing_y)), ("count", n)):
+        for name, value in (
+            ("win0", (win.j0, win.i0)),
+            ("win_size", (win.j1 - win.j0, win.i1 - win.i0)),
+            ("spacing", (self.gpu.hf.spacing_x, self.gpu.hf.spacing_y)),
+            ("count", n),
+        ):
             prog[name].value = value
         prog["disc"].write(disc.tobytes())
         prog["motion"].write(motion.tobytes())

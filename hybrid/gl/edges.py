@@ -1,4 +1,5 @@
 """The terrain's outer edges on the GPU, for the shaders' ray_starts_under (hybrid/gl/edges.glsl)."""
+
 from __future__ import annotations
 
 import numpy as np

@@ -9,6 +9,7 @@ extent's walls mirror particles back, so they stay on the terrain. ``draw`` puts
 a frame target, depth-tested against the terrain already drawn there; ``timed_step`` and ``timed_draw`` time each
 pass apart (wall clock around glFinish, a GL timer query where valid: ``hybrid.gl.timing``).
 """
+
 from __future__ import annotations
 
 import math
@@ -24,9 +25,9 @@ from hybrid.gl.programs import compute_shader, program, set_uniform
 from hybrid.gl.target import FrameTarget
 from hybrid.gl.timing import timed
 
-MAX_PARTICLES = 1 << 22          # 64 MiB of positions, velocities and spawn points
-MAX_SUBSTEPS = 64                # the compute pass's loop cap
-GROUP = 64                       # the pass's work group size
+MAX_PARTICLES = 1 << 22  # 64 MiB of positions, velocities and spawn points
+MAX_SUBSTEPS = 64  # the compute pass's loop cap
+GROUP = 64  # the pass's work group size
 RECONSTRUCTIONS = ("triangles", "bilinear")
 
 
@@ -52,21 +53,30 @@ class ParticleParams:
 
 def check_particles(p: ParticleParams) -> ParticleParams:
     """The parameters if every value is in range, else a TerrabenchError naming the first that is not."""
+
     def number(name, lo, hi):
         v = getattr(p, name)
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo <= v <= hi:
             raise TerrabenchError(f"particle {name} must be a finite number in [{lo:g}, {hi:g}], got {v!r}")
+
     for name, lo, hi in (("count", 0, MAX_PARTICLES), ("substeps", 1, MAX_SUBSTEPS), ("seed", 0, 2**32 - 1)):
         v = getattr(p, name)
         if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
             raise TerrabenchError(f"particle {name} must be an integer in [{lo}, {hi}], got {v!r}")
-    for name, low, high in (("dt", 1e-6, 10.0), ("gravity", 0.0, 1e3), ("restitution", 0.0, 1.0),
-                            ("friction", 0.0, 1.0), ("clearance", 0.0, 1e4), ("drop", 0.0, 1e5),
-                            ("point_px", 1.0, 64.0)):
+    for name, low, high in (
+        ("dt", 1e-6, 10.0),
+        ("gravity", 0.0, 1e3),
+        ("restitution", 0.0, 1.0),
+        ("friction", 0.0, 1.0),
+        ("clearance", 0.0, 1e4),
+        ("drop", 0.0, 1e5),
+        ("point_px", 1.0, 64.0),
+    ):
         number(name, low, high)
     if p.reconstruction not in RECONSTRUCTIONS:
-        raise TerrabenchError(f"particle reconstruction must be one of {', '.join(RECONSTRUCTIONS)}, "
-                              f"got {p.reconstruction!r}")
+        raise TerrabenchError(
+            f"particle reconstruction must be one of {', '.join(RECONSTRUCTIONS)}, got {p.reconstruction!r}"
+        )
     return p
 
 
@@ -97,9 +107,12 @@ class ParticleSystem:
 
     def __init__(self, ctx, heights: GpuHeights, params: ParticleParams):
         self.ctx, self.heights, self.params = ctx, heights, check_particles(params)
-        self.step_prog = compute_shader(ctx, "hybrid.gl", "particles.comp.glsl",
-                                        {"MAX_SUBSTEPS": MAX_SUBSTEPS,
-                                         "BILINEAR": int(params.reconstruction == "bilinear")})
+        self.step_prog = compute_shader(
+            ctx,
+            "hybrid.gl",
+            "particles.comp.glsl",
+            {"MAX_SUBSTEPS": MAX_SUBSTEPS, "BILINEAR": int(params.reconstruction == "bilinear")},
+        )
         self.draw_prog = program(ctx, "hybrid.gl", "particles.vert.glsl", "particles.frag.glsl")
         self.vao = ctx.vertex_array(self.draw_prog, [])
         self.buffers: list = []
@@ -129,9 +142,17 @@ class ParticleSystem:
         self.heights.texture.bind_to_image(0, read=True, write=False)
         for unit, b in enumerate(self.buffers):
             b.bind_to_storage_buffer(unit)
-        values: dict = {"count": p.count, "grid": (hf.cols, hf.rows), "spacing": (hf.spacing_x, hf.spacing_y),
-                  "dt": p.dt / p.substeps, "substeps": p.substeps, "gravity": p.gravity,
-                  "restitution": p.restitution, "friction": p.friction, "clearance": p.clearance}
+        values: dict = {
+            "count": p.count,
+            "grid": (hf.cols, hf.rows),
+            "spacing": (hf.spacing_x, hf.spacing_y),
+            "dt": p.dt / p.substeps,
+            "substeps": p.substeps,
+            "gravity": p.gravity,
+            "restitution": p.restitution,
+            "friction": p.friction,
+            "clearance": p.clearance,
+        }
         for name, v in values.items():
             set_uniform(prog, name, v)
         prog.run(-(-p.count // GROUP), 1, 1)

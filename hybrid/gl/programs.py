@@ -5,6 +5,7 @@ supplies the text. The shared includes (``SHARED_INCLUDES``) are registered once
 (``hybrid.gl.context.create_context``); a strategy registers its own package-local includes on the context
 with ``register_include`` before it compiles. ``#define`` lines are placed right after ``#version``.
 """
+
 from __future__ import annotations
 
 from importlib import resources
@@ -37,11 +38,19 @@ def register_shared_includes(ctx) -> None:
         register_include(ctx, include, package, name)
 
 
-def program(ctx, package: str, vertex: str, fragment: str | None = None, geometry: str | None = None,
-            defines: dict | None = None):
+def program(
+    ctx,
+    package: str,
+    vertex: str,
+    fragment: str | None = None,
+    geometry: str | None = None,
+    defines: dict | None = None,
+):
     """A linked program from the GLSL files of PACKAGE (includes resolved by ctx.includes)."""
+
     def src(name):
         return None if name is None else glsl_source(package, name, defines)
+
     return ctx.program(vertex_shader=src(vertex), fragment_shader=src(fragment), geometry_shader=src(geometry))
 
 

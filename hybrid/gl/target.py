@@ -1,4 +1,5 @@
 """The frame target every method draws into: RGBA8 colour + 32-bit float reversed-Z depth, and its read-back."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -50,9 +51,10 @@ class RenderResult:
         from PIL import Image
 
         from hybrid.atomic import atomic_path
+
         path = check_png_path(path)
         depth_path = path.parent / (path.stem + ".depth.npy")
-        with atomic_path(path) as png, atomic_path(depth_path) as npy:      # both land, or neither
+        with atomic_path(path) as png, atomic_path(depth_path) as npy:  # both land, or neither
             Image.fromarray(self.colour).save(png, format="PNG")
             with open(npy, "wb") as f:
                 np.save(f, self.distance.astype(np.float32))

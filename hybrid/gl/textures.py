@@ -1,4 +1,5 @@
 """The terrain's colour texture on the GPU, shared by the reference and every strategy."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -13,6 +14,7 @@ def fit_texture(t: np.ndarray, limit: int) -> np.ndarray:
     if max(rows, cols) <= limit:
         return t
     from skimage.transform import resize
+
     f = limit / max(rows, cols)
     shape = (max(1, min(limit, round(rows * f))), max(1, min(limit, round(cols * f))), t.shape[2])
     out = resize(t, shape, order=1, anti_aliasing=True, preserve_range=True)

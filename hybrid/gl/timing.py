@@ -7,6 +7,7 @@ the CPU's share: the wall clock until the drawing function returns, less what it
 the queued work); on llvmpipe it still includes the vertex, geometry and compute work, which run inside the
 draw and dispatch calls, but not rasterization and fragment work, which run at the waits.
 """
+
 from __future__ import annotations
 
 import time
@@ -36,9 +37,9 @@ def timed(ctx, fn, query: bool = True):
     else:
         out = fn()
     issue = (time.perf_counter() - t0) * 1e3 - (gl_waited_ms() - waited)
-    gl_finish(ctx)                          # other threads (the tile loader) run while the GL works
+    gl_finish(ctx)  # other threads (the tile loader) run while the GL works
     wall = (time.perf_counter() - t0) * 1e3
     gpu = None
     if query is not None:
-        gpu = query.elapsed / 1e6          # moderngl frees a query with its Python object
+        gpu = query.elapsed / 1e6  # moderngl frees a query with its Python object
     return out, wall, gpu, issue

@@ -1,4 +1,5 @@
 """From samples read off a file to a HeightField: checks, no-data found and filled, units, south-up rows."""
+
 from __future__ import annotations
 
 import warnings
@@ -27,9 +28,22 @@ def check_grid(path, raw: np.ndarray) -> None:
         raise TerrainLoadError(f"{path}: heights must be integers or floats, got dtype {raw.dtype}")
 
 
-def assemble(path, raw: np.ndarray, *, spacing, scale: float = 1.0, offset: float = 0.0, nodata=None,
-             missing: np.ndarray | None = None, north_up: bool = True, east_left: bool = True, name=None,
-             texture=None, origin=(0.0, 0.0, 0.0), notes=()) -> HeightField:
+def assemble(
+    path,
+    raw: np.ndarray,
+    *,
+    spacing,
+    scale: float = 1.0,
+    offset: float = 0.0,
+    nodata=None,
+    missing: np.ndarray | None = None,
+    north_up: bool = True,
+    east_left: bool = True,
+    name=None,
+    texture=None,
+    origin=(0.0, 0.0, 0.0),
+    notes=(),
+) -> HeightField:
     """A HeightField from a 2-D array in file order: height = stored value * scale + offset metres.
 
     No-data is the given value, NaN/inf and ``missing`` (True = no data); it is filled (hybrid.terrain.voids),
@@ -61,8 +75,16 @@ def assemble(path, raw: np.ndarray, *, spacing, scale: float = 1.0, offset: floa
         texture = None if texture is None else texture[:, ::-1]
     try:
         step = (float(scale), float(offset)) if np.issubdtype(raw.dtype, np.integer) else None
-        return HeightField(np.ascontiguousarray(heights), spacing, origin, name or Path(path).stem,
-                           None if texture is None else np.ascontiguousarray(texture), n_missing, str(path), notes,
-                           step)
+        return HeightField(
+            np.ascontiguousarray(heights),
+            spacing,
+            origin,
+            name or Path(path).stem,
+            None if texture is None else np.ascontiguousarray(texture),
+            n_missing,
+            str(path),
+            notes,
+            step,
+        )
     except TerrabenchError as exc:
         raise TerrainLoadError(f"{path}: {exc}") from None

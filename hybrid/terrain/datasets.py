@@ -1,4 +1,5 @@
 """Named terrains: the bundled Puget Sound model and seeded synthetic scenes, some made to break methods."""
+
 from __future__ import annotations
 
 from importlib import resources
@@ -8,11 +9,13 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.heightfield import HeightField
 
-PUGET_SPACING = 160.0     # metres between samples
-PUGET_SCALE = 0.1         # metres per 16-bit unit
-PUGET_CREDIT = ("Puget Sound terrain: USGS data, made available by the University of Washington, "
-                "via the Georgia Tech Large Geometric Models Archive.")
-CREDITS = {"puget": PUGET_CREDIT}   # credit lines of bundled data (synthetic terrain is made here)
+PUGET_SPACING = 160.0  # metres between samples
+PUGET_SCALE = 0.1  # metres per 16-bit unit
+PUGET_CREDIT = (
+    "Puget Sound terrain: USGS data, made available by the University of Washington, "
+    "via the Georgia Tech Large Geometric Models Archive."
+)
+CREDITS = {"puget": PUGET_CREDIT}  # credit lines of bundled data (synthetic terrain is made here)
 
 
 def _data_path(name: str):
@@ -25,9 +28,18 @@ def puget(with_texture: bool = True, size: int | None = None) -> HeightField:
     ``size`` (at most 1025) crops a size x size window around Mount Rainier at full resolution, for tests.
     """
     from hybrid.terrain.loaders import load_png16
-    with resources.as_file(_data_path("ps_height_1k.png")) as hp, resources.as_file(_data_path("ps_texture_1k.png")) as tp:
-        hf = load_png16(hp, vertical_scale=PUGET_SCALE, spacing=PUGET_SPACING,
-                        texture_path=tp if with_texture else None, name="puget")
+
+    with (
+        resources.as_file(_data_path("ps_height_1k.png")) as hp,
+        resources.as_file(_data_path("ps_texture_1k.png")) as tp,
+    ):
+        hf = load_png16(
+            hp,
+            vertical_scale=PUGET_SCALE,
+            spacing=PUGET_SPACING,
+            texture_path=tp if with_texture else None,
+            name="puget",
+        )
     hf.notes.append(PUGET_CREDIT)
     if size is not None:
         hf = crop(hf, size, centre=(0.49, 0.78))
@@ -41,11 +53,19 @@ def crop(hf: HeightField, size: int, centre=(0.5, 0.5)) -> HeightField:
         raise TerrabenchError(f"crop size must lie in [2, {min(hf.rows, hf.cols)}], got {size}")
     i0 = int(np.clip(round(centre[0] * (hf.rows - 1) - size / 2), 0, hf.rows - size))
     j0 = int(np.clip(round(centre[1] * (hf.cols - 1) - size / 2), 0, hf.cols - size))
-    tex = None if hf.texture is None else hf.texture[i0:i0 + size - 1, j0:j0 + size - 1]
+    tex = None if hf.texture is None else hf.texture[i0 : i0 + size - 1, j0 : j0 + size - 1]
     o = (hf.origin[0] + j0 * hf.spacing_x, hf.origin[1] + i0 * hf.spacing_y, hf.origin[2])
-    return HeightField(hf.heights[i0:i0 + size, j0:j0 + size].copy(), (hf.spacing_x, hf.spacing_y), o,
-                       f"{hf.name}-{size}", tex, 0, hf.source, list(hf.notes) + [f"window rows {i0}.. cols {j0}.. of {hf.rows}x{hf.cols}"],
-                       hf.source_step)
+    return HeightField(
+        hf.heights[i0 : i0 + size, j0 : j0 + size].copy(),
+        (hf.spacing_x, hf.spacing_y),
+        o,
+        f"{hf.name}-{size}",
+        tex,
+        0,
+        hf.source,
+        list(hf.notes) + [f"window rows {i0}.. cols {j0}.. of {hf.rows}x{hf.cols}"],
+        hf.source_step,
+    )
 
 
 BAND_SAMPLES = 1 << 20
@@ -193,8 +213,15 @@ def synthetic_peak_bytes(size: int) -> int:
     return PEAK_BASE_BYTES + PEAK_BYTES_PER_SAMPLE * int(size) ** 2
 
 
-SYNTHETIC = {"fbm": fbm, "ridged": ridged, "spike": spike, "cliff": cliff, "staircase": staircase,
-             "flat": flat, "ridges": sine_ridges}
+SYNTHETIC = {
+    "fbm": fbm,
+    "ridged": ridged,
+    "spike": spike,
+    "cliff": cliff,
+    "staircase": staircase,
+    "flat": flat,
+    "ridges": sine_ridges,
+}
 NAMES = ("puget",) + tuple(SYNTHETIC)
 
 
@@ -209,5 +236,6 @@ def get_dataset(name: str, size: int | None = None, seed: int = 0) -> HeightFiel
         raise TerrabenchError(
             f"dataset size must lie in [3, {top}] samples, got {size} (a {top}² synthetic terrain takes about "
             f"{synthetic_peak_bytes(top) / 2**30:.1f} GiB; for larger ones build a tile store out of core: "
-            f"terrabench prepare --synthetic SIZE --out STORE)")
+            f"terrabench prepare --synthetic SIZE --out STORE)"
+        )
     return SYNTHETIC[name](size=int(size or 257), seed=int(seed))

@@ -15,6 +15,7 @@ deformation's displacement, in the order they were added, where the base is the 
 (``touched``), in the GPU pass's (``hybrid.gl.deform``) order of operations; the GPU's sine differs from NumPy's in
 the last bits.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -27,7 +28,7 @@ from hybrid.terrain.heightfield import MAX_ABS_HEIGHT, HeightField
 
 DEFORMATIONS = {"wave": 0, "uplift": 1}
 """Deformation names (as the edit log writes them) and the GPU pass's codes."""
-MAX_SECONDS = 86400.0           # latest end time (s): float32 times keep steps of 8 ms or finer within it
+MAX_SECONDS = 86400.0  # latest end time (s): float32 times keep steps of 8 ms or finer within it
 TWO_PI = np.float32(2.0 * np.pi)
 
 
@@ -92,16 +93,21 @@ def check_deformation(d: Deformation, hf: HeightField, start: float, end: float)
     ox, oy, _ = hf.origin
     w, depth = hf.extent
     if not (ox <= cx <= ox + w and oy <= cy <= oy + depth):
-        raise TerrabenchError(f"{name} centre ({cx:g}, {cy:g}) m lies off terrain {hf.name!r}, which spans x "
-                              f"{ox:g} .. {ox + w:g} and y {oy:g} .. {oy + depth:g} m")
+        raise TerrabenchError(
+            f"{name} centre ({cx:g}, {cy:g}) m lies off terrain {hf.name!r}, which spans x "
+            f"{ox:g} .. {ox + w:g} and y {oy:g} .. {oy + depth:g} m"
+        )
     r = _finite(f"{name} radius", d.radius)
     if not 0.0 < r <= max(w, depth):
-        raise TerrabenchError(f"{name} radius must lie in (0, {max(w, depth):g}] m (the terrain's larger extent), "
-                              f"got {d.radius!r}")
+        raise TerrabenchError(
+            f"{name} radius must lie in (0, {max(w, depth):g}] m (the terrain's larger extent), got {d.radius!r}"
+        )
     t0, t1 = _finite(f"{name} start", start), _finite(f"{name} end", end)
     if not 0.0 <= t0 < t1 <= MAX_SECONDS:
-        raise TerrabenchError(f"{name} start and end must satisfy 0 <= start < end <= {MAX_SECONDS:g} s, got "
-                              f"start {start!r} and end {end!r}")
+        raise TerrabenchError(
+            f"{name} start and end must satisfy 0 <= start < end <= {MAX_SECONDS:g} s, got "
+            f"start {start!r} and end {end!r}"
+        )
     if isinstance(d, Wave):
         a = _finite(f"{name} amplitude", d.amplitude)
         for k in ("wavelength", "speed"):
@@ -118,11 +124,26 @@ def deform_params(d: Deformation, hf: HeightField, start: float, end: float) -> 
     """The checked deformation in hf's texel space (``DeformParams``)."""
     check_deformation(d, hf, start, end)
     ox, oy, _ = hf.origin
-    disc = BrushParams(-1, (float(d.centre[1]) - oy) / hf.spacing_y, (float(d.centre[0]) - ox) / hf.spacing_x,
-                       hf.spacing_x, hf.spacing_y, float(d.radius), 0.0, 0.0)
+    disc = BrushParams(
+        -1,
+        (float(d.centre[1]) - oy) / hf.spacing_y,
+        (float(d.centre[0]) - ox) / hf.spacing_x,
+        hf.spacing_x,
+        hf.spacing_y,
+        float(d.radius),
+        0.0,
+        0.0,
+    )
     if isinstance(d, Wave):
-        return DeformParams(DEFORMATIONS["wave"], disc, float(d.amplitude), float(d.wavelength), float(d.speed),
-                            float(start), float(end))
+        return DeformParams(
+            DEFORMATIONS["wave"],
+            disc,
+            float(d.amplitude),
+            float(d.wavelength),
+            float(d.speed),
+            float(start),
+            float(end),
+        )
     return DeformParams(DEFORMATIONS["uplift"], disc, float(d.rate), 0.0, 0.0, float(start), float(end))
 
 

@@ -8,6 +8,7 @@ the footprint is [0, cols - 1] x [0, rows - 1]. A ray starting over the footprin
 lies below the triangulated ground; one from outside when it enters the footprint below the outer edge's
 height there (linear between samples, as the surface). GPU twin: hybrid/gl/edges.glsl.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -18,9 +19,11 @@ from hybrid.terrain.heightfield import HeightField
 def edge_profiles(heights: np.ndarray) -> np.ndarray:
     """(4, L) float32 heights (metres) along the south, north, west and east edges, L = max(rows, cols), each
     padded with its last sample."""
-    sides = tuple(np.asarray(heights[i], dtype=np.float32) for i in ((0, slice(None)), (-1, slice(None)),
-                                                                   (slice(None), 0), (slice(None), -1)))
-    n = max(heights.shape)                          # sliced first: a stored grid reads only its edges
+    sides = tuple(
+        np.asarray(heights[i], dtype=np.float32)
+        for i in ((0, slice(None)), (-1, slice(None)), (slice(None), 0), (slice(None), -1))
+    )
+    n = max(heights.shape)  # sliced first: a stored grid reads only its edges
     return np.stack([np.pad(s, (0, n - len(s)), mode="edge") for s in sides])
 
 

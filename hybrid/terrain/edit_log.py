@@ -8,6 +8,7 @@ wavelength (m) and speed (m/s) for a ``wave``, its rate (m/s) for an ``uplift``,
 editor's clock). A log read for another terrain, or a malformed line, is refused by line number before anything
 is applied.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -23,11 +24,13 @@ from hybrid.terrain.deform import DEFORMATION_TYPES, Deformation, Wave, check_de
 from hybrid.terrain.edits import BRUSHES, Brush, Flatten, check_brush
 from hybrid.terrain.heightfield import HeightField
 
-FORMAT = 1                       # the header's "terrabench_edits" version
-DIGEST_LATTICE = 64              # samples a side of the lattice the digest reads
+FORMAT = 1  # the header's "terrabench_edits" version
+DIGEST_LATTICE = 64  # samples a side of the lattice the digest reads
 EDIT_KEYS = {"frame", "brush", "centre", "radius", "strength"}
-DEFORMATION_KEYS = {"wave": {"deformation", "centre", "radius", "amplitude", "wavelength", "speed", "start", "end"},
-                    "uplift": {"deformation", "centre", "radius", "rate", "start", "end"}}
+DEFORMATION_KEYS = {
+    "wave": {"deformation", "centre", "radius", "amplitude", "wavelength", "speed", "start", "end"},
+    "uplift": {"deformation", "centre", "radius", "rate", "start", "end"},
+}
 
 
 @dataclass(frozen=True)
@@ -79,15 +82,29 @@ def terrain_id(hf: HeightField) -> TerrainId:
 
 
 def _header(tid: TerrainId) -> dict:
-    return {"terrabench_edits": FORMAT, "terrain": {"name": tid.name, "rows": tid.rows, "cols": tid.cols,
-            "spacing": list(tid.spacing), "origin": list(tid.origin), "digest": tid.digest}}
+    return {
+        "terrabench_edits": FORMAT,
+        "terrain": {
+            "name": tid.name,
+            "rows": tid.rows,
+            "cols": tid.cols,
+            "spacing": list(tid.spacing),
+            "origin": list(tid.origin),
+            "digest": tid.digest,
+        },
+    }
 
 
 def edit_record(edit: LoggedEdit) -> dict:
     """One edit as its log line's JSON object."""
     b = edit.brush
-    out = {"frame": int(edit.frame), "brush": b.kind, "centre": [float(v) for v in b.centre],
-           "radius": float(b.radius), "strength": float(b.strength)}
+    out = {
+        "frame": int(edit.frame),
+        "brush": b.kind,
+        "centre": [float(v) for v in b.centre],
+        "radius": float(b.radius),
+        "strength": float(b.strength),
+    }
     if isinstance(b, Flatten):
         out["height"] = float(b.height)
     return out
@@ -106,37 +123,55 @@ def deformation_record(d: LoggedDeformation) -> dict:
 
 def write_log(path, log: EditLog) -> Path:
     """Write an edit log as JSON lines, atomically (the file lands whole or not at all)."""
-    lines = [json.dumps(_header(log.terrain))] + [json.dumps(edit_record(e)) for e in log.edits] + \
-        [json.dumps(deformation_record(d)) for d in log.deformations]
+    lines = (
+        [json.dumps(_header(log.terrain))]
+        + [json.dumps(edit_record(e)) for e in log.edits]
+        + [json.dumps(deformation_record(d)) for d in log.deformations]
+    )
     return write_text(path, "\n".join(lines) + "\n")
 
 
 def _parse_header(obj, where: str) -> TerrainId:
     if not isinstance(obj, dict) or obj.get("terrabench_edits") != FORMAT or not isinstance(obj.get("terrain"), dict):
-        raise TerrabenchError(f"{where}: the first line must be the header {{\"terrabench_edits\": {FORMAT}, "
-                              "\"terrain\": {...}}, as terrabench writes it")
+        raise TerrabenchError(
+            f'{where}: the first line must be the header {{"terrabench_edits": {FORMAT}, '
+            '"terrain": {...}}, as terrabench writes it'
+        )
     t = obj["terrain"]
     try:
-        return TerrainId(str(t["name"]), int(t["rows"]), int(t["cols"]), tuple(float(v) for v in t["spacing"]),
-                         tuple(float(v) for v in t["origin"]), str(t["digest"]))
+        return TerrainId(
+            str(t["name"]),
+            int(t["rows"]),
+            int(t["cols"]),
+            tuple(float(v) for v in t["spacing"]),
+            tuple(float(v) for v in t["origin"]),
+            str(t["digest"]),
+        )
     except (KeyError, TypeError, ValueError):
-        raise TerrabenchError(f"{where}: the header's terrain needs name, rows, cols, spacing, origin and digest, "
-                              f"got {json.dumps(t)[:200]}") from None
+        raise TerrabenchError(
+            f"{where}: the header's terrain needs name, rows, cols, spacing, origin and digest, "
+            f"got {json.dumps(t)[:200]}"
+        ) from None
 
 
 def _keys(obj: dict, keys: set, what: str, where: str) -> None:
     """Refuse an object whose keys are not exactly ``keys``, naming the missing and unknown ones."""
     if set(obj) != keys:
         missing, extra = sorted(keys - set(obj)), sorted(set(obj) - keys)
-        raise TerrabenchError(f"{where}: a {what} has keys {', '.join(sorted(keys))}"
-                              + (f"; missing {', '.join(missing)}" if missing else "")
-                              + (f"; unknown {', '.join(extra)}" if extra else ""))
+        raise TerrabenchError(
+            f"{where}: a {what} has keys {', '.join(sorted(keys))}"
+            + (f"; missing {', '.join(missing)}" if missing else "")
+            + (f"; unknown {', '.join(extra)}" if extra else "")
+        )
 
 
 def _centre(obj: dict, where: str) -> tuple[float, float]:
     centre = obj["centre"]
-    if not isinstance(centre, list) or len(centre) != 2 or \
-            not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in centre):
+    if (
+        not isinstance(centre, list)
+        or len(centre) != 2
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in centre)
+    ):
         raise TerrabenchError(f"{where}: centre must be [x, y] in metres, got {centre!r}")
     return float(centre[0]), float(centre[1])
 
@@ -214,12 +249,17 @@ def check_log(log: EditLog, hf: HeightField, path="edit log") -> EditLog:
     TerrabenchError naming the difference or the edit."""
     mine = terrain_id(hf)
     t = log.terrain
-    for what, theirs, ours in (("samples (rows, cols)", (t.rows, t.cols), (mine.rows, mine.cols)),
-                               ("spacing (m)", t.spacing, mine.spacing), ("origin (m)", t.origin, mine.origin),
-                               ("height digest", t.digest, mine.digest)):
+    for what, theirs, ours in (
+        ("samples (rows, cols)", (t.rows, t.cols), (mine.rows, mine.cols)),
+        ("spacing (m)", t.spacing, mine.spacing),
+        ("origin (m)", t.origin, mine.origin),
+        ("height digest", t.digest, mine.digest),
+    ):
         if tuple(np.atleast_1d(theirs)) != tuple(np.atleast_1d(ours)):
-            raise TerrabenchError(f"{path} was made for terrain {t.name!r} with {what} {theirs}, not this terrain "
-                                  f"{hf.name!r} with {ours}; replay it on the terrain it was made for")
+            raise TerrabenchError(
+                f"{path} was made for terrain {t.name!r} with {what} {theirs}, not this terrain "
+                f"{hf.name!r} with {ours}; replay it on the terrain it was made for"
+            )
     for k, e in enumerate(log.edits, start=1):
         try:
             check_brush(e.brush, hf)

@@ -13,6 +13,7 @@ w = (1 - d²/r²)² for d < r, else 0 (continuous slope at the rim), so an edit 
 Every brush is computed in float32 over the samples it touches only (``touched``); ``brush_params`` turns a brush
 into the texel-space numbers the CPU (``apply_brush``) and the GPU pass (``hybrid.gl.brush``) both compute from.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -24,8 +25,8 @@ from hybrid.terrain.heightfield import MAX_ABS_HEIGHT, HeightField
 
 KINDS = {"raise": 0, "flatten": 1, "smooth": 2, "crater": 3}
 """Brush names (as the edit log writes them) and the GPU pass's codes."""
-CRATER_BOWL = 0.7               # share of the radius the crater's bowl spans
-CRATER_RIM = 0.3                # the rim's height as a share of the crater's depth
+CRATER_BOWL = 0.7  # share of the radius the crater's bowl spans
+CRATER_RIM = 0.3  # the rim's height as a share of the crater's depth
 
 
 @dataclass(frozen=True)
@@ -138,12 +139,15 @@ def check_brush(brush: Brush, hf: HeightField) -> Brush:
     ox, oy, _ = hf.origin
     w, d = hf.extent
     if not (ox <= cx <= ox + w and oy <= cy <= oy + d):
-        raise TerrabenchError(f"{name} centre ({cx:g}, {cy:g}) m lies off terrain {hf.name!r}, which spans x "
-                              f"{ox:g} .. {ox + w:g} and y {oy:g} .. {oy + d:g} m")
+        raise TerrabenchError(
+            f"{name} centre ({cx:g}, {cy:g}) m lies off terrain {hf.name!r}, which spans x "
+            f"{ox:g} .. {ox + w:g} and y {oy:g} .. {oy + d:g} m"
+        )
     r = _finite(f"{name} radius", brush.radius)
     if not (0.0 < r <= max(w, d)):
-        raise TerrabenchError(f"{name} radius must lie in (0, {max(w, d):g}] m (the terrain's larger extent), "
-                              f"got {brush.radius!r}")
+        raise TerrabenchError(
+            f"{name} radius must lie in (0, {max(w, d):g}] m (the terrain's larger extent), got {brush.radius!r}"
+        )
     s = _finite(f"{name} strength", brush.strength)
     if brush.kind in ("flatten", "smooth") and not 0.0 <= s <= 1.0:
         raise TerrabenchError(f"{name} strength must lie in [0, 1], got {brush.strength!r}")
@@ -162,9 +166,16 @@ def brush_params(brush: Brush, hf: HeightField) -> BrushParams:
     check_brush(brush, hf)
     ox, oy, oz = hf.origin
     target = float(brush.height) - oz if isinstance(brush, Flatten) else 0.0
-    return BrushParams(KINDS[brush.kind], (float(brush.centre[1]) - oy) / hf.spacing_y,
-                       (float(brush.centre[0]) - ox) / hf.spacing_x, hf.spacing_x, hf.spacing_y,
-                       float(brush.radius), float(brush.strength), target)
+    return BrushParams(
+        KINDS[brush.kind],
+        (float(brush.centre[1]) - oy) / hf.spacing_y,
+        (float(brush.centre[0]) - ox) / hf.spacing_x,
+        hf.spacing_x,
+        hf.spacing_y,
+        float(brush.radius),
+        float(brush.strength),
+        target,
+    )
 
 
 def touched(p: BrushParams, rows: int, cols: int) -> Window:
@@ -181,9 +192,9 @@ def _mean3(h: np.ndarray, win: Window) -> np.ndarray:
     cols = np.clip(np.arange(win.j0 - 1, win.j1 + 1), 0, h.shape[1] - 1)
     a = h[np.ix_(rows, cols)].astype(np.float32)
     total = np.zeros((win.i1 - win.i0, win.j1 - win.j0), np.float32)
-    for di in range(3):                             # row by row, in the GPU pass's order of summation
+    for di in range(3):  # row by row, in the GPU pass's order of summation
         for dj in range(3):
-            total += a[di:di + total.shape[0], dj:dj + total.shape[1]]
+            total += a[di : di + total.shape[0], dj : dj + total.shape[1]]
     return total / np.float32(9.0)
 
 

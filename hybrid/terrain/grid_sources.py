@@ -8,6 +8,7 @@ a GDAL file through rasterio (windows of the file, never the whole grid), a seed
 every sample is a function of its own position and the seed, so any window gives the same samples, and a
 height field already in memory (a bundled dataset made into a store).
 """
+
 from __future__ import annotations
 
 import warnings
@@ -25,6 +26,7 @@ class GdalGridSource:
         from rasterio.errors import NotGeoreferencedWarning
 
         from .gdal_files import _open, grid_header
+
         self.path = str(path)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", NotGeoreferencedWarning)
@@ -37,12 +39,13 @@ class GdalGridSource:
         self._row0 = 0 if self.h.window is None else int(self.h.window.row_off)
         self._col0 = 0 if self.h.window is None else int(self.h.window.col_off)
         integer = np.issubdtype(np.dtype(self.src.dtypes[self.h.band - 1]), np.integer)
-        self.source_step = (float(self.h.scale), float(self.h.offset)) if integer else None   # as the loader's
+        self.source_step = (float(self.h.scale), float(self.h.offset)) if integer else None  # as the loader's
 
     def read_rows(self, r0: int, r1: int) -> np.ndarray:
         """Rows r0..r1-1 counted from the south, (r1 - r0, cols) float32 metres; no-data is refused by name."""
         from rasterio.windows import Window
-        f0 = self.rows - r1 if self.h.north_up else r0                 # the band's first row in the file
+
+        f0 = self.rows - r1 if self.h.north_up else r0  # the band's first row in the file
         win = Window(self._col0, self._row0 + f0, self.cols, r1 - r0)
         try:
             raw = self.src.read(self.h.band, window=win)
@@ -53,7 +56,8 @@ class GdalGridSource:
             raise TerrainLoadError(
                 f"{self.path}: {int((valid == 0).sum())} no-data samples in rows {f0}..{f0 + r1 - r0}; a tile store "
                 "is built a band at a time and does not fill voids: fill them first (e.g. gdal_fillnodata.py), or "
-                "load the file whole, where terrabench fills them")
+                "load the file whole, where terrabench fills them"
+            )
         h = raw.astype(np.float64) * self.h.scale + self.h.offset
         if self.h.north_up:
             h = h[::-1]
@@ -71,7 +75,9 @@ class GdalGridSource:
 def _hash(seed: int, octave: int, ix: np.ndarray, iy: np.ndarray) -> np.ndarray:
     """Uniform values in [-1, 1) from integer lattice points, the seed and the octave (a 64-bit mix)."""
     with np.errstate(over="ignore"):
-        h = (ix.astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)) ^ (iy.astype(np.uint64) * np.uint64(0xC2B2AE3D27D4EB4F))
+        h = (ix.astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)) ^ (
+            iy.astype(np.uint64) * np.uint64(0xC2B2AE3D27D4EB4F)
+        )
         h ^= np.uint64((seed * 1000003 + octave * 7919) & 0xFFFFFFFFFFFFFFFF)
         h ^= h >> np.uint64(33)
         h *= np.uint64(0xFF51AFD7ED558CCD)
@@ -103,8 +109,16 @@ class FractalSource:
     extends periodically without a seam.
     """
 
-    def __init__(self, size: int, seed: int = 0, spacing: float = 10.0, relief: float = 1500.0,
-                 feature_cells: int = 512, octaves: int = 10, period: int | None = None):
+    def __init__(
+        self,
+        size: int,
+        seed: int = 0,
+        spacing: float = 10.0,
+        relief: float = 1500.0,
+        feature_cells: int = 512,
+        octaves: int = 10,
+        period: int | None = None,
+    ):
         if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or not 2 <= size <= 1_048_577:
             raise TerrabenchError(f"synthetic size must be an integer in [2, 1048577] samples, got {size!r}")
         if not (0 <= seed < 2**32):
@@ -112,10 +126,12 @@ class FractalSource:
         self.rows = self.cols = int(size)
         self.seed, self.spacing, self.relief = int(seed), float(spacing), float(relief)
         self.feature, self.octaves = float(feature_cells), int(octaves)
-        if period is not None and (isinstance(period, bool) or int(period) != period or period & (period - 1)
-                                   or period < 2 * feature_cells):
-            raise TerrabenchError(f"period must be a power of two of at least {2 * feature_cells} samples, got "
-                                  f"{period!r}")
+        if period is not None and (
+            isinstance(period, bool) or int(period) != period or period & (period - 1) or period < 2 * feature_cells
+        ):
+            raise TerrabenchError(
+                f"period must be a power of two of at least {2 * feature_cells} samples, got {period!r}"
+            )
         self.period = None if period is None else int(period)
         self.name = f"fractal-{size}-s{seed}" + (f"-p{period}" if period else "")
         self.notes = [f"synthetic: fBm, ridges and flat basins, seed {seed}, {spacing:g} m spacing"]
@@ -127,8 +143,10 @@ class FractalSource:
         base = np.zeros((r1 - r0, self.cols))
         ridge = np.zeros_like(base)
         amp, cell = 1.0, self.feature
+
         def wrap(c):
             return int(self.period // c) if self.period else None
+
         for o in range(self.octaves):
             n = _value_noise(self.seed, o, y / cell, x / cell, wrap(cell))
             base += amp * n
@@ -138,9 +156,9 @@ class FractalSource:
             cell = max(cell / 2.0, 1.0)
         big = 2 * self.feature
         mask = np.clip(0.5 + 1.5 * _value_noise(self.seed + 2, 0, y / big, x / big, wrap(big)), 0, 1)
-        h = self.relief * (0.35 * base + 0.65 * mask * ridge ** 2)
+        h = self.relief * (0.35 * base + 0.65 * mask * ridge**2)
         level = 0.7 * self.relief
-        h = np.where(h < level, level + 0.05 * (h - level), h)           # flat basins below the level
+        h = np.where(h < level, level + 0.05 * (h - level), h)  # flat basins below the level
         return h.astype(np.float32)
 
 

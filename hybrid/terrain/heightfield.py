@@ -12,6 +12,7 @@ Conventions (the README states them once for the whole project):
 - The optional colour texture is cell-centred: texel (i, j) covers cell (i, j), so it has one row and
   one column fewer than the heights, and the same south-up row order.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -20,9 +21,9 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 
-MAX_ABS_HEIGHT = 1.0e7           # metres: float32 heights keep steps of 1 m or finer within it; a numerical
-                                 # bound, not Earth's (exaggerated and extraterrestrial terrain stays allowed)
-MAX_ORIGIN = 1.0e9               # metres: a terrain's world origin (as the camera's coordinates)
+MAX_ABS_HEIGHT = 1.0e7  # metres: float32 heights keep steps of 1 m or finer within it; a numerical
+# bound, not Earth's (exaggerated and extraterrestrial terrain stays allowed)
+MAX_ORIGIN = 1.0e9  # metres: a terrain's world origin (as the camera's coordinates)
 
 
 def spacing_pair(spacing, name: str = "terrain") -> tuple[float, float]:
@@ -31,7 +32,9 @@ def spacing_pair(spacing, name: str = "terrain") -> tuple[float, float]:
         pair = (spacing, spacing) if np.ndim(spacing) == 0 else tuple(spacing)
         sx, sy = (float(v) for v in pair)
     except (TypeError, ValueError):
-        raise TerrabenchError(f"spacing of {name!r} must be a number or an (x, y) pair of metres, got {spacing!r}") from None
+        raise TerrabenchError(
+            f"spacing of {name!r} must be a number or an (x, y) pair of metres, got {spacing!r}"
+        ) from None
     for axis, v in (("x", sx), ("y", sy)):
         if not (np.isfinite(v) and v > 0):
             raise TerrabenchError(f"spacing {axis} of {name!r} must be finite and > 0 metres, got {v!r}")
@@ -60,7 +63,7 @@ class HeightField:
     source_step: tuple[float, float] | None = None
     spacing_x: float = field(init=False, default=0.0)
     spacing_y: float = field(init=False, default=0.0)
-    _range: tuple = field(init=False, default=(None, None), repr=False, compare=False)   # (heights array, its range)
+    _range: tuple = field(init=False, default=(None, None), repr=False, compare=False)  # (heights array, its range)
 
     def __post_init__(self):
         h = np.asarray(self.heights)
@@ -76,11 +79,12 @@ class HeightField:
                 f"heights of {self.name!r} hold {bad} NaN/inf samples; load through hybrid.terrain.loaders "
                 "(which fills no-data) or fill them first"
             )
-        lo, hi = float(h.min()), float(h.max())          # checked before the float32 cast, which could overflow
+        lo, hi = float(h.min()), float(h.max())  # checked before the float32 cast, which could overflow
         if max(-lo, hi) > MAX_ABS_HEIGHT:
             raise TerrabenchError(
                 f"heights of {self.name!r} span {lo:g} .. {hi:g} m, beyond ±{MAX_ABS_HEIGHT:g} m, where float32 "
-                "heights lose metre precision; check the vertical scale and units")
+                "heights lose metre precision; check the vertical scale and units"
+            )
         self.heights = np.ascontiguousarray(h.astype(np.float32, copy=False))
         self.spacing_x, self.spacing_y = spacing_pair(self.spacing, self.name)
         self.spacing = self.spacing_x if self.spacing_x == self.spacing_y else (self.spacing_x, self.spacing_y)
@@ -176,8 +180,8 @@ class HeightField:
             f"samples:     {self.cols} x {self.rows} (columns x rows)",
             f"spacing:     {self.spacing_x:g} m east-west x {self.spacing_y:g} m north-south",
             f"extent:      {w / 1000:.2f} km x {d / 1000:.2f} km",
-            f"heights:     {lo:.1f} .. {hi:.1f} m" + (f" (mean {float(self.heights.mean()):.1f} m)"
-                                                    if isinstance(self.heights, np.ndarray) else ""),
+            f"heights:     {lo:.1f} .. {hi:.1f} m"
+            + (f" (mean {float(self.heights.mean()):.1f} m)" if isinstance(self.heights, np.ndarray) else ""),
             f"origin:      ({self.origin[0]:g}, {self.origin[1]:g}, {self.origin[2]:g}) m",
             f"texture:     {f'{self.texture.shape[1]}x{self.texture.shape[0]} RGB' if self.texture is not None else 'none'}",
             f"no-data:     {self.nodata_filled} samples filled",
@@ -187,5 +191,14 @@ class HeightField:
 
     def moved(self, origin) -> HeightField:
         """The same terrain placed at another world origin (x, y, z) in metres."""
-        return HeightField(self.heights, self.spacing, tuple(origin), self.name, self.texture,
-                           self.nodata_filled, self.source, list(self.notes), self.source_step)
+        return HeightField(
+            self.heights,
+            self.spacing,
+            tuple(origin),
+            self.name,
+            self.texture,
+            self.nodata_filled,
+            self.source,
+            list(self.notes),
+            self.source_step,
+        )

@@ -7,6 +7,7 @@ south edge (see hybrid.terrain.heightfield). ``.npy``/``.npz`` arrays are taken 
 ``save_npz`` writes). No-data is filled by hybrid.terrain.voids, counted in ``HeightField.nodata_filled``,
 and reported in a NoDataWarning and a note.
 """
+
 from __future__ import annotations
 
 import os
@@ -22,8 +23,16 @@ from hybrid.terrain.window import Crop
 __all__ = ["NoDataWarning", "load_npy", "load_png16", "load_raw", "load_terrain", "load_texture", "save_npz"]
 
 GDAL_SUFFIXES = (".tif", ".tiff", ".hgt", ".asc", ".vrt", ".img", ".bil", ".dem")
-SUFFIXES = {".png": "png", ".npy": "npy", ".npz": "npz", ".raw": "raw", ".bin": "raw", ".r16": "raw", ".r32": "raw",
-            **dict.fromkeys(GDAL_SUFFIXES, "gdal")}
+SUFFIXES = {
+    ".png": "png",
+    ".npy": "npy",
+    ".npz": "npz",
+    ".raw": "raw",
+    ".bin": "raw",
+    ".r16": "raw",
+    ".r32": "raw",
+    **dict.fromkeys(GDAL_SUFFIXES, "gdal"),
+}
 
 
 def _need(path, what, value):
@@ -41,10 +50,12 @@ def _cropped(path, arr: np.ndarray, crop: Crop | None, notes: list) -> np.ndarra
     return arr[crop.slices()]
 
 
-def load_png16(path, *, vertical_scale=None, spacing=None, crop: Crop | None = None, texture_path=None,
-               name=None) -> HeightField:
+def load_png16(
+    path, *, vertical_scale=None, spacing=None, crop: Crop | None = None, texture_path=None, name=None
+) -> HeightField:
     """Load a 16-bit (or 8-bit) greyscale PNG; height = value * vertical_scale metres, north-up file."""
     from PIL import Image, UnidentifiedImageError
+
     try:
         with Image.open(path) as im:
             arr = np.array(im)
@@ -58,22 +69,32 @@ def load_png16(path, *, vertical_scale=None, spacing=None, crop: Crop | None = N
     notes: list[str] = []
     arr = _cropped(path, arr, crop, notes)
     if tex is not None and crop is not None:
-        tex = tex[crop.row:crop.row + crop.rows - 1, crop.col:crop.col + crop.cols - 1]
-    return assemble(path, arr, scale=float(_need(path, "vertical scale", vertical_scale)),
-                    spacing=_need(path, "spacing", spacing), texture=tex, name=name, notes=notes)
+        tex = tex[crop.row : crop.row + crop.rows - 1, crop.col : crop.col + crop.cols - 1]
+    return assemble(
+        path,
+        arr,
+        scale=float(_need(path, "vertical scale", vertical_scale)),
+        spacing=_need(path, "spacing", spacing),
+        texture=tex,
+        name=name,
+        notes=notes,
+    )
 
 
 def load_texture(path, cells_shape) -> np.ndarray:
     """Load an RGB texture (north-up, uint8) whose size must equal the height grid's cells (rows-1, cols-1)."""
     from PIL import Image, UnidentifiedImageError
+
     try:
         with Image.open(path) as im:
             tex = np.array(im.convert("RGB"))
     except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
         raise TerrainLoadError(f"{path}: not a readable image ({exc})") from None
     if tex.shape[:2] != tuple(cells_shape):
-        raise TerrainLoadError(f"{path}: texture is {tex.shape[1]}x{tex.shape[0]}, the height grid has "
-                               f"{cells_shape[1]}x{cells_shape[0]} cells (texels are cell-centred)")
+        raise TerrainLoadError(
+            f"{path}: texture is {tex.shape[1]}x{tex.shape[0]}, the height grid has "
+            f"{cells_shape[1]}x{cells_shape[0]} cells (texels are cell-centred)"
+        )
     return tex
 
 
@@ -96,19 +117,37 @@ def load_npy(path, *, vertical_scale=None, spacing=None, crop: Crop | None = Non
             if spacing is None and "spacing" in keys:
                 stored = np.asarray(data["spacing"])
                 if stored.shape not in ((), (1,), (2,)):
-                    raise TerrainLoadError(f"{path}: 'spacing' must hold one number or (x, y) metres, "
-                                           f"got shape {stored.shape}")
+                    raise TerrainLoadError(
+                        f"{path}: 'spacing' must hold one number or (x, y) metres, got shape {stored.shape}"
+                    )
                 spacing = float(stored.reshape(-1)[0]) if stored.size == 1 else tuple(float(v) for v in stored)
     else:
         arr = data
     notes: list[str] = []
     arr = _cropped(path, np.asarray(arr), crop, notes) if np.ndim(arr) == 2 else np.asarray(arr)
-    return assemble(path, arr, scale=1.0 if vertical_scale is None else float(vertical_scale),
-                    spacing=_need(path, "spacing", spacing), north_up=False, name=name, notes=notes)
+    return assemble(
+        path,
+        arr,
+        scale=1.0 if vertical_scale is None else float(vertical_scale),
+        spacing=_need(path, "spacing", spacing),
+        north_up=False,
+        name=name,
+        notes=notes,
+    )
 
 
-def load_raw(path, *, shape, dtype, vertical_scale=1.0, spacing=None, crop: Crop | None = None, north_up=True,
-             nodata=None, name=None) -> HeightField:
+def load_raw(
+    path,
+    *,
+    shape,
+    dtype,
+    vertical_scale=1.0,
+    spacing=None,
+    crop: Crop | None = None,
+    north_up=True,
+    nodata=None,
+    name=None,
+) -> HeightField:
     """Load a headerless grid of the given (rows, cols) shape and NumPy dtype (e.g. '<u2', '<f4')."""
     try:
         dt = np.dtype(dtype)
@@ -121,8 +160,16 @@ def load_raw(path, *, shape, dtype, vertical_scale=1.0, spacing=None, crop: Crop
         raise TerrainLoadError(f"{path}: {size} bytes, but shape {rows}x{cols} of {dt} needs {need}")
     notes: list[str] = []
     arr = _cropped(path, np.fromfile(path, dtype=dt).reshape(rows, cols), crop, notes)
-    return assemble(path, arr, scale=float(vertical_scale), spacing=_need(path, "spacing", spacing),
-                    north_up=north_up, nodata=nodata, name=name, notes=notes)
+    return assemble(
+        path,
+        arr,
+        scale=float(vertical_scale),
+        spacing=_need(path, "spacing", spacing),
+        north_up=north_up,
+        nodata=nodata,
+        name=name,
+        notes=notes,
+    )
 
 
 def load_terrain(path, **options) -> HeightField:
@@ -133,6 +180,7 @@ def load_terrain(path, **options) -> HeightField:
     """
     from hybrid.terrain.gdal_files import load_gdal
     from hybrid.terrain.paths import path_problem
+
     p = Path(path)
     problem = path_problem(p)
     if problem is not None:
@@ -147,11 +195,14 @@ def load_terrain(path, **options) -> HeightField:
     options = {k: v for k, v in options.items() if v is not None}
     reader = {"png": load_png16, "gdal": load_gdal, "npy": load_npy, "npz": load_npy, "raw": load_raw}[kind]
     if kind == "raw" and ("shape" not in options or "dtype" not in options):
-        raise TerrainLoadError(f"{path}: a raw grid needs an explicit shape (--raw-shape ROWSxCOLS) and dtype "
-                               "(--raw-dtype)")
+        raise TerrainLoadError(
+            f"{path}: a raw grid needs an explicit shape (--raw-shape ROWSxCOLS) and dtype (--raw-dtype)"
+        )
     if "crs" in options and kind != "gdal":
-        raise TerrainLoadError(f"{path}: --crs applies to GDAL formats ({', '.join(GDAL_SUFFIXES)}), not {p.suffix}; "
-                               "give the ground spacing with --spacing")
+        raise TerrainLoadError(
+            f"{path}: --crs applies to GDAL formats ({', '.join(GDAL_SUFFIXES)}), not {p.suffix}; "
+            "give the ground spacing with --spacing"
+        )
     try:
         return reader(str(p), **options)
     except TypeError as exc:

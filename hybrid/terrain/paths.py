@@ -1,4 +1,5 @@
 """Why a path names nothing readable: missing, a broken symlink or a symlink loop."""
+
 from __future__ import annotations
 
 import errno

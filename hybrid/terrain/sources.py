@@ -1,4 +1,5 @@
 """What terrain to load: a bundled or synthetic dataset name, or a file with its loader options, and its credit."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -35,6 +36,7 @@ class TerrainSource:
     def is_file(self) -> bool:
         """Whether the dataset is a file (not a bundled or synthetic name)."""
         from hybrid.terrain.datasets import NAMES
+
         return self.dataset not in NAMES
 
     @property
@@ -46,29 +48,40 @@ class TerrainSource:
         """The HeightField; ``size`` (samples a side) and ``seed`` apply to synthetic data (size crops puget)."""
         from hybrid.terrain.datasets import NAMES, get_dataset
         from hybrid.terrain.loaders import load_terrain
+
         given = [k for k in FILE_OPTIONS if getattr(self, k) is not None]
         if not self.is_file:
             if given:
-                raise TerrabenchError(f"dataset {self.dataset!r} is bundled or synthetic; {', '.join(given)} apply to "
-                                      "files only")
+                raise TerrabenchError(
+                    f"dataset {self.dataset!r} is bundled or synthetic; {', '.join(given)} apply to files only"
+                )
             hf = get_dataset(self.dataset, size=size, seed=seed)
             if self.name is not None:
                 hf.name = self.name
             return hf
         from hybrid.terrain.stored import is_store, open_store, store_remains
-        if is_store(self.dataset) or store_remains(self.dataset):    # a tile store (damaged or not): stays on disk
+
+        if is_store(self.dataset) or store_remains(self.dataset):  # a tile store (damaged or not): stays on disk
             if given:
-                raise TerrabenchError(f"{self.dataset} is a tile store; {', '.join(given)} were applied when it was "
-                                      "prepared")
+                raise TerrabenchError(
+                    f"{self.dataset} is a tile store; {', '.join(given)} were applied when it was prepared"
+                )
             return open_store(self.dataset)
         problem = path_problem(self.dataset)
         if problem is not None and (problem != "no such file" or Path(self.dataset).suffix):
             raise TerrabenchError(f"{self.dataset}: {problem}")
         if not Path(self.dataset).suffix:
-            raise TerrabenchError(f"unknown dataset {self.dataset!r}; choose one of {', '.join(NAMES)}, a file path or "
-                                  "a tile store (terrabench prepare)")
-        opts = {"spacing": self.spacing, "vertical_scale": self.vertical_scale, "crs": self.crs, "crop": self.crop,
-                "name": self.name}
+            raise TerrabenchError(
+                f"unknown dataset {self.dataset!r}; choose one of {', '.join(NAMES)}, a file path or "
+                "a tile store (terrabench prepare)"
+            )
+        opts = {
+            "spacing": self.spacing,
+            "vertical_scale": self.vertical_scale,
+            "crs": self.crs,
+            "crop": self.crop,
+            "name": self.name,
+        }
         if self.raw_shape is not None or self.raw_dtype is not None:
             opts.update(shape=self.raw_shape, dtype=self.raw_dtype)
         return load_terrain(self.dataset, **opts)
@@ -77,6 +90,7 @@ class TerrainSource:
         """Who to credit for the terrain: the given credit, a bundled dataset's, a note for an uncredited file,
         None for synthetic terrain."""
         from hybrid.terrain.datasets import CREDITS
+
         if self.credit:
             return f"{self.label}: {self.credit}"
         if self.dataset in CREDITS:

@@ -12,6 +12,7 @@ finished: a rename is atomic, so whatever is still staged is renamed. An uncommi
 point therefore leaves the store wholly before or wholly after the change. One writer at a time: two processes
 must not change a store at once.
 """
+
 from __future__ import annotations
 
 import json
@@ -61,7 +62,7 @@ class Transaction:
         recover(self.root)
         self.stage = self.root / EDIT_DIR / uuid.uuid4().hex
         self.stage.mkdir(parents=True)
-        self.files: list[tuple[str, str]] = []          # (key: a POSIX path in the store, staged file name)
+        self.files: list[tuple[str, str]] = []  # (key: a POSIX path in the store, staged file name)
         self.committed = False
 
     def add(self, key: str, data: bytes) -> None:
@@ -115,7 +116,9 @@ def recover(root) -> str | None:
         info = json.loads(marker.read_bytes())
         stage, files = edit / str(info["stage"]), [(str(k), str(n)) for k, n in info["files"]]
     except (OSError, ValueError, KeyError, TypeError):
-        raise TerrabenchError(f"{root}: tile store's commit marker {marker} is unreadable; an edit was interrupted "
-                              "while committing: restore the store from its input (terrabench prepare)") from None
+        raise TerrabenchError(
+            f"{root}: tile store's commit marker {marker} is unreadable; an edit was interrupted "
+            "while committing: restore the store from its input (terrabench prepare)"
+        ) from None
     _finish(root, stage, files)
     return "finished"

@@ -12,6 +12,7 @@ A store prepared before manifests has no ``manifest`` attribute: it reads as bef
 ``terrabench info STORE --verify`` says it cannot be verified; running the same prepare command on it records one
 (trusting what is on disk then).
 """
+
 from __future__ import annotations
 
 import functools
@@ -24,7 +25,7 @@ from hybrid.errors import StoreDamagedError, TerrabenchError
 
 MANIFEST = "manifest.json"
 MANIFEST_FORMAT = "terrabench-store-manifest"
-HEADER = "zarr.json"             # the group's metadata: its attributes are the store's header
+HEADER = "zarr.json"  # the group's metadata: its attributes are the store's header
 
 
 def crc32(data) -> int:
@@ -38,15 +39,17 @@ def describe(key: str) -> str:
         array, chunk = key.split("/c/", 1)
         return f"array {array}, chunk ({', '.join(chunk.split('/'))}) (file {key})"
     if key.endswith(HEADER):
-        parent = key[:-len(HEADER)].rstrip("/")
+        parent = key[: -len(HEADER)].rstrip("/")
         return f"the metadata of {parent or 'the group'} (file {key})"
     return f"file {key}"
 
 
 def damaged(store, key: str, reason: str) -> StoreDamagedError:
     """The one error for a damaged file of a store: names the store, the array and chunk, and the fix."""
-    return StoreDamagedError(f"{store}: tile store is damaged: {describe(key)} {reason}; run terrabench prepare again "
-                           f"on its input into a new folder (or remove {store} first)")
+    return StoreDamagedError(
+        f"{store}: tile store is damaged: {describe(key)} {reason}; run terrabench prepare again "
+        f"on its input into a new folder (or remove {store} first)"
+    )
 
 
 def fault(data, entry) -> str | None:
@@ -89,8 +92,9 @@ def record_manifest(root) -> dict:
 
 def manifest_bytes(files: dict) -> bytes:
     """The manifest file's bytes listing ``files`` (key -> [bytes, crc32])."""
-    return json.dumps({"format": MANIFEST_FORMAT, "version": 1, "checksum": "crc32", "files": files},
-                      separators=(",", ":")).encode()
+    return json.dumps(
+        {"format": MANIFEST_FORMAT, "version": 1, "checksum": "crc32", "files": files}, separators=(",", ":")
+    ).encode()
 
 
 def manifest_attribute(text: bytes, files: dict) -> dict:

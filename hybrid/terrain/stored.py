@@ -18,6 +18,7 @@ index touches, so camera presets, ground heights and edge profiles work without 
 would need the whole grid at once (the reference renderer, ``load``) refuses by name beyond MAX_LOAD_SAMPLES; the
 raster strategies read their node arrays from the store a tile at a time.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -39,7 +40,7 @@ from hybrid.terrain.store_manifest import (
 
 STORE_FORMAT = "terrabench-tile-store"
 STORE_VERSION = 1
-MAX_LOAD_SAMPLES = 1 << 26          # a stored grid up to this many samples may be loaded whole (256 MiB)
+MAX_LOAD_SAMPLES = 1 << 26  # a stored grid up to this many samples may be loaded whole (256 MiB)
 
 
 def _zarr():
@@ -57,6 +58,7 @@ def is_store(path) -> bool:
         return False
     try:
         import json
+
         return json.loads((p / "zarr.json").read_text()).get("attributes", {}).get("format") == STORE_FORMAT
     except (OSError, ValueError):
         return False
@@ -81,8 +83,12 @@ class LazyGrid:
         if not isinstance(index, tuple):
             index = (index, slice(None))
         if any(isinstance(i, (np.ndarray, list)) for i in index):
-            i, j = np.broadcast_arrays(*(np.asarray(k, dtype=np.int64) if not isinstance(k, slice)
-                                         else np.arange(self.shape[d])[k] for d, k in enumerate(index)))
+            i, j = np.broadcast_arrays(
+                *(
+                    np.asarray(k, dtype=np.int64) if not isinstance(k, slice) else np.arange(self.shape[d])[k]
+                    for d, k in enumerate(index)
+                )
+            )
             i = np.where(i < 0, i + self.shape[0], i)
             j = np.where(j < 0, j + self.shape[1], j)
             if i.size == 0:
@@ -107,7 +113,8 @@ class LazyGrid:
         if self.size > MAX_LOAD_SAMPLES:
             raise TerrabenchError(
                 f"{self.name!r} is stored out of core ({self.shape[1]}x{self.shape[0]} samples); this step needs "
-                f"the whole grid in memory, allowed up to {MAX_LOAD_SAMPLES} samples")
+                f"the whole grid in memory, allowed up to {MAX_LOAD_SAMPLES} samples"
+            )
         a = np.asarray(self.array[:, :], dtype=np.float32)
         return a if dtype is None else a.astype(dtype)
 
@@ -121,7 +128,7 @@ class StoredTerrain(HeightField):
     """A HeightField over a tile store: ``heights`` is a LazyGrid of level 0; ``store`` is the opened group;
     ``source_step`` is the store's recorded step (None for a store without one)."""
 
-    store: Any = None               # the opened zarr group (typed Any: its attrs and arrays are read untyped)
+    store: Any = None  # the opened zarr group (typed Any: its attrs and arrays are read untyped)
     path: str = ""
 
     def __post_init__(self):
@@ -153,8 +160,16 @@ class StoredTerrain(HeightField):
 
     def load(self) -> HeightField:
         """The whole grid as an in-memory HeightField (refused beyond MAX_LOAD_SAMPLES)."""
-        return HeightField(np.asarray(self.heights), (self.spacing_x, self.spacing_y), self.origin, self.name,
-                           None, source=self.path, notes=list(self.notes), source_step=self.source_step)
+        return HeightField(
+            np.asarray(self.heights),
+            (self.spacing_x, self.spacing_y),
+            self.origin,
+            self.name,
+            None,
+            source=self.path,
+            notes=list(self.notes),
+            source_step=self.source_step,
+        )
 
 
 HEADER_KEYS = ("version", "complete", "name", "spacing", "origin", "height_range", "tile_size", "max_level")
@@ -170,6 +185,7 @@ def _header(p: Path, path) -> dict:
     """The store's header (its group attributes), read from zarr.json after finishing or dropping an interrupted
     edit's write-through (``store_journal.recover``); a missing or garbled one refused by name."""
     import json
+
     if p.is_dir():
         recover(p)
     try:
@@ -198,23 +214,35 @@ def open_store(path) -> StoredTerrain:
     if a.get("version") != STORE_VERSION:
         raise TerrabenchError(f"{path}: tile store version {a.get('version')!r}, this terrabench reads {STORE_VERSION}")
     if not a.get("complete"):
-        raise TerrabenchError(f"{path}: tile store is incomplete (interrupted prepare); run the same prepare "
-                              "command again to finish it")
+        raise TerrabenchError(
+            f"{path}: tile store is incomplete (interrupted prepare); run the same prepare command again to finish it"
+        )
     files = load_manifest(path, a)
     bad = bad_files(p, files, only_metadata=True) if files else []
     if bad:
-        more = f" (and {len(bad) - 1} more damaged files: terrabench info {path} --verify lists them)" if bad[1:] else ""
+        more = (
+            f" (and {len(bad) - 1} more damaged files: terrabench info {path} --verify lists them)" if bad[1:] else ""
+        )
         raise damaged(path, bad[0][0], bad[0][1] + more)
     zarr = _zarr()
     g = zarr.open_group(store=checked_store(path, files), mode="r")
     try:
         level0 = g["levels/0"]
-    except KeyError:                                # a store without a manifest: checked here, by name
+    except KeyError:  # a store without a manifest: checked here, by name
         raise damaged(path, "levels/0/zarr.json", "is missing") from None
     except ValueError as exc:
         raise damaged(path, "levels/0/zarr.json", f"is not valid array metadata ({exc})") from None
     notes = [f"tile store {p.name}: {a.get('made_by', '')}"] + (["periodic extension"] if a.get("periodic") else [])
     step = a.get("source_step")
-    return StoredTerrain(LazyGrid(level0, tuple(a["height_range"]), a["name"]), tuple(a["spacing"]),
-                         tuple(a["origin"]), a["name"], None, source=str(p), notes=notes,
-                         source_step=None if step is None else (float(step[0]), float(step[1])), store=g, path=str(p))
+    return StoredTerrain(
+        LazyGrid(level0, tuple(a["height_range"]), a["name"]),
+        tuple(a["spacing"]),
+        tuple(a["origin"]),
+        a["name"],
+        None,
+        source=str(p),
+        notes=notes,
+        source_step=None if step is None else (float(step[0]), float(step[1])),
+        store=g,
+        path=str(p),
+    )

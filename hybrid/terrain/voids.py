@@ -7,6 +7,7 @@ curvature smoothly across the void (no rings or grooves), but as a fourth-order 
 each void's fill is therefore bounded by the lowest and highest known samples on its rim (the known
 8-neighbours of its samples), and the number of samples that bound moved is reported, never hidden.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -26,19 +27,22 @@ class VoidFill:
     samples: int
     voids: int
     largest: int
-    bounded: int          # samples held at or moved to their void's rim range
+    bounded: int  # samples held at or moved to their void's rim range
     method: str = METHOD
 
     def describe(self, total: int) -> str:
         """One sentence for warnings and notes; total is the grid's sample count."""
-        return (f"{self.samples} no-data samples ({100 * self.samples / total:.2f} %) in {self.voids} "
-                f"void{'s' if self.voids != 1 else ''} "
-                f"(largest {self.largest} samples) filled by {self.method}, each void bounded by its rim's height "
-                f"range ({self.bounded} samples held to that range)")
+        return (
+            f"{self.samples} no-data samples ({100 * self.samples / total:.2f} %) in {self.voids} "
+            f"void{'s' if self.voids != 1 else ''} "
+            f"(largest {self.largest} samples) filled by {self.method}, each void bounded by its rim's height "
+            f"range ({self.bounded} samples held to that range)"
+        )
 
 
-def rim_ranges(values: np.ndarray, missing: np.ndarray, labels: np.ndarray,
-               count: int) -> tuple[np.ndarray, np.ndarray]:
+def rim_ranges(
+    values: np.ndarray, missing: np.ndarray, labels: np.ndarray, count: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Per void label 1..count: min and max of the known samples 8-adjacent to it (index 0 unused)."""
     lo = np.full(count + 1, np.inf)
     hi = np.full(count + 1, -np.inf)
@@ -63,6 +67,7 @@ def fill_voids(values: np.ndarray, missing: np.ndarray, integer: bool = False) -
     step and its 16-bit tiles stay exact (the rim's range, of integers, still bounds it)."""
     from scipy import ndimage
     from skimage.restoration import inpaint_biharmonic
+
     missing = np.asarray(missing, dtype=bool)
     if not missing.any():
         return np.asarray(values, dtype=np.float64), VoidFill(0, 0, 0, 0)

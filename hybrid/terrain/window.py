@@ -1,4 +1,5 @@
 """A crop window of a grid file, in the file's own stored row order (row 0 is the first row stored)."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -41,9 +42,11 @@ class Crop:
     def check(self, shape: tuple[int, int], where: str) -> None:
         """Refuse a window that does not lie inside a grid of shape (rows, cols)."""
         if self.row + self.rows > shape[0] or self.col + self.cols > shape[1]:
-            raise TerrainLoadError(f"{where}: crop rows {self.row}..{self.row + self.rows - 1}, cols "
-                                   f"{self.col}..{self.col + self.cols - 1} does not fit the {shape[0]}x{shape[1]} "
-                                   "grid (rows x cols)")
+            raise TerrainLoadError(
+                f"{where}: crop rows {self.row}..{self.row + self.rows - 1}, cols "
+                f"{self.col}..{self.col + self.cols - 1} does not fit the {shape[0]}x{shape[1]} "
+                "grid (rows x cols)"
+            )
 
     def slices(self) -> tuple[slice, slice]:
         """Row and column slices of the window."""

@@ -4,6 +4,7 @@ Every value equals what the whole-grid computation gives (maxima and minima are 
 interpolated height is the same arithmetic on the same samples), but the work arrays cover one block of
 BLOCK_CELLS² cells at a time, so the peak memory is the heights plus a few MiB, at any grid size.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -30,7 +31,7 @@ def _fold(out: np.ndarray, cells: np.ndarray, i0: int, j0: int, b: int, fn) -> N
     """Fold a block of per-cell values starting at cell (i0, j0) into ``out``'s tiles of b cells with fn."""
     part = _reduce(cells, min(b, BLOCK_CELLS), fn)
     r, c = i0 // b, j0 // b
-    view = out[r:r + part.shape[0], c:c + part.shape[1]]
+    view = out[r : r + part.shape[0], c : c + part.shape[1]]
     view[...] = fn(view, part)
 
 
@@ -56,7 +57,7 @@ def _deviation(h: np.ndarray, k: int, i0: int, i1: int, j0: int, j1: int) -> np.
     lower = h00 + fj * (h01 - h00) + fi * (h11 - h01)
     upper = h00 + fi * (h10 - h00) + fj * (h11 - h10)
     surface = np.where(fj >= fi, lower, upper)
-    return np.abs(surface - h[i0:i1 + 1, j0:j1 + 1].astype(np.float64))
+    return np.abs(surface - h[i0 : i1 + 1, j0 : j1 + 1].astype(np.float64))
 
 
 def level_bounds(h: np.ndarray, n: int, max_level: int) -> tuple[dict, dict, dict]:
@@ -65,7 +66,7 @@ def level_bounds(h: np.ndarray, n: int, max_level: int) -> tuple[dict, dict, dic
     shape0 = (-(-cells_r // n), -(-cells_c // n))
     zmax0, zmin0 = np.full(shape0, -np.inf, h.dtype), np.full(shape0, np.inf, h.dtype)
     for i0, i1, j0, j1 in _blocks(cells_r, cells_c):
-        sub = h[i0:i1 + 1, j0:j1 + 1]
+        sub = h[i0 : i1 + 1, j0 : j1 + 1]
         _fold(zmax0, _corner(sub, np.maximum), i0, j0, n, np.maximum)
         _fold(zmin0, _corner(sub, np.minimum), i0, j0, n, np.minimum)
     zmax, zmin, err = {0: zmax0}, {0: zmin0}, {0: np.zeros(shape0)}

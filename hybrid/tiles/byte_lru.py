@@ -1,4 +1,5 @@
 """A thread-safe least-recently-used store of arrays bounded in bytes, each made on its first miss."""
+
 from __future__ import annotations
 
 import threading
@@ -11,7 +12,7 @@ class ByteLRU:
 
     def __init__(self, budget: int):
         self.budget = int(budget)
-        self.nbytes, self.made = 0, 0               # bytes held; arrays kept since the start
+        self.nbytes, self.made = 0, 0  # bytes held; arrays kept since the start
         self._items: OrderedDict = OrderedDict()
         self._lock = threading.Lock()
 

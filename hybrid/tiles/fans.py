@@ -11,6 +11,7 @@ measured window by window (the tile store's node arrays, ``hybrid.tiles.store_no
 This module sits below the strategies because ``prepare`` (``hybrid.tiles``) writes what the raster strategies
 read; ``raster.quadtree`` re-exports GPU_BETA.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -42,8 +43,11 @@ def fans_at(h: np.ndarray, r0: int, c0: int, rows: np.ndarray, cols: np.ndarray,
     h00, h01 = h[np.ix_(a0, b0)], h[np.ix_(a0, b1)]
     h10, h11 = h[np.ix_(a1, b0)], h[np.ix_(a1, b1)]
     main = np.where(fj >= fi, h00 + fj * (h01 - h00) + fi * (h11 - h01), h00 + fi * (h10 - h00) + fj * (h11 - h10))
-    anti = np.where(fi + fj <= 1.0, h00 + fj * (h01 - h00) + fi * (h10 - h00),
-                    h11 + (1.0 - fj) * (h10 - h11) + (1.0 - fi) * (h01 - h11))
+    anti = np.where(
+        fi + fj <= 1.0,
+        h00 + fj * (h01 - h00) + fi * (h10 - h00),
+        h11 + (1.0 - fj) * (h10 - h11) + (1.0 - fi) * (h01 - h11),
+    )
     del h00, h01, h10, h11
     odd = ((Ir[:, None] + Ic[None, :]) & 1).astype(bool)
     full = np.where(odd, anti, main)
@@ -60,14 +64,15 @@ def fans_at(h: np.ndarray, r0: int, c0: int, rows: np.ndarray, cols: np.ndarray,
     right = se + 0.5 * v * (ne - se) + (2.0 - u) * (c - 0.5 * (se + ne))
     top = nw + 0.5 * u * (ne - nw) + (2.0 - v) * (c - 0.5 * (nw + ne))
     left = sw + 0.5 * v * (nw - sw) + u * (c - 0.5 * (sw + nw))
-    below_main = v <= u            # below the SW-NE diagonal
-    below_anti = v <= 2.0 - u      # below the NW-SE diagonal
+    below_main = v <= u  # below the SW-NE diagonal
+    below_anti = v <= 2.0 - u  # below the NW-SE diagonal
     stitched = np.where(below_main, np.where(below_anti, bottom, right), np.where(below_anti, left, top))
     return full, stitched
 
 
-def fan_deviations(h: np.ndarray, r0: int, c0: int, rows: np.ndarray, cols: np.ndarray, m: int,
-                   n: int) -> tuple[np.ndarray, np.ndarray]:
+def fan_deviations(
+    h: np.ndarray, r0: int, c0: int, rows: np.ndarray, cols: np.ndarray, m: int, n: int
+) -> tuple[np.ndarray, np.ndarray]:
     """(|full - h|, |stitched - h|) in metres of level-m nodes at samples (rows x cols), as ``fans_at``."""
     full, stitched = fans_at(h, r0, c0, rows, cols, m, n)
     own = h[np.ix_(rows - r0, cols - c0)]
@@ -92,10 +97,11 @@ def side_maxima(dev: np.ndarray, m: int, row_offset: int = 0) -> np.ndarray:
     ri = (np.arange(Nr)[:, None] * sr + np.arange(sr + 1)[None, :]).ravel()
     ci = (np.arange(Nc)[:, None] * s + np.arange(s + 1)[None, :]).ravel()
     win = dev[np.ix_(ri, ci)].reshape(Nr, sr + 1, Nc, s + 1)
-    v, u = ((np.arange(sr + 1) + row_offset) / k)[:, None], (np.arange(s + 1) / k)[None, :]   # local coordinates
+    v, u = ((np.arange(sr + 1) + row_offset) / k)[:, None], (np.arange(s + 1) / k)[None, :]  # local coordinates
     out = np.empty((4, Nr, Nc))
-    for i, mask in enumerate(((v >= u) & (v <= 2.0 - u), (v <= u) & (v >= 2.0 - u),
-                              (v <= u) & (v <= 2.0 - u), (v >= u) & (v >= 2.0 - u))):
+    for i, mask in enumerate(
+        ((v >= u) & (v <= 2.0 - u), (v <= u) & (v >= 2.0 - u), (v <= u) & (v <= 2.0 - u), (v >= u) & (v >= 2.0 - u))
+    ):
         out[i] = win.max(axis=(1, 3), where=mask[None, :, None, :], initial=0.0)
     return out
 
@@ -110,10 +116,10 @@ def with_cell_centres(h: np.ndarray, sides: np.ndarray) -> np.ndarray:
     beta times the bound, as the drop waits until the side meets it by beta)."""
     se, nw = _centre_terms(h)
     out = sides.copy()
-    out[0] = np.maximum(out[0], nw)       # W
-    out[1] = np.maximum(out[1], se)       # E
-    out[2] = np.maximum(out[2], se)       # S
-    out[3] = np.maximum(out[3], nw)       # N
+    out[0] = np.maximum(out[0], nw)  # W
+    out[1] = np.maximum(out[1], se)  # E
+    out[2] = np.maximum(out[2], se)  # S
+    out[3] = np.maximum(out[3], nw)  # N
     return out
 
 
@@ -171,5 +177,5 @@ def grow3(a: np.ndarray, fn) -> np.ndarray:
     n0, n1 = a.shape
     for dy in (0, 1, 2):
         for dx in (0, 1, 2):
-            out = fn(out, p[dy:dy + n0, dx:dx + n1])
+            out = fn(out, p[dy : dy + n0, dx : dx + n1])
     return out

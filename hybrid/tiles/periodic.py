@@ -16,6 +16,7 @@ the source's ``source_step``. When the source has the raster strategies' node ar
 own from them, window by window (``hybrid.tiles.periodic_nodes``: the source's values away from the seams,
 conservative bounds near them).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -33,8 +34,8 @@ class _WrappedLevel:
     """A level's sample grid of the extension: slices of it read the source's level grid, wrapped."""
 
     def __init__(self, source, period: int, size: int, stride: int = 1):
-        self.source, self.period, self.stride = source, period, stride     # period in this level's samples;
-        self.shape = (size, size)                                          # stride: source samples per sample
+        self.source, self.period, self.stride = source, period, stride  # period in this level's samples;
+        self.shape = (size, size)  # stride: source samples per sample
 
     def _index(self, s, n: int) -> np.ndarray:
         if isinstance(s, slice):
@@ -78,20 +79,24 @@ class PeriodicStore:
         _check_extension(terrain, size, n, P)
         self.source, self.n, self.P, self.size = g, n, P, int(size)
         L = _levels(size, size, n)
-        self.attrs = {**src_attrs, "max_level": L, "name": f"{src_attrs['name']}-periodic-{size}",
-                      "periodic": {"source": terrain.path, "period_cells": P, "size": int(size)}}
-        seams = seam_profiles(terrain.heights, P)          # the seams' samples (corner included) and steps
+        self.attrs = {
+            **src_attrs,
+            "max_level": L,
+            "name": f"{src_attrs['name']}-periodic-{size}",
+            "periodic": {"source": terrain.path, "period_cells": P, "size": int(size)},
+        }
+        seams = seam_profiles(terrain.heights, P)  # the seams' samples (corner included) and steps
         lo, hi = terrain.height_range
         self.arrays = {}
         src_L = int(src_attrs["max_level"])
         beyond: dict = {}
         for level in range(L + 1):
             span = n << level
-            tiles = -(-(size - 1) // span)                 # the last may cover padding (k not a power of two)
+            tiles = -(-(size - 1) // span)  # the last may cover padding (k not a power of two)
             if span <= P and level <= src_L:
                 zmin, zmax, err = _within_period(g, level, tiles, span, P, seams)
-            else:                                          # tiles of whole periods: the periodic chain bound
-                if not beyond:                             # from the top source level's errors, seams included
+            else:  # tiles of whole periods: the periodic chain bound
+                if not beyond:  # from the top source level's errors, seams included
                     beyond = _whole_period_errors(g, src_L, L, float(self.arrays[f"error/{src_L}"].max()))
                 zmin, zmax = np.full((tiles, tiles), lo), np.full((tiles, tiles), hi)
                 err = np.full((tiles, tiles), beyond[level])
@@ -103,14 +108,18 @@ class PeriodicStore:
         """A level's tile bounds and errors (level 0's none, every level's at least its children's) and its samples,
         the source's level grid wrapped (above the source's levels, its top grid strided)."""
         if level == 0:
-            err = np.zeros_like(err)                   # level 0 is the extension's own samples
-        if level:                                      # monotone, as every pyramid's errors
+            err = np.zeros_like(err)  # level 0 is the extension's own samples
+        if level:  # monotone, as every pyramid's errors
             err = np.maximum(err, block_reduce(self.arrays[f"error/{level - 1}"], 2, np.maximum))
         self.arrays[f"zmin/{level}"], self.arrays[f"zmax/{level}"] = zmin, zmax
         self.arrays[f"error/{level}"] = err
-        src_level = min(level, src_L)                  # above the source's levels: its top grid, strided
-        self.arrays[f"levels/{level}"] = _WrappedLevel(self.source[f"levels/{src_level}"], max(self.P >> level, 1),
-                                                       ((self.size - 1) >> level) + 1, 1 << (level - src_level))
+        src_level = min(level, src_L)  # above the source's levels: its top grid, strided
+        self.arrays[f"levels/{level}"] = _WrappedLevel(
+            self.source[f"levels/{src_level}"],
+            max(self.P >> level, 1),
+            ((self.size - 1) >> level) + 1,
+            1 << (level - src_level),
+        )
 
     def _add_nodes(self, info, seams, height_range) -> None:
         """The raster strategies' node arrays, served from the source's (hybrid.tiles.periodic_nodes), when the
@@ -119,8 +128,9 @@ class PeriodicStore:
         if not info or int(info["square"]) != self.P:
             return
         square = self.n << int(self.attrs["max_level"])
-        nodes = PeriodicNodes(self.source, self.P, (self.size - 1) // self.P, square, seams, float(info["beta"]),
-                              height_range)
+        nodes = PeriodicNodes(
+            self.source, self.P, (self.size - 1) // self.P, square, seams, float(info["beta"]), height_range
+        )
         self.attrs["nodes"] = {**info, "levels": nodes.levels, "square": square, "periodic": True}
         for kind in nodes.kinds:
             for lev in range(nodes.levels):
@@ -134,15 +144,25 @@ def _check_extension(terrain: StoredTerrain, size, n: int, P: int) -> None:
     """Refuse an extension of a store that is not square with a power-of-two period of at least a tile, or to a
     size that is not a whole number of periods (plus one sample) larger than the store, up to 2^24 + 1."""
     if terrain.rows != terrain.cols:
-        raise TerrabenchError(f"{terrain.path}: a periodic extension needs a square store, got "
-                              f"{terrain.cols}x{terrain.rows} samples")
+        raise TerrabenchError(
+            f"{terrain.path}: a periodic extension needs a square store, got {terrain.cols}x{terrain.rows} samples"
+        )
     if P & (P - 1) or P < n:
-        raise TerrabenchError(f"{terrain.path}: a periodic extension needs a period of a power of two cells "
-                              f"of at least one tile ({n}), got {P}")
-    if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size <= terrain.cols or \
-            (size - 1) % P or size > (1 << 24) + 1:
-        raise TerrabenchError(f"periodic size must be k x {P} + 1 samples, larger than the store and at most "
-                              f"{(1 << 24) + 1}, got {size!r}")
+        raise TerrabenchError(
+            f"{terrain.path}: a periodic extension needs a period of a power of two cells "
+            f"of at least one tile ({n}), got {P}"
+        )
+    if (
+        isinstance(size, bool)
+        or not isinstance(size, (int, np.integer))
+        or size <= terrain.cols
+        or (size - 1) % P
+        or size > (1 << 24) + 1
+    ):
+        raise TerrabenchError(
+            f"periodic size must be k x {P} + 1 samples, larger than the store and at most "
+            f"{(1 << 24) + 1}, got {size!r}"
+        )
 
 
 def _within_period(g, level: int, tiles: int, span: int, P: int, seams) -> tuple:
@@ -176,7 +196,7 @@ def _whole_period_errors(g, src_L: int, L: int, base: float) -> dict:
     if L <= src_L:
         return {}
     top = np.asarray(g[f"levels/{src_L}"][:, :], dtype=np.float64)
-    period = top[:-1, :-1]                                   # one period; the wrap supplies the closing row/column
+    period = top[:-1, :-1]  # one period; the wrap supplies the closing row/column
     out, err, grid = {}, base, period
     for level in range(src_L + 1, L + 1):
         if grid.shape[0] < 2 or grid.shape[0] % 2:
@@ -194,11 +214,22 @@ def open_periodic(path, size: int) -> StoredTerrain:
     terrain = open_store(path)
     view = PeriodicStore(terrain, size)
     grid = LazyGrid(view["levels/0"], terrain.height_range, view.attrs["name"])
-    return StoredTerrain(grid, (terrain.spacing_x, terrain.spacing_y), terrain.origin, view.attrs["name"], None,
-                         source_step=terrain.source_step, source=terrain.path, notes=list(terrain.notes) + [
-                             f"periodic extension to {size}x{size} samples of {terrain.cols}x{terrain.rows} "
-                             f"(wrapped every {terrain.cols - 1} cells; virtual, nothing written)"],
-                         store=view, path=f"{terrain.path}@periodic{size}")
+    return StoredTerrain(
+        grid,
+        (terrain.spacing_x, terrain.spacing_y),
+        terrain.origin,
+        view.attrs["name"],
+        None,
+        source_step=terrain.source_step,
+        source=terrain.path,
+        notes=list(terrain.notes)
+        + [
+            f"periodic extension to {size}x{size} samples of {terrain.cols}x{terrain.rows} "
+            f"(wrapped every {terrain.cols - 1} cells; virtual, nothing written)"
+        ],
+        store=view,
+        path=f"{terrain.path}@periodic{size}",
+    )
 
 
 def open_any_store(text: str) -> StoredTerrain:

@@ -10,6 +10,7 @@ place in another period: the periodic pattern is cut once. Cut blocks are kept i
 their place in the period (a tile of the first or last period by its own key); cutting is thread-safe, so a store's
 loader thread can cut a tile's block ahead of its upload (``PeriodicBlocks.ready`` says whether it still needs to).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -17,7 +18,7 @@ import numpy as np
 from .byte_lru import ByteLRU
 from .store_blocks import band_blocks
 
-CUT_BYTES = 64 << 20            # bytes of blocks cut near the seams kept, least recent out
+CUT_BYTES = 64 << 20  # bytes of blocks cut near the seams kept, least recent out
 
 
 def source_block_tile(level: int, tx: int, ty: int, n: int, period: int, cells: int) -> tuple[int, int] | None:
@@ -29,11 +30,11 @@ def source_block_tile(level: int, tx: int, ty: int, n: int, period: int, cells: 
     span = n << level
     if span > period:
         return None
-    per = period // span                                    # tiles a period at this level
+    per = period // span  # tiles a period at this level
     sx, sy = tx % per, ty % per
     for m in range(int(np.log2(n))):
         side, g = n >> (m + 1), level + m
-        T, inside = period >> (g + 1), cells >> (g + 1)    # nodes a period; nodes over the extension
+        T, inside = period >> (g + 1), cells >> (g + 1)  # nodes a period; nodes over the extension
         for i, a in ((sx, tx), (sy, ty)):
             if i * side - 1 < 1 or (i + 1) * side > T - 3 or (a + 1) * side >= inside:
                 return None
@@ -64,18 +65,27 @@ class _LevelBlocks:
         at = source_block_tile(self.level, tx, ty, o.n, o.period, o.cells)
         if at is not None:
             return np.asarray(o.source_blocks[self.level][at[1], at[0]], dtype=np.float32)
-        key = o.cut_key(self.level, tx, ty)       # cut before, or a tile at this place in another period
+        key = o.cut_key(self.level, tx, ty)  # cut before, or a tile at this place in another period
         return o.cut.get(key, lambda: band_blocks(*o.arrays, self.level, ty, o.n, tx, tx + 1, o.codes)[0])
 
 
 class PeriodicBlocks:
     """Node blocks of an extension by pyramid level: the source's where they are equal, else cut (see module)."""
 
-    def __init__(self, source_blocks: tuple, arrays: tuple, n: int, period: int, cells: int, levels: int,
-                 codes: tuple | None = None, budget: int = CUT_BYTES):
+    def __init__(
+        self,
+        source_blocks: tuple,
+        arrays: tuple,
+        n: int,
+        period: int,
+        cells: int,
+        levels: int,
+        codes: tuple | None = None,
+        budget: int = CUT_BYTES,
+    ):
         self.source_blocks, self.arrays, self.codes = source_blocks, arrays, codes
         self.n, self.period, self.cells = int(n), int(period), int(cells)
-        self.cut = ByteLRU(budget)                          # blocks cut near seams, by ``cut_key``
+        self.cut = ByteLRU(budget)  # blocks cut near seams, by ``cut_key``
         self._levels = tuple(_LevelBlocks(self, lev) for lev in range(levels))
 
     def __getitem__(self, level: int) -> _LevelBlocks:

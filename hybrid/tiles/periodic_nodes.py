@@ -40,6 +40,7 @@ child near one (so its saturation and the sides facing it are the source's), a n
 errors of all of them over beta (which bound their sides and their side-form errors), and a source code read
 against a parent whose error became a bound reads larger, never smaller.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -52,9 +53,9 @@ from .sidecodes import holds_side_codes, side_codes_each
 from .source_chunks import SourceChunks, gather
 
 KINDS = ("effective", "zlo", "zhi")
-_UP = 1.0 + 2.0 ** -21          # relative headroom over float32 rounding (2^-24 per rounded value)
-MAX_WHOLE_NODES = 1 << 26       # a level may be read whole (np.asarray) up to this many nodes
-DEPTH = 2                       # levels below a near-seam node whose bounds tighten its own (``_effective``)
+_UP = 1.0 + 2.0**-21  # relative headroom over float32 rounding (2^-24 per rounded value)
+MAX_WHOLE_NODES = 1 << 26  # a level may be read whole (np.asarray) up to this many nodes
+DEPTH = 2  # levels below a near-seam node whose bounds tighten its own (``_effective``)
 
 
 def _up32(x) -> np.ndarray:
@@ -70,7 +71,7 @@ def _nbr3(v: np.ndarray, fn) -> np.ndarray:
     out = v[1:-1, 1:-1].copy()
     for dy in (0, 1, 2):
         for dx in (0, 1, 2):
-            out = fn(out, v[dy:dy + h, dx:dx + w])
+            out = fn(out, v[dy : dy + h, dx : dx + w])
     return out
 
 
@@ -87,8 +88,16 @@ class PeriodicNodes:
     source's node arrays' beta, ``height_range`` the terrain's (metres).
     """
 
-    def __init__(self, source, P: int, periods: int, square: int, profiles: SeamProfiles, beta: float,
-                 height_range: tuple[float, float]):
+    def __init__(
+        self,
+        source,
+        P: int,
+        periods: int,
+        square: int,
+        profiles: SeamProfiles,
+        beta: float,
+        height_range: tuple[float, float],
+    ):
         self.source, self.P, self.k, self.square = source, int(P), int(periods), int(square)
         self.levels, self.src_levels = int(np.log2(square)), int(np.log2(P))
         self.beta, self.profiles = float(beta), profiles
@@ -106,18 +115,23 @@ class PeriodicNodes:
     def level(self, kind: str, g: int) -> NodeLevel:
         """The lazy array of kind ``effective``, ``zlo`` or ``zhi`` (metres, float32) at global level g."""
         if kind not in self.kinds or not 0 <= g < self.levels:
-            raise TerrabenchError(f"no periodic node array {kind!r} at level {g} (kinds {self.kinds}, levels "
-                                  f"0..{self.levels - 1})")
+            raise TerrabenchError(
+                f"no periodic node array {kind!r} at level {g} (kinds {self.kinds}, levels 0..{self.levels - 1})"
+            )
         return NodeLevel(self, kind, g)
 
     def _level_spans(self, g: int) -> dict:
         """Per source node of level g (T values): the largest seam steps and the seam samples' range along it."""
         if g not in self._spans:
             s, p = 2 << g, self.profiles
-            self._spans[g] = {"row_step": profile_spans(p.row_step, s, np.maximum),
-                              "col_step": profile_spans(p.col_step, s, np.maximum),
-                              "row_lo": profile_spans(p.row0, s, np.minimum), "row_hi": profile_spans(p.row0, s, np.maximum),
-                              "col_lo": profile_spans(p.col0, s, np.minimum), "col_hi": profile_spans(p.col0, s, np.maximum)}
+            self._spans[g] = {
+                "row_step": profile_spans(p.row_step, s, np.maximum),
+                "col_step": profile_spans(p.col_step, s, np.maximum),
+                "row_lo": profile_spans(p.row0, s, np.minimum),
+                "row_hi": profile_spans(p.row0, s, np.maximum),
+                "col_lo": profile_spans(p.col0, s, np.minimum),
+                "col_hi": profile_spans(p.col0, s, np.maximum),
+            }
         return self._spans[g]
 
     def _top_values(self) -> tuple[float, float, float]:
@@ -128,7 +142,7 @@ class PeriodicNodes:
             zlo = float(np.asarray(self.source[f"nodes/zlo/{G}"][:, :]).min())
             zhi = float(np.asarray(self.source[f"nodes/zhi/{G}"][:, :]).max())
             step = float(self.profiles.row_step.max() + self.profiles.col_step.max())
-            top = (eff + (2.0 * step + self.mu) * self.beta ** -G) * _UP        # every node of level G, seams included
+            top = (eff + (2.0 * step + self.mu) * self.beta**-G) * _UP  # every node of level G, seams included
             self._top = (max(top, self.beta * (zhi - zlo + self.mu)), zlo, zhi)
         return self._top
 
@@ -176,11 +190,12 @@ class PeriodicNodes:
         vals[:, ~ok_c] = -np.inf
         near_r, near_c = (self._near(i[1:-1], T, g, "effective", wrap is True) for i in (ri, ci))
         sp = self._level_spans(g)
-        step_r = np.where(ok_c, sp["row_step"][rc], 0.0)             # along the columns of a row seam
+        step_r = np.where(ok_c, sp["row_step"][rc], 0.0)  # along the columns of a row seam
         step_c = np.where(ok_r, sp["col_step"][rr], 0.0)
-        d = np.where(near_r[:, None], _run3(step_r, np.maximum)[None, :], 0.0) + \
-            np.where(near_c[None, :], _run3(step_c, np.maximum)[:, None], 0.0)
-        bound = _nbr3(vals, np.maximum) + (2.0 * d + self.mu) * self.beta ** -g
+        d = np.where(near_r[:, None], _run3(step_r, np.maximum)[None, :], 0.0) + np.where(
+            near_c[None, :], _run3(step_c, np.maximum)[:, None], 0.0
+        )
+        bound = _nbr3(vals, np.maximum) + (2.0 * d + self.mu) * self.beta**-g
         out = np.where(near_r[:, None] | near_c[None, :], bound, vals[1:-1, 1:-1])
         out[~ok_r[1:-1], :] = -np.inf
         out[:, ~ok_c[1:-1]] = -np.inf
@@ -196,9 +211,10 @@ class PeriodicNodes:
         vals, ri, ci, rr, rc, _, _ = self._read(self.bounds, g, r0, r1, c0, c1, True)
         near_r, near_c = (self._near(i, T, g, "effective", True) for i in (ri, ci))
         sp = self._level_spans(g)
-        seam_r, seam_c = ri % T == T - 1, ci % T == T - 1               # touching a row / column seam
-        step = np.where(seam_r[:, None], sp["row_step"][rc][None, :], 0.0) + \
-            np.where(seam_c[None, :], sp["col_step"][rr][:, None], 0.0)
+        seam_r, seam_c = ri % T == T - 1, ci % T == T - 1  # touching a row / column seam
+        step = np.where(seam_r[:, None], sp["row_step"][rc][None, :], 0.0) + np.where(
+            seam_c[None, :], sp["col_step"][rr][:, None], 0.0
+        )
         bound = vals + 2.0 * step + self.mu
         if g:
             kids = self._effective(g - 1, 2 * r0 - 1, 2 * r1 + 1, 2 * c0 - 1, 2 * c1 + 1, depth - 1)
@@ -214,12 +230,12 @@ class PeriodicNodes:
         ri, ci = np.arange(r0, r1), np.arange(c0, c1)
         out = gather(self.source_chunks.reader("effective", g), self._rho(ri, T, False), self._rho(ci, T, False))
         near_r, near_c = self._near(ri, T, g, "effective"), self._near(ci, T, g, "effective")
-        locs = [T - 1, T] if g else [T - 1]                          # near a seam: local T-1, and 0 from level 1
+        locs = [T - 1, T] if g else [T - 1]  # near a seam: local T-1, and 0 from level 1
         if near_c.any():
             across = _up32(self._effective(g, r0, r1, locs[0], locs[-1] + 1, DEPTH) * _UP)
             for i, t in enumerate(locs):
                 at = (ci % T == t % T) & near_c
-                out[:, at] = across[:, i:i + 1]
+                out[:, at] = across[:, i : i + 1]
         if near_r.any():
             along = _up32(self._effective(g, locs[0], locs[-1] + 1, c0, c1, DEPTH) * _UP)
             for i, t in enumerate(locs):
@@ -252,8 +268,11 @@ class PeriodicNodes:
         if g < self.src_levels:
             near = self._near_window(g, r0, r1, c0, c1)
             T = self.P >> (g + 1)
-            src = gather(self.source_chunks.reader("sides", g), self._rho(np.arange(r0, r1), T, False),
-                         self._rho(np.arange(c0, c1), T, False))
+            src = gather(
+                self.source_chunks.reader("sides", g),
+                self._rho(np.arange(r0, r1), T, False),
+                self._rho(np.arange(c0, c1), T, False),
+            )
             if not near.any():
                 return src
         own = self.window("effective", g, r0, r1, c0, c1)
@@ -291,11 +310,11 @@ class PeriodicNodes:
         vals[~ok_r, :] = fill
         vals[:, ~ok_c] = fill
         sp = self._level_spans(g)
-        row = np.where(ok_c, sp[f"row_{side}"][rc], fill)                # a row seam's samples along the columns
+        row = np.where(ok_c, sp[f"row_{side}"][rc], fill)  # a row seam's samples along the columns
         col = np.where(ok_r, sp[f"col_{side}"][rr], fill)
         m = fn(_nbr3(vals, fn), np.where(near_r[:, None], _run3(row, fn)[None, :], fill))
         m = fn(m, np.where(near_c[None, :], _run3(col, fn)[:, None], fill))
-        return np.where(near_r[:, None] | near_c[None, :], m.astype(np.float32), out)   # min/max of float32: exact
+        return np.where(near_r[:, None] | near_c[None, :], m.astype(np.float32), out)  # min/max of float32: exact
 
 
 def _range(index, n: int) -> tuple[int, int, bool]:
@@ -331,7 +350,9 @@ class NodeLevel:
 
     def __array__(self, dtype=None, copy=None):
         if self.shape[0] * self.shape[1] > MAX_WHOLE_NODES:
-            raise TerrabenchError(f"periodic node level {self.g} has {self.shape[0]}² nodes; read it a window at a "
-                                  f"time (whole up to {MAX_WHOLE_NODES})")
+            raise TerrabenchError(
+                f"periodic node level {self.g} has {self.shape[0]}² nodes; read it a window at a "
+                f"time (whole up to {MAX_WHOLE_NODES})"
+            )
         a = self[:, :]
         return a if dtype is None else a.astype(dtype)

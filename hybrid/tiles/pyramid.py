@@ -15,6 +15,7 @@ spans the level-0 heights over its clipped region, so it bounds the surface of e
 triangulated level-l surface and the level-0 samples it covers, made monotone (a parent's error is at
 least its children's).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -98,7 +99,7 @@ class Tile:
         return int(self.heights.size * 4)
 
 
-MAX_PADDED_SAMPLES = 1 << 27     # the square only the reference node arrays build (raster.nodes.square_nodes): 128 M
+MAX_PADDED_SAMPLES = 1 << 27  # the square only the reference node arrays build (raster.nodes.square_nodes): 128 M
 
 
 class TilePyramid:
@@ -114,24 +115,28 @@ class TilePyramid:
     """Bytes of tiles the pyramid keeps on the host, or None: all of them (in memory)."""
 
     def __init__(self, hf: HeightField, tile_size: int = 256):
-        if isinstance(tile_size, bool) or not isinstance(tile_size, (int, np.integer)) or tile_size < 2 \
-                or tile_size & (tile_size - 1):
+        if (
+            isinstance(tile_size, bool)
+            or not isinstance(tile_size, (int, np.integer))
+            or tile_size < 2
+            or tile_size & (tile_size - 1)
+        ):
             raise TerrabenchError(f"tile size must be a power of two >= 2 cells, got {tile_size!r}")
         self.hf = hf
         self.n = int(tile_size)
         cells = max(hf.rows, hf.cols) - 1
         tiles0 = -(-cells // self.n)
         self.max_level = int(np.ceil(np.log2(tiles0))) if tiles0 > 1 else 0
-        self.size = self.n * (1 << self.max_level) + 1      # samples a side of the addressing square
+        self.size = self.n * (1 << self.max_level) + 1  # samples a side of the addressing square
         self._new_caches()
-        self._on_step = None                # per cell: corners on the source step (hybrid.tiles.quantize)
+        self._on_step = None  # per cell: corners on the source step (hybrid.tiles.quantize)
         self._build_bounds()
 
     def _new_caches(self) -> None:
         """Empty the per-level arrays made on first use (every pyramid's constructor calls this)."""
-        self._boxes: dict = {}              # level -> boxes_at's arrays of every tile
-        self._qerr: dict = {}               # level -> quantisation error bounds
-        self._tables: dict = {}             # level -> level_table
+        self._boxes: dict = {}  # level -> boxes_at's arrays of every tile
+        self._qerr: dict = {}  # level -> quantisation error bounds
+        self._tables: dict = {}  # level -> level_table
 
     @property
     def padded(self) -> np.ndarray:
@@ -143,7 +148,8 @@ class TilePyramid:
                 f"{self.hf.name!r} ({self.hf.cols}x{self.hf.rows} samples, tiles of {self.n}) would need a padded "
                 f"square of {self.size}² samples ({need * 4 / 2**30:.1f} GiB as float32, several times that to process), "
                 f"beyond the limit of {MAX_PADDED_SAMPLES} samples; the strategies do not need it (raster node arrays "
-                "are computed over the grid's rectangle, raster.rect_nodes)")
+                "are computed over the grid's rectangle, raster.rect_nodes)"
+            )
         hf = self.hf
         return np.pad(hf.heights, ((0, self.size - hf.rows), (0, self.size - hf.cols)), mode="edge")
 
@@ -188,11 +194,12 @@ class TilePyramid:
 
     def boxes_at(self, level: int, tx: np.ndarray, ty: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World-space (min, max) corners, (B, 3) float64 metres, of the level's existing tiles (tx, ty)."""
-        if level not in self._boxes:                    # every box of a level, made on first use
+        if level not in self._boxes:  # every box of a level, made on first use
             rows, cols = self.tile_counts(level)
             ty_all, tx_all = np.divmod(np.arange(rows * cols), cols)
-            self._boxes[level] = tuple(a.reshape(rows, cols, 3)
-                                       for a in self.aabbs(np.full(rows * cols, level), tx_all, ty_all))
+            self._boxes[level] = tuple(
+                a.reshape(rows, cols, 3) for a in self.aabbs(np.full(rows * cols, level), tx_all, ty_all)
+            )
         lo, hi = self._boxes[level]
         return lo[ty, tx], hi[ty, tx]
 
@@ -300,28 +307,44 @@ class TilePyramid:
     def tile(self, key: TileKey) -> Tile:
         """The tile's level-l samples and placement."""
         if not self.exists(key):
-            raise TerrabenchError(f"tile {key} does not exist (levels 0..{self.max_level}, "
-                                  f"{self.tiles_per_side(key.level) if 0 <= key.level <= self.max_level else 0} tiles a side)")
+            raise TerrabenchError(
+                f"tile {key} does not exist (levels 0..{self.max_level}, "
+                f"{self.tiles_per_side(key.level) if 0 <= key.level <= self.max_level else 0} tiles a side)"
+            )
         h = self.samples(key)
         origin, (sx, sy) = self.placement(key)
         z0, z1 = self.zrange(key)
-        return Tile(key, np.ascontiguousarray(h, dtype=np.float32), origin, sx, sy,
-                    self.clip(key), z0, z1, self.error(key), getattr(self.hf, "source_step", None))
+        return Tile(
+            key,
+            np.ascontiguousarray(h, dtype=np.float32),
+            origin,
+            sx,
+            sy,
+            self.clip(key),
+            z0,
+            z1,
+            self.error(key),
+            getattr(self.hf, "source_step", None),
+        )
 
     def placement(self, key: TileKey) -> tuple[tuple[float, float, float], tuple[float, float]]:
         """(world origin of the tile's sample [0, 0], (spacing_x, spacing_y)) in metres, without its samples."""
         k = 1 << key.level
         i0, j0 = key.ty * self.n * k, key.tx * self.n * k
         hf = self.hf
-        return ((hf.origin[0] + j0 * hf.spacing_x, hf.origin[1] + i0 * hf.spacing_y, hf.origin[2]),
-                (hf.spacing_x * k, hf.spacing_y * k))
+        return (
+            (hf.origin[0] + j0 * hf.spacing_x, hf.origin[1] + i0 * hf.spacing_y, hf.origin[2]),
+            (hf.spacing_x * k, hf.spacing_y * k),
+        )
 
     def samples(self, key: TileKey) -> np.ndarray:
         """The tile's (N+1)² level-l samples (metres, rows south to north), gathered with clamped indices."""
         k = 1 << key.level
         i0, j0 = key.ty * self.n * k, key.tx * self.n * k
         steps = np.arange(self.n + 1) * k
-        return self.hf.heights[np.ix_(np.minimum(i0 + steps, self.hf.rows - 1), np.minimum(j0 + steps, self.hf.cols - 1))]
+        return self.hf.heights[
+            np.ix_(np.minimum(i0 + steps, self.hf.rows - 1), np.minimum(j0 + steps, self.hf.cols - 1))
+        ]
 
     def texture_rect(self, key: TileKey) -> tuple[int, int, int, int]:
         """Cell (texel) index range (j0, i0, j1, i1) of the terrain's texture that the tile covers."""

@@ -7,6 +7,7 @@ the arithmetic of ``hybrid.tiles.bounds.level_bounds`` (maxima and minima are ex
 operations on the same samples), so the arrays equal a full rebuild; the per-level caches made on first use (boxes,
 selection tables, the dense selection's table, quantisation bounds, on-step flags) are updated over the same tiles.
 """
+
 from __future__ import annotations
 
 import weakref
@@ -67,9 +68,10 @@ def _level_blocks(pyramid: TilePyramid) -> dict:
         out = {}
         for level in range(1, pyramid.max_level + 1):
             k = 1 << level
-            step, rows = max(1, BLOCK_CELLS // k), -(-cells_r // k)      # a band of blocks at once (memory bound)
-            out[level] = np.concatenate([_deviation_blocks(h, k, a, min(a + step, rows), 0, -(-cells_c // k))
-                                         for a in range(0, rows, step)])
+            step, rows = max(1, BLOCK_CELLS // k), -(-cells_r // k)  # a band of blocks at once (memory bound)
+            out[level] = np.concatenate(
+                [_deviation_blocks(h, k, a, min(a + step, rows), 0, -(-cells_c // k)) for a in range(0, rows, step)]
+            )
         _BLOCKS[pyramid] = out
     return _BLOCKS[pyramid]
 
@@ -82,7 +84,7 @@ def _bounds(pyramid: TilePyramid, win: Window) -> None:
     for ty in rows0:
         for tx in cols0:
             i0, i1, j0, j1 = _tile_cells(pyramid, 0, ty, tx)
-            sub = h[i0:i1 + 1, j0:j1 + 1]
+            sub = h[i0 : i1 + 1, j0 : j1 + 1]
             zmax[0][ty, tx], zmin[0][ty, tx] = _corner(sub, np.maximum).max(), _corner(sub, np.minimum).min()
     for level in range(1, pyramid.max_level + 1):
         k, dev = 1 << level, blocks[level]
@@ -96,8 +98,8 @@ def _bounds(pyramid: TilePyramid, win: Window) -> None:
             for tx in cols:
                 kids = (slice(ty * k, (ty + 1) * k), slice(tx * k, (tx + 1) * k))
                 zmax[level][ty, tx], zmin[level][ty, tx] = zmax[0][kids].max(), zmin[0][kids].min()
-                mine = dev[ty * n:(ty + 1) * n, tx * n:(tx + 1) * n].max()
-                below = err[level - 1][2 * ty:2 * ty + 2, 2 * tx:2 * tx + 2].max()
+                mine = dev[ty * n : (ty + 1) * n, tx * n : (tx + 1) * n].max()
+                below = err[level - 1][2 * ty : 2 * ty + 2, 2 * tx : 2 * tx + 2].max()
                 err[level][ty, tx] = max(mine, below)
 
 
@@ -105,10 +107,10 @@ def _on_step(pyramid: TilePyramid, win: Window) -> None:
     """The per-cell on-step flags over the cells whose corners the window holds."""
     h = pyramid.hf.heights
     i0, j0 = max(win.i0 - 1, 0), max(win.j0 - 1, 0)
-    cells = on_step_cells(h[i0:min(win.i1 + 1, h.shape[0]), j0:min(win.j1 + 1, h.shape[1])], pyramid.hf.source_step)
+    cells = on_step_cells(h[i0 : min(win.i1 + 1, h.shape[0]), j0 : min(win.j1 + 1, h.shape[1])], pyramid.hf.source_step)
     if cells is None or pyramid._on_step is None:
         return
-    pyramid._on_step[i0:i0 + cells.shape[0], j0:j0 + cells.shape[1]] = cells
+    pyramid._on_step[i0 : i0 + cells.shape[0], j0 : j0 + cells.shape[1]] = cells
 
 
 def _qerr(pyramid: TilePyramid, level: int, ty: int, tx: int) -> float:
@@ -144,7 +146,7 @@ def _caches(pyramid: TilePyramid, win: Window) -> None:
             rows7 = np.concatenate([lo, hi, e[:, None]], axis=1)
             if level in pyramid._tables:
                 pyramid._tables[level][ty, tx] = rows7
-            if pyramid in _TABLES:                        # the dense selection's flat table of tile places
+            if pyramid in _TABLES:  # the dense selection's flat table of tile places
                 side = pyramid.tiles_per_side(level)
                 first = sum(pyramid.tiles_per_side(lv) ** 2 for lv in range(level))
                 _TABLES[pyramid].boxes[first + ty * side + tx] = rows7
@@ -155,7 +157,7 @@ def update_pyramid(pyramid: TilePyramid, win: Window) -> list[TileKey]:
     caches of the touched tiles; returns those tiles (``touched_keys``)."""
     if win.empty:
         return []
-    pyramid.hf._range = (None, None)                      # the height range is read again
+    pyramid.hf._range = (None, None)  # the height range is read again
     _bounds(pyramid, win)
     _caches(pyramid, win)
     return touched_keys(pyramid, win)

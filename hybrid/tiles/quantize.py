@@ -11,6 +11,7 @@ Heights are float32 metres relative to the terrain's origin z, as in a Tile. Two
 The ray caster (raycast) uploads the codes; the pyramid bounds the error of every tile (``error_bound``)
 so that tile selection can add it to the geometric error.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -18,18 +19,18 @@ from dataclasses import dataclass
 import numpy as np
 
 Q_MAX = 65535
-_HALF_ULP = 2.0 ** -24            # float32 rounding of a dequantised height: at most |h| * 2^-24
+_HALF_ULP = 2.0**-24  # float32 rounding of a dequantised height: at most |h| * 2^-24
 
 
 @dataclass(frozen=True)
 class Quantized:
     """A tile's 16-bit codes and how to turn them back into metres (relative to the terrain's origin z)."""
 
-    q: np.ndarray                 # uint16, the heights' shape
-    offset: float                 # metres
-    step: float                   # metres per code unit
-    base: int                     # added to q before scaling
-    error: float                  # largest |h - dequantised| over the tile, metres (measured)
+    q: np.ndarray  # uint16, the heights' shape
+    offset: float  # metres
+    step: float  # metres per code unit
+    base: int  # added to q before scaling
+    error: float  # largest |h - dequantised| over the tile, metres (measured)
 
     @property
     def exact(self) -> bool:
@@ -56,7 +57,7 @@ def quantize(heights, source_step: tuple[float, float] | None = None) -> Quantiz
         step, offset = (float(v) for v in source_step)
         k, ok = _on_step(h, step, offset)
         kmin = float(k.min())
-        if ok.all() and float(k.max()) - kmin <= Q_MAX and abs(kmin) < 2 ** 31:
+        if ok.all() and float(k.max()) - kmin <= Q_MAX and abs(kmin) < 2**31:
             return Quantized((k - kmin).astype(np.uint16), offset, step, int(kmin), 0.0)
     if hi == lo:
         return Quantized(np.zeros(h.shape, np.uint16), lo, 1.0, 0, 0.0)

@@ -1,6 +1,7 @@
 """The seams of a periodic extension (``hybrid.tiles.periodic``): the source's samples along them and their steps,
 and reductions of those profiles over each span of a level's tiles or nodes.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass

@@ -6,15 +6,16 @@ In the node arrays' fourth column: 0 beyond the node square, else 1 + sum(code <
 2^((code - 56) / 8), never below the measured one; 63 stands for any larger ratio (the midpoint stays), 0 for 2^-7
 or less. A leaf's parent splits, so only sides below it matter. Exact integers up to 2^24.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
-SIDE_STEPS = 8                  # side-error codes an octave of side error / the parent's effective error
-SIDE_BITS = 6                   # bits a side: codes 0 .. 62 a ratio 2^((code - SIDE_BIAS) / 8), 63 any larger
-SIDE_BIAS = 56                  # code 0: 2^-7 of the parent's error or less
-ALWAYS = (1 << SIDE_BITS) - 1   # the code of a midpoint that always stays
-SIDE_FORM = "sides"             # a store's ``nodes`` attribute "form" when its node arrays carry side codes
+SIDE_STEPS = 8  # side-error codes an octave of side error / the parent's effective error
+SIDE_BITS = 6  # bits a side: codes 0 .. 62 a ratio 2^((code - SIDE_BIAS) / 8), 63 any larger
+SIDE_BIAS = 56  # code 0: 2^-7 of the parent's error or less
+ALWAYS = (1 << SIDE_BITS) - 1  # the code of a midpoint that always stays
+SIDE_FORM = "sides"  # a store's ``nodes`` attribute "form" when its node arrays carry side codes
 
 
 def holds_side_codes(group) -> bool:

@@ -1,12 +1,13 @@
 """Windows of a tile store's node arrays read through their decoded chunks, kept in a byte-bounded LRU: what a periodic
 extension (``hybrid.tiles.periodic_nodes``) reads of its source's arrays, a few small chunks many times over."""
+
 from __future__ import annotations
 
 import numpy as np
 
 from .byte_lru import ByteLRU
 
-CHUNK_BYTES = 64 << 20          # decoded chunks of the source's node arrays kept (``SourceChunks``)
+CHUNK_BYTES = 64 << 20  # decoded chunks of the source's node arrays kept (``SourceChunks``)
 
 
 def _runs(u: np.ndarray) -> list[tuple[int, int, int, int]]:
@@ -36,7 +37,7 @@ class SourceChunks:
     def __init__(self, group, budget: int = CHUNK_BYTES):
         self.group = group
         self._arrays: dict = {}
-        self.chunks = ByteLRU(budget)                       # decoded chunks by (kind, g, chunk row, chunk column)
+        self.chunks = ByteLRU(budget)  # decoded chunks by (kind, g, chunk row, chunk column)
 
     def array(self, kind: str, g: int):
         """The source's array of a kind at global level g (its handle looked up once)."""
@@ -48,8 +49,10 @@ class SourceChunks:
     def _chunk(self, kind: str, g: int, cy: int, cx: int) -> np.ndarray:
         arr = self.array(kind, g)
         ch, cw = arr.chunks
-        return self.chunks.get((kind, g, cy, cx), lambda: np.asarray(arr[cy * ch:(cy + 1) * ch, cx * cw:(cx + 1) * cw],
-                                                                       dtype=np.float32))
+        return self.chunks.get(
+            (kind, g, cy, cx),
+            lambda: np.asarray(arr[cy * ch : (cy + 1) * ch, cx * cw : (cx + 1) * cw], dtype=np.float32),
+        )
 
     def window(self, kind: str, g: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
         """Rows r0..r1-1, columns c0..c1-1 (inside the array) of a kind's level-g array (float32)."""
@@ -60,7 +63,7 @@ class SourceChunks:
             for cx in range(c0 // cw, (c1 - 1) // cw + 1):
                 xa, xb = max(c0, cx * cw), min(c1, (cx + 1) * cw)
                 c = self._chunk(kind, g, cy, cx)
-                out[ya - r0:yb - r0, xa - c0:xb - c0] = c[ya - cy * ch:yb - cy * ch, xa - cx * cw:xb - cx * cw]
+                out[ya - r0 : yb - r0, xa - c0 : xb - c0] = c[ya - cy * ch : yb - cy * ch, xa - cx * cw : xb - cx * cw]
         return out
 
     def reader(self, kind: str, g: int):

@@ -5,6 +5,7 @@
 ``StorePyramid`` is a TilePyramid over a store: per-level bounds and errors come from the store (small arrays
 read whole), a tile's samples are read from disk when asked for and kept in a host LRU cache bounded in bytes.
 """
+
 from __future__ import annotations
 
 import threading
@@ -19,7 +20,7 @@ from hybrid.terrain.stored import StoredTerrain, open_store
 from .pyramid import TilePyramid
 from .store_prepare import prepare_store  # noqa: F401  (the stores' API: prepare, then open)
 
-CHUNK_SHARE = 8                 # decoded chunks may hold 1/CHUNK_SHARE of a StorePyramid's host budget
+CHUNK_SHARE = 8  # decoded chunks may hold 1/CHUNK_SHARE of a StorePyramid's host budget
 
 
 class StorePyramid(TilePyramid):
@@ -43,7 +44,7 @@ class StorePyramid(TilePyramid):
         self._levels = {l: g[f"levels/{l}"] for l in range(self.max_level + 1)}
         self.host_budget = int(host_bytes)
         self._cache: OrderedDict = OrderedDict()
-        self.cache_bytes = 0                      # tiles and decoded chunks held, bytes (<= host_budget)
+        self.cache_bytes = 0  # tiles and decoded chunks held, bytes (<= host_budget)
         # decoded chunks of the levels (a tile's samples span 4 of them: its own, one row and one column of two
         # neighbours and a corner), so that neighbouring tiles decode each chunk once
         self.chunk_budget = self.host_budget // CHUNK_SHARE
@@ -51,11 +52,11 @@ class StorePyramid(TilePyramid):
         self.chunk_bytes = 0
         self.stats = {"reads": 0, "hits": 0, "evictions": 0, "peak_bytes": 0, "chunk_reads": 0}
         self._lock = threading.Lock()
-        self._wake = threading.Condition(threading.Lock())   # the loader thread's queue (request)
+        self._wake = threading.Condition(threading.Lock())  # the loader thread's queue (request)
         self._wanted: list = []
-        self._work: dict = {}                                 # key -> host work the loader runs after its samples
+        self._work: dict = {}  # key -> host work the loader runs after its samples
         self._done = threading.Event()
-        self._go = threading.Event()                          # cleared: the loader waits before its next tile
+        self._go = threading.Event()  # cleared: the loader waits before its next tile
         self._go.set()
         self._loader = None
         self._closing = False
@@ -117,10 +118,10 @@ class StorePyramid(TilePyramid):
                 self._chunks.move_to_end(key)
                 return self._chunks[key]
         n = self.n
-        c = np.asarray(self._levels[level][cy * n:(cy + 1) * n, cx * n:(cx + 1) * n], dtype=np.float32)
+        c = np.asarray(self._levels[level][cy * n : (cy + 1) * n, cx * n : (cx + 1) * n], dtype=np.float32)
         with self._lock:
             self.stats["chunk_reads"] += 1
-            if key in self._chunks:                  # decoded meanwhile by the other thread
+            if key in self._chunks:  # decoded meanwhile by the other thread
                 return self._chunks[key]
             self._chunks[key] = c
             self.chunk_bytes += c.nbytes
@@ -213,15 +214,17 @@ class StorePyramid(TilePyramid):
                 self.samples(key)
                 for fn in work:
                     fn()
-            except Exception:                # the renderer's own read of it raises the error where it is seen
+            except Exception:  # the renderer's own read of it raises the error where it is seen
                 with self._lock:
                     self._failed.add(key)
 
     @property
     def padded(self) -> np.ndarray:
         """Refused: a stored terrain is never gathered into one square."""
-        raise TerrabenchError(f"{self.hf.name!r} is a tile store: its padded grid is never built whole (the raster "
-                              "strategies read the store's node arrays instead)")
+        raise TerrabenchError(
+            f"{self.hf.name!r} is a tile store: its padded grid is never built whole (the raster "
+            "strategies read the store's node arrays instead)"
+        )
 
 
 def pyramid_for(hf, tile_size: int) -> TilePyramid:
@@ -230,7 +233,9 @@ def pyramid_for(hf, tile_size: int) -> TilePyramid:
     if isinstance(hf, StoredTerrain):
         n = int(hf.store.attrs["tile_size"])
         if int(tile_size) != n:
-            raise TerrabenchError(f"{hf.path} was prepared with tiles of {n} cells; use --tile-size {n} (or prepare "
-                                  f"it again with --tile-size {tile_size})")
+            raise TerrabenchError(
+                f"{hf.path} was prepared with tiles of {n} cells; use --tile-size {n} (or prepare "
+                f"it again with --tile-size {tile_size})"
+            )
         return StorePyramid(hf)
     return TilePyramid(hf, tile_size)

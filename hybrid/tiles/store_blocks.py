@@ -9,13 +9,14 @@ south: columns E (effective error, metres), zlo, zhi (box height range, metres a
 (``hybrid.tiles.store_nodes``), a block needs one read per local level and array, each of a window that
 spans many small chunks; the stored blocks make a tile's upload one read of one chunk.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 from .sidecodes import stored_codes
 
-COLUMNS = 4                     # E, zlo, zhi, inside
+COLUMNS = 4  # E, zlo, zhi, inside
 
 
 def block_offsets(n: int) -> np.ndarray:
@@ -60,11 +61,15 @@ def build_blocks(g, n: int, max_level: int, mark) -> None:
     for level in range(max_level + 1):
         ty_n, tx_n = g[f"zmin/{level}"].shape
         name = f"nodes/blocks/{level}"
-        out = g[name] if name in g else g.create_array(name, shape=(ty_n, tx_n, length, COLUMNS),
-                                                       chunks=(1, 1, length, COLUMNS), dtype="f4", fill_value=0.0)
+        out = (
+            g[name]
+            if name in g
+            else g.create_array(
+                name, shape=(ty_n, tx_n, length, COLUMNS), chunks=(1, 1, length, COLUMNS), dtype="f4", fill_value=0.0
+            )
+        )
         key = f"blocks:{level}"
         for ty in range(int(dict(g.attrs["progress"]).get(key, 0)), ty_n):
             out[ty] = band_blocks(*arrays, level, ty, n, 0, tx_n, codes)
             mark(key, ty + 1, f"node blocks, level {level} row {ty + 1}")
     g.attrs.update({"node_blocks": True})
-

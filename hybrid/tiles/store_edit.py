@@ -10,6 +10,7 @@ files. What is written is the touched chunks only: its cost follows the edit, no
 ``level_chunks`` gives the pyramid levels' chunks over a window of level-0 samples (every level keeps every
 2^l-th sample, the last row and column kept: ``store_prepare``).
 """
+
 from __future__ import annotations
 
 import json
@@ -38,7 +39,7 @@ def level_rows(win_lo: int, win_hi: int, samples: int, level: int) -> np.ndarray
     """Rows (or columns) of pyramid level ``level`` whose level-0 sample lies in [win_lo, win_hi) of a grid of
     ``samples`` level-0 rows (level row r is level-0 row min(r 2^l, samples - 1))."""
     k = 1 << level
-    last = -(-(samples - 1) // k)                       # the level's last row: level-0 row samples - 1
+    last = -(-(samples - 1) // k)  # the level's last row: level-0 row samples - 1
     rows = np.arange(-(-win_lo // k), min(-(-win_hi // k), last))
     return np.append(rows, last) if win_lo <= samples - 1 < win_hi else rows
 
@@ -50,19 +51,22 @@ class StoreWrite:
         if hf.store.attrs.get("periodic"):
             raise TerrabenchError(f"{hf.path}: a periodic extension is served from its source store; edit the source")
         from zarr.storage import MemoryStore
+
         self.hf, self.root, self.zarr = hf, Path(hf.path), _zarr()
-        self.encoded: dict = {}                     # key -> Zarr buffer: what the staged arrays wrote
+        self.encoded: dict = {}  # key -> Zarr buffer: what the staged arrays wrote
         self.memory = MemoryStore(self.encoded)
-        self.staged: dict = {}                      # array name -> its staged Zarr array
+        self.staged: dict = {}  # array name -> its staged Zarr array
         self.tx = Transaction(self.root)
 
     def _stage_array(self, name: str):
         """The array ``name`` over the memory store (its metadata copied there), for encoding whole chunks."""
         if name not in self.staged:
             from zarr.core.buffer import cpu
+
             self.encoded[f"{name}/{HEADER}"] = cpu.Buffer.from_bytes((self.root / name / HEADER).read_bytes())
-            self.staged[name] = self.zarr.open_array(store=self.memory, path=name, mode="r+",
-                                                     config={"write_empty_chunks": True})
+            self.staged[name] = self.zarr.open_array(
+                store=self.memory, path=name, mode="r+", config={"write_empty_chunks": True}
+            )
         return self.staged[name]
 
     def chunks(self, name: str, chunk_ids, fill, read=True) -> None:
@@ -73,8 +77,9 @@ class StoreWrite:
         src = self.hf.store[name]
         out = self._stage_array(name)
         for first, last in _runs(chunk_ids):
-            sel = tuple(slice(i * c, min((j + 1) * c, s))
-                        for i, j, c, s in zip(first, last, src.chunks, src.shape, strict=True))
+            sel = tuple(
+                slice(i * c, min((j + 1) * c, s)) for i, j, c, s in zip(first, last, src.chunks, src.shape, strict=True)
+            )
             starts = tuple(x.start for x in sel)
             if read(starts) if callable(read) else read:
                 data = np.array(src[sel])
@@ -141,4 +146,5 @@ def level_fill(heights: np.ndarray, level: int):
         r = np.minimum((starts[0] + np.arange(data.shape[0])) * k, rows - 1)
         c = np.minimum((starts[1] + np.arange(data.shape[1])) * k, cols - 1)
         data[...] = heights[np.ix_(r, c)]
+
     return fill

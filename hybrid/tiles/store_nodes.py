@@ -32,6 +32,7 @@ How, band by band:
 Progress is recorded after every band (attribute ``progress``), so an interrupted build resumes; the store's
 ``nodes`` attribute (beta, levels, square, exact span, form "sides") is written when all levels are.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -50,12 +51,12 @@ from .fans import (
 )
 from .sidecodes import SIDE_FORM, holds_side_codes, side_codes
 
-NODE_EXACT_SPAN = 1024          # node sides (level-0 cells) up to which node errors are measured exactly
-SLICE_ROWS = 128                # sample rows measured at once inside a block (memory bound)
-NODE_BAND = 1 << 19             # nodes per band of a level's pass (memory bound)
-SIDE_NODES = 1 << 17            # nodes whose side errors are worked on at once (memory bound: 4 float64 each)
-CHUNK = 512                     # chunk side of the build's working arrays (nodes)
-MIN_CHUNK = 8                   # smallest chunk side of the final node arrays (nodes)
+NODE_EXACT_SPAN = 1024  # node sides (level-0 cells) up to which node errors are measured exactly
+SLICE_ROWS = 128  # sample rows measured at once inside a block (memory bound)
+NODE_BAND = 1 << 19  # nodes per band of a level's pass (memory bound)
+SIDE_NODES = 1 << 17  # nodes whose side errors are worked on at once (memory bound: 4 float64 each)
+CHUNK = 512  # chunk side of the build's working arrays (nodes)
+MIN_CHUNK = 8  # smallest chunk side of the final node arrays (nodes)
 
 
 def node_square(n: int, max_level: int) -> tuple[int, int]:
@@ -83,14 +84,14 @@ def node_bands(R: int) -> int:
     for g in range(levels):
         total = R >> (g + 1)
         out += 2 * -(-total // _band_rows(total, g <= gx))
-    return out + 1                                  # the top level's side codes
+    return out + 1  # the top level's side codes
 
 
 def _window(lv0, rows: int, cols: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
     """Samples rows r0..r1-1, columns c0..c1-1 of the padded square (float64), read from level 0 clamped."""
     ri, ci = np.minimum(np.arange(r0, r1), rows - 1), np.minimum(np.arange(c0, c1), cols - 1)
     a0, c_0 = int(ri[0]), int(ci[0])
-    w = np.asarray(lv0[a0:int(ri[-1]) + 1, c_0:int(ci[-1]) + 1], dtype=np.float64)
+    w = np.asarray(lv0[a0 : int(ri[-1]) + 1, c_0 : int(ci[-1]) + 1], dtype=np.float64)
     return w[np.ix_(ri - a0, ci - c_0)]
 
 
@@ -100,11 +101,17 @@ def _array(g, name: str, total: int, dtype: str, chunk: int = CHUNK, planes: int
         return g[name]
     c = min(total, chunk)
     lead = (planes,) if planes else ()
-    return g.create_array(name, shape=lead + (total, total), chunks=lead + (c, c), dtype=dtype, fill_value=np.nan,
-                          **_TMP if name.startswith("nodes/tmp/") else {})
+    return g.create_array(
+        name,
+        shape=lead + (total, total),
+        chunks=lead + (c, c),
+        dtype=dtype,
+        fill_value=np.nan,
+        **_TMP if name.startswith("nodes/tmp/") else {},
+    )
 
 
-_TMP = {"compressors": None}    # intermediate arrays, read back once or twice and deleted: not worth compressing
+_TMP = {"compressors": None}  # intermediate arrays, read back once or twice and deleted: not worth compressing
 
 
 def tile_chunk(n: int, level: int) -> int:
@@ -137,9 +144,9 @@ def _direct_block(lv0, rows, cols, R, B, gx, br, c0) -> tuple[list, list, list, 
             a = i0 // s
             for out, dev in ((direct[g], np.maximum(df, ds)), (full[g], df)):
                 part = cell_max(dev).reshape(S // sr, sr, B // s, s).max(axis=(1, 3))
-                np.maximum(out[a:a + part.shape[0]], part, out=out[a:a + part.shape[0]])
+                np.maximum(out[a : a + part.shape[0]], part, out=out[a : a + part.shape[0]])
             part = side_maxima(ds, g, i0 % s if S < s else 0)
-            np.maximum(sides[g][:, a:a + part.shape[1]], part, out=sides[g][:, a:a + part.shape[1]])
+            np.maximum(sides[g][:, a : a + part.shape[1]], part, out=sides[g][:, a : a + part.shape[1]])
     sides[0] = with_cell_centres(w, sides[0])
     direct[0] = np.maximum(direct[0], cell_centre_error(w))
     return direct, full, sides, zmin, zmax
@@ -154,7 +161,7 @@ def _post_deviation(levels_of, R: int, L: int, lev: int) -> np.ndarray:
     p = np.arange(P)
     q = p << (lev - 1 - l)
     H = arr[np.ix_(np.minimum(q, arr.shape[0] - 1), np.minimum(q, arr.shape[1] - 1))]
-    return block2(cell_max(fan_deviation(H, 0, 0, p, p, 1, P - 1)), np.max)          # per child: its 3x3 posts
+    return block2(cell_max(fan_deviation(H, 0, 0, p, p, 1, P - 1)), np.max)  # per child: its 3x3 posts
 
 
 def _facing(sides_below, a0: int, a1: int, total: int) -> np.ndarray:
@@ -166,7 +173,7 @@ def _facing(sides_below, a0: int, a1: int, total: int) -> np.ndarray:
     for b0 in range(a0, a1, step):
         b1 = min(b0 + step, a1)
         lo, hi = max(2 * b0 - 2, 0), min(2 * b1 + 2, 2 * total)
-        f = facing_side_errors(np.asarray(sides_below[:, lo:hi, :]))[2 * b0 - lo:2 * b1 - lo]
+        f = facing_side_errors(np.asarray(sides_below[:, lo:hi, :]))[2 * b0 - lo : 2 * b1 - lo]
         out.append(block2(f, np.max))
     return np.concatenate(out, axis=0)
 
@@ -208,16 +215,16 @@ def build_nodes(g, rows: int, cols: int, n: int, max_level: int, beta: float, ma
     R, levels = node_square(n, max_level)
     B, gx = _plan(R)
     if g.attrs.get("nodes") and not holds_side_codes(g):
-        return                      # complete arrays of the combined form (prepared before side codes): kept
+        return  # complete arrays of the combined form (prepared before side codes): kept
     b = _Build(g, R, n, max_level, beta, mark)
-    if b.progress("nodes:direct") and b.tmp("full", 0) not in g:      # a build begun before side codes: begin again
+    if b.progress("nodes:direct") and b.tmp("full", 0) not in g:  # a build begun before side codes: begin again
         g.attrs.update({"progress": {k: v for k, v in dict(g.attrs["progress"]).items() if not k.startswith("nodes")}})
         if "nodes/tmp" in g:
             del g["nodes/tmp"]
     _direct_errors(b, rows, cols, B, gx)
     for lev in range(levels):
         _build_level(b, lev, lev <= gx)
-    if not b.progress("nodes:codes"):                         # the root level's: no parent
+    if not b.progress("nodes:codes"):  # the root level's: no parent
         top = levels - 1
         _write_codes(g, b.sides(top), top, 0, 1, None, tile_chunk(n, top))
         mark("nodes:codes", 1, "side codes")
@@ -231,7 +238,7 @@ def _direct_errors(b: _Build, rows: int, cols: int, B: int, gx: int) -> None:
     of B x B blocks at a time, from the first band not yet recorded."""
     lv0, R = b.g["levels/0"], b.R
     for br in range(b.progress("nodes:direct"), R // B):
-        for c0 in range(0, R, B):                             # a block of B x B cells at a time
+        for c0 in range(0, R, B):  # a block of B x B cells at a time
             direct, full, sides, zmin, zmax = _direct_block(lv0, rows, cols, R, B, gx, br, c0)
             for lev, (d, f, sd) in enumerate(zip(direct, full, sides)):
                 at = (slice(br * d.shape[0], (br + 1) * d.shape[0]), slice(c0 >> (lev + 1), (c0 + B) >> (lev + 1)))
@@ -239,7 +246,7 @@ def _direct_errors(b: _Build, rows: int, cols: int, B: int, gx: int) -> None:
                 b.work("full", lev)[at] = f
                 b.sides(lev)[(slice(None),) + at] = sd
             for kind, z in (("zmin", zmin), ("zmax", zmax)):
-                b.work(kind, 0, "f4")[br * (B // 2):(br + 1) * (B // 2), c0 // 2:(c0 + B) // 2] = z
+                b.work(kind, 0, "f4")[br * (B // 2) : (br + 1) * (B // 2), c0 // 2 : (c0 + B) // 2] = z
         b.mark("nodes:direct", br + 1, f"node errors, band {br + 1}")
 
 
@@ -255,7 +262,7 @@ def _build_level(b: _Build, lev: int, exact: bool) -> None:
         return
     arr = {k: _array(b.g, b.tmp(k, lev), total, "f4" if k.startswith("z") else "f8") for k in KINDS}
     below = {k: b.g[b.tmp(k, lev - 1)] for k in KINDS} if lev else None
-    for i, a0 in enumerate(starts):                       # pass 1: errors, effective errors, ranges
+    for i, a0 in enumerate(starts):  # pass 1: errors, effective errors, ranges
         if i < done:
             continue
         a1 = min(a0 + hb, total)
@@ -267,9 +274,11 @@ def _build_level(b: _Build, lev: int, exact: bool) -> None:
         else:
             _level_band(b, lev, exact, arr, below, a0, a1)
         b.mark(key, i + 1, f"node level {lev}, band {i + 1}")
-    final = {k: _array(b.g, f"nodes/{k}/{lev}", total, "f4", tile_chunk(b.n, lev))
-             for k in ("effective", "combined", "zlo", "zhi")}
-    for i, a0 in enumerate(starts):                       # pass 2: float32 errors, 3x3 box ranges, codes
+    final = {
+        k: _array(b.g, f"nodes/{k}/{lev}", total, "f4", tile_chunk(b.n, lev))
+        for k in ("effective", "combined", "zlo", "zhi")
+    }
+    for i, a0 in enumerate(starts):  # pass 2: float32 errors, 3x3 box ranges, codes
         if len(starts) + i < done:
             continue
         _final_band(b, lev, exact, arr, final, a0, min(a0 + hb, total))
@@ -285,23 +294,23 @@ def _level_band(b: _Build, lev: int, exact: bool, arr: dict, below: dict, a0: in
     lo, hi = max(2 * a0 - 1, 0), min(2 * a1 + 1, 2 * total)
     # the combined form (both fans in one error), then the side-error form (full fans, sides facing)
     for err, eff, direct, with_sides in (("error", "eff", "direct", False), ("serror", "seff", "full", True)):
-        kids = np.asarray(below[err][2 * a0:2 * a1, :])
+        kids = np.asarray(below[err][2 * a0 : 2 * a1, :])
         if exact:
             e = np.maximum(np.asarray(b.g[b.tmp(direct, lev)][a0:a1, :]), block2(kids, np.max))
-        else:                                     # a bound of both fans, so of every side too
+        else:  # a bound of both fans, so of every side too
             e = block2(post + kids, np.max) + b.margin
             if with_sides:
                 b.sides(lev)[:, a0:a1, :] = np.broadcast_to(e, (4,) + e.shape)
         del kids
-        d = block2(dilate4(np.asarray(below[eff][lo:hi, :]))[2 * a0 - lo:2 * a1 - lo], np.max)
+        d = block2(dilate4(np.asarray(below[eff][lo:hi, :]))[2 * a0 - lo : 2 * a1 - lo], np.max)
         if with_sides:
             e = np.maximum(e, facing)
             d = np.maximum(d, facing)
         arr[err][a0:a1, :] = e
         arr[eff][a0:a1, :] = np.maximum(e, d / b.beta)
         del e, d
-    arr["zmin"][a0:a1, :] = block2(np.asarray(below["zmin"][2 * a0:2 * a1, :]), np.min)
-    arr["zmax"][a0:a1, :] = block2(np.asarray(below["zmax"][2 * a0:2 * a1, :]), np.max)
+    arr["zmin"][a0:a1, :] = block2(np.asarray(below["zmin"][2 * a0 : 2 * a1, :]), np.min)
+    arr["zmax"][a0:a1, :] = block2(np.asarray(below["zmax"][2 * a0 : 2 * a1, :]), np.max)
 
 
 def _final_band(b: _Build, lev: int, exact: bool, arr: dict, final: dict, a0: int, a1: int) -> None:
@@ -312,14 +321,14 @@ def _final_band(b: _Build, lev: int, exact: bool, arr: dict, final: dict, a0: in
     for kind, src in (("effective", "seff"), ("combined", "eff")):
         e64 = np.asarray(arr[src][a0:a1, :])
         e32[kind] = e64.astype(np.float32)
-        if not exact:                                 # a bound stays a bound in float32
+        if not exact:  # a bound stays a bound in float32
             e32[kind] = np.where(e32[kind] < e64, np.nextafter(e32[kind], np.float32(np.inf)), e32[kind])
         final[kind][a0:a1, :] = e32[kind]
     lo, hi = max(a0 - 1, 0), min(a1 + 1, total)
     for kind, src, fn in (("zlo", "zmin", np.minimum), ("zhi", "zmax", np.maximum)):
         # the slab's own edges repeat only where they are the square's; other rows are the apron
-        final[kind][a0:a1, :] = grow3(np.asarray(arr[src][lo:hi, :]), fn)[a0 - lo:a1 - lo]
-    if lev:                                           # the level below's side codes, against these errors
+        final[kind][a0:a1, :] = grow3(np.asarray(arr[src][lo:hi, :]), fn)[a0 - lo : a1 - lo]
+    if lev:  # the level below's side codes, against these errors
         _write_codes(b.g, b.sides(lev - 1), lev - 1, 2 * a0, 2 * a1, e32["effective"], tile_chunk(b.n, lev - 1))
 
 
@@ -332,5 +341,5 @@ def _write_codes(g, sides, lev: int, r0: int, r1: int, parent, chunk: int) -> No
     step = 2 * max(1, SIDE_NODES // total // 2)
     for b0 in range(r0, r1, step):
         b1 = min(b0 + step, r1)
-        p = None if parent is None else parent[(b0 - r0) // 2:(b1 - r0 + 1) // 2]
+        p = None if parent is None else parent[(b0 - r0) // 2 : (b1 - r0 + 1) // 2]
         out[b0:b1, :] = side_codes(np.asarray(sides[:, b0:b1, :]), np.asarray(g[f"nodes/effective/{lev}"][b0:b1, :]), p)

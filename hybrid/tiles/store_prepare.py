@@ -16,6 +16,7 @@ the store's attributes after every band, so an interrupted prepare resumes where
 complete last, with its manifest (every file's size and CRC-32, ``hybrid.terrain.store_manifest``), which a
 complete store prepared before manifests gets when prepared again.
 """
+
 from __future__ import annotations
 
 import time
@@ -33,8 +34,8 @@ from .store_blocks import build_blocks
 from .store_nodes import build_nodes, node_bands, node_square
 from .subsampling import block_reduce, interpolate_clamped
 
-COL_BLOCK = 4096                # about this many columns per piece of a band when measuring errors (memory bound)
-EXACT_SPAN = 1024               # levels whose tiles span at most this many level-0 cells get exact errors
+COL_BLOCK = 4096  # about this many columns per piece of a band when measuring errors (memory bound)
+EXACT_SPAN = 1024  # levels whose tiles span at most this many level-0 cells get exact errors
 
 
 def _levels(rows: int, cols: int, n: int) -> int:
@@ -98,7 +99,7 @@ def prepare_store(source, out, tile_size: int = 256, report=None, stop_after: in
         return out
     L = int(g.attrs["max_level"])
     bands = sum(-(-(_level_shape(rows, cols, l)[0] - 1) // n) for l in range(L + 1))
-    prog = _Progress(report, 2 * bands + node_bands(node_square(n, L)[0]))   # levels, nodes, blocks
+    prog = _Progress(report, 2 * bands + node_bands(node_square(n, L)[0]))  # levels, nodes, blocks
     mark = _Marks(g, prog, stop_after)
     for level in range(L + 1):
         _write_level(g, source, level, rows, cols, n, mark)
@@ -117,8 +118,13 @@ def _store_params(source, tile_size) -> dict:
     if rows < 2 or cols < 2:
         raise TerrabenchError(f"{source.name}: a grid needs at least 2x2 samples, got {rows}x{cols}")
     sx, sy = (source.spacing, source.spacing) if np.isscalar(source.spacing) else tuple(source.spacing)
-    return {"source": getattr(source, "path", source.name), "rows": rows, "cols": cols, "tile_size": n,
-            "spacing": [float(sx), float(sy)]}
+    return {
+        "source": getattr(source, "path", source.name),
+        "rows": rows,
+        "cols": cols,
+        "tile_size": n,
+        "spacing": [float(sx), float(sy)],
+    }
 
 
 def _open_store(zarr, source, out: Path, params: dict):
@@ -129,20 +135,35 @@ def _open_store(zarr, source, out: Path, params: dict):
     if is_store(out):
         g = zarr.open_group(str(out), mode="r+")
         if dict(g.attrs).get("params") != params:
-            raise TerrabenchError(f"{out}: holds a store of other input or settings ({dict(g.attrs).get('params')}); "
-                                  "choose another folder or remove it")
+            raise TerrabenchError(
+                f"{out}: holds a store of other input or settings ({dict(g.attrs).get('params')}); "
+                "choose another folder or remove it"
+            )
         if g.attrs.get("complete") and g.attrs.get("nodes") and g.attrs.get("node_blocks"):
-            if not g.attrs.get("manifest"):           # prepared before manifests: record what is on disk
+            if not g.attrs.get("manifest"):  # prepared before manifests: record what is on disk
                 g.attrs.update({"manifest": record_manifest(out)})
             return None
         return g
     n, rows, cols = params["tile_size"], params["rows"], params["cols"]
     g = zarr.open_group(str(out), mode="w")
-    g.attrs.update({"format": STORE_FORMAT, "version": STORE_VERSION, "complete": False, "params": params,
-                    "name": source.name, "spacing": list(params["spacing"]), "origin": [0.0, 0.0, 0.0],
-                    "tile_size": n, "max_level": _levels(rows, cols, n), "notes": list(source.notes),
-                    "made_by": f"terrabench prepare, tiles of {n}", "progress": {}, "height_range": None,
-                    "source_step": _claimed_step(source)})
+    g.attrs.update(
+        {
+            "format": STORE_FORMAT,
+            "version": STORE_VERSION,
+            "complete": False,
+            "params": params,
+            "name": source.name,
+            "spacing": list(params["spacing"]),
+            "origin": [0.0, 0.0, 0.0],
+            "tile_size": n,
+            "max_level": _levels(rows, cols, n),
+            "notes": list(source.notes),
+            "made_by": f"terrabench prepare, tiles of {n}",
+            "progress": {},
+            "height_range": None,
+            "source_step": _claimed_step(source),
+        }
+    )
     return g
 
 
@@ -150,12 +171,19 @@ def _level_arrays(g, level: int, R: int, C: int, n: int) -> tuple:
     """(samples, zmin, zmax, error) arrays of a level of R x C samples, made if missing."""
     ty_n, tx_n = -(-(R - 1) // n), -(-(C - 1) // n)
     arrays = {}
-    for name, shape, chunks, fill in ((f"levels/{level}", (R, C), (n, n), np.nan),
-                                      (f"zmin/{level}", (ty_n, tx_n), (ty_n, tx_n), np.nan),
-                                      (f"zmax/{level}", (ty_n, tx_n), (ty_n, tx_n), np.nan),
-                                      (f"error/{level}", (ty_n, tx_n), (ty_n, tx_n), np.nan)):
-        arrays[name.split("/")[0]] = g[name] if name in g else g.create_array(
-            name, shape=shape, chunks=chunks, dtype="f4" if name.startswith("levels") else "f8", fill_value=fill)
+    for name, shape, chunks, fill in (
+        (f"levels/{level}", (R, C), (n, n), np.nan),
+        (f"zmin/{level}", (ty_n, tx_n), (ty_n, tx_n), np.nan),
+        (f"zmax/{level}", (ty_n, tx_n), (ty_n, tx_n), np.nan),
+        (f"error/{level}", (ty_n, tx_n), (ty_n, tx_n), np.nan),
+    ):
+        arrays[name.split("/")[0]] = (
+            g[name]
+            if name in g
+            else g.create_array(
+                name, shape=shape, chunks=chunks, dtype="f4" if name.startswith("levels") else "f8", fill_value=fill
+            )
+        )
     return arrays["levels"], arrays["zmin"], arrays["zmax"], arrays["error"]
 
 
@@ -186,9 +214,13 @@ def _write_level(g, source, level: int, rows: int, cols: int, n: int, mark) -> N
             err[ty, :] = own
         hr = g.attrs["height_range"]
         lo, hi = float(band.min()), float(band.max())
-        mark(str(level), ty + 1, f"level {level} band {ty + 1}",
-             {"height_range": [min(lo, hr[0]), max(hi, hr[1])] if hr else [lo, hi]} if level == 0 else None)
-    if level:                                          # bounds of a level: its children's, 2 x 2
+        mark(
+            str(level),
+            ty + 1,
+            f"level {level} band {ty + 1}",
+            {"height_range": [min(lo, hr[0]), max(hi, hr[1])] if hr else [lo, hi]} if level == 0 else None,
+        )
+    if level:  # bounds of a level: its children's, 2 x 2
         zmin[:, :] = block_reduce(np.asarray(g[f"zmin/{level - 1}"][:]), 2, np.minimum)
         zmax[:, :] = block_reduce(np.asarray(g[f"zmax/{level - 1}"][:]), 2, np.maximum)
 
@@ -197,7 +229,7 @@ def _level0_band(g, source, r0: int, r1: int) -> np.ndarray:
     """Rows r0..r1-1 of the source; a claimed ``source_step`` they are not on is dropped from the attributes."""
     band = source.read_rows(r0, r1)
     step = g.attrs.get("source_step")
-    if step and not on_step_cells(band, step).all():   # a claimed step the samples are not on
+    if step and not on_step_cells(band, step).all():  # a claimed step the samples are not on
         g.attrs.update({"source_step": None})
     return band
 
@@ -208,17 +240,17 @@ def _coarse_band(g, prev, level: int, r0: int, r1: int, rows: int, cols: int, n:
     level l-1 (the children's errors are added by the caller)."""
     R1 = _level_shape(rows, cols, level - 1)[0]
     C = _level_shape(rows, cols, level)[1]
-    a0, a1 = 2 * r0, min(2 * (r1 - 1), R1 - 1) + 1      # level l-1 rows under the band
+    a0, a1 = 2 * r0, min(2 * (r1 - 1), R1 - 1) + 1  # level l-1 rows under the band
     fine = np.asarray(prev[a0:a1, :], dtype=np.float32)
     idx = np.minimum(2 * np.arange(r1 - r0), a1 - a0 - 1)
     cidx = np.minimum(2 * np.arange(C), fine.shape[1] - 1)
     band = fine[np.ix_(idx, cidx)]
-    if (n << level) <= EXACT_SPAN:             # exact: against level 0's samples under the band
+    if (n << level) <= EXACT_SPAN:  # exact: against level 0's samples under the band
         k = 1 << level
         b0, b1 = r0 * k, min((r1 - 1) * k, rows - 1) + 1
         level0 = g["levels/0"]
         own = _band_error(lambda c0, c1, level0=level0, b0=b0, b1=b1: level0[b0:b1, c0:c1], cols, k, n)
-    else:                                      # bounded: against level l-1, plus its error
+    else:  # bounded: against level l-1, plus its error
         own = _band_error(lambda c0, c1, fine=fine: fine[:, c0:c1], fine.shape[1], 2, n)
     return band, own
 
@@ -233,8 +265,9 @@ def _claimed_step(source) -> list | None:
     except (TypeError, ValueError):
         raise TerrabenchError(f"{source.name}: source_step must be (step, offset) in metres, got {step!r}") from None
     if not (np.isfinite(s) and np.isfinite(o) and s > 0):
-        raise TerrabenchError(f"{source.name}: source_step must have a finite step > 0 and a finite offset (metres), "
-                              f"got {step!r}")
+        raise TerrabenchError(
+            f"{source.name}: source_step must have a finite step > 0 and a finite offset (metres), got {step!r}"
+        )
     return [s, o]
 
 
@@ -242,7 +275,7 @@ def _band_error(piece_of, cols: int, k: int, n: int) -> np.ndarray:
     """Per level-l tile of a band: the largest |S - G| (metres) over the samples G of a finer grid under the band,
     S the grid of every k-th of them triangulated; ``piece_of(c0, c1)`` gives columns c0..c1-1 of the band's
     rows of that grid (first row on a level-l row). Read in pieces of whole tiles to bound memory."""
-    span = k * n                                             # finer-grid cells a level-l tile spans
+    span = k * n  # finer-grid cells a level-l tile spans
     tiles = -(-(cols - 1) // span) if cols > 1 else 1
     out = np.zeros(tiles)
     width = span * max(1, COL_BLOCK // span)
@@ -256,5 +289,5 @@ def _band_error(piece_of, cols: int, k: int, n: int) -> np.ndarray:
             cell = dev
         e = block_reduce(cell, span, np.maximum).max(axis=0)
         t0 = c0 // span
-        out[t0:t0 + len(e)] = np.maximum(out[t0:t0 + len(e)], e)
+        out[t0 : t0 + len(e)] = np.maximum(out[t0 : t0 + len(e)], e)
     return out

@@ -2,6 +2,7 @@
 children's, or from per-cell values) and the triangulated surface of every k-th sample, evaluated at every sample
 (what a level's geometric error is measured against).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -17,10 +18,12 @@ def block_reduce(a: np.ndarray, b: int, fn) -> np.ndarray:
 def interpolate_clamped(h: np.ndarray, k: int) -> np.ndarray:
     """Triangulated surface of the every-k-th-sample grid of h, edge-repeated beyond h, at every sample of h
     (float64); cells split along the (i, j) -> (i+1, j+1) diagonal; h may be any rectangle."""
+
     def axis(n):
         idx = np.arange(n)
         c = idx // k
         return np.minimum(c * k, n - 1), np.minimum((c + 1) * k, n - 1), (idx - c * k) / k
+
     r0, r1, fi = axis(h.shape[0])
     c0, c1, fj = axis(h.shape[1])
     h = h.astype(np.float64, copy=False)

@@ -9,6 +9,7 @@ pyramid. That is a fixed handful of array operations a view, where the level-by-
 every tile costs more than that walk saves. Both give the same tiles, distances, errors and edge levels (a
 test compares them, and each with a per-tile traversal).
 """
+
 from __future__ import annotations
 
 import weakref
@@ -19,10 +20,10 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 from hybrid.tiles.pyramid import TilePyramid
 
-DENSE_MAX_TILES = 8192         # measured on Puget: 0.59x the level-by-level time at 1365 places, 0.83x at 5461,
-                               # 1.28x at 21845 (tiles of 32, 16, 8 cells)
-MAX_TABLE_TILES = 1 << 20      # a table asked for beyond this is refused (it would cost ~0.2 GB)
-_STEPS = ((-1, 0), (1, 0), (0, -1), (0, 1))                # W, E, S, N
+DENSE_MAX_TILES = 8192  # measured on Puget: 0.59x the level-by-level time at 1365 places, 0.83x at 5461,
+# 1.28x at 21845 (tiles of 32, 16, 8 cells)
+MAX_TABLE_TILES = 1 << 20  # a table asked for beyond this is refused (it would cost ~0.2 GB)
+_STEPS = ((-1, 0), (1, 0), (0, -1), (0, 1))  # W, E, S, N
 
 
 def square_tiles(pyramid: TilePyramid) -> int:
@@ -92,12 +93,14 @@ def _build(pyramid: TilePyramid) -> TileTable:
     for c, (ox, oy) in enumerate(((0, 0), (1, 0), (0, 1), (1, 1))):
         children[:n, c] = index(level - 1, 2 * tx + ox, 2 * ty + oy)
     hf = pyramid.hf
-    span = pyramid.n << level                              # level-0 cells a side of each place
-    centre = np.stack([hf.origin[0] + (tx + 0.5) * (span * hf.spacing_x),
-                       hf.origin[1] + (ty + 0.5) * (span * hf.spacing_y)], axis=1)
+    span = pyramid.n << level  # level-0 cells a side of each place
+    centre = np.stack(
+        [hf.origin[0] + (tx + 0.5) * (span * hf.spacing_x), hf.origin[1] + (ty + 0.5) * (span * hf.spacing_y)], axis=1
+    )
     quadrant = np.stack([tx & 1, ty & 1], axis=1)
-    return TileTable(level, tx, ty, np.stack([level, tx, ty], axis=1), exists, boxes, chain, neighbours, children,
-                     centre, quadrant)
+    return TileTable(
+        level, tx, ty, np.stack([level, tx, ty], axis=1), exists, boxes, chain, neighbours, children, centre, quadrant
+    )
 
 
 _TABLES: weakref.WeakKeyDictionary[TilePyramid, TileTable] = weakref.WeakKeyDictionary()
@@ -108,8 +111,10 @@ def tile_table(pyramid: TilePyramid) -> TileTable:
     if pyramid not in _TABLES:
         places = square_tiles(pyramid)
         if places > MAX_TABLE_TILES:
-            raise TerrabenchError(f"a table of every tile place of this pyramid would hold {places} places, beyond "
-                                  f"{MAX_TABLE_TILES}; select its tiles level by level (select_tiles(dense=False))")
+            raise TerrabenchError(
+                f"a table of every tile place of this pyramid would hold {places} places, beyond "
+                f"{MAX_TABLE_TILES}; select its tiles level by level (select_tiles(dense=False))"
+            )
         _TABLES[pyramid] = _build(pyramid)
     return _TABLES[pyramid]
 
@@ -126,25 +131,25 @@ def dense_selection(pyramid: TilePyramid, measure, tau: float, eye: np.ndarray):
     n = len(t.level)
     d, pe, c = measure(t.boxes)
     live = t.exists & (c >= 0)
-    split = np.append(live & (pe > tau) & (t.level > 0), True)          # the sentinel: "split" above the root
+    split = np.append(live & (pe > tau) & (t.level > 0), True)  # the sentinel: "split" above the root
     selected = np.append(live & ~split[:n] & split[t.chain[:n, 1:]].all(axis=1), False)
     while True:
         idx = np.flatnonzero(selected[:n])
-        cover = selected[t.chain[t.neighbours[idx]]]                    # (M, 4, top + 1)
+        cover = selected[t.chain[t.neighbours[idx]]]  # (M, 4, top + 1)
         found = cover.any(axis=2)
         first = cover.argmax(axis=2)
-        cov = np.where(found, t.level[idx][:, None] + first, -1).T       # (4, M)
+        cov = np.where(found, t.level[idx][:, None] + first, -1).T  # (4, M)
         far = cov >= t.level[idx][None, :] + 2
         if not far.any():
             break
         e, i = np.nonzero(far)
         parents = np.unique(t.chain[t.neighbours[idx[i], e], first[i, e]])
-        selected[parents] = False                                       # split: their children replace them
+        selected[parents] = False  # split: their children replace them
         kids = t.children[parents].reshape(-1)
         selected[kids[kids < n][live[kids[kids < n]]]] = True
     order = _order(t, idx, eye)
     idx, cov = idx[order], cov[:, order]
-    finer = (selected[t.children[t.neighbours[idx]]].any(axis=2)).T     # (4, M)
+    finer = (selected[t.children[t.neighbours[idx]]].any(axis=2)).T  # (4, M)
     box = t.boxes[idx]
     return (t.keys[idx], d[idx], pe[idx], c[idx], box[:, :3], box[:, 3:6]), cov, finer
 
@@ -153,8 +158,8 @@ def _order(t: TileTable, idx: np.ndarray, eye: np.ndarray) -> np.ndarray:
     """Front-to-back order of places ``idx``, the key of ``_Selection.front_to_back`` summed over each place's
     chain: every place below the root adds its quadrant's rank within its parent, ranked from the eye's side."""
     n = len(t.level)
-    parent = t.chain[:n, 1] if t.chain.shape[1] > 1 else np.full(n, n)          # N: the root has none
-    side = np.append(eye[None, :2] >= t.centre, np.zeros((1, 2), bool), axis=0)[parent]        # (N, 2)
+    parent = t.chain[:n, 1] if t.chain.shape[1] > 1 else np.full(n, n)  # N: the root has none
+    side = np.append(eye[None, :2] >= t.centre, np.zeros((1, 2), bool), axis=0)[parent]  # (N, 2)
     rank = (t.quadrant[:, 0] != side[:, 0]).astype(np.int64) + 2 * (t.quadrant[:, 1] != side[:, 1])
     digit = np.append(np.where(parent < n, rank << (2 * t.level), 0), 0)
     return np.argsort(digit[t.chain[idx]].sum(axis=1), kind="stable")

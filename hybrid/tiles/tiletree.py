@@ -9,6 +9,7 @@ the child quadrant on the eye's side first and the opposite one last, which is a
 height-field columns. A pyramid of a few thousand tile places is selected over all of them at once
 (hybrid.tiles.tile_table), with the same result.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -23,7 +24,7 @@ from hybrid.tiles.tile_table import DENSE_MAX_TILES, dense_selection, square_til
 DEFAULT_TAU = 2.0 / 3.0
 NO_NEIGHBOUR = 9
 _EDGES = ((EDGE_W, -1, 0), (EDGE_E, 1, 0), (EDGE_S, 0, -1), (EDGE_N, 0, 1))
-_STEPS = np.array([(dx, dy) for _, dx, dy in _EDGES])      # (4, 2) tile steps to the W, E, S, N neighbours
+_STEPS = np.array([(dx, dy) for _, dx, dy in _EDGES])  # (4, 2) tile steps to the W, E, S, N neighbours
 _EDGE_BITS = np.array([bit for bit, _, _ in _EDGES])
 
 
@@ -72,12 +73,14 @@ def box_distances(eye: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray
     return np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
 
 
-_SHIFT = 29                   # tile codes: level << 58 | ty << 29 | tx (tiles a side < 2^29)
+_SHIFT = 29  # tile codes: level << 58 | ty << 29 | tx (tiles a side < 2^29)
 
 
 def _codes(level, tx, ty) -> np.ndarray:
     """int64 codes of tiles given as (broadcastable) arrays of level, tx, ty."""
-    return (np.asarray(level, np.int64) << (2 * _SHIFT)) | (np.asarray(ty, np.int64) << _SHIFT) | np.asarray(tx, np.int64)
+    return (
+        (np.asarray(level, np.int64) << (2 * _SHIFT)) | (np.asarray(ty, np.int64) << _SHIFT) | np.asarray(tx, np.int64)
+    )
 
 
 def _member(sorted_codes: np.ndarray, cand: np.ndarray) -> np.ndarray:
@@ -103,8 +106,8 @@ def box_classes(x: np.ndarray, m: np.ndarray, off: np.ndarray) -> np.ndarray:
     """Frustum classes of eye-relative boxes x = [lo | hi] (B, 6) under ``corner_planes``' (m, off): (B,) int8 of
     -1 outside, 1 wholly inside, 0 crossing a plane."""
     v = x @ m + off
-    out = (v[:, 6:] >= 0).all(axis=1).astype(np.int8)           # the nearest corner inside every plane
-    out[(v[:, :6] < 0).any(axis=1)] = -1                        # the farthest corner outside one
+    out = (v[:, 6:] >= 0).all(axis=1).astype(np.int8)  # the nearest corner inside every plane
+    out[(v[:, :6] < 0).any(axis=1)] = -1  # the farthest corner outside one
     return out
 
 
@@ -116,14 +119,14 @@ class _Selection:
         self.planes, self.K = view.frustum_planes_rel(), view.pixels_per_radian
         self.corners = corner_planes(self.planes)
         self.eye2 = np.concatenate([self.eye, self.eye])
-        self.parts = []                                   # (level, tx, ty, d, pe, c, lo, hi) arrays of selected tiles
+        self.parts = []  # (level, tx, ty, d, pe, c, lo, hi) arrays of selected tiles
 
     def measure(self, level: int, tx: np.ndarray, ty: np.ndarray):
         """Existing, not culled tiles of a level among (tx, ty), with distance, projected error and class."""
         ok = self.pyramid.exists_at(level, tx, ty)
         if not ok.all():
             tx, ty = tx[ok], ty[ok]
-        t = self.pyramid.level_table(level)[ty, tx]             # lo, hi, error: (B, 7)
+        t = self.pyramid.level_table(level)[ty, tx]  # lo, hi, error: (B, 7)
         c = box_classes(t[:, :6] - self.eye2, *self.corners)
         keep = c >= 0
         if not keep.all():
@@ -151,8 +154,9 @@ class _Selection:
             tx, ty, d, pe, c, lo, hi = self.measure(level, tx, ty)
             split = (pe > self.tau) & (level > 0)
             keep = ~split
-            self.parts.append((np.full(int(keep.sum()), level), tx[keep], ty[keep], d[keep], pe[keep], c[keep],
-                               lo[keep], hi[keep]))
+            self.parts.append(
+                (np.full(int(keep.sum()), level), tx[keep], ty[keep], d[keep], pe[keep], c[keep], lo[keep], hi[keep])
+            )
             tx, ty = _children(tx[split], ty[split])
             level -= 1
 
@@ -167,12 +171,12 @@ class _Selection:
         the edge neighbour's place, -1 where none (off the pyramid, culled, or finer tiles there)."""
         top = self.pyramid.max_level
         codes = np.sort(_codes(lv, tx, ty))
-        t = (1 << (top - lv))[None, None, :]                              # tiles a side at each tile's level
-        k = np.arange(top + 1)[None, :, None]                             # ancestor steps
+        t = (1 << (top - lv))[None, None, :]  # tiles a side at each tile's level
+        k = np.arange(top + 1)[None, :, None]  # ancestor steps
         nx, ny = tx[None, None, :] + _STEPS[:, 0, None, None], ty[None, None, :] + _STEPS[:, 1, None, None]
         ok = (nx >= 0) & (nx < t) & (ny >= 0) & (ny < t) & (lv[None, None, :] + k <= top)
         found = ok & _member(codes, _codes(lv[None, None, :] + k, np.maximum(nx, 0) >> k, np.maximum(ny, 0) >> k))
-        first = np.argmax(found, axis=1)                                  # the finest covering level
+        first = np.argmax(found, axis=1)  # the finest covering level
         return np.where(found.any(axis=1), lv[None, :] + first, -1)
 
     def finer_neighbours(self, lv, tx, ty) -> np.ndarray:
@@ -210,9 +214,9 @@ class _Selection:
         """Order of the tiles by the quadtree traversal that visits the eye's child quadrant first."""
         p, hf = self.pyramid, self.pyramid.hf
         key = np.zeros(len(lv), np.int64)
-        for a in range(p.max_level, 0, -1):               # ancestor level a: one base-4 digit each
+        for a in range(p.max_level, 0, -1):  # ancestor level a: one base-4 digit each
             below = lv < a
-            up = np.maximum(a - lv, 1)                      # levels up to the ancestor (masked where not below)
+            up = np.maximum(a - lv, 1)  # levels up to the ancestor (masked where not below)
             ax, ay = tx >> up, ty >> up
             qx, qy = (tx >> (up - 1)) & 1, (ty >> (up - 1)) & 1
             span_x, span_y = (p.n << a) * hf.spacing_x, (p.n << a) * hf.spacing_y
@@ -226,8 +230,10 @@ class _Selection:
 def _children(tx: np.ndarray, ty: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The four children (SW, SE, NW, NE) of each tile (tx, ty), as flat arrays of the next finer level."""
     tx, ty = np.asarray(tx, np.int64), np.asarray(ty, np.int64)
-    return (np.concatenate([2 * tx, 2 * tx + 1, 2 * tx, 2 * tx + 1]),
-            np.concatenate([2 * ty, 2 * ty, 2 * ty + 1, 2 * ty + 1]))
+    return (
+        np.concatenate([2 * tx, 2 * tx + 1, 2 * tx, 2 * tx + 1]),
+        np.concatenate([2 * ty, 2 * ty, 2 * ty + 1, 2 * ty + 1]),
+    )
 
 
 class TileSelection(list):
@@ -237,8 +243,9 @@ class TileSelection(list):
     __slots__ = ("distance", "hi", "inside", "keys", "lo")
 
 
-def select_tiles(pyramid: TilePyramid, view: View, tau: float = DEFAULT_TAU,
-                 dense: bool | None = None) -> list[SelectedTile]:
+def select_tiles(
+    pyramid: TilePyramid, view: View, tau: float = DEFAULT_TAU, dense: bool | None = None
+) -> list[SelectedTile]:
     """Tiles to draw for a view with screen-space error <= tau pixels: restricted, culled, front to back.
 
     A small pyramid (``hybrid.tiles.tile_table.DENSE_MAX_TILES`` tile places or fewer; ``dense`` forces either
@@ -268,7 +275,9 @@ def select_tiles(pyramid: TilePyramid, view: View, tau: float = DEFAULT_TAU,
     out = TileSelection(
         SelectedTile(TileKey(level, x, y), dist, err, mask, ins, tuple(delta))
         for (level, x, y), dist, err, mask, ins, delta in zip(
-            keys.tolist(), d.tolist(), pe.tolist(), masks.tolist(), inside.tolist(), deltas.tolist()))
+            keys.tolist(), d.tolist(), pe.tolist(), masks.tolist(), inside.tolist(), deltas.tolist()
+        )
+    )
     out.inside, out.keys = inside, keys
     out.distance, out.lo, out.hi = d.astype(np.float64, copy=False), lo, hi
     return out
@@ -288,8 +297,12 @@ def edge_neighbours(keys: set, key: TileKey, dx: int, dy: int, max_level: int) -
         for k in frontier:
             for c in k.children():
                 # keep the children on the side that faces key
-                if (dx == 1 and c.tx % 2 == 0) or (dx == -1 and c.tx % 2 == 1) or \
-                        (dy == 1 and c.ty % 2 == 0) or (dy == -1 and c.ty % 2 == 1):
+                if (
+                    (dx == 1 and c.tx % 2 == 0)
+                    or (dx == -1 and c.tx % 2 == 1)
+                    or (dy == 1 and c.ty % 2 == 0)
+                    or (dy == -1 and c.ty % 2 == 1)
+                ):
                     (out if c in keys else nxt).append(c)
         frontier = nxt
     return out
