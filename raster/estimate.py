@@ -17,7 +17,6 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from numba import njit
 
 from hybrid.camera.view import View
 from hybrid.contract import DEFAULT_FULL_RES
@@ -29,7 +28,7 @@ from hybrid.tiles.tiletree import SelectedTile
 
 from .nodes import nodes_for, pending_cut, tile_node_block
 from .quadtree import GPU_BETA, check_full_res
-from .split_tables import BIN_SHIFT, TABLE_BINS, SplitTables, split_tables
+from .split_tables import TABLE_BINS, SplitTables, split_tables
 from .tile_nodes import KINDS, TileNodes, block_tile_nodes, tile_nodes
 
 MAX_TILES = 4096  # tiles whose TileNodes are kept (least recently used first out)
@@ -84,87 +83,15 @@ def estimate_rows(
     else:
         w, bias = _corner_test(planes, eye)
     inside = np.zeros(b, np.bool_) if inside is None else np.asarray(inside, np.bool_)
-    sides = np.broadcast_to(np.asarray(sides, np.int64), (b,))
-    return _estimate_tiles(
-        tables.tables,
-        tables.base,
-        np.asarray(rows, np.int64),
-        coarse,
-        boxes,
-        np.asarray(root, np.int64),
-        eye,
-        float(k_tau),
-        w,
-        bias,
-        inside,
-        lean,
-        float(beta),
-        np.ascontiguousarray(sides),
-        float(split1_triangles[0]),
-        float(split1_triangles[1]),
+    sides = np.ascontiguousarray(np.broadcast_to(np.asarray(sides, np.int64), (b,)))
+    from .estimate_loops import estimate_tiles
+
+    weights = np.array([*split1_triangles, 4.0 * NEAR_SIDE_TRIANGLES, NEAR_TRIANGLES], dtype=np.float64)
+    rows, root, k = np.asarray(rows, np.int64), np.asarray(root, np.int64), float(k_tau)
+    t = tables
+    return estimate_tiles(
+        t.tables, t.base, rows, coarse, boxes, root, eye, k, w, bias, inside, lean, beta, sides, weights
     )
-
-
-@njit(cache=True)
-def _estimate_tiles(
-    tables, base, rows, coarse, boxes, root, eye, k_tau, w, bias, inside, lean, beta, sides, split1_sides, split1_plain
-):
-    """``estimate_rows`` tile by tile (a loop compiled by numba: a frame has a few dozen tiles, and as array
-    operations its time was their number): (triangles (B,) int64, visible share (B,))."""
-    b, kinds, nb, width = len(rows), tables.shape[1], tables.shape[2], tables.shape[3]
-    nc = coarse.shape[1]
-    tri, vis = np.zeros(b, np.int64), np.zeros(b)
-    d = np.empty(nb + nc)
-    factor = np.array([1.0, beta, 1.0]) / k_tau
-    thr = np.empty(nb, np.float32)
-    for t in range(b):
-        for n in range(nb + nc):  # eye to each box, metres
-            dx = max(boxes[t, 3, n] - eye[0], eye[0] - boxes[t, 0, n], 0.0)
-            dy = max(boxes[t, 4, n] - eye[1], eye[1] - boxes[t, 1, n], 0.0)
-            dz = max(boxes[t, 5, n] - eye[2], eye[2] - boxes[t, 2, n], 0.0)
-            d[n] = np.sqrt(dx * dx + dy * dy + dz * dz)
-        per_kind = np.zeros(kinds)
-        splits = shown = 0.0
-        for k in range(kinds):  # small nodes: one table look-up a block
-            for n in range(nb):
-                thr[n] = d[n] * factor[k]
-            bins = (thr.view(np.int32).astype(np.int64) >> BIN_SHIFT) - base[rows[t]]
-            for n in range(nb):
-                count = tables[rows[t], k, n, min(max(bins[n], 0), width - 1)]
-                per_kind[k] += count
-                if k == 0:
-                    splits += count
-                    shown += count * _seen(boxes, t, n, w, bias, inside[t])
-        near_large = 0.0
-        for c in range(nc):  # large nodes: each against its own box
-            if coarse[t, c] * k_tau > d[nb + c]:
-                splits += 1
-                shown += _seen(boxes, t, nb + c, w, bias, inside[t])
-            near_large += coarse[t, c] * (k_tau / beta) > d[nb + c]
-        leaves = 1 + 3 * (splits + root[t])
-        vis[t] = min(1.0, (1 + 3 * (shown + root[t])) / leaves)
-        if not lean:
-            tri[t] = 8 * leaves
-            continue
-        near = per_kind[1] / sides[t] - splits + near_large  # near leaves
-        weight = 4 * NEAR_SIDE_TRIANGLES if sides[t] == 4 else NEAR_TRIANGLES
-        split1 = split1_sides if sides[t] == 4 else split1_plain
-        tri[t] = np.int64(np.rint(4 * leaves + weight * near + split1 * per_kind[2]))
-    return tri, vis
-
-
-@njit(cache=True)
-def _seen(boxes, t: int, n: int, w, bias, inside: bool) -> float:
-    """1.0 where tile t's box n is not wholly behind any frustum plane (``_corner_test``), else 0.0."""
-    if inside:
-        return 1.0
-    for p in range(6):
-        s = 0.0
-        for j in range(6):
-            s += w[j, p] * boxes[t, j, n]
-        if s < bias[p]:
-            return 0.0
-    return 1.0
 
 
 def _corner_test(planes: np.ndarray, eye: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -13,7 +13,7 @@ the samples of a window change, a sub-block's maxima can change only where its o
 where the window holds a post row and a post column of its node (the whole node then). ``refresh`` re-measures
 those sub-blocks only.
 
-The measurement is one loop compiled by numba over the samples (``_deviations`` repeats
+The measurement is one loop compiled by numba over the samples (``node_block_loops``, whose ``_deviations`` repeats
 ``hybrid.tiles.fans.fans_at``'s floating-point operations in its order, so the values are the same): as array
 operations an edit's few small windows a level cost their number of NumPy calls, not their samples.
 """
@@ -21,7 +21,6 @@ operations an edit's few small windows a level cost their number of NumPy calls,
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from hybrid.terrain.edits import Window
 
@@ -40,77 +39,6 @@ def block_cells(g: int) -> int:
     return min(2 << g, SUB_CELLS)
 
 
-@njit(cache=True)
-def _at(h, i: int, j: int) -> float:
-    """The padded square's sample (row i, column j) of the grid h as float64: beyond the grid its edge repeats."""
-    return np.float64(h[min(i, h.shape[0] - 1), min(j, h.shape[1] - 1)])
-
-
-@njit(cache=True)
-def _deviations(h, r: int, c: int, m: int, n: int) -> tuple:
-    """(|full - h|, |stitched - h|) in metres of level-m nodes (posts every k = 2^m samples, side 2k) of an
-    n-cell square at sample (r, c): ``hybrid.tiles.fans.fans_at``'s operations in its order, for one sample."""
-    k, s = 1 << m, 2 << m
-    ir, ic = min(r >> m, (n >> m) - 1), min(c >> m, (n >> m) - 1)
-    fi, fj = (r - ir * k) / k, (c - ic * k) / k
-    h00, h01 = _at(h, ir * k, ic * k), _at(h, ir * k, ic * k + k)
-    h10, h11 = _at(h, ir * k + k, ic * k), _at(h, ir * k + k, ic * k + k)
-    if (ir + ic) & 1:
-        if fi + fj <= 1.0:
-            full = h00 + fj * (h01 - h00) + fi * (h10 - h00)
-        else:
-            full = h11 + (1.0 - fj) * (h10 - h11) + (1.0 - fi) * (h01 - h11)
-    elif fj >= fi:
-        full = h00 + fj * (h01 - h00) + fi * (h11 - h01)
-    else:
-        full = h00 + fi * (h10 - h00) + fj * (h11 - h10)
-    ar, ac = min(r >> (m + 1), (n >> (m + 1)) - 1), min(c >> (m + 1), (n >> (m + 1)) - 1)
-    v, u = (r - ar * s) / k, (c - ac * s) / k
-    sw, se = _at(h, ar * s, ac * s), _at(h, ar * s, ac * s + s)
-    nw, ne = _at(h, ar * s + s, ac * s), _at(h, ar * s + s, ac * s + s)
-    cc = _at(h, ar * s + k, ac * s + k)
-    if v <= u:
-        if v <= 2.0 - u:
-            st = sw + 0.5 * u * (se - sw) + v * (cc - 0.5 * (sw + se))
-        else:
-            st = se + 0.5 * v * (ne - se) + (2.0 - u) * (cc - 0.5 * (se + ne))
-    elif v <= 2.0 - u:
-        st = sw + 0.5 * v * (nw - sw) + u * (cc - 0.5 * (sw + nw))
-    else:
-        st = nw + 0.5 * u * (ne - nw) + (2.0 - v) * (cc - 0.5 * (nw + ne))
-    own = _at(h, r, c)
-    return abs(full - own), abs(st - own)
-
-
-@njit(cache=True)
-def _measure_jit(h, m: int, n: int, lb: int, side_errors: bool, p0: int, p1: int, q0: int, q1: int, out) -> None:
-    """Sub-block maxima (``_measure``) into out (channels, nbr, nbc), zeros on entry: every sample once, its
-    deviations added to each sub-block holding it (two or four on sub-block borders), the triangle masks in the
-    coordinates of that sub-block's node (``hybrid.tiles.fans.side_maxima``'s); level m, sub-blocks of 2^lb."""
-    k, B = 1 << m, 1 << lb
-    mask = (2 << m) - 1
-    for r in range(p0, p1 + 1):
-        a_lo, a_hi = max((r - p0 - 1) >> lb, 0), min((r - p0) >> lb, ((p1 - p0) >> lb) - 1)
-        for c in range(q0, q1 + 1):
-            df, ds = _deviations(h, r, c, m, n)
-            e = df if side_errors else max(df, ds)
-            for a in range(a_lo, a_hi + 1):
-                v = (((p0 + a * B) & mask) + r - p0 - a * B) / k
-                for b in range(max((c - q0 - 1) >> lb, 0), min((c - q0) >> lb, ((q1 - q0) >> lb) - 1) + 1):
-                    out[0, a, b] = max(out[0, a, b], e)
-                    if not side_errors:
-                        continue
-                    u = (((q0 + b * B) & mask) + c - q0 - b * B) / k
-                    if v >= u and v <= 2.0 - u:
-                        out[1, a, b] = max(out[1, a, b], ds)
-                    if v <= u and v >= 2.0 - u:
-                        out[2, a, b] = max(out[2, a, b], ds)
-                    if v <= u and v <= 2.0 - u:
-                        out[3, a, b] = max(out[3, a, b], ds)
-                    if v >= u and v >= 2.0 - u:
-                        out[4, a, b] = max(out[4, a, b], ds)
-
-
 def _measure(h: np.ndarray, g: int, R: int, side_errors: bool, rows: tuple, cols: tuple) -> np.ndarray:
     """(channels, nbr, nbc) sub-block maxima over square sample rows rows[0] .. rows[1] and columns cols[0] ..
     cols[1] (whole sub-blocks of level-g nodes, of ``block_cells(g)`` cells): e, then (``side_errors``) the
@@ -118,7 +46,9 @@ def _measure(h: np.ndarray, g: int, R: int, side_errors: bool, rows: tuple, cols
     B = block_cells(g)
     (p0, p1), (q0, q1) = rows, cols
     out = np.zeros((5 if side_errors else 1, (p1 - p0) // B, (q1 - q0) // B))
-    _measure_jit(h, g, R, B.bit_length() - 1, side_errors, p0, p1, q0, q1, out)
+    from .node_block_loops import measure_blocks
+
+    measure_blocks(h, g, R, B.bit_length() - 1, side_errors, p0, p1, q0, q1, out)
     return out
 
 
