@@ -26,6 +26,19 @@ METHODS = ("reference", "raycast", "raster", "raster_gs", "hybrid", "fullres", "
 SAMPLED_PIXELS = 400
 
 
+_LAUNCH = """import os, sys
+pid = os.fork()
+if pid == 0:
+    os.execvp(sys.argv[2], sys.argv[2:])
+_, status, usage = os.wait4(pid, 0)
+open(sys.argv[1], "w").write(str(usage.ru_maxrss))
+sys.exit(os.waitstatus_to_exitcode(status))
+"""
+"""Runs a command and writes its peak RSS (KiB) to a file. Linux counts in a child's peak the resident size of the
+process it was forked from, so the command is started from this small launcher, not from the benchmark's own
+process (which holds the images)."""
+
+
 @dataclass
 class Outcome:
     """One method's render of one view: exit status, seconds, peak RSS (GiB), message, and the distance image."""
@@ -109,17 +122,16 @@ def render(dataset: Path, method: str, view: View, out: Path, extra: list[str]) 
         "shaded",
         *extra,
     ]
+    peak_file = out.with_suffix(".peak")
     t0 = time.perf_counter()
-    with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
-        _, status, usage = os.wait4(proc.pid, 0)  # the child's own peak RSS (output is a few lines)
-        code = os.waitstatus_to_exitcode(status)
-        proc.returncode = code
-        out_text, err_text = proc.stdout.read(), proc.stderr.read()
+    run = subprocess.run([sys.executable, "-c", _LAUNCH, str(peak_file), *cmd], capture_output=True, text=True)
     seconds = time.perf_counter() - t0
+    code, out_text, err_text = run.returncode, run.stdout, run.stderr
+    peak_kib = int(peak_file.read_text()) if peak_file.exists() else 0
     depth = out.with_suffix(".depth.npy")
     distance = np.load(depth) if code == 0 and depth.exists() else None
     lines = (err_text if code else out_text).strip().splitlines() or [""]
-    return Outcome(code, seconds, usage.ru_maxrss / 2**20, lines[-1] if code else lines[0], distance)
+    return Outcome(code, seconds, peak_kib / 2**20, lines[-1] if code else lines[0], distance)
 
 
 @dataclass
