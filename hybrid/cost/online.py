@@ -12,6 +12,11 @@ refits one strategy at most, the one with most rows since its last refit: a stra
 it has fewer than twice ``hold_rows``, every other row while its predictions do not hold, and every
 ``refit_every`` rows while they do.
 
+Until a strategy has ``level_rows`` rows its level is the machine's: the starting model scaled by the median
+measured / starting model's predicted ms of every strategy's recent passes (``machine_scale``), so that a machine
+slower than the one the model was fitted on (or one loaded by other work) raises every strategy together, and a
+strategy not drawn yet does not look cheap beside one that is.
+
 A strategy the hybrid does not choose gives no rows, so it may be given a few tiles of a frame (exploration):
 at most ``explore_tiles`` tiles, those it is predicted to draw cheapest against the frame's choice, paid from a
 budget that earns ``explore_share`` of every observed frame's measured ms and is charged the exploration's
@@ -54,7 +59,8 @@ OUTLIER = 4.0
 @dataclass(frozen=True)
 class AdaptOptions:
     """How the hybrid's cost model adapts online: rows kept, the ridge toward the starting model, the exploration
-    budget (share of frame time) and when a strategy's predictions hold."""
+    budget (share of frame time), when a strategy's predictions hold and the rows a strategy needs before its own
+    level replaces the machine's (``level_rows``)."""
 
     window: int = 48
     prior_weight: float = 2.0
@@ -62,12 +68,16 @@ class AdaptOptions:
     explore_share: float = 0.05
     explore_tiles: int = 2
     hold_rows: int = 6
+    level_rows: int = 3
     hold_error: float = 0.15
     refit_every: int = 8
 
     def __post_init__(self):
-        if not (self.window >= 4 and self.hold_rows >= 1 and self.explore_tiles >= 1 and self.refit_every >= 1):
-            raise TerrabenchError("adapt options need window >= 4 and hold_rows, explore_tiles, refit_every >= 1")
+        counts = (self.hold_rows, self.level_rows, self.explore_tiles, self.refit_every)
+        if not (self.window >= 4 and min(counts) >= 1):
+            raise TerrabenchError(
+                "adapt options need window >= 4 and hold_rows, level_rows, explore_tiles, refit_every >= 1"
+            )
         for name in ("prior_weight", "prior_share", "explore_share", "hold_error"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
@@ -118,6 +128,8 @@ class OnlineModel:
         self._spent: dict = {}  # the last measured cost of exploring each strategy
         self.errors = {s: deque(maxlen=self.options.hold_rows) for s in names}
         self.residual = {"pure": deque(maxlen=self.options.window), "mixed": deque(maxlen=self.options.window)}
+        self.ratios: deque = deque(maxlen=self.options.window)  # measured / starting model's ms of recent passes
+        self._own: set = set()  # strategies fitted at their own level (enough rows)
         self.credit = 0.0
         self.stats = AdaptStats()
         self._rng = np.random.default_rng(seed)
@@ -146,7 +158,8 @@ class OnlineModel:
         todo = [i for i, s in enumerate(names) if i not in used and not self.holds(s) and np.isfinite(table[i]).any()]
         if not todo or len(picks) == 0:
             return None
-        i = todo[int(self._rng.integers(len(todo)))]
+        least = min(len(self.rows[names[j]]) for j in todo)  # the candidate known least goes first
+        i = todo[int(self._rng.choice([j for j in range(len(todo)) if len(self.rows[names[todo[j]]]) == least]))]
         base = table[picks, np.arange(len(picks))]
         ratio = np.where(np.isfinite(table[i]), table[i] / np.maximum(base, 1e-9), np.inf)
         k = min(self.options.explore_tiles, int(np.isfinite(ratio).sum()))
@@ -193,6 +206,9 @@ class OnlineModel:
                 continue
             predicted = float(x @ self._theta(m, s))
             self.errors[s].append(abs(predicted - ms) / ms)
+            started = float(x @ self._theta(self.start, s))
+            if started > 0:
+                self.ratios.append(ms / started)
             self.rows[s].add(x, float(ms))
             self._fresh[s] += 1
             if self._fresh[s] >= self._cadence(s):
@@ -227,15 +243,45 @@ class OnlineModel:
         c = getattr(m, s)
         return np.array([m.overhead.get(s, 0.0)] + [c.get(t, 0.0) for t in TERMS[s]], dtype=np.float64)
 
+    def machine_scale(self) -> float:
+        """How much slower (or faster) this machine draws now than the starting model says, shared by the
+        strategies of few rows: the median over strategies with ``level_rows`` rows of their median measured /
+        starting model's ms (one vote a strategy, so that one mispredicted strategy drawn often does not set it),
+        else the median of every recent pass's."""
+        levels = []
+        for s, w in self.rows.items():
+            if len(w) >= self.options.level_rows:
+                X, y = w.arrays()
+                pred = X @ self._theta(self.start, s)
+                ok = pred > 0
+                if ok.any():
+                    levels.append(_median((y[ok] / pred[ok]).tolist()))
+        if levels:
+            return _median(levels)
+        return _median(self.ratios) if self.ratios else 1.0
+
     def _refit(self, names: list[str]) -> None:
         m = copy.copy(self.model)
-        for s in names:
-            self._fresh[s] = 0
-            X, y = self.rows[s].arrays()
-            o = self.options
+        o, scale = self.options, self.machine_scale()
+        for s in self.model.candidates:
+            if s in names:
+                self._fresh[s] = 0
+            elif s in self._own:
+                continue
+            X, y = self.rows[s].arrays()  # a strategy of few rows follows the machine's scale only
+            own = len(y) >= o.level_rows
             theta = fit_rows(
-                X, y, self._theta(self.start, s), o.prior_weight, o.prior_share, 2 * o.hold_rows, o.explore_tiles
+                X,
+                y,
+                self._theta(self.start, s) * (1.0 if own else scale),
+                o.prior_weight,
+                o.prior_share,
+                2 * o.hold_rows,
+                o.explore_tiles,
+                own_level=own,
             )
+            if own:
+                self._own.add(s)
             m.overhead = {**m.overhead, s: float(theta[0])}
             setattr(m, s, dict(zip(TERMS[s], map(float, theta[1:]))))
         mixed, pure = self.residual["mixed"], self.residual["pure"]
@@ -279,14 +325,16 @@ def fit_rows(
     prior_share: float = 0.0,
     shape_rows: int = 0,
     few_tiles: int = 0,
+    own_level: bool = True,
 ) -> np.ndarray:
     """Non-negative [overhead, coefficients] of one strategy from rows of terms X (n, p; column 1 the tile
     count) and measured ms y (n,), on relative error, with a ridge toward ``prior`` scaled by the rows' median
     measured / predicted, worth the larger of ``prior_weight`` rows and ``prior_share`` of the rows; outliers
     (``OUTLIER``) dropped and refitted once. No rows: the prior. Fewer than ``shape_rows`` rows of more than
     ``few_tiles`` tiles: the scaled prior (passes of a few explored tiles fix a strategy's level, not how its
-    cost splits between the frame and its tiles)."""
-    if len(y) == 0:
+    cost splits between the frame and its tiles). Without ``own_level``: the prior as given (a strategy of too
+    few rows to tell its own level follows the machine's, which the caller has applied)."""
+    if len(y) == 0 or not own_level:
         return prior.copy()
     pred = X @ prior
     ratio = y[pred > 0] / pred[pred > 0]
