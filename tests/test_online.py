@@ -135,7 +135,7 @@ def test_a_strategy_that_could_not_pay_is_not_explored_once_its_level_is_known()
 
 def test_strategies_not_drawn_follow_the_machines_level():
     rng = np.random.default_rng(12)
-    slow = copy.deepcopy(TRUE)                          # the machine draws everything at half the model's speed
+    slow = copy.deepcopy(TRUE)  # the machine draws everything at half the model's speed
     for st in slow.candidates:
         setattr(slow, st, {k: v / 2 for k, v in getattr(slow, st).items()})
         slow.overhead = {**slow.overhead, st: slow.overhead[st] / 2}
@@ -143,10 +143,10 @@ def test_strategies_not_drawn_follow_the_machines_level():
     run_frames(online, rng, 30, explore=False)
     m = online.model
     drawn = {s for s in m.candidates if len(online.rows[s])}
-    assert drawn and drawn != set(m.candidates)         # some strategy was never drawn
+    assert drawn and drawn != set(m.candidates)  # some strategy was never drawn
     assert online.machine_scale() == pytest.approx(2.0, rel=0.1)
     cols = columns(rng, 20)
-    for s in set(m.candidates) - drawn:                 # predicted at the machine's level all the same
+    for s in set(m.candidates) - drawn:  # predicted at the machine's level all the same
         t = TRUE.predict_table(cols)[TRUE.candidates.index(s)].sum() + TRUE.overhead[s]
         p = m.predict_table(cols)[m.candidates.index(s)].sum() + m.overhead[s]
         assert abs(p - t) / t < 0.1, s
