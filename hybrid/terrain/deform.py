@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hybrid.errors import TerrabenchError
-from hybrid.terrain.edits import BrushParams, Window, _finite, touched
+from hybrid.terrain.edits import BrushParams, Window, _finite, check_disc, touched
 from hybrid.terrain.heightfield import MAX_ABS_HEIGHT, HeightField
 
 DEFORMATIONS = {"wave": 0, "uplift": 1}
@@ -86,22 +86,7 @@ def check_deformation(d: Deformation, hf: HeightField, start: float, end: float)
     if not isinstance(d, (Wave, Uplift)):
         raise TerrabenchError(f"a deformation must be one of {', '.join(DEFORMATIONS)}, got {type(d).__name__}")
     name = f"{d.kind} deformation"
-    try:
-        cx, cy = (_finite(f"{name} centre {a}", v) for a, v in zip("xy", d.centre, strict=True))
-    except (TypeError, ValueError):
-        raise TerrabenchError(f"{name} centre must be an (x, y) pair of metres, got {d.centre!r}") from None
-    ox, oy, _ = hf.origin
-    w, depth = hf.extent
-    if not (ox <= cx <= ox + w and oy <= cy <= oy + depth):
-        raise TerrabenchError(
-            f"{name} centre ({cx:g}, {cy:g}) m lies off terrain {hf.name!r}, which spans x "
-            f"{ox:g} .. {ox + w:g} and y {oy:g} .. {oy + depth:g} m"
-        )
-    r = _finite(f"{name} radius", d.radius)
-    if not 0.0 < r <= max(w, depth):
-        raise TerrabenchError(
-            f"{name} radius must lie in (0, {max(w, depth):g}] m (the terrain's larger extent), got {d.radius!r}"
-        )
+    check_disc(name, d.centre, d.radius, hf)
     t0, t1 = _finite(f"{name} start", start), _finite(f"{name} end", end)
     if not 0.0 <= t0 < t1 <= MAX_SECONDS:
         raise TerrabenchError(

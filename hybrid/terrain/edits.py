@@ -126,16 +126,13 @@ def _finite(name: str, value) -> float:
     return v
 
 
-def check_brush(brush: Brush, hf: HeightField) -> Brush:
-    """The brush if it fits the terrain (centre on it, 0 < radius <= its larger extent, finite strength in range),
-    else a TerrabenchError naming what is wrong; metres in the terrain's world frame."""
-    if not isinstance(brush, (Raise, Flatten, Smooth, Crater)):
-        raise TerrabenchError(f"an edit must be one of {', '.join(BRUSHES)}, got {type(brush).__name__}")
-    name = f"{brush.kind} brush"
+def check_disc(name: str, centre, radius, hf) -> tuple[float, float, float]:
+    """(x, y, radius) metres of a disc on the terrain (centre an (x, y) pair on it in its world frame, 0 < radius
+    <= its larger extent), else a TerrabenchError naming ``name`` and what is wrong."""
     try:
-        cx, cy = (_finite(f"{name} centre {a}", v) for a, v in zip("xy", brush.centre, strict=True))
+        cx, cy = (_finite(f"{name} centre {a}", v) for a, v in zip("xy", centre, strict=True))
     except (TypeError, ValueError):
-        raise TerrabenchError(f"{name} centre must be an (x, y) pair of metres, got {brush.centre!r}") from None
+        raise TerrabenchError(f"{name} centre must be an (x, y) pair of metres, got {centre!r}") from None
     ox, oy, _ = hf.origin
     w, d = hf.extent
     if not (ox <= cx <= ox + w and oy <= cy <= oy + d):
@@ -143,11 +140,21 @@ def check_brush(brush: Brush, hf: HeightField) -> Brush:
             f"{name} centre ({cx:g}, {cy:g}) m lies off terrain {hf.name!r}, which spans x "
             f"{ox:g} .. {ox + w:g} and y {oy:g} .. {oy + d:g} m"
         )
-    r = _finite(f"{name} radius", brush.radius)
+    r = _finite(f"{name} radius", radius)
     if not (0.0 < r <= max(w, d)):
         raise TerrabenchError(
-            f"{name} radius must lie in (0, {max(w, d):g}] m (the terrain's larger extent), got {brush.radius!r}"
+            f"{name} radius must lie in (0, {max(w, d):g}] m (the terrain's larger extent), got {radius!r}"
         )
+    return cx, cy, r
+
+
+def check_brush(brush: Brush, hf: HeightField) -> Brush:
+    """The brush if it fits the terrain (centre on it, 0 < radius <= its larger extent, finite strength in range),
+    else a TerrabenchError naming what is wrong; metres in the terrain's world frame."""
+    if not isinstance(brush, (Raise, Flatten, Smooth, Crater)):
+        raise TerrabenchError(f"an edit must be one of {', '.join(BRUSHES)}, got {type(brush).__name__}")
+    name = f"{brush.kind} brush"
+    check_disc(name, brush.centre, brush.radius, hf)
     s = _finite(f"{name} strength", brush.strength)
     if brush.kind in ("flatten", "smooth") and not 0.0 <= s <= 1.0:
         raise TerrabenchError(f"{name} strength must lie in [0, 1], got {brush.strength!r}")
