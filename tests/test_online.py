@@ -7,7 +7,15 @@ import json
 import numpy as np
 import pytest
 
-from hybrid.cost.model import TERMS, CostModel, all_term_values, load_cost_model, read_costs_file, save_cost_model
+from hybrid.cost.model import (
+    ONLINE_FIT_VERSION,
+    TERMS,
+    CostModel,
+    all_term_values,
+    load_cost_model,
+    read_costs_file,
+    save_cost_model,
+)
 from hybrid.cost.online import AdaptOptions, OnlineModel, fit_rows
 from hybrid.errors import TerrabenchError
 
@@ -217,6 +225,22 @@ def test_learned_model_round_trips_through_the_costs_file(tmp_path):
     for s in back.candidates:
         assert getattr(back, s) == pytest.approx(getattr(online.model, s))
         assert back.overhead[s] == pytest.approx(online.model.overhead[s])
+
+
+def test_a_model_learned_by_an_earlier_online_fit_is_passed_over(tmp_path):
+    rng = np.random.default_rng(6)
+    online = OnlineModel(scaled(TRUE, "raycast", 0.5))
+    run_frames(online, rng, 12)
+    path = tmp_path / "costs.json"
+    old = copy.deepcopy(online.model)
+    old.renderer, old.online_fit = "llvmpipe", ONLINE_FIT_VERSION - 1
+    save_cost_model(old, path)
+    with pytest.warns(UserWarning, match="earlier version of the online fit"):
+        got = load_cost_model("llvmpipe", path)
+    assert got.adapted_frames == 0 and got.source.startswith("shipped default")
+    old.online_fit = ONLINE_FIT_VERSION  # learned by this version: used
+    save_cost_model(old, path)
+    assert load_cost_model("llvmpipe", path).adapted_frames == 12
 
 
 @pytest.mark.parametrize("text", ["{not json", "[1, 2]", '{"llvmpipe": 3}', "\u00ff\u00fe"])

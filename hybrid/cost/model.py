@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from dataclasses import asdict, dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -105,6 +106,7 @@ class CostModel:
     mix_overhead: float = 0.0  # ms a frame that uses more than one strategy adds (fitted with the frames)
     full_res: str = PRIOR_FULL_RES  # the full-resolution rule its raster frames were drawn by
     adapted_frames: int = 0  # frames it learned from online after it was loaded (hybrid.cost.online)
+    online_fit: int = 0  # the version of the online fit that learned it (ONLINE_FIT_VERSION), 0: not learned online
 
     @property
     def candidates(self) -> tuple[str, ...]:
@@ -281,6 +283,7 @@ def cost_model_from_dict(d: dict, source: str) -> CostModel:
             float(d.get("mix_overhead", 0.0)),
             d.get("full_res", PRIOR_FULL_RES),
             int(d.get("adapted_frames", 0)),
+            int(d.get("online_fit", 0)),
         )
         if m.full_res not in FULL_RES:
             raise ValueError(f"full_res must be one of {', '.join(FULL_RES)}, got {m.full_res!r}")
@@ -304,14 +307,27 @@ def matching_key(keys, renderer: str) -> str | None:
     return max(inside, key=len) if inside else None
 
 
+ONLINE_FIT_VERSION = 2
+"""The version of ``hybrid.cost.online``'s fit, saved with the models it learns: one learned by another version
+is not loaded (its coefficients follow rules since changed), and the shipped default serves instead."""
+
+
 def load_cost_model(renderer: str, path: Path | None = None) -> CostModel:
-    """The calibrated model for a GL renderer (matching_key): the user's file first, then the shipped defaults."""
+    """The calibrated model for a GL renderer (matching_key): the user's file first (a model learned online by
+    another version of the fit is passed over, with a warning), then the shipped defaults."""
     path = Path(path) if path else user_costs_path()
     if path.exists():
         data = read_costs_file(path)
         key = matching_key(data, renderer)
         if key is not None:
-            return cost_model_from_dict(data[key], str(path) if key == renderer else f"{path} '{key}'")
+            m = cost_model_from_dict(data[key], str(path) if key == renderer else f"{path} '{key}'")
+            if not m.adapted_frames or m.online_fit == ONLINE_FIT_VERSION:
+                return m
+            warnings.warn(
+                f"{path}: the model for {key!r} was learned by an earlier version of the online fit; it is not "
+                "used (a run learns it again, or run terrabench calibrate)",
+                stacklevel=2,
+            )
     shipped = _shipped()
     key = matching_key(shipped, renderer)
     if key is not None:

@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import nnls
 
-from hybrid.cost.model import _TERM_INDEX, TERMS, CostModel, all_term_values
+from hybrid.cost.model import _TERM_INDEX, ONLINE_FIT_VERSION, TERMS, CostModel, all_term_values
 from hybrid.errors import TerrabenchError
 
 
@@ -121,6 +121,7 @@ class OnlineModel:
         self.start = copy.deepcopy(start)
         self.model = copy.deepcopy(start)
         self.model.source = f"{start.source or 'unsaved'}, adapted online"
+        self.model.online_fit = ONLINE_FIT_VERSION
         names = self.model.candidates
         self.rows = {s: RowWindow(self.options.window, 1 + len(TERMS[s])) for s in names}
         self._fresh = dict.fromkeys(names, 0)  # rows since the strategy's last refit
