@@ -28,17 +28,8 @@ def from_args(cls, args: argparse.Namespace):
     return cls(**{f.name: getattr(args, f.name) for f in fields(cls)})
 
 
-def add_terrain_arguments(p: argparse.ArgumentParser) -> None:
-    """Options naming a terrain: bundled/synthetic name or a file, with scale and spacing overrides."""
-    p.add_argument(
-        "--dataset",
-        default="puget",
-        help="bundled name (puget, fbm, ridged, spike, cliff, staircase, flat, ridges) or a file",
-    )
-    p.add_argument(
-        "--size-samples", type=int, default=None, help="samples per side for synthetic data, or a crop of puget"
-    )
-    p.add_argument("--seed", type=argtypes.int_in("--seed", 0, 2**32 - 1), default=0, help="seed for synthetic data")
+def add_file_arguments(p: argparse.ArgumentParser) -> None:
+    """Options for reading a height file: vertical scale, ground spacing, CRS, crop window, raw layout."""
     p.add_argument(
         "--vertical-scale",
         type=argtypes.positive_float("--vertical-scale", "metres per stored unit"),
@@ -60,6 +51,20 @@ def add_terrain_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--raw-shape", type=argtypes.rows_cols("--raw-shape"), default=None, help="ROWSxCOLS for raw files")
     p.add_argument("--raw-dtype", default=None, help="NumPy dtype for raw files, e.g. <u2, <f4")
+
+
+def add_terrain_arguments(p: argparse.ArgumentParser) -> None:
+    """Options naming a terrain: bundled/synthetic name or a file, with scale and spacing overrides."""
+    p.add_argument(
+        "--dataset",
+        default="puget",
+        help="bundled name (puget, fbm, ridged, spike, cliff, staircase, flat, ridges) or a file",
+    )
+    p.add_argument(
+        "--size-samples", type=int, default=None, help="samples per side for synthetic data, or a crop of puget"
+    )
+    p.add_argument("--seed", type=argtypes.int_in("--seed", 0, 2**32 - 1), default=0, help="seed for synthetic data")
+    add_file_arguments(p)
     p.add_argument(
         "--offset", type=argtypes.vec3("--offset"), default=None, help="place the terrain at world x,y,z metres"
     )

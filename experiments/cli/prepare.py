@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from . import argtypes
+from .options import add_file_arguments
 
 HELP = "build the tile pyramid of a file (or a synthetic terrain) out of core into a tile store"
 
@@ -48,22 +49,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--tile-size", type=argtypes.power_of_two("--tile-size"), default=256, help="cells per tile side (power of two)"
     )
-    p.add_argument(
-        "--vertical-scale",
-        type=argtypes.positive_float("--vertical-scale", "metres per stored unit"),
-        default=None,
-        help="metres per stored unit (overrides the file's vertical unit)",
-    )
-    p.add_argument(
-        "--spacing",
-        type=argtypes.spacing("--spacing"),
-        default=None,
-        help="ground metres between samples, one number or X,Y (overrides the CRS)",
-    )
-    p.add_argument("--crs", default=None, help="CRS of the file, overriding its own")
-    p.add_argument("--crop", type=argtypes.crop("--crop"), default=None, help="ROW,COL,ROWS,COLS window of the file")
-    p.add_argument("--raw-shape", type=argtypes.rows_cols("--raw-shape"), default=None, help="ROWSxCOLS for raw files")
-    p.add_argument("--raw-dtype", default=None, help="NumPy dtype for raw files, e.g. <u2, <f4")
+    add_file_arguments(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
