@@ -14,12 +14,12 @@ from .split_tables import BIN_SHIFT
 def estimate_tiles(tables, base, rows, coarse, boxes, root, eye, k_tau, w, bias, inside, lean, beta, sides, weights):
     """``estimate_rows`` tile by tile: (triangles (B,) int64, visible share (B,)); ``weights`` the triangles a split
     level-1 node and a near leaf add, with side errors and without (split1 both, then near both)."""
-    b, kinds, nb, width = len(rows), tables.shape[1], tables.shape[2], tables.shape[3]
+    b, kinds, nb = len(rows), tables.shape[1], tables.shape[2]
     nc = coarse.shape[1]
     tri, vis = np.zeros(b, np.int64), np.zeros(b)
     d = np.empty(nb + nc)
     factor = np.array([1.0, beta, 1.0]) / k_tau
-    thr = np.empty(nb, np.float32)
+    thr, counts = np.empty(nb, np.float32), np.empty(nb, np.int64)
     for t in range(b):
         for n in range(nb + nc):  # eye to each box, metres
             dx = max(boxes[t, 3, n] - eye[0], eye[0] - boxes[t, 0, n], 0.0)
@@ -31,9 +31,9 @@ def estimate_tiles(tables, base, rows, coarse, boxes, root, eye, k_tau, w, bias,
         for k in range(kinds):  # small nodes: one table look-up a block
             for n in range(nb):
                 thr[n] = d[n] * factor[k]
-            bins = (thr.view(np.int32).astype(np.int64) >> BIN_SHIFT) - base[rows[t]]
+            block_splits(tables[rows[t], k], base[rows[t]], thr, counts)
             for n in range(nb):
-                count = tables[rows[t], k, n, min(max(bins[n], 0), width - 1)]
+                count = counts[n]
                 per_kind[k] += count
                 if k == 0:
                     splits += count
@@ -68,3 +68,26 @@ def _seen(boxes, t: int, n: int, w, bias, inside: bool) -> float:
         if s < bias[p]:
             return 0.0
     return 1.0
+
+
+@njit(cache=True)
+def block_splits(table, base: int, thr, out) -> None:
+    """Into ``out`` (blocks,): each block's nodes of one kind whose error, rounded to a bin edge, exceeds its
+    threshold ``thr`` (blocks,) (float32 metres); ``table`` (blocks, TABLE_BINS) is one tile's ``split_tables``
+    of that kind and ``base`` its base bin. One look-up a block; the table's ends count all and none, exactly."""
+    width = table.shape[1]
+    bins = (thr.view(np.int32).astype(np.int64) >> BIN_SHIFT) - base
+    for n in range(len(thr)):
+        out[n] = table[n, min(max(bins[n], 0), width - 1)]
+
+
+@njit(cache=True)
+def kind_splits(tables, base, rows, threshold):
+    """``block_splits`` of many tiles: per tile row, kind and block (B, kinds, blocks) int64 counts, from stacked
+    tables (rows, kinds, blocks, TABLE_BINS), base bins (rows,), rows (B,) and thresholds (B, kinds, blocks)
+    in metres."""
+    out = np.zeros(threshold.shape, np.int64)
+    for b in range(threshold.shape[0]):
+        for k in range(threshold.shape[1]):
+            block_splits(tables[rows[b], k], base[rows[b]], threshold[b, k].astype(np.float32), out[b, k])
+    return out

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,7 +23,7 @@ def split_tables(errors: list[np.ndarray]) -> tuple[int, np.ndarray]:
     """(base bin, (kinds, blocks, ``TABLE_BINS``) int64 table) of a tile's small-node errors, one (blocks, nodes)
     array (metres) per kind (``raster.tile_nodes.KINDS``): entry i of a block's row counts its nodes whose error,
     rounded to the nearest bin edge, is at least the edge of bin base + 1 + i, so that for a threshold t in bin
-    j = base + i (``kind_splits``) it counts the nodes whose rounded error exceeds t. An error <= 0 never splits
+    j = base + i (``raster.estimate_loops.block_splits``) it counts the nodes whose rounded error exceeds t. An error <= 0 never splits
     and is not counted; one more than 20 octaves below the tile's largest is counted as that floor (only a
     threshold below it sees the difference)."""
     nb = errors[0].shape[0]
@@ -53,19 +52,3 @@ class SplitTables:
     def blocks(self) -> int:
         """Blocks a tile."""
         return self.tables.shape[2]
-
-
-def kind_splits(tables: SplitTables, rows: np.ndarray, threshold: np.ndarray) -> np.ndarray:
-    """Per tile row, kind and block ((B, kinds, blocks)): the block's nodes of that kind whose error (rounded to a
-    bin edge) exceeds its ``threshold`` (metres, (B, kinds, blocks)), one table look-up each (int64 counts)."""
-    _, kinds, nb, width = tables.tables.shape
-    i = _bins(threshold) - tables.base[rows][:, None, None]
-    np.minimum(np.maximum(i, 0, out=i), width - 1, out=i)  # the ends count all and none: exact
-    i += rows[:, None, None] * (kinds * nb * width) + _table_offsets(kinds, nb, width)
-    return tables.tables.reshape(-1).take(i).astype(np.int64)
-
-
-@functools.cache
-def _table_offsets(kinds: int, nb: int, width: int) -> np.ndarray:
-    """(kinds, blocks) flat offsets of each kind's and block's table within a row of ``SplitTables.tables``."""
-    return (np.arange(kinds)[:, None] * nb + np.arange(nb)) * width

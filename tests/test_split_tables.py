@@ -1,4 +1,5 @@
-"""The triangle estimate's split tables (raster.split_tables: split_tables, kind_splits) against brute-force counts:
+"""The triangle estimate's split tables (raster.split_tables) and their look-up (raster.estimate_loops:
+kind_splits, the estimate's own) against brute-force counts:
 exact for the errors rounded to their bin edge, and off the exact count only by nodes whose error lies within
 half a bin of the threshold (bins split each octave in 32 equal steps: half a bin is at most 1/64 of the value),
 or below the tables' floor 20 octaves under a tile's largest error."""
@@ -7,7 +8,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from raster.split_tables import BIN_SHIFT, TABLE_BINS, SplitTables, kind_splits, split_tables
+from raster.estimate_loops import kind_splits
+from raster.split_tables import BIN_SHIFT, TABLE_BINS, SplitTables, split_tables
 from raster.tile_nodes import KINDS
 
 HALF_BIN = 1 + 1 / 64  # the largest relative move of rounding to a bin edge
@@ -53,9 +55,9 @@ def test_split_tables_count_the_rounded_errors_above_a_threshold(tile):
         ]
     )
     rows = np.ones(len(thr), np.int64)
-    got = kind_splits(tables, rows, thr)
+    got = kind_splits(tables.tables, tables.base, rows, thr)
     assert got.dtype == np.int64 and got.shape == thr.shape
-    assert not kind_splits(tables, np.zeros(3, np.int64), thr[:3]).any()
+    assert not kind_splits(tables.tables, tables.base, np.zeros(3, np.int64), thr[:3]).any()
     t32 = thr.astype(np.float32)
     top = rounded(np.array([largest])).view(np.int32)[0] >> BIN_SHIFT  # the largest error's bin
     floor = float(np.array([(top + 2 - TABLE_BINS) << BIN_SHIFT], np.int32).view(np.float32)[0]) if largest > 0 else 0.0
