@@ -84,10 +84,15 @@ def explore(online: OnlineModel, plans: list[TilePlan]) -> Exploration | None:
 def observe(
     online: OnlineModel, plans: list[TilePlan], pass_ms: dict, draw_ms: float, explored: Exploration | None
 ) -> None:
-    """Hand one drawn frame (its plans, each strategy's pass ms and the drawing's ms) to the online model."""
+    """Hand one drawn frame (its plans, each strategy's pass ms and the drawing's ms) to the online model, with the
+    model's prediction of the frame as drawn."""
     frame = frame_columns(plans)
     if frame is not None:
-        online.observe(frame.columns, [p.choice for p in plans], pass_ms, draw_ms, explored)
+        picks = np.array([p.choice for p in plans])
+        used = set(picks.tolist())
+        tiles = sum(float(np.asarray(frame.predicted[s])[picks == s].sum()) for s in used if s in frame.predicted)
+        predicted = online.model.frame_ms([tiles], used) if used <= set(frame.predicted) else None
+        online.observe(frame.columns, picks.tolist(), pass_ms, draw_ms, explored, predicted)
 
 
 def timed_explore(online: OnlineModel | None, plans: list[TilePlan], learn: bool) -> tuple[Exploration | None, float]:

@@ -16,7 +16,7 @@ from hybrid.cost.model import (
     read_costs_file,
     save_cost_model,
 )
-from hybrid.cost.online import AdaptOptions, OnlineModel, fit_rows
+from hybrid.cost.online import AdaptOptions, Exploration, OnlineModel, fit_rows
 from hybrid.errors import TerrabenchError
 
 TRUE = CostModel(
@@ -258,3 +258,51 @@ def test_costs_file_model_of_wrong_shape_is_refused_by_name(tmp_path):
     path.write_text(json.dumps({"llvmpipe": {"renderer": "llvmpipe", "raster": []}}))
     with pytest.raises(TerrabenchError, match="malformed cost model"):
         load_cost_model("llvmpipe", path)
+
+
+def test_mixed_frames_over_their_predictions_raise_the_share_a_mix_must_save():
+    rng = np.random.default_rng(13)
+    online = OnlineModel(TRUE, AdaptOptions(window=12))
+    start = TRUE.mix_error
+    names = TRUE.candidates
+
+    def frame(mixed: bool, over: float, explored=None):
+        cols = columns(rng, 10)
+        chosen = np.array([names[0]] * 10, dtype=object)
+        if mixed:
+            chosen[:4] = "raycast"
+        passes = true_passes(cols, chosen, rng, noise=0.0)
+        predicted = sum(passes.values())
+        online.observe(cols, chosen.tolist(), passes, predicted * over, explored, predicted)
+
+    frame(True, 1.0)  # first passes of each strategy: one-off costs, not checked
+    for _ in range(4):
+        frame(False, 1.1)
+    for _ in range(2):
+        frame(True, 1.43)
+    assert online.model.mix_error == start  # two mixed frames say too little
+    frame(True, 1.43, explored=Exploration("raycast", np.arange(4), 1.0))
+    assert online.model.mix_error == start  # an explored frame is not the hybrid's choice: not checked
+    frame(True, 1.43)
+    assert online.model.mix_error == pytest.approx(0.3, abs=1e-9)  # 1.43 / 1.1 - 1
+    for _ in range(12):
+        frame(False, 1.1)
+    assert online.model.mix_error == start  # the mixed frames aged out of the window: a mix is tried again
+
+
+def test_a_strategys_first_pass_is_not_charged_to_the_exploration_budget():
+    rng = np.random.default_rng(14)
+    online = OnlineModel(TRUE)
+    names = TRUE.candidates
+    cols = columns(rng, 10)
+    chosen = np.array(["raster"] * 10, dtype=object)
+    online.observe(cols, chosen.tolist(), true_passes(cols, chosen, rng), 20.0)  # raster's own first pass
+    online.credit = 5.0
+    chosen[:2] = "raycast"
+    passes = {**true_passes(cols, chosen, rng), "raycast": 2000.0}  # its shaders compiled in this pass
+    online.observe(cols, chosen.tolist(), passes, 2020.0, Exploration("raycast", np.arange(2), 1.0))
+    assert online.credit > 5.0 and online.stats.explore_ms == 0.0  # the compile is not exploration's cost
+    assert online.explore(TRUE.predict_table(cols), np.zeros(10, int), names) is not None  # still affordable
+    passes["raycast"] = 4.0
+    online.observe(cols, chosen.tolist(), passes, 24.0, Exploration("raycast", np.arange(2), 1.0))
+    assert online.stats.explore_ms == pytest.approx(3.0)  # a later pass is charged what it cost beyond the base

@@ -307,7 +307,7 @@ def matching_key(keys, renderer: str) -> str | None:
     return max(inside, key=len) if inside else None
 
 
-ONLINE_FIT_VERSION = 2
+ONLINE_FIT_VERSION = 3
 """The version of ``hybrid.cost.online``'s fit, saved with the models it learns: one learned by another version
 is not loaded (its coefficients follow rules since changed), and the shipped default serves instead."""
 

@@ -20,12 +20,20 @@ strategy not drawn yet does not look cheap beside one that is.
 A strategy the hybrid does not choose gives no rows, so it may be given a few tiles of a frame (exploration):
 at most ``explore_tiles`` tiles, those it is predicted to draw cheapest against the frame's choice, paid from a
 budget that earns ``explore_share`` of every observed frame's measured ms and is charged the exploration's
-measured cost (its pass, less the chosen strategy's predicted cost of those tiles). A strategy whose last
+measured cost (its pass, less the chosen strategy's predicted cost of those tiles; a strategy's first pass,
+which pays one-off costs such as compiling its shaders, is neither charged nor a row). A strategy whose last
 ``hold_rows`` predictions were within ``hold_error`` (median relative error of passes predicted before they
 were fitted) holds, and is explored no more while it holds.
 
 A mixed frame's own overhead is the median of (frame ms - its passes' ms) over the window's mixed frames less
 that of its one-strategy frames.
+
+Whole frames are checked too: a frame the hybrid chose (not explored) is measured against the frame the model
+predicted for it. Where the window's mixed frames run over their predictions by more than its one-strategy
+frames do, the model's ``mix_error`` (the share a mix must save before the hybrid takes it,
+``hybrid.cost.planner.hedged_picks``) becomes that excess: per-pass rows can each fit well while the frames that
+mix them do not (a few explored tiles fix a strategy's level but not its tiles, and a frame around several
+passes costs more than they do). Checks older than the window age out, so a mix given up is tried again.
 """
 
 from __future__ import annotations
@@ -129,6 +137,7 @@ class OnlineModel:
         self._spent: dict = {}  # the last measured cost of exploring each strategy
         self.errors = {s: deque(maxlen=self.options.hold_rows) for s in names}
         self.residual = {"pure": deque(maxlen=self.options.window), "mixed": deque(maxlen=self.options.window)}
+        self.checks = {"pure": deque(maxlen=self.options.window), "mixed": deque(maxlen=self.options.window)}
         self.ratios: deque = deque(maxlen=self.options.window)  # measured / starting model's ms of recent passes
         self._own: set = set()  # strategies fitted at their own level (enough rows)
         self.credit = 0.0
@@ -186,16 +195,24 @@ class OnlineModel:
         return gain > OPTIMISM * self.model.overhead.get(strategy, 0.0) + self.model.mix_overhead
 
     def observe(
-        self, columns: dict, picks: list[str], pass_ms: dict, frame_ms: float, explored: Exploration | None = None
+        self,
+        columns: dict,
+        picks: list[str],
+        pass_ms: dict,
+        frame_ms: float,
+        explored: Exploration | None = None,
+        predicted_ms: float | None = None,
     ) -> None:
         """Learn from one drawn frame: feature columns of its tiles ((B,) arrays), each tile's strategy, each
-        strategy's measured pass ms and the whole drawing's ms; refits the strategies drawn."""
+        strategy's measured pass ms, the whole drawing's ms and the model's prediction of it (ms, before this
+        frame); refits the strategies drawn."""
         if not np.isfinite(frame_ms) or frame_ms <= 0:
             return
         terms = all_term_values(columns)
         picks = np.asarray(picks)
         m = self.model
         learnt = []
+        first = set(pass_ms) - self._seen  # drawn for the first time: one-off costs (compiles)
         for s, ms in pass_ms.items():
             if s not in self.rows or not (np.isfinite(ms) and ms > 0):
                 continue
@@ -216,6 +233,9 @@ class OnlineModel:
                 learnt.append(s)
         kind = "mixed" if len(pass_ms) > 1 else "pure"
         self.residual[kind].append(frame_ms - sum(pass_ms.values()))
+        if explored is None and not first and predicted_ms is not None and predicted_ms > 0:
+            self.checks[kind].append((self.stats.frames, frame_ms / predicted_ms))
+            m.mix_error = self.mix_margin(self.start.mix_error)
         self.stats.frames += 1
         m.adapted_frames += 1
         self.stats.frame_ms += frame_ms
@@ -223,13 +243,25 @@ class OnlineModel:
             self.credit + self.options.explore_share * frame_ms, 20 * self.options.explore_share * frame_ms
         )
         if explored is not None and explored.strategy in pass_ms:
-            spent = self._spent[explored.strategy] = max(pass_ms[explored.strategy] - explored.base_ms, 0.0)
+            spent = max(pass_ms[explored.strategy] - explored.base_ms, 0.0) if explored.strategy not in first else 0.0
+            self._spent[explored.strategy] = spent
             self.credit -= spent
             self.stats.explored_frames += 1
             self.stats.explored_tiles += len(explored.tiles)
             self.stats.explore_ms += spent
         if learnt:  # one refit a frame, the strategy with the most rows since its last: a bounded cost
             self._refit([max(learnt, key=self._fresh.get)])
+
+    def mix_margin(self, prior: float) -> float:
+        """The share a mix must save: how far the window's mixed frames ran over their predictions beyond the
+        one-strategy frames (medians of measured / predicted; >= 0), once three mixed frames of the last ``window``
+        frames were checked, else ``prior``."""
+        since = self.stats.frames - self.options.window
+        mixed = [r for k, r in self.checks["mixed"] if k >= since]
+        if len(mixed) < 3:
+            return prior
+        pure = [r for k, r in self.checks["pure"] if k >= since]
+        return max(_median(mixed) / (_median(pure) if pure else 1.0) - 1.0, 0.0)
 
     def _cadence(self, s: str) -> int:
         """Rows between refits of strategy s: every row while it has few, every other while its predictions do not
