@@ -80,7 +80,7 @@ def group_task(spec: Spec, items: list, costs: dict):
     """On a worker: run one group of configurations with the worker's GL context (config_task.run_group)."""
     from distributed import get_worker
 
-    from hybrid.cost.model import cost_model_from_dict
+    from hybrid.cost.model import costs_file_model
 
     from .config_task import run_group
 
@@ -89,8 +89,7 @@ def group_task(spec: Spec, items: list, costs: dict):
     if tb is None or tb["state"] is None:
         raise TerrabenchError(f"worker {w.address} has no GL context: {tb['error'] if tb else 'plugin missing'}")
     state = tb["state"]
-    model = costs.get(tb["renderer"])
-    state.cost_model = cost_model_from_dict(model, "costs file sent by the client") if model else None
+    state.cost_model = costs_file_model(costs, tb["renderer"], "costs file sent by the client")
     return run_group(spec, items, state, extra={"device": tb["renderer"], "worker": w.address})
 
 

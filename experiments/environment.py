@@ -42,11 +42,10 @@ def cost_model_fingerprint(renderer: str, sent: dict | None = None) -> dict:
     import hashlib
     import json
 
-    from hybrid.cost.model import cost_model_from_dict, load_cost_model
+    from hybrid.cost.model import costs_file_model, load_cost_model
 
-    if sent and renderer in sent:
-        model = cost_model_from_dict(sent[renderer], "costs file sent by the client")
-    else:
+    model = costs_file_model(sent, renderer, "costs file sent by the client") if sent else None
+    if model is None:
         model = load_cost_model(renderer)
     d = model.to_dict()
     d.pop("source", None)

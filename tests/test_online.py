@@ -306,3 +306,22 @@ def test_a_strategys_first_pass_is_not_charged_to_the_exploration_budget():
     passes["raycast"] = 4.0
     online.observe(cols, chosen.tolist(), passes, 24.0, Exploration("raycast", np.arange(2), 1.0))
     assert online.stats.explore_ms == pytest.approx(3.0)  # a later pass is charged what it cost beyond the base
+
+
+def test_a_learned_model_never_overwrites_the_calibrated_one(tmp_path):
+    rng = np.random.default_rng(15)
+    path = tmp_path / "costs.json"
+    calibrated = scaled(TRUE, "raycast", 2.0)
+    save_cost_model(calibrated, path)
+    online = OnlineModel(calibrated)
+    run_frames(online, rng, 10)
+    save_cost_model(online.model, path)
+    data = read_costs_file(path)
+    assert data["test"]["raycast"] == calibrated.raycast  # the calibration kept beside the learned model
+    assert load_cost_model("test", path).adapted_frames == 10  # the learned one is used
+    old = copy.deepcopy(online.model)
+    old.online_fit = ONLINE_FIT_VERSION - 1
+    save_cost_model(old, path)
+    with pytest.warns(UserWarning, match="earlier version of the online fit"):
+        got = load_cost_model("test", path)
+    assert got.adapted_frames == 0 and got.raycast == calibrated.raycast  # the calibration serves again

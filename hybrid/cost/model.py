@@ -249,13 +249,20 @@ def read_costs_file(path: Path | None = None) -> dict:
     return data
 
 
+LEARNED = "learned online"
+"""The costs file's section of models learned online, by GL renderer: apart from the calibrated models (the file's
+other keys), so that learning never overwrites a user's calibration."""
+
+
 def save_cost_model(model: CostModel, path: Path | None = None) -> Path:
-    """Add or replace the model (keyed by its renderer string) in the costs file; returns the path."""
+    """Add or replace the model (keyed by its renderer string) in the costs file, in the ``LEARNED`` section when
+    it was learned online; returns the path."""
     path = Path(path) if path else user_costs_path()
     data = read_costs_file(path)
     d = model.to_dict()
     d.pop("source", None)
-    data[model.renderer] = d
+    section = data.setdefault(LEARNED, {}) if model.adapted_frames else data
+    section[model.renderer] = d
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -299,7 +306,7 @@ def cost_model_from_dict(d: dict, source: str) -> CostModel:
 def matching_key(keys, renderer: str) -> str | None:
     """The key of a costs file that names this GL renderer: the renderer string itself, else the longest key
     contained in it ignoring case ('NVIDIA H200' for 'NVIDIA H200/PCIe/SSE2'); None if none does."""
-    keys = [k for k in keys if k != "fallback"]
+    keys = [k for k in keys if k not in ("fallback", LEARNED)]
     if renderer in keys:
         return renderer
     low = renderer.lower()
@@ -317,22 +324,35 @@ def load_cost_model(renderer: str, path: Path | None = None) -> CostModel:
     another version of the fit is passed over, with a warning), then the shipped defaults."""
     path = Path(path) if path else user_costs_path()
     if path.exists():
-        data = read_costs_file(path)
-        key = matching_key(data, renderer)
-        if key is not None:
-            m = cost_model_from_dict(data[key], str(path) if key == renderer else f"{path} '{key}'")
-            if not m.adapted_frames or m.online_fit == ONLINE_FIT_VERSION:
-                return m
-            warnings.warn(
-                f"{path}: the model for {key!r} was learned by an earlier version of the online fit; it is not "
-                "used (a run learns it again, or run terrabench calibrate)",
-                stacklevel=2,
-            )
+        m = costs_file_model(read_costs_file(path), renderer, str(path))
+        if m is not None:
+            return m
     shipped = _shipped()
     key = matching_key(shipped, renderer)
     if key is not None:
         return cost_model_from_dict(shipped[key], f"shipped default '{key}'")
     return fallback_cost_model()
+
+
+def costs_file_model(data: dict, renderer: str, where: str) -> CostModel | None:
+    """The model a costs file's ``data`` (from ``where``) holds for a GL renderer (``matching_key``): the one learned
+    online, unless an earlier version of the online fit learned it (passed over, with a warning), else the
+    calibrated one; None where it holds neither."""
+    learned = data.get(LEARNED)
+    sections: list[tuple[dict, str]] = [(learned if isinstance(learned, dict) else {}, f"{where} ({LEARNED})")]
+    for section, label in [*sections, (data, where)]:
+        key = matching_key(section, renderer)
+        if key is None:
+            continue
+        m = cost_model_from_dict(section[key], label if key == renderer else f"{label} '{key}'")
+        if not m.adapted_frames or m.online_fit == ONLINE_FIT_VERSION:
+            return m
+        warnings.warn(
+            f"{where}: the model for {key!r} was learned by an earlier version of the online fit; it is not "
+            "used (a run learns it again, or run terrabench calibrate)",
+            stacklevel=3,
+        )
+    return None
 
 
 def _shipped() -> dict:
