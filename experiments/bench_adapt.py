@@ -36,7 +36,7 @@ def start_models(renderer: str) -> dict:
 
     device = load_cost_model(renderer)
     skewed = copy.deepcopy(device)
-    skewed.raycast = {k: v / 5 for k, v in skewed.raycast.items()}
+    skewed.coefficients["raycast"] = {k: v / 5 for k, v in skewed.coefficients["raycast"].items()}
     skewed.overhead = {**skewed.overhead, "raycast": skewed.overhead["raycast"] / 5}
     skewed.source = f"{device.source}, ray casting / 5"
     h200 = {**_shipped()["NVIDIA H200"], "renderer": renderer}

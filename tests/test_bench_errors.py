@@ -14,9 +14,7 @@ def _model() -> CostModel:
     coef = {"const": 0.1}
     return CostModel(
         "test",
-        raster=dict(coef),
-        raycast=dict(coef),
-        raster_gs=dict(coef),
+        {"raster": dict(coef), "raycast": dict(coef), "raster_gs": dict(coef)},
         call_overhead=dict.fromkeys(STRATEGIES, 0.0),
     )
 

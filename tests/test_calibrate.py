@@ -57,7 +57,7 @@ def test_calibrate_fits_the_tiles_the_renderer_selects(ctx, fbm129, views):
     assert m.tiles == n and m.frames == len(cal.samples) and m.renderer == gl_info(ctx).renderer
     assert m.full_res == DEFAULT_FULL_RES  # the rule its raster frames were drawn by
     for s in candidates():
-        coef = getattr(m, s)
+        coef = m.coefficients[s]
         assert set(coef) == set(TERMS[s])
         assert all(np.isfinite(c) and c >= 0 for c in coef.values()), (s, coef)
         assert np.isfinite(m.overhead[s]) and m.overhead[s] >= 0

@@ -52,8 +52,7 @@ def test_hedged_choices_leave_the_base_only_beyond_the_model_error():
     zero = {"const": 0.0, "triangles": 0.0, "visible_triangles": 0.0, "pixels": 0.0}
     m = CostModel(
         "t",
-        zero,
-        {"const": 0.0, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0},
+        {"raster": zero, "raycast": {"const": 0.0, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0}},
         fit_error={"raster": 0.15, "raycast": 0.10},
         overhead={"raster": 0.0, "raycast": 0.0},
     )
@@ -103,12 +102,10 @@ def test_hedged_picks_shortcut_agrees_with_pricing_every_subset():
         errs = {n: float(rng.choice([0.0, 0.1])) for n in names}
         model = CostModel(
             "test",
-            {"const": 0.0},
-            {"const": 0.0},
+            {"raster": {"const": 0.0}, "raycast": {"const": 0.0}, **({"raster_gs": {"const": 0.0}} if s > 2 else {})},
             fit_error=dict(errs),
             tile_error=dict(errs),
             overhead={n: float(rng.choice([0.0, 1.0, 3.0])) for n in names},
-            raster_gs={"const": 0.0} if s > 2 else {},
             mix_overhead=float(rng.choice([0.0, 0.5])),
             mix_error=float(rng.choice([0.0, 0.05])),
         )
@@ -134,9 +131,7 @@ def test_hedged_picks_shortcut_needs_the_base_overhead_least():
     table = np.array([[1.0, 1.0, 9.0, 9.0], [1.0, 1.0, 1.0, 1.0], [9.0, 9.0, 1.0, 1.0]])
     model = CostModel(
         "test",
-        {"const": 0.0},
-        {"const": 0.0},
-        raster_gs={"const": 0.0},
+        {"raster": {"const": 0.0}, "raycast": {"const": 0.0}, "raster_gs": {"const": 0.0}},
         overhead={"raster": 0.0, "raycast": 5.0, "raster_gs": 0.0},
     )
     assert hedged_picks(table, ["raster", "raycast", "raster_gs"], model).tolist() == [0, 0, 2, 2]

@@ -107,7 +107,11 @@ def test_a_cluster_run_is_not_resumed_under_another_cost_model(cluster, tmp_path
     assert env["cost_model"][renderer]["source"].startswith("shipped")
     journal = (folder / "frames.jsonl").read_bytes()
     other = load_cost_model(renderer)
-    other.renderer, other.raster = renderer, {**other.raster, "const": other.raster["const"] + 1.0}
+    ras = other.coefficients["raster"]
+    other.renderer, other.coefficients = (
+        renderer,
+        {**other.coefficients, "raster": {**ras, "const": ras["const"] + 1.0}},
+    )
     save_cost_model(other, tmp_path / "costs.json")
     monkeypatch.setenv("TERRABENCH_COSTS", str(tmp_path / "costs.json"))
     with pytest.raises(TerrabenchError, match="cost_model"):

@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+from cost_helpers import true_model
 
 from hybrid.camera.view import View
 from hybrid.cost.features import TileFeatures, _hull_area_clipped, footprint_pixels
@@ -13,12 +14,7 @@ from hybrid.cost.planner import choose
 from hybrid.errors import TerrabenchError
 from hybrid.residency import ResidencyCache
 
-TRUE = CostModel(
-    "test",
-    {"const": 0.3, "triangles": 5e-5, "visible_triangles": 1.5e-4, "pixels": 1e-5, "surface_pixels": 2e-5},
-    {"const": 0.5, "pixels": 2e-5, "surface_pixels": 1e-5, "pixel_steps": 1e-5},
-    raster_gs={"const": 0.2, "triangles": 2e-4, "visible_triangles": 3e-4, "pixels": 1e-5, "surface_pixels": 2.5e-5},
-)
+TRUE = true_model()
 
 
 def synthetic_tiles(n=300, seed=0):
@@ -72,10 +68,15 @@ def test_frame_fit_recovers_known_coefficients_and_overheads():
     assert m.candidates == NAMES and m.frames == 240
     total = np.mean([f.ms for f in frames])
     for s in NAMES:
-        for i, (t, v) in enumerate(getattr(TRUE, s).items()):
+        for i, (t, v) in enumerate(TRUE.coefficients[s].items()):
             share = v * np.mean([f.sums[s][i] for f in frames]) / total  # of the frames' time
             # a term under a tenth of the time is weakly seen at this noise (0.5 %): within 60 %, else 25 %
-            assert np.isclose(getattr(m, s)[t], v, rtol=0.25 if share >= 0.1 else 0.6), (s, t, getattr(m, s)[t], v)
+            assert np.isclose(m.coefficients[s][t], v, rtol=0.25 if share >= 0.1 else 0.6), (
+                s,
+                t,
+                m.coefficients[s][t],
+                v,
+            )
         assert np.isclose(m.overhead[s], OVERHEAD[s], rtol=0.25), (s, m.overhead[s])
         assert m.fit_error[s] < 0.01  # held-out frames: about the noise
     assert np.isclose(m.mix_overhead, MIX, rtol=0.25), m.mix_overhead
@@ -168,7 +169,11 @@ def test_choice_follows_predicted_costs():
     assert choose("hybrid", rough_big, b) == "raycast"
     # the same tiles under a device where rays are very expensive go to raster both
     costly_rays = CostModel(
-        "x", TRUE.raster, {"const": 5.0, "pixels": 1e-3, "surface_pixels": 0.0, "pixel_steps": 1e-3}
+        "x",
+        {
+            "raster": TRUE.coefficients["raster"],
+            "raycast": {"const": 5.0, "pixels": 1e-3, "surface_pixels": 0.0, "pixel_steps": 1e-3},
+        },
     )
     assert choose("hybrid", rough_big, costly_rays.predict(rough_big)) == "raster"
     assert choose("heuristic", rough_big, b) == "raycast" and choose("heuristic", flat_small, a) == "raster"
@@ -180,12 +185,10 @@ def test_save_load_by_renderer(tmp_path):
     p = tmp_path / "costs.json"
     save_cost_model(TRUE, p)
     got = load_cost_model("test", p)
-    assert got.raster == TRUE.raster and got.raycast == TRUE.raycast and got.raster_gs == TRUE.raster_gs
+    assert got.coefficients == TRUE.coefficients
     fitted = CostModel(
         "fitted",
-        TRUE.raster,
-        TRUE.raycast,
-        raster_gs=TRUE.raster_gs,
+        dict(TRUE.coefficients),
         call_overhead=dict(CALL),
         tile_error={"raster": 0.1},
         mix_overhead=1.25,
@@ -209,8 +212,8 @@ def test_save_load_by_renderer(tmp_path):
     assert "fallback" in other.source
     # saved under a part of the renderer string (calibrate --key), as the shipped file keys its models: found
     # for the full string whatever its case, the longest such key first, in the user's file before the shipped
-    save_cost_model(CostModel("NVIDIA H200", TRUE.raster, TRUE.raycast, mix_overhead=0.5), p)
-    save_cost_model(CostModel("NVIDIA", TRUE.raster, TRUE.raycast, mix_overhead=0.25), p)
+    save_cost_model(CostModel("NVIDIA H200", dict(TRUE.coefficients), mix_overhead=0.5), p)
+    save_cost_model(CostModel("NVIDIA", dict(TRUE.coefficients), mix_overhead=0.25), p)
     gpu = load_cost_model("NVIDIA H200/PCIe/SSE2", p)
     assert gpu.mix_overhead == 0.5 and "'NVIDIA H200'" in gpu.source
     assert load_cost_model("nvidia h200/pcie/sse2", p).mix_overhead == 0.5

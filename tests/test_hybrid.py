@@ -29,8 +29,10 @@ def split_model(triangles: float) -> CostModel:
     a triangle against a constant a tile, no per-frame overheads), so frames really mix both strategies."""
     return CostModel(
         "split",
-        {"const": 0.0, "triangles": 1e-3, "visible_triangles": 0.0, "pixels": 0.0},
-        {"const": 1e-3 * triangles, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0},
+        {
+            "raster": {"const": 0.0, "triangles": 1e-3, "visible_triangles": 0.0, "pixels": 0.0},
+            "raycast": {"const": 1e-3 * triangles, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0},
+        },
     )
 
 
@@ -231,7 +233,7 @@ def test_pure_hybrid_and_heuristic_policies_follow_their_rules(ctx, puget_full):
     # per-frame overheads: ray casting wins exactly where a tile has more than n triangles
     with Renderer(ctx, puget_full, "hybrid", tile_size=128, cost_model=SPLIT, adapt=False) as h:
         h.model = model = median_split(h.pyramid, v)
-        n = model.raycast["const"] / 1e-3
+        n = model.coefficients["raycast"]["const"] / 1e-3
         plans = h.plan(v)
     assert [p.choice for p in plans] == ["raycast" if p.features.triangles > n else "raster" for p in plans]
     assert {p.choice for p in plans} == {"raster", "raycast"}
@@ -357,8 +359,10 @@ def test_rays_stop_behind_the_raster_tiles_drawn_before_them(ctx, puget_full):
         # raster a flat 1 ms a tile, ray casting 1 ms per px pixels: the big near tiles are rasterized
         r.model = CostModel(
             "near-raster",
-            {"const": 1.0, "triangles": 0.0, "visible_triangles": 0.0, "pixels": 0.0},
-            {"const": 0.0, "pixels": 1.0 / px, "surface_pixels": 0.0, "pixel_steps": 0.0},
+            {
+                "raster": {"const": 1.0, "triangles": 0.0, "visible_triangles": 0.0, "pixels": 0.0},
+                "raycast": {"const": 0.0, "pixels": 1.0 / px, "surface_pixels": 0.0, "pixel_steps": 0.0},
+            },
         )
         plans = r.plan(v)
         kinds = [r.kind(p.choice) for p in plans]

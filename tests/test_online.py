@@ -6,11 +6,11 @@ import json
 
 import numpy as np
 import pytest
+from cost_helpers import true_model
 
 from hybrid.cost.model import (
     ONLINE_FIT_VERSION,
     TERMS,
-    CostModel,
     all_term_values,
     load_cost_model,
     read_costs_file,
@@ -19,14 +19,7 @@ from hybrid.cost.model import (
 from hybrid.cost.online import AdaptOptions, Exploration, OnlineModel, fit_rows
 from hybrid.errors import TerrabenchError
 
-TRUE = CostModel(
-    "test",
-    {"const": 0.3, "triangles": 5e-5, "visible_triangles": 1.5e-4, "pixels": 1e-5, "surface_pixels": 2e-5},
-    {"const": 0.5, "pixels": 2e-5, "surface_pixels": 1e-5, "pixel_steps": 1e-5},
-    overhead={"raster": 2.0, "raster_gs": 3.0, "raycast": 1.5},
-    raster_gs={"const": 0.2, "triangles": 2e-4, "visible_triangles": 3e-4, "pixels": 1e-5, "surface_pixels": 2.5e-5},
-    mix_overhead=0.8,
-)
+TRUE = true_model(overhead={"raster": 2.0, "raster_gs": 3.0, "raycast": 1.5}, mix_overhead=0.8)
 
 
 def columns(rng, n):
@@ -57,7 +50,7 @@ def true_passes(cols, picks, rng, noise=0.03):
 def scaled(model, strategy, factor):
     """A copy of the model with one strategy's coefficients and overhead multiplied by factor."""
     m = copy.deepcopy(model)
-    setattr(m, strategy, {k: v * factor for k, v in getattr(m, strategy).items()})
+    m.coefficients = {**m.coefficients, strategy: {k: v * factor for k, v in m.coefficients[strategy].items()}}
     m.overhead = {**m.overhead, strategy: m.overhead[strategy] * factor}
     return m
 
@@ -82,7 +75,7 @@ def run_frames(online, rng, frames, explore=True):
 
 def test_fit_rows_recovers_coefficients_from_a_wrong_prior():
     rng = np.random.default_rng(1)
-    theta = np.r_[TRUE.overhead["raycast"], [TRUE.raycast[t] for t in TERMS["raycast"]]]
+    theta = np.r_[TRUE.overhead["raycast"], [TRUE.coefficients["raycast"][t] for t in TERMS["raycast"]]]
     X = np.c_[
         np.ones(48), np.array([all_term_values(columns(rng, 20))[:, [0, 3, 4, 5]].sum(axis=0) for _ in range(48)])
     ]
@@ -145,7 +138,7 @@ def test_strategies_not_drawn_follow_the_machines_level():
     rng = np.random.default_rng(12)
     slow = copy.deepcopy(TRUE)  # the machine draws everything at half the model's speed
     for st in slow.candidates:
-        setattr(slow, st, {k: v / 2 for k, v in getattr(slow, st).items()})
+        slow.coefficients = {**slow.coefficients, st: {k: v / 2 for k, v in slow.coefficients[st].items()}}
         slow.overhead = {**slow.overhead, st: slow.overhead[st] / 2}
     online = OnlineModel(slow, AdaptOptions(explore_share=0.0))
     run_frames(online, rng, 30, explore=False)
@@ -223,7 +216,7 @@ def test_learned_model_round_trips_through_the_costs_file(tmp_path):
     back = load_cost_model("test", path)
     assert back.adapted_frames == 30
     for s in back.candidates:
-        assert getattr(back, s) == pytest.approx(getattr(online.model, s))
+        assert back.coefficients[s] == pytest.approx(online.model.coefficients[s])
         assert back.overhead[s] == pytest.approx(online.model.overhead[s])
 
 
@@ -317,11 +310,15 @@ def test_a_learned_model_never_overwrites_the_calibrated_one(tmp_path):
     run_frames(online, rng, 10)
     save_cost_model(online.model, path)
     data = read_costs_file(path)
-    assert data["test"]["raycast"] == calibrated.raycast  # the calibration kept beside the learned model
+    assert (
+        data["test"]["coefficients"]["raycast"] == calibrated.coefficients["raycast"]
+    )  # the calibration kept beside the learned model
     assert load_cost_model("test", path).adapted_frames == 10  # the learned one is used
     old = copy.deepcopy(online.model)
     old.online_fit = ONLINE_FIT_VERSION - 1
     save_cost_model(old, path)
     with pytest.warns(UserWarning, match="earlier version of the online fit"):
         got = load_cost_model("test", path)
-    assert got.adapted_frames == 0 and got.raycast == calibrated.raycast  # the calibration serves again
+    assert (
+        got.adapted_frames == 0 and got.coefficients["raycast"] == calibrated.coefficients["raycast"]
+    )  # the calibration serves again

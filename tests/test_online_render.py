@@ -21,7 +21,7 @@ def flight(puget257):
 def skewed(ctx, factor=0.2):
     """This device's model with every ray-casting coefficient and its overhead multiplied by factor."""
     m = copy.deepcopy(load_cost_model(gl_info(ctx).renderer))
-    m.raycast = {k: v * factor for k, v in m.raycast.items()}
+    m.coefficients = {**m.coefficients, "raycast": {k: v * factor for k, v in m.coefficients["raycast"].items()}}
     m.overhead = {**m.overhead, "raycast": m.overhead["raycast"] * factor}
     return m
 

@@ -103,7 +103,11 @@ def test_resuming_with_another_cost_model_is_refused(ctx, tmp_path, monkeypatch)
     journal = (folder / "frames.jsonl").read_bytes()
     renderer = gl_info(ctx).renderer
     other = load_cost_model(renderer)
-    other.renderer, other.raycast = renderer, {**other.raycast, "const": other.raycast["const"] + 1.0}
+    ray = other.coefficients["raycast"]
+    other.renderer, other.coefficients = (
+        renderer,
+        {**other.coefficients, "raycast": {**ray, "const": ray["const"] + 1.0}},
+    )
     save_cost_model(other, tmp_path / "costs.json")
     monkeypatch.setenv("TERRABENCH_COSTS", str(tmp_path / "costs.json"))
     with pytest.raises(TerrabenchError, match=r"cost_model .*shipped.* then, .*costs\.json"):

@@ -115,8 +115,10 @@ def split_model(pixels: float) -> CostModel:
     rest, so a frame really mixes both strategies."""
     return CostModel(
         "split",
-        {"const": 0.0, "triangles": 0.0, "visible_triangles": 0.0, "pixels": 1e-3},
-        {"const": 1e-3 * pixels, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0},
+        {
+            "raster": {"const": 0.0, "triangles": 0.0, "visible_triangles": 0.0, "pixels": 1e-3},
+            "raycast": {"const": 1e-3 * pixels, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0},
+        },
     )
 
 

@@ -29,7 +29,10 @@ def test_three_strategies_in_one_frame_leave_no_hole(ctx, puget_full):
         puget_full,
         "hybrid",
         tile_size=128,
-        cost_model=CostModel("flat", FLAT, {"const": 1.0, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0}),
+        cost_model=CostModel(
+            "flat",
+            {"raster": FLAT, "raycast": {"const": 1.0, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0}},
+        ),
         adapt=False,
     )
     plan = mixed.plan
@@ -60,8 +63,8 @@ def test_three_strategies_in_one_frame_leave_no_hole(ctx, puget_full):
 
 def test_hybrid_chooses_the_geometry_shader_path_when_the_model_says_it_is_cheapest(ctx, puget257):
     ray = {"const": 1.0, "pixels": 0.0, "surface_pixels": 0.0, "pixel_steps": 0.0}
-    cheap_gs = CostModel("gs", {**FLAT, "const": 2.0}, ray, raster_gs={**FLAT, "const": 0.5})
-    no_gs = CostModel("old", {**FLAT, "const": 2.0}, ray)
+    cheap_gs = CostModel("gs", {"raster": {**FLAT, "const": 2.0}, "raycast": ray, "raster_gs": {**FLAT, "const": 0.5}})
+    no_gs = CostModel("old", {"raster": {**FLAT, "const": 2.0}, "raycast": ray})
     v = preset("flyover", puget257, 6, *SIZE).view(2)
     with Renderer(ctx, puget257, "hybrid", tile_size=64, cost_model=cheap_gs, adapt=False) as h:
         assert {p.choice for p in h.plan(v)} == {"raster_gs"}

@@ -121,10 +121,8 @@ def fit_frames(
         coef[s] = dict(zip(TERMS[s], map(float, x[offsets[j] + 1 : offsets[j + 1]])))
     model = CostModel(
         renderer,
-        coef["raster"],
-        coef["raycast"],
+        coef,
         overhead=overhead,
-        raster_gs=coef.get("raster_gs", {}),
         frames=len(samples),
         tiles=len(tiles),
         mix_overhead=float(x[width - 1]),

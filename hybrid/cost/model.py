@@ -83,22 +83,20 @@ def term_values(f, strategy: str) -> np.ndarray:
 
 @dataclass
 class CostModel:
-    """Coefficients (milliseconds per unit of each term) per candidate strategy, and how well they fit: ``fit_error``
-    the held-out median relative error of frame times (frames using the strategy) when fitted on ``frames`` whole
-    frames, else of per-tile times.
+    """Coefficients (milliseconds per unit of each term, ``coefficients[strategy][term]``) per candidate strategy,
+    and how well they fit: ``fit_error`` the held-out median relative error of frame times (frames using the
+    strategy) when fitted on ``frames`` whole frames, else of per-tile times.
 
-    ``raster_gs`` is empty in a model calibrated before the geometry-shader path was a candidate: such a
-    model never chooses it.
+    A strategy without coefficients (``raster_gs`` in a model calibrated before the geometry-shader path was a
+    candidate) is never chosen.
     """
 
     renderer: str
-    raster: dict
-    raycast: dict
+    coefficients: dict[str, dict[str, float]]
     fit_error: dict = field(default_factory=dict)
     tiles: int = 0
     source: str = ""
     overhead: dict = field(default_factory=lambda: dict.fromkeys(TERMS, 0.0))
-    raster_gs: dict = field(default_factory=dict)
     frames: int = 0  # whole frames fitted (0: fitted on per-tile times)
     tile_error: dict = field(default_factory=dict)  # held-out per-tile error against tiles timed a call each
     call_overhead: dict = field(default_factory=dict)  # ms one tile drawn as its own call adds (fitted with the tiles)
@@ -111,7 +109,7 @@ class CostModel:
     @property
     def candidates(self) -> tuple[str, ...]:
         """The strategies this model has coefficients for, in TERMS order."""
-        return tuple(s for s in TERMS if getattr(self, s))
+        return tuple(s for s in TERMS if self.coefficients.get(s))
 
     def frame_ms(self, tile_costs: list[float], strategies: set) -> float:
         """Predicted frame time (ms): the tiles' costs plus the overhead of each strategy used, and the mixed
@@ -138,7 +136,7 @@ class CostModel:
         coef = self._memo(
             "coef",
             lambda: np.array(
-                [[getattr(self, s).get(t, 0.0) if t in TERMS[s] else 0.0 for t in ALL_TERMS] for s in cands],
+                [[self.coefficients[s].get(t, 0.0) if t in TERMS[s] else 0.0 for t in ALL_TERMS] for s in cands],
                 dtype=np.float64,
             ),
         )
@@ -171,7 +169,7 @@ class CostModel:
     def _memo(self, key, build):
         """``build()`` made once while the model's coefficient and error dicts stay as they were (compared with the
         copies kept beside it at every call: a dict edited in place makes it anew)."""
-        now = (self.raster, self.raycast, self.raster_gs, self.overhead, self.fit_error, self.tile_error)
+        now = (*self.coefficients.values(), self.overhead, self.fit_error, self.tile_error)
         memo = self.__dict__.setdefault("_memos", {})
         hit = memo.get(key)
         if hit is None or hit[0] != now:
@@ -182,7 +180,7 @@ class CostModel:
         """The formulas with their coefficients, and the held-out error."""
 
         def fmt(s):
-            c = getattr(self, s)
+            c = self.coefficients[s]
             parts = [f"{c['const']:.4g}"] + [f"{c[t]:.4g}*{t}" for t in TERMS[s][1:]]
             return f"{s:9s} ms = " + " + ".join(parts)
 
@@ -274,30 +272,32 @@ def save_cost_model(model: CostModel, path: Path | None = None) -> Path:
 def cost_model_from_dict(d: dict, source: str) -> CostModel:
     """A CostModel from its saved form (as in a costs file); ``source`` names where it came from."""
     try:
+        coefficients = d["coefficients"] if "coefficients" in d else {s: d[s] for s in TERMS if d.get(s)}
         m = CostModel(
             d["renderer"],
-            dict(d["raster"]),
-            dict(d["raycast"]),
-            dict(d.get("fit_error", {})),
-            int(d.get("tiles", 0)),
-            source,
-            {**dict.fromkeys(TERMS, 0.0), **d.get("overhead", {})},
-            dict(d.get("raster_gs") or {}),
-            int(d.get("frames", 0)),
-            dict(d.get("tile_error", {})),
-            {s: float(v) for s, v in (d.get("call_overhead") or {}).items()},
-            float(d.get("mix_error", 0.0)),
-            float(d.get("mix_overhead", 0.0)),
-            d.get("full_res", PRIOR_FULL_RES),
-            int(d.get("adapted_frames", 0)),
-            int(d.get("online_fit", 0)),
+            {s: dict(c) for s, c in dict(coefficients).items() if s in TERMS and c},
+            fit_error=dict(d.get("fit_error", {})),
+            tiles=int(d.get("tiles", 0)),
+            source=source,
+            overhead={**dict.fromkeys(TERMS, 0.0), **d.get("overhead", {})},
+            frames=int(d.get("frames", 0)),
+            tile_error=dict(d.get("tile_error", {})),
+            call_overhead={s: float(v) for s, v in (d.get("call_overhead") or {}).items()},
+            mix_error=float(d.get("mix_error", 0.0)),
+            mix_overhead=float(d.get("mix_overhead", 0.0)),
+            full_res=d.get("full_res", PRIOR_FULL_RES),
+            adapted_frames=int(d.get("adapted_frames", 0)),
+            online_fit=int(d.get("online_fit", 0)),
         )
+        missing = [s for s in ("raster", "raycast") if s not in m.coefficients]
+        if missing:
+            raise KeyError(f"no coefficients for {', '.join(missing)}")
         if m.full_res not in FULL_RES:
             raise ValueError(f"full_res must be one of {', '.join(FULL_RES)}, got {m.full_res!r}")
         for s in m.candidates:
             for t in TERMS[s]:
-                getattr(m, s).setdefault(t, 0.0)  # a model saved before a term existed has it at 0
-                float(getattr(m, s)[t])
+                m.coefficients[s].setdefault(t, 0.0)  # a model saved before a term existed has it at 0
+                float(m.coefficients[s][t])
         return m
     except (KeyError, TypeError, ValueError) as exc:
         raise TerrabenchError(f"{source}: malformed cost model ({exc})") from None

@@ -273,7 +273,7 @@ class OnlineModel:
     @staticmethod
     def _theta(m: CostModel, s: str) -> np.ndarray:
         """[overhead, coefficients in TERMS order] of strategy s in model m."""
-        c = getattr(m, s)
+        c = m.coefficients[s]
         return np.array([m.overhead.get(s, 0.0)] + [c.get(t, 0.0) for t in TERMS[s]], dtype=np.float64)
 
     def machine_scale(self) -> float:
@@ -316,7 +316,7 @@ class OnlineModel:
             if own:
                 self._own.add(s)
             m.overhead = {**m.overhead, s: float(theta[0])}
-            setattr(m, s, dict(zip(TERMS[s], map(float, theta[1:]))))
+            m.coefficients = {**m.coefficients, s: dict(zip(TERMS[s], map(float, theta[1:])))}
         mixed, pure = self.residual["mixed"], self.residual["pure"]
         if len(mixed) >= 3:
             m.mix_overhead = max(_median(mixed) - (_median(pure) if pure else 0.0), 0.0)
