@@ -264,3 +264,15 @@ def test_residency_budget_and_lru():
         c.get("raster", s, "d", lambda: 300)
     with pytest.raises(TerrabenchError, match="budget"):
         ResidencyCache(-1)
+
+
+def test_a_model_saved_with_per_strategy_keys_still_loads(tmp_path):
+    legacy = {"renderer": "old", **{s: dict(c) for s, c in TRUE.coefficients.items()}, "mix_overhead": 0.5}
+    p = tmp_path / "costs.json"
+    p.write_text(json.dumps({"old": legacy}))
+    got = load_cost_model("old", p)
+    assert got.coefficients == TRUE.coefficients and got.mix_overhead == 0.5
+    del legacy["raycast"]
+    p.write_text(json.dumps({"old": legacy}))
+    with pytest.raises(TerrabenchError, match="malformed cost model.*raycast"):
+        load_cost_model("old", p)
