@@ -6,7 +6,6 @@ import pytest
 from hybrid.terrain.datasets import crop, get_dataset, puget
 from hybrid.terrain.edits import Crater, Raise, Smooth, apply_brush, brush_params
 from hybrid.tiles.pyramid import TilePyramid
-from hybrid.tiles.pyramid_edit import touched_keys, update_pyramid
 from hybrid.tiles.tile_table import tile_table
 
 
@@ -30,9 +29,7 @@ def _pyramid_arrays(p):
         rows, cols = p.tile_counts(level)
         ty, tx = np.divmod(np.arange(rows * cols), cols)
         out += [
-            p._zmax[level],
-            p._zmin[level],
-            p._err[level],
+            *p.level_arrays(level),
             p.level_table(level),
             p.quantization_errors_at(level, tx, ty),
         ]
@@ -54,7 +51,7 @@ def test_pyramid_after_edits_equals_a_rebuild(small_puget, name):
             Smooth((hf.origin[0], hf.origin[1]), 5 * hf.spacing_x, 1.0),
         ],
     )
-    keys = update_pyramid(p, win)
+    keys = p.follow_edit(win)
     fresh = TilePyramid(hf, 16)
     for a, b in zip(_pyramid_arrays(p), _pyramid_arrays(fresh), strict=True):
         np.testing.assert_array_equal(a, b)
@@ -69,7 +66,7 @@ def test_touched_keys_include_both_tiles_of_a_shared_border():
     p = TilePyramid(hf, 16)
     win = _edit(hf, [Raise((16 * 30.0, 40 * 30.0), 20.0, 5.0)])  # one sample: the border column 16
     assert (win.j0, win.j1, win.i0, win.i1) == (16, 17, 40, 41)
-    level0 = sorted((k.tx, k.ty) for k in touched_keys(p, win) if k.level == 0)
+    level0 = sorted((k.tx, k.ty) for k in p.touched_keys(win) if k.level == 0)
     assert level0 == [(0, 2), (1, 2)]
 
 
