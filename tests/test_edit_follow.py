@@ -153,3 +153,26 @@ def test_node_arrays_after_edits_equal_a_rebuild(monkeypatch, exact_span):
                 np.testing.assert_array_equal(a, b, err_msg=f"level {g} after {brush}")
         assert rewritten[0].i1 - rewritten[0].i0 < nodes.effective[0].shape[0]  # not the whole level 0
     assert not np.array_equal(nodes.zhi[0], zhi[0]) and not np.array_equal(nodes.effective[2], eff[2])
+
+
+def test_a_replaced_resident_tile_keeps_its_slot_and_its_bytes_count(ctx):
+    from hybrid.residency import ResidencyCache
+    from hybrid.strategies import make_strategy
+
+    hf = get_dataset("fbm", 65)
+    p = TilePyramid(hf, 16)
+    keys = [*p.keys(0)[:2], p.root()]
+    s = make_strategy("raycast", ctx, hf)
+    cache = ResidencyCache()
+    try:
+        for k in keys:
+            cache.get("raycast", s, k, lambda k=k: p.tile(k))
+        new = s.upload(p.tile(keys[1]))
+        cache.replace("raycast", keys[1], new)
+        resident = cache.resident("raycast")
+        assert [k for k, _ in resident] == keys and resident[1][1] is new
+        assert cache.bytes == sum(int(g.nbytes) for _, g in resident) > 0
+        assert cache.stats.uploads == 3  # a replacement is no upload of a new tile
+    finally:
+        cache.clear()
+        s.release()
