@@ -199,6 +199,17 @@ def reading(f: pd.DataFrame, env: dict, errors: list[dict]) -> list[str]:
     return [x for x in lines if x]
 
 
+def _deformation(p: dict) -> str:
+    """A sentence on the programme's deformation, or nothing where it names none."""
+    d = p.get("deformation")
+    if not d:
+        return ""
+    return (
+        f" A {d['kind']} of radius {d['radius']:g} m runs from {d['start']:g} s to {d['end']:g} s under every edited "
+        f"terrain, {d['seconds_per_frame']:g} s a frame."
+    )
+
+
 def _markdown(spec: dict, env: dict, lines: list[str], tables: dict, charts: dict) -> str:
     p = spec["edit"]
     md = (
@@ -208,8 +219,8 @@ def _markdown(spec: dict, env: dict, lines: list[str], tables: dict, charts: dic
             f"Every method follows the same edits over the same views ({spec['flight']} flight, {spec['frames']} frames, "
             f"{spec['sizes'][0]}): {p['edits_per_frame']} {p['brush']} a frame of strength {p['strength']:g} along "
             f"a path of {len(p['path'])} way-points, at radii {', '.join(f'{r:g}' for r in p['radii'])} m, and the "
-            f"static terrain; {p['particles']} particles fall and bounce on it. Frame time is the median of "
-            f"{spec['repeats']} timed draws after the edits, configurations timed in rotating turns.",
+            f"static terrain; {p['particles']} particles fall and bounce on it.{_deformation(p)} Frame time is the "
+            f"median of {spec['repeats']} timed draws after the edits, configurations timed in rotating turns.",
             "",
             "## Environment",
             "",

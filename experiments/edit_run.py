@@ -28,7 +28,7 @@ from hybrid.atomic import remove_stale_temps, write_json
 from hybrid.errors import TerrabenchError
 
 from .config_task import ConfigResult, ImageOut
-from .edit_spec import EditSpec, check_programme, frame_brushes
+from .edit_spec import EditSpec, check_programme, frame_brushes, spec_deformation
 from .journal import Journal, pending, record
 from .metrics import frame_accuracy
 from .progress import Progress
@@ -65,8 +65,9 @@ def _rotated(items: list, shift: int) -> list:
 class _Member:
     """One configuration being run: its terrain copy, renderer, editor, GPU heights, particles and what it timed."""
 
-    def __init__(self, c: dict, todo: list[int], brushes: list[list]):
+    def __init__(self, c: dict, todo: list[int], brushes: list[list], deform=None):
         self.c, self.todo, self.brushes = c, todo, brushes
+        self.deform = deform if c["editing"] else None  # (deformation, its programme) or None
         self.renderer: Any = None  # GPU state, made by open()
         self.editor: Any = None
         self.heights: Any = None
@@ -93,6 +94,9 @@ class _Member:
         if self.c["editing"]:
             self.editor = TerrainEditor(ctx, hf, self.renderer)
             self.heights = self.editor.gpu
+            if self.deform is not None:
+                d, p = self.deform
+                self.editor.deform(d, p.start, p.end)
         else:
             self.heights = GpuHeights(ctx, hf)
         self.particles = ParticleSystem(ctx, self.heights, ParticleParams(count=spec.edit.particles, seed=spec.seed))
@@ -100,10 +104,18 @@ class _Member:
         self.gpu_bytes = {"edit_gpu_bytes": self.heights.nbytes, "particles_bytes": self.particles.nbytes}
 
     def edit(self, k: int) -> None:
-        """Apply frame k's edits (its editor times each step) and step the particles once (timed)."""
+        """Apply frame k's edits and set its deformation's time (its editor times each step) and step the particles
+        once (timed)."""
         cols: dict = {"edits": len(self.brushes[k]), "update_ms": 0.0, "edit_tiles": 0, "edit_refreshed": 0}
-        for b in self.brushes[k]:
-            rep = self.editor.apply(b)
+        reports = [self.editor.apply(b) for b in self.brushes[k]]
+        if self.deform is not None:
+            t0 = time.perf_counter()
+            self.editor.step(self.deform[1].time(k))
+            self.editor.ctx.finish()
+            cols["update_deform_ms"] = (time.perf_counter() - t0) * 1e3
+            cols["update_ms"] += cols["update_deform_ms"]
+            reports.append(self.editor.sync())
+        for rep in reports:
             cols["edit_tiles"] += rep.tiles
             cols["edit_refreshed"] += sum(rep.refreshed.values())
             for step, ms in rep.ms.items():
@@ -146,19 +158,25 @@ class _Member:
 class _Reference:
     """The reference renderer of one edit variant (a radius, or the static terrain), following the same edits."""
 
-    def __init__(self, ctx, hf, brushes: list[list]):
+    def __init__(self, ctx, hf, brushes: list[list], deform=None):
         from hybrid.editing import TerrainEditor
         from hybrid.reference import ReferenceRenderer
 
         self.hf = _copy(hf)
-        self.brushes = brushes
+        self.brushes, self.deform = brushes, deform
         self.ref = ReferenceRenderer(ctx, self.hf)
-        self.editor: Any = TerrainEditor(ctx, self.hf, None, self.ref) if any(brushes) else None
+        editor = TerrainEditor(ctx, self.hf, None, self.ref) if any(brushes) or deform else None
+        if editor is not None and deform is not None:
+            editor.deform(deform[0], deform[1].start, deform[1].end)
+        self.editor: Any = editor
 
     def frame(self, k: int, view, supersample: int):
-        """Frame k's reference image after frame k's edits (untimed)."""
+        """Frame k's reference image after frame k's edits and deformation time (untimed)."""
         for b in self.brushes[k]:
             self.editor.apply(b)
+        if self.deform is not None:
+            self.editor.step(self.deform[1].time(k))
+            self.editor.sync()
         return self.ref.render(view, supersample=supersample)
 
     def release(self) -> None:
@@ -169,8 +187,8 @@ class _Reference:
 
 
 def prepare(spec: EditSpec) -> tuple:
-    """(terrain, views, brushes per radius) of a spec, every value checked against the terrain: a TerrabenchError
-    naming the first that does not fit, before any folder is made."""
+    """(terrain, views, brushes per radius, (deformation, its programme) or None) of a spec, every value checked
+    against the terrain: a TerrabenchError naming the first that does not fit, before any folder is made."""
     from hybrid.camera.clearance import check_eye_above
     from hybrid.camera.flight import get_flight
     from hybrid.camera.view import parse_size
@@ -190,7 +208,8 @@ def prepare(spec: EditSpec) -> tuple:
         check_eye_above(hf, v, f"flight {spec.flight} frame {k}")
     programme = {r: frame_brushes(spec, hf, r) for r in spec.edit.radii}
     programme[0.0] = [[] for _ in range(spec.frames)]
-    return hf, views, programme
+    d = spec_deformation(spec, hf)
+    return hf, views, programme, (None if d is None else (d, spec.edit.deformation))
 
 
 def _open_folder(spec: EditSpec, runs_dir: Path) -> Path:
@@ -205,12 +224,12 @@ def _open_folder(spec: EditSpec, runs_dir: Path) -> Path:
 def run_edit_spec(spec: EditSpec, runs_dir, ctx=None, progress: bool = True, fail_fast: bool = False) -> Path:
     """Run (or resume) an edit spec into runs_dir/<name>; returns the run folder."""
     from hybrid.gl.context import shared_context
-    from hybrid.terrain.edit_log import EditLog, LoggedEdit, terrain_id, write_log
+    from hybrid.terrain.edit_log import EditLog, LoggedDeformation, LoggedEdit, terrain_id, write_log
 
     from .environment import environment
     from .folders import read_json
 
-    hf, views, programme = prepare(spec)
+    hf, views, programme, deform = prepare(spec)
     folder = _open_folder(spec, runs_dir)
     with RunLock(folder):
         for where in (folder, folder / "images"):
@@ -222,10 +241,12 @@ def run_edit_spec(spec: EditSpec, runs_dir, ctx=None, progress: bool = True, fai
         ctx = ctx or shared_context()
         write_json(folder / "env.json", environment(ctx))
         tid = terrain_id(hf)
+        # replayed (render --edit) at the deformation's end: the terrain of a frame at or after it
+        deforms = () if deform is None else (LoggedDeformation(deform[1].start, deform[1].end, deform[0]),)
         for r in spec.edit.radii:
             edits = tuple(LoggedEdit(k, b) for k, frame in enumerate(programme[r]) for b in frame)
-            write_log(folder / f"edits-r{r:g}m.jsonl", EditLog(tid, edits))
-        _run(spec, folder, ctx, (hf, views, programme), progress, fail_fast)
+            write_log(folder / f"edits-r{r:g}m.jsonl", EditLog(tid, edits, deforms))
+        _run(spec, folder, ctx, (hf, views, programme, deform), progress, fail_fast)
     return folder
 
 
@@ -233,13 +254,14 @@ def _run(spec: EditSpec, folder: Path, ctx, prepared: tuple, progress: bool, fai
     """Time every frame of the configurations the journal lacks frames of, then measure and journal them."""
     from hybrid.gl.context import gl_info
 
-    hf, views, programme = prepared
+    hf, views, programme, deform = prepared
     journal = Journal(folder)
     todo = pending(spec, journal)  # type: ignore[arg-type]
     total = len(spec.configs()) * spec.frames
     bar = Progress(total, total - sum(len(t) for _, t in todo), progress)
-    members = [_Member(c, t, programme[c["edit_radius"]]) for c, t in todo]
-    refs = {r: _Reference(ctx, hf, programme[r]) for r in sorted({m.c["edit_radius"] for m in members})}
+    members = [_Member(c, t, programme[c["edit_radius"]], deform) for c, t in todo]
+    radii = sorted({m.c["edit_radius"] for m in members})
+    refs = {r: _Reference(ctx, hf, programme[r], deform if r > 0 else None) for r in radii}
     try:
         for m in members:
             m.attempt(lambda m=m: m.open(ctx, spec, hf, views[0]), fail_fast)

@@ -26,6 +26,7 @@
     height = 0.0                      # flatten only: the world z (m) it pulls toward
     edits_per_frame = 1
     particles = 4096                  # particles on the terrain (hybrid.gl.particles); 0: none
+    [edit.deformation]                # optional: a wave or uplift driven by time (experiments.edit_deform)
 
 Every method runs once per radius with the programme and once on the static terrain (``editing`` false), the same
 views and particles throughout. The edits of a run: ``frames * edits_per_frame`` brushes spaced evenly along the
@@ -47,6 +48,7 @@ from hybrid.gl.particles import MAX_PARTICLES
 from hybrid.terrain.edits import BRUSHES, Brush, Flatten, check_brush
 from hybrid.terrain.heightfield import HeightField
 
+from .edit_deform import DeformProgramme, deformation, parse_deformation
 from .spec_datasets import check_dataset_entry, dataset_label, terrain_source
 
 EDIT_POLICIES = ("raster", "raster_gs", "raycast", "hybrid", "heuristic", "oracle")
@@ -58,7 +60,7 @@ MAX_EDITS_PER_FRAME = 1000
 @dataclass(frozen=True)
 class EditProgramme:
     """A brush path: way-points (x, y) in ``units``, the brush's kind, radii (m), strength and flatten height (world
-    z, m), edits a frame, and the particle count."""
+    z, m), edits a frame, the particle count, and a deformation driven by time (or None)."""
 
     path: tuple[tuple[float, float], ...]
     brush: str = "crater"
@@ -68,6 +70,7 @@ class EditProgramme:
     height: float | None = None
     edits_per_frame: int = 1
     particles: int = 4096
+    deformation: DeformProgramme | None = None
 
 
 @dataclass
@@ -127,8 +130,11 @@ class EditSpec:
         return terrain_source(self.dataset).load(size=self.dataset_size or None, seed=self.seed)
 
     def to_dict(self) -> dict:
-        """Plain form, with its kind."""
-        return {"kind": "edit", **asdict(self)}
+        """Plain form, with its kind (no deformation key where it names none, as specs before deformations)."""
+        d = {"kind": "edit", **asdict(self)}
+        if d["edit"]["deformation"] is None:
+            del d["edit"]["deformation"]
+        return d
 
     def same_as(self, stored: dict) -> bool:
         """Whether a stored plain form (a run folder's spec.json) is this spec."""
@@ -206,8 +212,16 @@ def parse_programme(d, source: str) -> EditProgramme:
         for k, hi in (("edits_per_frame", MAX_EDITS_PER_FRAME), ("particles", MAX_PARTICLES))
         if k in d
     }
+    deform = parse_deformation(d["deformation"], units, source) if "deformation" in d else None
     return EditProgramme(
-        _path(d["path"], units, where), brush, units, tuple(float(r) for r in radii), strength, height, **counts
+        _path(d["path"], units, where),
+        brush,
+        units,
+        tuple(float(r) for r in radii),
+        strength,
+        height,
+        **counts,
+        deformation=deform,
     )
 
 
@@ -323,6 +337,14 @@ def check_programme(spec: EditSpec, hf: HeightField) -> None:
         for frame in frame_brushes(spec, hf, r):
             for b in frame:
                 check_brush(b, hf)
+    spec_deformation(spec, hf)
+
+
+def spec_deformation(spec: EditSpec, hf: HeightField):
+    """The programme's deformation in world metres (hf's frame), checked against the terrain; None if it names
+    none."""
+    p = spec.edit
+    return None if p.deformation is None else deformation(p.deformation, p.units, hf, spec.name)
 
 
 def frame_brushes(spec: EditSpec, hf: HeightField, radius: float) -> list[list[Brush]]:

@@ -7,12 +7,13 @@ imports nothing above ``hybrid.gl``. The renderer hands it ``TileItem``s front t
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, fields
 from typing import Any, Literal, NamedTuple, Protocol, get_args, runtime_checkable
 
 from hybrid.camera.view import View
 from hybrid.gl.target import FrameTarget
+from hybrid.terrain.edits import Window
 from hybrid.tiles.pyramid import Tile, TileKey
 from hybrid.tiles.tiletree import SelectedTile
 
@@ -82,6 +83,29 @@ class TileStrategy(Protocol):
         """Free the strategy's own GPU objects (tiles are freed through their GpuTile)."""
 
 
+@dataclass(frozen=True)
+class TerrainChange:
+    """What an edit changed, as a strategy follows it: the window of level-0 samples, the pyramid's tiles (every
+    level) whose samples or bounds changed, their tile size in cells, and per global level the window of raster
+    node indices whose values changed (``raster.edit.follow_nodes``; empty where no raster strategy draws)."""
+
+    window: Window
+    tiles: frozenset[TileKey]
+    tile_size: int
+    nodes: tuple[Window, ...] = ()
+
+
+@runtime_checkable
+class EditFollowing(Protocol):
+    """A strategy that follows edits of the terrain it draws (``hybrid.editing``)."""
+
+    def follow_edit(
+        self, change: TerrainChange, resident: Sequence[tuple[TileKey, GpuTile]], tile: Callable[[TileKey], Tile]
+    ) -> tuple[int, list[TileKey]]:
+        """Bring the resident tiles (key, GPU tile) up to date after ``change``, given ``tile(key)`` after it:
+        (tiles brought up to date in place, keys of those the renderer must upload again)."""
+
+
 class SkirtedStrategy(TileStrategy, Protocol):
     """A raster strategy that hangs skirts (draw option ``skirts``) from tile edges facing ray-cast tiles; the
     renderer draws them after every tile, so no skirt lies inside a ray-cast tile's box at its pre-pass."""
@@ -109,6 +133,9 @@ class TriangleEstimator(Protocol):
         """(triangle counts, share of them inside the view frustum), (B,) float arrays, of the selected tiles at
         ``view`` for the bound tau (pixels); with ``budget_ms``, per-tile preparation stops after that much wall
         time (at least one tile a call) and the tiles left are NaN in both."""
+
+    def follow_edit(self, change: TerrainChange) -> int:
+        """Forget what it prepared for the tiles an edit changed; returns how many."""
 
 
 @dataclass

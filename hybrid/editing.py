@@ -4,12 +4,13 @@
 (``hybrid.gl.brush``), writes the touched window through to the CPU heights, then brings up to date, over what the
 window reaches only:
 
-- the tile pyramid's bounds, errors and caches of the touched tiles (``hybrid.tiles.pyramid_edit``);
-- the ray caster's resident tiles: codes and max-mip texels over the window (``raycast.edit``);
-- the raster strategies' node arrays over the nodes the edit reaches, saturation included (``raster.edit``), and
-  their resident tiles whose samples or node blocks changed, uploaded again (a tile's heap slot);
+- the tile pyramid's bounds, errors and caches of the touched tiles (``TilePyramid.follow_edit``);
+- the raster strategies' node arrays over the nodes the edit reaches, saturation included (``raster.edit``);
+- each strategy's resident tiles (``Renderer.follow_edit``, through the strategy's ``follow_edit`` of
+  ``hybrid.contract.EditFollowing``): the ray caster's codes and max-mip texels over the window, in place; the
+  raster tiles whose samples or node blocks changed, uploaded again into their residency slots;
 - the triangle estimate of the touched tiles (the hybrid's per-tile features read it and the pyramid's boxes);
-- the reference renderer's height textures over the window and its blocks' bounds.
+- the reference renderer's height textures over the window and its blocks' bounds (``ReferenceRenderer.follow_edit``).
 
 A terrain opened from a tile store is edited through an in-memory copy of its level 0, each change written
 through to the store at once (``hybrid.store_editing``); its renderers then read the new files.
@@ -28,26 +29,21 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-import numpy as np
-
+from hybrid.contract import TerrainChange
 from hybrid.errors import TerrabenchError
 from hybrid.gl.brush import GpuHeights, read_r32f_window
 from hybrid.gl.deform import GpuDeformations
-from hybrid.gl.edges import TerrainEdges
 from hybrid.reference import ReferenceRenderer
 from hybrid.renderer import Renderer
-from hybrid.store_editing import StoreEditing, follow_store_pyramid
+from hybrid.store_editing import StoreEditing
 from hybrid.terrain.deform import Deformation, deform_params
 from hybrid.terrain.edit_log import EditLog, check_log
 from hybrid.terrain.edits import Brush, Window
 from hybrid.terrain.heightfield import HeightField
 from hybrid.terrain.stored import StoredTerrain
-from hybrid.tiles.pyramid_edit import update_pyramid
 from hybrid.tiles.store import StorePyramid
-from raster.edit import edit_state, follow_nodes, reads_changed_nodes
+from raster.edit import edit_state, follow_nodes
 from raster.quadtree import GPU_BETA
-from raycast.caster import RaycastStrategy
-from raycast.edit import follow_tile, local_window
 
 
 @dataclass
@@ -72,19 +68,6 @@ def _timed(ctx, report: EditReport, name: str, fn):
         ctx.finish()
     report.ms[name] = report.ms.get(name, 0.0) + (time.perf_counter() - t0) * 1e3
     return out
-
-
-def follow_reference(ref: ReferenceRenderer, win: Window) -> None:
-    """Write the changed window of the terrain's heights into the reference's block textures, update their bounds."""
-    h = ref.hf.heights
-    for k, b in enumerate(ref.blocks):
-        r0, r1, c0, c1 = max(b.r0, win.i0), min(b.r1, win.i1), max(b.c0, win.j0), min(b.c1, win.j1)
-        if r0 >= r1 or c0 >= c1:
-            continue
-        ref.lo[k], ref.hi[k] = float(np.min(h[b.r0 : b.r1, b.c0 : b.c1])), float(np.max(h[b.r0 : b.r1, b.c0 : b.c1]))
-        if ref.resident:
-            data = np.ascontiguousarray(h[r0:r1, c0:c1], dtype=np.float32)
-            ref.textures[k].write(data.tobytes(), viewport=(c0 - b.c0, r0 - b.r0, c1 - c0, r1 - r0))
 
 
 class TerrainEditor:
@@ -157,68 +140,36 @@ class TerrainEditor:
         if self.renderer is not None:
             self._follow_renderer(self.renderer, win, report)
         if self.reference is not None:
-            _timed(self.ctx, report, "reference", lambda: follow_reference(self.reference, win))
+            _timed(self.ctx, report, "reference", lambda: self.reference.follow_edit(win))
         return report
 
     def _follow_renderer(self, r: Renderer, win: Window, report: EditReport) -> None:
+        """Bring a renderer up to date after the window changed: its pyramid, the raster node arrays, each
+        strategy's resident tiles and the triangle estimate."""
         keys = _timed(None, report, "pyramid", lambda: self._follow_pyramid(r, win))
         report.tiles += len(keys)
-        for k in keys:
-            r._tiles.pop(k, None)  # the renderer's CPU copies of the tiles
-        raster = [n for n in r.strategies if r.kind(n) == "raster"]
-        rewritten: list[Window] = []
-        if raster:
-            rewritten = _timed(
+        r.tiles_changed(keys)
+        beta = _raster_beta(r)
+        nodes: list[Window] = []
+        if beta is not None:
+            nodes = _timed(
                 None,
                 report,
                 "raster_nodes",
-                lambda: (
-                    follow_nodes(self.hf, r.pyramid.n, win, getattr(r.strategies[raster[0]], "beta", GPU_BETA))
-                    if self.stored is None
-                    else self.stored.rewritten
-                ),
+                lambda: follow_nodes(self.hf, r.pyramid.n, win, beta) if self.stored is None else self.stored.rewritten,
             )
-        touched = set(keys)
-        for name, strategy in r.strategies.items():
-            entries = [(k, g) for (n, k), g in list(r.cache.entries.items()) if n == name]
-            if isinstance(strategy, RaycastStrategy):
-                done = _timed(self.ctx, report, name, lambda s=strategy, e=entries: self._follow_raycast(r, s, e, win))
-            else:
-                stale = [(k, g) for k, g in entries if k in touched or reads_changed_nodes(k, r.pyramid.n, rewritten)]
-                done = _timed(self.ctx, report, name, lambda s=strategy, n=name, e=stale: _reupload(r, n, s, e))
-            report.refreshed[name] = done
-        forget, known = getattr(r.triangles, "forget", None), getattr(r.triangles, "known", None)
-        if forget is not None and known is not None:
-            _timed(
-                None,
-                report,
-                "estimate",
-                lambda: forget([k for k in known() if k in touched or reads_changed_nodes(k, r.pyramid.n, rewritten)]),
-            )
+        change = TerrainChange(win, frozenset(keys), r.pyramid.n, tuple(nodes))
+        for name in r.strategies:
+            report.refreshed[name] = _timed(self.ctx, report, name, lambda n=name: r.follow_edit(n, change))
+        if r.triangles is not None:
+            _timed(None, report, "estimate", lambda: r.follow_estimate(change))
 
     def _follow_pyramid(self, r: Renderer, win: Window) -> list:
         """The renderer's pyramid after the window changed: updated in place, or for a store the written bounds."""
         if self.stored is None:
-            return update_pyramid(r.pyramid, win)
+            return r.pyramid.follow_edit(win)
         assert isinstance(r.pyramid, StorePyramid)  # a stored terrain's renderer reads the store
-        return follow_store_pyramid(r.pyramid, self.stored.pyramid, win)
-
-    def _follow_raycast(self, r: Renderer, strategy: RaycastStrategy, entries, win: Window) -> int:
-        """Refresh the strategy's resident tiles whose samples changed; its edge profiles and shadow grid too."""
-        done = 0
-        for key, gpu in entries:
-            local = local_window(win, key, r.pyramid.n, self.hf.rows, self.hf.cols)
-            if local.empty and not _bounds_changed(r, key, gpu):
-                continue
-            follow_tile(strategy, gpu, r.tile(key), local)
-            done += 1
-        if win.i0 == 0 or win.j0 == 0 or win.i1 == self.hf.rows or win.j1 == self.hf.cols:
-            strategy.edges.release()
-            strategy.edges = TerrainEdges(self.ctx, self.hf)
-        if strategy.grid is not None:  # the shadow rays' whole grid: made again when next used
-            strategy.grid.tex.release()
-            strategy.grid = None
-        return done
+        return r.pyramid.follow_write(self.stored.pyramid, win)
 
     def release(self) -> None:
         """Free the GPU heights and deformations (not the renderers)."""
@@ -260,25 +211,15 @@ def merged(wins: list[Window]) -> list[Window]:
     return out
 
 
+def _raster_beta(r: Renderer) -> float | None:
+    """The beta of the renderer's raster node arrays (its first raster strategy's), or None: no raster strategy."""
+    raster = [n for n in r.strategies if r.kind(n) == "raster"]
+    return float(getattr(r.strategies[raster[0]], "beta", GPU_BETA)) if raster else None
+
+
 def _node_state(r: Renderer) -> None:
     """Make the rect_nodes state of the renderer's raster node arrays before any edit (it measures what an edit
     changes against the heights before it)."""
-    raster = [n for n in r.strategies if r.kind(n) == "raster"]
-    if raster:
-        edit_state(r.hf, r.pyramid.n, getattr(r.strategies[raster[0]], "beta", GPU_BETA))
-
-
-def _bounds_changed(r: Renderer, key, gpu) -> bool:
-    """Whether a resident ray-cast tile's box (clip and height range) differs from the pyramid's now."""
-    return bool(gpu.bounds) and tuple(gpu.bounds[1:]) != r.pyramid.zrange(key)
-
-
-def _reupload(r: Renderer, name: str, strategy, entries) -> int:
-    """Upload the resident tiles again from the edited pyramid (a raster tile's heap slot: heights and node block),
-    in place of the old ones in the residency cache; returns how many."""
-    for key, old in entries:
-        new = strategy.upload(r.tile(key))
-        r.cache.entries[(name, key)] = new
-        r.cache.bytes += int(new.nbytes) - int(old.nbytes)
-        old.release()
-    return len(entries)
+    beta = _raster_beta(r)
+    if beta is not None:
+        edit_state(r.hf, r.pyramid.n, beta)

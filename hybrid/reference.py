@@ -28,6 +28,7 @@ from hybrid.reference_blocks import (
     reference_blocks,
     visible_blocks,
 )
+from hybrid.terrain.edits import Window
 from hybrid.terrain.heightfield import HeightField
 from hybrid.tiles.byte_lru import ByteLRU
 from hybrid.tiles.tiletree import DEFAULT_TAU
@@ -73,6 +74,20 @@ class ReferenceRenderer:
                 self.textures[k] = self._texture(b)
         self.texture = terrain_texture(ctx, hf)
         self.triangles = 2 * (hf.rows - 1) * (hf.cols - 1)
+
+    def follow_edit(self, win: Window) -> None:
+        """Follow an edit of the terrain's heights over a window of samples: the blocks' bounds, and the resident
+        block textures over the window."""
+        h = self.hf.heights
+        for k, b in enumerate(self.blocks):
+            r0, r1, c0, c1 = max(b.r0, win.i0), min(b.r1, win.i1), max(b.c0, win.j0), min(b.c1, win.j1)
+            if r0 >= r1 or c0 >= c1:
+                continue
+            block = h[b.r0 : b.r1, b.c0 : b.c1]
+            self.lo[k], self.hi[k] = float(np.min(block)), float(np.max(block))
+            if self.resident:
+                data = np.ascontiguousarray(h[r0:r1, c0:c1], dtype=np.float32)
+                self.textures[k].write(data.tobytes(), viewport=(c0 - b.c0, r0 - b.r0, c1 - c0, r1 - r0))
 
     def _read(self, b: Block) -> np.ndarray:
         self.block_reads += 1

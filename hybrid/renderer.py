@@ -26,7 +26,7 @@ import numpy as np
 
 from hybrid import adaptive, oracle
 from hybrid.camera.view import View
-from hybrid.contract import DEFAULT_FULL_RES, TileItem
+from hybrid.contract import DEFAULT_FULL_RES, EditFollowing, TerrainChange, TileItem
 from hybrid.cost.model import CostModel, load_cost_model
 from hybrid.cost.online import AdaptOptions, OnlineModel
 from hybrid.cost.planner import TilePlan, plan_frame
@@ -154,6 +154,28 @@ class Renderer:
         if budget is not None and len(self._tiles) > max(budget // max(t.heights.nbytes, 1), 256):
             self._tiles.popitem(last=False)
         return t
+
+    # --- edits (hybrid.editing) ---------------------------------------------------------------------
+    def tiles_changed(self, keys) -> None:
+        """Drop the CPU copies of tiles whose samples or bounds changed (the pyramid followed an edit)."""
+        for k in keys:
+            self._tiles.pop(k, None)
+
+    def follow_edit(self, name: str, change: TerrainChange) -> int:
+        """Bring strategy ``name``'s resident tiles up to date after an edit the pyramid followed: in place where
+        the strategy can, else uploaded again in their residency slots; returns how many were refreshed."""
+        self._check_live()
+        strategy = self.strategies[name]
+        if not isinstance(strategy, EditFollowing):
+            raise TerrabenchError(f"strategy {name!r} cannot follow an edit of the terrain (no follow_edit)")
+        done, stale = strategy.follow_edit(change, self.cache.resident(name), self.tile)
+        for key in stale:
+            self.cache.replace(name, key, strategy.upload(self.tile(key)))
+        return done + len(stale)
+
+    def follow_estimate(self, change: TerrainChange) -> int:
+        """Forget the triangle estimate's work for the tiles an edit changed; returns how many (0 when none kept)."""
+        return 0 if self.triangles is None else self.triangles.follow_edit(change)
 
     def plan(self, view: View, tau: float = DEFAULT_TAU) -> list[TilePlan]:
         """The frame's tiles front to back with the policy's choices (and, when mixed, features and costs); when

@@ -72,6 +72,20 @@ class ResidencyCache:
         gpu.release()
         self.stats.evictions += 1
 
+    def resident(self, strategy_name: str) -> list[tuple]:
+        """(tile key, GPU tile) of every tile resident for one strategy, least recently used first."""
+        return [(key, gpu) for (name, key), gpu in self.entries.items() if name == strategy_name]
+
+    def replace(self, strategy_name: str, tile_key, gpu) -> None:
+        """Put ``gpu`` in place of the resident tile (strategy, key), keeping its place in the LRU order, and free
+        the old one (its tile changed: an edit); the budget is not checked (a tile of the same shape)."""
+        k = (strategy_name, tile_key)
+        old = self.entries[k]
+        self.entries[k] = gpu
+        self.bytes += int(gpu.nbytes) - int(old.nbytes)
+        self.stats.peak_bytes = max(self.stats.peak_bytes, self.bytes)
+        old.release()
+
     def bytes_by_strategy(self) -> dict[str, int]:
         """Resident bytes per strategy name."""
         out: dict[str, int] = {}

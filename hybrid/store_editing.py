@@ -3,12 +3,12 @@
 A tile store (``hybrid.tiles.store``) holds, besides level 0, what prepare derived from it: the coarser levels, the
 tiles' bounds and errors, the raster node arrays (split form with side codes, and the combined form) and each
 tile's node block. ``StoreEditing`` keeps the terrain's level 0 in memory (loaded once: stores up to
-``MAX_LOAD_SAMPLES``), an in-memory pyramid and node arrays following it (``hybrid.tiles.pyramid_edit``,
+``MAX_LOAD_SAMPLES``), an in-memory pyramid and node arrays following it (``TilePyramid.follow_edit``,
 ``raster.edit``: bit-equal to the store's where its errors are measured), and after a window of samples changed
 writes through, atomically (``hybrid.tiles.store_edit``): the levels' chunks over the window, the bounds of the
 touched tiles, the node arrays' chunks over the rewritten nodes, the blocks of the tiles that read them, the header's
 height range (and its source step, dropped once a sample leaves it) and the manifest. A renderer drawing the store
-then reads the new files; its pyramid takes the new bounds (``follow_store_pyramid``). Nodes beyond those the
+then reads the new files; its pyramid takes the new bounds (``StorePyramid.follow_write``). Nodes beyond those the
 tiles read (the padded square's far part) are not rewritten: nothing reads them.
 """
 
@@ -20,12 +20,10 @@ from hybrid.errors import TerrabenchError
 from hybrid.terrain.edits import Window
 from hybrid.terrain.stored import LazyGrid, StoredTerrain
 from hybrid.tiles.pyramid import TileKey, TilePyramid
-from hybrid.tiles.pyramid_edit import touched_keys, touched_tiles, update_pyramid
+from hybrid.tiles.pyramid_edit import touched_tiles
 from hybrid.tiles.quantize import on_step_cells
 from hybrid.tiles.sidecodes import holds_side_codes
-from hybrid.tiles.store import StorePyramid
 from hybrid.tiles.store_edit import StoreWrite, WriteReport, level_chunks, level_fill
-from hybrid.tiles.tile_table import _TABLES
 from raster.edit import edit_state, follow_nodes, reads_changed_nodes
 from raster.nodes import global_nodes, tile_node_block
 
@@ -62,7 +60,7 @@ class StoreEditing:
     def write(self, win: Window) -> WriteReport:
         """Bring the in-memory pyramid and node arrays up to date after the samples of ``win`` changed in the copy,
         and write every changed chunk through to the store at once; returns what was written."""
-        self.keys = update_pyramid(self.pyramid, win)
+        self.keys = self.pyramid.follow_edit(win)
         self.rewritten = follow_nodes(self.mem, self.n, win, self.beta)
         combined = follow_nodes(self.mem, self.n, win, self.beta, side_errors=False)
         w = StoreWrite(self.hf)
@@ -108,9 +106,9 @@ class StoreEditing:
             if not len(rows) or not len(cols):
                 continue
             at = (slice(rows.start, rows.stop), slice(cols.start, cols.stop))
-            for name, arr in (("zmin", p._zmin), ("zmax", p._zmax), ("error", p._err)):
+            for name, arr in zip(("zmin", "zmax", "error"), p.level_arrays(level), strict=True):
 
-                def fill(data, starts, a=arr[level], at=at):
+                def fill(data, starts, a=arr, at=at):
                     data[at] = a[at]
 
                 w.chunks(f"{name}/{level}", [(0, 0)], fill)
@@ -150,35 +148,3 @@ def _node_chunks(w: StoreWrite, name: str, arrays, rewritten: list[Window]) -> N
             return min(starts[0] + c, shape[0]) > src.shape[0] or min(starts[1] + c, shape[1]) > src.shape[1]
 
         w.chunks(key, ids, fill, read=beyond)
-
-
-def follow_store_pyramid(pyramid: StorePyramid, source: TilePyramid, win: Window) -> list[TileKey]:
-    """A renderer's StorePyramid after a write-through: the touched tiles' bounds and errors from the in-memory
-    pyramid that was written, its host caches of them dropped, its per-level caches made again on next use (a
-    few array operations a level; the quantisation bounds of every tile move when the store leaves its source
-    step); returns the touched tiles."""
-    keys = touched_keys(source, win)
-    for level in range(pyramid.max_level + 1):
-        rows, cols = touched_tiles(source, win, level)
-        at = (slice(rows.start, rows.stop), slice(cols.start, cols.stop))
-        for mine, theirs in ((pyramid._zmin, source._zmin), (pyramid._zmax, source._zmax), (pyramid._err, source._err)):
-            mine[level][at] = theirs[level][at]
-    with pyramid._lock:
-        for k in keys:
-            if k in pyramid._cache:
-                pyramid.cache_bytes -= pyramid._cache.pop(k).nbytes
-        n = pyramid.n
-        for key in [c for c in pyramid._chunks if _chunk_meets(c, n, win)]:
-            old = pyramid._chunks.pop(key)
-            pyramid.chunk_bytes -= old.nbytes
-            pyramid.cache_bytes -= old.nbytes
-    pyramid._new_caches()
-    _TABLES.pop(pyramid, None)
-    return keys
-
-
-def _chunk_meets(chunk: tuple, n: int, win: Window) -> bool:
-    """Whether a StorePyramid's decoded chunk (level, cy, cx) holds samples of a window of level-0 samples."""
-    level, cy, cx = chunk
-    s, k = n << level, 1 << level  # a level's last sample may sit up to k samples before
-    return cy * s - k < win.i1 and win.i0 < (cy + 1) * s and cx * s - k < win.j1 and win.j0 < (cx + 1) * s

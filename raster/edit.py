@@ -63,3 +63,11 @@ def reads_changed_nodes(key, n: int, rewritten: list[Window]) -> bool:
         if r0 < w.i1 and w.i0 < r0 + side + 2 and c0 < w.j1 and w.j0 < c0 + side + 2:
             return True
     return False
+
+
+def stale_tiles(change, resident) -> tuple[int, list]:
+    """A raster strategy following an edit (``hybrid.contract.EditFollowing``, change a ``TerrainChange``):
+    nothing in place; the resident tiles (key, GPU tile) whose samples or bounds changed or whose node block
+    reads a changed node, for the renderer to upload again."""
+    n, nodes = change.tile_size, list(change.nodes)
+    return 0, [k for k, _ in resident if k in change.tiles or reads_changed_nodes(k, n, nodes)]

@@ -26,6 +26,7 @@ from hybrid.tiles.pyramid import TileKey, TilePyramid
 from hybrid.tiles.sidecodes import holds_side_codes
 from hybrid.tiles.tiletree import SelectedTile
 
+from .edit import stale_tiles
 from .nodes import nodes_for, pending_cut, tile_node_block
 from .quadtree import GPU_BETA, check_full_res
 from .split_tables import TABLE_BINS, SplitTables, split_tables
@@ -241,6 +242,13 @@ class TileletTriangleEstimator:
     def known(self) -> list[TileKey]:
         """The tiles whose nodes are built and kept."""
         return list(self._rows.row)
+
+    def follow_edit(self, change) -> int:
+        """Forget the kept tiles an edit changed (``hybrid.contract.TerrainChange``: samples, bounds or the nodes
+        their block reads), built again when next asked; returns how many."""
+        _, stale = stale_tiles(change, [(k, None) for k in self._rows.row])
+        self.forget(stale)
+        return len(stale)
 
     def _global_nodes(self):
         """An in-memory height field's whole-grid nodes, which its GPU selection reads too (``nodes_for``, cached per

@@ -20,6 +20,7 @@ from hybrid.gl.shading import resolve_mode
 from hybrid.gl.textures import terrain_texture
 from hybrid.terrain.edges import edge_profiles
 
+from .edit import stale_tiles
 from .mesh_skirts import SeamDepths, SkirtMesh, mesh_border_edges, rays_may_start_under
 from .shading import MODES
 from .tileblock import BLOCK_DEFINES, TileBlocks, register_tile_block, tile_blocks
@@ -79,6 +80,10 @@ class MeshStrategyBase:
         self.edges = TerrainEdges(ctx, hf)  # which rays start under the sheet (skirts rise for those)
         self.edge_tops = edge_profiles(hf.heights).max(axis=1)
         self.depths = SeamDepths(hf.height_range[0])
+
+    def follow_edit(self, change, resident, tile) -> tuple[int, list]:
+        """Follow an edit (``hybrid.contract.EditFollowing``): the resident tiles it changed, to upload again."""
+        return stale_tiles(change, resident)
 
     @property
     def shared_nbytes(self) -> int:

@@ -16,6 +16,7 @@ from hybrid.gl.edges import TerrainEdges
 from hybrid.gl.programs import program
 from hybrid.gl.shading import resolve_mode
 
+from .edit import stale_tiles
 from .frame_items import BASE_WORD, CMD_POINTS
 from .selection import LEAF_FORMAT, LEAN_LEAF_FORMAT, SelectedTileletTile, TileletSelection, full_res_defines
 from .shading import MODES
@@ -75,6 +76,10 @@ class TileletDrawing(TileletSelection):
         self.edges = TerrainEdges(ctx, hf)  # skirts are not drawn for rays from under the sheet
         self.skirt_prog = None  # the program that draws skirts (subclasses)
         self._arena_vaos = (None, {})  # ((arena, item buffers) versions, vertex arrays over them)
+
+    def follow_edit(self, change, resident, tile) -> tuple[int, list]:
+        """Follow an edit (``hybrid.contract.EditFollowing``): the resident tiles it changed, to upload again."""
+        return stale_tiles(change, resident)
 
     @property
     def shared_nbytes(self) -> int:

@@ -38,6 +38,7 @@ from .cast_stats import (
     read_tile_stats,
 )
 from .cast_uniforms import shadow_uniforms, view_uniforms
+from .edit import follow_tile, local_window
 from .gpu_tile import GpuTile, ShadowGrid, shadow_grid, upload_heights
 from .maxmip import MaxMipBuilder, bytes_per_sample
 from .options import MODES, RECONSTRUCTIONS, CastOptions, prepass_default
@@ -307,6 +308,29 @@ class RaycastStrategy:
         gl_finish(self.ctx)  # the wait lets other threads (the tile loader) run
         self.last_tile_stats = read_tile_stats(self.stats_buf, len(items))
         return frame_counters(self.last_tile_stats, opts, items, grid)
+
+    def follow_edit(self, change, resident, tile) -> tuple[int, list]:
+        """Follow an edit (``hybrid.contract.EditFollowing``): each touched resident tile's codes and max-mip texels
+        over its changed samples, in place; the terrain's edge profiles when the edit reaches its border, and the
+        shadow grid made again when next used. Nothing to upload again."""
+        done = 0
+        for key, gpu in resident:
+            if key not in change.tiles:
+                continue  # neither its samples nor its bounds changed
+            t = tile(key)
+            local = local_window(change.window, key, change.tile_size, self.hf.rows, self.hf.cols)
+            if local.empty and (not gpu.bounds or tuple(gpu.bounds[1:]) == (t.zmin, t.zmax)):
+                continue
+            follow_tile(self.builder, gpu, t, local)
+            done += 1
+        w = change.window
+        if w.i0 == 0 or w.j0 == 0 or w.i1 == self.hf.rows or w.j1 == self.hf.cols:
+            self.edges.release()
+            self.edges = TerrainEdges(self.ctx, self.hf)
+        if self.grid is not None:  # the shadow rays' whole grid: made again when next used
+            self.grid.tex.release()
+            self.grid = None
+        return done, []
 
     def release(self) -> None:
         """Free programs, buffers and textures (not the tiles: release those through their GpuTile)."""

@@ -15,13 +15,15 @@ import numpy as np
 from hybrid.terrain.edits import Window
 from hybrid.tiles.quantize import quantize
 
-from .caster import GpuTile, RaycastStrategy
+from .gpu_tile import GpuTile
+from .maxmip import MaxMipBuilder
 from .tile_params import tile_row
 
 
-def follow_tile(strategy: RaycastStrategy, gpu: GpuTile, tile, win: Window) -> bool:
+def follow_tile(builder: MaxMipBuilder, gpu: GpuTile, tile, win: Window) -> bool:
     """Bring a resident tile up to date with ``tile`` (the pyramid's tile after the edit) whose samples changed
-    over ``win`` (tile-local rows and columns, clipped to the tile); True when only the window was written."""
+    over ``win`` (tile-local rows and columns, clipped to the tile), its max mipmap made by ``builder``; True when
+    only the window was written."""
     qz = quantize(tile.heights, getattr(tile, "source_step", None))
     same = (qz.offset, qz.step, qz.base) == (gpu.offset, gpu.step, gpu.base)
     n, heights = gpu.n, cast(Any, gpu.heights)  # a moderngl texture
@@ -30,10 +32,10 @@ def follow_tile(strategy: RaycastStrategy, gpu: GpuTile, tile, win: Window) -> b
     elif same:
         codes = np.ascontiguousarray(qz.q[win.slices()])
         heights.write(codes.tobytes(), viewport=(win.j0, win.i0, win.j1 - win.j0, win.i1 - win.i0))
-        strategy.builder.update(gpu.heights, gpu.maxmip, n, win)
+        builder.update(gpu.heights, gpu.maxmip, n, win)
     else:
         heights.write(np.ascontiguousarray(qz.q).tobytes())
-        strategy.builder.build(gpu.heights, n, out_tex=gpu.maxmip)
+        builder.build(gpu.heights, n, out_tex=gpu.maxmip)
     gpu.offset, gpu.step, gpu.base, gpu.quant_error = qz.offset, qz.step, qz.base, qz.error
     gpu.row, gpu.bounds = tile_row(gpu, tile), (tile.clip, tile.zmin, tile.zmax)
     return same

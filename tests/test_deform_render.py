@@ -3,8 +3,8 @@ without cracks against the reference of the deformed heights."""
 
 import numpy as np
 import pytest
+from edit_helpers import assert_draws_as_fresh, copy_terrain
 
-from experiments.metrics import crack_pixels
 from hybrid.camera.flight import preset
 from hybrid.editing import TerrainEditor, replay
 from hybrid.reference import ReferenceRenderer
@@ -12,13 +12,8 @@ from hybrid.renderer import Renderer
 from hybrid.terrain.datasets import puget
 from hybrid.terrain.deform import Uplift, Wave
 from hybrid.terrain.edit_log import EditLog, LoggedDeformation, terrain_id
-from hybrid.terrain.heightfield import HeightField
 
 SIZE = (320, 180)
-
-
-def _copy(hf):
-    return HeightField(hf.heights.copy(), hf.spacing, hf.origin, hf.name, hf.texture, source_step=hf.source_step)
 
 
 def _deformations(hf):
@@ -31,7 +26,7 @@ def _deformations(hf):
 
 @pytest.mark.parametrize("policy", ["raster", "raster_gs", "raycast", "hybrid"])
 def test_strategies_follow_deformations_across_tile_borders(ctx, policy):
-    hf = _copy(puget(size=257))
+    hf = copy_terrain(puget(size=257))
     fly = preset("flyover", hf, 6, *SIZE)
     views = [fly.view(1), fly.view(3)]
     r = Renderer(ctx, hf, policy, tile_size=64, adapt=False)
@@ -46,28 +41,14 @@ def test_strategies_follow_deformations_across_tile_borders(ctx, policy):
         report = editor.sync()
         assert report.tiles > 0 and any(report.refreshed.get(n, 0) for n in r.strategies)
         np.testing.assert_array_equal(hf.heights, editor.gpu.read())
-        after = [r.render(v) for v in views]
-        fresh_hf = _copy(hf)
-        with (
-            Renderer(ctx, fresh_hf, policy, tile_size=64, adapt=False, cost_model=r.model) as fresh,
-            ReferenceRenderer(ctx, fresh_hf) as fresh_ref,
-        ):
-            for v, a, b in zip(views, after, before, strict=True):
-                want = fresh.render(v)
-                np.testing.assert_allclose(a.distance, want.distance, rtol=1e-5)
-                assert np.array_equal(np.isfinite(a.distance), np.isfinite(want.distance))
-                got_ref = ref.render(v)
-                np.testing.assert_array_equal(got_ref.distance, fresh_ref.render(v).distance)
-                assert int(crack_pixels(a, got_ref).sum()) == 0
-                moved = np.isfinite(a.distance) & np.isfinite(b.distance)
-                assert np.abs(a.distance[moved] - b.distance[moved]).max() > 100.0  # the deformation is in view
+        assert_draws_as_fresh(ctx, r, ref, views, before)
     finally:
         for x in (editor, ref, r):
             x.release()
 
 
 def test_replaying_a_log_deforms_as_stepping_does(ctx):
-    stepped, replayed = _copy(puget(size=257)), _copy(puget(size=257))
+    stepped, replayed = copy_terrain(puget(size=257)), copy_terrain(puget(size=257))
     log = EditLog(terrain_id(replayed), (), tuple(LoggedDeformation(s, e, d) for d, s, e in _deformations(replayed)))
     with TerrainEditor(ctx, replayed) as editor:
         reports = replay(editor, log, time=12.0)

@@ -6,7 +6,6 @@ import pytest
 from hybrid.terrain.datasets import crop, get_dataset, puget
 from hybrid.terrain.edits import Crater, Raise, Smooth, apply_brush, brush_params
 from hybrid.tiles.pyramid import TilePyramid
-from hybrid.tiles.pyramid_edit import touched_keys, update_pyramid
 from hybrid.tiles.tile_table import tile_table
 
 
@@ -30,9 +29,7 @@ def _pyramid_arrays(p):
         rows, cols = p.tile_counts(level)
         ty, tx = np.divmod(np.arange(rows * cols), cols)
         out += [
-            p._zmax[level],
-            p._zmin[level],
-            p._err[level],
+            *p.level_arrays(level),
             p.level_table(level),
             p.quantization_errors_at(level, tx, ty),
         ]
@@ -54,7 +51,7 @@ def test_pyramid_after_edits_equals_a_rebuild(small_puget, name):
             Smooth((hf.origin[0], hf.origin[1]), 5 * hf.spacing_x, 1.0),
         ],
     )
-    keys = update_pyramid(p, win)
+    keys = p.follow_edit(win)
     fresh = TilePyramid(hf, 16)
     for a, b in zip(_pyramid_arrays(p), _pyramid_arrays(fresh), strict=True):
         np.testing.assert_array_equal(a, b)
@@ -69,7 +66,7 @@ def test_touched_keys_include_both_tiles_of_a_shared_border():
     p = TilePyramid(hf, 16)
     win = _edit(hf, [Raise((16 * 30.0, 40 * 30.0), 20.0, 5.0)])  # one sample: the border column 16
     assert (win.j0, win.j1, win.i0, win.i1) == (16, 17, 40, 41)
-    level0 = sorted((k.tx, k.ty) for k in touched_keys(p, win) if k.level == 0)
+    level0 = sorted((k.tx, k.ty) for k in p.touched_keys(win) if k.level == 0)
     assert level0 == [(0, 2), (1, 2)]
 
 
@@ -156,3 +153,26 @@ def test_node_arrays_after_edits_equal_a_rebuild(monkeypatch, exact_span):
                 np.testing.assert_array_equal(a, b, err_msg=f"level {g} after {brush}")
         assert rewritten[0].i1 - rewritten[0].i0 < nodes.effective[0].shape[0]  # not the whole level 0
     assert not np.array_equal(nodes.zhi[0], zhi[0]) and not np.array_equal(nodes.effective[2], eff[2])
+
+
+def test_a_replaced_resident_tile_keeps_its_slot_and_its_bytes_count(ctx):
+    from hybrid.residency import ResidencyCache
+    from hybrid.strategies import make_strategy
+
+    hf = get_dataset("fbm", 65)
+    p = TilePyramid(hf, 16)
+    keys = [*p.keys(0)[:2], p.root()]
+    s = make_strategy("raycast", ctx, hf)
+    cache = ResidencyCache()
+    try:
+        for k in keys:
+            cache.get("raycast", s, k, lambda k=k: p.tile(k))
+        new = s.upload(p.tile(keys[1]))
+        cache.replace("raycast", keys[1], new)
+        resident = cache.resident("raycast")
+        assert [k for k, _ in resident] == keys and resident[1][1] is new
+        assert cache.bytes == sum(int(g.nbytes) for _, g in resident) > 0
+        assert cache.stats.uploads == 3  # a replacement is no upload of a new tile
+    finally:
+        cache.clear()
+        s.release()

@@ -2,6 +2,7 @@
 no run folder made)."""
 
 import itertools
+import json
 
 import pytest
 
@@ -132,3 +133,77 @@ def test_parse_errors_exit_2_from_the_command_line(tmp_path, capsys):
 def test_a_tile_store_dataset_is_refused():
     with pytest.raises(TerrabenchError, match="cannot be edited"):
         parse_edit_spec({"dataset": "puget@periodic2049", "edit": {"path": [[0.5, 0.5]]}}, "s")
+
+
+WAVE = """
+[edit.deformation]
+kind = "wave"
+centre = [0.5, 0.5]
+radius = 6000.0
+amplitude = 150.0
+wavelength = 3000.0
+speed = 1500.0
+start = 0.0
+end = 4.0
+seconds_per_frame = 0.5
+"""
+
+
+def test_a_deformation_is_parsed_and_placed_on_the_terrain():
+    from experiments.edit_spec import spec_deformation
+    from hybrid.terrain.deform import Uplift, Wave
+
+    hf = puget(size=129)
+    ox, oy, _ = hf.origin
+    spec = parse_spec(BASE + EDIT + WAVE)
+    assert spec_deformation(spec, hf) == Wave((ox + 10240.0, oy + 10240.0), 6000.0, 150.0, 3000.0, 1500.0)
+    assert [spec.edit.deformation.time(k) for k in range(3)] == [0.5, 1.0, 1.5]
+    uplift = WAVE.replace('"wave"', '"uplift"').replace(
+        "amplitude = 150.0\nwavelength = 3000.0\nspeed = 1500.0", "rate = -8"
+    )
+    lifted = parse_spec(BASE + EDIT + uplift)
+    assert spec_deformation(lifted, hf) == Uplift((ox + 10240.0, oy + 10240.0), 6000.0, -8.0)
+    assert spec_deformation(parse_spec(BASE + EDIT), hf) is None
+    assert "deformation" not in parse_spec(BASE + EDIT).to_dict()["edit"]  # run folders of earlier specs resume
+    stored = json.loads(json.dumps(spec.to_dict()))  # as a run folder's spec.json holds it
+    assert spec.same_as(stored) and not parse_spec(BASE + EDIT).same_as(stored)
+    assert stored["edit"]["deformation"]["amplitude"] == 150.0 and stored["edit"]["deformation"]["rate"] is None
+
+
+@pytest.mark.parametrize(
+    "change, words",
+    [
+        (('kind = "wave"', 'kind = "ripple"'), "[edit.deformation]: 'kind' must be one of wave, uplift, got 'ripple'"),
+        (("speed = 1500.0", "speed = 1500.0\nrate = 3.0"), "unknown keys ['rate'] for kind = 'wave'"),
+        (("speed = 1500.0\n", ""), "a wave needs ['speed']"),
+        (("wavelength = 3000.0", "wavelength = 0.0"), "'wavelength' must be > 0, got 0.0"),
+        (("amplitude = 150.0", "amplitude = nan"), "'amplitude' must be a finite number, got nan"),
+        (("radius = 6000.0", "radius = -1.0"), "'radius' must be > 0, got -1.0"),
+        (("end = 4.0", "end = 0.0"), "0 <= start < end <= 86400 s, got start 0.0 and end 0.0"),
+        (("seconds_per_frame = 0.5", "seconds_per_frame = 0"), "'seconds_per_frame' must be > 0, got 0"),
+        (("centre = [0.5, 0.5]", "centre = [0.5, 1.5]"), "'centre' (0.5, 1.5) lies off the terrain"),
+        (("centre = [0.5, 0.5]", "centre = 3"), "'centre' must be [x, y], got 3"),
+    ],
+)
+def test_bad_deformations_are_refused_by_key_and_value(change, words):
+    with pytest.raises(TerrabenchError) as exc:
+        parse_spec((BASE + EDIT + WAVE).replace(*change))
+    assert words in str(exc.value) and "[edit.deformation]" in str(exc.value)
+
+
+@pytest.mark.parametrize(
+    "change, words",
+    [
+        (("amplitude = 150.0", "amplitude = 2e7"), "[edit.deformation]: wave deformation displacement 2e+07 m lies"),
+        (("radius = 6000.0", "radius = 1e6"), "[edit.deformation]: wave deformation radius must lie in (0, 20480]"),
+        (('kind = "wave"', 'kind = "wave"\nunits = 1'), "unknown keys ['units']"),
+    ],
+)
+def test_bad_deformations_exit_2_before_a_run_folder(tmp_path, capsys, change, words):
+    path = tmp_path / "e.toml"
+    path.write_text((BASE + EDIT + WAVE).replace(*change))
+    runs = tmp_path / "runs"
+    assert main(["run", str(path), "--runs", str(runs), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert words in err and "Traceback" not in err, err
+    assert not (runs / "e").exists()

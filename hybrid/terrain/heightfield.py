@@ -129,6 +129,10 @@ class HeightField:
             self._range = (self.heights, value)
         return value
 
+    def heights_changed(self) -> None:
+        """Say the heights were changed in place (an edit): their range is computed again when next read."""
+        self._range = (None, None)
+
     def world_of(self, i, j) -> np.ndarray:
         """World position(s) (float64, metres) of sample(s) at row i, column j (may be fractional)."""
         i = np.asarray(i, dtype=np.float64)

@@ -24,8 +24,10 @@ from typing import NamedTuple
 import numpy as np
 
 from hybrid.errors import TerrabenchError
+from hybrid.terrain.edits import Window
 from hybrid.terrain.heightfield import HeightField
 from hybrid.tiles.bounds import level_bounds
+from hybrid.tiles.pyramid_edit import LevelArrays, edit_bounds, follow_caches, level_blocks, touched_tiles
 from hybrid.tiles.quantize import Q_MAX, error_bound, on_step_cells
 from hybrid.tiles.subsampling import block_reduce
 
@@ -113,6 +115,9 @@ class TilePyramid:
     """Whether a loader thread reads tiles ahead (``request``); callers then ask ``cached`` and ``failed``."""
     host_budget: int | None = None
     """Bytes of tiles the pyramid keeps on the host, or None: all of them (in memory)."""
+    edits = 0
+    """How many times its bounds changed after an edit; caches made from them elsewhere compare it."""
+    _dev_blocks: dict | None = None  # per level, deviation maxima per block (hybrid.tiles.pyramid_edit)
 
     def __init__(self, hf: HeightField, tile_size: int = 256):
         if (
@@ -168,6 +173,35 @@ class TilePyramid:
         A level-0 cell's min/max over its four corners bounds every reconstruction of the cell; a level's
         error is each tile's largest deviation of its triangulated surface from level 0, made monotone."""
         self._zmax, self._zmin, self._err = level_bounds(self.hf.heights, self.n, self.max_level)
+
+    def level_arrays(self, level: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(zmin, zmax, error) per tile of a level: (rows, cols) float32 metres, read-only views."""
+        out = tuple(a[level].view() for a in (self._zmin, self._zmax, self._err))
+        for a in out:
+            a.flags.writeable = False
+        return out[0], out[1], out[2]
+
+    # --- edits ------------------------------------------------------------------------------------
+    def touched_keys(self, win: Window) -> list[TileKey]:
+        """Every existing tile of every level whose samples meet a window of level-0 samples, finest level first."""
+        touched = [touched_tiles(self, win, level) for level in range(self.max_level + 1)]
+        return [TileKey(level, tx, ty) for level, (rows, cols) in enumerate(touched) for ty in rows for tx in cols]
+
+    def follow_edit(self, win: Window) -> list[TileKey]:
+        """Bring bounds, errors and caches of the touched tiles up to date after the samples of ``win`` changed in
+        place in the height field (equal to a rebuild); returns those tiles (``touched_keys``)."""
+        if win.empty:
+            return []
+        self.hf.heights_changed()
+        if self._dev_blocks is None:
+            self._dev_blocks = level_blocks(self.hf.heights, self.max_level)
+        touched = [touched_tiles(self, win, level) for level in range(self.max_level + 1)]
+        arrays = LevelArrays(self._zmax, self._zmin, self._err)
+        edit_bounds(self.hf.heights, self.n, arrays, self._dev_blocks, win, touched)
+        caches = {"qerr": self._qerr, "boxes": self._boxes, "tables": self._tables, "on_step": self._on_step}
+        follow_caches(self, caches, win, touched)
+        self.edits += 1
+        return self.touched_keys(win)
 
     # --- tiles ------------------------------------------------------------------------------------
     def exists(self, key: TileKey) -> bool:

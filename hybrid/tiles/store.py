@@ -15,9 +15,11 @@ from pathlib import Path
 import numpy as np
 
 from hybrid.errors import TerrabenchError
+from hybrid.terrain.edits import Window
 from hybrid.terrain.stored import StoredTerrain, open_store
 
-from .pyramid import TilePyramid
+from .pyramid import TileKey, TilePyramid
+from .pyramid_edit import touched_tiles
 from .store_prepare import prepare_store  # noqa: F401  (the stores' API: prepare, then open)
 
 CHUNK_SHARE = 8  # decoded chunks may hold 1/CHUNK_SHARE of a StorePyramid's host budget
@@ -129,6 +131,33 @@ class StorePyramid(TilePyramid):
             self._evict()
             return c
 
+    def follow_edit(self, win: Window) -> list[TileKey]:
+        """Refused: a store's pyramid follows an edit written through to the store (``follow_write``)."""
+        raise TerrabenchError(f"{self.hf.name!r} is a tile store: its pyramid follows a write-through (follow_write)")
+
+    def follow_write(self, source: TilePyramid, win: Window) -> list[TileKey]:
+        """Follow a write-through of the samples of ``win``: the touched tiles' bounds and errors from ``source``
+        (the in-memory pyramid that was written), its host copies of them dropped, its per-level caches made
+        again on next use (a few array operations a level; the quantisation bounds of every tile move when the
+        store leaves its source step); returns the touched tiles."""
+        keys = source.touched_keys(win)
+        for level in range(self.max_level + 1):
+            rows, cols = touched_tiles(source, win, level)
+            at = (slice(rows.start, rows.stop), slice(cols.start, cols.stop))
+            for mine, theirs in zip((self._zmin, self._zmax, self._err), source.level_arrays(level), strict=True):
+                mine[level][at] = theirs[at]
+        with self._lock:
+            for k in keys:
+                if k in self._cache:
+                    self.cache_bytes -= self._cache.pop(k).nbytes
+            for chunk in [c for c in self._chunks if _chunk_meets(c, self.n, win)]:
+                old = self._chunks.pop(chunk)
+                self.chunk_bytes -= old.nbytes
+                self.cache_bytes -= old.nbytes
+        self._new_caches()
+        self.edits += 1
+        return keys
+
     def _on_step_tiles(self, level: int, step) -> np.ndarray:
         """Every tile of a store is on its recorded step: prepare records it only when every sample is."""
         return np.ones(self._zmin[level].shape, dtype=bool)
@@ -225,6 +254,13 @@ class StorePyramid(TilePyramid):
             f"{self.hf.name!r} is a tile store: its padded grid is never built whole (the raster "
             "strategies read the store's node arrays instead)"
         )
+
+
+def _chunk_meets(chunk: tuple, n: int, win: Window) -> bool:
+    """Whether a StorePyramid's decoded chunk (level, cy, cx) holds samples of a window of level-0 samples."""
+    level, cy, cx = chunk
+    s, k = n << level, 1 << level  # a level's last sample may sit up to k samples before
+    return cy * s - k < win.i1 and win.i0 < (cy + 1) * s and cx * s - k < win.j1 and win.j0 < (cx + 1) * s
 
 
 def pyramid_for(hf, tile_size: int) -> TilePyramid:

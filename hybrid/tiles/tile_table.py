@@ -75,16 +75,14 @@ def _build(pyramid: TilePyramid) -> TileTable:
         return np.where(ok, base[np.clip(lv, 0, top)] + np.where(ok, y * s + x, 0), n)
 
     exists = np.zeros(n, bool)
-    boxes = np.zeros((n, 7))
+    boxes = np.empty((n, 7))
     for lv in range(top + 1):
         rows, cols = pyramid.tile_counts(lv)
         at = slice(int(base[lv]), int(base[lv + 1]))
         grid = np.zeros((sides[lv], sides[lv]), bool)
         grid[:rows, :cols] = True
         exists[at] = grid.reshape(-1)
-        square = np.zeros((sides[lv], sides[lv], 7))
-        square[:rows, :cols] = pyramid.level_table(lv)
-        boxes[at] = square.reshape(-1, 7)
+    _fill_boxes(pyramid, boxes)
     k = np.arange(top + 1, dtype=np.int64)[None, :]
     chain = np.full((n + 1, top + 1), n, dtype=np.int64)
     chain[:n] = index(level[:, None] + k, tx[:, None] >> k, ty[:, None] >> k)
@@ -103,20 +101,37 @@ def _build(pyramid: TilePyramid) -> TileTable:
     )
 
 
-_TABLES: weakref.WeakKeyDictionary[TilePyramid, TileTable] = weakref.WeakKeyDictionary()
+def _fill_boxes(pyramid: TilePyramid, boxes: np.ndarray) -> None:
+    """Write every tile place's row of ``boxes`` (N, 7) from the pyramid's level tables (zeros where no tile)."""
+    first = 0
+    for lv in range(pyramid.max_level + 1):
+        side = pyramid.tiles_per_side(lv)
+        rows, cols = pyramid.tile_counts(lv)
+        square = np.zeros((side, side, 7))
+        square[:rows, :cols] = pyramid.level_table(lv)
+        boxes[first : first + side * side] = square.reshape(-1, 7)
+        first += side * side
+
+
+_TABLES: weakref.WeakKeyDictionary[TilePyramid, tuple[int, TileTable]] = weakref.WeakKeyDictionary()
 
 
 def tile_table(pyramid: TilePyramid) -> TileTable:
-    """The pyramid's table of tile places, made on first use and kept as long as the pyramid."""
-    if pyramid not in _TABLES:
+    """The pyramid's table of tile places, made on first use and kept as long as the pyramid; its boxes follow
+    the pyramid's bounds after an edit (``TilePyramid.edits``)."""
+    hit = _TABLES.get(pyramid)
+    if hit is None:
         places = square_tiles(pyramid)
         if places > MAX_TABLE_TILES:
             raise TerrabenchError(
                 f"a table of every tile place of this pyramid would hold {places} places, beyond "
                 f"{MAX_TABLE_TILES}; select its tiles level by level (select_tiles(dense=False))"
             )
-        _TABLES[pyramid] = _build(pyramid)
-    return _TABLES[pyramid]
+        hit = _TABLES[pyramid] = (pyramid.edits, _build(pyramid))
+    elif hit[0] != pyramid.edits:  # the bounds changed since the boxes were read: a few array copies a level
+        _fill_boxes(pyramid, hit[1].boxes)
+        hit = _TABLES[pyramid] = (pyramid.edits, hit[1])
+    return hit[1]
 
 
 def dense_selection(pyramid: TilePyramid, measure, tau: float, eye: np.ndarray):
