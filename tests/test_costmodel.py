@@ -274,5 +274,5 @@ def test_a_model_saved_with_per_strategy_keys_still_loads(tmp_path):
     assert got.coefficients == TRUE.coefficients and got.mix_overhead == 0.5
     del legacy["raycast"]
     p.write_text(json.dumps({"old": legacy}))
-    with pytest.raises(TerrabenchError, match="malformed cost model.*raycast"):
+    with pytest.raises(TerrabenchError, match=r"malformed cost model.*raycast"):
         load_cost_model("old", p)
