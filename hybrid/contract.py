@@ -8,10 +8,11 @@ imports nothing above ``hybrid.gl``. The renderer hands it ``TileItem``s front t
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Any, Literal, NamedTuple, Protocol, get_args, runtime_checkable
 
 from hybrid.camera.view import View
+from hybrid.errors import TerrabenchError
 from hybrid.gl.target import FrameTarget
 from hybrid.terrain.edits import Window
 from hybrid.tiles.pyramid import Tile, TileKey
@@ -42,6 +43,32 @@ models without the key drew. Config ids leave it unnamed (ids stay as such runs 
 policies that draw no tilelets record it."""
 
 
+class DrawOptions:
+    """Base of a strategy's frozen dataclass of draw options (``options_type``; ``raycast.CastOptions``,
+    ``raster.options``): a copy with some changed, names checked, and the values as ``draw_tiles`` keywords."""
+
+    def updated(self, **changes) -> Any:
+        """A copy with some options changed; unknown names raise TerrabenchError."""
+        known = {f.name for f in fields(self)}  # type: ignore[arg-type]
+        bad = sorted(set(changes) - known)
+        if bad:
+            raise TerrabenchError(
+                f"unknown {type(self).__name__} option(s) {', '.join(bad)}; known: {', '.join(sorted(known))}"
+            )
+        return replace(self, **changes) if changes else self  # type: ignore[type-var]
+
+    def values(self) -> dict[str, Any]:
+        """The options by name, as keywords of the strategy's ``draw_tiles`` (not copied)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}  # type: ignore[arg-type]
+
+
+def check_flags(options, names: tuple[str, ...]) -> None:
+    """Raise TerrabenchError naming the first of ``names`` whose option is not True or False."""
+    for name in names:
+        if not isinstance(getattr(options, name), bool):
+            raise TerrabenchError(f"{name} must be True or False, got {getattr(options, name)!r}")
+
+
 @runtime_checkable
 class GpuTile(Protocol):
     """One tile uploaded by one strategy: its GPU bytes and how to free them."""
@@ -66,6 +93,7 @@ class TileStrategy(Protocol):
 
     kind: Kind
     draw_options: frozenset[str]
+    options_type: type[DrawOptions]
 
     def upload(self, tile: Tile) -> GpuTile:
         """Put one tile on the GPU."""

@@ -16,7 +16,8 @@ from hybrid.gl.timing import timed
 def draw_frame(
     r, target, view, plans: list[TilePlan], pinned, tau: float, options: dict, clock: adaptive.PassClock | None = None
 ) -> dict:
-    """Draw renderer ``r``'s plans into the bound target, a pass per strategy (skirts last); the counters summed."""
+    """Draw renderer ``r``'s plans into the bound target, a pass per strategy (skirts last), with each strategy's
+    draw options (``options``, by name); the counters summed."""
     counters: dict = {}
     skirts = r.skirts(plans)
     kinds = [r.kind(p.choice) for p in plans]
@@ -31,11 +32,11 @@ def draw_frame(
         sub = [p for p in plans if p.choice == name]
         if not sub:
             continue
-        opts = options[name]
+        opts = options[name].values()
         if skirts and "skirts" in r.strategies[name].draw_options:
-            opts = {**opts, "skirts": skirts}
-        if behind and rasterized and "occluders" in r.strategies[name].draw_options and "occluders" not in opts:
-            opts = {**opts, "occluders": True}  # rays stop behind the raster tiles drawn before them
+            opts["skirts"] = skirts
+        if behind and rasterized and "occluders" in opts and opts["occluders"] is None:
+            opts["occluders"] = True  # rays stop behind the raster tiles drawn before them
         rasterized |= r.kind(name) == "raster"
         items = r._items(name, sub, pinned)
         c = (

@@ -31,7 +31,8 @@ def frame_result(r, target, view, plans, stats, counters, tau, opts, read: bool,
 
 def strategy_map(r, view: View, plans: list[TilePlan], tau: float, options: dict) -> np.ndarray:
     """Per pixel: 0 no terrain, 1 drawn by a raster tile, 2 by a ray-cast tile (compares depth per kind): each of
-    renderer ``r``'s strategies draws its plans alone, without pre-pass, into a target of its own."""
+    renderer ``r``'s strategies draws its plans alone, with its draw options (``options`` by name) but without
+    pre-pass, into a target of its own."""
     depths = {}
     for name in r.strategies:
         sub = [p for p in plans if p.choice == name]
@@ -40,7 +41,9 @@ def strategy_map(r, view: View, plans: list[TilePlan], tau: float, options: dict
             t.clear()
             t.use()
             if sub:
-                opts = {**options[name], **({"prepass": False} if "prepass" in options[name] else {})}
+                opts = options[name].values()
+                if "prepass" in opts:
+                    opts["prepass"] = False
                 r.strategies[name].draw_tiles(t, view, r._items(name, sub, set()), tau, **opts)
             depths[name] = t.read_depth()
         finally:

@@ -20,7 +20,9 @@ from hybrid.strategies import candidates
 def timed_call(r, target: FrameTarget, view: View, name: str, items: list[TileItem], tau: float) -> float:
     """ms of one draw call of ``items`` with strategy ``name`` of renderer ``r`` into the target as it stands: the
     GL timer query on real GPUs, the wall clock around ctx.finish() on CPU rasterizers."""
-    _, wall, gpu, _ = timed(r.ctx, lambda: r.strategies[name].draw_tiles(target, view, items, tau, **r.options[name]))
+    _, wall, gpu, _ = timed(
+        r.ctx, lambda: r.strategies[name].draw_tiles(target, view, items, tau, **r.options[name].values())
+    )
     return wall if gpu is None else gpu
 
 

@@ -21,12 +21,13 @@ from __future__ import annotations
 
 import time
 from collections import OrderedDict
+from collections.abc import Mapping
 
 import numpy as np
 
 from hybrid import adaptive, oracle
 from hybrid.camera.view import View
-from hybrid.contract import DEFAULT_FULL_RES, EditFollowing, TerrainChange, TileItem
+from hybrid.contract import DEFAULT_FULL_RES, DrawOptions, EditFollowing, TerrainChange, TileItem
 from hybrid.cost.model import CostModel, load_cost_model
 from hybrid.cost.online import AdaptOptions, OnlineModel
 from hybrid.cost.planner import TilePlan, plan_frame
@@ -56,12 +57,29 @@ from hybrid.uploads import fallback_selection, fallback_tile
 
 
 def route_options(strategies: dict, options: dict) -> dict[str, dict]:
-    """Draw options split per strategy by the names each accepts; a name no strategy knows is an error."""
-    known = set().union(*(e.draw_options for e in STRATEGIES.values()))
+    """Draw options split per strategy by the names its options dataclass has; a name none knows is an error."""
+    known = set().union(*(e.option_names for e in STRATEGIES.values()))
     bad = sorted(set(options) - known)
     if bad:
         raise TerrabenchError(f"unknown draw option(s) {', '.join(bad)}; known: {', '.join(sorted(known))}")
-    return {n: {k: v for k, v in options.items() if k in s.draw_options} for n, s in strategies.items()}
+    return {n: {k: v for k, v in options.items() if k in STRATEGIES[n].option_names} for n in strategies}
+
+
+def resolve_options(strategies: dict, given: Mapping[str, DrawOptions] | None, options: dict) -> dict:
+    """Each strategy's draw options (its ``options_type``): those ``given`` by strategy name, with the keyword
+    ``options`` each takes applied over them; refuses a name or a type that does not fit."""
+    given = dict(given or {})
+    bad = sorted(set(given) - set(strategies))
+    if bad:
+        raise TerrabenchError(f"options for strategies this renderer does not draw: {', '.join(bad)}")
+    out = {}
+    for n, routed in route_options(strategies, options).items():
+        kind = STRATEGIES[n].cls.options_type
+        base = given.get(n, kind())
+        if not isinstance(base, kind):
+            raise TerrabenchError(f"options for {n!r} must be a {kind.__name__}, got {type(base).__name__}")
+        out[n] = base.updated(**routed)
+    return out
 
 
 class Renderer:
@@ -86,6 +104,7 @@ class Renderer:
         pyramid: TilePyramid | None = None,
         upload_budget_ms: float | None = None,
         adapt: bool | AdaptOptions = True,
+        strategy_options: Mapping[str, DrawOptions] | None = None,
         **options,
     ):
         check_policy(policy)
@@ -96,7 +115,7 @@ class Renderer:
         self.pyramid = pyramid or pyramid_for(hf, tile_size)
         self.cache = ResidencyCache(budget_bytes)
         self.strategies = {n: make_strategy(n, ctx, hf) for n in (candidates() if self.mixed else (policy,))}
-        self.options = route_options(self.strategies, options)
+        self.options = resolve_options(self.strategies, strategy_options, options)
         self._model = cost_model or (load_cost_model(gl_info(ctx).renderer) if self.mixed else None)
         self.online = (
             OnlineModel(self._model, adapt if isinstance(adapt, AdaptOptions) else None)
@@ -298,7 +317,7 @@ class Renderer:
         """
         self._check_live()
         measure = self._measures(measure, maps, read, plans)
-        opts = {n: {**self.options[n], **o} for n, o in route_options(self.strategies, options).items()}
+        opts = {n: self.options[n].updated(**o) for n, o in route_options(self.strategies, options).items()}
         learn = self.online is not None and plans is None and not measure
         plans, plan_ms, prep_ms = self._planned(view, tau, plans)
         explored, adapt_ms = adaptive.timed_explore(self.online, plans, learn)
@@ -344,9 +363,11 @@ class Renderer:
     def strategy_map(
         self, view: View, plans: list[TilePlan], tau: float = DEFAULT_TAU, options: dict | None = None
     ) -> np.ndarray:
-        """Per pixel: 0 no terrain, 1 drawn by a raster tile, 2 by a ray-cast tile (compares depth per kind)."""
+        """Per pixel: 0 no terrain, 1 drawn by a raster tile, 2 by a ray-cast tile (compares depth per kind);
+        ``options`` are draw options by name over the renderer's, as ``render`` takes them."""
         self._check_live()
-        return strategy_map(self, view, plans, tau, options or self.options)
+        opts = {n: self.options[n].updated(**o) for n, o in route_options(self.strategies, options or {}).items()}
+        return strategy_map(self, view, plans, tau, opts)
 
     def release(self) -> None:
         """Free resident tiles and strategies (and stop the loader of a store pyramid made here); the renderer

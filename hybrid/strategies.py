@@ -22,7 +22,7 @@ renderer (which find strategies only through it).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -59,8 +59,13 @@ class StrategyEntry:
 
     @property
     def draw_options(self) -> frozenset[str]:
-        """Names of the options its draw_tiles takes."""
+        """Names of the options its draw_tiles takes (the renderer's own, such as skirts, included)."""
         return self.cls.draw_options
+
+    @property
+    def option_names(self) -> frozenset[str]:
+        """Names of its draw options a user sets: the fields of its options dataclass (``options_type``)."""
+        return frozenset(f.name for f in fields(self.cls.options_type))
 
 
 @dataclass(frozen=True)

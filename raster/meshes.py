@@ -10,6 +10,8 @@ from those sides, deep as the measured difference (draw option ``seam_skirts``, 
 
 from __future__ import annotations
 
+from dataclasses import fields
+
 import numpy as np
 
 from hybrid.errors import TerrabenchError
@@ -22,6 +24,7 @@ from hybrid.terrain.edges import edge_profiles
 
 from .edit import stale_tiles
 from .mesh_skirts import SeamDepths, SkirtMesh, mesh_border_edges, rays_may_start_under
+from .options import MeshOptions
 from .shading import MODES
 from .tileblock import BLOCK_DEFINES, TileBlocks, register_tile_block, tile_blocks
 
@@ -62,7 +65,8 @@ class MeshStrategyBase:
     ``mesh_of`` (and may give its border edges in ``border_edges``)."""
 
     kind = "raster"
-    draw_options = frozenset({"mode", "wireframe", "seam_skirts"})
+    options_type = MeshOptions
+    draw_options = frozenset(f.name for f in fields(MeshOptions))
 
     def __init__(self, ctx, hf):
         self.ctx, self.hf = ctx, hf

@@ -9,6 +9,8 @@ computed on the CPU per frame; the CPU sets uniforms and issues two dispatches a
 
 from __future__ import annotations
 
+from dataclasses import fields
+
 import numpy as np
 
 from hybrid.contract import DEFAULT_FULL_RES
@@ -18,6 +20,7 @@ from hybrid.gl.shading import resolve_mode
 
 from .edit import stale_tiles
 from .frame_items import BASE_WORD, CMD_POINTS
+from .options import TileletOptions
 from .selection import LEAF_FORMAT, LEAN_LEAF_FORMAT, SelectedTileletTile, TileletSelection, full_res_defines
 from .shading import MODES
 from .tileblock import BLOCK_DEFINES
@@ -66,9 +69,8 @@ def read_leaves(strategy, g: SelectedTileletTile) -> dict:
 class TileletDrawing(TileletSelection):
     """Uniforms and state shared by both tilelet draws; subclasses issue the draw of one tile."""
 
-    draw_options = frozenset(
-        {"mode", "wireframe", "morph", "stitching", "lean", "culling", "leaf_tau", "skirts", "full_res", "lod_eye"}
-    )
+    options_type = TileletOptions
+    draw_options = frozenset({f.name for f in fields(TileletOptions)} | {"skirts"})  # skirts: the renderer's
 
     def __init__(self, ctx, hf, **options):
         super().__init__(ctx, hf, **options)

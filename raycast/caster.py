@@ -70,6 +70,7 @@ class RaycastStrategy:
     """GPU ray caster of height-field tiles over maximum mipmaps (Dick et al. 2009) with Qu's reconstructions."""
 
     kind = "raycast"
+    options_type = CastOptions
     draw_options = frozenset(f.name for f in fields(CastOptions))
 
     def __init__(self, ctx, hf, **options):
@@ -113,7 +114,7 @@ class RaycastStrategy:
             opts.stats,
             opts.shadows,
             mode,
-            opts.occluders,
+            bool(opts.occluders),
         )
         if key not in self.programs:
             defines = {
@@ -124,7 +125,7 @@ class RaycastStrategy:
                 "STATS": int(opts.stats),
                 "SHADOWS": int(opts.shadows),
                 "MODE": MODES.index(mode),
-                "OCCLUDERS": int(opts.occluders),
+                "OCCLUDERS": int(bool(opts.occluders)),
                 **LAYOUT_DEFINES,
             }
             prog = program(self.ctx, "raycast", "box.vert.glsl", "raycast.frag.glsl", defines=defines)

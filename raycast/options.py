@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass
 from typing import Literal, get_args
 
+from hybrid.contract import DrawOptions, check_flags
 from hybrid.errors import TerrabenchError
 
 Reconstruction = Literal["planes", "linear", "triangles", "bilinear"]
@@ -16,7 +17,7 @@ MODES: tuple[str, ...] = get_args(CastMode)
 
 
 @dataclass(frozen=True)
-class CastOptions:
+class CastOptions(DrawOptions):
     """How tiles are ray cast and shaded.
 
     reconstruction: surface inside a cell ('planes' = piecewise constant box of the cell's max-mip height
@@ -26,7 +27,8 @@ class CastOptions:
     prepass: tile-ID pre-pass so only pixels still empty cast a ray (Dick 3.4); None: the device's default
       (``prepass_default``).
     occluders: what the target's depth holds when the pass starts (an earlier pass of the frame: the raster
-      tiles of a mixed frame) bounds every ray, which stops where it would pass behind it (the renderer sets it).
+      tiles of a mixed frame) bounds every ray, which stops where it would pass behind it; None: the renderer
+      turns it on where raster tiles lie in front of ray-cast ones.
     lod: None, or tau in pixels: stop descending at the level whose texel projects to <= tau pixels.
     mode: shading mode (None = 'texture' when the terrain has one, else 'shaded').
     shadows: cast a shadow ray toward LIGHT_DIR from every hit (whole terrain, primary ray's level).
@@ -38,7 +40,7 @@ class CastOptions:
     reconstruction: Reconstruction = "triangles"
     traversal: Traversal = "maxmip"
     prepass: bool | None = None
-    occluders: bool = False
+    occluders: bool | None = None
     lod: float | None = None
     mode: CastMode | None = None
     shadows: bool = False
@@ -57,9 +59,9 @@ class CastOptions:
             raise TerrabenchError(f"mode must be one of {', '.join(MODES)} (or None), got {self.mode!r}")
         if self.prepass is not None and not isinstance(self.prepass, bool):
             raise TerrabenchError(f"prepass must be True, False or None (the device's default), got {self.prepass!r}")
-        for name in ("shadows", "stats", "occluders"):
-            if not isinstance(getattr(self, name), bool):
-                raise TerrabenchError(f"{name} must be True or False, got {getattr(self, name)!r}")
+        check_flags(self, ("shadows", "stats"))
+        if self.occluders is not None and not isinstance(self.occluders, bool):
+            raise TerrabenchError(f"occluders must be True, False or None (the renderer's), got {self.occluders!r}")
         if self.lod is not None:
             if isinstance(self.lod, bool) or not isinstance(self.lod, (int, float)) or not (0 < float(self.lod) < 1e6):
                 raise TerrabenchError(f"lod must be None or a tau in pixels in (0, 1e6), got {self.lod!r}")
@@ -73,14 +75,6 @@ class CastOptions:
             raise TerrabenchError(f"max_steps must be None or an integer in [1, 1000000], got {self.max_steps!r}")
         if isinstance(self.heat_max, bool) or not isinstance(self.heat_max, (int, float)) or not self.heat_max > 0:
             raise TerrabenchError(f"heat_max must be a number of steps > 0, got {self.heat_max!r}")
-
-    def updated(self, **changes) -> CastOptions:
-        """A copy with some options changed; unknown names raise TerrabenchError."""
-        known = {f.name for f in fields(self)}
-        bad = sorted(set(changes) - known)
-        if bad:
-            raise TerrabenchError(f"unknown ray-cast option(s) {', '.join(bad)}; known: {', '.join(sorted(known))}")
-        return replace(self, **changes)
 
 
 def default_max_steps(n: int) -> int:
