@@ -67,14 +67,16 @@ def _vertical(path, crs, band_unit: str, vertical_scale) -> tuple[float, list[st
             [] if metres == 1.0 else [f"converted: heights from {unit} (vertical CRS) to metres, x {metres:.10g}"]
         )
     if band_unit:
-        metres = unit_metres(band_unit)
-        if metres is None:
+        band_metres = unit_metres(band_unit)
+        if band_metres is None:
             raise TerrainLoadError(
                 f"{path}: band unit {band_unit!r} is not a length unit pyproj knows; pass "
                 "--vertical-scale (metres per stored unit)"
             )
-        return metres, (
-            [] if metres == 1.0 else [f"converted: heights from {band_unit} (band unit) to metres, x {metres:.10g}"]
+        return band_metres, (
+            []
+            if band_metres == 1.0
+            else [f"converted: heights from {band_unit} (band unit) to metres, x {band_metres:.10g}"]
         )
     return 1.0, ["heights taken as metres: the file names no vertical unit (pass --vertical-scale to convert)"]
 
