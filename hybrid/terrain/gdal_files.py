@@ -12,6 +12,7 @@ import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from hybrid.errors import TerrabenchError, TerrainLoadError
 from hybrid.terrain.assemble import assemble
@@ -25,6 +26,9 @@ from hybrid.terrain.georef import (
 )
 from hybrid.terrain.heightfield import HeightField
 from hybrid.terrain.window import Crop
+
+if TYPE_CHECKING:
+    from rasterio.windows import Window
 
 PASS_SPACING = "pass --spacing METRES (or --spacing X,Y for east-west,north-south metres; `spacing` in a spec entry)"
 NO_CRS = (
@@ -88,7 +92,7 @@ class GridHeader:
 
     band: int
     shape: tuple[int, int]
-    window: object
+    window: Window | None
     ground: object
     scale: float
     offset: float
