@@ -172,16 +172,19 @@ def selection_rows(ctx, repeats=5):
     from hybrid.camera.flight import preset
     from hybrid.renderer import Renderer
     from hybrid.terrain.datasets import puget
+    from raster.selection import TileletSelection
 
     hf = puget()
     view = preset("flyover", hf, 8).view(3)
-    rows = []
+    rows: list[tuple] = []
     for name in ("raster", "raster_gs"):
         with Renderer(ctx, hf, name, tile_size=128) as r:
             r.render(view)
             items = r._items(name, r.plan(view), set())
+            strategy = r.strategies[name]
+            assert isinstance(strategy, TileletSelection)  # raster and raster_gs select leaves on the GPU
             issue, sel = _issue_and_total_ms(
-                lambda name=name, items=items: r.strategies[name].select_leaves(view, items, 2 / 3), repeats, ctx
+                lambda strategy=strategy, items=items: strategy.select_leaves(view, items, 2 / 3), repeats, ctx
             )
             res = [r.render(view).stats for _ in range(repeats)]
             plan, draw_issue = np.median([x.plan_ms for x in res]), np.median([x.issue_ms for x in res])
@@ -205,7 +208,7 @@ def selection_rows(ctx, repeats=5):
 def memory_rows(ctx, hf, tiles):
     """Rows (representation, bytes per tile, triangles, bytes per triangle); the tilelet strategies' resident
     bytes per tile (heights, nodes, skirts, commands), then what their frame arena holds per drawn leaf."""
-    from raster.arena import INDEX_BYTES, RECORD_BYTES, VERTEX_BYTES
+    from raster.arena import LAYOUTS
     from raster.tilelets import TileletStrategy
     from raster.tin import TinStrategy
     from raster.trianglelist import TriangleListStrategy
@@ -213,20 +216,21 @@ def memory_rows(ctx, hf, tiles):
     rows = []
     tile = tiles[0]
     full_tris = 2 * tile.n * tile.n
-    for name, cls, kw in (
-        ("tilelets resident (raster, raster_gs)", TileletStrategy, {}),
-        ("fullres list", TriangleListStrategy, {}),
-        ("tin 90% reduced", TinStrategy, {"reduction": 0.9}),
+    for name, make in (
+        ("tilelets resident (raster, raster_gs)", lambda: TileletStrategy(ctx, hf)),
+        ("fullres list", lambda: TriangleListStrategy(ctx, hf)),
+        ("tin 90% reduced", lambda: TinStrategy(ctx, hf, reduction=0.9)),
     ):
-        s = cls(ctx, hf, **kw)
+        s = make()
         g = s.upload(tile)
         tris = getattr(g, "triangles", full_tris)
         rows.append((name, g.nbytes, tris, f"{g.nbytes / tris:.1f}"))
         g.release()
         s.release()
+    record_bytes, vertex_bytes, index_bytes = LAYOUTS["exact"]  # an "exact"-rule leaf, as reports/bench give it
     for name, per_leaf in (
-        ("raster arena, a drawn leaf", VERTEX_BYTES + INDEX_BYTES),
-        ("raster_gs arena, a drawn leaf", RECORD_BYTES),
+        ("raster arena, a drawn leaf", vertex_bytes + index_bytes),
+        ("raster_gs arena, a drawn leaf", record_bytes),
     ):
         rows.append((name, per_leaf, 8, f"{per_leaf / 8:.1f}"))
     rows.append(("paper: list indices", full_tris * 12, full_tris, "12.0 (96 bits)"))

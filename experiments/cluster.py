@@ -19,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from hybrid.errors import TerrabenchError
 
@@ -39,10 +40,13 @@ def _distributed():
     return distributed
 
 
-try:
+if TYPE_CHECKING:
     from distributed.diagnostics.plugin import WorkerPlugin
-except ImportError:  # without the cluster extra the plugin is never registered
-    WorkerPlugin = object
+else:
+    try:
+        from distributed.diagnostics.plugin import WorkerPlugin
+    except ImportError:  # without the cluster extra the plugin is never registered
+        WorkerPlugin = object
 
 
 class GLWorkerPlugin(WorkerPlugin):
@@ -214,7 +218,7 @@ def calibrate_on_cluster(client, args: tuple) -> list:
     from hybrid.cost.model import cost_model_from_dict
 
     info = ready_workers(client)
-    by_device = {}
+    by_device: dict[str, str] = {}  # GL renderer -> the first worker's address
     for address, i in sorted(info.items()):
         if i["error"] is None:
             by_device.setdefault(i["renderer"], address)

@@ -24,6 +24,7 @@ import time
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -35,6 +36,9 @@ from hybrid.strategies import mixed_policies
 from .metrics import frame_accuracy
 from .popping import popping, static_pop_pixels, temporal_errors
 from .spec import Config, Spec
+
+if TYPE_CHECKING:
+    from hybrid.renderer import Renderer
 
 SETTLE_S = 0.3  # seconds of idle before a configuration's timed frames
 
@@ -75,7 +79,7 @@ class TaskState:
         self._group = None
         self._views = None
         self._refs: dict = {}
-        self._reference = None
+        self._reference: ReferenceRenderer | None = None  # the group's, with spec.accuracy
         self.cost_model = None  # the device's calibrated model, when the client sends one
         self.learned = None  # the adapted model of the hybrid that learned most, once it settled
 
@@ -104,6 +108,7 @@ class TaskState:
         """The reference render of frame k of the configuration's group (cached for the group)."""
         if k not in self._refs:
             _, views = self.views(spec, c)
+            assert self._reference is not None  # views made it: references are asked for with spec.accuracy
             self._refs[k] = self._reference.render(views[k], supersample=spec.supersample)
             if k in spec.image_frames or spec.video:
                 images.append(_image(f"ref-{group_id(c)}-f{k}", self._refs[k], k in spec.image_frames))
@@ -140,7 +145,7 @@ class _ConfigRun:
 
     def __init__(self, c: dict, todo: list[int]):
         self.c, self.cfg, self.todo = c, Config.of(c), todo
-        self.renderer = None
+        self.renderer: Renderer | ReferenceRenderer | None = None  # made by _open, None once released
         self.timed: dict = {}
         self.out = ConfigResult(c)
 
@@ -314,11 +319,12 @@ def _measure(spec: Spec, r: _ConfigRun, state: TaskState, views, extra: dict | N
 def _accuracy(spec: Spec, r: _ConfigRun, state: TaskState, views, k: int, res, drawn: dict) -> dict:
     """Frame k's accuracy, temporal and popping measures against the group's references; ``drawn`` holds the
     frames drawn so far (neighbours a resumed run did not time are added)."""
-    c, tau = r.c, r.cfg.tau
+    c, tau, renderer = r.c, r.cfg.tau, r.renderer
+    assert renderer is not None  # r is live: its renderer drew frame k
 
     def frame(j):
         if j not in drawn:
-            drawn[j] = r.renderer.render(views[j], tau)
+            drawn[j] = renderer.render(views[j], tau)
         return drawn[j]
 
     def ref(j):
@@ -331,8 +337,6 @@ def _accuracy(spec: Spec, r: _ConfigRun, state: TaskState, views, k: int, res, d
         refs = (ref(k - 1), ref(k), ref(k + 1))
         row.update(popping((frame(k - 1), res, frame(k + 1)), refs, views[k - 1 : k + 2]))
         row["pop_static_px"] = (
-            static_pop_pixels(r.renderer, views[k - 1 : k + 2], refs, tau, res)
-            if np.isfinite(row["pop_px"])
-            else np.nan
+            static_pop_pixels(renderer, views[k - 1 : k + 2], refs, tau, res) if np.isfinite(row["pop_px"]) else np.nan
         )
     return row

@@ -21,10 +21,13 @@ import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
+
+if TYPE_CHECKING:
+    from hybrid.terrain.stored import StoredTerrain
 
 METHODS = ("raycast", "raster", "raster_gs", "hybrid")
 
@@ -72,7 +75,7 @@ def warm_up(r, view, tau: float) -> None:
 class _Flight:
     """One store's flight for one method: its terrain, views, pyramid and renderer (GPU state)."""
 
-    terrain: object
+    terrain: StoredTerrain
     views: list
     pyramid: Any = None
     renderer: Any = None
@@ -113,7 +116,9 @@ def run_scaling(
     from hybrid.camera.flight import preset
     from hybrid.tiles.periodic import open_any_store
 
-    rows, refused, setup = [], [], []
+    rows: list[dict] = []  # a frame's measures each
+    refused: list[dict] = []  # a store and method that refused, with the reason
+    setup: list[dict] = []  # a store and method's one-off setup
     flights = []
     for path in stores:
         terrain = open_any_store(path)

@@ -74,6 +74,7 @@ def _size_sentences(frames: pd.DataFrame) -> list[str]:
     sides = sorted(ray["side"].unique())
     for large in sides[1:]:
         r = size_ratio(ray[ray["side"].isin([sides[0], large])], "raycast")
+        assert r is not None  # the frames hold two sizes, the smallest and this one
         verdict = (
             "within the noise of this run: independent of the data size here"
             if r["low"] <= 1.0 <= r["high"]

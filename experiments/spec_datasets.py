@@ -10,6 +10,7 @@ STORE a store's folder or ``puget``, whose store is prepared once into the cache
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.sources import TerrainSource
@@ -103,7 +104,7 @@ def check_dataset_entry(entry, source: str, base: Path | None):
     if not isinstance(path, str) or not path:
         raise TerrabenchError(f"{source}: a dataset table needs 'path' (a file or dataset name), got {entry!r}")
     what = f"{source}: dataset {entry.get('name') or path!r}"
-    out = {"path": _resolve(path, source, base)}
+    out: dict[str, Any] = {"path": _resolve(path, source, base)}  # the entry as TOML gives it, checked
     given = [k for k in ("spacing", "vertical_scale", "crs", "crop") if k in entry]
     if (path in NAMES or split_periodic(path)) and given:
         raise TerrabenchError(

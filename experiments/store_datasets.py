@@ -40,7 +40,9 @@ def split_periodic(text, what: str = "") -> tuple[str, int] | None:
 def check_periodic(text: str, what: str) -> None:
     """Refuse by name a 'STORE@periodicSIZE' whose size cannot extend a bundled store (a store folder's size is
     checked when it is opened)."""
-    base, size = split_periodic(text)
+    periodic = split_periodic(text)
+    assert periodic is not None  # called with 'STORE@periodicSIZE' names only
+    base, size = periodic
     period = BUNDLED_STORES.get(base)
     if period is not None and not (period + 1 < size <= MAX_SIZE and (size - 1) % period == 0):
         raise TerrabenchError(
@@ -53,7 +55,9 @@ def open_periodic_dataset(text: str, tile_size: int):
     """The StoredTerrain of 'STORE@periodicSIZE' (a bundled store prepared at tile_size cells when missing)."""
     from hybrid.tiles.periodic import open_periodic
 
-    base, size = split_periodic(text)
+    periodic = split_periodic(text)
+    assert periodic is not None  # called with 'STORE@periodicSIZE' names only
+    base, size = periodic
     return open_periodic(bundled_store(base, tile_size) if base in BUNDLED_STORES else base, size)
 
 

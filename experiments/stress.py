@@ -54,6 +54,7 @@ def make_scene(name: str, size: int = 257) -> HeightField:
         return puget(size=size)
     if name == "puget_x100":
         p = puget(size=size)
+        assert p.source_step is not None  # puget is read from a 16-bit file
         step = p.source_step[0] * 100.0  # the 16-bit source at 10 m a unit, as a loader would make it
         h = (np.rint(p.heights / p.source_step[0]) * step).astype(np.float32)
         return HeightField(h, (p.spacing_x, p.spacing_y), p.origin, "puget_x100", p.texture, source_step=(step, 0.0))
@@ -84,10 +85,10 @@ def stress_view(hf: HeightField, kind: str, width: int = 320, height: int = 180,
         x, y = ox + 0.3 * w, oy + 0.35 * d
         z = g(x, y) + 2.0
         # near 2 cm: on steep ground (x100 exaggeration) the surface passes within centimetres of the eye
-        return hf, View([x, y, z], [x + w, y + 0.7 * d, z], 60.0, width, height, 0.02, far)
+        return hf, View(np.array([x, y, z]), np.array([x + w, y + 0.7 * d, z]), 60.0, width, height, 0.02, far)
     if kind == "down":
         c = [ox + 0.5 * w, oy + 0.5 * d]
-        return hf, View(c + [oz + hi + 0.3 * size], c + [oz + lo], 60.0, width, height, 1.0, far)
+        return hf, View(np.array(c + [oz + hi + 0.3 * size]), np.array(c + [oz + lo]), 60.0, width, height, 1.0, far)
     if kind == "inside_aabb":
         # lowest sample of the central tile-sized block, eye halfway between it and the block's top
         n = min(tile_size, hf.rows - 1, hf.cols - 1)
@@ -96,18 +97,19 @@ def stress_view(hf: HeightField, kind: str, width: int = 320, height: int = 180,
         i, j = np.unravel_index(np.argmin(block), block.shape)
         x, y = ox + (j0 + j) * hf.spacing_x, oy + (i0 + i) * hf.spacing_y
         z = g(x, y) + max(0.5 * (float(block.max()) + oz - g(x, y)), 2.0)
-        return hf, View([x, y, z], [x + 0.3 * w, y + 0.2 * d, g(x, y)], 70.0, width, height, 0.5, far)
+        eye, tgt = np.array([x, y, z]), np.array([x + 0.3 * w, y + 0.2 * d, g(x, y)])
+        return hf, View(eye, tgt, 70.0, width, height, 0.5, far)
     if kind == "below":
         x, y = ox + 0.5 * w, oy + 0.5 * d
         z = g(x, y) - 20.0
-        return hf, View([x, y, z], [x + w, y + 0.3 * d, z], 60.0, width, height, 0.5, far)
+        return hf, View(np.array([x, y, z]), np.array([x + w, y + 0.3 * d, z]), 60.0, width, height, 0.5, far)
     if kind in ("axis_x", "axis_y"):
         z = oz + hi + 0.05 * size
         if kind == "axis_x":
             e, t = [ox + 0.05 * w, oy + 0.5 * d, z], [ox + 0.95 * w, oy + 0.5 * d, oz + lo]
         else:
             e, t = [ox + 0.5 * w, oy + 0.05 * d, z], [ox + 0.5 * w, oy + 0.95 * d, oz + lo]
-        return hf, View(e, t, 60.0, width, height, 0.5, far)
+        return hf, View(np.array(e), np.array(t), 60.0, width, height, 0.5, far)
     if kind in ("offset_1e6", "offset_1e7"):
         off = np.array([1e6, 1e6, 0.0]) if kind == "offset_1e6" else np.array([1e7, 1e7, 0.0])
         moved = hf.moved(np.array(hf.origin) + off)
@@ -237,7 +239,7 @@ def stress_table(
     views=VIEWS,
     methods=METHODS,
     size: int = 257,
-    viewport=(320, 180),
+    viewport: tuple[int, int] = (320, 180),
     tile_size: int = 64,
     progress: bool = True,
 ) -> pd.DataFrame:

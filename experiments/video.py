@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 import pandas as pd
 
 from hybrid.atomic import atomic_path
@@ -28,7 +29,7 @@ def write_videos(run: Path, frames: pd.DataFrame, out: Path, fps: int = 6) -> li
         r0 = sf.iloc[0]
         gid = f"{Path(str(r0['dataset'])).stem}-s{r0['seed']}-{Path(str(r0['flight'])).stem}-{r0['size']}"
         configs = sf.drop_duplicates("config")[["config", "method"]].values.tolist()
-        seq = []
+        seq: list[npt.ArrayLike] = []  # the frames, as imageio.mimsave takes them
         for k in sorted(sf["frame"].unique()):
             paths = [("reference", img / f"ref-{gid}-f{k}.png")] + [(m, img / f"{c}-f{k}.png") for c, m in configs]
             if not all(p.exists() for _, p in paths):

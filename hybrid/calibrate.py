@@ -61,7 +61,7 @@ def time_view_frames(r: Renderer, v: View, tau: float, repeats: int, mixes: int,
     for _ in range(mixes):
         pool = rng.choice(candidates(), size=int(rng.integers(2, len(candidates()) + 1)), replace=False)
         assigns.append(rng.choice(pool, size=len(plans)))
-    ms = [[] for _ in assigns]
+    ms: list[list[float]] = [[] for _ in assigns]
     for rep in range(repeats + 1):  # the first round warms (uploads, compiles)
         for a, m in zip(assigns, ms):
             for p, c in zip(plans, a):
@@ -102,12 +102,15 @@ def calibrate(
     view's frames and tiles are timed one after the other, so that a drift of the machine's speed over the run
     falls on both alike."""
     rng = np.random.default_rng(seed)
-    samples, feats, times, frames = [], [], {n: [] for n in candidates()}, []
+    samples: list[FrameSample] = []
+    feats: list[TileFeatures] = []
+    measured: dict[str, list[float]] = {n: [] for n in candidates()}  # per candidate, each tile's ms
+    frames: list[dict] = []
     with Renderer(ctx, hf, "hybrid", tile_size, oracle_repeats=repeats, full_res=full_res) as r:
         for v in views:
             samples += time_view_frames(r, v, tau, repeats, mixes, rng)
-            time_view_tiles(r, v, tau, feats, times, frames)
-    times = {n: np.array(t) for n, t in times.items()}
+            time_view_tiles(r, v, tau, feats, measured, frames)
+    times = {n: np.array(t) for n, t in measured.items()}
     model = fit_frames(samples, gl_info(ctx).renderer, holdout, seed, candidates(), tile_samples(feats, times))
     model.tiles = len(feats)
     model.full_res = full_res

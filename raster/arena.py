@@ -14,9 +14,14 @@ added) or 11 vertices and 36 indices (their centre posts and 4 triangles each).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from hybrid.gl.context import gl_bytes
+
+if TYPE_CHECKING:
+    import moderngl
 
 MIN_LEAVES = 4096  # smallest arena, leaves
 GROW = 2.0  # a grown or shrunk arena holds this many times the frame's leaves
@@ -56,7 +61,9 @@ class LeafArena:
     def __init__(self, ctx, writes: str, capacity: int = MIN_LEAVES):
         self.ctx, self.writes, self.full_res = ctx, writes, "exact"
         self.capacity = 0
-        self.records = self.vertices = self.indices = None
+        self.records: moderngl.Buffer | None = None  # the buffers are None once released
+        self.vertices: moderngl.Buffer | None = None
+        self.indices: moderngl.Buffer | None = None
         self.version = 0
         self.last = self.sparse = self.sparse_peak = 0
         self._allocate(int(capacity))
@@ -111,6 +118,7 @@ class LeafArena:
 
     def bind(self) -> None:
         """Bind the buffers where the selection writes them (``*_BINDING``)."""
+        assert self.records is not None and self.vertices is not None and self.indices is not None  # not released
         self.records.bind_to_storage_buffer(RECORDS_BINDING)
         self.vertices.bind_to_storage_buffer(VERTICES_BINDING)
         self.indices.bind_to_storage_buffer(INDICES_BINDING)

@@ -112,8 +112,9 @@ class _Rows:
     # KINDS as ``split_tables`` in ``tables``
 
     def __init__(self, limit: int):
-        self.limit, self.row = limit, {}  # key -> row
-        self.keys: list = []  # row -> key
+        self.limit = limit
+        self.row: dict[TileKey, int] = {}  # key -> row
+        self.keys: list[TileKey] = []  # row -> key
         self.arrays: dict = {}  # FIELDS, (rows, ...) each
         self.tables: SplitTables | None = None
         self.stamp = np.zeros(0, np.int64)  # row -> tick of its last use
@@ -145,6 +146,7 @@ class _Rows:
             self.keys.append(key)
             if r >= len(self.stamp):
                 self._grow(nodes)
+        assert self.tables is not None  # _grow made them with the first row
         self.tables.base[r], self.tables.tables[r] = split_tables([getattr(nodes, kind) for kind in KINDS])
         for f in self.FIELDS:
             self.arrays[f][r] = getattr(nodes, f)
@@ -166,6 +168,7 @@ class _Rows:
             np.zeros((new, len(KINDS), nodes.fine.shape[0], TABLE_BINS), np.uint16 if most < 1 << 16 else np.uint32),
         )
         if self.arrays:
+            assert self.tables is not None  # made with the arrays
             for f in grown:
                 grown[f][:cap] = self.arrays[f]
             tables.base[:cap], tables.tables[:cap] = self.tables.base, self.tables.tables
@@ -293,6 +296,7 @@ class TileletTriangleEstimator:
         a, r = self._rows.arrays, rows[ok]
         if not len(r):
             return np.full(len(rows), np.nan), np.full(len(rows), np.nan)
+        assert self._rows.tables is not None  # rows r are stored, so the tables exist
         est = estimate_rows(
             self._rows.tables,
             r,

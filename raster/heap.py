@@ -9,9 +9,14 @@ slots. Bytes: a tile counts its slot's; what the heaps hold unused is shared (``
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from hybrid.gl.context import gl_bytes
+
+if TYPE_CHECKING:
+    import moderngl
 
 NODES_BINDING, HEIGHTS_BINDING = 0, 5  # storage bindings
 HEAP_DEFINES = {"NODES_BINDING": NODES_BINDING, "HEIGHTS_BINDING": HEIGHTS_BINDING}
@@ -57,7 +62,8 @@ class TileHeap:
         self.height_words = (self.n + 1) ** 2
         self.slot_bytes = 4 * self.height_words + 16 * self.node_rows
         self.capacity = 0
-        self.heights = self.nodes = None
+        self.heights: moderngl.Buffer | None = None  # None once released
+        self.nodes: moderngl.Buffer | None = None
         self.owners: list[HeapSlot | None] = []
         self._remake(MIN_SLOTS)
 
@@ -80,6 +86,7 @@ class TileHeap:
             self._remake(2 * self.capacity)
         slot = HeapSlot(self, free[0])
         self.owners[slot.index] = slot
+        assert self.heights is not None and self.nodes is not None  # _remake made them; not released
         self.heights.write(np.ascontiguousarray(heights, dtype=np.float32).tobytes(), offset=slot.heights_base * 4)
         self.nodes.write(np.ascontiguousarray(nodes, dtype=np.float32).tobytes(), offset=slot.nodes_base * 16)
         return slot
@@ -124,6 +131,7 @@ class TileHeap:
 
     def bind(self) -> None:
         """Bind the node buffer and the heights at their storage bindings (``HEAP_DEFINES``)."""
+        assert self.heights is not None and self.nodes is not None  # bound only while the heap is in use
         self.nodes.bind_to_storage_buffer(NODES_BINDING)
         self.heights.bind_to_storage_buffer(HEIGHTS_BINDING)
 

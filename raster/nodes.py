@@ -48,7 +48,7 @@ from hybrid.tiles.store_blocks import block_offsets
 from .quadtree import GPU_BETA, error_pyramid
 from .rect_nodes import rect_nodes
 
-_CACHE: dict = {}
+_CACHE: dict[tuple, tuple[weakref.ref, GlobalNodes]] = {}
 
 
 @dataclass(frozen=True)
@@ -105,7 +105,7 @@ def global_nodes(hf, tile_size: int, beta: float = GPU_BETA, side_errors: bool =
     grid = hf.load() if isinstance(hf, StoredTerrain) else hf  # a store without usable node arrays, if it fits
     R, effective, zlo, zhi, sides = rect_nodes(grid, int(tile_size), float(beta), bool(side_errors))
     nodes = GlobalNodes(R, float(beta), effective, zlo, zhi, sides=sides)
-    ref = weakref.ref(hf, lambda _r, k=key: _CACHE.pop(k, None))
+    ref = weakref.ref(hf, lambda _r: _CACHE.pop(key, None))  # key is never rebound
     _CACHE[key] = (ref, nodes)
     return nodes
 
@@ -141,9 +141,10 @@ def nodes_for(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
         return hit[1]
     levels = range(int(info["levels"]))
     g = hf.store
-    arrays = tuple(tuple(g[f"nodes/{k}/{lev}"] for lev in levels) for k in ("effective", "zlo", "zhi"))
+    effective, zlo, zhi = (tuple(g[f"nodes/{k}/{lev}"] for lev in levels) for k in ("effective", "zlo", "zhi"))
+    arrays = (effective, zlo, zhi)
     codes = stored_codes(g, len(levels))
-    blocks = None
+    blocks: PeriodicBlocks | tuple | None = None
     if hf.store.attrs.get("node_blocks"):
         tiers = range(int(hf.store.attrs["max_level"]) + 1)
         if periodic:  # the source's blocks away from the seams, cut near them
@@ -159,8 +160,8 @@ def nodes_for(hf, tile_size: int, beta: float = GPU_BETA) -> GlobalNodes:
             )
         else:
             blocks = tuple(g[f"nodes/blocks/{lev}"] for lev in tiers)
-    nodes = GlobalNodes(int(info["square"]), float(beta), *arrays, blocks, codes)
-    _CACHE[key] = (weakref.ref(hf, lambda _r, k=key: _CACHE.pop(k, None)), nodes)
+    nodes = GlobalNodes(int(info["square"]), float(beta), effective, zlo, zhi, blocks, codes)
+    _CACHE[key] = (weakref.ref(hf, lambda _r: _CACHE.pop(key, None)), nodes)  # key is never rebound
     return nodes
 
 

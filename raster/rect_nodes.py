@@ -69,7 +69,9 @@ def _axis(samples: int, R: int, levels: int) -> tuple[list, list, list]:
     first node); near[g] (4, reps): the compact indices at level g-1 of nodes 2a-1 .. 2a+2 of each
     representative a (-1 beyond the square)."""
     prev = np.minimum(np.arange(R + 1), samples - 1)  # sample classes: the padding repeats the last row
-    maps, reps, near = [], [], []
+    maps: list[np.ndarray] = []
+    reps: list[np.ndarray] = []
+    near: list[np.ndarray | None] = []
     for g in range(levels):
         N = R >> (g + 1)
         a = np.arange(N)
@@ -118,7 +120,8 @@ def _window_errors(w: np.ndarray, r0: int, c0: int, g: int, R: int, side_errors:
     S = max(2, 1 << int(np.log2(max(SLICE_SAMPLES // width, 1))))
     S = min(S, total) if S >= s else S  # whole nodes a slice, or a power-of-two part of one
     cols = np.arange(c0, c0 + width)
-    e, sides = np.zeros((Nr, Nc)), np.zeros((4, Nr, Nc)) if side_errors else None
+    e = np.zeros((Nr, Nc))
+    sides = np.zeros((4, Nr, Nc)) if side_errors else None
     for i0 in range(0, total, S):
         i1 = min(i0 + S, total)
         df, ds = fan_deviations(w, r0, c0, np.arange(r0 + i0, r0 + i1 + 1), cols, g, R)
@@ -126,12 +129,12 @@ def _window_errors(w: np.ndarray, r0: int, c0: int, g: int, R: int, side_errors:
         dev = df if side_errors else np.maximum(df, ds)
         part = cell_max(dev).reshape((i1 - i0) // sr, sr, Nc, s).max(axis=(1, 3))
         np.maximum(e[a : a + part.shape[0]], part, out=e[a : a + part.shape[0]])
-        if side_errors:
+        if sides is not None:  # side_errors
             part = side_maxima(ds, g, i0 % s if i1 - i0 < s else 0)
             np.maximum(sides[:, a : a + part.shape[1]], part, out=sides[:, a : a + part.shape[1]])
         del df, ds, dev
     if g == 0:
-        if side_errors:
+        if sides is not None:  # side_errors
             sides = with_cell_centres(w, sides)
         else:
             e = np.maximum(e, cell_centre_error(w))
@@ -149,7 +152,8 @@ def _direct(h, ax_r, ax_c, g: int, R: int, side_errors: bool):
     """Level g's measured errors at every pair of representatives (compact arrays, ``_window_errors``), and for
     level 0 the nodes' height ranges (zmin, zmax; else None), one window of samples per block of them."""
     nr, nc = ax_r[1][g].size, ax_c[1][g].size
-    e, sides = np.zeros((nr, nc)), np.zeros((4, nr, nc)) if side_errors else None
+    e = np.zeros((nr, nc))
+    sides = np.zeros((4, nr, nc)) if side_errors else None
     zr = (np.zeros((nr, nc)), np.zeros((nr, nc))) if g == 0 else None
     s = 2 << g
     for a0, a1, i in _blocks(_segments(ax_r[1][g]), s):
@@ -157,7 +161,7 @@ def _direct(h, ax_r, ax_c, g: int, R: int, side_errors: bool):
             w = _samples(h, np.arange(a0 * s, a1 * s + 1), np.arange(b0 * s, b1 * s + 1))
             at = (slice(i, i + a1 - a0), slice(j, j + b1 - b0))
             e[at], d = _window_errors(w, a0 * s, b0 * s, g, R, side_errors)
-            if side_errors:
+            if sides is not None:  # side_errors
                 sides[(slice(None),) + at] = d
             if zr is not None:
                 lo = np.minimum(np.minimum(w[:-1, :-1], w[:-1, 1:]), np.minimum(w[1:, :-1], w[1:, 1:]))
@@ -267,21 +271,26 @@ def rect_nodes(grid, n: int, beta: float, side_errors: bool = True):
     ax_r, ax_c = _axis(grid.rows, R, levels), _axis(grid.cols, R, levels)
     ext_r, ext_c = _extents(grid.rows, n, L, levels), _extents(grid.cols, n, L, levels)
     margin = 16 * np.finfo(np.float64).eps * max(abs(float(h.min())), abs(float(h.max())), 1.0)
-    outs, prev, prev_bound = [], None, False
+    outs: list[tuple] = []
+    prev: dict | None = None
+    prev_bound = False
     for g in range(levels):
         bound = (2 << g) > EXACT_SPAN
         if g == 0:
             e, sides, (zmin, zmax) = _direct(h, ax_r, ax_c, 0, R, side_errors)
             lv = {"e": e, "eff": e, "sides": sides, "zmin": zmin, "zmax": zmax}
-        elif bound:
-            lv = _level(prev, ax_r, ax_c, g, _post_bound(h, ax_r, ax_c, g, R), beta, margin)
         else:
-            lv = _level(prev, ax_r, ax_c, g, _direct(h, ax_r, ax_c, g, R, side_errors)[:2], beta, None)
+            assert prev is not None  # level g-1's, made by the step before
+            if bound:
+                lv = _level(prev, ax_r, ax_c, g, _post_bound(h, ax_r, ax_c, g, R), beta, margin)
+            else:
+                lv = _level(prev, ax_r, ax_c, g, _direct(h, ax_r, ax_c, g, R, side_errors)[:2], beta, None)
         if prev is not None:
             outs.append(
                 _output(prev, _float32(lv["eff"], bound), ax_r, ax_c, g - 1, ext_r[g - 1], ext_c[g - 1], prev_bound)
             )
         prev, prev_bound = lv, bound
+    assert prev is not None  # R >= 2 cells, so there is a level
     outs.append(_output(prev, None, ax_r, ax_c, levels - 1, ext_r[-1], ext_c[-1], prev_bound))
     eff, zlo, zhi, codes = zip(*outs)
     return R, eff, zlo, zhi, (codes if side_errors else None)

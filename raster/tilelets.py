@@ -77,7 +77,8 @@ class TileletDrawing(TileletSelection):
         self._skirted: list = []  # items of the last draw_tiles call that hang skirts
         self.edges = TerrainEdges(ctx, hf)  # skirts are not drawn for rays from under the sheet
         self.skirt_prog = None  # the program that draws skirts (subclasses)
-        self._arena_vaos = (None, {})  # ((arena, item buffers) versions, vertex arrays over them)
+        # ((arena, item buffers, tile blocks) versions, vertex arrays over them)
+        self._arena_vaos: tuple[tuple[int, int, int] | None, dict] = (None, {})
 
     def follow_edit(self, change, resident, tile) -> tuple[int, list]:
         """Follow an edit (``hybrid.contract.EditFollowing``): the resident tiles it changed, to upload again."""
@@ -267,7 +268,7 @@ class TileletStrategy(TileletDrawing):
 
     def arena_arrays(self) -> dict:
         """Two vertex arrays of the arena's leaf records as points: for the mesh and for the skirt program."""
-        attrs = [(self.arena.records, LEAF_FORMAT, "a_node", "a_h0", "a_h1", "a_h8")]
+        attrs: list[tuple] = [(self.arena.records, LEAF_FORMAT, "a_node", "a_h0", "a_h1", "a_h8")]
         if self.full_res == "lean":
             attrs = [(self.arena.records, LEAN_LEAF_FORMAT, "a_node", "a_h0", "a_h1", "a_h8", "a_turn")]
         return {

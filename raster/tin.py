@@ -173,6 +173,7 @@ def build_tin(
         m = simplify(target_count=int(target_count) + walls)
         kept_walls = int(target_count) + walls - m.triangles
         return simplify(target_count=min(int(target_count) + max(kept_walls, 0), full + walls))
+    assert max_error is not None  # exactly one of target_count and max_error, and not target_count
     if not (np.isfinite(max_error) and max_error >= 0):
         raise TerrabenchError(f"max_error must be finite and >= 0 metres, got {max_error!r}")
     return _bisect_reduction(
@@ -252,7 +253,8 @@ class TinStrategy(MeshStrategyBase):
             raise TerrabenchError(f"reduction must lie in [0, 1), got {reduction!r}")
         super().__init__(ctx, hf)
         self.reduction, self.max_error, self.preserve_border = float(reduction), max_error, bool(preserve_border)
-        self.meshes = {}
+        # (level, tx, ty) -> (the tile's TIN, its spacing)
+        self.meshes: dict[tuple[int, int, int], tuple[TinMesh, tuple[float, float]]] = {}
 
     def mesh_of(self, tile):
         """The tile's TIN (also kept in ``self.meshes`` by key for export and crack measurement)."""

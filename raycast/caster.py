@@ -16,6 +16,7 @@ gl_FragDepth = clip.z / clip.w with the view's reversed-Z ``view_proj_rel``. Mis
 from __future__ import annotations
 
 from dataclasses import fields
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -44,6 +45,9 @@ from .maxmip import MaxMipBuilder, bytes_per_sample
 from .options import MODES, RECONSTRUCTIONS, CastOptions, prepass_default
 from .tile_params import TILE_BLOCK, block_stride, outer_bits, tile_params, tile_row
 
+if TYPE_CHECKING:
+    import moderngl
+
 
 def _cube_back_face_triangles() -> np.ndarray:
     """36 unit-cube corners (float32), 12 triangles wound counter-clockwise seen from outside the cube."""
@@ -63,7 +67,7 @@ def _cube_back_face_triangles() -> np.ndarray:
 
 def outer_faces(clip, hf) -> int:
     """Bit mask of a tile's box sides lying on the terrain's outer boundary (W 1, E 2, S 4, N 8)."""
-    return int(outer_bits([[float(v) for v in clip]], hf)[0])
+    return int(outer_bits(np.array([[float(v) for v in clip]]), hf)[0])
 
 
 class RaycastStrategy:
@@ -90,7 +94,7 @@ class RaycastStrategy:
         self.edges = TerrainEdges(ctx, hf)
         self.ids = None
         self.prior = None  # the frame's earlier passes, for occluded passes
-        self.tile_buf = None  # the frame's TileParams blocks (tile_params)
+        self.tile_buf: moderngl.Buffer | None = None  # the frame's TileParams blocks (tile_params)
         self._stride = block_stride(ctx.info.get("GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT", 256))
         self._next_id = 1
         self.grid: ShadowGrid | None = None
@@ -106,6 +110,7 @@ class RaycastStrategy:
 
     def _program(self, opts: CastOptions, mode: str):
         opts = self._resolved(opts)
+        assert opts.prepass is not None  # _resolved chose the device's default
         key = (
             opts.reconstruction,
             opts.traversal,
@@ -257,6 +262,7 @@ class RaycastStrategy:
         ctx.cull_face = "front"
         try:
             self._tile_blocks(view, items, opts)
+            assert self.tile_buf is not None  # _tile_blocks made it
             for k, (g, _tile, _sel) in enumerate(items):
                 self.tile_buf.bind_to_uniform_block(
                     TILE_PARAMS_BINDING, offset=k * self._stride, size=TILE_BLOCK.itemsize

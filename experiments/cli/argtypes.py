@@ -19,7 +19,8 @@ from hybrid.terrain.window import Crop
 def positive_float(option: str, unit: str = "") -> Callable[[str], float]:
     """A check for a finite number > 0; unit (e.g. 'pixels') is named in the message."""
     name = f"{option} ({unit})" if unit else option
-    return lambda text: check_positive(name, text)
+    # check_positive parses the text itself, so a non-number gets the same message; it is annotated as float
+    return lambda text: check_positive(name, text)  # type: ignore[arg-type]
 
 
 def int_in(option: str, lo: int, hi: int) -> Callable[[str], int]:
@@ -94,7 +95,8 @@ def spacing(option: str) -> Callable[[str], float | tuple[float, float]]:
         parts = text.split(",")
         if len(parts) not in (1, 2):
             raise TerrabenchError(f"{option} must be one number or X,Y (metres east-west, north-south), got {text!r}")
-        values = [check_positive(f"{option} (metres)", p.strip()) for p in parts]
+        # check_positive parses each text (see positive_float)
+        values = [check_positive(f"{option} (metres)", p.strip()) for p in parts]  # type: ignore[arg-type]
         return values[0] if len(values) == 1 else (values[0], values[1])
 
     return check

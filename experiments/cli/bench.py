@@ -40,36 +40,36 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def benchmark(ctx, name: str, frames: int = 8) -> dict[str, pd.DataFrame]:
     """One benchmark's tables keyed by title; frames per flight (the triangle and raster benchmarks have none)."""
     if name == "raycast":
-        from ..bench_raycast import run
+        from ..bench_raycast import run as raycast_run
 
-        return run(ctx, frames=frames)
+        return raycast_run(ctx, frames=frames)
     if name == "triangles":
         from ..bench_raster import triangle_tables
 
         return triangle_tables()
     if name == "raster":
-        from ..bench_raster import run
+        from ..bench_raster import run as raster_run
 
-        return run(ctx)
+        return raster_run(ctx)
     if name == "planning":
-        from ..bench_planning import run
+        from ..bench_planning import run as planning_run
 
-        return run(ctx, frames=frames)
+        return planning_run(ctx, frames=frames)
     if name == "cpu":
-        from ..bench_cpu import run
+        from ..bench_cpu import run as cpu_run
 
-        return run(ctx, frames=frames)
+        return cpu_run(ctx, frames=frames)
     if name == "adapt":
-        from ..bench_adapt import run
+        from ..bench_adapt import run as adapt_run
 
-        return run(ctx, frames=max(frames, 24))  # its targets read frames 8 to 23 of a 24-frame flight
+        return adapt_run(ctx, frames=max(frames, 24))  # its targets read frames 8 to 23 of a 24-frame flight
     if name == "choice":
-        from ..bench_choice import run
+        from ..bench_choice import run as choice_run
 
-        return run(ctx, frames=frames)
-    from ..bench_hybrid import run
+        return choice_run(ctx, frames=frames)
+    from ..bench_hybrid import run as hybrid_run
 
-    return run(ctx, frames=frames)
+    return hybrid_run(ctx, frames=frames)
 
 
 def run(which=BENCHES, frames: int = 8, out=None, device: int | None = None) -> dict[str, dict[str, pd.DataFrame]]:

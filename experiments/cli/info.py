@@ -42,6 +42,7 @@ def run(
     if verify and not store:
         raise TerrabenchError("--verify applies to a tile store (terrabench info STORE --verify)")
     if store:
+        assert terrain is not None  # store implies a terrain
         from .store_info import describe_store
 
         describe_store(terrain.dataset, verify)

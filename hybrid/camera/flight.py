@@ -147,7 +147,7 @@ class Flight:
             if extra:
                 raise TerrabenchError(f"{path}: unknown flight settings {sorted(extra)}")
             d.setdefault("name", path.stem)
-            return cls(eyes=eyes, targets=targets, **d)
+            return cls(eyes=np.asarray(eyes, dtype=np.float64), targets=np.asarray(targets, dtype=np.float64), **d)
         except (KeyError, ValueError, TypeError, json.JSONDecodeError) as exc:
             if isinstance(exc, TerrabenchError):
                 raise

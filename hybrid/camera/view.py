@@ -88,7 +88,7 @@ class View:
                 f"planes and a depth buffer cannot resolve that; raise near ({self.near}) or lower far"
             )
         d = self.target - self.eye
-        if np.linalg.norm(d) <= 1e-9 * max(1.0, np.linalg.norm(self.eye)):
+        if np.linalg.norm(d) <= 1e-9 * max(1.0, float(np.linalg.norm(self.eye))):
             raise TerrabenchError("target must differ from eye")
         object.__setattr__(self, "fov_y", float(self.fov_y))
         object.__setattr__(self, "near", float(self.near))

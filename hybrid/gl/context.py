@@ -13,6 +13,7 @@ import ctypes.util
 import os
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -78,7 +79,7 @@ def create_context(device: int | None = None, require: int = 430):
             device = int(raw)
         except ValueError:
             raise GLContextError(f"{DEVICE_ENV} must be a device index >= 0, got {raw!r}") from None
-    kwargs = {"backend": "egl", "require": require}
+    kwargs: dict[str, Any] = {"backend": "egl", "require": require}
     if device is not None:
         if isinstance(device, bool) or not isinstance(device, int) or device < 0:
             raise GLContextError(f"GL device index must be an integer >= 0, got {device!r}")

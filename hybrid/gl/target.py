@@ -41,10 +41,16 @@ class RenderResult:
     maps: dict = field(default_factory=dict)
     plans: list = field(default_factory=list)
 
+    def _read_back(self) -> tuple[np.ndarray, np.ndarray]:
+        """(colour, distance) of a frame that was read back; TypeError for one drawn with ``read=False``."""
+        if self.colour is None or self.distance is None:
+            raise TypeError("the frame was drawn without reading it back (Renderer.render(read=False))")
+        return self.colour, self.distance
+
     @property
     def mask(self) -> np.ndarray:
         """Coverage: True where a pixel shows terrain."""
-        return np.isfinite(self.distance)
+        return np.isfinite(self._read_back()[1])
 
     def save(self, path) -> tuple[Path, Path]:
         """Write PATH.png and PATH.depth.npy (float32 metres, inf where no terrain); returns both paths."""
@@ -52,12 +58,13 @@ class RenderResult:
 
         from hybrid.atomic import atomic_path
 
+        colour, distance = self._read_back()
         path = check_png_path(path)
         depth_path = path.parent / (path.stem + ".depth.npy")
         with atomic_path(path) as png, atomic_path(depth_path) as npy:  # both land, or neither
-            Image.fromarray(self.colour).save(png, format="PNG")
+            Image.fromarray(colour).save(png, format="PNG")
             with open(npy, "wb") as f:
-                np.save(f, self.distance.astype(np.float32))
+                np.save(f, distance.astype(np.float32))
         return path, depth_path
 
 

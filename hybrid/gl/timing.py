@@ -27,12 +27,12 @@ def timed(ctx, fn, query: bool = True):
     """(fn(), wall ms, GPU ms or None, issue ms): fn runs between two ctx.finish(); GPU ms from a timer query on
     GPUs (not with ``query`` False: fn times its own parts, and GL time queries do not nest); issue ms the wall
     clock until fn returns less its waits for the GL."""
-    query = ctx.query(time=True) if query and timer_queries_valid(ctx) else None
+    timer = ctx.query(time=True) if query and timer_queries_valid(ctx) else None
     ctx.finish()
     waited = gl_waited_ms()
     t0 = time.perf_counter()
-    if query is not None:
-        with query:
+    if timer is not None:
+        with timer:
             out = fn()
     else:
         out = fn()
@@ -40,6 +40,6 @@ def timed(ctx, fn, query: bool = True):
     gl_finish(ctx)  # other threads (the tile loader) run while the GL works
     wall = (time.perf_counter() - t0) * 1e3
     gpu = None
-    if query is not None:
-        gpu = query.elapsed / 1e6  # moderngl frees a query with its Python object
+    if timer is not None:
+        gpu = timer.elapsed / 1e6  # moderngl frees a query with its Python object
     return out, wall, gpu, issue

@@ -95,7 +95,8 @@ def _cell_weights(n: int, cells: int) -> tuple[np.ndarray, np.ndarray]:
 
 def _octave_band(xs: list[np.ndarray], n: int, rows: slice, ridged: bool) -> np.ndarray:
     """Rows ``rows`` of the octave sum (unnormalised, float64) of smooth value noise in [-1, 1]."""
-    total, amp, norm = None, 1.0, 0.0
+    total: np.ndarray | None = None
+    amp, norm = 1.0, 0.0
     for x in xs:
         k, f = _cell_weights(n, x.shape[0] - 1)
         k, fy = k[rows], f[rows][:, None]
@@ -112,6 +113,7 @@ def _octave_band(xs: list[np.ndarray], n: int, rows: slice, ridged: bool) -> np.
         total = v if total is None else np.add(total, v, out=total)
         norm += amp
         amp *= 0.5
+    assert total is not None  # xs holds one lattice an octave, and there are octaves
     total /= norm
     return total
 

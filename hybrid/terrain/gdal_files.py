@@ -12,6 +12,7 @@ import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from hybrid.errors import TerrabenchError, TerrainLoadError
 from hybrid.terrain.assemble import assemble
@@ -25,6 +26,9 @@ from hybrid.terrain.georef import (
 )
 from hybrid.terrain.heightfield import HeightField
 from hybrid.terrain.window import Crop
+
+if TYPE_CHECKING:
+    from rasterio.windows import Window
 
 PASS_SPACING = "pass --spacing METRES (or --spacing X,Y for east-west,north-south metres; `spacing` in a spec entry)"
 NO_CRS = (
@@ -67,14 +71,16 @@ def _vertical(path, crs, band_unit: str, vertical_scale) -> tuple[float, list[st
             [] if metres == 1.0 else [f"converted: heights from {unit} (vertical CRS) to metres, x {metres:.10g}"]
         )
     if band_unit:
-        metres = unit_metres(band_unit)
-        if metres is None:
+        band_metres = unit_metres(band_unit)
+        if band_metres is None:
             raise TerrainLoadError(
                 f"{path}: band unit {band_unit!r} is not a length unit pyproj knows; pass "
                 "--vertical-scale (metres per stored unit)"
             )
-        return metres, (
-            [] if metres == 1.0 else [f"converted: heights from {band_unit} (band unit) to metres, x {metres:.10g}"]
+        return band_metres, (
+            []
+            if band_metres == 1.0
+            else [f"converted: heights from {band_unit} (band unit) to metres, x {band_metres:.10g}"]
         )
     return 1.0, ["heights taken as metres: the file names no vertical unit (pass --vertical-scale to convert)"]
 
@@ -86,7 +92,7 @@ class GridHeader:
 
     band: int
     shape: tuple[int, int]
-    window: object
+    window: Window | None
     ground: object
     scale: float
     offset: float

@@ -11,6 +11,7 @@ and reported in a NoDataWarning and a note.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -193,7 +194,9 @@ def load_terrain(path, **options) -> HeightField:
     if kind is None:
         raise TerrainLoadError(f"{path}: unknown suffix {p.suffix!r}; supported: {', '.join(sorted(SUFFIXES))}")
     options = {k: v for k, v in options.items() if v is not None}
-    reader = {"png": load_png16, "gdal": load_gdal, "npy": load_npy, "npz": load_npy, "raw": load_raw}[kind]
+    readers: dict[str, Callable[..., HeightField]]
+    readers = {"png": load_png16, "gdal": load_gdal, "npy": load_npy, "npz": load_npy, "raw": load_raw}
+    reader = readers[kind]
     if kind == "raw" and ("shape" not in options or "dtype" not in options):
         raise TerrainLoadError(
             f"{path}: a raw grid needs an explicit shape (--raw-shape ROWSxCOLS) and dtype (--raw-dtype)"

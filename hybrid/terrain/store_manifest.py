@@ -115,6 +115,7 @@ def load_manifest(root, attrs: dict) -> dict | None:
         data = None
     reason = fault(data, [int(info["bytes"]), int(info["crc32"])])
     if reason is None:
+        assert data is not None  # fault calls a missing file a fault
         try:
             body = json.loads(data)
             if body.get("format") == MANIFEST_FORMAT:

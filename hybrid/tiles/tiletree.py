@@ -119,7 +119,7 @@ class _Selection:
         self.planes, self.K = view.frustum_planes_rel(), view.pixels_per_radian
         self.corners = corner_planes(self.planes)
         self.eye2 = np.concatenate([self.eye, self.eye])
-        self.parts = []  # (level, tx, ty, d, pe, c, lo, hi) arrays of selected tiles
+        self.parts: list[tuple[np.ndarray, ...]] = []  # (level, tx, ty, d, pe, c, lo, hi) arrays of selected tiles
 
     def measure(self, level: int, tx: np.ndarray, ty: np.ndarray):
         """Existing, not culled tiles of a level among (tx, ty), with distance, projected error and class."""
@@ -236,11 +236,16 @@ def _children(tx: np.ndarray, ty: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     )
 
 
-class TileSelection(list):
+class TileSelection(list[SelectedTile]):
     """Selected tiles front to back (``SelectedTile``s), with the same tiles as arrays in the same order: keys
     (B, 3) int64 level, tx, ty; distance (B,) metres; lo, hi (B, 3) world box corners (metres); inside (B,) bool."""
 
     __slots__ = ("distance", "hi", "inside", "keys", "lo")
+    distance: np.ndarray
+    hi: np.ndarray
+    inside: np.ndarray
+    keys: np.ndarray
+    lo: np.ndarray
 
 
 def select_tiles(
@@ -291,9 +296,10 @@ def edge_neighbours(keys: set, key: TileKey, dx: int, dy: int, max_level: int) -
     cov = covering_tile(keys, TileKey(key.level, nx, ny), max_level)
     if cov is not None:
         return [cov]
-    out, frontier = [], [TileKey(key.level, nx, ny)]
+    out: list[TileKey] = []
+    frontier = [TileKey(key.level, nx, ny)]
     while frontier and frontier[0].level > 0:
-        nxt = []
+        nxt: list[TileKey] = []
         for k in frontier:
             for c in k.children():
                 # keep the children on the side that faces key
