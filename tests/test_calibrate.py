@@ -88,7 +88,7 @@ def test_time_draw_positive_and_counters_grow_with_tiles(ctx, fbm129, views, nam
                 ]
                 target.clear()
                 target.use()
-                counters.append(r.strategies[name].draw_tiles(target, v, items, 2 / 3, **r.options[name]))
+                counters.append(r.strategies[name].draw_tiles(target, v, items, 2 / 3, **r.options[name].values()))
         finally:
             target.release()
     work = "rays" if name == "raycast" else "triangles"
