@@ -104,7 +104,7 @@ def summarize(frames: pd.DataFrame) -> dict[str, pd.DataFrame]:
         late = g[g["frame"] >= SETTLED_FROM]
         by = {m: q for m, q in late.groupby("method", sort=False)}
         pure_ms = {p: float(by[p]["wall_ms"].median()) for p in candidates()}
-        best = min(pure_ms, key=pure_ms.get)
+        best = min(pure_ms, key=lambda p: pure_ms[p])
         for s in sorted({m.split(":")[1] for m in by if ":" in m}, key=STARTS.index):
             hy, fr = by[f"hybrid:{s}"], by[f"frozen:{s}"]
             rows.append(

@@ -119,7 +119,7 @@ class Renderer:
         self._model = cost_model or (load_cost_model(gl_info(ctx).renderer) if self.mixed else None)
         self.online = (
             OnlineModel(self._model, adapt if isinstance(adapt, AdaptOptions) else None)
-            if adapt and self.entry is not None and self.entry.adapts
+            if adapt and self.entry is not None and self.entry.adapts and self._model is not None
             else None
         )
         self.triangles = (
@@ -329,7 +329,7 @@ class Renderer:
             streamed = make_resident(self, plans, pinned, prep_ms)
             clock = adaptive.PassClock(self.ctx, learn and len({p.choice for p in plans}) > 1)
             counters, draw, gpu, issue = timed_draw(self, target, view, plans, pinned, tau, opts, clock)
-            if learn and not (streamed and streamed.fallback_tiles):
+            if learn and self.online is not None and not (streamed and streamed.fallback_tiles):
                 adapt_ms += adaptive.learn(self.online, clock, plans, draw, gpu, issue, explored)
             stats = frame_stats(self, plans, plan_ms, draw, gpu, counters, together)
             add_frame_costs(self, stats, prep_ms, issue, adapt_ms, explored, streamed, before)

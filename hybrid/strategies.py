@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
+from typing import Any
 
 import numpy as np
 
@@ -51,7 +52,7 @@ class StrategyEntry:
 
     name: str
     kind: Kind
-    cls: type
+    cls: Any  # the GPU class, satisfying TileStrategy structurally
     description: str
     triangle_estimator: Callable[[TilePyramid], TriangleEstimator] | None = None
     candidate: bool = False

@@ -15,6 +15,7 @@ missed the cache at nearly every step); a frame's tiles are then estimated toget
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -319,7 +320,7 @@ class TileletTriangleEstimator:
         return tri, vis
 
     def many(
-        self, selected: list[SelectedTile], view: View, tau: float, budget_ms: float | None = None
+        self, selected: Sequence[SelectedTile], view: View, tau: float, budget_ms: float | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """(triangles (B,) float, visible share (B,)) of the selected tiles at ``view`` for the bound tau (pixels).
 

@@ -58,7 +58,8 @@ def _convex_hull(pts) -> list[tuple[float, float]]:
     def cross(o, a, b):
         return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
 
-    lower, upper = [], []
+    lower: list[tuple[float, float]] = []
+    upper: list[tuple[float, float]] = []
     for p in pts:
         while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
             lower.pop()
@@ -114,10 +115,10 @@ def footprint_pixels(view: View, lo: np.ndarray, hi: np.ndarray) -> float:
             pts.append(rel[a] + t * (rel[b] - rel[a]))
     if len(pts) < 3:
         return 0.0
-    pts = np.array(pts)
+    front = np.array(pts)
     t = view.tan_half_fov
-    x = (pts[:, 0] / -pts[:, 2]) / (t * view.aspect)
-    y = (pts[:, 1] / -pts[:, 2]) / t
+    x = (front[:, 0] / -front[:, 2]) / (t * view.aspect)
+    y = (front[:, 1] / -front[:, 2]) / t
     screen = np.stack([(x + 1) * 0.5 * view.width, (1 - y) * 0.5 * view.height], axis=1)
     return _hull_area_clipped(screen, view.width, view.height)
 

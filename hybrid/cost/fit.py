@@ -24,6 +24,7 @@ error is reported on frames (and tiles) held out of the fit.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -88,7 +89,7 @@ def fit_frames(
     holdout: float = 0.3,
     seed: int = 0,
     names=("raster", "raster_gs", "raycast"),
-    tiles: list[TileSample] = (),
+    tiles: Sequence[TileSample] = (),
 ) -> CostModel:
     """Coefficients and per-frame overheads of every strategy in ``names``, and the overhead of a frame that mixes
     strategies (``mix_overhead``), fitted together on a random

@@ -135,9 +135,10 @@ class OnlineModel:
         self._fresh = dict.fromkeys(names, 0)  # rows since the strategy's last refit
         self._seen: set = set()  # strategies whose first pass (compiles, first use) went by
         self._spent: dict = {}  # the last measured cost of exploring each strategy
-        self.errors = {s: deque(maxlen=self.options.hold_rows) for s in names}
-        self.residual = {"pure": deque(maxlen=self.options.window), "mixed": deque(maxlen=self.options.window)}
-        self.checks = {"pure": deque(maxlen=self.options.window), "mixed": deque(maxlen=self.options.window)}
+        self.errors: dict[str, deque[float]] = {s: deque(maxlen=self.options.hold_rows) for s in names}
+        w = self.options.window
+        self.residual: dict[str, deque[float]] = {"pure": deque(maxlen=w), "mixed": deque(maxlen=w)}
+        self.checks: dict[str, deque[tuple[int, float]]] = {"pure": deque(maxlen=w), "mixed": deque(maxlen=w)}
         self.ratios: deque = deque(maxlen=self.options.window)  # measured / starting model's ms of recent passes
         self._own: set = set()  # strategies fitted at their own level (enough rows)
         self.credit = 0.0
@@ -209,7 +210,7 @@ class OnlineModel:
         if not np.isfinite(frame_ms) or frame_ms <= 0:
             return
         terms = all_term_values(columns)
-        picks = np.asarray(picks)
+        chosen = np.asarray(picks)
         m = self.model
         learnt = []
         first = set(pass_ms) - self._seen  # drawn for the first time: one-off costs (compiles)
@@ -219,7 +220,7 @@ class OnlineModel:
             if s not in self._seen:  # a strategy's first pass pays one-off costs: not a row
                 self._seen.add(s)
                 continue
-            x = np.concatenate([[1.0], terms[picks == s][:, _TERM_INDEX[s]].sum(axis=0)])
+            x = np.concatenate([[1.0], terms[chosen == s][:, _TERM_INDEX[s]].sum(axis=0)])
             if not np.all(np.isfinite(x)):
                 continue
             predicted = float(x @ self._theta(m, s))
@@ -250,7 +251,7 @@ class OnlineModel:
             self.stats.explored_tiles += len(explored.tiles)
             self.stats.explore_ms += spent
         if learnt:  # one refit a frame, the strategy with the most rows since its last: a bounded cost
-            self._refit([max(learnt, key=self._fresh.get)])
+            self._refit([max(learnt, key=lambda s: self._fresh[s])])
 
     def mix_margin(self, prior: float) -> float:
         """The share a mix must save: how far the window's mixed frames ran over their predictions beyond the

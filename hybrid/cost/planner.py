@@ -14,6 +14,7 @@ Policies:
 from __future__ import annotations
 
 import weakref
+from collections.abc import Sequence
 from dataclasses import fields
 
 import numpy as np
@@ -152,7 +153,7 @@ def hedged_choices(predicted: dict, model: CostModel) -> list[str]:
     return [names[i] for i in hedged_picks(table, names, model).tolist()]
 
 
-def hedged_picks(table: np.ndarray, names: list[str], model: CostModel) -> np.ndarray:
+def hedged_picks(table: np.ndarray, names: Sequence[str], model: CostModel) -> np.ndarray:
     """``hedged_choices`` as indices into ``names`` (B,), from an (S, B) table of predicted ms in ``names`` order."""
     overhead, err, tile_err = model.choice_arrays(tuple(names))
     known = np.isfinite(table).all(axis=0)  # tiles every strategy can draw

@@ -134,7 +134,7 @@ class TilePyramid:
         self.max_level = int(np.ceil(np.log2(tiles0))) if tiles0 > 1 else 0
         self.size = self.n * (1 << self.max_level) + 1  # samples a side of the addressing square
         self._new_caches()
-        self._on_step = None  # per cell: corners on the source step (hybrid.tiles.quantize)
+        self._on_step: np.ndarray | None = None  # per cell: corners on the source step (hybrid.tiles.quantize)
         self._build_bounds()
 
     def _new_caches(self) -> None:
@@ -270,6 +270,7 @@ class TilePyramid:
         """Per tile of a level: True where every level-0 sample it covers is on the source step."""
         if self._on_step is None:
             self._on_step = on_step_cells(self.hf.heights, step)
+        assert self._on_step is not None, "on-step tiles asked of a grid without a source step"
         return block_reduce(self._on_step, self.n << level, np.minimum)
 
     def quantization_error(self, key: TileKey) -> float:

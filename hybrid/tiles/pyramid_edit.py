@@ -71,9 +71,9 @@ def level_blocks(h: np.ndarray, max_level: int) -> dict[int, np.ndarray]:
 class LevelArrays:
     """A pyramid's per-level arrays an edit rewrites: (tile rows, tile columns) float32 per level."""
 
-    zmax: list[np.ndarray]
-    zmin: list[np.ndarray]
-    err: list[np.ndarray]
+    zmax: dict[int, np.ndarray]
+    zmin: dict[int, np.ndarray]
+    err: dict[int, np.ndarray]
 
 
 def edit_bounds(h: np.ndarray, n: int, a: LevelArrays, blocks: dict, win: Window, touched: Touched) -> None:
