@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from hybrid.errors import TerrabenchError
+from hybrid.terrain.store_chunks import chunk_reader
 from hybrid.terrain.stored import StoredTerrain, open_store
 
 from .pyramid import TilePyramid
@@ -42,6 +43,7 @@ class StorePyramid(TilePyramid):
         self._zmax = {l: np.asarray(g[f"zmax/{l}"][:]) for l in range(self.max_level + 1)}
         self._err = {l: np.asarray(g[f"error/{l}"][:]) for l in range(self.max_level + 1)}
         self._levels = {l: g[f"levels/{l}"] for l in range(self.max_level + 1)}
+        self._readers = {l: level_reader(a, self.n) for l, a in self._levels.items()}
         self.host_budget = int(host_bytes)
         self._cache: OrderedDict = OrderedDict()
         self.cache_bytes = 0  # tiles and decoded chunks held, bytes (<= host_budget)
@@ -71,7 +73,7 @@ class StorePyramid(TilePyramid):
                 return self._cache[key]
         win = self._window(key)
         pad = ((0, self.n + 1 - win.shape[0]), (0, self.n + 1 - win.shape[1]))
-        h = np.ascontiguousarray(np.pad(win, pad, mode="edge"))
+        h = win if not any(pad[0] + pad[1]) else np.ascontiguousarray(np.pad(win, pad, mode="edge"))  # win: a copy
         with self._lock:
             if key not in self._cache:
                 self._cache[key] = h
@@ -117,8 +119,7 @@ class StorePyramid(TilePyramid):
             if key in self._chunks:
                 self._chunks.move_to_end(key)
                 return self._chunks[key]
-        n = self.n
-        c = np.asarray(self._levels[level][cy * n : (cy + 1) * n, cx * n : (cx + 1) * n], dtype=np.float32)
+        c = np.asarray(self._readers[level](cy, cx), dtype=np.float32)
         with self._lock:
             self.stats["chunk_reads"] += 1
             if key in self._chunks:  # decoded meanwhile by the other thread
@@ -225,6 +226,13 @@ class StorePyramid(TilePyramid):
             f"{self.hf.name!r} is a tile store: its padded grid is never built whole (the raster "
             "strategies read the store's node arrays instead)"
         )
+
+
+def level_reader(array, n: int):
+    """Chunk (cy, cx) of n x n samples of a level's grid: a periodic extension's wrapped level reads its source's
+    chunk, a store's level decodes its chunk file directly (``hybrid.terrain.store_chunks``)."""
+    wrapped = getattr(array, "chunk_reader", None)
+    return wrapped(n) if wrapped is not None else chunk_reader(array, (n, n))
 
 
 def pyramid_for(hf, tile_size: int) -> TilePyramid:
