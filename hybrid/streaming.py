@@ -1,13 +1,14 @@
 """Making a frame's tiles resident before the renderer draws it: all of them before the timed draw, or within an
 upload budget inside the frame, the rest drawn from a resident ancestor (``hybrid.uploads``).
 
-From a tile store the store's loader thread is first asked for the samples the frame lacks and for the slow host
+From a tile store the store's loader thread is first asked for the samples the frame lacks (those whose fallback
+shows most first, ``hybrid.uploads.fallback_priority``) and for the slow host
 work of uploads and estimates (``hybrid.uploads.host_jobs``); an upload whose host work it has not yet done waits.
 """
 
 from __future__ import annotations
 
-from hybrid.uploads import UploadReport, host_jobs, stream_uploads
+from hybrid.uploads import UploadReport, fallback_priority, host_jobs, stream_uploads
 
 
 def make_resident(r, plans: list, pinned: set, prep_ms: float) -> UploadReport | None:
@@ -20,8 +21,9 @@ def make_resident(r, plans: list, pinned: set, prep_ms: float) -> UploadReport |
         return None
     ready, deferred = (lambda key: True), (lambda plan: False)
     pyramid = r.pyramid
-    if pyramid.background_loader:  # a store: its loader thread reads what is missing
+    if pyramid.background_loader:  # a store: its loader thread reads what is missing, most visible first
         missing = [p for p in plans if (p.choice, p.key) not in r.cache.entries]
+        missing.sort(key=lambda p: -fallback_priority(r.cache, p, pyramid.max_level, pyramid.error))
         work, waiting = host_jobs(r.strategies, r.triangles, missing, pyramid.n)
         pyramid.request([p.key for p in missing] + list(work), work)
         ready = pyramid.cached
@@ -37,6 +39,8 @@ def make_resident(r, plans: list, pinned: set, prep_ms: float) -> UploadReport |
         max(r.upload_budget_ms - prep_ms, 0.0),
         ready,
         deferred,
+        pyramid.error,
+        r.job_costs,
     )
     r._fallbacks = {plans[i].key: a for i, a in streamed.fallbacks.items()}
     return streamed

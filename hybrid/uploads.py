@@ -3,10 +3,12 @@
 Bhattacharjee et al. (§4.3) keep a frame's GPU work bounded by queueing what a new view needs (uploads, max-mip
 builds, per-tile buffers) and running only as much of it as fits in the frame; a tile whose data is not yet on
 the GPU is drawn from its resident ancestor meanwhile, so the frame never shows a hole. Here one job is one
-``strategy.upload(tile)`` (which includes the strategy's per-tile GPU builds). Each frame runs jobs front to
-back until ``budget_ms`` of wall time is spent (at least one job a frame, so the queue always drains): first
-those whose CPU tile the ``ready`` callback says is loaded (a tile store's loader thread reads ahead), then
-the others, whose job reads the tile as well, except those ``deferred`` to the loader thread: jobs whose slow CPU part
+``strategy.upload(tile)`` (which includes the strategy's per-tile GPU builds). Each frame runs the jobs that fit
+in ``budget_ms`` of wall time (at least one job a frame, so the queue always drains; after it, a job starts only
+if its expected time, ``JobCosts``, fits in what is left): first those whose CPU tile the ``ready`` callback says is
+loaded (a tile store's loader thread reads ahead), then the others, whose job reads the tile as well, each group
+by priority, the tile whose fallback shows the largest screen-space error first (``fallback_priority``), except
+those ``deferred`` to the loader thread: jobs whose slow CPU part
 (``host_jobs``: a periodic extension's node block cut near a seam, tens to hundreds of ms) it runs first, so that
 no frame waits for it. The coarsest tile (the root) of every
 strategy in use is made resident before anything else, whatever the budget, so every tile has an ancestor.
@@ -77,6 +79,43 @@ def host_jobs(strategies: dict, estimator, plans, n: int) -> tuple[dict, set]:
     return work, waiting
 
 
+class JobCosts:
+    """Running estimates of an upload job's wall ms by (strategy, whether its samples were loaded), from the jobs
+    run so far (an exponential mean), so that a frame starts only the jobs that fit in what is left of its budget."""
+
+    def __init__(self, weight: float = 0.25):
+        self.weight, self.ms = float(weight), dict[tuple, float]()
+
+    def expect(self, kind) -> float:
+        """The expected ms of a job of this kind (0 before any was run: the first one measures it)."""
+        return self.ms.get(kind, 0.0)
+
+    def record(self, kind, ms: float) -> None:
+        """Take in the wall ms of a job just run."""
+        old = self.ms.get(kind)
+        self.ms[kind] = float(ms) if old is None else old + self.weight * (float(ms) - old)
+
+
+def fallback_priority(cache, plan, max_level: int, error_of) -> float:
+    """How much a missing tile's fallback shows: its nearest resident ancestor's geometric error over the tile's
+    distance (proportional to that error in pixels; infinite with the eye inside the tile's box)."""
+    root = TileKey(max_level, 0, 0)  # the fallback of last resort, made resident first
+    anc = next((a for a in ancestors(plan.key, max_level) if (plan.choice, a) in cache.entries), root)
+    err = float(error_of(anc))
+    distance = float(plan.selected.distance)
+    return err / distance if distance > 0 else float("inf")
+
+
+def job_order(cache, plans, missing: list, ready, max_level: int, error_of) -> list[tuple[int, bool]]:
+    """The frame's jobs as (plan index, samples loaded): loaded ones first (their job is the GPU's part), each group
+    by priority (``fallback_priority``, largest first; front to back without ``error_of``)."""
+    loaded = {i: bool(ready(plans[i].key)) for i in missing}
+    rank = dict.fromkeys(missing, 0.0)
+    if error_of is not None:
+        rank = {i: -fallback_priority(cache, plans[i], max_level, error_of) for i in missing}
+    return sorted(((i, loaded[i]) for i in missing), key=lambda j: (not j[1], rank[j[0]], j[0]))
+
+
 def stream_uploads(
     cache,
     strategies: dict,
@@ -87,15 +126,19 @@ def stream_uploads(
     budget_ms: float,
     ready=lambda key: True,
     deferred=lambda plan: False,
+    error_of=None,
+    costs: JobCosts | None = None,
 ) -> UploadReport:
     """Run a frame's upload jobs within ``budget_ms`` and pick an ancestor for every tile still missing.
 
-    ``plans`` (front to back) carry ``key`` and ``choice``; ``pinned`` gains every (strategy, key) the frame
-    draws, ancestors included. Returns the report; ``fallbacks`` maps a plan index to its ancestor's key.
+    ``plans`` (front to back) carry ``key``, ``choice`` and ``selected``; ``pinned`` gains every (strategy, key) the
+    frame draws, ancestors included. Jobs run in ``job_order`` (by priority with ``error_of(key)``, a tile's
+    geometric error); after the first, a job starts only if its expected ms (``costs``) fits in what is left.
+    Returns the report; ``fallbacks`` maps a plan index to its ancestor's key.
     """
     if not (budget_ms >= 0):
         raise TerrabenchError(f"upload budget must be >= 0 ms a frame, got {budget_ms!r}")
-    report = UploadReport()
+    report, costs = UploadReport(), costs or JobCosts()
     root = TileKey(max_level, 0, 0)
     t0 = time.perf_counter()
     for name in sorted({p.choice for p in plans}):
@@ -105,15 +148,17 @@ def stream_uploads(
         pinned.add((name, root))
     missing = [i for i, p in enumerate(plans) if (p.choice, p.key) not in cache.entries]
     waiting = {i for i in missing if deferred(plans[i])}  # the loader thread's first: not this frame
-    missing_now = [i for i in missing if i not in waiting]
-    loaded = [ready(plans[i].key) for i in missing_now]
-    # tiles whose samples are loaded first (their job is the GPU's part), then the others (read here too)
-    for i in [i for i, r in zip(missing_now, loaded) if r] + [i for i, r in zip(missing_now, loaded) if not r]:
-        p = plans[i]
-        if report.uploads and (time.perf_counter() - t0) * 1e3 >= budget_ms:
+    now = [i for i in missing if i not in waiting]
+    for i, loaded in job_order(cache, plans, now, ready, max_level, error_of):
+        p, spent = plans[i], (time.perf_counter() - t0) * 1e3
+        if report.uploads and spent >= budget_ms:
             break
+        if report.uploads and spent + costs.expect((p.choice, loaded)) > budget_ms:
+            continue  # would not end within the budget (a cheaper job further on may)
         try:
+            start = time.perf_counter()
             cache.get(p.choice, strategies[p.choice], p.key, lambda p=p: make_tile(p.key), pinned)
+            costs.record((p.choice, loaded), (time.perf_counter() - start) * 1e3)
             report.uploads += 1
         except BudgetExceeded:
             continue  # no room this frame: drawn from its ancestor
