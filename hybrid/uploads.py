@@ -7,7 +7,7 @@ the GPU is drawn from its resident ancestor meanwhile, so the frame never shows 
 in ``budget_ms`` of wall time (at least one job a frame, so the queue always drains; after it, a job starts only
 if its expected time, ``JobCosts``, fits in what is left): first those whose CPU tile the ``ready`` callback says is
 loaded (a tile store's loader thread reads ahead), then the others, whose job reads the tile as well, each group
-by priority, the tile whose fallback shows the largest screen-space error first (``fallback_priority``), except
+by priority, the tile whose fallback shows the largest screen-space error first (``fallback_priorities``), except
 those ``deferred`` to the loader thread: jobs whose slow CPU part
 (``host_jobs``: a periodic extension's node block cut near a seam, tens to hundreds of ms) it runs first, so that
 no frame waits for it. The coarsest tile (the root) of every
@@ -20,7 +20,10 @@ neighbours (a coarser surface for a few frames, never a hole).
 from __future__ import annotations
 
 import time
+from collections import deque
 from dataclasses import dataclass, field, replace
+
+import numpy as np
 
 from hybrid.errors import TerrabenchError
 from hybrid.residency import BudgetExceeded
@@ -80,39 +83,58 @@ def host_jobs(strategies: dict, estimator, plans, n: int) -> tuple[dict, set]:
 
 
 class JobCosts:
-    """Running estimates of an upload job's wall ms by (strategy, whether its samples were loaded), from the jobs
-    run so far (an exponential mean), so that a frame starts only the jobs that fit in what is left of its budget."""
+    """Expected wall ms of an upload job by (strategy, whether its samples were loaded): the median of the last
+    ``keep`` jobs of its kind (a median, so that one job slowed by the machine's other work does not hold back
+    the next frames' jobs), so that a frame starts only the jobs that fit in what is left of its budget."""
 
-    def __init__(self, weight: float = 0.25):
-        self.weight, self.ms = float(weight), dict[tuple, float]()
+    def __init__(self, keep: int = 8):
+        self.keep, self.ms = int(keep), dict[tuple, deque]()
 
     def expect(self, kind) -> float:
         """The expected ms of a job of this kind (0 before any was run: the first one measures it)."""
-        return self.ms.get(kind, 0.0)
+        times = self.ms.get(kind)
+        return float(np.median(times)) if times else 0.0
 
     def record(self, kind, ms: float) -> None:
         """Take in the wall ms of a job just run."""
-        old = self.ms.get(kind)
-        self.ms[kind] = float(ms) if old is None else old + self.weight * (float(ms) - old)
+        self.ms.setdefault(kind, deque(maxlen=self.keep)).append(float(ms))
 
 
-def fallback_priority(cache, plan, max_level: int, error_of) -> float:
-    """How much a missing tile's fallback shows: its nearest resident ancestor's geometric error over the tile's
-    distance (proportional to that error in pixels; infinite with the eye inside the tile's box)."""
-    root = TileKey(max_level, 0, 0)  # the fallback of last resort, made resident first
-    anc = next((a for a in ancestors(plan.key, max_level) if (plan.choice, a) in cache.entries), root)
-    err = float(error_of(anc))
-    distance = float(plan.selected.distance)
-    return err / distance if distance > 0 else float("inf")
+def fallback_priorities(cache, plans, max_level: int, error_of) -> list[float]:
+    """Per plan, how much its fallback shows: the nearest resident ancestor's geometric error (the root's if none
+    is yet) over the tile's distance (proportional to that error in pixels; infinite with the eye in its box).
+    Tiles share ancestors: each (strategy, tile)'s nearest resident one is found once."""
+    root, out = TileKey(max_level, 0, 0), []
+    nearest: dict[tuple, TileKey] = {}  # (strategy, tile) -> its nearest resident ancestor
+    errors: dict[TileKey, float] = {}
+    for p in plans:
+        walked, k, anc = [], p.key, root
+        while k.level < max_level:
+            k = k.parent()
+            if (p.choice, k) in nearest:
+                anc = nearest[(p.choice, k)]
+                break
+            walked.append((p.choice, k))
+            if (p.choice, k) in cache.entries:
+                anc = k
+                break
+        nearest.update(dict.fromkeys(walked, anc))
+        if anc not in errors:
+            errors[anc] = float(error_of(anc))
+        distance = float(p.selected.distance)
+        out.append(errors[anc] / distance if distance > 0 else float("inf"))
+    return out
 
 
 def job_order(cache, plans, missing: list, ready, max_level: int, error_of) -> list[tuple[int, bool]]:
     """The frame's jobs as (plan index, samples loaded): loaded ones first (their job is the GPU's part), each group
-    by priority (``fallback_priority``, largest first; front to back without ``error_of``)."""
+    by priority (``fallback_priorities``, largest first; front to back without ``error_of``)."""
     loaded = {i: bool(ready(plans[i].key)) for i in missing}
     rank = dict.fromkeys(missing, 0.0)
     if error_of is not None:
-        rank = {i: -fallback_priority(cache, plans[i], max_level, error_of) for i in missing}
+        rank = dict(
+            zip(missing, (-v for v in fallback_priorities(cache, [plans[i] for i in missing], max_level, error_of)))
+        )
     return sorted(((i, loaded[i]) for i in missing), key=lambda j: (not j[1], rank[j[0]], j[0]))
 
 

@@ -76,15 +76,16 @@ def test_the_largest_fallback_error_goes_first(clock):
     near = plan(0, 0, 0, 10.0)  # its parent (1, 0, 0) resident: a fallback of 0.5 m at 10 m
     far = plan(0, 7, 7, 40.0)  # only the root above it: 8 m at 40 m
     mid = plan(0, 4, 0, 20.0)  # its grandparent (2, 1, 0) resident: 2 m at 20 m
+    sibling = plan(0, 5, 1, 25.0)  # the same parent (1, 2, 0) as mid, found once: 2 m at 25 m
     for key in (TileKey(1, 0, 0), TileKey(2, 1, 0)):
         cache.get("s", strategy, key, lambda key=key: key)
-    plans = [near, mid, far]  # front to back
+    plans = [near, mid, sibling, far]  # front to back
     order = []
-    for _ in range(4):  # a zero budget: one job a frame (the root's first)
+    for _ in range(5):  # a zero budget: one job a frame (the root's first)
         strategy.uploaded.clear()
         _frame(cache, strategy, plans, 0.0, costs, error_of=lambda k: errors[k.level])
         order += [k for k in strategy.uploaded if k.level == 0]
-    assert order == [far.key, mid.key, near.key]  # 0.2, 0.1, 0.05 m a metre
+    assert order == [far.key, mid.key, sibling.key, near.key]  # 0.2, 0.1, 0.08, 0.05 m a metre
     cache.clear()
     strategy.uploaded.clear()
     _frame(cache, strategy, plans, 0.0, costs)  # without errors: front to back

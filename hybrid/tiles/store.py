@@ -8,6 +8,7 @@ read whole), a tile's samples are read from disk when asked for and kept in a ho
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from collections import OrderedDict
 from pathlib import Path
@@ -140,6 +141,12 @@ class StorePyramid(TilePyramid):
         with self._lock:
             return key in self._cache or key in self._failed
 
+    def cached_keys(self, keys) -> set:
+        """Those of ``keys`` that ``cached`` is true of, under one hold of the lock (a frame's hundreds of tiles
+        would otherwise each wait on the loader thread for the lock and the interpreter)."""
+        with self._lock:
+            return {k for k in keys if k in self._cache or k in self._failed}
+
     def request(self, keys, work: dict | None = None) -> threading.Event:
         """Have the loader thread read these tiles next, front to back, in place of what it was asked before, and
         after a tile's samples run its ``work`` (key -> callables: host work of its upload or estimate, thread-safe,
@@ -177,6 +184,17 @@ class StorePyramid(TilePyramid):
             self._go.clear()
         else:
             self._go.set()
+
+    @contextlib.contextmanager
+    def held(self):
+        """Hold the loader thread (as ``pause``) inside the block, then restore what it was: so that a frame's
+        upload jobs do not wait on the loader's reads for the interpreter lock."""
+        was = not self._go.is_set()
+        self.pause()
+        try:
+            yield
+        finally:
+            self.pause(was)
 
     def close(self) -> None:
         """Stop the loader thread (it ends after the tile it is reading) and drop the host cache; a later read
