@@ -53,7 +53,7 @@ from hybrid.terrain.heightfield import HeightField
 from hybrid.tiles.pyramid import EDGE_E, EDGE_N, EDGE_S, EDGE_W, TilePyramid
 from hybrid.tiles.store import pyramid_for
 from hybrid.tiles.tiletree import DEFAULT_TAU, edge_neighbours
-from hybrid.uploads import fallback_selection, fallback_tile
+from hybrid.uploads import JobCosts, fallback_selection, fallback_tile
 
 
 def route_options(strategies: dict, options: dict) -> dict[str, dict]:
@@ -132,6 +132,7 @@ class Renderer:
         if upload_budget_ms is not None and not (np.isfinite(upload_budget_ms) and upload_budget_ms >= 0):
             raise TerrabenchError(f"upload budget must be a finite number of ms >= 0, got {upload_budget_ms!r}")
         self.upload_budget_ms = upload_budget_ms
+        self.job_costs = JobCosts()  # upload jobs' expected ms: a frame starts those that fit its budget
         self._fallbacks: dict = {}
         self._tiles: OrderedDict = OrderedDict()
         self._released = False

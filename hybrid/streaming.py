@@ -1,13 +1,16 @@
 """Making a frame's tiles resident before the renderer draws it: all of them before the timed draw, or within an
 upload budget inside the frame, the rest drawn from a resident ancestor (``hybrid.uploads``).
 
-From a tile store the store's loader thread is first asked for the samples the frame lacks and for the slow host
+From a tile store the store's loader thread is first asked for the samples the frame lacks (those whose fallback
+shows most first, ``hybrid.uploads.fallback_priorities``) and for the slow host
 work of uploads and estimates (``hybrid.uploads.host_jobs``); an upload whose host work it has not yet done waits.
 """
 
 from __future__ import annotations
 
-from hybrid.uploads import UploadReport, host_jobs, stream_uploads
+import contextlib
+
+from hybrid.uploads import UploadReport, fallback_priorities, host_jobs, stream_uploads
 
 
 def make_resident(r, plans: list, pinned: set, prep_ms: float) -> UploadReport | None:
@@ -20,23 +23,33 @@ def make_resident(r, plans: list, pinned: set, prep_ms: float) -> UploadReport |
         return None
     ready, deferred = (lambda key: True), (lambda plan: False)
     pyramid = r.pyramid
-    if pyramid.background_loader:  # a store: its loader thread reads what is missing
+    if pyramid.background_loader:  # a store: its loader thread reads what is missing, most visible first
         missing = [p for p in plans if (p.choice, p.key) not in r.cache.entries]
+        rank = fallback_priorities(r.cache, missing, pyramid.max_level, pyramid.error)
+        missing = [missing[i] for i in sorted(range(len(missing)), key=lambda i: -rank[i])]
         work, waiting = host_jobs(r.strategies, r.triangles, missing, pyramid.n)
         pyramid.request([p.key for p in missing] + list(work), work)
-        ready = pyramid.cached
+        ready = pyramid.cached_keys([p.key for p in missing]).__contains__  # one look, not one a tile
         deferred = lambda p: (p.choice, p.key) in waiting and not pyramid.failed(p.key)  # noqa: E731
-    # the frame's budget covers the estimate's preparation and the uploads together
-    streamed = stream_uploads(
+    # the frame's budget covers the estimate's preparation and the uploads together; a store's loader waits
+    with pyramid.held() if pyramid.background_loader else contextlib.nullcontext():
+        streamed = _stream(r, plans, pinned, prep_ms, ready, deferred)
+    r._fallbacks = {plans[i].key: a for i, a in streamed.fallbacks.items()}
+    return streamed
+
+
+def _stream(r, plans, pinned, prep_ms, ready, deferred) -> UploadReport:
+    """``stream_uploads`` with the renderer's cache, strategies, tiles, budget, errors and job costs."""
+    return stream_uploads(
         r.cache,
         r.strategies,
         plans,
         pinned,
         r.tile,
-        pyramid.max_level,
+        r.pyramid.max_level,
         max(r.upload_budget_ms - prep_ms, 0.0),
         ready,
         deferred,
+        r.pyramid.error,
+        r.job_costs,
     )
-    r._fallbacks = {plans[i].key: a for i, a in streamed.fallbacks.items()}
-    return streamed

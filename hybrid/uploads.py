@@ -3,10 +3,12 @@
 Bhattacharjee et al. (§4.3) keep a frame's GPU work bounded by queueing what a new view needs (uploads, max-mip
 builds, per-tile buffers) and running only as much of it as fits in the frame; a tile whose data is not yet on
 the GPU is drawn from its resident ancestor meanwhile, so the frame never shows a hole. Here one job is one
-``strategy.upload(tile)`` (which includes the strategy's per-tile GPU builds). Each frame runs jobs front to
-back until ``budget_ms`` of wall time is spent (at least one job a frame, so the queue always drains): first
-those whose CPU tile the ``ready`` callback says is loaded (a tile store's loader thread reads ahead), then
-the others, whose job reads the tile as well, except those ``deferred`` to the loader thread: jobs whose slow CPU part
+``strategy.upload(tile)`` (which includes the strategy's per-tile GPU builds). Each frame runs the jobs that fit
+in ``budget_ms`` of wall time (at least one job a frame, so the queue always drains; after it, a job starts only
+if its expected time, ``JobCosts``, fits in what is left): first those whose CPU tile the ``ready`` callback says is
+loaded (a tile store's loader thread reads ahead), then the others, whose job reads the tile as well, each group
+by priority, the tile whose fallback shows the largest screen-space error first (``fallback_priorities``), except
+those ``deferred`` to the loader thread: jobs whose slow CPU part
 (``host_jobs``: a periodic extension's node block cut near a seam, tens to hundreds of ms) it runs first, so that
 no frame waits for it. The coarsest tile (the root) of every
 strategy in use is made resident before anything else, whatever the budget, so every tile has an ancestor.
@@ -18,7 +20,10 @@ neighbours (a coarser surface for a few frames, never a hole).
 from __future__ import annotations
 
 import time
+from collections import deque
 from dataclasses import dataclass, field, replace
+
+import numpy as np
 
 from hybrid.errors import TerrabenchError
 from hybrid.residency import BudgetExceeded
@@ -77,6 +82,62 @@ def host_jobs(strategies: dict, estimator, plans, n: int) -> tuple[dict, set]:
     return work, waiting
 
 
+class JobCosts:
+    """Expected wall ms of an upload job by (strategy, whether its samples were loaded): the median of the last
+    ``keep`` jobs of its kind (a median, so that one job slowed by the machine's other work does not hold back
+    the next frames' jobs), so that a frame starts only the jobs that fit in what is left of its budget."""
+
+    def __init__(self, keep: int = 8):
+        self.keep, self.ms = int(keep), dict[tuple, deque]()
+
+    def expect(self, kind) -> float:
+        """The expected ms of a job of this kind (0 before any was run: the first one measures it)."""
+        times = self.ms.get(kind)
+        return float(np.median(times)) if times else 0.0
+
+    def record(self, kind, ms: float) -> None:
+        """Take in the wall ms of a job just run."""
+        self.ms.setdefault(kind, deque(maxlen=self.keep)).append(float(ms))
+
+
+def fallback_priorities(cache, plans, max_level: int, error_of) -> list[float]:
+    """Per plan, how much its fallback shows: the nearest resident ancestor's geometric error (the root's if none
+    is yet) over the tile's distance (proportional to that error in pixels; infinite with the eye in its box).
+    Tiles share ancestors: each (strategy, tile)'s nearest resident one is found once."""
+    root, out = TileKey(max_level, 0, 0), []
+    nearest: dict[tuple, TileKey] = {}  # (strategy, tile) -> its nearest resident ancestor
+    errors: dict[TileKey, float] = {}
+    for p in plans:
+        walked, k, anc = [], p.key, root
+        while k.level < max_level:
+            k = k.parent()
+            if (p.choice, k) in nearest:
+                anc = nearest[(p.choice, k)]
+                break
+            walked.append((p.choice, k))
+            if (p.choice, k) in cache.entries:
+                anc = k
+                break
+        nearest.update(dict.fromkeys(walked, anc))
+        if anc not in errors:
+            errors[anc] = float(error_of(anc))
+        distance = float(p.selected.distance)
+        out.append(errors[anc] / distance if distance > 0 else float("inf"))
+    return out
+
+
+def job_order(cache, plans, missing: list, ready, max_level: int, error_of) -> list[tuple[int, bool]]:
+    """The frame's jobs as (plan index, samples loaded): loaded ones first (their job is the GPU's part), each group
+    by priority (``fallback_priorities``, largest first; front to back without ``error_of``)."""
+    loaded = {i: bool(ready(plans[i].key)) for i in missing}
+    rank = dict.fromkeys(missing, 0.0)
+    if error_of is not None:
+        rank = dict(
+            zip(missing, (-v for v in fallback_priorities(cache, [plans[i] for i in missing], max_level, error_of)))
+        )
+    return sorted(((i, loaded[i]) for i in missing), key=lambda j: (not j[1], rank[j[0]], j[0]))
+
+
 def stream_uploads(
     cache,
     strategies: dict,
@@ -87,15 +148,19 @@ def stream_uploads(
     budget_ms: float,
     ready=lambda key: True,
     deferred=lambda plan: False,
+    error_of=None,
+    costs: JobCosts | None = None,
 ) -> UploadReport:
     """Run a frame's upload jobs within ``budget_ms`` and pick an ancestor for every tile still missing.
 
-    ``plans`` (front to back) carry ``key`` and ``choice``; ``pinned`` gains every (strategy, key) the frame
-    draws, ancestors included. Returns the report; ``fallbacks`` maps a plan index to its ancestor's key.
+    ``plans`` (front to back) carry ``key``, ``choice`` and ``selected``; ``pinned`` gains every (strategy, key) the
+    frame draws, ancestors included. Jobs run in ``job_order`` (by priority with ``error_of(key)``, a tile's
+    geometric error); after the first, a job starts only if its expected ms (``costs``) fits in what is left.
+    Returns the report; ``fallbacks`` maps a plan index to its ancestor's key.
     """
     if not (budget_ms >= 0):
         raise TerrabenchError(f"upload budget must be >= 0 ms a frame, got {budget_ms!r}")
-    report = UploadReport()
+    report, costs = UploadReport(), costs or JobCosts()
     root = TileKey(max_level, 0, 0)
     t0 = time.perf_counter()
     for name in sorted({p.choice for p in plans}):
@@ -105,15 +170,17 @@ def stream_uploads(
         pinned.add((name, root))
     missing = [i for i, p in enumerate(plans) if (p.choice, p.key) not in cache.entries]
     waiting = {i for i in missing if deferred(plans[i])}  # the loader thread's first: not this frame
-    missing_now = [i for i in missing if i not in waiting]
-    loaded = [ready(plans[i].key) for i in missing_now]
-    # tiles whose samples are loaded first (their job is the GPU's part), then the others (read here too)
-    for i in [i for i, r in zip(missing_now, loaded) if r] + [i for i, r in zip(missing_now, loaded) if not r]:
-        p = plans[i]
-        if report.uploads and (time.perf_counter() - t0) * 1e3 >= budget_ms:
+    now = [i for i in missing if i not in waiting]
+    for i, loaded in job_order(cache, plans, now, ready, max_level, error_of):
+        p, spent = plans[i], (time.perf_counter() - t0) * 1e3
+        if report.uploads and spent >= budget_ms:
             break
+        if report.uploads and spent + costs.expect((p.choice, loaded)) > budget_ms:
+            continue  # would not end within the budget (a cheaper job further on may)
         try:
+            start = time.perf_counter()
             cache.get(p.choice, strategies[p.choice], p.key, lambda p=p: make_tile(p.key), pinned)
+            costs.record((p.choice, loaded), (time.perf_counter() - start) * 1e3)
             report.uploads += 1
         except BudgetExceeded:
             continue  # no room this frame: drawn from its ancestor

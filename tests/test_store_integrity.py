@@ -36,15 +36,20 @@ def reads(clean, ctx, tmp_path_factory):
     from experiments.cli.options import TerrainOptions, ViewOptions
 
     cls, seen = store_manifest._checked_class(), []
-    original = cls.get
+    original, original_file = cls.get, cls.read_file
 
     async def recording(self, key, prototype=None, byte_range=None):
         seen.append(key)
         return await original(self, key, prototype, byte_range)
 
+    def recording_file(self, key):  # chunks read directly (hybrid.terrain.store_chunks)
+        seen.append(key)
+        return original_file(self, key)
+
     out = {}
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(cls, "get", recording)
+        mp.setattr(cls, "read_file", recording_file)
         ViewOptions(size=(96, 54), flight="flyover", frame=1).view(TerrainOptions(str(clean)).load())
         camera = set(seen)
         for method in METHODS:

@@ -171,6 +171,18 @@ def _checked_class():
                 raise damaged(self.store_path, key, reason)
             return data
 
+        def read_file(self, key: str) -> bytes | None:
+            """A file's bytes read in the caller's thread (None: absent and not listed), checked as ``get`` does."""
+            try:
+                data = (Path(self.store_path) / key).read_bytes()
+            except (FileNotFoundError, NotADirectoryError):
+                data = None
+            entry = self.files.get(key)
+            reason = None if entry is None else fault(data, entry)
+            if reason:
+                raise damaged(self.store_path, key, reason)
+            return data
+
         def with_read_only(self, read_only: bool = False):
             if not read_only:
                 raise TerrabenchError(f"{self.store_path}: an opened tile store is read-only")

@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from hybrid.errors import TerrabenchError
+from hybrid.terrain.store_chunks import ChunkRead, chunk_reader, sliced_reader
 from hybrid.terrain.stored import LazyGrid, StoredTerrain, open_store
 
 from .periodic_nodes import PeriodicNodes
@@ -57,6 +58,21 @@ class _WrappedLevel:
     @property
     def vindex(self):
         return _VIndex(self)
+
+    def chunk_reader(self, n: int) -> ChunkRead:
+        """Chunk (cy, cx) of n x n samples, clipped to the grid: the source's chunk (cy, cx) modulo the period, read
+        directly, when the period is whole chunks of the source's own level; else a slice of this grid."""
+        if self.stride != 1 or self.period % n:
+            return sliced_reader(self, (n, n))
+        source, t, (rows, cols) = chunk_reader(self.source, (n, n)), self.period // n, self.shape
+
+        def read(cy: int, cx: int) -> np.ndarray:
+            r, c = rows - cy * n, cols - cx * n
+            if min(cy, cx) < 0 or r <= 0 or c <= 0:
+                raise IndexError(f"chunk ({cy}, {cx}) lies outside the wrapped grid of {rows}x{cols}")
+            return source(cy % t, cx % t)[:r, :c]
+
+        return read
 
 
 class _VIndex:

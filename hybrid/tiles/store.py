@@ -8,6 +8,7 @@ read whole), a tile's samples are read from disk when asked for and kept in a ho
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from collections import OrderedDict
 from pathlib import Path
@@ -16,6 +17,7 @@ import numpy as np
 
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.edits import Window
+from hybrid.terrain.store_chunks import chunk_reader
 from hybrid.terrain.stored import StoredTerrain, open_store
 
 from .pyramid import TileKey, TilePyramid
@@ -44,6 +46,7 @@ class StorePyramid(TilePyramid):
         self._zmax = {l: np.asarray(g[f"zmax/{l}"][:]) for l in range(self.max_level + 1)}
         self._err = {l: np.asarray(g[f"error/{l}"][:]) for l in range(self.max_level + 1)}
         self._levels = {l: g[f"levels/{l}"] for l in range(self.max_level + 1)}
+        self._readers = {l: level_reader(a, self.n) for l, a in self._levels.items()}
         self.host_budget = int(host_bytes)
         self._cache: OrderedDict = OrderedDict()
         self.cache_bytes = 0  # tiles and decoded chunks held, bytes (<= host_budget)
@@ -73,7 +76,7 @@ class StorePyramid(TilePyramid):
                 return self._cache[key]
         win = self._window(key)
         pad = ((0, self.n + 1 - win.shape[0]), (0, self.n + 1 - win.shape[1]))
-        h = np.ascontiguousarray(np.pad(win, pad, mode="edge"))
+        h = win if not any(pad[0] + pad[1]) else np.ascontiguousarray(np.pad(win, pad, mode="edge"))  # win: a copy
         with self._lock:
             if key not in self._cache:
                 self._cache[key] = h
@@ -119,8 +122,7 @@ class StorePyramid(TilePyramid):
             if key in self._chunks:
                 self._chunks.move_to_end(key)
                 return self._chunks[key]
-        n = self.n
-        c = np.asarray(self._levels[level][cy * n : (cy + 1) * n, cx * n : (cx + 1) * n], dtype=np.float32)
+        c = np.asarray(self._readers[level](cy, cx), dtype=np.float32)
         with self._lock:
             self.stats["chunk_reads"] += 1
             if key in self._chunks:  # decoded meanwhile by the other thread
@@ -168,6 +170,12 @@ class StorePyramid(TilePyramid):
         with self._lock:
             return key in self._cache or key in self._failed
 
+    def cached_keys(self, keys) -> set:
+        """Those of ``keys`` that ``cached`` is true of, under one hold of the lock (a frame's hundreds of tiles
+        would otherwise each wait on the loader thread for the lock and the interpreter)."""
+        with self._lock:
+            return {k for k in keys if k in self._cache or k in self._failed}
+
     def request(self, keys, work: dict | None = None) -> threading.Event:
         """Have the loader thread read these tiles next, front to back, in place of what it was asked before, and
         after a tile's samples run its ``work`` (key -> callables: host work of its upload or estimate, thread-safe,
@@ -205,6 +213,17 @@ class StorePyramid(TilePyramid):
             self._go.clear()
         else:
             self._go.set()
+
+    @contextlib.contextmanager
+    def held(self):
+        """Hold the loader thread (as ``pause``) inside the block, then restore what it was: so that a frame's
+        upload jobs do not wait on the loader's reads for the interpreter lock."""
+        was = not self._go.is_set()
+        self.pause()
+        try:
+            yield
+        finally:
+            self.pause(was)
 
     def close(self) -> None:
         """Stop the loader thread (it ends after the tile it is reading) and drop the host cache; a later read
@@ -261,6 +280,13 @@ def _chunk_meets(chunk: tuple, n: int, win: Window) -> bool:
     level, cy, cx = chunk
     s, k = n << level, 1 << level  # a level's last sample may sit up to k samples before
     return cy * s - k < win.i1 and win.i0 < (cy + 1) * s and cx * s - k < win.j1 and win.j0 < (cx + 1) * s
+
+
+def level_reader(array, n: int):
+    """Chunk (cy, cx) of n x n samples of a level's grid: a periodic extension's wrapped level reads its source's
+    chunk, a store's level decodes its chunk file directly (``hybrid.terrain.store_chunks``)."""
+    wrapped = getattr(array, "chunk_reader", None)
+    return wrapped(n) if wrapped is not None else chunk_reader(array, (n, n))
 
 
 def pyramid_for(hf, tile_size: int) -> TilePyramid:
