@@ -16,7 +16,8 @@ from hybrid.cost.model import (
     read_costs_file,
     save_cost_model,
 )
-from hybrid.cost.online import AdaptOptions, Exploration, OnlineModel, fit_rows
+from hybrid.cost.online import AdaptOptions, Exploration, OnlineModel
+from hybrid.cost.online_fit import fit_rows
 from hybrid.errors import TerrabenchError
 
 TRUE = true_model(overhead={"raster": 2.0, "raster_gs": 3.0, "raycast": 1.5}, mix_overhead=0.8)
@@ -93,9 +94,12 @@ def test_fit_rows_keeps_the_prior_shape_from_passes_of_a_few_explored_tiles():
     X = np.c_[np.ones(40), rng.integers(1, 3, 40), rng.uniform(1e3, 2e4, 40)]
     y = (X @ np.array([0.5, 1.5, 1e-4])) * (1 + 0.05 * rng.standard_normal(40))  # another split, same level
     fitted = fit_rows(X, y, theta, prior_weight=2.0, shape_rows=12, few_tiles=2)
-    ratio = fitted / theta
-    assert np.allclose(ratio, ratio[0])  # the prior's split kept, only its level moved
+    assert np.isclose(fitted[1] / theta[1], fitted[2] / theta[2])  # the tiles keep the prior's split
     assert 0.8 < np.median((X @ fitted) / y) < 1.25
+    X2 = np.r_[X, [[1.0, 20.0, 3e5]]]  # one pass of many tiles, 3x its prediction, sets the tiles' level
+    y2 = np.r_[y, 3.0 * (X2[-1] @ theta)]
+    fitted = fit_rows(X2, y2, theta, prior_weight=2.0, shape_rows=12, few_tiles=2)
+    assert 0.8 < (X2[-1] @ fitted) / y2[-1] < 1.25  # a frame drawn whole is priced by it, not by the 40 small
     X[:, 1] = rng.integers(5, 30, 40)  # passes of many tiles: the split is learnt
     y = (X @ np.array([0.5, 1.5, 1e-4])) * (1 + 0.01 * rng.standard_normal(40))
     fitted = fit_rows(X, y, theta, prior_weight=2.0, shape_rows=12, few_tiles=2)
@@ -322,3 +326,23 @@ def test_a_learned_model_never_overwrites_the_calibrated_one(tmp_path):
     assert (
         got.adapted_frames == 0 and got.coefficients["raycast"] == calibrated.coefficients["raycast"]
     )  # the calibration serves again
+
+
+def test_exploring_is_charged_what_the_whole_frame_cost_beyond_its_prediction():
+    rng = np.random.default_rng(16)
+    online = OnlineModel(TRUE)
+    cols = columns(rng, 10)
+    chosen = np.array(["raster"] * 10, dtype=object)
+    for _ in range(4):  # one-strategy frames measured at 1.1x their prediction
+        passes = true_passes(cols, chosen, rng, noise=0.0)
+        online.observe(cols, chosen.tolist(), passes, 1.1 * passes["raster"], None, passes["raster"])
+    chosen[:2] = "raycast"
+    passes = true_passes(cols, chosen, rng, noise=0.0)
+    online.observe(cols, chosen.tolist(), passes, sum(passes.values()))  # raycast's first pass: one-off costs
+    online.credit = 10.0
+    pure_frame = 20.0  # predicted ms of the frame as chosen, all raster
+    passes = {"raster": 18.0, "raycast": 3.0}  # the explored pass: 2 ms beyond the tiles' 1 ms as raster
+    explored = Exploration("raycast", np.arange(2), 1.0, pure_frame, True)
+    online.observe(cols, chosen.tolist(), passes, 30.0, explored)
+    assert online.stats.explore_ms == pytest.approx(30.0 - 1.1 * pure_frame)  # the frame's 8 ms, not the pass's 2
+    assert online.credit == pytest.approx(10.0 + 0.05 * 30.0 - 8.0)

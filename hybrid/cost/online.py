@@ -20,8 +20,11 @@ strategy not drawn yet does not look cheap beside one that is.
 A strategy the hybrid does not choose gives no rows, so it may be given a few tiles of a frame (exploration):
 at most ``explore_tiles`` tiles, those it is predicted to draw cheapest against the frame's choice, paid from a
 budget that earns ``explore_share`` of every observed frame's measured ms and is charged the exploration's
-measured cost (its pass, less the chosen strategy's predicted cost of those tiles; a strategy's first pass,
-which pays one-off costs such as compiling its shaders, is neither charged nor a row). A strategy whose last
+measured cost: the frame's measured ms beyond the frame as chosen (predicted, at the level such frames were
+recently measured at), or its pass less the chosen strategy's predicted cost of those tiles if that is more (a
+strategy's first pass, which pays one-off costs such as compiling its shaders, is neither charged nor a row).
+Until a strategy has ``shape_rows`` passes of more than ``explore_tiles`` tiles, its passes of a few tiles set its
+per-frame overhead and its tiles keep the starting model's split (``hybrid.cost.online_fit``). A strategy whose last
 ``hold_rows`` predictions were within ``hold_error`` (median relative error of passes predicted before they
 were fitted) holds, and is explored no more while it holds.
 
@@ -43,25 +46,14 @@ from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import nnls
 
 from hybrid.cost.model import _TERM_INDEX, ONLINE_FIT_VERSION, TERMS, CostModel, all_term_values
+from hybrid.cost.online_fit import fit_rows, median_of
 from hybrid.errors import TerrabenchError
-
-
-def _median(values) -> float:
-    """Median of a short sequence (numpy's median costs more than the sort on a few dozen values)."""
-    v = sorted(values)
-    n = len(v)
-    return float(v[n // 2]) if n % 2 else 0.5 * float(v[n // 2 - 1] + v[n // 2])
-
 
 OPTIMISM = 0.5
 """Exploration prices a strategy at this share of its predicted cost: one that would not pay even then is not
 explored (its predictions may be this far off before they hold, and no farther once its level is fitted)."""
-
-OUTLIER = 4.0
-"""Rows whose relative residual is over this many times the median one (and over 0.25) are refitted without."""
 
 
 @dataclass(frozen=True)
@@ -94,12 +86,15 @@ class AdaptOptions:
 
 @dataclass
 class Exploration:
-    """Tiles of one frame given to a strategy to learn it: their indices, and the predicted ms the chosen
-    strategies would have drawn them in."""
+    """Tiles of one frame given to a strategy to learn it: their indices, the predicted ms the chosen
+    strategies would have drawn them in, and the predicted ms of the frame as chosen (0: not known) and whether
+    that frame used one strategy."""
 
     strategy: str
     tiles: np.ndarray
     base_ms: float
+    frame_ms: float = 0.0
+    pure: bool = True
 
 
 @dataclass
@@ -148,7 +143,7 @@ class OnlineModel:
     def holds(self, strategy: str) -> bool:
         """Whether the strategy's recent predictions held (``hold_rows`` passes within ``hold_error``)."""
         e = self.errors[strategy]
-        return len(e) == e.maxlen and _median(e) <= self.options.hold_error
+        return len(e) == e.maxlen and median_of(e) <= self.options.hold_error
 
     @property
     def settled(self) -> bool:
@@ -180,8 +175,10 @@ class OnlineModel:
         cost = m.overhead.get(names[i], 0.0) + m.mix_overhead + float(table[i, tiles].sum() - base[tiles].sum())
         if max(cost, self._spent.get(names[i], 0.0)) > self.credit or not self._might_pay(table[i], base, names[i]):
             return None
+        chosen = [names[j] for j in used]
+        frame = m.frame_ms(base, set(chosen))
         picks[tiles] = i
-        return Exploration(names[i], tiles, float(base[tiles].sum()))
+        return Exploration(names[i], tiles, float(base[tiles].sum()), frame, len(chosen) == 1)
 
     def _might_pay(self, costs: np.ndarray, base: np.ndarray, strategy: str) -> bool:
         """Whether strategy ``strategy``, ``OPTIMISM`` times as costly as predicted (its per-tile ``costs`` (B,) and
@@ -244,7 +241,7 @@ class OnlineModel:
             self.credit + self.options.explore_share * frame_ms, 20 * self.options.explore_share * frame_ms
         )
         if explored is not None and explored.strategy in pass_ms:
-            spent = max(pass_ms[explored.strategy] - explored.base_ms, 0.0) if explored.strategy not in first else 0.0
+            spent = self._explore_cost(explored, pass_ms, frame_ms) if explored.strategy not in first else 0.0
             self._spent[explored.strategy] = spent
             self.credit -= spent
             self.stats.explored_frames += 1
@@ -262,7 +259,17 @@ class OnlineModel:
         if len(mixed) < 3:
             return prior
         pure = [r for k, r in self.checks["pure"] if k >= since]
-        return max(_median(mixed) / (_median(pure) if pure else 1.0) - 1.0, 0.0)
+        return max(median_of(mixed) / (median_of(pure) if pure else 1.0) - 1.0, 0.0)
+
+    def _explore_cost(self, explored: Exploration, pass_ms: dict, frame_ms: float) -> float:
+        """What exploring cost a frame (ms): its measured ms beyond the frame as chosen (predicted, times the
+        window's measured / predicted of such frames), or the explored pass beyond the tiles' predicted ms if
+        that is more. A mixed frame costs more than its explored pass: the split timing, the depth copy."""
+        kind = "pure" if explored.pure else "mixed"
+        recent = [r for _, r in self.checks[kind]]
+        expected = explored.frame_ms * (median_of(recent) if recent else 1.0)
+        whole = frame_ms - expected if explored.frame_ms > 0 else 0.0
+        return max(whole, pass_ms[explored.strategy] - explored.base_ms, 0.0)
 
     def _cadence(self, s: str) -> int:
         """Rows between refits of strategy s: every row while it has few, every other while its predictions do not
@@ -289,10 +296,10 @@ class OnlineModel:
                 pred = X @ self._theta(self.start, s)
                 ok = pred > 0
                 if ok.any():
-                    levels.append(_median((y[ok] / pred[ok]).tolist()))
+                    levels.append(median_of((y[ok] / pred[ok]).tolist()))
         if levels:
-            return _median(levels)
-        return _median(self.ratios) if self.ratios else 1.0
+            return median_of(levels)
+        return median_of(self.ratios) if self.ratios else 1.0
 
     def _refit(self, names: list[str]) -> None:
         m = copy.copy(self.model)
@@ -320,12 +327,12 @@ class OnlineModel:
             m.coefficients = {**m.coefficients, s: dict(zip(TERMS[s], map(float, theta[1:])))}
         mixed, pure = self.residual["mixed"], self.residual["pure"]
         if len(mixed) >= 3:
-            m.mix_overhead = max(_median(mixed) - (_median(pure) if pure else 0.0), 0.0)
-        m.fit_error = {**m.fit_error, **{s: _median(e) for s in names if len(e := self.errors[s]) == e.maxlen}}
+            m.mix_overhead = max(median_of(mixed) - (median_of(pure) if pure else 0.0), 0.0)
+        m.fit_error = {**m.fit_error, **{s: median_of(e) for s in names if len(e := self.errors[s]) == e.maxlen}}
         m.__dict__.pop("_memos", None)
         self.model = m
         self.stats.refits += 1
-        self.stats.errors.update({s: _median(self.errors[s]) for s in names})
+        self.stats.errors.update({s: median_of(self.errors[s]) for s in names})
 
 
 class RowWindow:
@@ -349,45 +356,3 @@ class RowWindow:
 
     def __len__(self) -> int:
         return min(self.n, len(self.y))
-
-
-def fit_rows(
-    X: np.ndarray,
-    y: np.ndarray,
-    prior: np.ndarray,
-    prior_weight: float,
-    prior_share: float = 0.0,
-    shape_rows: int = 0,
-    few_tiles: int = 0,
-    own_level: bool = True,
-) -> np.ndarray:
-    """Non-negative [overhead, coefficients] of one strategy from rows of terms X (n, p; column 1 the tile
-    count) and measured ms y (n,), on relative error, with a ridge toward ``prior`` scaled by the rows' median
-    measured / predicted, worth the larger of ``prior_weight`` rows and ``prior_share`` of the rows; outliers
-    (``OUTLIER``) dropped and refitted once. No rows: the prior. Fewer than ``shape_rows`` rows of more than
-    ``few_tiles`` tiles: the scaled prior (passes of a few explored tiles fix a strategy's level, not how its
-    cost splits between the frame and its tiles). Without ``own_level``: the prior as given (a strategy of too
-    few rows to tell its own level follows the machine's, which the caller has applied)."""
-    if len(y) == 0 or not own_level:
-        return prior.copy()
-    pred = X @ prior
-    ratio = y[pred > 0] / pred[pred > 0]
-    scaled = prior * (_median(ratio.tolist()) if len(ratio) else 1.0)
-    if int(np.count_nonzero(X[:, 1] > few_tiles)) < shape_rows:
-        return scaled
-    A = X / y[:, None]
-    col = np.sqrt(np.einsum("ij,ij->j", A, A) / len(y))
-    col = np.where(col > 0, col, 1.0)
-    keep = np.ones(len(y), dtype=bool)
-    for _ in range(2):
-        ridge = np.sqrt(max(prior_weight, prior_share * int(keep.sum()))) * np.eye(len(prior))
-        M = np.vstack([A[keep] / col, ridge])
-        b = np.concatenate([np.ones(int(keep.sum())), ridge @ (scaled * col)])
-        u, _ = nnls(M, b, maxiter=50 * len(prior))
-        theta = u / col
-        res = np.abs(A @ theta - 1.0)
-        cut = max(OUTLIER * _median(res.tolist()), 0.25)
-        if keep.sum() < 4 or np.all(res[keep] <= cut):
-            break
-        keep = res <= cut
-    return theta
