@@ -128,13 +128,15 @@ class StoredTerrain(HeightField):
     """A HeightField over a tile store: ``heights`` is a LazyGrid of level 0; ``store`` is the opened group;
     ``source_step`` is the store's recorded step (None for a store without one)."""
 
+    heights: Any  # a LazyGrid of level 0 (read by index; numpy where a HeightField needs an array)
     store: Any = None  # the opened zarr group (typed Any: its attrs and arrays are read untyped)
     path: str = ""
 
     def __post_init__(self):
         self.spacing_x, self.spacing_y = spacing_pair(self.spacing, self.name)
         self.spacing = self.spacing_x if self.spacing_x == self.spacing_y else (self.spacing_x, self.spacing_y)
-        self.origin = tuple(float(v) for v in self.origin)
+        x, y, z = (float(v) for v in self.origin)
+        self.origin = (x, y, z)
 
     @property
     def height_range(self) -> tuple[float, float]:

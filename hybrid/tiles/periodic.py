@@ -19,6 +19,8 @@ conservative bounds near them).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from hybrid.errors import TerrabenchError
@@ -103,7 +105,7 @@ class PeriodicStore:
         }
         seams = seam_profiles(terrain.heights, P)  # the seams' samples (corner included) and steps
         lo, hi = terrain.height_range
-        self.arrays = {}
+        self.arrays: dict[str, Any] = {}
         src_L = int(src_attrs["max_level"])
         beyond: dict = {}
         for level in range(L + 1):

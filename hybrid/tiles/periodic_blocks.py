@@ -13,6 +13,8 @@ loader thread can cut a tile's block ahead of its upload (``PeriodicBlocks.ready
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from .byte_lru import ByteLRU
@@ -75,7 +77,7 @@ class PeriodicBlocks:
     def __init__(
         self,
         source_blocks: tuple,
-        arrays: tuple,
+        arrays: tuple[Any, Any, Any],
         n: int,
         period: int,
         cells: int,

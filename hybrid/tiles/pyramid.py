@@ -18,6 +18,7 @@ least its children's).
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -325,8 +326,9 @@ class TilePyramid:
         lo[:, 0], lo[:, 1], lo[:, 2], hi[:, 0], hi[:, 1], hi[:, 2] = x0, y0, z0, x1, y1, z1
         return lo, hi
 
-    def request(self, keys, work: dict | None = None) -> None:
-        """Have these tiles (and their host ``work``) ready soon: in memory they are."""
+    def request(self, keys, work: dict | None = None) -> threading.Event | None:
+        """Have these tiles (and their host ``work``) ready soon: in memory they are (None: nothing to wait for)."""
+        return None
 
     def cached(self, key) -> bool:
         """Whether the tile's samples are on the host: always, in memory."""

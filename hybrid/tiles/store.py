@@ -47,12 +47,12 @@ class StorePyramid(TilePyramid):
         self._err = {l: np.asarray(g[f"error/{l}"][:]) for l in range(self.max_level + 1)}
         self._levels = {l: g[f"levels/{l}"] for l in range(self.max_level + 1)}
         self._readers = {l: level_reader(a, self.n) for l, a in self._levels.items()}
-        self.host_budget = int(host_bytes)
+        self.host_budget: int = int(host_bytes)
         self._cache: OrderedDict = OrderedDict()
         self.cache_bytes = 0  # tiles and decoded chunks held, bytes (<= host_budget)
         # decoded chunks of the levels (a tile's samples span 4 of them: its own, one row and one column of two
         # neighbours and a corner), so that neighbouring tiles decode each chunk once
-        self.chunk_budget = self.host_budget // CHUNK_SHARE
+        self.chunk_budget: int = self.host_budget // CHUNK_SHARE
         self._chunks: OrderedDict = OrderedDict()
         self.chunk_bytes = 0
         self.stats = {"reads": 0, "hits": 0, "evictions": 0, "peak_bytes": 0, "chunk_reads": 0}
@@ -63,7 +63,7 @@ class StorePyramid(TilePyramid):
         self._done = threading.Event()
         self._go = threading.Event()  # cleared: the loader waits before its next tile
         self._go.set()
-        self._loader = None
+        self._loader: threading.Thread | None = None
         self._closing = False
         self._failed: set = set()
 

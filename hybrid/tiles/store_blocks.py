@@ -55,7 +55,7 @@ def build_blocks(g, n: int, max_level: int, mark) -> None:
     """Write ``nodes/blocks/<level>`` (tiles y, tiles x, nodes, 4) of a store group whose node arrays are written,
     one chunk a tile, a tile row a band; ``mark(key, count, what)`` records each band (and may interrupt)."""
     levels = int(dict(g.attrs["nodes"])["levels"])
-    arrays = tuple(tuple(g[f"nodes/{k}/{lev}"] for lev in range(levels)) for k in ("effective", "zlo", "zhi"))
+    effective, zlo, zhi = (tuple(g[f"nodes/{k}/{lev}"] for lev in range(levels)) for k in ("effective", "zlo", "zhi"))
     codes = stored_codes(g, levels)
     length = int(block_offsets(n)[-1])
     for level in range(max_level + 1):
@@ -70,6 +70,6 @@ def build_blocks(g, n: int, max_level: int, mark) -> None:
         )
         key = f"blocks:{level}"
         for ty in range(int(dict(g.attrs["progress"]).get(key, 0)), ty_n):
-            out[ty] = band_blocks(*arrays, level, ty, n, 0, tx_n, codes)
+            out[ty] = band_blocks(effective, zlo, zhi, level, ty, n, 0, tx_n, codes)
             mark(key, ty + 1, f"node blocks, level {level} row {ty + 1}")
     g.attrs.update({"node_blocks": True})

@@ -208,6 +208,7 @@ def _write_level(g, source, level: int, rows: int, cols: int, n: int, mark) -> N
             zmin[ty, :] = _tile_reduce(band, n, np.minimum)
             zmax[ty, :] = _tile_reduce(band, n, np.maximum)
         if level:
+            assert prev_err is not None  # read above for every level but 0
             kids = block_reduce(prev_err, 2, np.maximum)[ty]
             err[ty, :] = np.maximum(own, kids) if (n << level) <= EXACT_SPAN else own + kids
         else:
@@ -229,7 +230,8 @@ def _level0_band(g, source, r0: int, r1: int) -> np.ndarray:
     """Rows r0..r1-1 of the source; a claimed ``source_step`` they are not on is dropped from the attributes."""
     band = source.read_rows(r0, r1)
     step = g.attrs.get("source_step")
-    if step and not on_step_cells(band, step).all():  # a claimed step the samples are not on
+    on = on_step_cells(band, step) if step else None
+    if on is not None and not on.all():  # a claimed step the samples are not on
         g.attrs.update({"source_step": None})
     return band
 
