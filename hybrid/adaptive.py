@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from hybrid.cost.online import Exploration, OnlineModel
-from hybrid.cost.planner import TilePlan, frame_columns
+from hybrid.cost.planner import TilePlan, frame_columns, predicted_frame_ms
 from hybrid.gl.context import gl_finish
 from hybrid.gl.timing import timer_queries_valid
 
@@ -88,11 +88,8 @@ def observe(
     model's prediction of the frame as drawn."""
     frame = frame_columns(plans)
     if frame is not None:
-        picks = np.array([p.choice for p in plans])
-        used = set(picks.tolist())
-        tiles = sum(float(np.asarray(frame.predicted[s])[picks == s].sum()) for s in used if s in frame.predicted)
-        predicted = online.model.frame_ms([tiles], used) if used <= set(frame.predicted) else None
-        online.observe(frame.columns, picks.tolist(), pass_ms, draw_ms, explored, predicted)
+        predicted = predicted_frame_ms(online.model, plans)
+        online.observe(frame.columns, [p.choice for p in plans], pass_ms, draw_ms, explored, predicted)
 
 
 def timed_explore(online: OnlineModel | None, plans: list[TilePlan], learn: bool) -> tuple[Exploration | None, float]:

@@ -6,6 +6,7 @@ Functions of a ``hybrid.renderer.Renderer`` (its residency cache, strategies and
 from __future__ import annotations
 
 from hybrid.contract import FrameStats
+from hybrid.cost.planner import predicted_frame_ms
 
 
 def gpu_bytes_by_kind(r) -> tuple[dict[str, int], int]:
@@ -26,9 +27,7 @@ def frame_stats(r, plans, plan_ms, draw, gpu, counters, together) -> FrameStats:
     predicted cost."""
     by_kind, shared = gpu_bytes_by_kind(r)
     n_raster = sum(r.kind(p.choice) == "raster" for p in plans)
-    pred = None
-    if r.mixed and plans and all(p.choice in p.predicted for p in plans):
-        pred = r.model.frame_ms([p.predicted[p.choice] for p in plans], {p.choice for p in plans})
+    pred = predicted_frame_ms(r.model, plans) if r.mixed else None
     return FrameStats(
         wall_ms=plan_ms + draw,
         plan_ms=plan_ms,

@@ -112,6 +112,14 @@ class TilePlan:
         }
 
 
+def predicted_frame_ms(model: CostModel, plans: list[TilePlan]) -> float | None:
+    """The model's predicted ms of a frame of plans as drawn (their choices, each strategy's overhead and a mixed
+    frame's); None where some plan has no prediction for its choice."""
+    if not plans or any(p.choice not in p.predicted for p in plans):
+        return None
+    return model.frame_ms([p.predicted[p.choice] for p in plans], {p.choice for p in plans})
+
+
 def frame_columns(plans: list[TilePlan]) -> FrameColumns | None:
     """The feature columns and predictions the plans of one frame share (a mixed policy's batch plan), else None."""
     frame = plans[0]._frame if plans else None
