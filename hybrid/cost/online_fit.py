@@ -38,11 +38,11 @@ def fit_rows(
     few rows to tell its own level follows the machine's, which the caller has applied)."""
     if len(y) == 0 or not own_level:
         return prior.copy()
+    if int(np.count_nonzero(X[:, 1] > few_tiles)) < shape_rows:
+        return few_tile_fit(X, y, prior, few_tiles)
     pred = X @ prior
     ratio = y[pred > 0] / pred[pred > 0]
     scaled = prior * (median_of(ratio.tolist()) if len(ratio) else 1.0)
-    if int(np.count_nonzero(X[:, 1] > few_tiles)) < shape_rows:
-        return few_tile_fit(X, y, prior, few_tiles)
     A = X / y[:, None]
     col = np.sqrt(np.einsum("ij,ij->j", A, A) / len(y))
     col = np.where(col > 0, col, 1.0)
