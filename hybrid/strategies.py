@@ -21,6 +21,7 @@ renderer (which find strategies only through it).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
@@ -63,9 +64,10 @@ class StrategyEntry:
         """Names of the options its draw_tiles takes (the renderer's own, such as skirts, included)."""
         return self.cls.draw_options
 
-    @property
+    @functools.cached_property
     def option_names(self) -> frozenset[str]:
-        """Names of its draw options a user sets: the fields of its options dataclass (``options_type``)."""
+        """Names of its draw options a user sets: the fields of its options dataclass (``options_type``); read by
+        every frame's option routing, so made once."""
         return frozenset(f.name for f in fields(self.cls.options_type))
 
 
