@@ -67,12 +67,12 @@ def _compare(store_path, hf, n, exact_span):
     return loose
 
 
-@pytest.mark.parametrize("shape", [(513, 513), pytest.param((300, 700), marks=pytest.mark.slow)])
+@pytest.mark.parametrize("shape", [(513, 513), (300, 460)])
 def test_node_arrays_equal_global_nodes_bit_for_bit(tmp_path, shape):
     h = np.ascontiguousarray(puget().heights[200 : 200 + shape[0], 100 : 100 + shape[1]])
     prepare_store(ArraySource(h, SP), tmp_path / "s", 64)
     hf = HeightField(h, SP)
-    assert _compare(tmp_path / "s", hf, 64, 1 << 30) == 1.0  # every level measured: squares of 512, 1024
+    assert _compare(tmp_path / "s", hf, 64, 1 << 30) == 1.0  # every level measured: squares of 512 cells
     stored, ref = nodes_for(open_store(tmp_path / "s"), 64), global_nodes(hf, 64)
     pyr = TilePyramid(hf, 64)
     for level in range(pyr.max_level + 1):  # every tile's block, apron included
@@ -131,30 +131,33 @@ def test_prepare_memory_stays_band_sized(tmp_path, monkeypatch):
     import tracemalloc
 
     from hybrid.terrain.grid_sources import FractalSource
+    from hybrid.terrain.stored import open_store
     from hybrid.tiles import store_prepare as store_mod
 
-    peaks, build = {}, store_mod.build_nodes
+    peaks: dict = {}
 
-    class Measured(Exception):
-        """Both peaks taken: the rest of the prepare (tile blocks) is not measured, so not run, untraced or not."""
+    def measured(name, build):
+        def run(*a, **k):
+            peaks.setdefault("levels", tracemalloc.get_traced_memory()[1])
+            tracemalloc.reset_peak()
+            build(*a, **k)
+            peaks[name] = tracemalloc.get_traced_memory()[1]
 
-    def measured(*a, **k):
-        peaks["levels"] = tracemalloc.get_traced_memory()[1]
-        tracemalloc.reset_peak()
-        build(*a, **k)
-        peaks["nodes"] = tracemalloc.get_traced_memory()[1]
-        raise Measured
+        return run
 
-    monkeypatch.setattr(store_mod, "build_nodes", measured)
+    monkeypatch.setattr(store_mod, "build_nodes", measured("nodes", store_mod.build_nodes))
+    monkeypatch.setattr(store_mod, "build_blocks", measured("blocks", store_mod.build_blocks))
     tracemalloc.start()
     try:
-        with pytest.raises(Measured):
-            prepare_store(FractalSource(2049, seed=0), tmp_path / "s", 128)
+        prepare_store(FractalSource(2049, seed=0), tmp_path / "s", 128)
     finally:
         tracemalloc.stop()
-    # measured here: levels 157 MiB, node arrays 86 MiB (the grid as float64 is 32 MiB, its square of nodes
-    # 16 MiB a level); the node build never holds more than one block of 1024² cells and one band a level
+    # the grid as float64 is 32 MiB, its square of nodes 16 MiB a level: the node build holds one block of 1024²
+    # cells and one band a level, the block build a window of rows of each node array
     assert peaks["nodes"] < 100 * 2**20 and peaks["nodes"] <= peaks["levels"], peaks
+    assert peaks["blocks"] < 100 * 2**20, peaks
+    t = open_store(tmp_path / "s")
+    assert np.array_equal(t.heights[:1025, :1025], FractalSource(1025, seed=0).read_rows(0, 1025))
 
 
 @pytest.fixture(scope="module")
@@ -203,9 +206,15 @@ def test_raster_frames_from_the_store_equal_the_grid_without_loading_it(ctx, pug
             assert np.array_equal(x.colour, y.colour) and np.array_equal(x.distance, y.distance), (policy, k)
 
 
-def test_stored_blocks_are_the_node_arrays_around_each_tile(tmp_path):
+@pytest.mark.parametrize("window_bytes", [None, 1])
+def test_stored_blocks_are_the_node_arrays_around_each_tile(tmp_path, monkeypatch, window_bytes):
     """Every tile's stored block holds, node by node, the node arrays' values (side codes in the fourth column) over
-    the tile and its one-node apron (zeros and inside 0 beyond the node square): checked element by element."""
+    the tile and its one-node apron (zeros and inside 0 beyond the node square): checked element by element, with
+    the node arrays read whole or (``window_bytes`` 1) a window of one tile row's rows at a time."""
+    from hybrid.tiles import store_blocks
+
+    if window_bytes is not None:
+        monkeypatch.setattr(store_blocks, "WINDOW_BYTES", window_bytes)
     h = puget(size=129).heights
     n = 16
     prepare_store(ArraySource(h, SP), tmp_path / "s", n)

@@ -17,6 +17,26 @@ import numpy as np
 from .sidecodes import stored_codes
 
 COLUMNS = 4  # E, zlo, zhi, inside
+WINDOW_BYTES = 8 << 20  # rows of a node array read at once while building blocks, per array
+
+
+class RowWindows:
+    """A 2-D array read a window of whole rows at a time (up to ``WINDOW_BYTES``), for row-ordered readers that
+    ask for overlapping windows: each stored chunk is decoded about once instead of once per window asked."""
+
+    def __init__(self, array):
+        self.array, self.shape = array, tuple(int(s) for s in array.shape)
+        self.rows = max(1, WINDOW_BYTES // max(1, self.shape[1] * np.dtype(array.dtype).itemsize))
+        self.r0, self.held = 0, np.empty((0, self.shape[1]), array.dtype)
+
+    def __getitem__(self, window: tuple[slice, slice]) -> np.ndarray:
+        """The samples of ``window`` (row and column slices with non-negative bounds and step 1)."""
+        rs, cs = window
+        ra, rb = rs.start or 0, self.shape[0] if rs.stop is None else min(rs.stop, self.shape[0])
+        if ra < self.r0 or rb > self.r0 + self.held.shape[0]:
+            self.r0 = ra
+            self.held = np.asarray(self.array[ra : min(self.shape[0], max(rb, ra + self.rows)), :])
+        return self.held[ra - self.r0 : rb - self.r0, cs]
 
 
 def block_offsets(n: int) -> np.ndarray:
@@ -55,8 +75,11 @@ def build_blocks(g, n: int, max_level: int, mark) -> None:
     """Write ``nodes/blocks/<level>`` (tiles y, tiles x, nodes, 4) of a store group whose node arrays are written,
     one chunk a tile, a tile row a band; ``mark(key, count, what)`` records each band (and may interrupt)."""
     levels = int(dict(g.attrs["nodes"])["levels"])
-    effective, zlo, zhi = (tuple(g[f"nodes/{k}/{lev}"] for lev in range(levels)) for k in ("effective", "zlo", "zhi"))
+    effective, zlo, zhi = (
+        tuple(RowWindows(g[f"nodes/{k}/{lev}"]) for lev in range(levels)) for k in ("effective", "zlo", "zhi")
+    )
     codes = stored_codes(g, levels)
+    codes = None if codes is None else tuple(RowWindows(c) for c in codes)
     length = int(block_offsets(n)[-1])
     for level in range(max_level + 1):
         ty_n, tx_n = g[f"zmin/{level}"].shape
