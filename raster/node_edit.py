@@ -87,13 +87,13 @@ def _compute(st: NodeEdits, h: np.ndarray, g: int, ar: np.ndarray, ac: np.ndarra
     """Level g's compact arrays at representatives (ar, ac), from the level below (already up to date)."""
     (sr, rows), (sc, cols) = _sub(st.ax_r, g, ar), _sub(st.ax_c, g, ac)
     if g == 0:
-        e, sides, (zmin, zmax) = rn._direct(h, sr, sc, 0, st.R, st.side_errors)
+        e, sides, (zmin, zmax) = rn.measured_errors(h, sr, sc, 0, st.R, st.side_errors)
         return {"e": e, "eff": e, "sides": sides, "zmin": zmin, "zmax": zmax}
     assert rows is not None and cols is not None  # a level above 0 reads the one below
     below = _below(st.levels[g - 1], rows, cols)
     if st.bound[g]:
-        return rn._level(below, sr, sc, g, rn._post_bound(h, sr, sc, g, st.R), st.beta, st.margin)
-    return rn._level(below, sr, sc, g, _measured(st, h, g, ar, ac, win), st.beta, None)
+        return rn.combined_level(below, sr, sc, g, rn.post_bounds(h, sr, sc, g, st.R), st.beta, st.margin)
+    return rn.combined_level(below, sr, sc, g, _measured(st, h, g, ar, ac, win), st.beta, None)
 
 
 def node_edits(grid, n: int, beta: float, side_errors: bool = True) -> NodeEdits:
@@ -106,8 +106,8 @@ def node_edits(grid, n: int, beta: float, side_errors: bool = True) -> NodeEdits
         float(beta),
         bool(side_errors),
         R,
-        rn._axis(grid.rows, R, count),
-        rn._axis(grid.cols, R, count),
+        rn.axis_classes(grid.rows, R, count),
+        rn.axis_classes(grid.cols, R, count),
         margin=_margin(h),
     )
     for g in range(count):
@@ -150,7 +150,7 @@ def _rewrite(st: NodeEdits, nodes: GlobalNodes, g: int, r: tuple[int, int], c: t
     lv = st.levels[g]
     H, W = nodes.effective[g].shape
     mr, mc = st.ax_r[0][g], st.ax_c[0][g]
-    eff = rn._float32(lv["eff"][np.ix_(mr[r0:r1], mc[c0:c1])], st.bound[g])
+    eff = rn.float32_bounded(lv["eff"][np.ix_(mr[r0:r1], mc[c0:c1])], st.bound[g])
     moved = nodes.effective[g][r0:r1, c0:c1] != eff
     nodes.effective[g][r0:r1, c0:c1] = eff
     gr0, gr1 = max(r0 - 1, 0), min(r1 + 1, H + 1, mr.size)  # one node more for the 3x3 boxes
@@ -164,7 +164,7 @@ def _rewrite(st: NodeEdits, nodes: GlobalNodes, g: int, r: tuple[int, int], c: t
         parent = None
         if g + 1 < len(st.levels):
             up = st.levels[g + 1]["eff"]
-            parent = rn._float32(
+            parent = rn.float32_bounded(
                 up[np.ix_(st.ax_r[0][g + 1][np.arange(r0, r1) // 2], st.ax_c[0][g + 1][np.arange(c0, c1) // 2])],
                 st.bound[g + 1],
             )

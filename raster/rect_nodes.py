@@ -11,7 +11,7 @@ same function, per axis, of (a) the classes of the level-(g-1) nodes at 2a-1 .. 
 the children's outside neighbours, which the facing side errors and the dilation read; -1 beyond the square) and
 (b) for level 0, the sample rows 2a .. 2a+2 and whether the node is the square's last (where ``fans_at`` clamps).
 Beyond the grid every sample row repeats the last one, so away from the grid and from the square's far edge all
-nodes of a level fall into a few classes (``_axis``). The arrays are computed for one representative node of each
+nodes of a level fall into a few classes (``axis_classes``). The arrays are computed for one representative node of each
 pair of row and column classes: the grid's nodes, a few beyond it and a few at the square's far edge, each from
 its own window of samples (``hybrid.tiles.fans``: the same floating-point operations whatever window holds them),
 so memory and time follow the grid's samples plus a few node rows and columns of padding a level.
@@ -63,7 +63,7 @@ def _extents(samples: int, n: int, L: int, levels: int) -> list[int]:
     return out
 
 
-def _axis(samples: int, R: int, levels: int) -> tuple[list, list, list]:
+def axis_classes(samples: int, R: int, levels: int) -> tuple[list, list, list]:
     """Per global level along one axis of the square (``samples`` real samples, R cells): (maps, reps, near).
     maps[g]: node index -> index of its class's representative in reps[g] (sorted node indices, each class's
     first node); near[g] (4, reps): the compact indices at level g-1 of nodes 2a-1 .. 2a+2 of each
@@ -148,7 +148,7 @@ def _blocks(segments, s: int):
     return [(a, min(a + step, a1), i + a - a0) for a0, a1, i in segments for a in range(a0, a1, step)]
 
 
-def _direct(h, ax_r, ax_c, g: int, R: int, side_errors: bool):
+def measured_errors(h, ax_r, ax_c, g: int, R: int, side_errors: bool):
     """Level g's measured errors at every pair of representatives (compact arrays, ``_window_errors``), and for
     level 0 the nodes' height ranges (zmin, zmax; else None), one window of samples per block of them."""
     nr, nc = ax_r[1][g].size, ax_c[1][g].size
@@ -170,7 +170,7 @@ def _direct(h, ax_r, ax_c, g: int, R: int, side_errors: bool):
     return e, sides, zr
 
 
-def _post_bound(h, ax_r, ax_c, g: int, R: int) -> np.ndarray:
+def post_bounds(h, ax_r, ax_c, g: int, R: int) -> np.ndarray:
     """(nr, 2, nc, 2) per child of each pair of level-g representatives: level g's fan deviation (both fans,
     metres) at the child's 3x3 posts (every 2^(g-1) samples), as the tile store's bounded levels take it."""
     nr, nc = ax_r[1][g].size, ax_c[1][g].size
@@ -193,7 +193,7 @@ def _take(arr: np.ndarray, ri: np.ndarray, ci: np.ndarray) -> np.ndarray:
     return out
 
 
-def _level(below: dict, ax_r, ax_c, g: int, direct, beta: float, margin: float | None) -> dict:
+def combined_level(below: dict, ax_r, ax_c, g: int, direct, beta: float, margin: float | None) -> dict:
     """Level g's compact arrays (e, eff, sides or None, zmin, zmax) from level g-1's and its own measured errors
     ``direct`` ((e, sides) exact) or, with ``margin``, its children's post deviations (a bound)."""
     nr, nc = ax_r[2][g], ax_c[2][g]  # (4, reps) level-(g-1) indices of 2a-1 .. 2a+2
@@ -233,7 +233,7 @@ def _level(below: dict, ax_r, ax_c, g: int, direct, beta: float, margin: float |
     }
 
 
-def _float32(a: np.ndarray, bound: bool) -> np.ndarray:
+def float32_bounded(a: np.ndarray, bound: bool) -> np.ndarray:
     """float32 of a float64 array, rounded up where it is a bound (a bound stays a bound)."""
     b = a.astype(np.float32)
     return np.where(b < a, np.nextafter(b, np.float32(np.inf)), b) if bound else b
@@ -243,7 +243,7 @@ def _output(lv: dict, parent32, ax_r, ax_c, g: int, H: int, W: int, bound: bool)
     """(effective, zlo, zhi, side codes or None) float32 of level g's nodes [0, H) x [0, W) from its compact
     arrays; ``parent32``: level g+1's compact float32 effective errors (None: the root level)."""
     mr, mc = ax_r[0][g][:H], ax_c[0][g][:W]
-    eff = _float32(lv["eff"], bound)
+    eff = float32_bounded(lv["eff"], bound)
     out = [eff[np.ix_(mr, mc)]]
     rows, cols = ax_r[0][g][: H + 1], ax_c[0][g][: W + 1]  # one more node for the 3x3 boxes, where there is one
     for kind, fn in (("zmin", np.minimum), ("zmax", np.maximum)):
@@ -268,7 +268,7 @@ def rect_nodes(grid, n: int, beta: float, side_errors: bool = True):
     h = np.asarray(grid.heights)
     R, L = square_cells(grid.rows, grid.cols, n)
     levels = int(np.log2(R))
-    ax_r, ax_c = _axis(grid.rows, R, levels), _axis(grid.cols, R, levels)
+    ax_r, ax_c = axis_classes(grid.rows, R, levels), axis_classes(grid.cols, R, levels)
     ext_r, ext_c = _extents(grid.rows, n, L, levels), _extents(grid.cols, n, L, levels)
     margin = 16 * np.finfo(np.float64).eps * max(abs(float(h.min())), abs(float(h.max())), 1.0)
     outs: list[tuple] = []
@@ -277,17 +277,21 @@ def rect_nodes(grid, n: int, beta: float, side_errors: bool = True):
     for g in range(levels):
         bound = (2 << g) > EXACT_SPAN
         if g == 0:
-            e, sides, (zmin, zmax) = _direct(h, ax_r, ax_c, 0, R, side_errors)
+            e, sides, (zmin, zmax) = measured_errors(h, ax_r, ax_c, 0, R, side_errors)
             lv = {"e": e, "eff": e, "sides": sides, "zmin": zmin, "zmax": zmax}
         else:
             assert prev is not None  # level g-1's, made by the step before
             if bound:
-                lv = _level(prev, ax_r, ax_c, g, _post_bound(h, ax_r, ax_c, g, R), beta, margin)
+                lv = combined_level(prev, ax_r, ax_c, g, post_bounds(h, ax_r, ax_c, g, R), beta, margin)
             else:
-                lv = _level(prev, ax_r, ax_c, g, _direct(h, ax_r, ax_c, g, R, side_errors)[:2], beta, None)
+                lv = combined_level(
+                    prev, ax_r, ax_c, g, measured_errors(h, ax_r, ax_c, g, R, side_errors)[:2], beta, None
+                )
         if prev is not None:
             outs.append(
-                _output(prev, _float32(lv["eff"], bound), ax_r, ax_c, g - 1, ext_r[g - 1], ext_c[g - 1], prev_bound)
+                _output(
+                    prev, float32_bounded(lv["eff"], bound), ax_r, ax_c, g - 1, ext_r[g - 1], ext_c[g - 1], prev_bound
+                )
             )
         prev, prev_bound = lv, bound
     assert prev is not None  # R >= 2 cells, so there is a level
