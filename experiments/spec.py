@@ -44,8 +44,7 @@ from __future__ import annotations
 import itertools
 import json
 import tomllib
-from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from hybrid.contract import DEFAULT_FULL_RES, PRIOR_FULL_RES
@@ -53,35 +52,10 @@ from hybrid.errors import TerrabenchError
 from hybrid.strategies import adapting_policies, policies_taking
 from hybrid.terrain.sources import TerrainSource
 
+from .run_config import Config
 from .spec_datasets import check_dataset_entry, dataset_label, terrain_source
 from .spec_keys import START_MODELS, checked_list, list_keys, scalar_keys
 from .stress_spec import parse_stress_spec
-
-
-@dataclass(frozen=True)
-class Config:
-    """One configuration of a run: a policy over one flight of one dataset at one size, tau and option set; ``config``
-    is its stable id. Runs store it as a row (``row``), as spec.json and the journal hold it."""
-
-    config: str
-    dataset: str
-    seed: int
-    flight: str
-    size: str
-    tau: float
-    reconstruction: str
-    full_res: str
-    policy: str
-    start_model: str = START_MODELS[0]
-
-    @classmethod
-    def of(cls, row: Mapping) -> Config:
-        """The configuration of a row; keys that are no field are left out, a missing start model is the device's."""
-        return cls(**{f.name: row[f.name] for f in fields(cls) if f.name in row})
-
-    def row(self) -> dict:
-        """The configuration as a flat dict, fields in order."""
-        return asdict(self)
 
 
 @dataclass
@@ -111,8 +85,9 @@ class Spec:
     adapt: bool = True
     start_models: list = field(default_factory=lambda: ["device"])
 
-    def configs(self) -> list[dict]:
-        """Every combination, one dict each, with a stable id; frames of one (dataset, seed, flight, size) are paired."""
+    def configs(self) -> list[Config]:
+        """Every combination, one Config each, with a stable id; frames of one (dataset, seed, flight, size) are
+        paired."""
         out = []
         labels = [dataset_label(d) for d in self.datasets]
         casting, tilelets, adapting = (
@@ -146,7 +121,7 @@ class Spec:
                 + ("" if fr == PRIOR_FULL_RES else f"-{fr}")
                 + ("" if sm == START_MODELS[0] else f"-from-{sm}")
             )
-            out.append(Config(cid, ds, seed, fl, size, tau, rec, fr, pol, sm).row())
+            out.append(Config(cid, ds, seed, fl, size, tau, rec, fr, pol, sm))
         return out
 
     def source(self, label: str) -> TerrainSource:
