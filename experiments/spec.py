@@ -46,6 +46,7 @@ import json
 import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import get_args, get_type_hints
 
 from hybrid.contract import DEFAULT_FULL_RES, PRIOR_FULL_RES
 from hybrid.errors import TerrabenchError
@@ -63,27 +64,27 @@ class Spec:
     """A parsed, checked experiment spec."""
 
     name: str
-    datasets: list = field(default_factory=lambda: ["puget"])
+    datasets: list[str | dict] = field(default_factory=lambda: ["puget"])
     dataset_size: int = 0
-    flights: list = field(default_factory=lambda: ["flyover"])
+    flights: list[str] = field(default_factory=lambda: ["flyover"])
     frames: int = 12
-    policies: list = field(default_factory=lambda: ["raster", "raycast", "hybrid"])
-    taus: list = field(default_factory=lambda: [2 / 3])
-    sizes: list = field(default_factory=lambda: ["640x360"])
-    reconstructions: list = field(default_factory=lambda: ["triangles"])
-    full_res: list = field(default_factory=lambda: [DEFAULT_FULL_RES])
+    policies: list[str] = field(default_factory=lambda: ["raster", "raycast", "hybrid"])
+    taus: list[float] = field(default_factory=lambda: [2 / 3])
+    sizes: list[str] = field(default_factory=lambda: ["640x360"])
+    reconstructions: list[str] = field(default_factory=lambda: ["triangles"])
+    full_res: list[str] = field(default_factory=lambda: [DEFAULT_FULL_RES])
     repeats: int = 3
-    seeds: list = field(default_factory=lambda: [0])
+    seeds: list[int] = field(default_factory=lambda: [0])
     tile_size: int = 256
     supersample: int = 2
     flip: bool = True
-    image_frames: list = field(default_factory=lambda: [0])
+    image_frames: list[int] = field(default_factory=lambda: [0])
     video: bool = False
     accuracy: bool = True
     gpu_budget_mib: int = 256
     upload_budget_ms: float | None = None
     adapt: bool = True
-    start_models: list = field(default_factory=lambda: ["device"])
+    start_models: list[str] = field(default_factory=lambda: ["device"])
 
     def configs(self) -> list[Config]:
         """Every combination, one Config each, with a stable id; frames of one (dataset, seed, flight, size) are
@@ -185,11 +186,13 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None, overri
         raise TerrabenchError(f"{source}: name must be a non-empty word without slashes or spaces, got {kw['name']!r}")
     if "datasets" in d:
         kw["datasets"] = _datasets(d["datasets"], source, base)
-    for key, kind, check in list_keys(source):
-        v = checked_list(d, key, kind, check)
+    types = get_type_hints(Spec)  # each key's type, as the dataclass declares it
+    for key, check in list_keys(source):
+        kind = get_args(types[key])[0]  # a list key's entry type; integers are numbers too
+        v = checked_list(d, key, (int, float) if kind is float else kind, check)
         if v is not None:
-            kw[key] = [float(x) for x in v] if key == "taus" else v
-    kw.update(scalar_keys(d, source))
+            kw[key] = [float(x) for x in v] if kind is float else v
+    kw.update(scalar_keys(d, source, flags=[k for k, t in types.items() if t is bool]))
     return _checked(Spec(**kw), source)
 
 
