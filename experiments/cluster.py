@@ -7,8 +7,8 @@ on the EGL device its environment names (TERRABENCH_GL_DEVICE, else the default)
 renderer; a worker whose context cannot be made is reported by name and gets no task (tasks ask for the
 worker resource the plugin sets only where the context works, so a worker restarted by its nanny takes tasks
 again once its context is made). A group of configurations timed together (``config_task.run_group``) is
-one task; the task gets the spec and the configurations (datasets travel as paths or names and are loaded
-on the worker) and returns their rows and images, which this process journals as they arrive: a resumed run redoes
+one task; the task gets the spec and the configurations (pickled dataclasses; datasets travel as paths or names
+and are loaded on the worker) and returns their rows and images, which this process journals as they arrive: a resumed run redoes
 nothing finished, and the task of a worker that dies is run again elsewhere by Dask, never journaled twice.
 Rows carry the device (GL renderer) and the worker that timed them; each task uses the cost model
 calibrated for its worker's device when this process's costs file has one.
@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 
 from hybrid.errors import TerrabenchError
 
+from .run_config import Config
 from .spec import Spec
 
 PLUGIN = "terrabench-gl"
@@ -80,7 +81,7 @@ def worker_info(dask_worker) -> dict:
     return {"renderer": tb["renderer"], "error": tb["error"], "pid": os.getpid()}
 
 
-def group_task(spec: Spec, items: list, costs: dict):
+def group_task(spec: Spec, items: list[tuple[Config, list[int]]], costs: dict):
     """On a worker: run one group of configurations with the worker's GL context (config_task.run_group)."""
     from distributed import get_worker
 
@@ -162,7 +163,7 @@ def run_on_cluster(spec: Spec, folder: Path, client, progress: bool = True) -> N
             spec,
             items,
             costs,
-            key=f"terrabench-{spec.name}-{items[0][0]['config']}",
+            key=f"terrabench-{spec.name}-{items[0][0].config}",
             pure=False,
             resources={GL_RESOURCE: 1},
         ): items
@@ -173,11 +174,11 @@ def run_on_cluster(spec: Spec, folder: Path, client, progress: bool = True) -> N
         try:
             results = fut.result()
         except Exception as exc:  # the task itself failed (e.g. on every worker it was tried on)
-            results = [ConfigResult(c, error={**c, "error": f"{type(exc).__name__}: {exc}"}) for c, _ in items]
+            results = [ConfigResult(c, error={**c.row(), "error": f"{type(exc).__name__}: {exc}"}) for c, _ in items]
         for result, (c, frames) in zip(results, items):
             record(folder, journal, result)
             bar.done += len(frames) - 1
-            bar.step(c["config"])
+            bar.step(c.config)
         journal.write_tables()
     bar.close()
 

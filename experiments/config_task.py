@@ -35,7 +35,8 @@ from hybrid.strategies import mixed_policies
 
 from .metrics import frame_accuracy
 from .popping import popping, static_pop_pixels, temporal_errors
-from .spec import Config, Spec
+from .run_config import Config, RunConfig
+from .spec import Spec
 
 if TYPE_CHECKING:
     from hybrid.renderer import Renderer
@@ -57,16 +58,16 @@ class ImageOut:
 class ConfigResult:
     """What a configuration task hands back: per frame (row, tile rows), images, and the error if it failed."""
 
-    config: dict
+    config: RunConfig | None
     frames: list = field(default_factory=list)
     images: list = field(default_factory=list)
     error: dict | None = None
     unreached: int = 0
 
 
-def group_id(c: dict) -> str:
+def group_id(c: Config) -> str:
     """The stem shared by a configuration's paired frames: dataset, seed, flight and size."""
-    return f"{Path(str(c['dataset'])).stem}-s{c['seed']}-{Path(str(c['flight'])).stem}-{c['size']}"
+    return f"{Path(c.dataset).stem}-s{c.seed}-{Path(c.flight).stem}-{c.size}"
 
 
 class TaskState:
@@ -83,15 +84,14 @@ class TaskState:
         self.cost_model = None  # the device's calibrated model, when the client sends one
         self.learned = None  # the adapted model of the hybrid that learned most, once it settled
 
-    def views(self, spec: Spec, c: dict):
+    def views(self, spec: Spec, cfg: Config):
         """The group's terrain and views (checked: every eye above the ground); loads the terrain once."""
         from hybrid.camera.clearance import check_eye_above
         from hybrid.camera.flight import get_flight
 
-        key = (spec.name, group_id(c))
+        key = (spec.name, group_id(cfg))
         if self._group != key:
             self.release_group()
-            cfg = Config.of(c)
             tkey = (cfg.dataset, cfg.seed, spec.dataset_size)
             if tkey not in self._terrain:
                 self._terrain = {tkey: spec.terrain(cfg.dataset, cfg.seed)}
@@ -104,7 +104,7 @@ class TaskState:
             self._reference = ReferenceRenderer(self.ctx, hf) if spec.accuracy else None
         return self._views
 
-    def reference(self, spec: Spec, c: dict, k: int, images: list):
+    def reference(self, spec: Spec, c: Config, k: int, images: list):
         """The reference render of frame k of the configuration's group (cached for the group)."""
         if k not in self._refs:
             _, views = self.views(spec, c)
@@ -127,12 +127,12 @@ def _image(stem: str, result, full: bool) -> ImageOut:
     )
 
 
-def group_key(c: dict) -> tuple:
+def group_key(c: Config) -> tuple:
     """Configurations timed together, frame by frame: the same paired views and the same tau."""
-    return (group_id(c), c["tau"])
+    return (group_id(c), c.tau)
 
 
-def groups(items: list[tuple[dict, list[int]]]) -> list[list[tuple[dict, list[int]]]]:
+def groups(items: list[tuple[Config, list[int]]]) -> list[list[tuple[Config, list[int]]]]:
     """(configuration, frames to do) pairs gathered by group_key, in the order they first appear."""
     out: dict = {}
     for c, todo in items:
@@ -143,11 +143,11 @@ def groups(items: list[tuple[dict, list[int]]]) -> list[list[tuple[dict, list[in
 class _ConfigRun:
     """One configuration inside a group: its renderer (GPU state), its timed draws and its result."""
 
-    def __init__(self, c: dict, todo: list[int]):
-        self.c, self.cfg, self.todo = c, Config.of(c), todo
+    def __init__(self, cfg: Config, todo: list[int]):
+        self.cfg, self.todo = cfg, todo
         self.renderer: Renderer | ReferenceRenderer | None = None  # made by _open, None once released
         self.timed: dict = {}
-        self.out = ConfigResult(c)
+        self.out = ConfigResult(cfg)
 
     def attempt(self, fn, fail_fast: bool) -> None:
         """Run fn(); a failure ends this configuration (its error kept, its renderer released), not the group."""
@@ -163,7 +163,7 @@ class _ConfigRun:
     def fail(self, exc: Exception) -> None:
         """Keep exc as this configuration's error and release its renderer."""
         msg = str(exc) if isinstance(exc, TerrabenchError) else f"{type(exc).__name__}: {exc}"
-        self.out.error = {**self.c, "error": msg, "trace": traceback.format_exc(limit=4)}
+        self.out.error = {**self.cfg.row(), "error": msg, "trace": traceback.format_exc(limit=4)}
         self.out.frames = []
         self.out.images = [i for i in self.out.images if i.stem.startswith("ref-")]  # the group's references
         self.out.unreached = len([k for k in self.todo if k not in self.timed])
@@ -178,7 +178,7 @@ class _ConfigRun:
 
 def run_group(
     spec: Spec,
-    items: list[tuple[dict, list[int]]],
+    items: list[tuple[Config, list[int]]],
     state: TaskState,
     step=None,
     fail_fast: bool = False,
@@ -291,12 +291,12 @@ def _time_frame(spec: Spec, live: list[_ConfigRun], k: int, views, fail_fast: bo
 def _measure(spec: Spec, r: _ConfigRun, state: TaskState, views, extra: dict | None) -> None:
     """Rows of r's timed frames, with their accuracy against the references unless the spec says accuracy =
     false; neighbours a resumed run did not time are drawn now (untimed) for the temporal measures."""
-    c, out = r.c, r.out
+    cfg, out = r.cfg, r.out
     drawn = {k: v[0] for k, v in r.timed.items()}
     for k in r.todo:
         res, walls, timed_stats, cpu, gpu = r.timed[k]  # counters of a timed draw, not the maps draw
         row = {
-            **c,
+            **cfg.row(),
             "frame": k,
             **timed_stats.row(),
             **(extra or {}),
@@ -309,7 +309,6 @@ def _measure(spec: Spec, r: _ConfigRun, state: TaskState, views, extra: dict | N
         }
         if spec.accuracy:
             row.update(_accuracy(spec, r, state, views, k, res, drawn))
-        cfg = r.cfg
         tiles = [{"config": cfg.config, "frame": k, "policy": cfg.policy, **t} for t in timed_stats.tile_rows]
         out.frames.append((row, tiles))
         if spec.accuracy and (k in spec.image_frames or spec.video):
@@ -319,7 +318,7 @@ def _measure(spec: Spec, r: _ConfigRun, state: TaskState, views, extra: dict | N
 def _accuracy(spec: Spec, r: _ConfigRun, state: TaskState, views, k: int, res, drawn: dict) -> dict:
     """Frame k's accuracy, temporal and popping measures against the group's references; ``drawn`` holds the
     frames drawn so far (neighbours a resumed run did not time are added)."""
-    c, tau, renderer = r.c, r.cfg.tau, r.renderer
+    tau, renderer = r.cfg.tau, r.renderer
     assert renderer is not None  # r is live: its renderer drew frame k
 
     def frame(j):
@@ -328,7 +327,7 @@ def _accuracy(spec: Spec, r: _ConfigRun, state: TaskState, views, k: int, res, d
         return drawn[j]
 
     def ref(j):
-        return state.reference(spec, c, j, r.out.images)
+        return state.reference(spec, r.cfg, j, r.out.images)
 
     row = frame_accuracy(res, ref(k), flip=spec.flip)
     if k > 0:

@@ -32,6 +32,7 @@ from .edit_spec import EditSpec, check_programme, frame_brushes, spec_deformatio
 from .journal import Journal, pending, record
 from .metrics import frame_accuracy
 from .progress import Progress
+from .run_config import EditConfig
 from .runlock import RunLock
 
 SETTLE_S = 0.3  # seconds of idle before the timed frames
@@ -65,9 +66,9 @@ def _rotated(items: list, shift: int) -> list:
 class _Member:
     """One configuration being run: its terrain copy, renderer, editor, GPU heights, particles and what it timed."""
 
-    def __init__(self, c: dict, todo: list[int], brushes: list[list], deform=None):
+    def __init__(self, c: EditConfig, todo: list[int], brushes: list[list], deform=None):
         self.c, self.todo, self.brushes = c, todo, brushes
-        self.deform = deform if c["editing"] else None  # (deformation, its programme) or None
+        self.deform = deform if c.editing else None  # (deformation, its programme) or None
         self.renderer: Any = None  # GPU state, made by open()
         self.editor: Any = None
         self.heights: Any = None
@@ -89,9 +90,9 @@ class _Member:
         from hybrid.strategies import mixed_policies
 
         hf = _copy(hf)
-        mixed = {"adapt": spec.adapt} if self.c["policy"] in mixed_policies() else {}
-        self.renderer = make_renderer(ctx, hf, self.c["policy"], tile_size=spec.tile_size, **mixed)
-        if self.c["editing"]:
+        mixed = {"adapt": spec.adapt} if self.c.policy in mixed_policies() else {}
+        self.renderer = make_renderer(ctx, hf, self.c.policy, tile_size=spec.tile_size, **mixed)
+        if self.c.editing:
             self.editor = TerrainEditor(ctx, hf, self.renderer)
             self.heights = self.editor.gpu
             if self.deform is not None:
@@ -142,7 +143,7 @@ class _Member:
             if fail_fast:
                 raise
             msg = str(exc) if isinstance(exc, TerrabenchError) else f"{type(exc).__name__}: {exc}"
-            self.out.error = {**self.c, "error": msg, "trace": traceback.format_exc(limit=4)}
+            self.out.error = {**self.c.row(), "error": msg, "trace": traceback.format_exc(limit=4)}
             self.release()
 
     def release(self) -> None:
@@ -256,11 +257,11 @@ def _run(spec: EditSpec, folder: Path, ctx, prepared: tuple, progress: bool, fai
 
     hf, views, programme, deform = prepared
     journal = Journal(folder)
-    todo = pending(spec, journal)  # type: ignore[arg-type]
+    todo = pending(spec, journal)
     total = len(spec.configs()) * spec.frames
     bar = Progress(total, total - sum(len(t) for _, t in todo), progress)
-    members = [_Member(c, t, programme[c["edit_radius"]], deform) for c, t in todo]
-    radii = sorted({m.c["edit_radius"] for m in members})
+    members = [_Member(c, t, programme[c.edit_radius], deform) for c, t in todo]
+    radii = sorted({m.c.edit_radius for m in members})
     refs = {r: _Reference(ctx, hf, programme[r], deform if r > 0 else None) for r in radii}
     try:
         for m in members:
@@ -272,7 +273,7 @@ def _run(spec: EditSpec, folder: Path, ctx, prepared: tuple, progress: bool, fai
             shots[k] = {r: ref.frame(k, views[k], spec.supersample) for r, ref in refs.items()}
             for m in members:
                 if k in m.todo and m.out.error is None:
-                    bar.step(f"{m.c['config']} frame {k}")
+                    bar.step(f"{m.c.config} frame {k}")
         extra = {"device": gl_info(ctx).renderer, "worker": "local"}
         for m in members:
             m.attempt(lambda m=m: _measure(spec, m, shots, extra), fail_fast)
@@ -327,7 +328,7 @@ def _measure(spec: EditSpec, m: _Member, shots: dict, extra: dict) -> None:
         step, draws = m.steps[k], t["draws"]
         gpu = [step.gpu_ms, _median(d.gpu_ms for d in draws)] if step.gpu_ms is not None else None
         row = {
-            **m.c,
+            **m.c.row(),
             "frame": k,
             **t["stats"].row(),
             **extra,
@@ -344,11 +345,11 @@ def _measure(spec: EditSpec, m: _Member, shots: dict, extra: dict) -> None:
             **m.gpu_bytes,
         }
         row["particles_ms"] = row["particles_step_ms"] + row["particles_draw_ms"]
-        row.update(frame_accuracy(m.plain[k], shots[k][m.c["edit_radius"]], flip=spec.flip))
-        tiles = [{"config": m.c["config"], "frame": k, "policy": m.c["policy"], **x} for x in t["stats"].tile_rows]
+        row.update(frame_accuracy(m.plain[k], shots[k][m.c.edit_radius], flip=spec.flip))
+        tiles = [{"config": m.c.config, "frame": k, "policy": m.c.policy, **x} for x in t["stats"].tile_rows]
         m.out.frames.append((row, tiles))
         if t["image"] is not None:
-            m.out.images.append(ImageOut(f"{m.c['config']}-f{k}", t["image"].colour, t["image"].distance))
+            m.out.images.append(ImageOut(f"{m.c.config}-f{k}", t["image"].colour, t["image"].distance))
 
 
 def _variant(radius: float) -> str:
@@ -357,7 +358,7 @@ def _variant(radius: float) -> str:
 
 def _reference_images(spec: EditSpec, shots: dict) -> ConfigResult:
     """The references of the image frames, one a variant, to save beside the configurations' images."""
-    out = ConfigResult({})
+    out = ConfigResult(None)
     for k in spec.image_frames:
         for r, res in shots.get(k, {}).items():
             out.images.append(ImageOut(f"ref-{_variant(r)}-f{k}", res.colour, res.distance))

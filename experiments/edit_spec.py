@@ -49,6 +49,7 @@ from hybrid.terrain.edits import BRUSHES, Brush, Flatten, check_brush
 from hybrid.terrain.heightfield import HeightField
 
 from .edit_deform import DeformProgramme, deformation, parse_deformation
+from .run_config import EditConfig
 from .spec_datasets import check_dataset_entry, dataset_label, terrain_source
 
 EDIT_POLICIES = ("raster", "raster_gs", "raycast", "hybrid", "heuristic", "oracle")
@@ -99,8 +100,8 @@ class EditSpec:
         """The dataset's label in configurations and tables."""
         return dataset_label(self.dataset)
 
-    def configs(self) -> list[dict]:
-        """Every method once per radius with the programme and once on the static terrain, as rows."""
+    def configs(self) -> list[EditConfig]:
+        """Every method once per radius with the programme and once on the static terrain."""
         out = []
         size = self.sizes[0]
         base = f"{Path(self.label).stem}-s{self.seed}-{Path(self.flight).stem}-{size}-tau{self.tau:.4g}"
@@ -109,19 +110,19 @@ class EditSpec:
                 editing = radius > 0
                 tail = f"r{radius:g}m" if editing else "static"
                 out.append(
-                    {
-                        "config": f"{base}-{policy}-{tail}",
-                        "dataset": self.label,
-                        "seed": self.seed,
-                        "flight": self.flight,
-                        "size": size,
-                        "tau": self.tau,
-                        "policy": policy,
-                        "editing": editing,
-                        "edit_radius": float(radius),
-                        "brush": self.edit.brush if editing else "none",
-                        "particles": self.edit.particles,
-                    }
+                    EditConfig(
+                        config=f"{base}-{policy}-{tail}",
+                        dataset=self.label,
+                        seed=self.seed,
+                        flight=self.flight,
+                        size=size,
+                        tau=self.tau,
+                        policy=policy,
+                        editing=editing,
+                        edit_radius=float(radius),
+                        brush=self.edit.brush if editing else "none",
+                        particles=self.edit.particles,
+                    )
                 )
         return out
 

@@ -9,7 +9,9 @@ here whoever ran it, this process or a cluster worker, so resuming never repeats
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Protocol, TypeVar
 
 import numpy as np
 import pandas as pd
@@ -17,7 +19,23 @@ import pandas as pd
 from hybrid.atomic import disk_full, save_npy, save_png, write_parquet
 from hybrid.errors import TerrabenchError
 
-from .spec import Spec
+from .run_config import RunConfig
+
+C = TypeVar("C", bound=RunConfig)
+C_co = TypeVar("C_co", bound=RunConfig, covariant=True)
+
+
+class RunSpec(Protocol[C_co]):
+    """What the journal needs of a spec (a flights or an edit spec): its frame count and its configurations."""
+
+    @property
+    def frames(self) -> int:
+        """Frames a configuration draws."""
+        ...
+
+    def configs(self) -> Sequence[C_co]:
+        """Every configuration of the spec."""
+        ...
 
 
 def _jsonable(v):
@@ -96,12 +114,12 @@ def failed_configs(folder) -> dict[str, str]:
     return {e["config"]: e["error"] for e in journal.rows("errors") if e["config"] not in finished}
 
 
-def pending(spec: Spec, journal: Journal) -> list[tuple[dict, list[int]]]:
+def pending(spec: RunSpec[C], journal: Journal) -> list[tuple[C, list[int]]]:
     """Every configuration with frames not yet in the journal, and those frames."""
     done = {(r["config"], r["frame"]) for r in journal.rows("frames")}
     out = []
     for c in spec.configs():
-        todo = [k for k in range(spec.frames) if (c["config"], k) not in done]
+        todo = [k for k in range(spec.frames) if (c.config, k) not in done]
         if todo:
             out.append((c, todo))
     return out

@@ -123,7 +123,7 @@ def missing_frames(spec: dict, frames: pd.DataFrame) -> str:
         return ""  # a spec of another form: nothing to compare with
     have = set(zip(frames["config"], frames["frame"]))
     n = int(spec.get("frames", 1))
-    gaps = {c["config"]: n - sum((c["config"], k) in have for k in range(n)) for c in expected}
+    gaps = {c.config: n - sum((c.config, k) in have for k in range(n)) for c in expected}
     gaps = {k: v for k, v in gaps.items() if v}
     if not gaps:
         return ""

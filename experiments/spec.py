@@ -44,44 +44,19 @@ from __future__ import annotations
 import itertools
 import json
 import tomllib
-from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import get_args, get_type_hints
 
 from hybrid.contract import DEFAULT_FULL_RES, PRIOR_FULL_RES
 from hybrid.errors import TerrabenchError
 from hybrid.strategies import adapting_policies, policies_taking
 from hybrid.terrain.sources import TerrainSource
 
+from .run_config import Config
 from .spec_datasets import check_dataset_entry, dataset_label, terrain_source
 from .spec_keys import START_MODELS, checked_list, list_keys, scalar_keys
 from .stress_spec import parse_stress_spec
-
-
-@dataclass(frozen=True)
-class Config:
-    """One configuration of a run: a policy over one flight of one dataset at one size, tau and option set; ``config``
-    is its stable id. Runs store it as a row (``row``), as spec.json and the journal hold it."""
-
-    config: str
-    dataset: str
-    seed: int
-    flight: str
-    size: str
-    tau: float
-    reconstruction: str
-    full_res: str
-    policy: str
-    start_model: str = START_MODELS[0]
-
-    @classmethod
-    def of(cls, row: Mapping) -> Config:
-        """The configuration of a row; keys that are no field are left out, a missing start model is the device's."""
-        return cls(**{f.name: row[f.name] for f in fields(cls) if f.name in row})
-
-    def row(self) -> dict:
-        """The configuration as a flat dict, fields in order."""
-        return asdict(self)
 
 
 @dataclass
@@ -89,30 +64,31 @@ class Spec:
     """A parsed, checked experiment spec."""
 
     name: str
-    datasets: list = field(default_factory=lambda: ["puget"])
+    datasets: list[str | dict] = field(default_factory=lambda: ["puget"])
     dataset_size: int = 0
-    flights: list = field(default_factory=lambda: ["flyover"])
+    flights: list[str] = field(default_factory=lambda: ["flyover"])
     frames: int = 12
-    policies: list = field(default_factory=lambda: ["raster", "raycast", "hybrid"])
-    taus: list = field(default_factory=lambda: [2 / 3])
-    sizes: list = field(default_factory=lambda: ["640x360"])
-    reconstructions: list = field(default_factory=lambda: ["triangles"])
-    full_res: list = field(default_factory=lambda: [DEFAULT_FULL_RES])
+    policies: list[str] = field(default_factory=lambda: ["raster", "raycast", "hybrid"])
+    taus: list[float] = field(default_factory=lambda: [2 / 3])
+    sizes: list[str] = field(default_factory=lambda: ["640x360"])
+    reconstructions: list[str] = field(default_factory=lambda: ["triangles"])
+    full_res: list[str] = field(default_factory=lambda: [DEFAULT_FULL_RES])
     repeats: int = 3
-    seeds: list = field(default_factory=lambda: [0])
+    seeds: list[int] = field(default_factory=lambda: [0])
     tile_size: int = 256
     supersample: int = 2
     flip: bool = True
-    image_frames: list = field(default_factory=lambda: [0])
+    image_frames: list[int] = field(default_factory=lambda: [0])
     video: bool = False
     accuracy: bool = True
     gpu_budget_mib: int = 256
     upload_budget_ms: float | None = None
     adapt: bool = True
-    start_models: list = field(default_factory=lambda: ["device"])
+    start_models: list[str] = field(default_factory=lambda: ["device"])
 
-    def configs(self) -> list[dict]:
-        """Every combination, one dict each, with a stable id; frames of one (dataset, seed, flight, size) are paired."""
+    def configs(self) -> list[Config]:
+        """Every combination, one Config each, with a stable id; frames of one (dataset, seed, flight, size) are
+        paired."""
         out = []
         labels = [dataset_label(d) for d in self.datasets]
         casting, tilelets, adapting = (
@@ -146,7 +122,7 @@ class Spec:
                 + ("" if fr == PRIOR_FULL_RES else f"-{fr}")
                 + ("" if sm == START_MODELS[0] else f"-from-{sm}")
             )
-            out.append(Config(cid, ds, seed, fl, size, tau, rec, fr, pol, sm).row())
+            out.append(Config(cid, ds, seed, fl, size, tau, rec, fr, pol, sm))
         return out
 
     def source(self, label: str) -> TerrainSource:
@@ -210,11 +186,13 @@ def parse_spec(text: str, source: str = "spec", base: Path | None = None, overri
         raise TerrabenchError(f"{source}: name must be a non-empty word without slashes or spaces, got {kw['name']!r}")
     if "datasets" in d:
         kw["datasets"] = _datasets(d["datasets"], source, base)
-    for key, kind, check in list_keys(source):
-        v = checked_list(d, key, kind, check)
+    types = get_type_hints(Spec)  # each key's type, as the dataclass declares it
+    for key, check in list_keys(source):
+        kind = get_args(types[key])[0]  # a list key's entry type; integers are numbers too
+        v = checked_list(d, key, (int, float) if kind is float else kind, check)
         if v is not None:
-            kw[key] = [float(x) for x in v] if key == "taus" else v
-    kw.update(scalar_keys(d, source))
+            kw[key] = [float(x) for x in v] if kind is float else v
+    kw.update(scalar_keys(d, source, flags=[k for k, t in types.items() if t is bool]))
     return _checked(Spec(**kw), source)
 
 

@@ -37,8 +37,8 @@ def checked_list(d, key, kind, check=None):
 
 
 def list_keys(source: str) -> tuple:
-    """(key, element type, element check or None) of every list key of a flights spec; the names a key allows
-    come from the strategy registry where they name policies or strategy options."""
+    """(key, entry check or None) of every list key of a flights spec but ``datasets`` (its entries' type is the
+    ``Spec`` field's); the names a key allows come from the strategy registry where they name policies or options."""
 
     def one_of(what: str, allowed: tuple):
         def check(v):
@@ -59,20 +59,21 @@ def list_keys(source: str) -> tuple:
             raise TerrabenchError(f"{source}: seeds must lie in [0, 2^32), got {s!r}")
 
     return (
-        ("flights", str, None),
-        ("policies", str, one_of("policy", methods())),
-        ("taus", (int, float), tau_ok),
-        ("sizes", str, size_ok),
-        ("reconstructions", str, one_of("reconstruction", option_choices("reconstruction"))),
-        ("full_res", str, one_of("full_res", option_choices("full_res"))),
-        ("seeds", int, seed_ok),
-        ("start_models", str, one_of("start model", START_MODELS)),
-        ("image_frames", int, None),
+        ("flights", None),
+        ("policies", one_of("policy", methods())),
+        ("taus", tau_ok),
+        ("sizes", size_ok),
+        ("reconstructions", one_of("reconstruction", option_choices("reconstruction"))),
+        ("full_res", one_of("full_res", option_choices("full_res"))),
+        ("seeds", seed_ok),
+        ("start_models", one_of("start model", START_MODELS)),
+        ("image_frames", None),
     )
 
 
-def scalar_keys(d: dict, source: str) -> dict:
-    """The spec's integer, number and true/false keys that ``d`` gives, checked."""
+def scalar_keys(d: dict, source: str, flags: list[str]) -> dict:
+    """The spec's integer, number and true/false keys (``flags``: the ``Spec`` fields typed bool) that ``d`` gives,
+    checked."""
     kw: dict[str, Any] = {}
     for key, lo, hi in (
         ("frames", 1, 100000),
@@ -94,7 +95,7 @@ def scalar_keys(d: dict, source: str) -> dict:
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0 <= v <= 1e4):
             raise TerrabenchError(f"{source}: 'upload_budget_ms' must be a number of ms in [0, 10000], got {v!r}")
         kw["upload_budget_ms"] = float(v)
-    for key in ("flip", "video", "accuracy", "adapt"):
+    for key in flags:
         if key in d:
             if not isinstance(d[key], bool):
                 raise TerrabenchError(f"{source}: '{key}' must be true or false, got {d[key]!r}")

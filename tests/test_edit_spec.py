@@ -38,10 +38,8 @@ def test_the_bundled_edit_spec_parses_with_overrides():
     assert spec.edit.brush == "crater" and len(spec.edit.radii) >= 2 and spec.edit.particles > 0
     configs = spec.configs()
     assert len(configs) == len(spec.policies) * (len(spec.edit.radii) + 1)
-    assert {c["config"] for c in configs if not c["editing"]} == {
-        c["config"] for c in configs if c["edit_radius"] == 0.0
-    }
-    assert len({c["config"] for c in configs}) == len(configs)
+    assert {c.config for c in configs if not c.editing} == {c.config for c in configs if c.edit_radius == 0.0}
+    assert len({c.config for c in configs}) == len(configs)
 
 
 def test_the_programme_is_the_same_brushes_along_the_path():

@@ -194,7 +194,7 @@ def test_specs_parse_or_are_refused(entries):
     except TerrabenchError:
         return
     configs = spec.configs()
-    assert configs and len({c["config"] for c in configs}) == len(configs)
+    assert configs and len({c.config for c in configs}) == len(configs)
     assert spec.frames >= 1 and spec.repeats >= 1 and all(s >= 0 for s in spec.seeds)
 
 

@@ -49,7 +49,7 @@ def test_registered_toys_appear_in_cli_choices(toys):
 def test_registered_toys_pass_the_spec_checks(toys):
     spec = parse_spec('policies = ["toycast", "toymix", "raster"]\nreconstructions = ["triangles", "toy"]')
     configs = spec.configs()
-    recs = {(c["policy"], c["reconstruction"]) for c in configs}
+    recs = {(c.policy, c.reconstruction) for c in configs}
     assert {("toycast", "toy"), ("toymix", "toy"), ("raster", "triangles")} <= recs
     assert ("raster", "toy") not in recs  # raster casts no rays: one reconstruction only
     assert "toymix" in strategies.mixed_policies() and "toycast" in strategies.pure_policies()

@@ -197,7 +197,7 @@ def test_full_resolution_rules_vary_only_tilelet_policies():
     )
     rules = {}
     for c in spec.configs():
-        rules.setdefault(c["policy"], []).append(c["full_res"])
+        rules.setdefault(c.policy, []).append(c.full_res)
     assert rules == {
         "raster": ["exact", "lean"],
         "raster_gs": ["exact", "lean"],
@@ -205,9 +205,9 @@ def test_full_resolution_rules_vary_only_tilelet_policies():
         "raycast": ["exact"],
         "reference": ["exact"],
     }
-    ids = [c["config"] for c in spec.configs()]
+    ids = [c.config for c in spec.configs()]
     assert len(set(ids)) == len(ids) and sum(i.endswith("-lean") for i in ids) == 3
-    assert {c["full_res"] for c in parse_spec("").configs() if c["policy"] in policies_taking("full_res")} == {
+    assert {c.full_res for c in parse_spec("").configs() if c.policy in policies_taking("full_res")} == {
         DEFAULT_FULL_RES
     }
 
@@ -245,7 +245,7 @@ def test_bundled_specs_parse():
     for name in ("default", "tiny", "full-res"):
         assert load_spec(name).configs()
         assert load_spec(name).gpu_budget_mib == 256 and load_spec(name).upload_budget_ms is None
-    rules = {(c["policy"], c["full_res"]) for c in load_spec("full-res").configs()}
+    rules = {(c.policy, c.full_res) for c in load_spec("full-res").configs()}
     assert {("raster", "lean"), ("hybrid", "lean"), ("raster", "exact")} <= rules
     with pytest.raises(TerrabenchError, match="no such spec"):
         load_spec("nowhere.toml")
@@ -363,10 +363,10 @@ def test_a_configuration_failing_in_its_measures_keeps_its_groups_reference_imag
 
 def test_start_models_vary_only_the_hybrid():
     spec = parse_spec('policies = ["raster", "raycast", "hybrid"]\nstart_models = ["device", "fallback"]')
-    hy = [c for c in spec.configs() if c["policy"] == "hybrid"]
-    assert sorted(c["start_model"] for c in hy) == ["device", "fallback"]
-    assert sum(c["config"].endswith("-from-fallback") for c in spec.configs()) == 1
-    assert all(c["start_model"] == "device" for c in spec.configs() if c["policy"] != "hybrid")
+    hy = [c for c in spec.configs() if c.policy == "hybrid"]
+    assert sorted(c.start_model for c in hy) == ["device", "fallback"]
+    assert sum(c.config.endswith("-from-fallback") for c in spec.configs()) == 1
+    assert all(c.start_model == "device" for c in spec.configs() if c.policy != "hybrid")
     with pytest.raises(TerrabenchError, match="unknown start model 'h200'"):
         parse_spec('start_models = ["h200"]')
     with pytest.raises(TerrabenchError, match="'adapt' must be true or false"):

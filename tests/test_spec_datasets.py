@@ -42,8 +42,8 @@ def test_table_entry_loads_with_its_options(tmp_path):
 name = "files"
 datasets = ["fbm", {{path = "{tif}", name = "dem", spacing = [20.0, 25.0], crop = {crop}}}]
 ''')
-    assert {c["dataset"] for c in spec.configs()} == {"fbm", "dem"}
-    assert any(c["config"].startswith("dem-s0-") for c in spec.configs())
+    assert {c.dataset for c in spec.configs()} == {"fbm", "dem"}
+    assert any(c.config.startswith("dem-s0-") for c in spec.configs())
     hf = spec.source("dem").load()
     assert hf.heights.shape == (8, 12) and (hf.spacing_x, hf.spacing_y) == (20.0, 25.0)
     assert hf.height_range == (100.0, 700.0)
