@@ -89,7 +89,7 @@ def observe(
     frame = frame_columns(plans)
     if frame is not None:
         predicted = predicted_frame_ms(online.model, plans)
-        online.observe(frame.columns, [p.choice for p in plans], pass_ms, draw_ms, explored, predicted)
+        online.observe(frame.columns, [p.choice for p in plans], pass_ms, draw_ms, explored, predicted, frame.terms)
 
 
 def timed_explore(online: OnlineModel | None, plans: list[TilePlan], learn: bool) -> tuple[Exploration | None, float]:

@@ -130,7 +130,10 @@ class CostModel:
     def predict_table(self, columns, unknown: float = np.nan) -> np.ndarray:
         """(candidates, B) predicted ms, rows in ``candidates`` order, from feature columns ((B,) arrays, or one
         ``TileFeatures``: (candidates,)); the raster rows are ``unknown`` where the triangles are NaN."""
-        terms = all_term_values(columns)
+        return self.predict_terms(all_term_values(columns), unknown)
+
+    def predict_terms(self, terms: np.ndarray, unknown: float = np.nan) -> np.ndarray:
+        """``predict_table`` from the columns' term values (``all_term_values``: (B, terms) or (terms,))."""
         shape, terms = terms.shape[:-1], terms.reshape(-1, len(ALL_TERMS))
         cands = self.candidates
         coef = self._memo(

@@ -200,13 +200,14 @@ class OnlineModel:
         frame_ms: float,
         explored: Exploration | None = None,
         predicted_ms: float | None = None,
+        terms: np.ndarray | None = None,
     ) -> None:
         """Learn from one drawn frame: feature columns of its tiles ((B,) arrays), each tile's strategy, each
         strategy's measured pass ms, the whole drawing's ms and the model's prediction of it (ms, before this
-        frame); refits the strategies drawn."""
+        frame); refits the strategies drawn. ``terms``: the columns' ``all_term_values`` where the plan has them."""
         if not np.isfinite(frame_ms) or frame_ms <= 0:
             return
-        terms = all_term_values(columns)
+        terms = all_term_values(columns) if terms is None else terms
         chosen = np.asarray(picks)
         m = self.model
         learnt = []

@@ -23,7 +23,7 @@ from hybrid.camera.view import View
 from hybrid.contract import TriangleEstimator
 from hybrid.cost.choice import best_assignment_table
 from hybrid.cost.features import TileFeatures, feature_columns, tile_features
-from hybrid.cost.model import CostModel
+from hybrid.cost.model import CostModel, all_term_values
 from hybrid.errors import TerrabenchError
 from hybrid.strategies import (
     STRATEGIES,
@@ -40,10 +40,11 @@ class FrameColumns:
     """A frame's per-tile feature columns and predicted ms ((B,) arrays), shared by its TilePlans, which read their
     row as objects only when asked (tables, calibration): drawing needs the choices alone."""
 
-    __slots__ = ("columns", "predicted")
+    __slots__ = ("columns", "predicted", "terms")
 
-    def __init__(self, columns: dict, predicted: dict):
+    def __init__(self, columns: dict, predicted: dict, terms: np.ndarray | None = None):
         self.columns, self.predicted = columns, predicted
+        self.terms = all_term_values(columns) if terms is None else terms  # (B, len(ALL_TERMS)), the model's inputs
 
     def features(self, i: int) -> TileFeatures:
         """Row i's features."""
@@ -115,9 +116,17 @@ class TilePlan:
 def predicted_frame_ms(model: CostModel, plans: list[TilePlan]) -> float | None:
     """The model's predicted ms of a frame of plans as drawn (their choices, each strategy's overhead and a mixed
     frame's); None where some plan has no prediction for its choice."""
-    if not plans or any(p.choice not in p.predicted for p in plans):
+    if not plans:
         return None
-    return model.frame_ms([p.predicted[p.choice] for p in plans], {p.choice for p in plans})
+    frame = frame_columns(plans)
+    if frame is None:
+        if any(p.choice not in p.predicted for p in plans):
+            return None
+        return model.frame_ms([p.predicted[p.choice] for p in plans], {p.choice for p in plans})
+    pred = frame.predicted
+    if any(p.choice not in pred for p in plans):
+        return None
+    return model.frame_ms([float(pred[p.choice][p._row]) for p in plans], {p.choice for p in plans})
 
 
 def frame_columns(plans: list[TilePlan]) -> FrameColumns | None:
@@ -242,14 +251,15 @@ def plan_frame(
     if batch:
         triangles, visible = triangles_fn.many(selected, view, tau, prep_budget_ms)
         columns = feature_columns(pyramid, view, selected, triangles, visible)
+        terms = all_term_values(columns)
         names = model.candidates
-        table = model.predict_table(columns, unknown=np.inf)  # unknown triangles: raster infinite, so ray cast
+        table = model.predict_terms(terms, unknown=np.inf)  # unknown triangles: raster infinite, so ray cast
         pred = dict(zip(names, table))
         if hedged:
             chosen = [names[i] for i in hedged_picks(table, names, model).tolist()]
         else:
             chosen = choices(policy, columns, pred, threshold)
-        frame = FrameColumns(columns, pred)
+        frame = FrameColumns(columns, pred, terms)
         return [TilePlan(s, None, None, c, frame=frame, row=i) for i, (s, c) in enumerate(zip(selected, chosen))]
     else:
         counts = [triangles_fn.many([s], view, tau) for s in selected]
