@@ -24,6 +24,10 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "ctx" in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.gl)
+    # modules with slow tests first (whole, so their module fixtures are made once): spread over the workers
+    # (pytest-xdist), the slow tests do not finish the run one after another
+    slow = {item.module.__name__ for item in items if item.get_closest_marker("slow") is not None}
+    items.sort(key=lambda item: item.module.__name__ not in slow)
 
 
 @pytest.fixture(scope="session")

@@ -11,6 +11,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("hybrid", "raster", "raycast", "experiments")
 LAYERS = [
@@ -217,6 +219,7 @@ def _import_each(names: list[list[str]]) -> list[str]:
     return [b for b in out.stdout.split("\n====\n") if b.strip()]
 
 
+@pytest.mark.slow
 def test_every_module_imports_alone_and_packages_in_any_order():
     groups = [[m] for m in sorted(modules()) if not m.endswith("__main__")]
     groups += [list(p) for p in itertools.permutations(PACKAGES)]

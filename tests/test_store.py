@@ -249,7 +249,6 @@ def test_nodata_is_refused_by_name(tmp_path):
     assert not out.exists() or not json.loads((out / "zarr.json").read_text())["attributes"]["complete"]
 
 
-@pytest.mark.slow
 def test_synthetic_terrain_is_window_and_size_independent(tmp_path):
     """A fractal's samples depend on neither the rows read at once nor the grid's size; the prepare's memory is
     measured in test_store_nodes.test_prepare_memory_stays_band_sized."""

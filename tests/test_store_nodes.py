@@ -131,33 +131,46 @@ def test_prepare_memory_stays_band_sized(tmp_path, monkeypatch):
     import tracemalloc
 
     from hybrid.terrain.grid_sources import FractalSource
-    from hybrid.terrain.stored import open_store
     from hybrid.tiles import store_prepare as store_mod
 
-    peaks: dict = {}
+    peaks, build = {}, store_mod.build_nodes
 
-    def measured(name, build):
-        def run(*a, **k):
-            peaks.setdefault("levels", tracemalloc.get_traced_memory()[1])
-            tracemalloc.reset_peak()
-            build(*a, **k)
-            peaks[name] = tracemalloc.get_traced_memory()[1]
+    class Measured(Exception):
+        """Both peaks taken: the rest of the prepare (tile blocks, read a window of rows at a time) is not run."""
 
-        return run
+    def measured(*a, **k):
+        peaks["levels"] = tracemalloc.get_traced_memory()[1]
+        tracemalloc.reset_peak()
+        build(*a, **k)
+        peaks["nodes"] = tracemalloc.get_traced_memory()[1]
+        raise Measured
 
-    monkeypatch.setattr(store_mod, "build_nodes", measured("nodes", store_mod.build_nodes))
-    monkeypatch.setattr(store_mod, "build_blocks", measured("blocks", store_mod.build_blocks))
+    monkeypatch.setattr(store_mod, "build_nodes", measured)
     tracemalloc.start()
     try:
-        prepare_store(FractalSource(2049, seed=0), tmp_path / "s", 128)
+        with pytest.raises(Measured):
+            prepare_store(FractalSource(2049, seed=0), tmp_path / "s", 128)
     finally:
         tracemalloc.stop()
     # the grid as float64 is 32 MiB, its square of nodes 16 MiB a level: the node build holds one block of 1024²
-    # cells and one band a level, the block build a window of rows of each node array
+    # cells and one band a level
     assert peaks["nodes"] < 100 * 2**20 and peaks["nodes"] <= peaks["levels"], peaks
-    assert peaks["blocks"] < 100 * 2**20, peaks
-    t = open_store(tmp_path / "s")
-    assert np.array_equal(t.heights[:1025, :1025], FractalSource(1025, seed=0).read_rows(0, 1025))
+
+
+def test_block_build_reads_node_arrays_a_bounded_window_at_a_time(monkeypatch):
+    """RowWindows holds at most WINDOW_BYTES of whole rows (or the rows asked, if more), whatever the array's
+    length, and serves every window asked with the array's samples."""
+    from hybrid.tiles import store_blocks
+
+    monkeypatch.setattr(store_blocks, "WINDOW_BYTES", 64 * 100 * 4)
+    a = np.arange(1000 * 100, dtype=np.float32).reshape(1000, 100)
+    w = store_blocks.RowWindows(a)
+    held = 0
+    for r0 in range(-1, 1000, 31):
+        ra, rb = max(r0, 0), min(r0 + 35, 1000)
+        assert np.array_equal(w[ra:rb, 3:97], a[ra:rb, 3:97])
+        held = max(held, w.held.nbytes)
+    assert held <= 64 * 100 * 4
 
 
 @pytest.fixture(scope="module")
