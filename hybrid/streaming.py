@@ -27,7 +27,7 @@ def make_resident(r, plans: list, pinned: set, prep_ms: float) -> UploadReport |
         missing = [p for p in plans if (p.choice, p.key) not in r.cache.entries]
         rank = fallback_priorities(r.cache, missing, pyramid.max_level, pyramid.error)
         missing = [missing[i] for i in sorted(range(len(missing)), key=lambda i: -rank[i])]
-        work, waiting = host_jobs(r.strategies, r.triangles, missing, pyramid.n)
+        work, waiting = host_jobs(r.strategies, r.triangles, missing, pyramid.n, pyramid)
         pyramid.request([p.key for p in missing] + list(work), work)
         ready = pyramid.cached_keys([p.key for p in missing]).__contains__  # one look, not one a tile
         deferred = lambda p: (p.choice, p.key) in waiting and not pyramid.failed(p.key)  # noqa: E731

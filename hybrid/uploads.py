@@ -22,6 +22,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 
@@ -67,10 +68,13 @@ def fallback_tile(ancestor_tile, clip, zrange=None):
     return out if zrange is None else replace(out, zmin=float(zrange[0]), zmax=float(zrange[1]))
 
 
-def host_jobs(strategies: dict, estimator, plans, n: int) -> tuple[dict, set]:
+def host_jobs(strategies: dict, estimator, plans, n: int, pyramid=None) -> tuple[dict, set]:
     """A frame's host work for a store's loader thread: (key -> callables, the (choice, key) uploads waiting for
     it). ``plans`` are the tiles whose upload is missing; strategies with a ``host_work(key, n)`` (the raster
-    ones) give theirs, and the triangle estimate (``estimator.waiting``, if any) the cuts it left unknown."""
+    ones) give theirs, which their upload waits for, and the triangle estimate (``estimator.waiting``, if any)
+    the cuts it left unknown. With the store's ``pyramid``, a strategy with a ``host_prepare(heights,
+    source_step)`` (the ray caster) has it made of the tile's samples (``StorePyramid.derive``) so that its
+    upload is the GL's part alone; an upload does not wait for that (it prepares its tile itself)."""
     work = {k: [fn] for k, fn in (getattr(estimator, "waiting", None) or {}).items()}
     waiting = set()
     for p in plans:
@@ -79,6 +83,16 @@ def host_jobs(strategies: dict, estimator, plans, n: int) -> tuple[dict, set]:
         if job is not None:
             work.setdefault(p.key, []).append(job)
             waiting.add((p.choice, p.key))
+    for name in {p.choice for p in plans} if pyramid is not None else ():
+        prepare = getattr(strategies[name], "host_prepare", None)
+        if prepare is None:
+            continue
+        product = strategies[name].host_product
+        keys = [p.key for p in plans if p.choice == name]
+        made = pyramid.derived_keys(keys, product)
+        for k in keys:
+            if k not in made:
+                work.setdefault(k, []).append(partial(pyramid.derive, k, product, prepare))
     return work, waiting
 
 

@@ -66,6 +66,36 @@ class StorePyramid(TilePyramid):
         self._loader: threading.Thread | None = None
         self._closing = False
         self._failed: set = set()
+        self._derived: dict = {}  # key -> {product name: what derive made of its samples}, evicted with them
+
+    def derive(self, key, name: str, make) -> None:
+        """Make ``make(samples, source_step)`` of the tile's samples (a strategy's host work for its upload, such as
+        the ray caster's 16-bit codes and max mipmap) and keep it beside them, counted in the host cache, until
+        a Tile of ``key`` takes it (``host_products``) or the samples leave the cache; thread-safe."""
+        h = self.samples(key)
+        made = make(h, getattr(self.hf, "source_step", None))
+        with self._lock:
+            if self._cache.get(key) is h:  # the samples it was made of are still the tile's
+                old = self._derived.setdefault(key, {}).pop(name, None)
+                self._derived[key][name] = made
+                self.cache_bytes += made.nbytes - (0 if old is None else old.nbytes)
+                self._evict()
+
+    def derived_keys(self, keys, name: str) -> set:
+        """Those of ``keys`` of which ``derive`` made product ``name`` that no Tile has taken yet (one lock)."""
+        with self._lock:
+            return {k for k in keys if name in self._derived.get(k, ())}
+
+    def host_products(self, key) -> dict:
+        """The products ``derive`` made of the tile's samples, handed over to the Tile being made (and dropped)."""
+        with self._lock:
+            out = self._derived.pop(key, {})
+            self.cache_bytes -= sum(v.nbytes for v in out.values())
+            return out
+
+    def _drop_derived(self, key) -> None:
+        """Under the lock: forget what was made of a tile's samples (they left the cache or changed)."""
+        self.cache_bytes -= sum(v.nbytes for v in self._derived.pop(key, {}).values())
 
     def samples(self, key) -> np.ndarray:
         """The tile's (n+1)² level-l samples (float32 metres), read from disk or the host cache."""
@@ -93,8 +123,9 @@ class StorePyramid(TilePyramid):
             self.chunk_bytes -= old.nbytes
             self.cache_bytes -= old.nbytes
         while self.cache_bytes > self.host_budget and len(self._cache) > 1:
-            _, old = self._cache.popitem(last=False)
+            key, old = self._cache.popitem(last=False)
             self.cache_bytes -= old.nbytes
+            self._drop_derived(key)
             self.stats["evictions"] += 1
         self.stats["peak_bytes"] = max(self.stats["peak_bytes"], self.cache_bytes)
 
@@ -150,6 +181,7 @@ class StorePyramid(TilePyramid):
                 mine[level][at] = theirs[at]
         with self._lock:
             for k in keys:
+                self._drop_derived(k)
                 if k in self._cache:
                     self.cache_bytes -= self._cache.pop(k).nbytes
             for chunk in [c for c in self._chunks if _chunk_meets(c, self.n, win)]:
@@ -239,6 +271,7 @@ class StorePyramid(TilePyramid):
         with self._lock:
             self._cache.clear()
             self._chunks.clear()
+            self._derived.clear()
             self.cache_bytes = self.chunk_bytes = 0
         self._closing = False
 
