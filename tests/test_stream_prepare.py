@@ -3,6 +3,7 @@ the GPU builder makes, kept beside the tile's samples until its upload takes the
 are the frames of a renderer that uploaded everything first, with no hole meanwhile."""
 
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -99,3 +100,30 @@ def test_uploads_of_a_jump_take_the_loaders_products_and_draw_the_resident_frame
     assert np.array_equal(res.colour, want.colour)
     both = np.isfinite(want.distance)
     assert np.array_equal(np.isfinite(res.distance), both) and np.array_equal(res.distance[both], want.distance[both])
+
+
+def test_no_loader_work_runs_inside_a_hold(store, monkeypatch):
+    """A hold waits for the tile the loader is on, then nothing of the loader's runs until it ends."""
+    from hybrid.tiles import store as store_mod
+
+    monkeypatch.setattr(store_mod, "HOLD_WAIT_S", 60.0)  # wait for the step, however slow the machine
+    p = StorePyramid(store)
+    spans, lock = [], threading.Lock()
+
+    def work():
+        t0 = time.perf_counter()
+        time.sleep(0.002)
+        with lock:
+            spans.append((t0, time.perf_counter()))
+
+    keys = p.keys(0)
+    p.request(keys, {k: [work] for k in keys})
+    while not spans:
+        time.sleep(0.001)
+    with p.held():
+        t0 = time.perf_counter()
+        time.sleep(0.05)
+        t1 = time.perf_counter()
+    assert p.idle(60) and len(spans) == len(keys)
+    assert not [s for s in spans if s[1] > t0 and s[0] < t1]
+    p.close()

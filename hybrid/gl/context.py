@@ -149,9 +149,10 @@ def gl_finish(ctx) -> None:
 
 def gl_memory_barrier(ctx) -> None:
     """glMemoryBarrier (all bits). A CPU rasterizer finishes the queued work there, so on one the call's time is
-    added to ``gl_waited_ms``; on a GPU the call does not wait."""
+    added to ``gl_waited_ms``; on a GPU the call does not wait. Called through ctypes, which lets other Python
+    threads (a tile store's loader) run while the rasterizer works (moderngl's holds the interpreter lock)."""
     t0 = time.perf_counter()
-    ctx.memory_barrier()
+    _gl_function(b"glMemoryBarrier", ctypes.c_uint)(0xFFFFFFFF)  # GL_ALL_BARRIER_BITS
     if is_software(ctx):
         _WAITED[0] += (time.perf_counter() - t0) * 1e3
 

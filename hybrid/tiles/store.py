@@ -24,6 +24,7 @@ from .pyramid import TileKey, TilePyramid
 from .pyramid_edit import touched_tiles
 from .store_prepare import prepare_store  # noqa: F401  (the stores' API: prepare, then open)
 
+HOLD_WAIT_S = 0.005  # a hold waits this long at most for the loader to finish the tile it is on
 CHUNK_SHARE = 8  # decoded chunks may hold 1/CHUNK_SHARE of a StorePyramid's host budget
 
 
@@ -63,6 +64,7 @@ class StorePyramid(TilePyramid):
         self._done = threading.Event()
         self._go = threading.Event()  # cleared: the loader waits before its next tile
         self._go.set()
+        self._busy = threading.Lock()  # held by the loader while it works on a tile
         self._loader: threading.Thread | None = None
         self._closing = False
         self._failed: set = set()
@@ -248,10 +250,13 @@ class StorePyramid(TilePyramid):
 
     @contextlib.contextmanager
     def held(self):
-        """Hold the loader thread (as ``pause``) inside the block, then restore what it was: so that a frame's
-        upload jobs do not wait on the loader's reads for the interpreter lock."""
+        """Hold the loader thread (as ``pause``) inside the block, once it has finished the tile it is on (waiting
+        ``HOLD_WAIT_S`` at most), then restore what it was: so that a frame's upload jobs do not wait on the
+        loader's reads for the interpreter lock."""
         was = not self._go.is_set()
         self.pause()
+        if self._busy.acquire(timeout=HOLD_WAIT_S):  # the tile it is on done (unless slow: then it goes on)
+            self._busy.release()
         try:
             yield
         finally:
@@ -286,18 +291,19 @@ class StorePyramid(TilePyramid):
                     self._done.set()
                     return
             self._go.wait()
-            with self._wake:
-                if self._closing or not self._wanted:
-                    continue
-                key = self._wanted.pop(0)
-                work = self._work.pop(key, ())
-            try:
-                self.samples(key)
-                for fn in work:
-                    fn()
-            except Exception:  # the renderer's own read of it raises the error where it is seen
-                with self._lock:
-                    self._failed.add(key)
+            with self._busy:
+                with self._wake:
+                    if self._closing or not self._wanted or not self._go.is_set():
+                        continue  # held meanwhile: nothing starts inside a hold
+                    key = self._wanted.pop(0)
+                    work = self._work.pop(key, ())
+                try:
+                    self.samples(key)
+                    for fn in work:
+                        fn()
+                except Exception:  # the renderer's own read of it raises the error where it is seen
+                    with self._lock:
+                        self._failed.add(key)
 
     @property
     def padded(self) -> np.ndarray:
