@@ -156,10 +156,36 @@ def _memory_sentences(table: pd.DataFrame, refused: pd.DataFrame) -> list[str]:
     return out
 
 
+def jump_sentences(table: pd.DataFrame, limit: int = 30) -> list[str]:
+    """The camera-jump target: per store and method, the frames until 95 % of the tiles are drawn at their wanted
+    level (``experiments.stream_jump``), met where it is at most ``limit``."""
+    if table.empty:
+        return []
+    reached = pd.to_numeric(table["frames_to_share"], errors="coerce")
+    done = reached <= limit
+    each = ", ".join(
+        f"{r.method} on {r.store} "
+        + (f"{int(k)} frames" if pd.notna(k) else "not reached")
+        + f" ({100 * r.share_at_30:.0f} % at frame {limit}, {r.uploads_mean:.1f} uploads a frame)"
+        for r, k in zip(table.itertuples(), reached)
+    )
+    return [
+        f"After a camera jump, 95 % of the tiles drawn at their wanted level within {limit} frames: target met in "
+        f"{int(done.sum())} of {len(table)} (store, method) pairs: {each}."
+    ]
+
+
 def write_scaling_report(
-    frames: pd.DataFrame, refused: pd.DataFrame, setup: pd.DataFrame, folder: Path, device: str, notes: list[str]
+    frames: pd.DataFrame,
+    refused: pd.DataFrame,
+    setup: pd.DataFrame,
+    folder: Path,
+    device: str,
+    notes: list[str],
+    jumps: pd.DataFrame | None = None,
 ) -> Path:
-    """Write reports/<folder>/scaling.md with its charts and tables; returns the markdown path."""
+    """Write reports/<folder>/scaling.md with its charts and tables (and ``jumps``, ``stream_jump.jump_table``'s
+    table of camera jumps, when given); returns the markdown path."""
     folder.mkdir(parents=True, exist_ok=True)
     write_parquet(folder / "scaling_frames.parquet", frames)
     table = summary(frames)
@@ -169,8 +195,12 @@ def write_scaling_report(
     size_chart(table, folder)
     lines = ["# Scaling: frame time and memory against data size", "", f"Device: {device}.", ""]
     lines += [f"- {n}" for n in notes] + [""]
-    lines += ["## Reading", ""] + [f"- {s}" for s in reading(frames, table, refused)] + [""]
+    jumps = pd.DataFrame() if jumps is None else jumps
+    lines += ["## Reading", ""] + [f"- {s}" for s in reading(frames, table, refused) + jump_sentences(jumps)] + [""]
     lines += ["## Per store and method", "", md_table(table.round(3)), ""]
+    if len(jumps):
+        lines += ["## After a camera jump (frames until 95 % of tiles at their wanted level)", ""]
+        lines += [md_table(jumps.round(3)), ""]
     if len(refused):
         lines += ["## Not drawn", "", md_table(refused), ""]
     if len(setup):

@@ -21,24 +21,25 @@ def make_resident(r, plans: list, pinned: set, prep_ms: float) -> UploadReport |
         for p in plans:  # upload first: the timed frame measures drawing only
             r._resident(p.choice, p.key, pinned)
         return None
-    ready, deferred = (lambda key: True), (lambda plan: False)
+    ready, deferred, priority = (lambda key: True), (lambda plan: False), None
     pyramid = r.pyramid
     if pyramid.background_loader:  # a store: its loader thread reads what is missing, most visible first
         missing = [p for p in plans if (p.choice, p.key) not in r.cache.entries]
         rank = fallback_priorities(r.cache, missing, pyramid.max_level, pyramid.error)
+        priority = {(p.choice, p.key): v for p, v in zip(missing, rank)}  # the jobs' order too
         missing = [missing[i] for i in sorted(range(len(missing)), key=lambda i: -rank[i])]
-        work, waiting = host_jobs(r.strategies, r.triangles, missing, pyramid.n)
+        work, waiting = host_jobs(r.strategies, r.triangles, missing, pyramid.n, pyramid)
         pyramid.request([p.key for p in missing] + list(work), work)
         ready = pyramid.cached_keys([p.key for p in missing]).__contains__  # one look, not one a tile
         deferred = lambda p: (p.choice, p.key) in waiting and not pyramid.failed(p.key)  # noqa: E731
     # the frame's budget covers the estimate's preparation and the uploads together; a store's loader waits
     with pyramid.held() if pyramid.background_loader else contextlib.nullcontext():
-        streamed = _stream(r, plans, pinned, prep_ms, ready, deferred)
+        streamed = _stream(r, plans, pinned, prep_ms, ready, deferred, priority)
     r._fallbacks = {plans[i].key: a for i, a in streamed.fallbacks.items()}
     return streamed
 
 
-def _stream(r, plans, pinned, prep_ms, ready, deferred) -> UploadReport:
+def _stream(r, plans, pinned, prep_ms, ready, deferred, priority) -> UploadReport:
     """``stream_uploads`` with the renderer's cache, strategies, tiles, budget, errors and job costs."""
     return stream_uploads(
         r.cache,
@@ -52,4 +53,5 @@ def _stream(r, plans, pinned, prep_ms, ready, deferred) -> UploadReport:
         deferred,
         r.pyramid.error,
         r.job_costs,
+        priority,
     )

@@ -22,6 +22,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 
@@ -45,14 +46,6 @@ class UploadReport:
         return len(self.fallbacks)
 
 
-def ancestors(key: TileKey, max_level: int):
-    """The tiles containing ``key`` from its parent up to the root, finest first."""
-    k = key
-    while k.level < max_level:
-        k = k.parent()
-        yield k
-
-
 def fallback_selection(sel, key: TileKey):
     """The selection record of a missing tile redirected to its ancestor ``key``: no neighbour to stitch to."""
     return sel._replace(key=key, coarser_edges=0, edge_deltas=(NO_NEIGHBOUR,) * 4)
@@ -67,10 +60,13 @@ def fallback_tile(ancestor_tile, clip, zrange=None):
     return out if zrange is None else replace(out, zmin=float(zrange[0]), zmax=float(zrange[1]))
 
 
-def host_jobs(strategies: dict, estimator, plans, n: int) -> tuple[dict, set]:
+def host_jobs(strategies: dict, estimator, plans, n: int, pyramid=None) -> tuple[dict, set]:
     """A frame's host work for a store's loader thread: (key -> callables, the (choice, key) uploads waiting for
     it). ``plans`` are the tiles whose upload is missing; strategies with a ``host_work(key, n)`` (the raster
-    ones) give theirs, and the triangle estimate (``estimator.waiting``, if any) the cuts it left unknown."""
+    ones) give theirs, which their upload waits for, and the triangle estimate (``estimator.waiting``, if any)
+    the cuts it left unknown. With the store's ``pyramid``, a strategy with a ``host_prepare(heights,
+    source_step)`` (the ray caster) has it made of the tile's samples (``StorePyramid.derive``) so that its
+    upload is the GL's part alone; an upload does not wait for that (it prepares its tile itself)."""
     work = {k: [fn] for k, fn in (getattr(estimator, "waiting", None) or {}).items()}
     waiting = set()
     for p in plans:
@@ -79,6 +75,16 @@ def host_jobs(strategies: dict, estimator, plans, n: int) -> tuple[dict, set]:
         if job is not None:
             work.setdefault(p.key, []).append(job)
             waiting.add((p.choice, p.key))
+    for name in {p.choice for p in plans} if pyramid is not None else ():
+        prepare = getattr(strategies[name], "host_prepare", None)
+        if prepare is None:
+            continue
+        product = strategies[name].host_product
+        keys = [p.key for p in plans if p.choice == name]
+        made = pyramid.derived_keys(keys, product)
+        for k in keys:
+            if k not in made:
+                work.setdefault(k, []).append(partial(pyramid.derive, k, product, prepare))
     return work, waiting
 
 
@@ -89,24 +95,24 @@ class JobCosts:
 
     def __init__(self, keep: int = 8):
         self.keep, self.ms = int(keep), dict[tuple, deque]()
+        self._median: dict[tuple, float] = {}  # by kind, updated as jobs are recorded (read once a job)
 
     def expect(self, kind) -> float:
         """The expected ms of a job of this kind (0 before any was run: the first one measures it)."""
-        times = self.ms.get(kind)
-        return float(np.median(times)) if times else 0.0
+        return self._median.get(kind, 0.0)
 
     def record(self, kind, ms: float) -> None:
         """Take in the wall ms of a job just run."""
-        self.ms.setdefault(kind, deque(maxlen=self.keep)).append(float(ms))
+        times = self.ms.setdefault(kind, deque(maxlen=self.keep))
+        times.append(float(ms))
+        self._median[kind] = float(np.median(times))
 
 
-def fallback_priorities(cache, plans, max_level: int, error_of) -> list[float]:
-    """Per plan, how much its fallback shows: the nearest resident ancestor's geometric error (the root's if none
-    is yet) over the tile's distance (proportional to that error in pixels; infinite with the eye in its box).
-    Tiles share ancestors: each (strategy, tile)'s nearest resident one is found once."""
+def nearest_ancestors(cache, plans, max_level: int) -> list[TileKey]:
+    """Per plan, the nearest ancestor of its tile resident for its strategy (the root if none is). Tiles share
+    ancestors: each (strategy, tile)'s nearest resident one is found once."""
     root, out = TileKey(max_level, 0, 0), []
     nearest: dict[tuple, TileKey] = {}  # (strategy, tile) -> its nearest resident ancestor
-    errors: dict[TileKey, float] = {}
     for p in plans:
         walked, k, anc = [], p.key, root
         while k.level < max_level:
@@ -119,6 +125,16 @@ def fallback_priorities(cache, plans, max_level: int, error_of) -> list[float]:
                 anc = k
                 break
         nearest.update(dict.fromkeys(walked, anc))
+        out.append(anc)
+    return out
+
+
+def fallback_priorities(cache, plans, max_level: int, error_of) -> list[float]:
+    """Per plan, how much its fallback shows: the nearest resident ancestor's geometric error (the root's if none
+    is yet) over the tile's distance (proportional to that error in pixels; infinite with the eye in its box)."""
+    errors: dict[TileKey, float] = {}
+    out = []
+    for p, anc in zip(plans, nearest_ancestors(cache, plans, max_level)):
         if anc not in errors:
             errors[anc] = float(error_of(anc))
         distance = float(p.selected.distance)
@@ -126,12 +142,17 @@ def fallback_priorities(cache, plans, max_level: int, error_of) -> list[float]:
     return out
 
 
-def job_order(cache, plans, missing: list, ready, max_level: int, error_of) -> list[tuple[int, bool]]:
+def job_order(
+    cache, plans, missing: list, ready, max_level: int, error_of, priority: dict | None = None
+) -> list[tuple[int, bool]]:
     """The frame's jobs as (plan index, samples loaded): loaded ones first (their job is the GPU's part), each group
-    by priority (``fallback_priorities``, largest first; front to back without ``error_of``)."""
+    by priority (``fallback_priorities``, largest first, or ``priority`` by (strategy, key) when the frame has
+    them already; front to back without either)."""
     loaded = {i: bool(ready(plans[i].key)) for i in missing}
     rank = dict.fromkeys(missing, 0.0)
-    if error_of is not None:
+    if priority is not None:
+        rank = {i: -priority.get((plans[i].choice, plans[i].key), 0.0) for i in missing}
+    elif error_of is not None:
         rank = dict(
             zip(missing, (-v for v in fallback_priorities(cache, [plans[i] for i in missing], max_level, error_of)))
         )
@@ -150,13 +171,14 @@ def stream_uploads(
     deferred=lambda plan: False,
     error_of=None,
     costs: JobCosts | None = None,
+    priority: dict | None = None,
 ) -> UploadReport:
     """Run a frame's upload jobs within ``budget_ms`` and pick an ancestor for every tile still missing.
 
     ``plans`` (front to back) carry ``key``, ``choice`` and ``selected``; ``pinned`` gains every (strategy, key) the
     frame draws, ancestors included. Jobs run in ``job_order`` (by priority with ``error_of(key)``, a tile's
-    geometric error); after the first, a job starts only if its expected ms (``costs``) fits in what is left.
-    Returns the report; ``fallbacks`` maps a plan index to its ancestor's key.
+    geometric error, or ``priority``); after the first, a job starts only if its expected ms (``costs``) fits in
+    what is left. Returns the report; ``fallbacks`` maps a plan index to its ancestor's key.
     """
     if not (budget_ms >= 0):
         raise TerrabenchError(f"upload budget must be >= 0 ms a frame, got {budget_ms!r}")
@@ -171,25 +193,27 @@ def stream_uploads(
     missing = [i for i, p in enumerate(plans) if (p.choice, p.key) not in cache.entries]
     waiting = {i for i in missing if deferred(plans[i])}  # the loader thread's first: not this frame
     now = [i for i in missing if i not in waiting]
-    for i, loaded in job_order(cache, plans, now, ready, max_level, error_of):
-        p, spent = plans[i], (time.perf_counter() - t0) * 1e3
+    full: set = set()  # kinds of job that no longer fit in what is left of the budget
+    for i, loaded in job_order(cache, plans, now, ready, max_level, error_of, priority):
+        p, kind = plans[i], (plans[i].choice, loaded)
+        if kind in full:
+            continue
+        spent = (time.perf_counter() - t0) * 1e3
         if report.uploads and spent >= budget_ms:
             break
-        if report.uploads and spent + costs.expect((p.choice, loaded)) > budget_ms:
-            continue  # would not end within the budget (a cheaper job further on may)
+        if report.uploads and spent + costs.expect(kind) > budget_ms:
+            full.add(kind)  # would not end within the budget (a cheaper kind further on may)
+            continue
         try:
             start = time.perf_counter()
             cache.get(p.choice, strategies[p.choice], p.key, lambda p=p: make_tile(p.key), pinned)
-            costs.record((p.choice, loaded), (time.perf_counter() - start) * 1e3)
+            costs.record(kind, (time.perf_counter() - start) * 1e3)
             report.uploads += 1
         except BudgetExceeded:
             continue  # no room this frame: drawn from its ancestor
     report.upload_ms = (time.perf_counter() - t0) * 1e3
-    for i in missing:
-        p = plans[i]
-        if (p.choice, p.key) in cache.entries:
-            continue
-        anc = next(a for a in ancestors(p.key, max_level) if (p.choice, a) in cache.entries)
-        pinned.add((p.choice, anc))
+    left = [i for i in missing if (plans[i].choice, plans[i].key) not in cache.entries]
+    for i, anc in zip(left, nearest_ancestors(cache, [plans[i] for i in left], max_level)):
+        pinned.add((plans[i].choice, anc))
         report.fallbacks[i] = anc
     return report

@@ -40,7 +40,7 @@ from .cast_stats import (
 )
 from .cast_uniforms import shadow_uniforms, view_uniforms
 from .edit import follow_tile, local_window
-from .gpu_tile import GpuTile, ShadowGrid, shadow_grid, upload_heights
+from .gpu_tile import GpuTile, HostTile, ShadowGrid, prepare_heights, shadow_grid, upload_heights, upload_prepared
 from .maxmip import MaxMipBuilder, bytes_per_sample
 from .options import MODES, RECONSTRUCTIONS, CastOptions, prepass_default
 from .tile_params import TILE_BLOCK, block_stride, outer_bits, tile_params, tile_row
@@ -155,9 +155,20 @@ class RaycastStrategy:
         """GPU bytes per height sample of an n-cell tile, max mipmap included (the textures ``upload`` makes)."""
         return bytes_per_sample(n)
 
+    host_product = "raycast.codes"  # the name of what host_prepare makes of a tile (StorePyramid.derive)
+
+    @staticmethod
+    def host_prepare(heights: np.ndarray, source_step=None) -> HostTile:
+        """The CPU part of a tile's upload, which a store's loader thread runs ahead: its 16-bit codes and max mipmap."""
+        return prepare_heights(heights, source_step)
+
     def upload(self, tile) -> GpuTile:
-        """Put a tile's (N+1)² heights on the GPU as 16-bit codes and build their max mipmap there."""
-        g = self.upload_grid(tile.heights, getattr(tile, "source_step", None))
+        """Put a tile's (N+1)² heights on the GPU as 16-bit codes with their max mipmap, made on the host (taken
+        from what the store's loader thread made of them, ``tile.host``, when it did)."""
+        host = getattr(tile, "host", {}).pop(self.host_product, None)
+        if host is None:
+            host = prepare_heights(tile.heights, getattr(tile, "source_step", None))
+        g = upload_prepared(self.ctx, host)
         g.row, g.bounds = tile_row(g, tile), (tile.clip, tile.zmin, tile.zmax)
         return g
 

@@ -2,7 +2,9 @@
 
 A tile is 16-bit height codes (hybrid.tiles.quantize: exact on a 16-bit source's step, else range/65535 with
 the error measured) in an R16UI (N+1)² texture, and its max mipmap of codes without level 0 in an R16UI (N/2)²
-texture (raycast.maxmip), built on the GPU.
+texture (raycast.maxmip). A tile's codes and max mipmap are made on the host (``prepare_heights``: CPU work that
+a tile store's loader thread does ahead of the frame) and put on the GPU as they are (``upload_prepared``: the
+frame's part, two texture uploads); a grid's max mipmap is built on the GPU (``upload_heights``).
 """
 
 from __future__ import annotations
@@ -13,9 +15,10 @@ from typing import Any
 import numpy as np
 
 from hybrid.errors import TerrabenchError
-from hybrid.tiles.quantize import quantize
+from hybrid.gl.context import r16ui_mip_texture
+from hybrid.tiles.quantize import Quantized, quantize
 
-from .maxmip import tile_nbytes
+from .maxmip import level_count, tile_nbytes
 
 
 @dataclass
@@ -56,14 +59,63 @@ class ShadowGrid:
     nbytes: int
 
 
-def upload_heights(ctx, builder, heights: np.ndarray, source_step=None) -> GpuTile:
-    """Heights (N+1)² (N a power of two >= 2; float32 metres relative to origin z) on the GPU as 16-bit codes
-    (exact on ``source_step``, hybrid.tiles.quantize), with their max mipmap built there by ``builder``
-    (raycast.maxmip.MaxMipBuilder)."""
+@dataclass(frozen=True)
+class HostTile:
+    """A tile's ray-cast upload made on the host: its 16-bit codes and their max mipmap (levels 1..log2 N, uint16)."""
+
+    codes: Quantized
+    mips: tuple[np.ndarray, ...]
+
+    @property
+    def nbytes(self) -> int:
+        """Host bytes held: the codes and every mip level."""
+        return int(self.codes.q.nbytes + sum(m.nbytes for m in self.mips))
+
+
+def _check_tile(heights) -> np.ndarray:
+    """Float32 (N+1)² heights with N a power of two >= 2, else refused."""
     h = np.asarray(heights, dtype=np.float32)
     n = h.shape[0] - 1
     if h.ndim != 2 or h.shape[1] != h.shape[0] or n < 2 or n & (n - 1):
         raise TerrabenchError(f"tile heights must be (N+1, N+1) with N a power of two >= 2, got {h.shape}")
+    return h
+
+
+def code_mips(q: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Max-mip levels 1..log2 N of (N+1)² uint16 codes (``raycast.maxmip.maxmip_levels(q)[1:]``): level 1 is the
+    largest code of each 3 x 3 samples at stride 2 (its 2 x 2 cells' corners), each next one a 2 x 2 maximum."""
+    r = np.maximum(np.maximum(q[:-2:2], q[1:-1:2]), q[2::2])
+    out = [np.ascontiguousarray(np.maximum(np.maximum(r[:, :-2:2], r[:, 1:-1:2]), r[:, 2::2]))]
+    while out[-1].shape[0] > 1:
+        m = out[-1].shape[0] // 2
+        out.append(np.ascontiguousarray(out[-1].reshape(m, 2, m, 2).max(axis=(1, 3))))
+    return tuple(out)
+
+
+def prepare_heights(heights, source_step=None) -> HostTile:
+    """A tile's (N+1)² heights (float32 metres relative to origin z) as 16-bit codes (exact on ``source_step``)
+    with their max mipmap, on the host: everything of its upload that needs no GL context."""
+    qz = quantize(_check_tile(heights), source_step)
+    q = np.ascontiguousarray(qz.q)
+    return HostTile(Quantized(q, qz.offset, qz.step, qz.base, qz.error), code_mips(q))
+
+
+def upload_prepared(ctx, host: HostTile) -> GpuTile:
+    """Put a host-prepared tile on the GPU: its codes and its max mipmap, two textures filled as they are."""
+    qz = host.codes
+    n = qz.q.shape[0] - 1
+    ht = ctx.texture((n + 1, n + 1), 1, qz.q, dtype="u2", alignment=1)
+    ht.filter = (ctx.NEAREST, ctx.NEAREST)
+    mm = r16ui_mip_texture(ctx, n // 2, level_count(n) - 1, list(host.mips))
+    return GpuTile(ht, mm, n, tile_nbytes(n), qz.offset, qz.step, qz.base, qz.error)
+
+
+def upload_heights(ctx, builder, heights: np.ndarray, source_step=None) -> GpuTile:
+    """Heights (N+1)² (N a power of two >= 2; float32 metres relative to origin z) on the GPU as 16-bit codes
+    (exact on ``source_step``, hybrid.tiles.quantize), with their max mipmap built there by ``builder``
+    (raycast.maxmip.MaxMipBuilder)."""
+    h = _check_tile(heights)
+    n = h.shape[0] - 1
     qz = quantize(h, source_step)
     ht = ctx.texture((n + 1, n + 1), 1, np.ascontiguousarray(qz.q).tobytes(), dtype="u2")
     ht.filter = (ctx.NEAREST, ctx.NEAREST)

@@ -121,3 +121,27 @@ def test_byte_lru_keeps_the_newest_within_its_bytes_and_makes_each_once():
     assert 2 not in lru and all(k in lru for k in (1, 3, 4)) and lru.nbytes == 2400
     big = ByteLRU(10)
     assert big.get("a", make(5))[0] == 5 and "a" in big and len(big) == 1  # the newest stays, even too big
+
+
+def test_a_cut_reads_the_source_node_chunks_from_their_files_as_zarr_reads_them(tmp_path, monkeypatch):
+    from hybrid.terrain import store_manifest
+    from raster.nodes import nodes_for
+
+    prepare_store(_rough(seed=4), tmp_path / "s", 16)
+    ext = open_periodic(tmp_path / "s", 385)
+    chunks = ext.store["nodes/effective/0"].nodes.source_chunks
+    cls, gets = store_manifest._checked_class(), []
+    original_get = cls.get
+
+    async def get(self, key, prototype=None, byte_range=None):
+        gets.append(key)
+        return await original_get(self, key, prototype, byte_range)
+
+    monkeypatch.setattr(cls, "get", get)
+    nodes_for(ext, 16).blocks[0][3, 7]  # a cut next to the seam
+    assert len(chunks.chunks) > 0 and not [k for k in gets if "/c/" in k]  # no chunk read through Zarr
+    for kind, g, cy, cx in list(chunks.chunks._items):
+        arr = chunks.array(kind, g)
+        ch, cw = arr.chunks
+        want = np.asarray(arr[cy * ch : (cy + 1) * ch, cx * cw : (cx + 1) * cw], dtype=np.float32)
+        assert chunks._chunk(kind, g, cy, cx).tobytes() == want.tobytes()

@@ -44,6 +44,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="instead of streaming: upload each frame's tiles before it (untimed), as terrain already on the GPU",
     )
+    p.add_argument(
+        "--jump-frames",
+        type=argtypes.int_in("--jump-frames", 0, 10000),
+        default=40,
+        help="also jump the camera on each store and count, over this many frames, the share of tiles drawn at "
+        "their wanted level (0: no jump)",
+    )
     p.add_argument("--host-budget-mib", type=argtypes.int_in("--host-budget-mib", 1, 1 << 20), default=512)
     p.add_argument("--out", default="reports/scaling", help="report folder")
 
@@ -61,6 +68,7 @@ def run(
     out="reports/scaling",
     device=None,
     resident=False,
+    jump_frames=40,
 ) -> Path:
     """Run the experiment and write its report; returns the report's path."""
     from hybrid.errors import TerrabenchError
@@ -89,7 +97,21 @@ def run(
         f"GPU budget {gpu_budget_mib} MiB; {uploads}; host tile cache {host_budget_mib} MiB",
         "GPU memory: the exact sizes of the buffers and textures terrabench allocated (not a driver reading)",
     ]
-    path = write_scaling_report(frames_df, refused, setup, Path(out), gl_info(ctx).renderer, notes)
+    jumps = None
+    if jump_frames and not resident:
+        from ..stream_jump import jump_table, run_jumps
+
+        budgets = {
+            "upload_budget_ms": upload_budget_ms,
+            "gpu_budget_mib": gpu_budget_mib,
+            "host_budget_mib": host_budget_mib,
+        }
+        jumps = jump_table(run_jumps(ctx, stores, methods, jump_frames, size, tau, **budgets))
+        notes.append(
+            f"camera jump: every tile of the transect's first view resident, then its last view, {jump_frames} "
+            "frames drawn once each, streaming as above"
+        )
+    path = write_scaling_report(frames_df, refused, setup, Path(out), gl_info(ctx).renderer, notes, jumps)
     print(f"report: {path}")
     return path
 
@@ -109,5 +131,6 @@ def run_from_args(args: argparse.Namespace) -> int:
         args.out,
         args.device,
         args.resident,
+        args.jump_frames,
     )
     return 0

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from hybrid.errors import GLContextError
+from hybrid.errors import GLContextError, TerrabenchError
 from hybrid.gl.programs import register_shared_includes
 
 GL_LOWER_LEFT = 0x8CA1
@@ -149,9 +149,10 @@ def gl_finish(ctx) -> None:
 
 def gl_memory_barrier(ctx) -> None:
     """glMemoryBarrier (all bits). A CPU rasterizer finishes the queued work there, so on one the call's time is
-    added to ``gl_waited_ms``; on a GPU the call does not wait."""
+    added to ``gl_waited_ms``; on a GPU the call does not wait. Called through ctypes, which lets other Python
+    threads (a tile store's loader) run while the rasterizer works (moderngl's holds the interpreter lock)."""
     t0 = time.perf_counter()
-    ctx.memory_barrier()
+    _gl_function(b"glMemoryBarrier", ctypes.c_uint)(0xFFFFFFFF)  # GL_ALL_BARRIER_BITS
     if is_software(ctx):
         _WAITED[0] += (time.perf_counter() - t0) * 1e3
 
@@ -248,17 +249,20 @@ _BYTES_PER_TEXEL = {
 # R32F RGBA8 RGB8 R32UI DEPTH32F DEPTH24 R8 R16F RGBA32F RGB32F RG32F R16UI
 
 
-def r16ui_mip_texture(ctx, size: int, levels: int):
-    """A size x size R16UI texture with ``levels`` mip levels allocated (contents undefined), NEAREST filtered.
+def r16ui_mip_texture(ctx, size: int, levels: int, data: list[np.ndarray] | None = None):
+    """A size x size R16UI texture with ``levels`` mip levels allocated, NEAREST filtered: filled from ``data``
+    (one C-contiguous uint16 array per level, level 0 first), else with contents undefined.
 
     moderngl allocates only level 0 and cannot build mipmaps of integer textures (glGenerateMipmap refuses
     them), so the coarser levels are specified through the driver directly.
     """
-    tex = ctx.texture((int(size), int(size)), 1, dtype="u2")
+    tex = ctx.texture((int(size), int(size)), 1, None if data is None else data[0], dtype="u2", alignment=1)
     u, i = ctypes.c_uint, ctypes.c_int
     bind = _gl_function(b"glBindTexture", u, u)
     image = _gl_function(b"glTexImage2D", u, i, i, i, i, i, u, u, ctypes.c_void_p)
     param = _gl_function(b"glTexParameteri", u, u, i)
+    if data is not None:
+        _gl_function(b"glPixelStorei", u, i)(0x0CF5, 1)  # GL_UNPACK_ALIGNMENT: rows of any width
     GL_TEXTURE_2D, GL_R16UI, GL_RED_INTEGER, GL_UNSIGNED_SHORT, GL_TEXTURE_MAX_LEVEL = (
         0x0DE1,
         0x8234,
@@ -269,12 +273,20 @@ def r16ui_mip_texture(ctx, size: int, levels: int):
     bind(GL_TEXTURE_2D, tex.glo)
     for level in range(1, int(levels)):
         m = max(int(size) >> level, 1)
-        image(GL_TEXTURE_2D, level, GL_R16UI, m, m, 0, GL_RED_INTEGER, GL_UNSIGNED_SHORT, None)
+        pixels = None if data is None else _level_pixels(data[level], m)
+        image(GL_TEXTURE_2D, level, GL_R16UI, m, m, 0, GL_RED_INTEGER, GL_UNSIGNED_SHORT, pixels)
     param(GL_TEXTURE_2D, GL_TEXTURE_MAX_LEVEL, int(levels) - 1)
     bind(GL_TEXTURE_2D, 0)
     tex.filter = (ctx.NEAREST_MIPMAP_NEAREST if levels > 1 else ctx.NEAREST, ctx.NEAREST)
     tex.repeat_x = tex.repeat_y = False
     return tex
+
+
+def _level_pixels(a: np.ndarray, m: int):
+    """The address of one mip level's m x m uint16 codes (refused if they are not that, C-contiguous)."""
+    if a.dtype != np.uint16 or a.shape != (m, m) or not a.flags.c_contiguous:
+        raise TerrabenchError(f"mip level data must be C-contiguous uint16 ({m}, {m}), got {a.dtype} {a.shape}")
+    return a.ctypes.data
 
 
 def read_r16ui_level(tex, level: int) -> np.ndarray:

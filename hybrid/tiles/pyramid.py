@@ -19,7 +19,7 @@ least its children's).
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
@@ -67,6 +67,8 @@ class Tile:
     error: geometric error in metres of this tile's level against level 0.
     source_step: the terrain's (step, offset) in metres when its heights lie on an integer step (HeightField),
       else None; the ray caster's 16-bit heights are exact there (hybrid.tiles.quantize).
+    host: what a store's loader thread made of these heights for a strategy's upload, by product name (taken by
+      the upload that uses it: ``StorePyramid.derive``).
     """
 
     key: TileKey
@@ -79,6 +81,7 @@ class Tile:
     zmax: float
     error: float
     source_step: tuple[float, float] | None = None
+    host: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
     def n(self) -> int:
@@ -362,7 +365,12 @@ class TilePyramid:
             z1,
             self.error(key),
             getattr(self.hf, "source_step", None),
+            self.host_products(key),
         )
+
+    def host_products(self, key: TileKey) -> dict:
+        """What a loader thread made of the tile's heights for uploads, handed over once: none in memory."""
+        return {}
 
     def placement(self, key: TileKey) -> tuple[tuple[float, float, float], tuple[float, float]]:
         """(world origin of the tile's sample [0, 0], (spacing_x, spacing_y)) in metres, without its samples."""

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from hybrid.terrain.store_chunks import chunk_reader
+
 from .byte_lru import ByteLRU
 
 CHUNK_BYTES = 64 << 20  # decoded chunks of the source's node arrays kept (``SourceChunks``)
@@ -37,6 +39,7 @@ class SourceChunks:
     def __init__(self, group, budget: int = CHUNK_BYTES):
         self.group = group
         self._arrays: dict = {}
+        self._readers: dict = {}
         self.chunks = ByteLRU(budget)  # decoded chunks by (kind, g, chunk row, chunk column)
 
     def array(self, kind: str, g: int):
@@ -47,12 +50,15 @@ class SourceChunks:
         return self._arrays[key]
 
     def _chunk(self, kind: str, g: int, cy: int, cx: int) -> np.ndarray:
-        arr = self.array(kind, g)
-        ch, cw = arr.chunks
-        return self.chunks.get(
-            (kind, g, cy, cx),
-            lambda: np.asarray(arr[cy * ch : (cy + 1) * ch, cx * cw : (cx + 1) * cw], dtype=np.float32),
-        )
+        """Chunk (cy, cx) of a kind's level-g array (float32), its file decoded directly where its layout allows
+        (``hybrid.terrain.store_chunks``: the same values as Zarr's read, without its per-call overhead)."""
+        key = (kind, g)
+        if key not in self._readers:
+            arr = self.array(kind, g)
+            ch, cw = arr.chunks
+            self._readers[key] = chunk_reader(arr, (int(ch), int(cw)))
+        read = self._readers[key]
+        return self.chunks.get((kind, g, cy, cx), lambda: np.asarray(read(cy, cx), dtype=np.float32))
 
     def window(self, kind: str, g: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
         """Rows r0..r1-1, columns c0..c1-1 (inside the array) of a kind's level-g array (float32)."""

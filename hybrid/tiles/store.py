@@ -24,6 +24,7 @@ from .pyramid import TileKey, TilePyramid
 from .pyramid_edit import touched_tiles
 from .store_prepare import prepare_store  # noqa: F401  (the stores' API: prepare, then open)
 
+HOLD_WAIT_S = 0.005  # a hold waits this long at most for the loader to finish the tile it is on
 CHUNK_SHARE = 8  # decoded chunks may hold 1/CHUNK_SHARE of a StorePyramid's host budget
 
 
@@ -63,9 +64,40 @@ class StorePyramid(TilePyramid):
         self._done = threading.Event()
         self._go = threading.Event()  # cleared: the loader waits before its next tile
         self._go.set()
+        self._busy = threading.Lock()  # held by the loader while it works on a tile
         self._loader: threading.Thread | None = None
         self._closing = False
         self._failed: set = set()
+        self._derived: dict = {}  # key -> {product name: what derive made of its samples}, evicted with them
+
+    def derive(self, key, name: str, make) -> None:
+        """Make ``make(samples, source_step)`` of the tile's samples (a strategy's host work for its upload, such as
+        the ray caster's 16-bit codes and max mipmap) and keep it beside them, counted in the host cache, until
+        a Tile of ``key`` takes it (``host_products``) or the samples leave the cache; thread-safe."""
+        h = self.samples(key)
+        made = make(h, getattr(self.hf, "source_step", None))
+        with self._lock:
+            if self._cache.get(key) is h:  # the samples it was made of are still the tile's
+                old = self._derived.setdefault(key, {}).pop(name, None)
+                self._derived[key][name] = made
+                self.cache_bytes += made.nbytes - (0 if old is None else old.nbytes)
+                self._evict()
+
+    def derived_keys(self, keys, name: str) -> set:
+        """Those of ``keys`` of which ``derive`` made product ``name`` that no Tile has taken yet (one lock)."""
+        with self._lock:
+            return {k for k in keys if name in self._derived.get(k, ())}
+
+    def host_products(self, key) -> dict:
+        """The products ``derive`` made of the tile's samples, handed over to the Tile being made (and dropped)."""
+        with self._lock:
+            out = self._derived.pop(key, {})
+            self.cache_bytes -= sum(v.nbytes for v in out.values())
+            return out
+
+    def _drop_derived(self, key) -> None:
+        """Under the lock: forget what was made of a tile's samples (they left the cache or changed)."""
+        self.cache_bytes -= sum(v.nbytes for v in self._derived.pop(key, {}).values())
 
     def samples(self, key) -> np.ndarray:
         """The tile's (n+1)² level-l samples (float32 metres), read from disk or the host cache."""
@@ -93,8 +125,9 @@ class StorePyramid(TilePyramid):
             self.chunk_bytes -= old.nbytes
             self.cache_bytes -= old.nbytes
         while self.cache_bytes > self.host_budget and len(self._cache) > 1:
-            _, old = self._cache.popitem(last=False)
+            key, old = self._cache.popitem(last=False)
             self.cache_bytes -= old.nbytes
+            self._drop_derived(key)
             self.stats["evictions"] += 1
         self.stats["peak_bytes"] = max(self.stats["peak_bytes"], self.cache_bytes)
 
@@ -150,6 +183,7 @@ class StorePyramid(TilePyramid):
                 mine[level][at] = theirs[at]
         with self._lock:
             for k in keys:
+                self._drop_derived(k)
                 if k in self._cache:
                     self.cache_bytes -= self._cache.pop(k).nbytes
             for chunk in [c for c in self._chunks if _chunk_meets(c, self.n, win)]:
@@ -216,10 +250,13 @@ class StorePyramid(TilePyramid):
 
     @contextlib.contextmanager
     def held(self):
-        """Hold the loader thread (as ``pause``) inside the block, then restore what it was: so that a frame's
-        upload jobs do not wait on the loader's reads for the interpreter lock."""
+        """Hold the loader thread (as ``pause``) inside the block, once it has finished the tile it is on (waiting
+        ``HOLD_WAIT_S`` at most), then restore what it was: so that a frame's upload jobs do not wait on the
+        loader's reads for the interpreter lock."""
         was = not self._go.is_set()
         self.pause()
+        if self._busy.acquire(timeout=HOLD_WAIT_S):  # the tile it is on done (unless slow: then it goes on)
+            self._busy.release()
         try:
             yield
         finally:
@@ -239,6 +276,7 @@ class StorePyramid(TilePyramid):
         with self._lock:
             self._cache.clear()
             self._chunks.clear()
+            self._derived.clear()
             self.cache_bytes = self.chunk_bytes = 0
         self._closing = False
 
@@ -253,18 +291,19 @@ class StorePyramid(TilePyramid):
                     self._done.set()
                     return
             self._go.wait()
-            with self._wake:
-                if self._closing or not self._wanted:
-                    continue
-                key = self._wanted.pop(0)
-                work = self._work.pop(key, ())
-            try:
-                self.samples(key)
-                for fn in work:
-                    fn()
-            except Exception:  # the renderer's own read of it raises the error where it is seen
-                with self._lock:
-                    self._failed.add(key)
+            with self._busy:
+                with self._wake:
+                    if self._closing or not self._wanted or not self._go.is_set():
+                        continue  # held meanwhile: nothing starts inside a hold
+                    key = self._wanted.pop(0)
+                    work = self._work.pop(key, ())
+                try:
+                    self.samples(key)
+                    for fn in work:
+                        fn()
+                except Exception:  # the renderer's own read of it raises the error where it is seen
+                    with self._lock:
+                        self._failed.add(key)
 
     @property
     def padded(self) -> np.ndarray:
