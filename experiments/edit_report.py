@@ -35,6 +35,8 @@ NOTES = [
     "cracks_px: most in a frame; coverage_%: the least, over frames, of pixels whose coverage agrees with the "
     "reference's; depth_rel_med: mean over frames of the median relative hit-distance error; flip: mean FLIP. Every "
     "measure is against the reference renderer of the same edited heights, on a draw without particles.",
+    "change_ratio: median over frames of the mean colour change from the frame before, over the reference's (1: as "
+    "stable as the reference); an edit that made a method pop would raise it above the static variant's.",
 ]
 
 
@@ -63,6 +65,8 @@ def summary_table(f: pd.DataFrame) -> pd.DataFrame:
     }
     if "flip" in f:
         agg["flip"] = ("flip", "mean")
+    if "change_ratio" in f:
+        agg["change_ratio"] = ("change_ratio", "median")
     t = f.groupby(["edit_radius", "policy"]).agg(**agg).reset_index()
     t.insert(0, "variant", [variant(r) for r in t["edit_radius"]])
     return t.drop(columns="edit_radius").rename(columns={"policy": "method"})
@@ -169,6 +173,22 @@ def accuracy_sentence(f: pd.DataFrame) -> str:
     )
 
 
+def stability_sentence(f: pd.DataFrame) -> str:
+    """Whether edits made a method change more between frames than the reference did: each method's median
+    change ratio over edited frames against the static variant's."""
+    if "change_ratio" not in f or f["change_ratio"].isna().all():
+        return ""
+    e, s = f[f["editing"]], f[~f["editing"]]
+    parts = []
+    for p, g in e.groupby("policy"):
+        st = s.loc[s["policy"] == p, "change_ratio"].median()
+        parts.append(f"{p} {g['change_ratio'].median():.3f} (static {st:.3f})")
+    return (
+        "Frame-to-frame colour change over the reference's (1: as stable as the reference), median over edited "
+        f"frames: {', '.join(parts)}."
+    )
+
+
 def particles_sentence(f: pd.DataFrame) -> str:
     """What the particles cost a frame, apart from it."""
     n = int(f["particles"].max())
@@ -188,6 +208,7 @@ def reading(f: pd.DataFrame, env: dict, errors: list[dict]) -> list[str]:
         share_sentence(f),
         step_sentence(f),
         accuracy_sentence(f),
+        stability_sentence(f),
         particles_sentence(f),
     ]
     lines.append("Timings are indicative: one run, wall clock on a machine possibly shared with other work.")

@@ -31,6 +31,7 @@ from .config_task import ConfigResult, ImageOut
 from .edit_spec import EditSpec, check_programme, frame_brushes, spec_deformation
 from .journal import Journal, pending, record
 from .metrics import frame_accuracy
+from .popping import temporal_errors
 from .progress import Progress
 from .run_config import EditConfig
 from .runlock import RunLock
@@ -346,10 +347,20 @@ def _measure(spec: EditSpec, m: _Member, shots: dict, extra: dict) -> None:
         }
         row["particles_ms"] = row["particles_step_ms"] + row["particles_draw_ms"]
         row.update(frame_accuracy(m.plain[k], shots[k][m.c.edit_radius], flip=spec.flip))
+        row.update(_temporal(m, shots, k))
         tiles = [{"config": m.c.config, "frame": k, "policy": m.c.policy, **x} for x in t["stats"].tile_rows]
         m.out.frames.append((row, tiles))
         if t["image"] is not None:
             m.out.images.append(ImageOut(f"{m.c.config}-f{k}", t["image"].colour, t["image"].distance))
+
+
+def _temporal(m: _Member, shots: dict, k: int) -> dict:
+    """Frame k's colour change from frame k-1 against the reference's of the same edited heights
+    (``temporal_errors``: change_ratio 1 is as stable as the reference); NaN for a first frame."""
+    r = m.c.edit_radius
+    if k - 1 not in m.plain or k - 1 not in shots:
+        return {"change_ratio": float("nan"), "error_flicker": float("nan")}
+    return temporal_errors(m.plain[k - 1], m.plain[k], shots[k - 1][r], shots[k][r])
 
 
 def _variant(radius: float) -> str:

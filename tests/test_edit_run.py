@@ -101,7 +101,19 @@ def test_report_reads_which_method_a_dynamic_scene_favours(run, tmp_path):
     text = md.read_text()
     assert "a dynamic scene on" in text
     assert "favours **" in text and "0 crack pixels in any edited frame" in text
+    assert "Frame-to-frame colour change over the reference's" in text and "change_ratio" in text
     for png in ("update_vs_radius.png", "frame_on_off.png", "images.png"):
         assert (md.parent / png).stat().st_size > 0 and f"]({png})" in text
     html = md.with_suffix(".html").read_text()
     assert "<table" in html and "update_vs_radius.png" in html
+
+
+def test_edits_change_each_method_between_frames_as_the_reference_changes(run):
+    """The colour change from one frame to the next over the reference's (of the same edited heights) is near 1
+    for every method and variant: an edit that made a method pop would raise it; the report reads it."""
+    _, folder = run
+    f = pd.read_parquet(folder / "frames.parquet")
+    assert f.loc[f["frame"] == 0, "change_ratio"].isna().all()
+    later = f[f["frame"] > 0]
+    assert np.isfinite(later["change_ratio"]).all() and np.isfinite(later["error_flicker"]).all()
+    assert later["change_ratio"].between(0.95, 1.05).all(), later[["policy", "edit_radius", "frame", "change_ratio"]]
