@@ -78,7 +78,7 @@ def jump_frames(
         upload_budget_ms=1e9,
         adapt=False,
     ) as r:
-        r.render(before, tau, read=False)  # every tile of the view before the jump resident, shaders compiled
+        _settled(r, pyramid, before, tau)
         r.upload_budget_ms = upload_budget_ms
         rows = []
         for k, v in enumerate(views):
@@ -90,6 +90,15 @@ def jump_frames(
     out.insert(0, "method", method)
     out.insert(0, "store", terrain.name)
     return out
+
+
+def _settled(r, pyramid, view, tau: float, tries: int = 8) -> None:
+    """Draw the view until every tile it wants is resident (uploads the loader thread's host work held back
+    drawn again once it is done), shaders compiled and the loader idle: nothing of it left for the jump."""
+    for _ in range(tries):
+        if r.render(view, tau, read=False).stats.fallback_tiles == 0 and pyramid.idle(60):
+            return
+        pyramid.idle(60)
 
 
 def _frame_row(r, k: int, view, tau: float) -> dict:
