@@ -19,6 +19,8 @@ import time
 import numpy as np
 import pandas as pd
 
+from experiments.frozen import frozen_heap
+
 WANTED = 0.95  # the share of tiles at their wanted level the streaming target asks for
 
 
@@ -81,10 +83,11 @@ def jump_frames(
         _settled(r, pyramid, before, tau)
         r.upload_budget_ms = upload_budget_ms
         rows = []
-        for k, v in enumerate(views):
-            if settle:
-                pyramid.idle(60)
-            rows.append(_frame_row(r, k + 1, v, tau))
+        with frozen_heap():  # no full collection inside the frames
+            for k, v in enumerate(views):
+                if settle:
+                    pyramid.idle(60)
+                rows.append(_frame_row(r, k + 1, v, tau))
     pyramid.close()
     out = pd.DataFrame(rows)
     out.insert(0, "method", method)
