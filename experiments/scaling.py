@@ -26,6 +26,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
+from experiments.frozen import frozen_heap
+
 if TYPE_CHECKING:
     from hybrid.terrain.stored import StoredTerrain
 
@@ -130,14 +132,15 @@ def run_scaling(
             if _open(ctx, f, method, tau, size, gpu_budget_mib, upload_budget_ms, host_budget_mib, refused, setup)
         ]
         try:
-            for k in range(frames):
-                turn = [f for f in live if f.renderer is not None]
-                shift = k % max(len(turn), 1)
-                for f in turn[shift:] + turn[:shift]:
-                    for g in turn:  # only this store's loader reads while its frame is timed
-                        if g.pyramid is not None:
-                            g.pyramid.pause(g is not f)
-                    _frame(f, method, k, tau, gpu_budget_mib, rows, refused)
+            with frozen_heap():  # no full collection inside the frames
+                for k in range(frames):
+                    turn = [f for f in live if f.renderer is not None]
+                    shift = k % max(len(turn), 1)
+                    for f in turn[shift:] + turn[:shift]:
+                        for g in turn:  # only this store's loader reads while its frame is timed
+                            if g.pyramid is not None:
+                                g.pyramid.pause(g is not f)
+                        _frame(f, method, k, tau, gpu_budget_mib, rows, refused)
         finally:
             for f in flights:
                 f.close()

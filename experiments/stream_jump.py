@@ -19,6 +19,8 @@ import time
 import numpy as np
 import pandas as pd
 
+from experiments.frozen import frozen_heap
+
 WANTED = 0.95  # the share of tiles at their wanted level the streaming target asks for
 
 
@@ -78,18 +80,28 @@ def jump_frames(
         upload_budget_ms=1e9,
         adapt=False,
     ) as r:
-        r.render(before, tau, read=False)  # every tile of the view before the jump resident, shaders compiled
+        _settled(r, pyramid, before, tau)
         r.upload_budget_ms = upload_budget_ms
         rows = []
-        for k, v in enumerate(views):
-            if settle:
-                pyramid.idle(60)
-            rows.append(_frame_row(r, k + 1, v, tau))
+        with frozen_heap():  # no full collection inside the frames
+            for k, v in enumerate(views):
+                if settle:
+                    pyramid.idle(60)
+                rows.append(_frame_row(r, k + 1, v, tau))
     pyramid.close()
     out = pd.DataFrame(rows)
     out.insert(0, "method", method)
     out.insert(0, "store", terrain.name)
     return out
+
+
+def _settled(r, pyramid, view, tau: float, tries: int = 8) -> None:
+    """Draw the view until every tile it wants is resident (uploads the loader thread's host work held back
+    drawn again once it is done), shaders compiled and the loader idle: nothing of it left for the jump."""
+    for _ in range(tries):
+        if r.render(view, tau, read=False).stats.fallback_tiles == 0 and pyramid.idle(60):
+            return
+        pyramid.idle(60)
 
 
 def _frame_row(r, k: int, view, tau: float) -> dict:

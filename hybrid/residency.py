@@ -47,12 +47,15 @@ class ResidencyCache:
             return self.entries[k]
         gpu = strategy.upload(make_tile())
         size = int(gpu.nbytes)
-        if self.budget is not None:
-            for old in list(self.entries):
-                if self.bytes + size <= self.budget:
+        if self.budget is not None and self.bytes + size > self.budget:
+            need, victims = self.bytes + size - self.budget, []
+            for old, tile in self.entries.items():  # least recently used first, pinned ones kept
+                if need <= 0:
                     break
-                if old in pinned:
-                    continue
+                if old not in pinned:
+                    victims.append(old)
+                    need -= int(tile.nbytes)
+            for old in victims:
                 self._evict(old)
             if self.bytes + size > self.budget:
                 gpu.release()

@@ -2,8 +2,9 @@
 upload budget inside the frame, the rest drawn from a resident ancestor (``hybrid.uploads``).
 
 From a tile store the store's loader thread is first asked for the samples the frame lacks (those whose fallback
-shows most first, ``hybrid.uploads.fallback_priorities``) and for the slow host
-work of uploads and estimates (``hybrid.uploads.host_jobs``); an upload whose host work it has not yet done waits.
+shows most first, ``hybrid.uploads.fallback_priorities``) with the slow host work of their uploads
+(``hybrid.uploads.host_jobs``), then for the triangle estimate's builds, which no upload waits for; an upload whose
+host work it has not yet done waits.
 """
 
 from __future__ import annotations
@@ -28,8 +29,9 @@ def make_resident(r, plans: list, pinned: set, prep_ms: float) -> UploadReport |
         rank = fallback_priorities(r.cache, missing, pyramid.max_level, pyramid.error)
         priority = {(p.choice, p.key): v for p, v in zip(missing, rank)}  # the jobs' order too
         missing = [missing[i] for i in sorted(range(len(missing)), key=lambda i: -rank[i])]
-        work, waiting = host_jobs(r.strategies, r.triangles, missing, pyramid.n, pyramid)
-        pyramid.request([p.key for p in missing] + list(work), work)
+        work, waiting = host_jobs(r.strategies, missing, pyramid.n, pyramid)
+        later = {k: [fn] for k, fn in (getattr(r.triangles, "waiting", None) or {}).items()}  # no upload waits
+        pyramid.request([p.key for p in missing] + list(work), work, later)
         ready = pyramid.cached_keys([p.key for p in missing]).__contains__  # one look, not one a tile
         deferred = lambda p: (p.choice, p.key) in waiting and not pyramid.failed(p.key)  # noqa: E731
     # the frame's budget covers the estimate's preparation and the uploads together; a store's loader waits

@@ -19,12 +19,11 @@ neighbours (a coarser surface for a few frames, never a hole).
 
 from __future__ import annotations
 
+import statistics
 import time
 from collections import deque
 from dataclasses import dataclass, field, replace
 from functools import partial
-
-import numpy as np
 
 from hybrid.errors import TerrabenchError
 from hybrid.residency import BudgetExceeded
@@ -60,14 +59,14 @@ def fallback_tile(ancestor_tile, clip, zrange=None):
     return out if zrange is None else replace(out, zmin=float(zrange[0]), zmax=float(zrange[1]))
 
 
-def host_jobs(strategies: dict, estimator, plans, n: int, pyramid=None) -> tuple[dict, set]:
+def host_jobs(strategies: dict, plans, n: int, pyramid=None) -> tuple[dict, set]:
     """A frame's host work for a store's loader thread: (key -> callables, the (choice, key) uploads waiting for
     it). ``plans`` are the tiles whose upload is missing; strategies with a ``host_work(key, n)`` (the raster
-    ones) give theirs, which their upload waits for, and the triangle estimate (``estimator.waiting``, if any)
-    the cuts it left unknown. With the store's ``pyramid``, a strategy with a ``host_prepare(heights,
-    source_step)`` (the ray caster) has it made of the tile's samples (``StorePyramid.derive``) so that its
-    upload is the GL's part alone; an upload does not wait for that (it prepares its tile itself)."""
-    work = {k: [fn] for k, fn in (getattr(estimator, "waiting", None) or {}).items()}
+    ones) give theirs, which their upload waits for. With the store's ``pyramid``, a strategy with a
+    ``host_prepare(heights, source_step)`` (the ray caster) has it made of the tile's samples
+    (``StorePyramid.derive``) so that its upload is the GL's part alone; an upload does not wait for that (it
+    prepares its tile itself)."""
+    work: dict = {}
     waiting = set()
     for p in plans:
         fn = getattr(strategies[p.choice], "host_work", None)
@@ -105,7 +104,7 @@ class JobCosts:
         """Take in the wall ms of a job just run."""
         times = self.ms.setdefault(kind, deque(maxlen=self.keep))
         times.append(float(ms))
-        self._median[kind] = float(np.median(times))
+        self._median[kind] = float(statistics.median(times))  # (as np.median, without its per-call overhead)
 
 
 def nearest_ancestors(cache, plans, max_level: int) -> list[TileKey]:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from functools import partial
 
 import numpy as np
 
@@ -28,7 +29,7 @@ from hybrid.tiles.sidecodes import holds_side_codes
 from hybrid.tiles.tiletree import SelectedTile
 
 from .edit import stale_tiles
-from .nodes import nodes_for, pending_cut, tile_node_block
+from .nodes import nodes_for, tile_node_block
 from .quadtree import GPU_BETA, check_full_res
 from .split_tables import TABLE_BINS, SplitTables, split_tables
 from .tile_nodes import KINDS, TileNodes, block_tile_nodes, tile_nodes
@@ -136,8 +137,9 @@ class _Rows:
             if r is not None:
                 self.stamp[r] = -1
 
-    def put(self, key, nodes: TileNodes) -> int:
-        """Store a tile's nodes as used by the call at hand; returns its row."""
+    def put(self, key, nodes: TileNodes, tables: tuple | None = None) -> int:
+        """Store a tile's nodes (and their ``split_tables``, made here if None) as used by the call at hand;
+        returns its row."""
         if len(self.row) >= self.limit:
             r = int(self.stamp[: len(self.keys)].argmin())  # the least recently used
             self.row.pop(self.keys[r], None)  # (absent when forgotten)
@@ -148,7 +150,7 @@ class _Rows:
             if r >= len(self.stamp):
                 self._grow(nodes)
         assert self.tables is not None  # _grow made them with the first row
-        self.tables.base[r], self.tables.tables[r] = split_tables([getattr(nodes, kind) for kind in KINDS])
+        self.tables.base[r], self.tables.tables[r] = tables or split_tables([getattr(nodes, kind) for kind in KINDS])
         for f in self.FIELDS:
             self.arrays[f][r] = getattr(nodes, f)
         self.stamp[r] = self.tick
@@ -181,9 +183,10 @@ class TileletTriangleEstimator:
     """A ``hybrid.contract.TriangleEstimator`` for the tilelet strategy over one tile pyramid.
 
     Per tile, its ``TileNodes`` are built once; ``build_ms`` adds up the wall time spent building them: one-time
-    work per tile, which renderers count apart from planning. With ``background`` (a store's loader thread cuts
-    blocks), a tile whose node block still needs cutting is left unknown (NaN) rather than cut in the caller's
-    thread, and the cut is in ``waiting`` for the loader to run. ``full_res``: the strategies' full-resolution rule
+    work per tile, which renderers count apart from planning. With ``background`` (a store's loader thread), a
+    new tile of a store with node blocks is left unknown (NaN) rather than built in the caller's thread: its
+    build (its block cut first where it needs it) is in ``waiting`` for the loader to run, and a later call
+    stores what it built. ``full_res``: the strategies' full-resolution rule
     (hybrid.contract.FULL_RES; "lean": level-0 tiles' leaves counted as every other tile's).
     """
 
@@ -195,7 +198,9 @@ class TileletTriangleEstimator:
         self._rows = _Rows(MAX_TILES)
         self.build_ms, self.builds = 0.0, 0
         self.background = False
-        self.waiting: dict = {}  # tiles of the last call left unknown for their block's cut -> the cut (callable)
+        self.waiting: dict = {}  # tiles of the last call left unknown for the loader -> its build (callable)
+        self._prepared: dict = {}  # tiles the loader built -> (epoch, TileNodes, split tables)
+        self._epoch = 0  # ``forget`` calls so far
         hf = pyramid.hf
         # a tile store whose nodes (as the GPU reads them) come in per-tile blocks: each tile's is one read, no
         # heights, no error pyramid (a periodic extension's near its seams is cut first, as the GPU's upload
@@ -211,36 +216,49 @@ class TileletTriangleEstimator:
 
     def _row(self, key: TileKey, deadline: float | None = None) -> int:
         """The new key's row, its nodes built first; -1 (not built) once ``deadline`` (perf_counter s) passed,
-        or with ``background`` while its block waits to be cut (the cut then in ``waiting``)."""
-        ready = self._block_ready(key)
-        if ready is False and self.background:
-            cut = pending_cut(self.pyramid.hf, self.pyramid.n, self.beta, key)
-            if cut is not None:  # (None: the loader has just cut it)
-                self.waiting[key] = cut
-                return -1
+        or with ``background`` while the loader has yet to build them (the build then in ``waiting``)."""
         t0 = time.perf_counter()
+        got = self._prepared.pop(key, None)
+        if got is not None and got[0] == self._epoch:  # built by the loader: stored here, no build in the frame
+            return self._stored(key, got[1], got[2], t0)
+        ready = self._block_ready(key)
+        if ready is not None and self.background:  # the loader cuts the block if need be and builds the nodes
+            self.waiting[key] = partial(self._prepare, key, self._epoch)
+            return -1
         if deadline is not None and t0 >= deadline:
             return -1
         source = self._blocks if ready is not None else self._global_nodes()
         if source is not None:  # the block the GPU reads (cut here if need be)
-            data, offsets = tile_node_block(source, key.level, key.tx, key.ty, self.pyramid.n)
-            nodes = block_tile_nodes(
-                data,
-                offsets,
-                self.pyramid.n,
-                *self.pyramid.placement(key),
-                self.full_res if key.level == 0 else None,
-                self.beta,
-            )
+            nodes = self._block_nodes(source, key)
         else:
             nodes = tile_nodes(self.pyramid.tile(key), self.beta, self.full_res if key.level == 0 else None)
-        r = self._rows.put(key, nodes)
+        return self._stored(key, nodes, None, t0)
+
+    def _block_nodes(self, source, key: TileKey) -> TileNodes:
+        """A tile's nodes from its node block in ``source`` (cut first if need be)."""
+        data, offsets = tile_node_block(source, key.level, key.tx, key.ty, self.pyramid.n)
+        full_res = self.full_res if key.level == 0 else None
+        return block_tile_nodes(data, offsets, self.pyramid.n, *self.pyramid.placement(key), full_res, self.beta)
+
+    def _stored(self, key: TileKey, nodes: TileNodes, tables: tuple | None, t0: float) -> int:
+        """Store built nodes in their row, counting the build from ``t0`` (perf_counter s); returns the row."""
+        r = self._rows.put(key, nodes, tables)
         self.builds += 1
         self.build_ms += (time.perf_counter() - t0) * 1e3
         return r
 
+    def _prepare(self, key: TileKey, epoch: int) -> None:
+        """Build a tile's nodes and split tables off the frame (a store's loader thread: thread-safe) for ``_row``
+        to store; a build older than the last ``forget`` (``epoch``) is not stored."""
+        nodes = self._block_nodes(self._blocks, key)
+        self._prepared[key] = (epoch, nodes, split_tables([getattr(nodes, kind) for kind in KINDS]))
+        while len(self._prepared) > MAX_TILES:  # builds never asked for again: the oldest out
+            self._prepared.pop(next(iter(self._prepared)), None)
+
     def forget(self, keys) -> None:
         """Build these tiles' nodes again when next asked (their heights or node arrays changed: an edit)."""
+        self._epoch += 1  # builds the loader has under way are stale
+        self._prepared.clear()
         self._rows.forget(keys)
 
     def known(self) -> list[TileKey]:
@@ -290,9 +308,9 @@ class TileletTriangleEstimator:
             rows[i] = self._row(keys[i], deadline)
         ok = rows >= 0
         if not ok.all():
-            missing = [i for i in np.flatnonzero(~ok) if not self.background or self._block_ready(keys[i])]
+            missing = [i for i in np.flatnonzero(~ok) if keys[i] not in self.waiting]
             if missing and self.builds == builds:  # at least one build a call: the queue drains
-                rows[missing[0]] = self._row(keys[missing[0]])  # (blocks left to cut: the loader's, not here)
+                rows[missing[0]] = self._row(keys[missing[0]])  # (those waiting: the loader's, not here)
                 ok = rows >= 0
         a, r = self._rows.arrays, rows[ok]
         if not len(r):

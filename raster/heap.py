@@ -80,11 +80,12 @@ class TileHeap:
                 f"a {self.n}-cell tile's heap slot holds {self.height_words} heights and "
                 f"{self.node_rows} node rows, got {heights.size} and {nodes.shape[0]}"
             )
-        free = [i for i, s in enumerate(self.owners) if s is None]
-        if not free:  # full: its tiles keep their slots in a heap twice the size
-            free = [self.capacity]
+        if None in self.owners:  # the first free slot (list.index: one C-speed scan)
+            index = self.owners.index(None)
+        else:  # full: its tiles keep their slots in a heap twice the size
+            index = self.capacity
             self._remake(2 * self.capacity)
-        slot = HeapSlot(self, free[0])
+        slot = HeapSlot(self, index)
         self.owners[slot.index] = slot
         assert self.heights is not None and self.nodes is not None  # _remake made them; not released
         self.heights.write(np.ascontiguousarray(heights, dtype=np.float32).tobytes(), offset=slot.heights_base * 4)
@@ -122,7 +123,7 @@ class TileHeap:
     @property
     def used(self) -> int:
         """Slots holding a tile."""
-        return sum(s is not None for s in self.owners)
+        return len(self.owners) - self.owners.count(None)
 
     @property
     def spare_nbytes(self) -> int:

@@ -80,6 +80,16 @@ def level_starts(n: int) -> np.ndarray:
 def level_bounds(data: np.ndarray, offsets: np.ndarray, n: int, spacing_xy: tuple[float, float]):
     """Per local level of a tile: largest effective error (m) and the union of its own nodes' boxes (tile-local m);
     ``spacing_xy`` is the tile's (x, y) sample spacing in metres."""
+    from .bounds_loops import level_extremes
+
+    err, zlo, zhi = level_extremes(np.asarray(data, np.float32), np.asarray(offsets, np.int64), int(n))
+    sp = np.asarray(spacing_xy, dtype=np.float64)
+    grow = (2 << np.arange(len(err)))[:, None] * sp  # (levels, 2): each level's node side, x and y
+    return err, np.column_stack([-grow, zlo]), np.column_stack([n * sp + grow, zhi])
+
+
+def _level_bounds_numpy(data: np.ndarray, offsets: np.ndarray, n: int, spacing_xy: tuple[float, float]):
+    """``level_bounds`` by numpy reductions, level by level (the reference the compiled loop is tested against)."""
     levels = len(offsets) - 1
     sp = np.asarray(spacing_xy, dtype=np.float64)
     err, lo, hi = np.zeros(levels), np.zeros((levels, 3)), np.zeros((levels, 3))

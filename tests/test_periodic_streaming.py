@@ -93,9 +93,11 @@ def test_near_seam_blocks_are_cut_in_the_loader_thread_not_in_frames(ctx, tmp_pa
     assert np.array_equal(np.isfinite(res.distance), both) and np.array_equal(res.distance[both], want.distance[both])
 
 
-def test_a_cut_reads_each_source_chunk_once_and_cuts_again_from_them(tmp_path):
+def test_a_cut_reads_each_source_chunk_once_and_cuts_again_from_them(tmp_path, monkeypatch):
+    from hybrid.tiles import source_chunks
     from raster.nodes import nodes_for
 
+    monkeypatch.setattr(source_chunks, "WHOLE_BYTES", 0)  # every level read a chunk at a time
     prepare_store(_rough(seed=4), tmp_path / "s", 16)
     ext = open_periodic(tmp_path / "s", 385)
     blocks = nodes_for(ext, 16).blocks
@@ -125,8 +127,10 @@ def test_byte_lru_keeps_the_newest_within_its_bytes_and_makes_each_once():
 
 def test_a_cut_reads_the_source_node_chunks_from_their_files_as_zarr_reads_them(tmp_path, monkeypatch):
     from hybrid.terrain import store_manifest
+    from hybrid.tiles import source_chunks
     from raster.nodes import nodes_for
 
+    monkeypatch.setattr(source_chunks, "WHOLE_BYTES", 0)  # every level read a chunk at a time
     prepare_store(_rough(seed=4), tmp_path / "s", 16)
     ext = open_periodic(tmp_path / "s", 385)
     chunks = ext.store["nodes/effective/0"].nodes.source_chunks
@@ -145,3 +149,22 @@ def test_a_cut_reads_the_source_node_chunks_from_their_files_as_zarr_reads_them(
         ch, cw = arr.chunks
         want = np.asarray(arr[cy * ch : (cy + 1) * ch, cx * cw : (cx + 1) * cw], dtype=np.float32)
         assert chunks._chunk(kind, g, cy, cx).tobytes() == want.tobytes()
+
+
+def test_cuts_from_whole_source_levels_equal_cuts_from_chunks_bit_for_bit(tmp_path, monkeypatch):
+    from hybrid.tiles import source_chunks
+    from raster.nodes import nodes_for
+
+    prepare_store(_rough(seed=4), tmp_path / "s", 16)
+    cut = {}
+    for whole in (0, 1 << 30):  # every level read a chunk at a time, then every level whole
+        monkeypatch.setattr(source_chunks, "WHOLE_BYTES", whole)
+        ext = open_periodic(tmp_path / "s", 385)  # a fresh extension: nothing cut or kept yet
+        blocks = nodes_for(ext, 16).blocks
+        chunks = ext.store["nodes/effective/0"].nodes.source_chunks
+        tiles = [(lev, tx, ty) for lev in range(3) for ty in range(0, 25 >> lev, 3) for tx in range(25 >> lev)]
+        cut[whole] = {t: blocks[t[0]][t[2], t[1]].tobytes() for t in tiles if not blocks.ready(*t)}
+        assert (len(chunks.chunks) > 0) == (whole == 0) and any(v is not None for v in chunks._whole.values()) == (
+            whole > 0
+        )
+    assert len(cut[0]) > 20 and cut[0] == cut[1 << 30]

@@ -50,3 +50,41 @@ def test_the_scaling_report_says_how_many_jumps_met_the_target(ctx, store):
     assert list(table["method"]) == ["raycast"] and len(rows) == 3
     (line,) = jump_sentences(table)
     assert "target met in 0 of 1" in line and "not reached" in line
+
+
+def test_after_a_jump_the_hybrid_builds_its_estimate_in_the_loader_and_uploads_many_a_frame(ctx, store, monkeypatch):
+    import threading
+
+    from raster.estimate import TileletTriangleEstimator
+
+    threads = []
+    real = TileletTriangleEstimator._block_nodes
+
+    def spy(self, source, key):
+        threads.append(threading.current_thread().name)
+        return real(self, source, key)
+
+    monkeypatch.setattr(TileletTriangleEstimator, "_block_nodes", spy)
+    rows = jump_frames(ctx, store, "hybrid", frames=6, size=SIZE, upload_budget_ms=1e3, settle=True)
+    assert threads and set(threads) == {"terrabench-tile-loader"}  # no estimate's build inside a frame
+    assert rows["uploads"].iloc[0] > 1  # every missing tile's job fits the budget: not one job a frame
+    assert rows["share"].iloc[-1] == 1.0
+
+
+def test_the_view_before_the_jump_is_settled_with_its_seam_cuts_done(ctx, tmp_path):
+    from test_periodic_nodes import _rough
+    from test_periodic_streaming import _seam_view
+
+    from experiments.stream_jump import _settled
+    from hybrid.renderer import Renderer
+    from hybrid.tiles.periodic import open_periodic
+    from hybrid.tiles.store import StorePyramid
+
+    prepare_store(_rough(seed=4), tmp_path / "s", 16)
+    ext = open_periodic(tmp_path / "s", 385)
+    pyramid, v = StorePyramid(ext), _seam_view(ext)
+    with Renderer(ctx, ext, "raster", 16, pyramid=pyramid, upload_budget_ms=1e9, adapt=False) as r:
+        assert r.render(v, 2.0, read=False).stats.fallback_tiles > 0  # near-seam tiles wait for their cuts
+        _settled(r, pyramid, v, 2.0)
+        assert r.render(v, 2.0, read=False).stats.fallback_tiles == 0
+    pyramid.close()

@@ -102,7 +102,9 @@ def test_store_uploads_take_what_the_loader_thread_read_first(ctx, puget257, tmp
     with Renderer(ctx, pyramid.hf, policy, 32, pyramid=pyramid, upload_budget_ms=0.0) as r:
         keys = [p.key for p in r.plan(v)]
         assert pyramid.request(keys[3:4]).wait(30) and not pyramid.cached(keys[0])
-        r.pyramid.request = lambda keys, work=None: None  # the frame asks for nothing more: only that tile is loaded
+        r.pyramid.request = lambda keys, work=None, later=None: (
+            None
+        )  # the frame asks for nothing more: only that tile is loaded
         assert r.render(v, mode="shaded").stats.uploads == 1  # the root: the first frame's job
         assert r.render(v, mode="shaded").stats.uploads == 1  # then the loaded tile, not the nearest
         assert (policy, keys[3]) in r.cache.entries and (policy, keys[0]) not in r.cache.entries

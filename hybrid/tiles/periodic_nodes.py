@@ -50,7 +50,7 @@ from hybrid.errors import TerrabenchError
 from .fans import block2, dilate4
 from .seams import SeamProfiles, profile_spans
 from .sidecodes import holds_side_codes, side_codes_each
-from .source_chunks import SourceChunks, gather
+from .source_chunks import SourceChunks
 
 KINDS = ("effective", "zlo", "zhi")
 _UP = 1.0 + 2.0**-21  # relative headroom over float32 rounding (2^-24 per rounded value)
@@ -177,7 +177,7 @@ class PeriodicNodes:
             lo = None if wrap == "below" else 0
             rr, rc = (self._rho(np.clip(i, lo, total - 1), T, False) for i in (ri, ci))
             ok_r, ok_c = ((i < total) & ((i >= 0) | (lo is None)) for i in (ri, ci))
-        vals = gather(self.source_chunks.reader(kind, g), rr, rc).astype(np.float64)
+        vals = self.source_chunks.gather(kind, g, rr, rc).astype(np.float64)
         return vals, ri, ci, rr, rc, ok_r, ok_c
 
     def _flat(self, g: int, r0: int, r1: int, c0: int, c1: int, wrap) -> np.ndarray:
@@ -228,7 +228,7 @@ class PeriodicNodes:
         whose nodes that pattern does not describe."""
         T = self.P >> (g + 1)
         ri, ci = np.arange(r0, r1), np.arange(c0, c1)
-        out = gather(self.source_chunks.reader("effective", g), self._rho(ri, T, False), self._rho(ci, T, False))
+        out = self.source_chunks.gather("effective", g, self._rho(ri, T, False), self._rho(ci, T, False))
         near_r, near_c = self._near(ri, T, g, "effective"), self._near(ci, T, g, "effective")
         locs = [T - 1, T] if g else [T - 1]  # near a seam: local T-1, and 0 from level 1
         if near_c.any():
@@ -268,8 +268,9 @@ class PeriodicNodes:
         if g < self.src_levels:
             near = self._near_window(g, r0, r1, c0, c1)
             T = self.P >> (g + 1)
-            src = gather(
-                self.source_chunks.reader("sides", g),
+            src = self.source_chunks.gather(
+                "sides",
+                g,
                 self._rho(np.arange(r0, r1), T, False),
                 self._rho(np.arange(c0, c1), T, False),
             )

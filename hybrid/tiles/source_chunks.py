@@ -1,5 +1,7 @@
 """Windows of a tile store's node arrays read through their decoded chunks, kept in a byte-bounded LRU: what a periodic
-extension (``hybrid.tiles.periodic_nodes``) reads of its source's arrays, a few small chunks many times over."""
+extension (``hybrid.tiles.periodic_nodes``) reads of its source's arrays, a few small chunks many times over. Levels
+of at most ``WHOLE_BYTES`` (the coarser ones, whose chunks are small and many) are decoded whole once and indexed
+directly: a cut gathers rows and columns from them in one indexing, not one window per chunk."""
 
 from __future__ import annotations
 
@@ -10,6 +12,7 @@ from hybrid.terrain.store_chunks import chunk_reader
 from .byte_lru import ByteLRU
 
 CHUNK_BYTES = 64 << 20  # decoded chunks of the source's node arrays kept (``SourceChunks``)
+WHOLE_BYTES = 1 << 20  # a source level up to this size is decoded whole once and kept: a window is a slice
 
 
 def _runs(u: np.ndarray) -> list[tuple[int, int, int, int]]:
@@ -41,6 +44,7 @@ class SourceChunks:
         self._arrays: dict = {}
         self._readers: dict = {}
         self.chunks = ByteLRU(budget)  # decoded chunks by (kind, g, chunk row, chunk column)
+        self._whole: dict = {}  # (kind, g) -> the whole level (float32), or None where it is over WHOLE_BYTES
 
     def array(self, kind: str, g: int):
         """The source's array of a kind at global level g (its handle looked up once)."""
@@ -49,15 +53,43 @@ class SourceChunks:
             self._arrays[key] = self.group[f"nodes/{kind}/{g}"]
         return self._arrays[key]
 
-    def _chunk(self, kind: str, g: int, cy: int, cx: int) -> np.ndarray:
-        """Chunk (cy, cx) of a kind's level-g array (float32), its file decoded directly where its layout allows
-        (``hybrid.terrain.store_chunks``: the same values as Zarr's read, without its per-call overhead)."""
+    def _read(self, kind: str, g: int):
+        """The chunk reader of a kind's level-g array (made once)."""
         key = (kind, g)
         if key not in self._readers:
             arr = self.array(kind, g)
             ch, cw = arr.chunks
             self._readers[key] = chunk_reader(arr, (int(ch), int(cw)))
-        read = self._readers[key]
+        return self._readers[key]
+
+    def whole(self, kind: str, g: int) -> np.ndarray | None:
+        """A kind's level-g array whole (float32, decoded once), or None where it is larger than WHOLE_BYTES."""
+        key = (kind, g)
+        if key not in self._whole:  # (two threads may both decode it: the same values)
+            arr = self.array(kind, g)
+            rows, cols = (int(v) for v in arr.shape)
+            out = None
+            if rows * cols * 4 <= WHOLE_BYTES:
+                read, (ch, cw) = self._read(kind, g), arr.chunks
+                out = np.empty((rows, cols), np.float32)
+                for cy in range(-(-rows // ch)):
+                    for cx in range(-(-cols // cw)):
+                        out[cy * ch : (cy + 1) * ch, cx * cw : (cx + 1) * cw] = read(cy, cx)
+            self._whole[key] = out
+        return self._whole[key]
+
+    def gather(self, kind: str, g: int, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """A kind's level-g array at rows x cols (float32): indexed in the whole level where it is kept, else read
+        as a few windows (``gather``)."""
+        whole = self.whole(kind, g)
+        if whole is not None:
+            return whole[np.ix_(rows, cols)]
+        return gather(self.reader(kind, g), rows, cols)
+
+    def _chunk(self, kind: str, g: int, cy: int, cx: int) -> np.ndarray:
+        """Chunk (cy, cx) of a kind's level-g array (float32), its file decoded directly where its layout allows
+        (``hybrid.terrain.store_chunks``: the same values as Zarr's read, without its per-call overhead)."""
+        read = self._read(kind, g)
         return self.chunks.get((kind, g, cy, cx), lambda: np.asarray(read(cy, cx), dtype=np.float32))
 
     def window(self, kind: str, g: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:

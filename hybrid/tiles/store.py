@@ -59,8 +59,8 @@ class StorePyramid(TilePyramid):
         self.stats = {"reads": 0, "hits": 0, "evictions": 0, "peak_bytes": 0, "chunk_reads": 0}
         self._lock = threading.Lock()
         self._wake = threading.Condition(threading.Lock())  # the loader thread's queue (request)
-        self._wanted: list = []
-        self._work: dict = {}  # key -> host work the loader runs after its samples
+        self._wanted: list = []  # (key, whether its samples are read) in the loader's order
+        self._work: dict = {}  # (key, read) -> host work the loader runs (after the samples, if read)
         self._done = threading.Event()
         self._go = threading.Event()  # cleared: the loader waits before its next tile
         self._go.set()
@@ -210,16 +210,19 @@ class StorePyramid(TilePyramid):
         with self._lock:
             return {k for k in keys if k in self._cache or k in self._failed}
 
-    def request(self, keys, work: dict | None = None) -> threading.Event:
+    def request(self, keys, work: dict | None = None, later: dict | None = None) -> threading.Event:
         """Have the loader thread read these tiles next, front to back, in place of what it was asked before, and
         after a tile's samples run its ``work`` (key -> callables: host work of its upload or estimate, thread-safe,
-        such as cutting a periodic extension's node block near a seam); returns an event set when it is done (or
-        was asked for others instead)."""
-        work = work or {}
+        such as cutting a periodic extension's node block near a seam), then, once every tile is read, ``later``
+        (key -> callables run without reading the tile: work no upload waits for); returns an event set when it
+        is done (or was asked for others instead)."""
+        work, later = work or {}, later or {}
         with self._wake:
             self._done.set()
-            self._wanted = [k for k in dict.fromkeys(keys) if k not in self._cache or k in work]
-            self._work = {k: list(work[k]) for k in self._wanted if k in work}
+            wanted = [k for k in dict.fromkeys(keys) if k not in self._cache or k in work]
+            self._work = {(k, True): list(work[k]) for k in wanted if k in work}
+            self._work.update({(k, False): list(fns) for k, fns in later.items()})
+            self._wanted = [(k, True) for k in wanted] + [(k, False) for k in later]
             self._done = threading.Event()
             if not self._wanted:
                 self._done.set()
@@ -295,10 +298,11 @@ class StorePyramid(TilePyramid):
                 with self._wake:
                     if self._closing or not self._wanted or not self._go.is_set():
                         continue  # held meanwhile: nothing starts inside a hold
-                    key = self._wanted.pop(0)
-                    work = self._work.pop(key, ())
+                    key, read = item = self._wanted.pop(0)
+                    work = self._work.pop(item, ())
                 try:
-                    self.samples(key)
+                    if read:
+                        self.samples(key)
                     for fn in work:
                         fn()
                 except Exception:  # the renderer's own read of it raises the error where it is seen
