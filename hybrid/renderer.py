@@ -136,6 +136,7 @@ class Renderer:
         self._fallbacks: dict = {}
         self._tiles: OrderedDict = OrderedDict()
         self._released = False
+        self._eye: np.ndarray | None = None  # the last frame's eye (world metres): the camera's motion
 
     def __enter__(self) -> Renderer:
         return self
@@ -327,7 +328,8 @@ class Renderer:
         target = FrameTarget(self.ctx, view.width, view.height)
         try:
             together = oracle.measure_plans(self, view, plans, target, pinned, tau) if measure else {}
-            streamed = make_resident(self, plans, pinned, prep_ms)
+            motion, self._eye = (None if self._eye is None else view.eye - self._eye), view.eye
+            streamed = make_resident(self, plans, pinned, prep_ms, motion)
             clock = adaptive.PassClock(self.ctx, learn and len({p.choice for p in plans}) > 1)
             counters, draw, gpu, issue = timed_draw(self, target, view, plans, pinned, tau, opts, clock)
             if learn and self.online is not None and not (streamed and streamed.fallback_tiles):
