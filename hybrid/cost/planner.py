@@ -90,6 +90,14 @@ class TilePlan:
             self._predicted = self._frame.prediction(self._row) if self._frame is not None else {}
         return self._predicted
 
+    def cost(self, strategy: str) -> float | None:
+        """Predicted ms of one strategy for the tile (None where it has no prediction), read from the frame's
+        table where the plan shares one, without making the tile's dict of every candidate."""
+        if self._predicted is None and self._frame is not None:
+            column = self._frame.predicted.get(strategy)
+            return None if column is None else float(column[self._row])
+        return self.predicted.get(strategy)
+
     @property
     def key(self) -> TileKey:
         """The tile's address."""
@@ -116,17 +124,11 @@ class TilePlan:
 def predicted_frame_ms(model: CostModel, plans: list[TilePlan]) -> float | None:
     """The model's predicted ms of a frame of plans as drawn (their choices, each strategy's overhead and a mixed
     frame's); None where some plan has no prediction for its choice."""
-    if not plans:
+    costs = [p.cost(p.choice) for p in plans]
+    known = [c for c in costs if c is not None]
+    if not plans or len(known) < len(costs):
         return None
-    frame = frame_columns(plans)
-    if frame is None:
-        if any(p.choice not in p.predicted for p in plans):
-            return None
-        return model.frame_ms([p.predicted[p.choice] for p in plans], {p.choice for p in plans})
-    pred = frame.predicted
-    if any(p.choice not in pred for p in plans):
-        return None
-    return model.frame_ms([float(pred[p.choice][p._row]) for p in plans], {p.choice for p in plans})
+    return model.frame_ms(known, {p.choice for p in plans})
 
 
 def frame_columns(plans: list[TilePlan]) -> FrameColumns | None:
