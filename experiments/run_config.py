@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields
-from typing import Any, Protocol
+from typing import Any, Protocol, Self, cast
 
 from .spec_keys import START_MODELS
 
@@ -33,13 +33,22 @@ class RunConfig(Protocol):
         ...
 
 
-def _fields_of(cls: Any, row: Mapping) -> dict:
-    """The keys of row that are fields of the dataclass cls; the rest (a frame's columns) are left out."""
-    return {f.name: row[f.name] for f in fields(cls) if f.name in row}
+class RowForm:
+    """A configuration dataclass's row form: ``of`` reads one from a row, ``row`` writes its fields in order."""
+
+    @classmethod
+    def of(cls, row: Mapping) -> Self:
+        """The configuration of a row; keys that are no field (a frame's columns) are left out, and a field the row
+        lacks takes its default."""
+        return cls(**{f.name: row[f.name] for f in fields(cast(Any, cls)) if f.name in row})
+
+    def row(self) -> dict:
+        """The configuration as a flat dict, fields in order."""
+        return asdict(cast(Any, self))
 
 
 @dataclass(frozen=True)
-class Config:
+class Config(RowForm):
     """One configuration of a run: a policy over one flight of one dataset at one size, tau and option set; ``config``
     is its stable id. Runs store it as a row (``row``), as spec.json and the journal hold it."""
 
@@ -54,18 +63,9 @@ class Config:
     policy: str
     start_model: str = START_MODELS[0]
 
-    @classmethod
-    def of(cls, row: Mapping) -> Config:
-        """The configuration of a row; keys that are no field are left out, a missing start model is the device's."""
-        return cls(**_fields_of(cls, row))
-
-    def row(self) -> dict:
-        """The configuration as a flat dict, fields in order."""
-        return asdict(self)
-
 
 @dataclass(frozen=True)
-class EditConfig:
+class EditConfig(RowForm):
     """One configuration of an edit run: a policy following the edit programme at one brush radius (m), or on the
     static terrain (``editing`` false, radius 0, brush "none"), with ``particles`` drawn on the terrain."""
 
@@ -80,12 +80,3 @@ class EditConfig:
     edit_radius: float
     brush: str
     particles: int
-
-    @classmethod
-    def of(cls, row: Mapping) -> EditConfig:
-        """The edit configuration of a row; keys that are no field are left out."""
-        return cls(**_fields_of(cls, row))
-
-    def row(self) -> dict:
-        """The configuration as a flat dict, fields in order."""
-        return asdict(self)
