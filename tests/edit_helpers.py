@@ -1,12 +1,24 @@
 """Shared checks of the edit and deformation tests: a renderer that followed changes of its terrain draws it as
 renderers made afresh on the changed heights do."""
 
+import dataclasses
+
 import numpy as np
 
 from experiments.metrics import crack_pixels
+from experiments.spec import load_spec
 from hybrid.reference import ReferenceRenderer
 from hybrid.renderer import Renderer
 from hybrid.terrain.heightfield import HeightField
+
+
+def tiny_edit_spec(name: str, edit: dict, **changes):
+    """The bundled edit spec at a tiny size (Puget at 129², tiles of 32, 3 frames of 96x54) named ``name``, its
+    programme and its other fields changed as given."""
+    spec = load_spec("edit", {"frames": 3, "sizes": ["96x54"]})
+    return dataclasses.replace(
+        spec, dataset_size=129, tile_size=32, name=name, edit=dataclasses.replace(spec.edit, **edit), **changes
+    )
 
 
 def copy_terrain(hf: HeightField) -> HeightField:

@@ -1,17 +1,14 @@
 """An edit run whose programme names a deformation: every method follows the wave frame by frame, as accurate
 against the reference of the deformed heights as on the static terrain, and its edit log replays the terrain."""
 
-import dataclasses
-
 import numpy as np
 import pandas as pd
 import pytest
-from edit_helpers import copy_terrain
+from edit_helpers import copy_terrain, tiny_edit_spec
 
 from experiments.edit_deform import DeformProgramme
 from experiments.edit_run import run_edit_spec
 from experiments.edit_spec import spec_deformation
-from experiments.spec import load_spec
 from hybrid.camera.flight import get_flight
 from hybrid.editing import TerrainEditor, replay
 from hybrid.reference import ReferenceRenderer
@@ -25,16 +22,12 @@ WAVE = DeformProgramme(
 
 @pytest.fixture(scope="module")
 def run(ctx, tmp_path_factory):
-    spec = load_spec("edit", {"frames": 3, "sizes": ["96x54"]})
-    spec = dataclasses.replace(
-        spec,
-        dataset_size=129,
-        tile_size=32,
+    spec = tiny_edit_spec(
+        "deform-tiny",
+        {"radii": (1500.0,), "edits_per_frame": 0, "particles": 64, "deformation": WAVE},
         image_frames=[1],
-        name="deform-tiny",
         policies=POLICIES,
         flip=False,
-        edit=dataclasses.replace(spec.edit, radii=(1500.0,), edits_per_frame=0, particles=64, deformation=WAVE),
     )
     return spec, run_edit_spec(spec, tmp_path_factory.mktemp("runs"), ctx, progress=False)
 

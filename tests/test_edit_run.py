@@ -1,14 +1,12 @@
 """An edit run end to end at a tiny size: every method follows the same edits, its tables, 0 cracks, the report."""
 
-import dataclasses
-
 import numpy as np
 import pandas as pd
 import pytest
+from edit_helpers import tiny_edit_spec
 
 from experiments.edit_run import run_edit_spec
 from experiments.report import write_run_report
-from experiments.spec import load_spec
 from hybrid.terrain.edit_log import check_log, read_log
 
 POLICIES = {"raster", "raster_gs", "raycast", "hybrid"}
@@ -16,15 +14,11 @@ POLICIES = {"raster", "raster_gs", "raycast", "hybrid"}
 
 @pytest.fixture(scope="module")
 def run(ctx, tmp_path_factory):
-    spec = load_spec("edit", {"frames": 3, "sizes": ["96x54"]})
-    spec = dataclasses.replace(
-        spec,
-        dataset_size=129,
-        tile_size=32,
+    spec = tiny_edit_spec(
+        "edit-tiny",
+        {"radii": (1500.0, 3000.0), "strength": 300.0, "particles": 512},
         image_frames=[2],
-        name="edit-tiny",
         policies=sorted(POLICIES),
-        edit=dataclasses.replace(spec.edit, radii=(1500.0, 3000.0), strength=300.0, particles=512),
     )
     base = tmp_path_factory.mktemp("runs")
     return spec, run_edit_spec(spec, base, ctx, progress=False)
