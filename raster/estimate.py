@@ -72,37 +72,32 @@ def estimate_rows(
     exact rule's four leaves draw 8 each, 16; the lean rule's ``LEAN_SPLIT1_TRIANGLES``, 0). Rows whose nodes have
     side errors (``sides`` (B,) 4, else 1) count their leaves' near sides instead, ``NEAR_SIDE_TRIANGLES`` each.
 
-    The tiles are rows of stacked ``TileNodes``: ``tables`` the small nodes' ``split_tables`` of every kind, of
-    which ``rows`` (B,) are the tiles'; coarse (B, C) errors; boxes (B, 6, blocks + C) as (hi, lo) corners in world
-    metres, coordinates first; root (B,). ``inside`` (B,) marks tiles wholly inside the frustum, whose boxes need
-    no test. A node splits when E * k_tau exceeds its block's (or, large, its own box's) distance: a block's count
-    of each kind is one look-up in its table, errors rounded to 1/32 octave (``split_tables``)."""
+    The tiles are rows of stacked ``TileNodes``, read in place: ``tables`` the small nodes' ``split_tables`` of every
+    kind, coarse (rows, C) errors, boxes (rows, 6, blocks + C) as (hi, lo) corners in world metres, coordinates
+    first, root (rows,) and ``sides`` (rows,), of which ``rows`` (B,) are the tiles'. ``inside`` (B,) marks tiles
+    wholly inside the frustum, whose boxes need no test. A node splits when E * k_tau exceeds its block's (or,
+    large, its own box's) distance: a block's count of each kind is one look-up in its table, errors rounded to
+    1/32 octave (``split_tables``)."""
     b = len(rows)
     if not b:
         return np.zeros(0, np.int64), np.zeros(0)
     eye = np.asarray(eye, dtype=np.float64)
-    if planes is None:
-        w, bias = np.zeros((6, 6)), np.full(6, -np.inf)  # every box passes every plane
-    else:
-        w, bias = _corner_test(planes, eye)
+    planes = _NO_PLANES if planes is None else np.ascontiguousarray(planes, dtype=np.float64)
     inside = np.zeros(b, np.bool_) if inside is None else np.asarray(inside, np.bool_)
-    sides = np.ascontiguousarray(np.broadcast_to(np.asarray(sides, np.int64), (b,)))
+    sides = np.asarray(sides, np.int64)
+    if sides.ndim == 0:
+        sides = np.full(len(root), int(sides), np.int64)
     from .estimate_loops import estimate_tiles
 
     weights = np.array([*split1_triangles, 4.0 * NEAR_SIDE_TRIANGLES, NEAR_TRIANGLES], dtype=np.float64)
     rows, root, k = np.asarray(rows, np.int64), np.asarray(root, np.int64), float(k_tau)
     t = tables
     return estimate_tiles(
-        t.tables, t.base, rows, coarse, boxes, root, eye, k, w, bias, inside, lean, beta, sides, weights
+        t.tables, t.base, rows, coarse, boxes, root, eye, k, planes, inside, lean, beta, sides, weights
     )
 
 
-def _corner_test(planes: np.ndarray, eye: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(6, 6) weights and (6,) bounds such that a (hi, lo) world box row r lies wholly behind some frustum plane
-    (eye-relative ``planes``) exactly where some column of r @ weights falls below its bound: per plane, its
-    corner farthest along the normal."""
-    n = planes[:, :3].T
-    return np.concatenate([np.maximum(n, 0.0), np.minimum(n, 0.0)]), eye @ n - planes[:, 3]
+_NO_PLANES = np.zeros((0, 4))
 
 
 class _Rows:
@@ -319,16 +314,16 @@ class TileletTriangleEstimator:
         est = estimate_rows(
             self._rows.tables,
             r,
-            a["coarse_error"][r],
-            a["boxes"][r],
-            a["root"][r],
+            a["coarse_error"],
+            a["boxes"],
+            a["root"],
             view.eye,
             float(view.pixels_per_radian) / tau,
             view.frustum_planes_rel(),
             None if inside is None else inside[ok],
             self.lean,
             self.beta,
-            a["sides"][r],
+            a["sides"],
             (SPLIT1_TRIANGLES, 16) if self.full_res == "exact" else (LEAN_SPLIT1_TRIANGLES, 0),
         )
         if len(r) == len(rows):

@@ -22,6 +22,11 @@ def _subsets(s: int) -> np.ndarray:
     return np.array(rows, dtype=bool).reshape(-1, s)
 
 
+def subset_masks(s: int) -> np.ndarray:
+    """(2^s - 1, s) masks of the non-empty subsets of s strategies, in the order the assignment prices them."""
+    return _subsets(s)
+
+
 @functools.cache
 def _sizes(s: int) -> np.ndarray:
     """(2^s - 1,) strategies in each subset of ``_subsets(s)``."""

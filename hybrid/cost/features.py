@@ -164,12 +164,16 @@ def slab_cells_batch(view: View, lo: np.ndarray, hi: np.ndarray, spacing: np.nda
 
     dz / tan(elevation) metres along the heading is dz * horizontal / |vertical| metres, so the cells are
     dz * (cells along the heading to the centre) / |vertical|: no angle is formed."""
-    d = 0.5 * (lo + hi) - view.eye
-    dz = hi[:, 2] - lo[:, 2]
-    along = np.hypot(d[:, 0] / spacing[:, 0], d[:, 1] / spacing[:, 1])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cells = np.minimum(dz * along / np.abs(d[:, 2]), n * np.sqrt(2.0))  # level eye: the diagonal
-    return np.where(dz == 0.0, 0.0, np.where(along == 0.0, 1.0, cells))  # flat: none; eye straight above: 1
+    from .plan_loops import slab_cells_loop
+
+    f64 = np.float64
+    return slab_cells_loop(
+        np.ascontiguousarray(lo, dtype=f64).reshape(-1, 3),
+        np.ascontiguousarray(hi, dtype=f64).reshape(-1, 3),
+        np.ascontiguousarray(spacing, dtype=f64).reshape(-1, 2),
+        np.asarray(view.eye, dtype=f64),
+        float(n),
+    )
 
 
 def feature_columns(pyramid: TilePyramid, view: View, selected: list[SelectedTile], triangles, visible=None) -> dict:
@@ -184,11 +188,11 @@ def feature_columns(pyramid: TilePyramid, view: View, selected: list[SelectedTil
         keys = np.array([(s.key.level, s.key.tx, s.key.ty) for s in selected], dtype=np.int64).reshape(-1, 3)
         lo, hi = pyramid.aabbs(keys[:, 0], keys[:, 1], keys[:, 2])
         distance = np.array([s.distance for s in selected], dtype=np.float64).reshape(-1)
-    mid = 0.5 * (lo[:, 2] + hi[:, 2])
-    mid_lo, mid_hi = lo.copy(), hi.copy()
-    mid_lo[:, 2] = mid_hi[:, 2] = mid
+    from .plan_loops import with_mid_boxes
+
+    lo, hi = np.ascontiguousarray(lo, dtype=np.float64), np.ascontiguousarray(hi, dtype=np.float64)
     b = len(keys)
-    area = footprints(view, np.concatenate([lo, mid_lo]), np.concatenate([hi, mid_hi]))
+    area = footprints(view, *with_mid_boxes(lo.reshape(-1, 3), hi.reshape(-1, 3)))
     k = (1 << keys[:, 0]).astype(np.float64)
     spacing = k[:, None] * np.array([pyramid.hf.spacing_x, pyramid.hf.spacing_y])
     return {

@@ -111,7 +111,7 @@ class CostModel:
         """The strategies this model has coefficients for, in TERMS order."""
         return tuple(s for s in TERMS if self.coefficients.get(s))
 
-    def frame_ms(self, tile_costs: list[float], strategies: set) -> float:
+    def frame_ms(self, tile_costs: list[float] | np.ndarray, strategies: set) -> float:
         """Predicted frame time (ms): the tiles' costs plus the overhead of each strategy used, and the mixed
         frame's own overhead where more than one is used."""
         mixed = self.mix_overhead if len(strategies) > 1 else 0.0
@@ -136,13 +136,7 @@ class CostModel:
         """``predict_table`` from the columns' term values (``all_term_values``: (B, terms) or (terms,))."""
         shape, terms = terms.shape[:-1], terms.reshape(-1, len(ALL_TERMS))
         cands = self.candidates
-        coef = self._memo(
-            "coef",
-            lambda: np.array(
-                [[self.coefficients[s].get(t, 0.0) if t in TERMS[s] else 0.0 for t in ALL_TERMS] for s in cands],
-                dtype=np.float64,
-            ),
-        )
+        coef = self.coefficient_table()
         nan = np.isnan(terms[:, 1])
         unknown_any = bool(nan.any())
         if unknown_any:
@@ -152,6 +146,23 @@ class CostModel:
         if unknown_any:
             table[np.ix_(["triangles" in TERMS[s] for s in cands], nan)] = unknown
         return table.reshape(len(cands), *shape)
+
+    def coefficient_table(self) -> np.ndarray:
+        """(candidates, len(ALL_TERMS)) coefficients (ms per unit of each term, 0 where a strategy has no such
+        term), rows in ``candidates`` order; read-only."""
+
+        def build():
+            cands = self.candidates
+            rows = [[self.coefficients[s].get(t, 0.0) if t in TERMS[s] else 0.0 for t in ALL_TERMS] for s in cands]
+            out = np.array(rows, dtype=np.float64).reshape(len(cands), len(ALL_TERMS))
+            out.setflags(write=False)
+            return out
+
+        return self._memo("coef", build)
+
+    def uses_triangles(self) -> np.ndarray:
+        """(candidates,) whether each candidate's prediction needs the tile's triangles (a raster strategy)."""
+        return np.array(["triangles" in TERMS[s] for s in self.candidates], dtype=np.bool_)
 
     def choice_arrays(self, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per strategy of ``names`` (S,): per-frame overhead (ms), held-out frame error and per-tile error (the

@@ -21,7 +21,7 @@ import numpy as np
 
 from hybrid.camera.view import View
 from hybrid.contract import TriangleEstimator
-from hybrid.cost.choice import best_assignment_table
+from hybrid.cost.choice import best_assignment_table, subset_masks
 from hybrid.cost.features import TileFeatures, feature_columns, tile_features
 from hybrid.cost.model import CostModel, all_term_values
 from hybrid.errors import TerrabenchError
@@ -124,11 +124,19 @@ class TilePlan:
 def predicted_frame_ms(model: CostModel, plans: list[TilePlan]) -> float | None:
     """The model's predicted ms of a frame of plans as drawn (their choices, each strategy's overhead and a mixed
     frame's); None where some plan has no prediction for its choice."""
-    costs = [p.cost(p.choice) for p in plans]
-    known = [c for c in costs if c is not None]
-    if not plans or len(known) < len(costs):
+    chosen = [p.choice for p in plans]
+    used = set(chosen)
+    frame = frame_columns(plans)
+    if frame is not None and used <= frame.predicted.keys():  # one gather from the frame's table
+        names = list(frame.predicted)
+        index = {n: i for i, n in enumerate(names)}
+        table = np.stack([frame.predicted[n] for n in names])
+        costs = table[[index[c] for c in chosen], np.arange(len(plans))]
+        return None if np.isnan(costs).any() else model.frame_ms(costs, used)
+    known = [c for c in (p.cost(p.choice) for p in plans) if c is not None]
+    if not plans or len(known) < len(plans):
         return None
-    return model.frame_ms(known, {p.choice for p in plans})
+    return model.frame_ms(known, used)
 
 
 def frame_columns(plans: list[TilePlan]) -> FrameColumns | None:
@@ -195,6 +203,31 @@ def hedged_picks(table: np.ndarray, names: Sequence[str], model: CostModel) -> n
     return picks
 
 
+def compiled_choice(
+    model: CostModel, columns: dict, hedged: bool = True
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(terms (B, len(ALL_TERMS)), predicted ms (candidates, B), hedged picks (B,) or None) of a frame's feature
+    columns in one compiled pass (``hybrid.cost.plan_loops``): ``all_term_values``, ``model.predict_terms`` with
+    unknown triangles priced infinite for the raster strategies, and ``hedged_picks``, as their numpy forms
+    compute them."""
+    from .plan_loops import hedged_pick_loop, predicted_table, term_table
+
+    cols = (np.ascontiguousarray(columns[n], dtype=np.float64) for n in _TERM_FEATURES)
+    terms = term_table(*cols)
+    table = predicted_table(terms, model.coefficient_table(), model.uses_triangles(), np.inf)
+    if not hedged:
+        return terms, table, None
+    names = model.candidates
+    overhead, err, tile_err = model.choice_arrays(names)
+    picks = hedged_pick_loop(
+        table, overhead, err, tile_err, float(model.mix_overhead), float(model.mix_error), subset_masks(len(names))
+    )
+    return terms, table, picks
+
+
+_TERM_FEATURES = ("pixels", "triangles", "visible", "surface_pixels", "slab_cells")
+
+
 def _pure_base_wins(scaled: np.ndarray, base: int, overhead: np.ndarray, mixed: float) -> bool:
     """Whether ``best_assignment_table`` gives every tile of the (S, B) finite table ``scaled`` to strategy ``base``
     (ordered first), known without pricing the subsets. Let g_s be what strategy s saves over the base on the
@@ -253,12 +286,11 @@ def plan_frame(
     if batch:
         triangles, visible = triangles_fn.many(selected, view, tau, prep_budget_ms)
         columns = feature_columns(pyramid, view, selected, triangles, visible)
-        terms = all_term_values(columns)
         names = model.candidates
-        table = model.predict_terms(terms, unknown=np.inf)  # unknown triangles: raster infinite, so ray cast
+        terms, table, picks = compiled_choice(model, columns, hedged)  # unknown triangles: raster infinite
         pred = dict(zip(names, table))
-        if hedged:
-            chosen = [names[i] for i in hedged_picks(table, names, model).tolist()]
+        if picks is not None:
+            chosen = [names[i] for i in picks.tolist()]
         else:
             chosen = choices(policy, columns, pred, threshold)
         frame = FrameColumns(columns, pred, terms)
