@@ -6,7 +6,9 @@ The hybrid (adapting, as by default) is given this device's cost model with ever
 overhead set out of reach, so that every tile goes to one strategy, as a frame the hybrid would draw one way;
 beside it the pure method draws the same frames, the two interleaved frame by frame, at tiles of 64, 128 and
 256 on Puget's default flights. Its extra time is planning (features, triangle estimates, the choice) and
-learning (``adapt_ms``). Target: the hybrid's frame within 1.03x the pure method's.
+learning (``adapt_ms``); as by default it plans such a clear choice in full every fourth frame and reuses it in
+between (``hybrid.cost.reuse``), and beside it the same hybrid planning every frame shows what choosing costs
+each frame. Target: the hybrid's frame within 1.03x the pure method's.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from hybrid.errors import TerrabenchError
 
 TILE_SIZES = (64, 128, 256)
 TARGET = "hybrid / pure (target <= 1.03)"
+EVERY = "hybrid planning every frame"
 
 
 def forced(model, keep: str):
@@ -40,6 +43,7 @@ def draw(ctx, hf, views, tau: float, tile_size: int, model, method: str, repeats
     try:
         rs[method] = Renderer(ctx, hf, method, tile_size)
         rs["hybrid"] = Renderer(ctx, hf, "hybrid", tile_size, cost_model=forced(model, method))
+        rs[EVERY] = Renderer(ctx, hf, "hybrid", tile_size, cost_model=forced(model, method), reuse_choice=1)
         for r in rs.values():
             r.render(views[0], tau, read=False)
         got: dict = {(p, k): [] for p in rs for k in range(len(views))}
@@ -52,7 +56,7 @@ def draw(ctx, hf, views, tau: float, tile_size: int, model, method: str, repeats
             r.release()
     rows = []
     for (p, k), st in got.items():
-        if p == "hybrid" and any((s.tiles_raycast if method == "raycast" else s.tiles_raster) != s.tiles for s in st):
+        if p != method and any((s.tiles_raycast if method == "raycast" else s.tiles_raster) != s.tiles for s in st):
             raise TerrabenchError(f"the hybrid forced to {method} drew some tiles another way")
         w = [s.wall_ms for s in st]
         rows.append(
@@ -63,6 +67,7 @@ def draw(ctx, hf, views, tau: float, tile_size: int, model, method: str, repeats
                 "wall_ms_repeats": w,
                 "plan_ms": float(np.median([s.plan_ms for s in st])),
                 "adapt_ms": float(np.median([s.adapt_ms for s in st])),
+                "reused": float(np.mean([s.choice_reused for s in st])),
                 "tiles": st[-1].tiles,
             }
         )
@@ -99,6 +104,7 @@ def run(
                 df = draw(ctx, hf, views, tau, ts, model, method, repeats)
                 by = {p: g for p, g in df.groupby("policy")}
                 c = compare("hybrid", by["hybrid"], method, by[method])
+                every = compare(EVERY, by[EVERY], method, by[method])
                 out.append(
                     {
                         "tile size": ts,
@@ -112,6 +118,11 @@ def run(
                         "pure plan ms": float(by[method]["plan_ms"].median()),
                         "hybrid plan ms": float(by["hybrid"]["plan_ms"].median()),
                         "hybrid adapt ms": float(by["hybrid"]["adapt_ms"].median()),
+                        "frames reused": float(by["hybrid"]["reused"].mean()),
+                        "planning every frame / pure": every.ratio,
+                        "planning every frame": every.words(),
+                        "every-frame plan ms": float(by[EVERY]["plan_ms"].median()),
+                        "every-frame adapt ms": float(by[EVERY]["adapt_ms"].median()),
                     }
                 )
     return {

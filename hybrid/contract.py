@@ -181,8 +181,9 @@ class FrameStats:
     wall_ms. With an upload budget, upload_ms and prep_ms are part of wall_ms, fallback_tiles counts the tiles
     drawn from a resident ancestor and pending_uploads the jobs left waiting. adapt_ms is an adapting hybrid's
     CPU time learning from the frame (exploration and refit, ``hybrid.cost.online``), part of wall_ms;
-    explored_tiles counts the tiles it gave to a strategy it is learning. plans are a mixed policy's tile plans,
-    behind ``tile_rows``.
+    explored_tiles counts the tiles it gave to a strategy it is learning. choice_reused marks a hybrid's frame drawn
+    as its last clear pure choice without planning (``hybrid.cost.reuse``: no features, predictions or learning).
+    plans are a mixed policy's tile plans, behind ``tile_rows``.
     """
 
     wall_ms: float
@@ -207,6 +208,7 @@ class FrameStats:
     pred_ms: float | None = None
     adapt_ms: float = 0.0
     explored_tiles: int = 0
+    choice_reused: bool = False
     counters: dict[str, float] = field(default_factory=dict)
     together_ms: dict[str, float] = field(default_factory=dict)
     plans: list = field(default_factory=list, repr=False, compare=False)

@@ -30,7 +30,9 @@ from hybrid.camera.view import View
 from hybrid.contract import DEFAULT_FULL_RES, DrawOptions, EditFollowing, TerrainChange, TileItem
 from hybrid.cost.model import CostModel, load_cost_model
 from hybrid.cost.online import AdaptOptions, OnlineModel
-from hybrid.cost.planner import TilePlan, plan_frame
+from hybrid.cost.planner import TilePlan, plan_frame, pure_slack
+from hybrid.cost.reuse import REUSE_FRAMES, ChoiceReuse
+from hybrid.draw_options import resolve_options, route_options
 from hybrid.errors import TerrabenchError
 from hybrid.frame_draw import timed_draw
 from hybrid.frame_readback import frame_result, strategy_map
@@ -56,37 +58,13 @@ from hybrid.tiles.tiletree import DEFAULT_TAU, edge_neighbours
 from hybrid.uploads import JobCosts, fallback_selection, fallback_tile
 
 
-def route_options(strategies: dict, options: dict) -> dict[str, dict]:
-    """Draw options split per strategy by the names its options dataclass has; a name none knows is an error."""
-    known = set().union(*(e.option_names for e in STRATEGIES.values()))
-    bad = sorted(set(options) - known)
-    if bad:
-        raise TerrabenchError(f"unknown draw option(s) {', '.join(bad)}; known: {', '.join(sorted(known))}")
-    return {n: {k: v for k, v in options.items() if k in STRATEGIES[n].option_names} for n in strategies}
-
-
-def resolve_options(strategies: dict, given: Mapping[str, DrawOptions] | None, options: dict) -> dict:
-    """Each strategy's draw options (its ``options_type``): those ``given`` by strategy name, with the keyword
-    ``options`` each takes applied over them; refuses a name or a type that does not fit."""
-    given = dict(given or {})
-    bad = sorted(set(given) - set(strategies))
-    if bad:
-        raise TerrabenchError(f"options for strategies this renderer does not draw: {', '.join(bad)}")
-    out = {}
-    for n, routed in route_options(strategies, options).items():
-        kind = STRATEGIES[n].cls.options_type
-        base = given.get(n, kind())
-        if not isinstance(base, kind):
-            raise TerrabenchError(f"options for {n!r} must be a {kind.__name__}, got {type(base).__name__}")
-        out[n] = base.updated(**routed)
-    return out
-
-
 class Renderer:
     """Whole views drawn tile by tile with a policy's choice of strategy; resident tiles within a byte budget.
 
     ``options`` are draw options of the strategies (``mode``, ``reconstruction``, ``prepass``, ``wireframe``,
-    ...), each given to the strategies that take it. A renderer is a context manager; it cannot be used
+    ...), each given to the strategies that take it. The hybrid reuses a clear pure choice for up to
+    ``reuse_choice`` - 1 frames after the full plan that made it (``hybrid.cost.reuse``; 1: plan every frame).
+    A renderer is a context manager; it cannot be used
     after ``release()``.
     """
 
@@ -104,6 +82,7 @@ class Renderer:
         pyramid: TilePyramid | None = None,
         upload_budget_ms: float | None = None,
         adapt: bool | AdaptOptions = True,
+        reuse_choice: int = REUSE_FRAMES,
         strategy_options: Mapping[str, DrawOptions] | None = None,
         **options,
     ):
@@ -122,6 +101,8 @@ class Renderer:
             if adapt and self.entry is not None and self.entry.adapts and self._model is not None
             else None
         )
+        hedged = self.entry is not None and self.entry.rule is None and not self.entry.measures
+        self.reuse = ChoiceReuse(reuse_choice) if hedged and reuse_choice > 1 else None
         self.triangles = (
             triangle_estimator(self.pyramid, full_res=options.get("full_res", DEFAULT_FULL_RES)) if self.mixed else None
         )
@@ -202,16 +183,19 @@ class Renderer:
         """The frame's tiles front to back with the policy's choices (and, when mixed, features and costs); when
         streaming, new tiles' estimates are prepared within the upload budget (the rest ray cast this frame)."""
         self._check_live()
-        return plan_frame(
-            self.pyramid,
-            view,
-            self.model,
-            self.triangles,
-            self.policy,
-            tau,
-            self.threshold,
-            prep_budget_ms=self.upload_budget_ms,
+        reused = self.reuse.take() if self.reuse is not None else None
+        if reused is not None:  # a clear choice of the last full plan (hybrid.cost.reuse)
+            return plan_frame(self.pyramid, view, None, None, reused, tau)
+        model, budget = self.model, self.upload_budget_ms
+        plans = plan_frame(
+            self.pyramid, view, model, self.triangles, self.policy, tau, self.threshold, prep_budget_ms=budget
         )
+        if self.reuse is not None and model is not None:
+            clear = pure_slack(plans, model)
+            online = self.online  # an adapting model: only once the choice's predictions hold, nothing to explore
+            quiet = online is None or clear is None or (online.holds(clear[0]) and not online.may_explore({clear[0]}))
+            self.reuse.planned(clear, budget is None and quiet)
+        return plans
 
     def skirts(self, plans: list[TilePlan]) -> dict:
         """Edge bits of every raster tile that touches a ray-cast tile: skirts close the seam there."""
@@ -320,7 +304,8 @@ class Renderer:
         self._check_live()
         measure = self._measures(measure, maps, read, plans)
         opts = {n: self.options[n].updated(**o) for n, o in route_options(self.strategies, options).items()}
-        learn = self.online is not None and plans is None and not measure
+        own = plans is None  # planned here
+        learn = self.online is not None and own and not measure
         plans, plan_ms, prep_ms = self._planned(view, tau, plans)
         explored, adapt_ms = adaptive.timed_explore(self.online, plans, learn)
         pinned = {(p.choice, p.key) for p in plans}
@@ -335,6 +320,7 @@ class Renderer:
             if learn and self.online is not None and not (streamed and streamed.fallback_tiles):
                 adapt_ms += adaptive.learn(self.online, clock, plans, draw, gpu, issue, explored)
             stats = frame_stats(self, plans, plan_ms, draw, gpu, counters, together)
+            stats.choice_reused = own and self.reuse is not None and self.reuse.reused
             add_frame_costs(self, stats, prep_ms, issue, adapt_ms, explored, streamed, before)
             if overlay is not None:
                 overlay(target, view)

@@ -139,6 +139,31 @@ def predicted_frame_ms(model: CostModel, plans: list[TilePlan]) -> float | None:
     return model.frame_ms(known, used)
 
 
+def pure_slack(plans: list[TilePlan], model: CostModel) -> tuple[str, float] | None:
+    """(strategy, slack) where every plan of a frame took one strategy and the model priced every tile every way:
+    slack is the least, over the other strategies, of what drawing that strategy's cheaper tiles saves at the
+    hedged prices (``hedged_picks``) short of its per-frame overhead beyond the chosen one's, as a share of the
+    predicted pure frame (ms / ms; negative: another strategy could pay); None for any other frame."""
+    frame = frame_columns(plans)
+    chosen = {p.choice for p in plans}
+    if frame is None or len(chosen) != 1 or not chosen <= frame.predicted.keys():
+        return None
+    names = tuple(frame.predicted)
+    choice = chosen.pop()
+    base = names.index(choice)
+    table = np.stack([frame.predicted[n] for n in names])
+    if len(names) < 2 or not np.isfinite(table).all():
+        return None
+    overhead, _, tile_err = model.choice_arrays(names)
+    factor = 1.0 + tile_err + tile_err[base]
+    factor[base] = 1.0
+    scaled = table * factor[:, None]
+    gain = np.maximum(scaled[base] - scaled, 0.0).sum(axis=1)
+    short = np.delete(overhead - overhead[base] - gain, base)
+    pure_ms = float(table[base].sum() + overhead[base])
+    return choice, float(short.min()) / pure_ms if pure_ms > 0 else 0.0
+
+
 def frame_columns(plans: list[TilePlan]) -> FrameColumns | None:
     """The feature columns and predictions the plans of one frame share (a mixed policy's batch plan), else None."""
     frame = plans[0]._frame if plans else None
