@@ -240,7 +240,7 @@ def _open(spec: Spec, r: _ConfigRun, state: TaskState, hf, views) -> None:
     if c.start_model == "fallback":
         model = fallback_cost_model()
     mixed = (
-        {"adapt": spec.adapt, **({"cost_model": model} if model is not None else {})}
+        {"adapt": spec.adapt, "reuse_choice": spec.reuse_choice, **({"cost_model": model} if model is not None else {})}
         if c.policy in mixed_policies()
         else {}
     )

@@ -91,7 +91,7 @@ class _Member:
         from hybrid.strategies import mixed_policies
 
         hf = _copy(hf)
-        mixed = {"adapt": spec.adapt} if self.c.policy in mixed_policies() else {}
+        mixed = {"adapt": spec.adapt, "reuse_choice": 1} if self.c.policy in mixed_policies() else {}  # every frame
         self.renderer = make_renderer(ctx, hf, self.c.policy, tile_size=spec.tile_size, **mixed)
         if self.c.editing:
             self.editor = TerrainEditor(ctx, hf, self.renderer)

@@ -11,6 +11,9 @@
     reconstructions = ["triangles"]   # ray-cast surface reconstructions
     full_res = ["lean"]               # raster full-resolution rules: "lean", "exact" (the reference's cells)
     adapt = true                      # the hybrid refits its cost model from the frames it draws (false: frozen)
+    reuse_choice = 1                  # the hybrid plans every frame (each frame's tiles and features in the tables,
+                                      # resumable frame by frame); N > 1 reuses a clear pure choice for up to N - 1
+                                      # frames between full plans, as an application's renderer does by default
     start_models = ["device"]         # the hybrid's starting cost model: "device" (this GL renderer's, as loaded),
                                       # "fallback" (the shipped uncalibrated one): one hybrid config each
     repeats = 3                       # timed repeats a frame, at least 3 (median kept, spread = noise)
@@ -84,6 +87,7 @@ class Spec:
     gpu_budget_mib: int = 256
     upload_budget_ms: float | None = None
     adapt: bool = True
+    reuse_choice: int = 1
     start_models: list[str] = field(default_factory=lambda: ["device"])
 
     def configs(self) -> list[Config]:

@@ -82,6 +82,7 @@ def scalar_keys(d: dict, source: str, flags: list[str]) -> dict:
         ("supersample", 1, 8),
         ("dataset_size", 0, 16385),
         ("gpu_budget_mib", 1, 1 << 20),
+        ("reuse_choice", 1, 1000),
     ):
         if key in d:
             v = d[key]

@@ -34,7 +34,9 @@ def assert_draws_as_fresh(ctx, r: Renderer, ref: ReferenceRenderer, views, befor
     fresh_hf = copy_terrain(r.hf)
     tile_size = r.pyramid.n
     with (
-        Renderer(ctx, fresh_hf, r.policy, tile_size=tile_size, adapt=False, cost_model=r.model) as fresh,
+        Renderer(
+            ctx, fresh_hf, r.policy, tile_size=tile_size, adapt=False, cost_model=r.model, reuse_choice=1
+        ) as fresh,
         ReferenceRenderer(ctx, fresh_hf) as fresh_ref,
     ):
         for v, b in zip(views, before, strict=True):

@@ -74,7 +74,7 @@ def test_reused_frames_draw_what_full_plans_draw(ctx, puget257):
     assert got[1].stats.pred_ms is None and got[4].stats.pred_ms is not None  # reused frames are not priced
     mixing = copy.deepcopy(model)
     mixing.overhead = dict.fromkeys(mixing.overhead, 0.0)
-    mixing.coefficients = {**mixing.coefficients, "raycast": {t: 0.0 for t in mixing.coefficients["raycast"]}}
+    mixing.coefficients = {**mixing.coefficients, "raycast": dict.fromkeys(mixing.coefficients["raycast"], 0.0)}
     with Renderer(ctx, puget257, "hybrid", 64, cost_model=mixing, adapt=False) as r:
         stats = [r.render(v, 2 / 3, read=False).stats for v in views[:4]]
     assert not any(s.choice_reused for s in stats) and all(s.tiles_raycast > 0 for s in stats)

@@ -23,7 +23,7 @@ def test_strategies_follow_edits_across_tile_borders(ctx, policy):
     ]  # on a tile border
     fly = preset("flyover", hf, 6, *SIZE)
     views = [fly.view(1), fly.view(3)]
-    r = Renderer(ctx, hf, policy, tile_size=64, adapt=False)
+    r = Renderer(ctx, hf, policy, tile_size=64, adapt=False, reuse_choice=1)  # every frame planned: features compared
     ref = ReferenceRenderer(ctx, hf)
     editor = TerrainEditor(ctx, hf, r, ref)
     try:

@@ -23,7 +23,7 @@ LAYERS = [
     ("hybrid.gl",),
     ("hybrid.contract",),
     ("raster", "raycast"),
-    ("hybrid.strategies",),
+    ("hybrid.strategies", "hybrid.draw_options"),
     ("hybrid.cost",),
     ("hybrid.oracle", "hybrid.adaptive"),  # the renderer's in-frame timing and online adaptation
     (
