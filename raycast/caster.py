@@ -339,7 +339,7 @@ class RaycastStrategy:
             local = local_window(change.window, key, change.tile_size, self.hf.rows, self.hf.cols)
             if local.empty and (not gpu.bounds or tuple(gpu.bounds[1:]) == (t.zmin, t.zmax)):
                 continue
-            follow_tile(self.builder, gpu, t, local)
+            follow_tile(gpu, t, local)
             done += 1
         w = change.window
         if w.i0 == 0 or w.j0 == 0 or w.i1 == self.hf.rows or w.j1 == self.hf.cols:

@@ -1,9 +1,12 @@
 """The ray caster following an edit: a resident tile's codes and max mipmap refreshed where the heights changed.
 
 A tile's 16-bit codes (``hybrid.tiles.quantize``) keep their meaning while the tile's offset, step and base stay
-the same: then only the codes of the changed samples are written and only the max-mip texels over them refilled
+the same: then only the codes of the changed samples are written and only the max-mip texels over them
 (``raycast.maxmip.texel_windows``). An edit that changes the tile's quantisation (its height range, or heights
-leaving the source's step) changes every code, and the whole tile is written again into the same textures.
+leaving the source's step) changes every code, and the whole tile is written again into the same textures. The
+max mipmap is made on the host from the codes, as a tile's upload makes it (``raycast.gpu_tile.code_mips``), and
+written level by level: a texture write a level, where building it on the GPU took a dispatch and a barrier a
+level (on a CPU rasterizer each of those costs as much as the whole write).
 """
 
 from __future__ import annotations
@@ -12,33 +15,48 @@ from typing import Any, cast
 
 import numpy as np
 
+from hybrid.gl.context import write_r16ui_level
 from hybrid.terrain.edits import Window
 from hybrid.tiles.quantize import quantize
 
-from .gpu_tile import GpuTile
-from .maxmip import MaxMipBuilder
+from .gpu_tile import GpuTile, code_mips
+from .maxmip import texel_windows
 from .tile_params import tile_row
 
 
-def follow_tile(builder: MaxMipBuilder, gpu: GpuTile, tile, win: Window) -> bool:
+def follow_tile(gpu: GpuTile, tile, win: Window) -> bool:
     """Bring a resident tile up to date with ``tile`` (the pyramid's tile after the edit) whose samples changed
-    over ``win`` (tile-local rows and columns, clipped to the tile), its max mipmap made by ``builder``; True when
-    only the window was written."""
+    over ``win`` (tile-local rows and columns, clipped to the tile); True when only the window was written."""
     qz = quantize(tile.heights, getattr(tile, "source_step", None))
     same = (qz.offset, qz.step, qz.base) == (gpu.offset, gpu.step, gpu.base)
     n, heights = gpu.n, cast(Any, gpu.heights)  # a moderngl texture
-    if same and win.empty:
-        pass  # none of the tile's own samples changed
-    elif same:
-        codes = np.ascontiguousarray(qz.q[win.slices()])
-        heights.write(codes.tobytes(), viewport=(win.j0, win.i0, win.j1 - win.j0, win.i1 - win.i0))
-        builder.update(gpu.heights, gpu.maxmip, n, win)
-    else:
-        heights.write(np.ascontiguousarray(qz.q).tobytes())
-        builder.build(gpu.heights, n, out_tex=gpu.maxmip)
+    if not (same and win.empty):
+        q = np.ascontiguousarray(qz.q)
+        mips = code_mips(q)
+        if same:
+            heights.write(np.ascontiguousarray(q[win.slices()]), viewport=_viewport(win.i0, win.i1, win.j0, win.j1))
+            write_mips(gpu.maxmip, mips, texel_windows(n, win))
+        else:
+            heights.write(q)
+            write_mips(gpu.maxmip, mips)
     gpu.offset, gpu.step, gpu.base, gpu.quant_error = qz.offset, qz.step, qz.base, qz.error
     gpu.row, gpu.bounds = tile_row(gpu, tile), (tile.clip, tile.zmin, tile.zmax)
     return same
+
+
+def write_mips(tex, mips, windows=None) -> None:
+    """Write host max-mip levels (``code_mips``: levels 1..log2 N, uint16) into a tile's R16UI max-mip texture,
+    level k of the texture from ``mips[k]``: each level whole, or only each level's (r0, r1, c0, c1) texel window
+    of ``windows``."""
+    for k, m in enumerate(mips):
+        r0, r1, c0, c1 = (0, m.shape[0], 0, m.shape[1]) if windows is None else windows[k]
+        if r1 > r0 and c1 > c0:
+            write_r16ui_level(tex, k, m[r0:r1, c0:c1], c0, r0)
+
+
+def _viewport(r0: int, r1: int, c0: int, c1: int) -> tuple[int, int, int, int]:
+    """(x, y, width, height) of rows [r0, r1) and columns [c0, c1), as texture writes take it."""
+    return c0, r0, c1 - c0, r1 - r0
 
 
 def local_window(win: Window, key, n: int, rows: int, cols: int) -> Window:

@@ -83,12 +83,15 @@ def _check_tile(heights) -> np.ndarray:
 
 def code_mips(q: np.ndarray) -> tuple[np.ndarray, ...]:
     """Max-mip levels 1..log2 N of (N+1)² uint16 codes (``raycast.maxmip.maxmip_levels(q)[1:]``): level 1 is the
-    largest code of each 3 x 3 samples at stride 2 (its 2 x 2 cells' corners), each next one a 2 x 2 maximum."""
-    r = np.maximum(np.maximum(q[:-2:2], q[1:-1:2]), q[2::2])
-    out = [np.ascontiguousarray(np.maximum(np.maximum(r[:, :-2:2], r[:, 1:-1:2]), r[:, 2::2]))]
-    while out[-1].shape[0] > 1:
-        m = out[-1].shape[0] // 2
-        out.append(np.ascontiguousarray(out[-1].reshape(m, 2, m, 2).max(axis=(1, 3))))
+    largest code of each 3 x 3 samples at stride 2 (its 2 x 2 cells' corners), each next one a 2 x 2 maximum;
+    views of one array made in one compiled pass (``raycast.mip_loops``)."""
+    from .mip_loops import code_mip_levels
+
+    flat = code_mip_levels(np.ascontiguousarray(q, dtype=np.uint16))
+    out, start, m = [], 0, (q.shape[0] - 1) // 2
+    while m >= 1:
+        out.append(flat[start : start + m * m].reshape(m, m))
+        start, m = start + m * m, m // 2
     return tuple(out)
 
 

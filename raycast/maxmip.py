@@ -67,8 +67,8 @@ def texel_windows(n: int, win: Window) -> list[tuple[int, int, int, int]]:
 
 
 def update_levels(levels: list[np.ndarray], heights, win: Window) -> None:
-    """CPU counterpart of ``MaxMipBuilder.update``: refill ``maxmip_levels``' levels 1.. in place over the texels a
-    window of changed samples reaches (``texel_windows``); level 0 is refilled over the window's cells."""
+    """Refill ``maxmip_levels``' levels 1.. in place over the texels a window of changed samples reaches
+    (``texel_windows``); level 0 is refilled over the window's cells."""
     h = _check_heights(heights)
     n = h.shape[0] - 1
     a0, a1, b0, b1 = max(win.i0 - 1, 0), min(win.i1, n), max(win.j0 - 1, 0), min(win.j1, n)
@@ -117,11 +117,6 @@ class MaxMipBuilder:
         tex = out_tex if out_tex is not None else self.allocate(n)
         self._fill(height_tex, tex, n, texel_windows(n, Window(0, n + 1, 0, n + 1)))
         return tex
-
-    def update(self, height_tex, tex, n: int, win: Window) -> None:
-        """Refill only the max-mip texels over a window of changed height samples (tile-local rows and columns):
-        the same codes as ``build`` gives the changed heights (``texel_windows``)."""
-        self._fill(height_tex, tex, n, texel_windows(n, win))
 
     def _fill(self, height_tex, tex, n: int, windows) -> None:
         """Dispatch the base pass and the reductions over one (r0, r1, c0, c1) texel window per stored level."""

@@ -96,8 +96,12 @@ def test_local_window_of_a_coarse_tile_includes_its_repeated_edge_samples():
 
 
 def test_gpu_max_mipmap_updated_over_the_window_equals_a_rebuild(ctx):
+    """The host's max-mip texels over each changed window, written level by level into the tile's texture, against
+    the GPU builder's whole max mipmap of the changed codes."""
     from hybrid.terrain.edits import Window
-    from raycast.maxmip import MaxMipBuilder, read_maxmip
+    from raycast.edit import write_mips
+    from raycast.gpu_tile import code_mips
+    from raycast.maxmip import MaxMipBuilder, read_maxmip, texel_windows
 
     rng = np.random.default_rng(5)
     n = 64
@@ -110,7 +114,7 @@ def test_gpu_max_mipmap_updated_over_the_window_equals_a_rebuild(ctx):
             h[win.slices()] = rng.integers(60000, 65535, (win.i1 - win.i0, win.j1 - win.j0))
             part = np.ascontiguousarray(h[win.slices()])
             ht.write(part.tobytes(), viewport=(win.j0, win.i0, win.j1 - win.j0, win.i1 - win.i0))
-            b.update(ht, tex, n, win)
+            write_mips(tex, code_mips(h), texel_windows(n, win))
             full = b.build(ht, n)
             for got, want in zip(read_maxmip(tex, n), read_maxmip(full, n), strict=True):
                 np.testing.assert_array_equal(got, want)

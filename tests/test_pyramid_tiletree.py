@@ -229,3 +229,19 @@ def test_a_thin_grid_costs_what_its_samples_do():
     np.testing.assert_array_equal(tiles[3].heights[5], h[1, 3 * 256 : 4 * 256 + 1])  # rows beyond repeat the edge
     with pytest.raises(TerrabenchError, match="padded square of 32769² samples"):
         _ = pyr.padded
+
+
+def test_tile_samples_clamp_past_the_grid_as_indices_do():
+    """Every tile of every level of grids that tiles do not divide: its samples equal the grid read at clamped
+    (row, column) indices, every 2^l-th sample."""
+    from hybrid.terrain.datasets import fbm
+
+    for hf, n in ((fbm(300, seed=1), 64), (fbm(97, seed=2), 16), (fbm(129, seed=3), 32)):
+        p = TilePyramid(hf, n)
+        for level in range(p.max_level + 1):
+            k = 1 << level
+            steps = np.arange(n + 1) * k
+            for key in p.keys(level):
+                rows = np.minimum(key.ty * n * k + steps, hf.rows - 1)
+                cols = np.minimum(key.tx * n * k + steps, hf.cols - 1)
+                assert np.array_equal(p.samples(key), hf.heights[np.ix_(rows, cols)]), key

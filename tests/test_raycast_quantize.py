@@ -124,3 +124,43 @@ def test_puget_frame_reports_no_quantisation_error(ctx, puget257):
         for g, _, _ in items:
             g.release()
         s.release()
+
+
+def _numpy_quantize(h, source_step=None):
+    """The quantiser written as whole-array numpy operations: (codes, offset, step, base, error)."""
+    h = np.asarray(h, dtype=np.float32)
+    lo, hi = float(h.min()), float(h.max())
+    if source_step is not None:
+        step, offset = source_step
+        k = np.rint((h.astype(np.float64) - offset) / step)
+        ok = (offset + step * k).astype(np.float32) == h
+        if ok.all() and k.max() - k.min() <= Q_MAX and abs(k.min()) < 2**31:
+            return (k - k.min()).astype(np.uint16), offset, step, int(k.min()), 0.0
+    if hi == lo:
+        return np.zeros(h.shape, np.uint16), lo, 1.0, 0, 0.0
+    step = (hi - lo) / Q_MAX
+    q = np.clip(np.rint((h.astype(np.float64) - lo) / step), 0, Q_MAX).astype(np.uint16)
+    err = float(np.abs((lo + step * q.astype(np.float64)).astype(np.float32).astype(np.float64) - h).max())
+    return q, lo, step, 0, err
+
+
+def test_compiled_quantiser_equals_whole_array_numpy():
+    """Codes, offset, step, base and error bit for bit: Puget tiles on and off its step, edited (off-step) heights,
+    float terrains, flat tiles, ranges beyond 16 bits and negative heights."""
+    rng = np.random.default_rng(5)
+    hf = puget(size=257)
+    step = hf.source_step
+    cases = [(hf.heights, step), (hf.heights[:65, :65], step), (hf.heights, None)]
+    edited = hf.heights.copy()
+    edited[40:60, 40:60] -= rng.uniform(0, 300, (20, 20)).astype(np.float32)
+    cases += [
+        (edited, step),
+        (fbm(129, seed=3).heights * 1000.0 - 500.0, None),
+        (np.full((9, 9), 7.5, np.float32), None),
+    ]
+    cases += [(np.arange(81, dtype=np.float32).reshape(9, 9) * 1000.0, (0.1, 0.0)), (-hf.heights[:33, :33], step)]
+    for h, s in cases:
+        z = quantize(h, s)
+        q, offset, st, base, err = _numpy_quantize(h, s)
+        assert np.array_equal(z.q, q) and z.q.dtype == np.uint16
+        assert (z.offset, z.step, z.base, z.error) == (offset, st, base, err)

@@ -289,6 +289,18 @@ def _level_pixels(a: np.ndarray, m: int):
     return a.ctypes.data
 
 
+def write_r16ui_level(tex, level: int, codes: np.ndarray, x: int = 0, y: int = 0) -> None:
+    """Write uint16 codes (rows, columns) into one mip level of an R16UI texture, its texel (x, y) first
+    (glTextureSubImage2D: moderngl writes only the levels it allocated itself)."""
+    a = np.ascontiguousarray(codes, dtype=np.uint16)
+    if a.ndim != 2:
+        raise TerrabenchError(f"mip level codes must be 2-D, got shape {a.shape}")
+    u, i = ctypes.c_uint, ctypes.c_int
+    _gl_function(b"glPixelStorei", u, i)(0x0CF5, 1)  # GL_UNPACK_ALIGNMENT: rows of any width
+    sub = _gl_function(b"glTextureSubImage2D", u, i, i, i, i, i, u, u, ctypes.c_void_p)
+    sub(tex.glo, int(level), int(x), int(y), a.shape[1], a.shape[0], 0x8D94, 0x1403, a.ctypes.data)
+
+
 def read_r16ui_level(tex, level: int) -> np.ndarray:
     """One mip level of an R16UI texture as a uint16 (height, width) array (moderngl reads only the levels it
     allocated itself)."""

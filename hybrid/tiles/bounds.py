@@ -78,3 +78,17 @@ def level_bounds(h: np.ndarray, n: int, max_level: int) -> tuple[dict, dict, dic
             _fold(e, _corner(_deviation(h, k, i0, i1, j0, j1), np.maximum), i0, j0, n * k, np.maximum)
         err[level] = np.maximum(e, _reduce(err[level - 1], 2, np.maximum))
     return zmax, zmin, err
+
+
+def strided_samples(h: np.ndarray, i0: int, j0: int, k: int, m: int) -> np.ndarray:
+    """(m, m) samples of grid ``h`` every k-th from (row i0, column j0), indices past the grid clamped to its last
+    row or column (strided slices, no index arrays)."""
+    rows, cols = h.shape
+    cr, cc = min(m, (rows - 1 - i0) // k + 1), min(m, (cols - 1 - j0) // k + 1)  # samples inside the grid
+    r, c = slice(i0, i0 + (cr - 1) * k + 1, k), slice(j0, j0 + (cc - 1) * k + 1, k)
+    out = np.empty((m, m), h.dtype)
+    out[:cr, :cc] = h[r, c]
+    out[:cr, cc:] = h[r, cols - 1][:, None]
+    out[cr:, :cc] = h[rows - 1, c]
+    out[cr:, cc:] = h[rows - 1, cols - 1]
+    return out

@@ -27,7 +27,7 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.edits import Window
 from hybrid.terrain.heightfield import HeightField
-from hybrid.tiles.bounds import level_bounds
+from hybrid.tiles.bounds import level_bounds, strided_samples
 from hybrid.tiles.pyramid_edit import LevelArrays, edit_bounds, follow_caches, level_blocks, touched_tiles
 from hybrid.tiles.quantize import Q_MAX, error_bound, on_step_cells
 from hybrid.tiles.subsampling import block_reduce
@@ -385,11 +385,7 @@ class TilePyramid:
     def samples(self, key: TileKey) -> np.ndarray:
         """The tile's (N+1)² level-l samples (metres, rows south to north), gathered with clamped indices."""
         k = 1 << key.level
-        i0, j0 = key.ty * self.n * k, key.tx * self.n * k
-        steps = np.arange(self.n + 1) * k
-        return self.hf.heights[
-            np.ix_(np.minimum(i0 + steps, self.hf.rows - 1), np.minimum(j0 + steps, self.hf.cols - 1))
-        ]
+        return strided_samples(self.hf.heights, key.ty * self.n * k, key.tx * self.n * k, k, self.n + 1)
 
     def texture_rect(self, key: TileKey) -> tuple[int, int, int, int]:
         """Cell (texel) index range (j0, i0, j1, i1) of the terrain's texture that the tile covers."""

@@ -84,7 +84,7 @@ def edit_bounds(h: np.ndarray, n: int, a: LevelArrays, blocks: dict, win: Window
         for tx in cols0:
             i0, i1, j0, j1 = _tile_cells(h, n, 0, ty, tx)
             sub = h[i0 : i1 + 1, j0 : j1 + 1]
-            a.zmax[0][ty, tx], a.zmin[0][ty, tx] = _corner(sub, np.maximum).max(), _corner(sub, np.minimum).min()
+            a.zmax[0][ty, tx], a.zmin[0][ty, tx] = sub.max(), sub.min()  # every sample is some cell's corner
     for level in range(1, len(touched)):
         k, dev = 1 << level, blocks[level]
         # a block's cells read samples of its own coarse cell and the next one's first row: two blocks of margin

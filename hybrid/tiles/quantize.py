@@ -50,21 +50,26 @@ def _on_step(h: np.ndarray, step: float, offset: float) -> tuple[np.ndarray, np.
 
 
 def quantize(heights, source_step: tuple[float, float] | None = None) -> Quantized:
-    """16-bit codes of float32 heights (metres, relative to origin z): exact on the source's step, else range/65535."""
-    h = np.asarray(heights, dtype=np.float32)
-    lo, hi = float(h.min()), float(h.max())
+    """16-bit codes of float32 heights (metres, relative to origin z): exact on the source's step, else range/65535.
+
+    One compiled pass per question over the samples (``hybrid.tiles.quantize_loops``)."""
+    from .quantize_loops import height_range, range_codes, step_codes
+
+    h = np.ascontiguousarray(heights, dtype=np.float32)
+    if h.ndim != 2:
+        h = h.reshape(1, -1)
+    lo, hi = height_range(h)
+    shape = np.shape(heights)
     if source_step is not None:
         step, offset = (float(v) for v in source_step)
-        k, ok = _on_step(h, step, offset)
-        kmin = float(k.min())
-        if ok.all() and float(k.max()) - kmin <= Q_MAX and abs(kmin) < 2**31:
-            return Quantized((k - kmin).astype(np.uint16), offset, step, int(kmin), 0.0)
+        q, base, ok = step_codes(h, step, offset, float(Q_MAX))
+        if ok:
+            return Quantized(q.reshape(shape), offset, step, int(base), 0.0)
     if hi == lo:
-        return Quantized(np.zeros(h.shape, np.uint16), lo, 1.0, 0, 0.0)
+        return Quantized(np.zeros(shape, np.uint16), lo, 1.0, 0, 0.0)
     step = (hi - lo) / Q_MAX
-    q = np.clip(np.rint((h.astype(np.float64) - lo) / step), 0, Q_MAX).astype(np.uint16)
-    err = float(np.abs(dequantize(q, lo, step).astype(np.float64) - h).max())
-    return Quantized(q, lo, step, 0, err)
+    q, err = range_codes(h, lo, step, float(Q_MAX))
+    return Quantized(q.reshape(shape), lo, step, 0, float(err))
 
 
 def quantized_heights(heights, source_step: tuple[float, float] | None = None) -> np.ndarray:
