@@ -180,3 +180,20 @@ def test_a_replaced_resident_tile_keeps_its_slot_and_its_bytes_count(ctx):
     finally:
         cache.clear()
         s.release()
+
+
+def test_compiled_deviation_blocks_equal_the_array_form():
+    """Per-block deviation maxima of a coarse level's surface, compiled, against the whole-array numpy form
+    (``hybrid.tiles.bounds``: deviations, corner maxima, block maxima), bit for bit: whole grids and windows, grids
+    that blocks do not divide."""
+    from hybrid.tiles.bounds import _corner, _deviation, _reduce
+    from hybrid.tiles.bounds_loops import deviation_block_max
+
+    for h in (crop(get_dataset("puget"), 257).heights, get_dataset("fbm", 300).heights, get_dataset("fbm", 97).heights):
+        cells_r, cells_c = h.shape[0] - 1, h.shape[1] - 1
+        for k in (2, 4, 16, 64):
+            rows, cols = -(-cells_r // k), -(-cells_c // k)
+            for a0, a1, b0, b1 in ((0, rows, 0, cols), (1, min(5, rows), 2, min(7, cols))):
+                i0, i1, j0, j1 = a0 * k, min(a1 * k, cells_r), b0 * k, min(b1 * k, cells_c)
+                want = _reduce(_corner(_deviation(h, k, i0, i1, j0, j1), np.maximum), k, np.maximum)
+                np.testing.assert_array_equal(deviation_block_max(h, k, a0, a1, b0, b1), want)

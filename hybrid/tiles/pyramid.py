@@ -27,8 +27,8 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.edits import Window
 from hybrid.terrain.heightfield import HeightField
+from hybrid.tiles import pyramid_edit as pedit
 from hybrid.tiles.bounds import level_bounds, strided_samples
-from hybrid.tiles.pyramid_edit import LevelArrays, edit_bounds, follow_caches, level_blocks, touched_tiles
 from hybrid.tiles.quantize import Q_MAX, error_bound, on_step_cells
 from hybrid.tiles.subsampling import block_reduce
 
@@ -121,7 +121,7 @@ class TilePyramid:
     """Bytes of tiles the pyramid keeps on the host, or None: all of them (in memory)."""
     edits = 0
     """How many times its bounds changed after an edit; caches made from them elsewhere compare it."""
-    _dev_blocks: dict | None = None  # per level, deviation maxima per block (hybrid.tiles.pyramid_edit)
+    _dev_blocks: pedit.DeviationBlocks | None = None  # made at the first edit (hybrid.tiles.pyramid_edit)
 
     def __init__(self, hf: HeightField, tile_size: int = 256):
         if (
@@ -145,6 +145,7 @@ class TilePyramid:
         """Empty the per-level arrays made on first use (every pyramid's constructor calls this)."""
         self._boxes: dict = {}  # level -> boxes_at's arrays of every tile
         self._qerr: dict = {}  # level -> quantisation error bounds
+        self._on_tiles: dict = {}  # level -> per tile: every cell it covers on the source step
         self._tables: dict = {}  # level -> level_table
 
     @property
@@ -188,7 +189,7 @@ class TilePyramid:
     # --- edits ------------------------------------------------------------------------------------
     def touched_keys(self, win: Window) -> list[TileKey]:
         """Every existing tile of every level whose samples meet a window of level-0 samples, finest level first."""
-        touched = [touched_tiles(self, win, level) for level in range(self.max_level + 1)]
+        touched = [pedit.touched_tiles(self, win, level) for level in range(self.max_level + 1)]
         return [TileKey(level, tx, ty) for level, (rows, cols) in enumerate(touched) for ty in rows for tx in cols]
 
     def follow_edit(self, win: Window) -> list[TileKey]:
@@ -198,12 +199,13 @@ class TilePyramid:
             return []
         self.hf.heights_changed()
         if self._dev_blocks is None:
-            self._dev_blocks = level_blocks(self.hf.heights, self.max_level)
-        touched = [touched_tiles(self, win, level) for level in range(self.max_level + 1)]
-        arrays = LevelArrays(self._zmax, self._zmin, self._err)
-        edit_bounds(self.hf.heights, self.n, arrays, self._dev_blocks, win, touched)
+            self._dev_blocks = pedit.level_blocks(self.hf.heights, self.max_level, self.n)
+        touched = [pedit.touched_tiles(self, win, level) for level in range(self.max_level + 1)]
+        arrays = pedit.LevelArrays(self._zmax, self._zmin, self._err)
+        pedit.edit_bounds(self.hf.heights, self.n, arrays, self._dev_blocks, win, touched)
         caches = {"qerr": self._qerr, "boxes": self._boxes, "tables": self._tables, "on_step": self._on_step}
-        follow_caches(self, caches, win, touched)
+        caches["on_tiles"] = self._on_tiles
+        pedit.follow_caches(self, caches, win, touched)
         self.edits += 1
         return self.touched_keys(win)
 
@@ -271,11 +273,14 @@ class TilePyramid:
         return self._qerr[level][np.asarray(ty, dtype=np.int64), np.asarray(tx, dtype=np.int64)]
 
     def _on_step_tiles(self, level: int, step) -> np.ndarray:
-        """Per tile of a level: True where every level-0 sample it covers is on the source step."""
+        """Per tile of a level: True where every level-0 sample it covers is on the source step (made once a level,
+        followed by edits)."""
         if self._on_step is None:
             self._on_step = on_step_cells(self.hf.heights, step)
         assert self._on_step is not None, "on-step tiles asked of a grid without a source step"
-        return block_reduce(self._on_step, self.n << level, np.minimum)
+        if level not in self._on_tiles:
+            self._on_tiles[level] = block_reduce(self._on_step, self.n << level, np.minimum)
+        return self._on_tiles[level]
 
     def quantization_error(self, key: TileKey) -> float:
         """Bound (metres) on the tile's 16-bit quantisation error, as quantization_errors_at."""
