@@ -15,13 +15,14 @@ from ..folders import writable_folder
 from . import argtypes
 
 HELP = (
-    "the ray-cast, triangle-count, raster, hybrid, adaptation, choice, planning and CPU benchmarks in one run, "
+    "the ray-cast, triangle-count, raster, hybrid, adaptation, choice, edit, planning and CPU benchmarks in one run, "
     "with the device named"
 )
-BENCHES = ("raycast", "triangles", "raster", "hybrid", "adapt", "choice", "planning", "cpu")
+BENCHES = ("raycast", "triangles", "raster", "hybrid", "adapt", "choice", "edit", "planning", "cpu")
 """In the order they run: triangles (mesh triangle counts against error) and planning use the CPU alone; adapt is
 the hybrid started from wrong cost models (``experiments.bench_adapt``), choice what choosing costs where the
-hybrid's choices equal a pure method's (``experiments.bench_choice``); cpu draws in a child process on Mesa's
+hybrid's choices equal a pure method's (``experiments.bench_choice``), edit what one edit costs each strategy as
+the terrain grows (``experiments.bench_edit``); cpu draws in a child process on Mesa's
 no-op driver (``experiments.bench_cpu``)."""
 
 
@@ -63,6 +64,10 @@ def benchmark(ctx, name: str, frames: int = 8) -> dict[str, pd.DataFrame]:
         from ..bench_adapt import run as adapt_run
 
         return adapt_run(ctx, frames=max(frames, 24))  # its targets read frames 8 to 23 of a 24-frame flight
+    if name == "edit":
+        from ..bench_edit import run as edit_run
+
+        return edit_run(ctx)
     if name == "choice":
         from ..bench_choice import run as choice_run
 
