@@ -192,8 +192,8 @@ class Renderer:
         )
         if self.reuse is not None and model is not None:
             clear = pure_slack(plans, model)
-            online = self.online  # an adapting model: only once the choice's predictions hold, nothing to explore
-            quiet = online is None or clear is None or (online.holds(clear[0]) and not online.may_explore({clear[0]}))
+            online = self.online  # an adapting model: only once the chosen strategy's predictions hold
+            quiet = online is None or clear is None or online.holds(clear[0])
             self.reuse.planned(clear, budget is None and quiet)
         return plans
 

@@ -78,3 +78,25 @@ def test_reused_frames_draw_what_full_plans_draw(ctx, puget257):
     with Renderer(ctx, puget257, "hybrid", 64, cost_model=mixing, adapt=False) as r:
         stats = [r.render(v, 2 / 3, read=False).stats for v in views[:4]]
     assert not any(s.choice_reused for s in stats) and all(s.tiles_raycast > 0 for s in stats)
+
+
+@pytest.mark.parametrize("hold_error", [0.0, 100.0])
+def test_an_adapting_hybrid_reuses_once_its_choice_holds(ctx, puget257, hold_error):
+    """Adapting, the hybrid reuses its clear choice only after that strategy's predictions hold: never where no
+    error is small enough, and soon after ``hold_rows`` passes where any error is."""
+    from hybrid.cost.online import AdaptOptions
+
+    views = preset("flyover", puget257, 12, 320, 180).views()
+    opts = AdaptOptions(hold_error=hold_error)
+    with Renderer(ctx, puget257, "hybrid", 64, cost_model=only(ctx, "raster"), adapt=opts) as r:
+        reused, holds = [], []
+        for v in views:
+            reused.append(r.render(v, 2 / 3, read=False).stats.choice_reused)
+            holds.append(r.online.holds("raster"))
+    if hold_error == 0.0:
+        assert not any(reused) and not any(holds)
+    else:
+        first = holds.index(True)
+        assert opts.hold_rows - 1 <= first <= opts.hold_rows  # a strategy's first pass is no row
+        assert not any(reused[: first + 1])
+        assert reused[first + 2 : first + 5] == [True, True, True]

@@ -346,3 +346,22 @@ def test_exploring_is_charged_what_the_whole_frame_cost_beyond_its_prediction():
     online.observe(cols, chosen.tolist(), passes, 30.0, explored)
     assert online.stats.explore_ms == pytest.approx(30.0 - 1.1 * pure_frame)  # the frame's 8 ms, not the pass's 2
     assert online.credit == pytest.approx(10.0 + 0.05 * 30.0 - 8.0)
+
+
+def test_a_candidate_the_budget_cannot_pay_for_does_not_hold_back_one_it_can():
+    """The candidate known least goes first only among those the budget covers: a costly unknown one waits while a
+    cheap one with a row already is explored."""
+    rng = np.random.default_rng(4)
+    online = OnlineModel(TRUE, AdaptOptions(explore_share=0.05))
+    cols = columns(rng, 20)
+    names = TRUE.candidates
+    table = TRUE.predict_table(cols)
+    g, c = names.index("raster_gs"), names.index("raycast")
+    table[g] += 50.0  # exploring raster_gs would cost far more than the credit
+    picks = np.full(20, names.index("raster"))
+    online.rows["raycast"].add(np.ones(1 + len(TERMS["raycast"])), 5.0)  # raycast known a little, raster_gs not
+    online.credit = TRUE.overhead["raycast"] + TRUE.mix_overhead + 2 * float(table[c].max()) + 1.0
+    found = [online.explore(table, picks.copy(), names) for _ in range(10)]
+    assert all(e is not None and e.strategy == "raycast" for e in found)
+    table[c] += 50.0  # now neither is affordable
+    assert online.explore(table, picks.copy(), names) is None

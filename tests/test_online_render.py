@@ -48,7 +48,7 @@ def test_adaptation_from_a_wrong_model_moves_predictions_toward_measured(ctx, pu
 
 def test_exploration_keeps_to_its_budget(ctx, puget257, flight):
     opts = AdaptOptions(explore_share=0.05)
-    with Renderer(ctx, puget257, "hybrid", 64, cost_model=skewed(ctx, 5.0), adapt=opts) as r:
+    with Renderer(ctx, puget257, "hybrid", 64, cost_model=skewed(ctx, 5.0), adapt=opts, reuse_choice=1) as r:
         explored = sum(r.render(v, 2 / 3, read=False).stats.explored_tiles for v in flight * 3)
         st = r.online.stats
     assert st.frames >= 60

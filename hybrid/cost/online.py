@@ -159,14 +159,26 @@ class OnlineModel:
 
     def explore(self, table: np.ndarray, picks: np.ndarray, names: tuple) -> Exploration | None:
         """Give a few tiles to a candidate the frame does not use and whose predictions do not hold, when the
-        budget covers its predicted cost; ``picks`` (B,) indices into ``names`` are changed in place."""
+        budget covers its predicted cost (of those it covers, the candidate known least); ``picks`` (B,) indices
+        into ``names`` are changed in place."""
         used = set(picks.tolist())
         todo = [i for i, s in enumerate(names) if i not in used and not self.holds(s) and np.isfinite(table[i]).any()]
         if not todo or len(picks) == 0:
             return None
-        least = min(len(self.rows[names[j]]) for j in todo)  # the candidate known least goes first
-        i = todo[int(self._rng.choice([j for j in range(len(todo)) if len(self.rows[names[todo[j]]]) == least]))]
         base = table[picks, np.arange(len(picks))]
+        offers = [o for i in todo if (o := self._offer(table, base, names, i)) is not None]
+        if not offers:
+            return None
+        least = min(len(self.rows[names[i]]) for i, _ in offers)  # a candidate it can pay for, known least first
+        ties = [o for o in offers if len(self.rows[names[o[0]]]) == least]
+        i, tiles = ties[int(self._rng.integers(len(ties)))]
+        chosen = [names[j] for j in used]
+        frame = self.model.frame_ms(base, set(chosen))
+        picks[tiles] = i
+        return Exploration(names[i], tiles, float(base[tiles].sum()), frame, len(chosen) == 1)
+
+    def _offer(self, table: np.ndarray, base: np.ndarray, names: tuple, i: int) -> tuple[int, np.ndarray] | None:
+        """(candidate i, the tiles to give it) where the budget covers exploring it and it might pay, else None."""
         ratio = np.where(np.isfinite(table[i]), table[i] / np.maximum(base, 1e-9), np.inf)
         k = min(self.options.explore_tiles, int(np.isfinite(ratio).sum()))
         pool = np.argsort(ratio, kind="stable")[: max(2 * k, 1)]
@@ -175,10 +187,7 @@ class OnlineModel:
         cost = m.overhead.get(names[i], 0.0) + m.mix_overhead + float(table[i, tiles].sum() - base[tiles].sum())
         if max(cost, self._spent.get(names[i], 0.0)) > self.credit or not self._might_pay(table[i], base, names[i]):
             return None
-        chosen = [names[j] for j in used]
-        frame = m.frame_ms(base, set(chosen))
-        picks[tiles] = i
-        return Exploration(names[i], tiles, float(base[tiles].sum()), frame, len(chosen) == 1)
+        return i, tiles
 
     def _might_pay(self, costs: np.ndarray, base: np.ndarray, strategy: str) -> bool:
         """Whether strategy ``strategy``, ``OPTIMISM`` times as costly as predicted (its per-tile ``costs`` (B,) and

@@ -8,8 +8,8 @@ of a flight, a few metres on, choose the same. So after such a frame the next ``
 as that pure strategy (tile selection only) and the one after in full again. A choice is clear where drawing any
 other strategy's cheaper tiles, at the hedged prices, falls short of its overhead by at least ``slack`` of the
 predicted pure frame (``hybrid.cost.planner.pure_slack``). A frame that mixes, explores or streams is never
-followed by reuse, nor is one of an adapting model until the chosen strategy's predictions hold and no other is
-to be explored: reused frames give the model no rows.
+followed by reuse, nor is one of an adapting model until the chosen strategy's predictions hold: reused frames
+give the model no rows. Another strategy still to be learned is explored in the full plans between reuses.
 """
 
 from __future__ import annotations
