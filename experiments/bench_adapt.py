@@ -5,9 +5,10 @@
 Starts: another device's model (the shipped H200 model, saved under this GL renderer's key in a costs file and
 loaded from it as a user's file would be), the shipped uncalibrated fallback, this device's model with every
 ray-casting coefficient and its per-frame overhead divided by 5 (a badly wrong prior), and this device's own
-model. Each start is drawn adapting (the default) and frozen (the starting gap), beside raster, raster_gs and
-ray casting, per flight and tau, every frame by every renderer in turn and each frame ``repeats`` times (an
-adapting hybrid learns from each of its draws, as in a run). The targets read frames 8 to the end: the
+model. This device's model is the one shipped for its GL renderer, never the user's costs file, so that the
+benchmark does not depend on what earlier runs learned. Each start is drawn adapting (the default) and frozen (the starting gap), beside raster, raster_gs and
+ray casting, per flight and tau, every frame by every renderer in turn, the flight ``repeats`` times, each time from a cold
+adapting hybrid (it sees every view once, as a user's run does). The targets read frames 8 to the end: the
 adapting hybrid's median frame within 1.05x of the better pure method's, and within noise of the hybrid
 started from this device's model (``experiments.noise.compare``).
 """
@@ -32,9 +33,9 @@ TARGET = "adapting / better pure, frames 8- (target <= 1.05)"
 
 def start_models(renderer: str) -> dict:
     """The starting cost models by name (``STARTS``) for a GL renderer."""
-    from hybrid.cost.model import _shipped, fallback_cost_model, load_cost_model
+    from hybrid.cost.model import _shipped, fallback_cost_model, load_cost_model, shipped_cost_model
 
-    device = load_cost_model(renderer)
+    device = shipped_cost_model(renderer)
     skewed = copy.deepcopy(device)
     skewed.coefficients["raycast"] = {k: v / 5 for k, v in skewed.coefficients["raycast"].items()}
     skewed.overhead = {**skewed.overhead, "raycast": skewed.overhead["raycast"] / 5}
@@ -49,48 +50,52 @@ def start_models(renderer: str) -> dict:
 
 
 def draw_flight(ctx, hf, views, tau: float, models: dict, repeats: int, tile_size: int) -> pd.DataFrame:
-    """Rows (method, frame, wall_ms, wall_ms_repeats, pred_ms, draw_ms, tiles by kind, explored tiles): every view
-    drawn by every renderer in turn, ``repeats`` times; methods are the pure policies and, per start model,
-    ``hybrid:<start>`` adapting and ``frozen:<start>``."""
+    """Rows (method, frame, wall_ms, wall_ms_repeats, pred_ms, draw_ms, tiles by kind, explored tiles): the flight
+    drawn ``repeats`` times, every view by every renderer in turn; methods are the pure policies and, per start
+    model, ``hybrid:<start>`` adapting and ``frozen:<start>``. Each repeat's adapting hybrids start cold from their
+    model, as a user's run does: they see every view once."""
     from hybrid.renderer import Renderer
 
-    renderers = {}
+    fixed: dict[str, tuple[str, dict]] = {p: (p, {}) for p in candidates()}
+    for name, model in models.items():
+        fixed[f"frozen:{name}"] = ("hybrid", {"cost_model": model, "adapt": False})
+    cold = {f"hybrid:{name}": ("hybrid", {"cost_model": model}) for name, model in models.items()}
+    names = list(fixed) + list(cold)
+    stats: dict = {(m, k): [] for m in names for k in range(len(views))}
+    renderers: dict = {}
     try:
-        for p in candidates():
-            renderers[p] = Renderer(ctx, hf, p, tile_size)
-        for name, model in models.items():
-            renderers[f"hybrid:{name}"] = Renderer(ctx, hf, "hybrid", tile_size, cost_model=model)
-            renderers[f"frozen:{name}"] = Renderer(ctx, hf, "hybrid", tile_size, cost_model=model, adapt=False)
-        for r in renderers.values():
-            r.render(views[0], tau, read=False)  # warm, as a run's configuration is: compiles, uploads
-        rows, names = [], list(renderers)
-        for k, v in enumerate(views):
-            stats: dict = {m: [] for m in names}
-            for rep in range(repeats):  # every renderer in turn, the first one rotating
-                shift = (k * repeats + rep) % len(names)
+        for rep in range(repeats):
+            for m, (policy, kw) in {**(fixed if rep == 0 else {}), **cold}.items():
+                if m in renderers:
+                    renderers[m].release()
+                renderers[m] = Renderer(ctx, hf, policy, tile_size, **kw)
+                renderers[m].render(views[0], tau, read=False)  # warm, as a run's configuration is: compiles, uploads
+            for k, v in enumerate(views):
+                shift = (k * repeats + rep) % len(names)  # every renderer in turn, the first one rotating
                 for m in names[shift:] + names[:shift]:
-                    stats[m].append(renderers[m].render(v, tau, read=False).stats)
-            for m, st in stats.items():
-                w = [s.wall_ms for s in st]
-                rows.append(
-                    {
-                        "method": m,
-                        "frame": k,
-                        "wall_ms": float(np.median(w)),
-                        "wall_ms_repeats": w,
-                        "pred_ms": st[-1].pred_ms,
-                        "draw_ms": st[-1].draw_ms,
-                        "plan_ms": st[-1].plan_ms,
-                        "adapt_ms": st[-1].adapt_ms,
-                        "tiles_raster": st[-1].tiles_raster,
-                        "tiles_raycast": st[-1].tiles_raycast,
-                        "explored": sum(s.explored_tiles for s in st),
-                    }
-                )
+                    stats[(m, k)].append(renderers[m].render(v, tau, read=False).stats)
     finally:
         for r in renderers.values():
             r.release()
-    return pd.DataFrame(rows)
+    return pd.DataFrame([frame_row(m, k, st) for (m, k), st in stats.items()])
+
+
+def frame_row(method: str, frame: int, st: list) -> dict:
+    """One row of ``draw_flight``: a method's frame over the repeats (the median wall ms, the last repeat's rest)."""
+    w = [s.wall_ms for s in st]
+    return {
+        "method": method,
+        "frame": frame,
+        "wall_ms": float(np.median(w)),
+        "wall_ms_repeats": w,
+        "pred_ms": st[-1].pred_ms,
+        "draw_ms": st[-1].draw_ms,
+        "plan_ms": st[-1].plan_ms,
+        "adapt_ms": st[-1].adapt_ms,
+        "tiles_raster": st[-1].tiles_raster,
+        "tiles_raycast": st[-1].tiles_raycast,
+        "explored": sum(s.explored_tiles for s in st),
+    }
 
 
 def summarize(frames: pd.DataFrame) -> dict[str, pd.DataFrame]:

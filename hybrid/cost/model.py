@@ -341,6 +341,12 @@ def load_cost_model(renderer: str, path: Path | None = None) -> CostModel:
         m = costs_file_model(read_costs_file(path), renderer, str(path))
         if m is not None:
             return m
+    return shipped_cost_model(renderer)
+
+
+def shipped_cost_model(renderer: str) -> CostModel:
+    """The model shipped with the package for a GL renderer (``matching_key``), else the uncalibrated fallback:
+    what a user with no costs file gets."""
     shipped = _shipped()
     key = matching_key(shipped, renderer)
     if key is not None:
