@@ -46,10 +46,34 @@ class NodeEdits:
     bound: list = field(default_factory=list)
     margin: float = 0.0
     blocks: dict = field(default_factory=dict)
+    extremes: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # max |height| per EXTREME_BLOCK²
 
 
-def _margin(h: np.ndarray) -> float:
-    return 16 * np.finfo(np.float64).eps * max(abs(float(h.min())), abs(float(h.max())), 1.0)
+EXTREME_BLOCK = 64
+"""Samples a side of the blocks whose largest |height| is kept, so that an edit finds the grid's margin anew from
+the blocks it touched and the others' maxima, not from every sample."""
+
+
+def _margin_of(extremes: np.ndarray) -> float:
+    """The bounded levels' margin from the grid's largest |height| (its block maxima)."""
+    return 16 * np.finfo(np.float64).eps * max(float(extremes.max(initial=0.0)), 1.0)
+
+
+def block_extremes(h: np.ndarray, out: np.ndarray | None = None, win: Window | None = None) -> np.ndarray:
+    """Largest |height| of each EXTREME_BLOCK² block of h (rows, cols), every block or (into ``out``) the blocks
+    that meet ``win``, one band of blocks at a time."""
+    B = EXTREME_BLOCK
+    nr, nc = -(-h.shape[0] // B), -(-h.shape[1] // B)
+    if out is None:
+        out, win = np.zeros((nr, nc)), Window(0, h.shape[0], 0, h.shape[1])
+    assert win is not None
+    c0, c1 = win.j0 // B, -(-win.j1 // B)
+    for br in range(win.i0 // B, -(-win.i1 // B)):
+        band = np.abs(h[br * B : (br + 1) * B, c0 * B : c1 * B])
+        pad = (c1 - c0) * B - band.shape[1]
+        band = np.pad(band, ((0, 0), (0, pad))) if pad else band
+        out[br, c0:c1] = band.reshape(band.shape[0], c1 - c0, B).max(axis=(0, 2))
+    return out
 
 
 def _sub(ax: tuple, g: int, idx: np.ndarray) -> tuple[tuple, np.ndarray | None]:
@@ -108,8 +132,9 @@ def node_edits(grid, n: int, beta: float, side_errors: bool = True) -> NodeEdits
         R,
         rn.axis_classes(grid.rows, R, count),
         rn.axis_classes(grid.cols, R, count),
-        margin=_margin(h),
+        extremes=block_extremes(h),
     )
+    st.margin = _margin_of(st.extremes)
     for g in range(count):
         st.bound.append((2 << g) > rn.EXACT_SPAN)
         ar, ac = np.arange(st.ax_r[1][g].size), np.arange(st.ax_c[1][g].size)
@@ -183,9 +208,11 @@ def update_nodes(st: NodeEdits, nodes: GlobalNodes, grid, win: Window) -> list[W
     heights; returns per level the window of nodes whose values changed (rows and columns of node indices, maybe
     empty)."""
     h = np.asarray(grid.heights)
-    if any(st.bound) and _margin(h) != st.margin:  # the bounded levels' margin moved: rebuild all
+    block_extremes(h, st.extremes, win)
+    if _margin_of(st.extremes) != st.margin and any(st.bound):  # the bounded levels' margin moved: rebuild all
         vars(st).update(vars(node_edits(grid, st.n, st.beta, st.side_errors)))
         win = Window(0, grid.rows, 0, grid.cols)
+    st.margin = _margin_of(st.extremes)
     changed, below_r, below_c = [], None, None
     for g in range(len(st.levels)):
         ar = _affected(st.ax_r, g, grid.rows, win.i0, win.i1, below_r)

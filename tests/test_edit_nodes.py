@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 import raster.node_blocks as nb
+import raster.node_edit as ne
 import raster.rect_nodes as rn
 from hybrid.terrain.datasets import get_dataset
 from hybrid.terrain.edits import Crater, Raise, Smooth, apply_brush, brush_params
@@ -26,8 +27,10 @@ def _at(hf, row, col):
 @pytest.mark.parametrize("sub_cells", [4, 32])
 def test_edits_on_large_node_posts_and_borders_equal_a_rebuild(monkeypatch, sub_cells):
     monkeypatch.setattr(nb, "SUB_CELLS", sub_cells)
+    monkeypatch.setattr(ne, "EXTREME_BLOCK", 24)  # blocks that do not divide the grid
     hf = get_dataset("fbm", 113)  # tiles of 16: a 128-cell square, nodes up to 128 cells
     sp = hf.spacing_x
+    top = np.unravel_index(np.argmax(np.abs(hf.heights)), hf.heights.shape)
     nodes, st = _nodes(hf, 16, 0.9), node_edits(hf, 16, 0.9)
     assert set(st.blocks) == {g for g in range(7) if (2 << g) > sub_cells}
     edits = [
@@ -35,8 +38,9 @@ def test_edits_on_large_node_posts_and_borders_equal_a_rebuild(monkeypatch, sub_
         Crater(_at(hf, 64, 64), 5 * sp, 30.0),  # and around it: four 64-cell nodes' corner
         Raise(_at(hf, 32, 96), 0.9 * sp, -40.0),  # one sample: a 64-cell node's centre post
         Smooth(_at(hf, 64, 20), 3 * sp, 1.0),  # across a large node's border, no post column
-        Raise(_at(hf, 112, 112), 4 * sp, 25.0),
-    ]  # the grid's corner: padding classes beyond it
+        Raise(_at(hf, 112, 112), 4 * sp, 25.0),  # the grid's corner: padding classes beyond it
+        Crater(_at(hf, *top), 3 * sp, 40.0),  # lowers the largest |height|: the margin moves
+    ]
     for brush in edits:
         win = apply_brush(hf.heights, brush_params(brush, hf))
         update_nodes(st, nodes, hf, win)
@@ -45,6 +49,8 @@ def test_edits_on_large_node_posts_and_borders_equal_a_rebuild(monkeypatch, sub_
             for g, (a, b) in enumerate(zip(got_arrays, want_arrays, strict=True)):
                 np.testing.assert_array_equal(a, b, err_msg=f"level {g} after {brush}")
         fresh = node_edits(hf, 16, 0.9)
+        np.testing.assert_array_equal(st.extremes, fresh.extremes, err_msg=f"after {brush}")
+        assert st.margin == 16 * np.finfo(np.float64).eps * max(float(np.abs(hf.heights).max()), 1.0)
         for g, vals in st.blocks.items():  # the kept maxima equal a fresh measurement
             np.testing.assert_array_equal(vals, fresh.blocks[g], err_msg=f"level {g} after {brush}")
 
