@@ -4,7 +4,7 @@ module). Imported where first called, so that a process that never edits does no
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 
 @njit(cache=True)
@@ -49,21 +49,23 @@ def _deviations(h, r: int, c: int, m: int, n: int) -> tuple:
     return abs(full - own), abs(st - own)
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def measure_blocks(h, m: int, n: int, lb: int, side_errors: bool, p0: int, p1: int, q0: int, q1: int, out) -> None:
-    """Sub-block maxima (``_measure``) into out (channels, nbr, nbc), zeros on entry: every sample once, its
-    deviations added to each sub-block holding it (two or four on sub-block borders), the triangle masks in the
-    coordinates of that sub-block's node (``hybrid.tiles.fans.side_maxima``'s); level m, sub-blocks of 2^lb."""
+    """Sub-block maxima (``_measure``) into out (channels, nbr, nbc), zeros on entry: each row of sub-blocks on its
+    own thread, every sample of its rows once (the rows on its borders also by its neighbour), its deviations
+    added to each sub-block holding it (two on sub-block borders), the triangle masks in the coordinates of that
+    sub-block's node (``hybrid.tiles.fans.side_maxima``'s); level m, sub-blocks of 2^lb."""
     k, B = 1 << m, 1 << lb
     mask = (2 << m) - 1
-    for r in range(p0, p1 + 1):
-        a_lo, a_hi = max((r - p0 - 1) >> lb, 0), min((r - p0) >> lb, ((p1 - p0) >> lb) - 1)
-        for c in range(q0, q1 + 1):
-            df, ds = _deviations(h, r, c, m, n)
-            e = df if side_errors else max(df, ds)
-            for a in range(a_lo, a_hi + 1):
-                v = (((p0 + a * B) & mask) + r - p0 - a * B) / k
-                for b in range(max((c - q0 - 1) >> lb, 0), min((c - q0) >> lb, ((q1 - q0) >> lb) - 1) + 1):
+    nbc = (q1 - q0) >> lb
+    for a in prange((p1 - p0) >> lb):
+        base = p0 + a * B
+        for r in range(base, base + B + 1):
+            v = ((base & mask) + r - base) / k
+            for c in range(q0, q1 + 1):
+                df, ds = _deviations(h, r, c, m, n)
+                e = df if side_errors else max(df, ds)
+                for b in range(max((c - q0 - 1) >> lb, 0), min((c - q0) >> lb, nbc - 1) + 1):
                     out[0, a, b] = max(out[0, a, b], e)
                     if not side_errors:
                         continue

@@ -20,6 +20,8 @@ operations an edit's few small windows a level cost their number of NumPy calls,
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from hybrid.terrain.edits import Window
@@ -27,6 +29,7 @@ from hybrid.terrain.edits import Window
 from . import rect_nodes as rn
 
 SUB_CELLS = 32  # cells a side of a sub-block whose maxima are kept
+_PARALLEL = threading.Lock()
 
 
 def uses_blocks(g: int, bound: bool) -> bool:
@@ -48,7 +51,8 @@ def _measure(h: np.ndarray, g: int, R: int, side_errors: bool, rows: tuple, cols
     out = np.zeros((5 if side_errors else 1, (p1 - p0) // B, (q1 - q0) // B))
     from .node_block_loops import measure_blocks
 
-    measure_blocks(h, g, R, B.bit_length() - 1, side_errors, p0, p1, q0, q1, out)
+    with _PARALLEL:  # numba's default thread pool runs one parallel loop at a time
+        measure_blocks(h, g, R, B.bit_length() - 1, side_errors, p0, p1, q0, q1, out)
     return out
 
 
