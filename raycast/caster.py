@@ -26,6 +26,7 @@ from hybrid.gl.edges import TerrainEdges
 from hybrid.gl.programs import program, register_include, set_uniform
 from hybrid.gl.shading import resolve_mode
 from hybrid.gl.textures import terrain_texture
+from hybrid.terrain.edges import may_start_under
 
 from .cast_stats import (
     LAYOUT_DEFINES,
@@ -108,10 +109,13 @@ class RaycastStrategy:
         """opts with a pre-pass left to the device (None) set to the device's default (prepass_default)."""
         return opts if opts.prepass is not None else opts.updated(prepass=self._prepass)
 
-    def _program(self, opts: CastOptions, mode: str):
+    def _program(self, opts: CastOptions, mode: str, under: bool = True):
+        """The (program, box vertex array) of the options and mode; ``under``: whether some of its rays may start
+        under the terrain sheet (without, the shader takes none to)."""
         opts = self._resolved(opts)
         assert opts.prepass is not None  # _resolved chose the device's default
         key = (
+            under,
             opts.reconstruction,
             opts.traversal,
             opts.lod is not None,
@@ -131,6 +135,7 @@ class RaycastStrategy:
                 "SHADOWS": int(opts.shadows),
                 "MODE": MODES.index(mode),
                 "OCCLUDERS": int(bool(opts.occluders)),
+                "UNDER": int(under),
                 **LAYOUT_DEFINES,
             }
             prog = program(self.ctx, "raycast", "box.vert.glsl", "raycast.frag.glsl", defines=defines)
@@ -218,7 +223,7 @@ class RaycastStrategy:
         """
         opts = self._resolved(self.options.updated(**options))
         mode = self._check_mode(opts)
-        prog, vao = self._program(opts, mode)
+        prog, vao = self._program(opts, mode, may_start_under(self.hf, view.eye))
         W, H = int(view.width), int(view.height)
         if tuple(target.size) != (W, H):
             raise TerrabenchError(f"target size {tuple(target.size)} does not match the view's {W}x{H} pixels")

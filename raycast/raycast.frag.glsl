@@ -1,6 +1,7 @@
 #version 430
 // One tile's ray-casting pass: the fragment of a back face of the tile's box casts the pixel-centre ray.
-// Defines (set by raycast.caster): RECON, NAIVE, LOD, PREPASS, STATS, SHADOWS, MODE, OCCLUDERS
+// Defines (set by raycast.caster): RECON, NAIVE, LOD, PREPASS, STATS, SHADOWS, MODE, OCCLUDERS, UNDER (whether any
+// ray of the view may start under the terrain sheet)
 // MODE: 0 texture (textureGrad), 1 texture_plain (texture), 2 shaded, 3 height, 4 normal, 5 depth,
 //       6 level, 7 steps
 #if STATS
@@ -143,7 +144,11 @@ void main() {
     vec3 dir_eye = vec3(ndc * ndc_scale, -1.0);
     vec3 d = cam_to_world * dir_eye;              // world direction, view depth 1 per unit of t
     vec3 D = vec3(d.xy / spacing, d.z);
+#if UNDER
     bool under = ray_starts_under(d);
+#else
+    const bool under = false;   // no ray of this view starts under the sheet (raycast.caster)
+#endif
     vec3 Q; ivec2 cell; int lev; vec4 hc; int steps;
     float tmax = RC_FAR;
 #if OCCLUDERS

@@ -8,9 +8,10 @@
 // D = (d.x / spacing.x, d.y / spacing.y, d.z), so t stays the world ray parameter and hit depths stay metres.
 //
 // Heights are 16-bit codes (R16UI, hybrid/tiles/quantize.py): metres = float32(dq.x + dq.y * (q + dqb)). The
-// max mipmap texture holds levels 1..log2 N (its level k is max-mip level k + 1); level 0 is the largest of
-// a cell's four corner codes (rc_code); steps compare against a float32 upper bound of it (rc_bound). Maxima
-// are taken on codes: dequantisation is monotone.
+// max mipmap texture holds levels 1..log2 N (its level k is max-mip level k + 1). A level-0 step reads its
+// parent's level-1 code (or the largest of the cell's four corner codes, where exact0: rc_code); steps
+// compare against a float32 upper bound of the code (rc_bound). Maxima are taken on codes: dequantisation is
+// monotone. On a SIMD rasterizer both sides of a branch run for every lane, so each step makes one fetch.
 //
 // Defines: RECON 0 planes (piecewise constant: a cell is a box of its max-mip height), 1 linear approximation
 // planes (Qu 3.1), 2 triangle mesh with the SW-NE diagonal (Qu 3.2), 3 bilinear patch (analytic);
@@ -29,15 +30,19 @@ float rc_height(uint q, dvec2 dq, int dqb) {
     return float(v);
 }
 
-// Max-mip code of texel ri at level l: level 0 the largest of the cell's four corner codes, level l >= 1
-// level l - 1 of the max-mip texture. Used for every bound the traversal reads (steps and LOD parents).
-uint rc_code(usampler2D hmap, usampler2D mmap, int l, ivec2 ri) {
-    if (l == 0) {
+// An upper bound (max-mip code) of the heights of texel ri at level l: level l - 1 of the max-mip texture; for a
+// level-0 cell its level-1 parent's (one fetch a step: the cell's own corners are read where the ray enters
+// its parent's box), or, where `exact0`, the largest of its four corner codes. Used for every bound the
+// traversal reads (steps and LOD parents).
+uint rc_code(usampler2D hmap, usampler2D mmap, int l, ivec2 ri, bool exact0) {
+    uint code = texelFetch(mmap, l == 0 ? ri >> 1 : ri, max(l - 1, 0)).r;
+    // a loop, not an if: a SIMD rasterizer skips a loop no lane enters, but runs both sides of a branch
+    for (int k = int(l == 0 && exact0); k > 0; k--) {
         // the four corners in one gather: the 2x2 texels around the cell's north-east corner (ri + 1)
         uvec4 c = textureGather(hmap, (vec2(ri) + 1.0) / vec2(textureSize(hmap, 0)), 0);
-        return max(max(c.x, c.y), max(c.z, c.w));
+        code = max(max(c.x, c.y), max(c.z, c.w));
     }
-    return texelFetch(mmap, ri, l - 1).r;
+    return code;
 }
 
 // An upper bound (metres) of rc_height(q) in float32 arithmetic, for the traversal's steps: the float
@@ -202,6 +207,12 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
     // rasterizer every statement of a loop body runs for all lanes, so the costly cell test (four height
     // fetches and the reconstruction) is kept out of the per-step body. Same steps, same order, same floats.
     float s, H, dt;
+    // a level-0 step tests the cell's own bound where the bound is the surface (planes) or the ray climbs
+    // through the sheet from below (its hit is the first cell where it is no longer under the surface)
+    bool exact0 = RECON == 0 || under;
+    // per ray: the reciprocal direction and the exit through the bottom or top of the box, which every step shares
+    vec2 invD = vec2(D.x > 0.0 ? 1.0 / D.x : 0.0, D.y > 0.0 ? 1.0 / D.y : 0.0);
+    float dtz = D.z < 0.0 ? (zr.x - P0.z) / D.z : (D.z > 0.0 ? (zr.y - P0.z) / D.z : RC_FAR);
     uint mc = 0u;
     vec2 dqf = vec2(dq);
     vec2 ij, e;
@@ -216,25 +227,24 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
             if (sP > s_max) return RC_MISS;
             steps++;
             s = float(1 << l);
-            ij = floor(P.xy / s);
+            ij = floor(ldexp(P.xy, ivec2(-l)));
             int nl = N >> l;
 #if LOD
             // coherent LOD: a texel whose parent is already final belongs to the parent's level
             while (!under && l < ltop) {
                 vec2 pij = floor(ij * 0.5);
                 ivec2 pri = ivec2(mx ? (nl >> 1) - 1 - int(pij.x) : int(pij.x), my ? (nl >> 1) - 1 - int(pij.y) : int(pij.y));
-                float PH = rc_bound(rc_code(hmap, mmap, l + 1, pri), dqf, dqb);
+                float PH = rc_bound(rc_code(hmap, mmap, l + 1, pri, false), dqf, dqb);
                 if (!rc_lod_final(l + 1, pij, PH, Om, zr.x, spacing, lod_k)) break;
                 l++; s *= 2.0; ij = pij; nl >>= 1;
             }
 #endif
             ri = ivec2(mx ? nl - 1 - int(ij.x) : int(ij.x), my ? nl - 1 - int(ij.y) : int(ij.y));
-            mc = rc_code(hmap, mmap, l, ri);
+            mc = rc_code(hmap, mmap, l, ri, exact0);
             H = rc_bound(mc, dqf, dqb);
             e = (ij + 1.0) * s;
-            float dtx = D.x > 0.0 ? (e.x - P0.x) / D.x : RC_FAR;
-            float dty = D.y > 0.0 ? (e.y - P0.y) / D.y : RC_FAR;
-            float dtz = D.z < 0.0 ? (zr.x - P0.z) / D.z : (D.z > 0.0 ? (zr.y - P0.z) / D.z : RC_FAR);
+            float dtx = D.x > 0.0 ? (e.x - P0.x) * invD.x : RC_FAR;
+            float dty = D.y > 0.0 ? (e.y - P0.y) * invD.y : RC_FAR;
             dt = max(min(min(dtx, dty), dtz), sP);
             cx = dtx <= dt; cy = dty <= dt; cz = dtz <= dt;
             X = P0 + dt * D;
@@ -274,7 +284,9 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
         vec4 h4 = vec4(rc_height(texelFetch(hmap, c0, 0).r, dq, dqb), rc_height(texelFetch(hmap, c0 + ivec2(S, 0), 0).r, dq, dqb),
                        rc_height(texelFetch(hmap, c0 + ivec2(0, S), 0).r, dq, dqb),
                        rc_height(texelFetch(hmap, c0 + ivec2(S, S), 0).r, dq, dqb));
-        H = rc_height(mc, dq, dqb);               // the exact bound: the planes reconstruction's surface
+        // the exact bound, the planes reconstruction's surface: a level-0 cell's own corners (its step read its
+        // parent's bound), else the texel's max-mip height
+        H = l == 0 ? max(max(h4.x, h4.y), max(h4.z, h4.w)) : rc_height(mc, dq, dqb);
         // a ray under the sheet crosses it upward: the same test with heights and ray z mirrored (z -> -z)
         float sg = under ? -1.0 : 1.0;
         float u = rc_cell_hit(vec3(A.xy, sg * A.z), vec3(B.xy, sg * B.z), vec2(c0), float(S), sg * h4, sg * H);

@@ -255,3 +255,33 @@ def test_step_cap_counts_capped_rays(ctx, puget257):
     assert c["capped"] > 0 and c["max_steps"] == 4
     assert c["hits"] == res.mask.sum()
     assert c["hits"] + c["capped"] <= c["rays"]
+
+
+@pytest.mark.parametrize("recon", ["triangles", "bilinear", "planes"])
+def test_a_view_with_no_ray_under_the_sheet_draws_as_the_exact_bounds_do(ctx, puget257, recon, monkeypatch):
+    """From over the footprint, above the ground, the caster takes no ray to start under the sheet and steps
+    level-0 cells against their parents' bounds; forced to test every ray and every cell's own bound (as for a
+    view that may have rays under the sheet), it draws the same frames and takes no fewer steps."""
+    import raycast.caster as rc
+    from hybrid.terrain.edges import may_start_under
+
+    views = preset("flyover", puget257, 3, 320, 180).views()
+    assert not any(may_start_under(puget257, v.eye) for v in views)
+    with Renderer(ctx, puget257, "raycast", reconstruction=recon) as r:
+        fast = [r.render(v, 2 / 3, stats=True) for v in views]
+        monkeypatch.setattr(rc, "may_start_under", lambda hf, eye: True)
+        exact = [r.render(v, 2 / 3, stats=True) for v in views]
+    for a, b in zip(fast, exact):
+        assert np.array_equal(a.mask, b.mask)
+        np.testing.assert_allclose(a.distance[a.mask], b.distance[b.mask], rtol=1e-6)
+        assert a.stats.row()["steps"] == b.stats.row()["steps"]
+
+
+def test_a_view_from_outside_or_under_the_footprint_may_start_rays_under(puget257):
+    from hybrid.terrain.edges import may_start_under
+
+    cx, cy = puget257.origin[0] + 128 * puget257.spacing_x, puget257.origin[1] + 128 * puget257.spacing_y
+    ground = float(puget257.sample_triangles(128.0, 128.0)) + puget257.origin[2]
+    assert not may_start_under(puget257, (cx, cy, ground + 100.0))
+    assert may_start_under(puget257, (cx, cy, ground - 100.0))
+    assert may_start_under(puget257, (puget257.origin[0] - 500.0, cy, ground + 5000.0))

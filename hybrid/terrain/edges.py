@@ -42,6 +42,15 @@ def eye_under(hf: HeightField, eye) -> bool:
     return bool(inside and O[2] < float(hf.sample_triangles(O[1], O[0])))
 
 
+def may_start_under(hf: HeightField, eye) -> bool:
+    """Whether any ray from the eye (world metres) can start under the terrain sheet: over the footprint, when
+    the eye is below the ground there; from outside it, always (a ray may enter through the side, below the
+    outer edge)."""
+    O = grid_frame(hf, eye, np.zeros((1, 3)))[0]
+    inside = 0.0 <= O[0] <= hf.cols - 1 and 0.0 <= O[1] <= hf.rows - 1
+    return eye_under(hf, eye) if inside else True
+
+
 def starts_under(hf: HeightField, eye, dirs) -> np.ndarray:
     """Per world ray eye + t dirs (dirs M x 3): True if the ray starts under the terrain sheet."""
     O, D = grid_frame(hf, eye, dirs)
