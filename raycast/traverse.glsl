@@ -11,7 +11,7 @@
 // max mipmap texture holds levels 1..log2 N (its level k is max-mip level k + 1). A level-0 step reads its
 // parent's level-1 code (or the largest of the cell's four corner codes, where exact0: rc_code); steps
 // compare against a float32 upper bound of the code (rc_bound). Maxima are taken on codes: dequantisation is
-// monotone. On a SIMD rasterizer both sides of a branch run for every lane, so each step makes one fetch.
+// monotone. On a SIMD rasterizer a branch compiled into the loop runs for every lane, so each step makes one fetch.
 //
 // Defines: RECON 0 planes (piecewise constant: a cell is a box of its max-mip height), 1 linear approximation
 // planes (Qu 3.1), 2 triangle mesh with the SW-NE diagonal (Qu 3.2), 3 bilinear patch (analytic);
@@ -35,14 +35,14 @@ float rc_height(uint q, dvec2 dq, int dqb) {
 // its parent's box), or, where `exact0`, the largest of its four corner codes. Used for every bound the
 // traversal reads (steps and LOD parents).
 uint rc_code(usampler2D hmap, usampler2D mmap, int l, ivec2 ri, bool exact0) {
-    uint code = texelFetch(mmap, l == 0 ? ri >> 1 : ri, max(l - 1, 0)).r;
-    // a loop, not an if: a SIMD rasterizer skips a loop no lane enters, but runs both sides of a branch
-    for (int k = int(l == 0 && exact0); k > 0; k--) {
+    // exact0 is a compile-time false in the caster's common variant (no planes, no ray under the sheet), so
+    // the gather is compiled out there: a SIMD rasterizer runs a branch for every lane whenever it is compiled
+    if (l == 0 && exact0) {
         // the four corners in one gather: the 2x2 texels around the cell's north-east corner (ri + 1)
         uvec4 c = textureGather(hmap, (vec2(ri) + 1.0) / vec2(textureSize(hmap, 0)), 0);
-        code = max(max(c.x, c.y), max(c.z, c.w));
+        return max(max(c.x, c.y), max(c.z, c.w));
     }
-    return code;
+    return texelFetch(mmap, l == 0 ? ri >> 1 : ri, max(l - 1, 0)).r;
 }
 
 // An upper bound (metres) of rc_height(q) in float32 arithmetic, for the traversal's steps: the float
