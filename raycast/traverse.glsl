@@ -252,27 +252,28 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
             if (cy) X.y = e.y;
             if (cz) X.z = D.z < 0.0 ? zr.x : zr.y;
             bool boxhit = D.z >= 0.0 ? P.z <= H : X.z <= H;
-            if (boxhit) {
-                bool fin = l <= lmin;
+            bool fin = l <= lmin;
 #if LOD
-                fin = fin || rc_lod_final(l, ij, H, Om, zr.x, spacing, lod_k);
+            fin = fin || rc_lod_final(l, ij, H, Om, zr.x, spacing, lod_k);
 #endif
-                if (fin) { cand = true; break; }
-                if (D.z < 0.0) {
-                    float sa = (H - P0.z) / D.z;
-                    if (sa > sP) { sP = sa; P = P0 + sa * D; P.xy = min(P.xy, e); moved = true; }
-                }
-                l--;
-                continue;
-            }
-            if (cz) return RC_MISS;
-            P = X;
-            sP = dt;
-            moved = true;
-#if !NAIVE
-            bool up = (cx && ((int(ij.x) + 1) & 1) == 0) || (cy && ((int(ij.y) + 1) & 1) == 0);
-            if (up && !under) l = min(l + 1, ltop);
+            if (boxhit && fin) { cand = true; break; }
+            if (!boxhit && cz) return RC_MISS;
+            // one step, with selects rather than branches (a SIMD rasterizer runs every branch for every lane):
+            // where the box is hit, descend a level (down to where the ray meets the box's top, if later); else
+            // move to the exit X and, leaving through an even-level border, ascend
+            float sa = D.z < 0.0 ? (H - P0.z) / D.z : -1.0;
+            bool adv = boxhit && sa > sP;
+            vec3 Pa = P0 + sa * D;
+            Pa.xy = min(Pa.xy, e);
+            P = adv ? Pa : (boxhit ? P : X);
+            sP = adv ? sa : (boxhit ? sP : dt);
+            moved = moved || adv || !boxhit;
+#if NAIVE
+            bool up = false;
+#else
+            bool up = !boxhit && !under && ((cx && ((int(ij.x) + 1) & 1) == 0) || (cy && ((int(ij.y) + 1) & 1) == 0));
 #endif
+            l = boxhit ? l - 1 : (up ? min(l + 1, ltop) : l);
         }
         if (!cand) return RC_CAPPED;
         // the ray enters the box of final texel ri at level l between P and X: intersect the cell's surface
