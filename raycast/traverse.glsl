@@ -200,7 +200,10 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
 #if NAIVE
     int l = lmin;
 #else
-    int l = under ? lmin : ltop;
+    // start at the level whose texels are about as wide as the ray travels across the box's height range: a
+    // steep ray starts low (it would descend anyway), a grazing one high (it skips far in few steps)
+    float span = D.z != 0.0 ? (zr.y - zr.x) / abs(D.z) * length(D.xy) : Nf;
+    int l = under ? lmin : clamp(int(floor(log2(max(span, 1.0)))), lmin, ltop);
 #endif
     // Two nested loops: the inner one only steps texels (cheap: one max-mip fetch a step) and stops at a
     // level-0 (final) texel whose box the ray enters; the outer one intersects that cell's surface. On a SIMD
