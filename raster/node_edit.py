@@ -208,11 +208,11 @@ def update_nodes(st: NodeEdits, nodes: GlobalNodes, grid, win: Window) -> list[W
     heights; returns per level the window of nodes whose values changed (rows and columns of node indices, maybe
     empty)."""
     h = np.asarray(grid.heights)
-    block_extremes(h, st.extremes, win)
-    if _margin_of(st.extremes) != st.margin and any(st.bound):  # the bounded levels' margin moved: rebuild all
+    margin = _margin_of(block_extremes(h, st.extremes, win))
+    if margin != st.margin and any(st.bound):  # the bounded levels' margin moved: rebuild all
         vars(st).update(vars(node_edits(grid, st.n, st.beta, st.side_errors)))
         win = Window(0, grid.rows, 0, grid.cols)
-    st.margin = _margin_of(st.extremes)
+    st.margin = margin
     changed, below_r, below_c = [], None, None
     for g in range(len(st.levels)):
         ar = _affected(st.ax_r, g, grid.rows, win.i0, win.i1, below_r)

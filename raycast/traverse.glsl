@@ -136,6 +136,12 @@ bool rc_lod_final(int l, vec2 ij, float H, vec3 Om, float zlo, vec2 spacing, flo
     return s * lod_k <= length(vec3(dxy, dz));
 }
 
+// Whether a ray leaving texel ij (through its x side where cx, its y side where cy) climbs a level: where the
+// border it crosses is also its parent's, so the parent it climbs to is one it has not tested.
+bool rc_climbs(vec2 ij, bool cx, bool cy) {
+    return (cx && ((int(ij.x) + 1) & 1) == 0) || (cy && ((int(ij.y) + 1) & 1) == 0);
+}
+
 // Cast one ray through the grid (height codes hmap, max mipmap mmap, dequantised by dq, dqb): returns RC_MISS,
 // RC_HIT or RC_CAPPED. On a hit, hit is the point (real texel
 // space), cell the hit texel (x, y) at level `level`, hc its corner heights. tmin: smallest ray parameter
@@ -274,7 +280,7 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
 #if NAIVE
             bool up = false;
 #else
-            bool up = !boxhit && !under && ((cx && ((int(ij.x) + 1) & 1) == 0) || (cy && ((int(ij.y) + 1) & 1) == 0));
+            bool up = !boxhit && !under && rc_climbs(ij, cx, cy);
 #endif
             l = boxhit ? l - 1 : (up ? min(l + 1, ltop) : l);
         }
@@ -307,8 +313,7 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
         sP = dt;
         moved = true;
 #if !NAIVE
-        bool up = (cx && ((int(ij.x) + 1) & 1) == 0) || (cy && ((int(ij.y) + 1) & 1) == 0);
-        if (up && !under) l = min(l + 1, ltop);
+        if (rc_climbs(ij, cx, cy) && !under) l = min(l + 1, ltop);
 #endif
     }
 }

@@ -35,11 +35,15 @@ def grid_frame(hf: HeightField, eye, dirs) -> tuple[np.ndarray, np.ndarray]:
     return np.array([e[0] / sx, e[1] / sy, e[2]]), np.stack([d[:, 0] / sx, d[:, 1] / sy, d[:, 2]], 1)
 
 
+def over_footprint(hf: HeightField, O) -> bool:
+    """Whether the point O (terrain grid space, ``grid_frame``) lies over the terrain's footprint."""
+    return bool(0.0 <= O[0] <= hf.cols - 1 and 0.0 <= O[1] <= hf.rows - 1)
+
+
 def eye_under(hf: HeightField, eye) -> bool:
     """True if the eye (world metres) lies over the terrain's footprint and below its triangulated ground."""
     O = grid_frame(hf, eye, np.zeros((1, 3)))[0]
-    inside = 0.0 <= O[0] <= hf.cols - 1 and 0.0 <= O[1] <= hf.rows - 1
-    return bool(inside and O[2] < float(hf.sample_triangles(O[1], O[0])))
+    return over_footprint(hf, O) and bool(O[2] < float(hf.sample_triangles(O[1], O[0])))
 
 
 def may_start_under(hf: HeightField, eye) -> bool:
@@ -47,16 +51,15 @@ def may_start_under(hf: HeightField, eye) -> bool:
     the eye is below the ground there; from outside it, always (a ray may enter through the side, below the
     outer edge)."""
     O = grid_frame(hf, eye, np.zeros((1, 3)))[0]
-    inside = 0.0 <= O[0] <= hf.cols - 1 and 0.0 <= O[1] <= hf.rows - 1
-    return eye_under(hf, eye) if inside else True
+    return eye_under(hf, eye) if over_footprint(hf, O) else True
 
 
 def starts_under(hf: HeightField, eye, dirs) -> np.ndarray:
     """Per world ray eye + t dirs (dirs M x 3): True if the ray starts under the terrain sheet."""
     O, D = grid_frame(hf, eye, dirs)
-    cells = np.array([hf.cols - 1, hf.rows - 1], dtype=np.float64)
-    if np.all(O[:2] >= 0) and np.all(O[:2] <= cells):
+    if over_footprint(hf, O):
         return np.full(len(D), eye_under(hf, eye))
+    cells = np.array([hf.cols - 1, hf.rows - 1], dtype=np.float64)
     M = len(D)
     tn, tf = np.full(M, -np.inf), np.full(M, np.inf)
     xside = np.zeros(M, bool)
