@@ -365,3 +365,50 @@ def test_a_candidate_the_budget_cannot_pay_for_does_not_hold_back_one_it_can():
     assert all(e is not None and e.strategy == "raycast" for e in found)
     table[c] += 50.0  # now neither is affordable
     assert online.explore(table, picks.copy(), names) is None
+
+
+def test_a_strategy_the_others_rows_price_up_is_explored_at_its_starting_level():
+    """Ray casting drawn at 5x its model sets the machine's scale; raster, never drawn and right in the model, is
+    still offered its two tiles at the starting level, where the scaled price would be beyond the credit."""
+    rng = np.random.default_rng(21)
+    online = OnlineModel(scaled(TRUE, "raycast", 0.2))
+    cols = columns(rng, 12)
+    chosen = np.array(["raycast"] * 12, dtype=object)
+    for _ in range(4):
+        online.observe(cols, chosen.tolist(), true_passes(cols, chosen, rng, noise=0.0), 30.0)
+    assert online.machine_scale() > 3.0
+    names = online.model.candidates
+    table = online.model.predict_table(cols)
+    picks = np.full(12, names.index("raycast"))
+    r = names.index("raster")
+    start = online.start.predict_table(cols)[r]
+    online.credit = online.start.overhead["raster"] + float(np.sort(start)[:4].sum()) + online.model.mix_overhead
+    scaled_price = online.model.overhead["raster"] + float(np.sort(table[r])[:2].sum())
+    assert scaled_price > online.credit  # what the machine's scale asks for two tiles
+    found = [online.explore(table, picks.copy(), names) for _ in range(10)]
+    assert any(e is not None and e.strategy == "raster" for e in found)
+
+
+def test_a_strategy_seen_on_a_few_tiles_is_given_a_whole_frame_until_it_drew_some():
+    """After its first pass (a few tiles, compiles), a strategy that might beat the frame is given every tile of
+    a frame the budget covers, until it drew ``level_rows`` such passes; then a few tiles again."""
+    rng = np.random.default_rng(22)
+    online = OnlineModel(TRUE)
+    names = TRUE.candidates
+    cols = columns(rng, 12)
+    chosen = np.array(["raycast"] * 12, dtype=object)
+    chosen[:2] = "raster"
+    online.observe(cols, chosen.tolist(), true_passes(cols, chosen, rng), 30.0)  # raster's first pass
+    table = TRUE.predict_table(cols)
+    r, c = names.index("raster"), names.index("raycast")
+    table[r] = 0.5 * table[c]  # raster would beat the frame
+    picks = np.full(12, c)
+    online.credit = 50.0
+    for _ in range(AdaptOptions().level_rows):
+        e = online.explore(table, picks.copy(), names)
+        assert e is not None and e.strategy == "raster" and len(e.tiles) == 12
+        whole = np.array(["raster"] * 12, dtype=object)
+        online.observe(cols, whole.tolist(), true_passes(cols, whole, rng), 20.0, e)
+        online.credit = 50.0
+    e = online.explore(table, picks.copy(), names)
+    assert e is None or len(e.tiles) <= AdaptOptions().explore_tiles

@@ -36,8 +36,8 @@ def prediction_errors(r, views, tau=2 / 3):
 
 
 def test_adaptation_from_a_wrong_model_moves_predictions_toward_measured(ctx, puget257, flight):
-    with Renderer(ctx, puget257, "hybrid", 64, cost_model=skewed(ctx)) as r:
-        errors = prediction_errors(r, flight)
+    with Renderer(ctx, puget257, "hybrid", 64, cost_model=skewed(ctx), reuse_choice=1) as r:
+        errors = prediction_errors(r, flight)  # every frame planned, so every frame predicted
         assert r.online.stats.refits > 0
         assert r.model.adapted_frames > 0 and "adapted online" in r.model.source
     with Renderer(ctx, puget257, "hybrid", 64, cost_model=skewed(ctx), adapt=False) as frozen:

@@ -23,6 +23,11 @@ budget that earns ``explore_share`` of every observed frame's measured ms and is
 measured cost: the frame's measured ms beyond the frame as chosen (predicted, at the level such frames were
 recently measured at), or its pass less the chosen strategy's predicted cost of those tiles if that is more (a
 strategy's first pass, which pays one-off costs such as compiling its shaders, is neither charged nor a row).
+A strategy with no level of its own yet is priced for exploration at no more than the starting model's level: the
+machine's scale, set by the other strategies' rows, may say more about them than about it. A few explored tiles
+are a strategy's costly ones and price its tiles, not its frames, so once past its first pass a strategy that drew
+fewer than ``level_rows`` passes of more than ``explore_tiles`` tiles may be given a whole frame instead, where it
+might beat the frame as chosen at ``OPTIMISM`` times its price and the budget covers the difference.
 Until a strategy has ``shape_rows`` passes of more than ``explore_tiles`` tiles, its passes of a few tiles set its
 per-frame overhead and its tiles keep the starting model's split (``hybrid.cost.online_fit``). A strategy whose last
 ``hold_rows`` predictions were within ``hold_error`` (median relative error of passes predicted before they
@@ -48,7 +53,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hybrid.cost.model import _TERM_INDEX, ONLINE_FIT_VERSION, TERMS, CostModel, all_term_values
-from hybrid.cost.online_fit import fit_rows, median_of
+from hybrid.cost.online_fit import RowWindow, fit_rows, median_of
 from hybrid.errors import TerrabenchError
 
 OPTIMISM = 0.5
@@ -136,6 +141,7 @@ class OnlineModel:
         self.checks: dict[str, deque[tuple[int, float]]] = {"pure": deque(maxlen=w), "mixed": deque(maxlen=w)}
         self.ratios: deque = deque(maxlen=self.options.window)  # measured / starting model's ms of recent passes
         self._own: set = set()  # strategies fitted at their own level (enough rows)
+        self._broad = dict.fromkeys(names, 0)  # passes of more than explore_tiles tiles
         self.credit = 0.0
         self.stats = AdaptStats()
         self._rng = np.random.default_rng(seed)
@@ -151,31 +157,61 @@ class OnlineModel:
         return all(self.holds(s) for s in self.model.candidates)
 
     def may_explore(self, used: set) -> bool:
-        """Whether the budget could pay to explore any candidate outside ``used`` whose predictions do not hold
-        (its per-frame overhead and a mixed frame's at least): a cheap test before any table is built."""
+        """Whether the budget could pay to explore any candidate outside ``used`` not ``known`` (its per-frame
+        overhead at least): a cheap test before any table is built."""
         m = self.model
-        costs = [m.overhead.get(s, 0.0) for s in m.candidates if s not in used and not self.holds(s)]
-        return bool(costs) and min(costs) + m.mix_overhead <= self.credit
+        costs = [m.overhead.get(s, 0.0) for s in m.candidates if s not in used and not self.known(s)]
+        return bool(costs) and min(costs) <= self.credit
+
+    def known(self, strategy: str) -> bool:
+        """Whether the strategy's predictions hold and it drew ``level_rows`` passes of more than a few tiles
+        (its level is then its own frames', not that of the few tiles it was explored on)."""
+        return self.holds(strategy) and self._broad[strategy] >= self.options.level_rows
 
     def explore(self, table: np.ndarray, picks: np.ndarray, names: tuple) -> Exploration | None:
-        """Give a few tiles to a candidate the frame does not use and whose predictions do not hold, when the
-        budget covers its predicted cost (of those it covers, the candidate known least); ``picks`` (B,) indices
-        into ``names`` are changed in place."""
+        """Give a whole frame (``_whole``), else a few tiles, to a candidate the frame does not use and whose
+        predictions do not hold, when the budget covers its predicted cost (of those it covers, the candidate known
+        least); ``picks`` (B,) indices into ``names`` are changed in place."""
         used = set(picks.tolist())
-        todo = [i for i, s in enumerate(names) if i not in used and not self.holds(s) and np.isfinite(table[i]).any()]
-        if not todo or len(picks) == 0:
+        if len(picks) == 0:
             return None
         base = table[picks, np.arange(len(picks))]
-        offers = [o for i in todo if (o := self._offer(table, base, names, i)) is not None]
+        chosen = [names[j] for j in used]
+        frame = self.model.frame_ms(base, set(chosen))
+        offers = [o for i in range(len(names)) if i not in used and (o := self._whole(table, names, i, frame))]
+        if not offers:
+            todo = [
+                i for i, s in enumerate(names) if i not in used and not self.holds(s) and np.isfinite(table[i]).any()
+            ]
+            offers = [o for i in todo if (o := self._offer(table, base, names, i)) is not None]
         if not offers:
             return None
         least = min(len(self.rows[names[i]]) for i, _ in offers)  # a candidate it can pay for, known least first
         ties = [o for o in offers if len(self.rows[names[o[0]]]) == least]
         i, tiles = ties[int(self._rng.integers(len(ties)))]
-        chosen = [names[j] for j in used]
-        frame = self.model.frame_ms(base, set(chosen))
         picks[tiles] = i
         return Exploration(names[i], tiles, float(base[tiles].sum()), frame, len(chosen) == 1)
+
+    def _level(self, strategy: str) -> float:
+        """The share of its predicted ms at which exploration prices a strategy: 1 once it has its own level,
+        else at most 1 (the starting model's level where the machine's scale, set by the other strategies'
+        rows, would raise it: a strategy never drawn is given the benefit of the doubt, so it gets explored)."""
+        return 1.0 if strategy in self._own else min(1.0, 1.0 / max(self.machine_scale(), 1e-9))
+
+    def _whole(self, table: np.ndarray, names: tuple, i: int, frame: float) -> tuple[int, np.ndarray] | None:
+        """(candidate i, every tile) where candidate i has drawn fewer than ``level_rows`` passes of more than a
+        few tiles, could draw the whole frame (every tile's cost known), might beat the frame as chosen
+        (``frame`` ms predicted) at ``OPTIMISM`` times its price, and the budget covers the difference: a pass
+        of a few explored tiles prices a strategy's expensive tiles, not its frames."""
+        s, o = names[i], self.options
+        if s not in self._seen or self._broad[s] >= o.level_rows or len(table[i]) <= o.explore_tiles:
+            return None  # a strategy's first pass (uncharged: it compiles) is a few tiles, never a frame
+        if not np.isfinite(table[i]).all():
+            return None
+        whole = self._level(s) * (self.model.overhead.get(s, 0.0) + float(table[i].sum()))
+        if OPTIMISM * whole >= frame or max(whole - frame, self._spent.get(s, 0.0)) > self.credit:
+            return None
+        return i, np.arange(len(table[i]))
 
     def _offer(self, table: np.ndarray, base: np.ndarray, names: tuple, i: int) -> tuple[int, np.ndarray] | None:
         """(candidate i, the tiles to give it) where the budget covers exploring it and it might pay, else None."""
@@ -184,7 +220,8 @@ class OnlineModel:
         pool = np.argsort(ratio, kind="stable")[: max(2 * k, 1)]
         tiles = np.sort(self._rng.choice(pool, size=k, replace=False))
         m = self.model
-        cost = m.overhead.get(names[i], 0.0) + m.mix_overhead + float(table[i, tiles].sum() - base[tiles].sum())
+        own_ms = self._level(names[i]) * (m.overhead.get(names[i], 0.0) + float(table[i, tiles].sum()))
+        cost = own_ms + m.mix_overhead - float(base[tiles].sum())
         if max(cost, self._spent.get(names[i], 0.0)) > self.credit or not self._might_pay(table[i], base, names[i]):
             return None
         return i, tiles
@@ -236,6 +273,7 @@ class OnlineModel:
             if started > 0:
                 self.ratios.append(ms / started)
             self.rows[s].add(x, float(ms))
+            self._broad[s] += int(x[1] > self.options.explore_tiles)
             self._fresh[s] += 1
             if self._fresh[s] >= self._cadence(s):
                 learnt.append(s)
@@ -320,7 +358,7 @@ class OnlineModel:
             elif s in self._own:
                 continue
             X, y = self.rows[s].arrays()  # a strategy of few rows follows the machine's scale only
-            own = len(y) >= o.level_rows
+            own = len(y) >= o.level_rows or self._broad[s] > 0  # or a pass of many tiles told its level
             theta = fit_rows(
                 X,
                 y,
@@ -343,26 +381,3 @@ class OnlineModel:
         self.model = m
         self.stats.refits += 1
         self.stats.errors.update({s: median_of(self.errors[s]) for s in names})
-
-
-class RowWindow:
-    """The last ``size`` rows of one strategy: terms (size, width) and measured ms (size,), in a ring."""
-
-    def __init__(self, size: int, width: int):
-        self.X = np.zeros((size, width))
-        self.y = np.zeros(size)
-        self.n = 0
-
-    def add(self, x: np.ndarray, ms: float) -> None:
-        """Keep a row, dropping the oldest once full."""
-        i = self.n % len(self.y)
-        self.X[i], self.y[i] = x, ms
-        self.n += 1
-
-    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        """(terms, ms) of the rows kept (order not kept)."""
-        k = min(self.n, len(self.y))
-        return self.X[:k], self.y[:k]
-
-    def __len__(self) -> int:
-        return min(self.n, len(self.y))

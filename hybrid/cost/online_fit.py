@@ -1,6 +1,7 @@
-"""The online fit of one strategy's rows (``hybrid.cost.online``): non-negative least squares on relative error with
-a ridge toward the starting model, and, while most of its passes drew a few explored tiles, a split that takes
-their level from the passes of many tiles and their per-frame overhead from the rest."""
+"""The online fit of one strategy's rows (``hybrid.cost.online``), kept in a ring (``RowWindow``): non-negative
+least squares on relative error with a ridge toward the starting model, and, while most of its passes drew a few
+explored tiles, a split that takes their level from the passes of many tiles and their per-frame overhead from
+the rest."""
 
 from __future__ import annotations
 
@@ -77,3 +78,26 @@ def few_tile_fit(X: np.ndarray, y: np.ndarray, prior: np.ndarray, few_tiles: int
     tiles = prior[1:] * level
     overhead = max(median_of((y - X[:, 1:] @ tiles).tolist()), 0.0)
     return np.concatenate([[overhead], tiles])
+
+
+class RowWindow:
+    """The last ``size`` rows of one strategy: terms (size, width) and measured ms (size,), in a ring."""
+
+    def __init__(self, size: int, width: int):
+        self.X = np.zeros((size, width))
+        self.y = np.zeros(size)
+        self.n = 0
+
+    def add(self, x: np.ndarray, ms: float) -> None:
+        """Keep a row, dropping the oldest once full."""
+        i = self.n % len(self.y)
+        self.X[i], self.y[i] = x, ms
+        self.n += 1
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """(terms, ms) of the rows kept (order not kept)."""
+        k = min(self.n, len(self.y))
+        return self.X[:k], self.y[:k]
+
+    def __len__(self) -> int:
+        return min(self.n, len(self.y))
