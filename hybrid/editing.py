@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 from hybrid.contract import TerrainChange
 from hybrid.errors import TerrabenchError
-from hybrid.gl.brush import GpuHeights, read_r32f_window
+from hybrid.gl.brush import GpuHeights
 from hybrid.gl.deform import GpuDeformations
 from hybrid.reference import ReferenceRenderer
 from hybrid.renderer import Renderer
@@ -127,7 +127,7 @@ class TerrainEditor:
 
     def _write_through(self, win: Window) -> None:
         """Copy a window of the GPU heights into the CPU heights."""
-        self.cpu.heights[win.slices()] = read_r32f_window(self.gpu.texture, win)
+        self.cpu.heights[win.slices()] = self.gpu.read(win)
 
     def _follow(self, win: Window, report: EditReport) -> EditReport:
         """Bring every renderer up to date after the samples of a window changed in the CPU heights."""

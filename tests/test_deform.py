@@ -28,6 +28,17 @@ def hf():
     return get_dataset("fbm", 65)  # 64 cells of 30 m
 
 
+@pytest.fixture(params=[None, 24], ids=["one-texture", "blocks"])
+def limit(request, ctx):
+    """The GL's texture size limit as the editor sees it: its own, or 24 (the heights in 3x3 blocks)."""
+    from hybrid.gl.context import context_extra
+
+    if request.param is not None:
+        context_extra(ctx)["max_texture_size"] = request.param
+    yield request.param
+    context_extra(ctx).pop("max_texture_size", None)
+
+
 @pytest.mark.parametrize(
     ("d", "start", "end", "words"),
     [
@@ -62,12 +73,13 @@ def test_displacements_start_at_zero_stay_in_their_disc_and_freeze_after_their_e
     )
 
 
-def test_gpu_heights_at_each_step_equal_the_cpu_composition(ctx, hf):
+def test_gpu_heights_at_each_step_equal_the_cpu_composition(ctx, hf, limit):
     from hybrid.editing import TerrainEditor
 
     base = hf.heights.copy()
     full = Window(0, hf.rows, 0, hf.cols)
     with TerrainEditor(ctx, hf) as editor:
+        assert len(editor.gpu.blocks) == (1 if limit is None else 9)
         editor.deform(WAVE, 1.0, 30.0)
         editor.deform(UPLIFT, 0.0, 20.0)
         params = editor.deforms.params
@@ -102,11 +114,11 @@ def test_the_same_time_gives_the_same_heights_whatever_the_steps_before(ctx):
         np.testing.assert_array_equal(other, out[0])
 
 
-def test_a_brush_under_deformations_edits_the_base(ctx, hf):
+def test_a_brush_under_deformations_edits_the_base(ctx, hf, limit):
     from hybrid.editing import TerrainEditor
 
     base = hf.heights.copy()
-    brushes = [Raise((1000.0, 800.0), 400.0, 30.0), Smooth((800.0, 1000.0), 300.0, 1.0)]
+    brushes = [Raise((1000.0, 800.0), 400.0, 30.0), Smooth((800.0, 1000.0), 300.0, 1.0)]  # across block borders
     with TerrainEditor(ctx, hf) as editor:
         editor.deform(WAVE, 0.0, 30.0)
         editor.step(5.0)

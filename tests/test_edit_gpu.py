@@ -22,18 +22,43 @@ def hf():
     return get_dataset("fbm", 65)  # 64 cells of 30 m; tiles of 16 cells have borders every 480 m
 
 
-def test_gpu_brushes_equal_the_cpu_reference_in_sequence(ctx, hf):
+@pytest.mark.parametrize("limit", [None, 24])  # one texture; 3x3 blocks of 22 samples (a GL limit of 24)
+def test_gpu_brushes_equal_the_cpu_reference_in_sequence_whatever_the_blocks(ctx, hf, limit):
     cpu = hf.heights.copy()
     before = hf.heights.copy()
-    gpu = GpuHeights(ctx, hf)
+    gpu = GpuHeights(ctx, hf, limit)
     try:
+        assert len(gpu.blocks) == (1 if limit is None else 9)
+        crossed = 0
         for brush in BRUSHES:
             win = gpu.edit(brush)
+            crossed += sum(not b.part(win).empty for b in gpu.blocks) > 1
             assert win == apply_brush(cpu, brush_params(brush, hf))
             tol = 1e-5 * max(1.0, float(np.abs(cpu).max()))
             np.testing.assert_allclose(hf.heights, cpu, rtol=0, atol=tol)  # the CPU copy followed
             np.testing.assert_allclose(gpu.read(), cpu, rtol=0, atol=tol)  # and the GPU's own heights
         assert np.abs(hf.heights - before).max() > 10.0
+        assert limit is None or crossed >= 4  # most brushes crossed block borders, smooth ones included
+    finally:
+        gpu.release()
+
+
+def test_height_blocks_tile_the_grid_once_and_one_texture_is_asked_for_by_name(ctx):
+    from hybrid.errors import TerrabenchError
+    from hybrid.gl.brush import block_starts
+    from hybrid.gl.particles import ParticleParams, ParticleSystem
+
+    for n, limit in ((16385, 16384), (65, 24), (65, 65), (8, 3), (1025, 1024)):
+        starts = block_starts(n, limit)
+        ends = starts[1:] + [n]
+        sides = [b - a for a, b in zip(starts, ends)]
+        assert starts[0] == 0 and min(sides) > 0 and max(sides) <= limit and len(starts) == -(-n // limit)
+    hf = get_dataset("fbm", 33)
+    gpu = GpuHeights(ctx, hf, 16)
+    try:
+        np.testing.assert_array_equal(gpu.read(), hf.heights)
+        with pytest.raises(TerrabenchError, match=r"held in 9 height textures"):
+            ParticleSystem(ctx, gpu, ParticleParams(count=16))
     finally:
         gpu.release()
 

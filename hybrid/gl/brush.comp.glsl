@@ -3,12 +3,16 @@
 // SNAPSHOT 1: copy the window grown by one sample (clamped to the grid) into the scratch image, so the brush
 // reads the heights before the edit (the smooth brush reads neighbours). SNAPSHOT 0: the brush itself, each
 // texel from the scratch copy, in the CPU reference's float32 order of operations (precise: no fused ops).
+// The grid may be held in blocks (textures of at most the GL's size limit): each dispatch reads and writes one
+// block, texel = sample - origin, and leaves the samples outside it to the other blocks' dispatches.
 layout(local_size_x = 8, local_size_y = 8) in;
 layout(r32f, binding = 0) uniform image2D heights;     // the grid, texel (j, i) = sample (i, j), row 0 = south
 layout(r32f, binding = 1) uniform image2D scratch;     // the window grown by one sample
 uniform ivec2 win0;                                    // first (column, row) of the window
 uniform ivec2 win_size;                                // (columns, rows) of the window
 uniform ivec2 grid;                                    // (columns, rows) of the grid
+uniform ivec2 origin;                                  // the block's first (column, row) in the grid
+uniform ivec2 block;                                   // the block's (columns, rows)
 uniform vec2 centre;                                   // (cj, ci): the brush centre in fractional samples
 uniform vec2 spacing;                                  // (sx, sy) metres between samples
 uniform float radius2;                                 // radius² (m²)
@@ -31,10 +35,13 @@ void main() {
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
 #if SNAPSHOT
     if (p.x >= win_size.x + 2 || p.y >= win_size.y + 2) return;
-    ivec2 src = clamp(win0 - 1 + p, ivec2(0), grid - 1);
+    ivec2 src = clamp(win0 - 1 + p, ivec2(0), grid - 1) - origin;
+    if (any(lessThan(src, ivec2(0))) || any(greaterThanEqual(src, block))) return;
     imageStore(scratch, p, imageLoad(heights, src));
 #else
     if (p.x >= win_size.x || p.y >= win_size.y) return;
+    ivec2 texel = win0 + p - origin;
+    if (any(lessThan(texel, ivec2(0))) || any(greaterThanEqual(texel, block))) return;
     ivec2 s = p + 1;                                    // this sample in the scratch image
     precise float old = imageLoad(scratch, s).r;
     vec2 ij = vec2(win0 + p);
@@ -57,6 +64,6 @@ void main() {
     } else {
         h = old + crater(sqrt(t), strength);
     }
-    imageStore(heights, win0 + p, vec4(h));
+    imageStore(heights, texel, vec4(h));
 #endif
 }

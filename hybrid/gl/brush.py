@@ -1,15 +1,20 @@
 """Terrain edits on the GPU: the brush pass over resident R32F heights, and the CPU copy following it.
 
-``GpuHeights`` holds a terrain's full-resolution heights (metres, relative to the origin z) in one R32F texture,
-texel (j, i) = sample (i, j), rows south to north. ``BrushPass`` applies a brush (``hybrid.terrain.edits``) to such
-a texture in place with two compute dispatches over the touched window only (a snapshot of the window grown by one
-sample, then the brush reading it), in the CPU reference's float32 arithmetic. ``edit`` runs it and then writes the
-window back to the height field's CPU array (write-through: the GPU changes first, the CPU copy follows).
+``GpuHeights`` holds a terrain's full-resolution heights (metres, relative to the origin z) in R32F textures,
+texel (j, i) = sample (i, j), rows south to north: one texture where the grid fits the GL's size limit, else
+blocks of equal size that tile the grid without overlap (``HeightBlock``), so that a grid of any size is edited.
+``BrushPass`` applies a brush (``hybrid.terrain.edits``) in place with two compute dispatches a block the touched
+window meets (a snapshot of the window grown by one sample into one scratch image, then the brush reading it),
+in the CPU reference's float32 arithmetic: a brush across block borders reads its neighbours from the snapshot,
+as in one texture. ``edit`` runs it and then writes the window back to the height field's CPU array
+(write-through: the GPU changes first, the CPU copy follows).
 """
 
 from __future__ import annotations
 
 import ctypes
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -33,6 +38,63 @@ def read_r32f_window(tex, win: Window) -> np.ndarray:
     return out
 
 
+@dataclass(frozen=True)
+class HeightBlock:
+    """One R32F texture of a grid's heights: samples [i0, i0 + rows) x [j0, j0 + cols), texel = sample - (i0, j0)."""
+
+    texture: Any  # a moderngl Texture
+    i0: int
+    j0: int
+    rows: int
+    cols: int
+
+    @property
+    def window(self) -> Window:
+        """The grid's samples this block holds."""
+        return Window(self.i0, self.i0 + self.rows, self.j0, self.j0 + self.cols)
+
+    def part(self, win: Window) -> Window:
+        """The samples of ``win`` this block holds (grid coordinates; empty where it holds none)."""
+        w = self.window
+        return Window(max(win.i0, w.i0), min(win.i1, w.i1), max(win.j0, w.j0), min(win.j1, w.j1))
+
+
+def block_starts(n: int, limit: int) -> list[int]:
+    """First samples of the fewest equal blocks (at most ``limit`` samples each) that cover n samples."""
+    count = -(-n // limit)
+    side = -(-n // count)
+    return list(range(0, n, side))
+
+
+def height_blocks(ctx, heights: np.ndarray, limit: int) -> list[HeightBlock]:
+    """R32F textures of float32 heights (rows, cols), in blocks of at most ``limit`` texels a side."""
+    rows, cols = heights.shape
+    out = []
+    for i0 in block_starts(rows, limit):
+        for j0 in block_starts(cols, limit):
+            i1, j1 = min(i0 + limit, rows), min(j0 + limit, cols)
+            r, c = i1 - i0, j1 - j0
+            part = np.ascontiguousarray(heights[i0:i1, j0:j1], dtype=np.float32)
+            tex = ctx.texture((c, r), 1, part.tobytes(), dtype="f4")
+            tex.filter = (ctx.NEAREST, ctx.NEAREST)
+            out.append(HeightBlock(tex, i0, j0, r, c))
+    return out
+
+
+def read_blocks(blocks: list[HeightBlock], win: Window) -> np.ndarray:
+    """float32 heights (rows, cols) of a window of samples, from the blocks that hold it."""
+    out = np.zeros((win.i1 - win.i0, win.j1 - win.j0), np.float32)
+    for b in blocks:
+        part = b.part(win)
+        if part.empty:
+            continue
+        local = Window(part.i0 - b.i0, part.i1 - b.i0, part.j0 - b.j0, part.j1 - b.j0)
+        out[part.i0 - win.i0 : part.i1 - win.i0, part.j0 - win.j0 : part.j1 - win.j0] = read_r32f_window(
+            b.texture, local
+        )
+    return out
+
+
 class BrushPass:
     """The brush compute programs and their scratch image (GPU state shared by every edit of a context)."""
 
@@ -52,34 +114,37 @@ class BrushPass:
             self.scratch = self.ctx.texture((w, h), 1, dtype="f4")
         return self.scratch
 
-    def apply(self, tex, p: BrushParams, grid: tuple[int, int]) -> Window:
-        """Apply brush p to the R32F heights texture ``tex`` of a (rows, cols) grid in place over the touched
-        window only; returns that window (empty: no dispatch)."""
+    def apply(self, blocks: list[HeightBlock], p: BrushParams, grid: tuple[int, int]) -> Window:
+        """Apply brush p to the R32F height blocks of a (rows, cols) grid in place over the touched window only;
+        returns that window (empty: no dispatch)."""
         rows, cols = grid
         win = touched(p, rows, cols)
         if win.empty:
             return win
         size = (win.j1 - win.j0, win.i1 - win.i0)
         scratch = self._scratch(size[0] + 2, size[1] + 2)
-        tex.bind_to_image(0, read=True, write=True)
         scratch.bind_to_image(1, read=True, write=True)
-        for prog in (self.snapshot, self.brush):
-            values = {
-                "win0": (win.j0, win.i0),
-                "win_size": size,
-                "grid": (cols, rows),
-                "centre": (p.cj, p.ci),
-                "spacing": (p.sx, p.sy),
-                "radius2": float(np.float32(p.radius * p.radius)),
-                "strength": p.strength,
-                "target": p.target,
-                "code": p.code,
-            }
-            for k, v in values.items():
-                if k in prog:
-                    prog[k].value = v
-            extra = 2 if prog is self.snapshot else 0
-            prog.run(-(-(size[0] + extra) // GROUP), -(-(size[1] + extra) // GROUP), 1)
+        grown = Window(max(win.i0 - 1, 0), min(win.i1 + 1, rows), max(win.j0 - 1, 0), min(win.j1 + 1, cols))
+        values = {
+            "win0": (win.j0, win.i0),
+            "win_size": size,
+            "grid": (cols, rows),
+            "centre": (p.cj, p.ci),
+            "spacing": (p.sx, p.sy),
+            "radius2": float(np.float32(p.radius * p.radius)),
+            "strength": p.strength,
+            "target": p.target,
+            "code": p.code,
+        }
+        for prog, reach, extra in ((self.snapshot, grown, 2), (self.brush, win, 0)):
+            for b in blocks:  # the snapshot whole before any block is brushed: borders read the old heights
+                if b.part(reach).empty:  # the window, or the samples its snapshot reads, clamped to the grid
+                    continue
+                for k, v in {**values, "origin": (b.j0, b.i0), "block": (b.cols, b.rows)}.items():
+                    if k in prog:
+                        prog[k].value = v
+                b.texture.bind_to_image(0, read=True, write=True)
+                prog.run(-(-(size[0] + extra) // GROUP), -(-(size[1] + extra) // GROUP), 1)
             self.ctx.memory_barrier()
         return win
 
@@ -97,40 +162,47 @@ class BrushPass:
 
 
 class GpuHeights:
-    """A height field's full-resolution heights on the GPU (one R32F texture) and the brush pass that edits them."""
+    """A height field's full-resolution heights on the GPU (R32F blocks of at most ``limit`` texels a side, the
+    GL's size limit by default: one texture where the grid fits) and the brush pass that edits them."""
 
-    def __init__(self, ctx, hf: HeightField):
-        limit = max_texture_size(ctx)
-        if hf.rows > limit or hf.cols > limit:
-            raise TerrabenchError(
-                f"editing {hf.name!r} ({hf.cols}x{hf.rows} samples) needs its heights in one "
-                f"texture, beyond this GL's limit of {limit} a side"
-            )
-        self.ctx, self.hf = ctx, hf
-        h = np.ascontiguousarray(hf.heights, dtype=np.float32)
-        self.texture = ctx.texture((hf.cols, hf.rows), 1, h.tobytes(), dtype="f4")
-        self.texture.filter = (ctx.NEAREST, ctx.NEAREST)
+    def __init__(self, ctx, hf: HeightField, limit: int | None = None):
+        limit = max_texture_size(ctx) if limit is None else int(limit)
+        if limit < 2:
+            raise TerrabenchError(f"height blocks need at least 2 texels a side, got {limit}")
+        self.ctx, self.hf, self.limit = ctx, hf, limit
+        self.blocks = height_blocks(ctx, np.asarray(hf.heights, dtype=np.float32), limit)
         self.brushes = BrushPass(ctx)
+
+    @property
+    def texture(self):
+        """The one R32F texture of the heights (refused where the grid is held in blocks)."""
+        if len(self.blocks) != 1:
+            raise TerrabenchError(
+                f"{self.hf.name!r} ({self.hf.cols}x{self.hf.rows} samples) is held in {len(self.blocks)} height "
+                "textures, beyond this GL's size limit for one; this use needs one texture"
+            )
+        return self.blocks[0].texture
 
     def edit(self, brush: Brush) -> Window:
         """Apply a brush (world metres, hf's frame) on the GPU, then copy the touched window back into hf's CPU
         heights; returns the window (sample rows and columns) that changed."""
         p = brush_params(brush, self.hf)
-        win = self.brushes.apply(self.texture, p, (self.hf.rows, self.hf.cols))
+        win = self.brushes.apply(self.blocks, p, (self.hf.rows, self.hf.cols))
         if not win.empty:
-            self.hf.heights[win.slices()] = read_r32f_window(self.texture, win)
+            self.hf.heights[win.slices()] = read_blocks(self.blocks, win)
         return win
 
     def read(self, win: Window | None = None) -> np.ndarray:
-        """float32 heights (metres, rows south to north) of a window of the texture (None: all of it)."""
-        return read_r32f_window(self.texture, win or Window(0, self.hf.rows, 0, self.hf.cols))
+        """float32 heights (metres, rows south to north) of a window of the grid (None: all of it)."""
+        return read_blocks(self.blocks, win or Window(0, self.hf.rows, 0, self.hf.cols))
 
     @property
     def nbytes(self) -> int:
         """GPU bytes of the heights and the brush pass's scratch image."""
-        return gl_bytes(self.texture) + self.brushes.nbytes
+        return sum(gl_bytes(b.texture) for b in self.blocks) + self.brushes.nbytes
 
     def release(self) -> None:
-        """Free the texture and the brush pass."""
-        self.texture.release()
+        """Free the textures and the brush pass."""
+        for b in self.blocks:
+            b.texture.release()
         self.brushes.release()

@@ -5,7 +5,8 @@
 layout(local_size_x = 8, local_size_y = 8) in;
 layout(r32f, binding = 0) uniform image2D heights;     // the grid, texel (j, i) = sample (i, j), row 0 = south
 layout(r32f, binding = 1) uniform image2D base;        // the grid's base heights (every brush, no deformation)
-uniform ivec2 win0;                                    // first (column, row) of the window
+uniform ivec2 win0;                                    // first (column, row) of the window (inside the block)
+uniform ivec2 origin;                                  // the block's first (column, row): texel = sample - origin
 uniform ivec2 win_size;                                // (columns, rows) of the window
 uniform vec2 spacing;                                  // (sx, sy) metres between samples
 uniform int count;                                     // deformations in the arrays (<= MAX_DEF)
@@ -16,7 +17,7 @@ const float TWO_PI = 6.2831855;
 void main() {
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
     if (p.x >= win_size.x || p.y >= win_size.y) return;
-    precise float h = imageLoad(base, win0 + p).r;
+    precise float h = imageLoad(base, win0 + p - origin).r;
     vec2 ij = vec2(win0 + p);
     for (int k = 0; k < MAX_DEF; k++) {
         if (k >= count) break;
@@ -40,5 +41,5 @@ void main() {
         precise float wave = motion[k].x * w * sin(TWO_PI * phase);
         h = h + wave;
     }
-    imageStore(heights, win0 + p, vec4(h));
+    imageStore(heights, win0 + p - origin, vec4(h));
 }

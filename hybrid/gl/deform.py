@@ -1,7 +1,7 @@
 """Procedural deformations on the GPU: the base heights under them, and the pass composing them at a time.
 
 ``GpuDeformations`` extends a terrain's ``hybrid.gl.brush.GpuHeights`` once a deformation is added: it keeps the
-base heights (every brush, no deformation; metres relative to the origin z) in a second R32F texture of the grid,
+base heights (every brush, no deformation; metres relative to the origin z) in R32F blocks laid out as the heights',
 and at a clock time ``step`` composes heights = base + every deformation's displacement (``hybrid.terrain.deform``)
 over the windows of the deformations whose own time moved, on the GPU only. A brush then edits the base
 (``edit``): the brush pass on the base texture, the composition over the brush's window, the window written
@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from hybrid.errors import TerrabenchError
-from hybrid.gl.brush import GROUP, GpuHeights, read_r32f_window
+from hybrid.gl.brush import GROUP, GpuHeights, HeightBlock, height_blocks, read_blocks
 from hybrid.gl.context import gl_bytes
 from hybrid.gl.programs import compute_shader
 from hybrid.terrain.deform import DeformParams, deform_window
@@ -28,8 +28,7 @@ class GpuDeformations:
 
     def __init__(self, gpu: GpuHeights):
         self.gpu, self.ctx = gpu, gpu.ctx
-        hf = gpu.hf
-        self.base = self.ctx.texture((hf.cols, hf.rows), 1, gpu.read().tobytes(), dtype="f4")
+        self.base: list[HeightBlock] = height_blocks(self.ctx, gpu.read(), gpu.limit)  # the heights' layout
         self.prog = compute_shader(self.ctx, "hybrid.gl", "deform.comp.glsl", {"MAX_DEF": MAX_DEFORMATIONS})
         self.params: list[DeformParams] = []
         self.taus: list[float | None] = []  # each deformation's own time (s) as last composed
@@ -52,18 +51,20 @@ class GpuDeformations:
             disc[k] = (q.cj, q.ci, np.float32(q.radius * q.radius), p.code)
             motion[k] = (p.amplitude, p.wavelength, p.speed, p.tau(self.time))
         prog = self.prog
-        for name, value in (
-            ("win0", (win.j0, win.i0)),
-            ("win_size", (win.j1 - win.j0, win.i1 - win.i0)),
-            ("spacing", (self.gpu.hf.spacing_x, self.gpu.hf.spacing_y)),
-            ("count", n),
-        ):
+        for name, value in (("spacing", (self.gpu.hf.spacing_x, self.gpu.hf.spacing_y)), ("count", n)):
             prog[name].value = value
         prog["disc"].write(disc.tobytes())
         prog["motion"].write(motion.tobytes())
-        self.gpu.texture.bind_to_image(0, read=True, write=True)
-        self.base.bind_to_image(1, read=True, write=False)
-        prog.run(-(-(win.j1 - win.j0) // GROUP), -(-(win.i1 - win.i0) // GROUP), 1)
+        for heights, base in zip(self.gpu.blocks, self.base):
+            part = heights.part(win)
+            if part.empty:
+                continue
+            prog["win0"].value = (part.j0, part.i0)
+            prog["win_size"].value = (part.j1 - part.j0, part.i1 - part.i0)
+            prog["origin"].value = (heights.j0, heights.i0)
+            heights.texture.bind_to_image(0, read=True, write=True)
+            base.texture.bind_to_image(1, read=True, write=False)
+            prog.run(-(-(part.j1 - part.j0) // GROUP), -(-(part.i1 - part.i0) // GROUP), 1)
         self.ctx.memory_barrier()
 
     def step(self, t: float) -> list[Window]:
@@ -89,19 +90,20 @@ class GpuDeformations:
         win = self.gpu.brushes.apply(self.base, brush_params(brush, hf), (hf.rows, hf.cols))
         if not win.empty:
             self._compose(win)
-            hf.heights[win.slices()] = read_r32f_window(self.gpu.texture, win)
+            hf.heights[win.slices()] = read_blocks(self.gpu.blocks, win)
         return win
 
     def read_base(self, win: Window | None = None) -> np.ndarray:
         """float32 base heights (metres, rows south to north) of a window (None: the whole grid)."""
-        return read_r32f_window(self.base, win or Window(0, self.gpu.hf.rows, 0, self.gpu.hf.cols))
+        return read_blocks(self.base, win or Window(0, self.gpu.hf.rows, 0, self.gpu.hf.cols))
 
     @property
     def nbytes(self) -> int:
         """GPU bytes of the base heights."""
-        return gl_bytes(self.base)
+        return sum(gl_bytes(b.texture) for b in self.base)
 
     def release(self) -> None:
         """Free the base heights and the program."""
-        self.base.release()
+        for b in self.base:
+            b.texture.release()
         self.prog.release()

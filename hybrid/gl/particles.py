@@ -3,7 +3,8 @@
 ``ParticleSystem`` keeps N particles' positions and velocities in shader storage buffers (metres and metres a
 second, relative to the terrain's origin: x east, y north, z up) and steps them on the GPU with gravity,
 restitution and friction, in at most ``MAX_SUBSTEPS`` sub-steps a frame. Each particle reads the same R32F heights
-texture the brush pass edits (``hybrid.gl.brush.GpuHeights``), through the reference's triangles or the bilinear
+texture the brush pass edits (``hybrid.gl.brush.GpuHeights``; a grid within the GL's size limit, held in one
+texture), through the reference's triangles or the bilinear
 patch, and is pushed above the surface on contact: a raise lifts resting particles, a crater lets them fall. The
 extent's walls mirror particles back, so they stay on the terrain. ``draw`` puts them as round point sprites into
 a frame target, depth-tested against the terrain already drawn there; ``timed_step`` and ``timed_draw`` time each
@@ -107,6 +108,7 @@ class ParticleSystem:
 
     def __init__(self, ctx, heights: GpuHeights, params: ParticleParams):
         self.ctx, self.heights, self.params = ctx, heights, check_particles(params)
+        self.texture = heights.texture  # the one texture of the heights (a grid in blocks is refused by name)
         self.step_prog = compute_shader(
             ctx,
             "hybrid.gl",
@@ -139,7 +141,7 @@ class ParticleSystem:
         if not self.count:
             return
         p, hf, prog = self.params, self.heights.hf, self.step_prog
-        self.heights.texture.bind_to_image(0, read=True, write=False)
+        self.texture.bind_to_image(0, read=True, write=False)
         for unit, b in enumerate(self.buffers):
             b.bind_to_storage_buffer(unit)
         values: dict = {
