@@ -103,9 +103,10 @@ def edit_bounds(h: np.ndarray, n: int, a: LevelArrays, blocks: DeviationBlocks, 
             a.zmax[0][ty, tx], a.zmin[0][ty, tx] = sub.max(), sub.min()  # every sample is some cell's corner
     for level in range(1, len(touched)):
         k, dev, sup, s = 1 << level, blocks.dev[level], blocks.sup[level], blocks.s
-        # a block's cells read samples of its own coarse cell and the next one's first row: two blocks of margin
-        a0, a1 = max(win.i0 // k - 2, 0), min((win.i1 - 1) // k + 2, dev.shape[0])
-        b0, b1 = max(win.j0 // k - 2, 0), min((win.j1 - 1) // k + 2, dev.shape[1])
+        # block a depends on samples [a k, (a + 1) k] only (its last sample's surface gives the next coarse
+        # cell's far corner weight 0): the blocks whose closed range meets the window
+        a0, a1 = max((win.i0 - 1) // k, 0), min((win.i1 - 1) // k + 1, dev.shape[0])
+        b0, b1 = max((win.j0 - 1) // k, 0), min((win.j1 - 1) // k + 1, dev.shape[1])
         dev[a0:a1, b0:b1] = _deviation_blocks(h, k, a0, a1, b0, b1)
         r0, r1, c0, c1 = a0 // s, -(-a1 // s), b0 // s, -(-b1 // s)
         sup[r0:r1, c0:c1] = _reduce(dev[r0 * s : r1 * s, c0 * s : c1 * s], s, np.maximum)
