@@ -1,7 +1,7 @@
 #version 430
 // A terrain brush (hybrid/terrain/edits.py) on R32F heights in place, over the touched window only.
-// SNAPSHOT 1: copy the window grown by one sample (clamped to the grid) into the scratch image, so the brush
-// reads the heights before the edit (the smooth brush reads neighbours). SNAPSHOT 0: the brush itself, each
+// SNAPSHOT 1: copy the window grown by one sample (clamped to the grid) into the scratch image, so the smooth
+// brush reads its neighbours' heights before the edit; the others read and write their own texel only (direct). SNAPSHOT 0: the brush itself, each
 // texel from the scratch copy, in the CPU reference's float32 order of operations (precise: no fused ops).
 // The grid may be held in blocks (textures of at most the GL's size limit): each dispatch reads and writes one
 // block, texel = sample - origin, and leaves the samples outside it to the other blocks' dispatches.
@@ -19,6 +19,7 @@ uniform float radius2;                                 // radius² (m²)
 uniform float strength;
 uniform float target;                                  // flatten: metres relative to the origin z
 uniform int code;                                      // 0 raise, 1 flatten, 2 smooth, 3 crater
+uniform bool direct;                                   // no snapshot: each texel reads itself (all but smooth)
 const float BOWL = 0.7;
 const float RIM = 0.3;
 
@@ -43,7 +44,7 @@ void main() {
     ivec2 texel = win0 + p - origin;
     if (any(lessThan(texel, ivec2(0))) || any(greaterThanEqual(texel, block))) return;
     ivec2 s = p + 1;                                    // this sample in the scratch image
-    precise float old = imageLoad(scratch, s).r;
+    precise float old = direct ? imageLoad(heights, texel).r : imageLoad(scratch, s).r;
     vec2 ij = vec2(win0 + p);
     precise float dx = (ij.x - centre.x) * spacing.x;
     precise float dy = (ij.y - centre.y) * spacing.y;

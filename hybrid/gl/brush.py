@@ -3,10 +3,10 @@
 ``GpuHeights`` holds a terrain's full-resolution heights (metres, relative to the origin z) in R32F textures,
 texel (j, i) = sample (i, j), rows south to north: one texture where the grid fits the GL's size limit, else
 blocks of equal size that tile the grid without overlap (``HeightBlock``), so that a grid of any size is edited.
-``BrushPass`` applies a brush (``hybrid.terrain.edits``) in place with two compute dispatches a block the touched
-window meets (a snapshot of the window grown by one sample into one scratch image, then the brush reading it),
-in the CPU reference's float32 arithmetic: a brush across block borders reads its neighbours from the snapshot,
-as in one texture. ``edit`` runs it and then writes the window back to the height field's CPU array
+``BrushPass`` applies a brush (``hybrid.terrain.edits``) in place with a compute dispatch a block the touched
+window meets, in the CPU reference's float32 arithmetic; the smooth brush, which reads its neighbours, first
+snapshots the window grown by one sample into one scratch image and reads that, so that across block borders it
+reads the heights before the edit, as in one texture. ``edit`` runs it and then writes the window back to the height field's CPU array
 (write-through: the GPU changes first, the CPU copy follows).
 """
 
@@ -21,7 +21,7 @@ import numpy as np
 from hybrid.errors import TerrabenchError
 from hybrid.gl.context import _gl_function, gl_bytes, max_texture_size
 from hybrid.gl.programs import compute_shader
-from hybrid.terrain.edits import Brush, BrushParams, Window, brush_params, touched
+from hybrid.terrain.edits import KINDS, Brush, BrushParams, Window, brush_params, touched
 from hybrid.terrain.heightfield import HeightField
 
 GROUP = 8  # the pass's work group side
@@ -136,7 +136,9 @@ class BrushPass:
             "target": p.target,
             "code": p.code,
         }
-        for prog, reach, extra in ((self.snapshot, grown, 2), (self.brush, win, 0)):
+        passes = [(self.snapshot, grown, 2)] if p.code == KINDS["smooth"] else []  # only smooth reads neighbours
+        values["direct"] = not passes
+        for prog, reach, extra in (*passes, (self.brush, win, 0)):
             for b in blocks:  # the snapshot whole before any block is brushed: borders read the old heights
                 if b.part(reach).empty:  # the window, or the samples its snapshot reads, clamped to the grid
                     continue
