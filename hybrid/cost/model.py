@@ -328,9 +328,10 @@ def matching_key(keys, renderer: str) -> str | None:
     return max(inside, key=len) if inside else None
 
 
-ONLINE_FIT_VERSION = 3
+ONLINE_FIT_VERSION = 4
 """The version of ``hybrid.cost.online``'s fit, saved with the models it learns: one learned by another version
-is not loaded (its coefficients follow rules since changed), and the shipped default serves instead."""
+is not loaded (its coefficients follow rules since changed, such as which rows exploration gathers), and the
+shipped default serves instead."""
 
 
 def load_cost_model(renderer: str, path: Path | None = None) -> CostModel:
