@@ -3,6 +3,7 @@ its budget and stops once predictions hold, a frozen hybrid chooses the same eve
 
 import copy
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -235,6 +236,9 @@ def test_a_model_learned_by_an_earlier_online_fit_is_passed_over(tmp_path):
     with pytest.warns(UserWarning, match="earlier version of the online fit"):
         got = load_cost_model("llvmpipe", path)
     assert got.adapted_frames == 0 and got.source.startswith("shipped default")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # said once a process, not at every renderer of a run
+        assert load_cost_model("llvmpipe", path).adapted_frames == 0
     old.online_fit = ONLINE_FIT_VERSION  # learned by this version: used
     save_cost_model(old, path)
     assert load_cost_model("llvmpipe", path).adapted_frames == 12

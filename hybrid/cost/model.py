@@ -355,6 +355,9 @@ def shipped_cost_model(renderer: str) -> CostModel:
     return fallback_cost_model()
 
 
+_PASSED_OVER: set[tuple[str, str]] = set()  # (costs file, key) of learned models passed over, warned of once
+
+
 def costs_file_model(data: dict, renderer: str, where: str) -> CostModel | None:
     """The model a costs file's ``data`` (from ``where``) holds for a GL renderer (``matching_key``): the one learned
     online, unless an earlier version of the online fit learned it (passed over, with a warning), else the
@@ -368,11 +371,13 @@ def costs_file_model(data: dict, renderer: str, where: str) -> CostModel | None:
         m = cost_model_from_dict(section[key], label if key == renderer else f"{label} '{key}'")
         if not m.adapted_frames or m.online_fit == ONLINE_FIT_VERSION:
             return m
-        warnings.warn(
-            f"{where}: the model for {key!r} was learned by an earlier version of the online fit; it is not "
-            "used (a run learns it again, or run terrabench calibrate)",
-            stacklevel=3,
-        )
+        if (where, key) not in _PASSED_OVER:  # said once a process: every renderer of a run loads it
+            _PASSED_OVER.add((where, key))
+            warnings.warn(
+                f"{where}: the model for {key!r} was learned by an earlier version of the online fit; it is not "
+                "used (a run learns it again, or run terrabench calibrate)",
+                stacklevel=3,
+            )
     return None
 
 
