@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from hybrid.errors import TerrabenchError
-from hybrid.gl.context import depth32f_texture, gl_bytes, gl_finish, gl_memory_barrier, is_software
+from hybrid.gl.context import depth32f_texture, gl_bytes, gl_finish, gl_memory_barrier
 from hybrid.gl.edges import TerrainEdges
 from hybrid.gl.programs import program, register_include, set_uniform
 from hybrid.gl.shading import resolve_mode
@@ -82,7 +82,7 @@ class RaycastStrategy:
         self.ctx, self.hf = ctx, hf
         register_include(ctx, "raycast/traverse", "raycast", "traverse.glsl")
         register_include(ctx, "raycast/tile_block", "raycast", "tile_block.glsl")
-        self._prepass = prepass_default(is_software(ctx))
+        self._prepass = prepass_default()
         self.options = self._resolved(CastOptions().updated(**options))
         self._check_mode(self.options)
         self.builder = MaxMipBuilder(ctx)
@@ -106,7 +106,7 @@ class RaycastStrategy:
         return resolve_mode(self.hf, opts.mode, MODES)
 
     def _resolved(self, opts: CastOptions) -> CastOptions:
-        """opts with a pre-pass left to the device (None) set to the device's default (prepass_default)."""
+        """opts with the pre-pass left to the default (None) set to it (prepass_default)."""
         return opts if opts.prepass is not None else opts.updated(prepass=self._prepass)
 
     def _program(self, opts: CastOptions, mode: str, under: bool = True):
