@@ -169,9 +169,10 @@ class OnlineModel:
         return self.holds(strategy) and self._broad[strategy] >= self.options.level_rows
 
     def explore(self, table: np.ndarray, picks: np.ndarray, names: tuple) -> Exploration | None:
-        """Give a whole frame (``_whole``), else a few tiles, to a candidate the frame does not use and whose
-        predictions do not hold, when the budget covers its predicted cost (of those it covers, the candidate known
-        least); ``picks`` (B,) indices into ``names`` are changed in place."""
+        """Give a candidate the frame does not use a whole frame (``_whole``: one not yet drawn on many tiles),
+        else a few tiles (``_offer``: one whose predictions do not hold), when the budget covers its predicted
+        cost (of those it covers, the candidate known least); ``picks`` (B,) indices into ``names`` are changed
+        in place."""
         used = set(picks.tolist())
         if len(picks) == 0:
             return None
