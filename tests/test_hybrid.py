@@ -410,7 +410,7 @@ def test_a_sea_at_a_strategy_border_seen_head_on_has_no_crack(ctx, height_m, pre
     and the camera is moved so that pixel (320, 200)'s ray meets the sea 6e-4 px short of it. Every pixel of that
     row lies within the rasterizer's rounding of the raster edge; the ones it leaves out reach the ray-cast tiles
     below their boxes. Before they drew the wall there, such a frame had 500-650 crack pixels along the border.
-    With the tile-ID pre-pass (on by default on a GPU) the ray-cast tile still casts there: no nearer hit has."""
+    With the tile-ID pre-pass (off by default, turned on here) the ray-cast tile still casts there: no nearer hit has."""
     from experiments.metrics import coverage_errors
     from hybrid.camera.view import View
     from hybrid.terrain.heightfield import HeightField

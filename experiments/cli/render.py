@@ -79,7 +79,7 @@ def _add_ray_arguments(p: argparse.ArgumentParser) -> None:
         action="store_const",
         const=True,
         default=None,
-        help="ray casting with the tile-ID pre-pass (default: on a GPU, not on a CPU rasterizer)",
+        help="ray casting with the tile-ID pre-pass (default: off; it paid on no device measured)",
     )
     pre.add_argument(
         "--no-prepass",
