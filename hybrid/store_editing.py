@@ -88,8 +88,7 @@ class StoreEditing:
         """Whether every sample of the window is on the store's source step (the window grown by one sample, so
         each of its samples is a cell's corner; the samples around were on the step)."""
         h = self.mem.heights
-        grown = h[max(win.i0 - 1, 0) : min(win.i1 + 1, h.shape[0]), max(win.j0 - 1, 0) : min(win.j1 + 1, h.shape[1])]
-        cells = on_step_cells(grown, self.step)
+        cells = on_step_cells(h[win.grown(1, *h.shape).slices()], self.step)
         return cells is not None and bool(cells.all())
 
     def _levels(self, w: StoreWrite, win: Window) -> None:

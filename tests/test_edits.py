@@ -8,7 +8,7 @@ import pytest
 from hybrid.errors import TerrabenchError
 from hybrid.terrain.datasets import get_dataset
 from hybrid.terrain.edit_log import EditLog, LoggedEdit, check_log, read_log, terrain_id, write_log
-from hybrid.terrain.edits import Crater, Flatten, Raise, Smooth, apply_brush, brush_params, check_brush, touched
+from hybrid.terrain.edits import Crater, Flatten, Raise, Smooth, Window, apply_brush, brush_params, check_brush, touched
 from hybrid.terrain.heightfield import HeightField
 
 
@@ -181,3 +181,11 @@ def test_a_logged_brush_off_the_terrain_is_refused_by_edit_number(hf, tmp_path):
     )
     with pytest.raises(TerrabenchError, match="edit 2: raise brush centre"):
         check_log(log, hf)
+
+
+def test_window_intersection_and_growth_clip_to_the_grid():
+    w = Window(2, 5, 0, 4)
+    assert w.intersection(Window(4, 9, 3, 9)) == Window(4, 5, 3, 4)
+    assert w.intersection(Window(6, 9, 0, 4)).empty
+    assert w.grown(1, 6, 4) == Window(1, 6, 0, 4)  # clipped at column 0, the last row and column
+    assert Window(0, 1, 0, 1).grown(2, 10, 10) == Window(0, 3, 0, 3)

@@ -1,8 +1,9 @@
 #version 430
 // A terrain brush (hybrid/terrain/edits.py) on R32F heights in place, over the touched window only.
 // SNAPSHOT 1: copy the window grown by one sample (clamped to the grid) into the scratch image, so the smooth
-// brush reads its neighbours' heights before the edit; the others read and write their own texel only (direct). SNAPSHOT 0: the brush itself, each
-// texel from the scratch copy, in the CPU reference's float32 order of operations (precise: no fused ops).
+// brush reads its neighbours' heights before the edit. SNAPSHOT 0: the brush itself, each texel from the scratch
+// copy, or from itself where the brush reads its own texel only (direct: all but smooth), in the CPU
+// reference's float32 order of operations (precise: no fused ops).
 // The grid may be held in blocks (textures of at most the GL's size limit): each dispatch reads and writes one
 // block, texel = sample - origin, and leaves the samples outside it to the other blocks' dispatches.
 layout(local_size_x = 8, local_size_y = 8) in;

@@ -6,8 +6,8 @@ blocks of equal size that tile the grid without overlap (``HeightBlock``), so th
 ``BrushPass`` applies a brush (``hybrid.terrain.edits``) in place with a compute dispatch a block the touched
 window meets, in the CPU reference's float32 arithmetic; the smooth brush, which reads its neighbours, first
 snapshots the window grown by one sample into one scratch image and reads that, so that across block borders it
-reads the heights before the edit, as in one texture. ``edit`` runs it and then writes the window back to the height field's CPU array
-(write-through: the GPU changes first, the CPU copy follows).
+reads the heights before the edit, as in one texture. ``edit`` runs it and then writes the window back to the
+height field's CPU array (write-through: the GPU changes first, the CPU copy follows).
 """
 
 from __future__ import annotations
@@ -55,8 +55,7 @@ class HeightBlock:
 
     def part(self, win: Window) -> Window:
         """The samples of ``win`` this block holds (grid coordinates; empty where it holds none)."""
-        w = self.window
-        return Window(max(win.i0, w.i0), min(win.i1, w.i1), max(win.j0, w.j0), min(win.j1, w.j1))
+        return self.window.intersection(win)
 
 
 def block_starts(n: int, limit: int) -> list[int]:
@@ -124,7 +123,7 @@ class BrushPass:
         size = (win.j1 - win.j0, win.i1 - win.i0)
         scratch = self._scratch(size[0] + 2, size[1] + 2)
         scratch.bind_to_image(1, read=True, write=True)
-        grown = Window(max(win.i0 - 1, 0), min(win.i1 + 1, rows), max(win.j0 - 1, 0), min(win.j1 + 1, cols))
+        grown = win.grown(1, rows, cols)
         values = {
             "win0": (win.j0, win.i0),
             "win_size": size,

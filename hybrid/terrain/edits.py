@@ -100,6 +100,14 @@ class Window:
         """(rows, columns) slices of the window."""
         return slice(self.i0, self.i1), slice(self.j0, self.j1)
 
+    def intersection(self, other: Window) -> Window:
+        """The samples both windows hold (empty where they share none)."""
+        return Window(max(self.i0, other.i0), min(self.i1, other.i1), max(self.j0, other.j0), min(self.j1, other.j1))
+
+    def grown(self, k: int, rows: int, cols: int) -> Window:
+        """The window grown by k samples on every side, clipped to a (rows, cols) grid."""
+        return Window(max(self.i0 - k, 0), min(self.i1 + k, rows), max(self.j0 - k, 0), min(self.j1 + k, cols))
+
 
 @dataclass(frozen=True)
 class BrushParams:

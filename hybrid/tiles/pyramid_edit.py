@@ -123,10 +123,10 @@ def edit_bounds(h: np.ndarray, n: int, a: LevelArrays, blocks: DeviationBlocks, 
 
 def follow_on_step(on_step: np.ndarray, h: np.ndarray, step, win: Window) -> None:
     """The per-cell on-step flags over the cells whose corners the window holds, in place."""
-    i0, j0 = max(win.i0 - 1, 0), max(win.j0 - 1, 0)
-    cells = on_step_cells(h[i0 : min(win.i1 + 1, h.shape[0]), j0 : min(win.j1 + 1, h.shape[1])], step)
+    grown = win.grown(1, *h.shape)
+    cells = on_step_cells(h[grown.slices()], step)
     if cells is not None:
-        on_step[i0 : i0 + cells.shape[0], j0 : j0 + cells.shape[1]] = cells
+        on_step[grown.i0 : grown.i0 + cells.shape[0], grown.j0 : grown.j0 + cells.shape[1]] = cells
 
 
 def follow_on_tiles(on_tiles: dict, h: np.ndarray, n: int, on_step, touched: Touched) -> None:
