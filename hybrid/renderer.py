@@ -4,7 +4,8 @@ A pure policy (raster, raycast, fullres, tin) is the per-tile choice with a sing
 (hybrid, heuristic, oracle) choose per tile among the candidates raster, raster_gs and raycast (hybrid.cost.planner).
 Within a frame the raster tiles are drawn first (front to back), then the ray-cast tiles front to back; with
 the tile-ID pre-pass (off by default, raycast.options.prepass_default) no ray is cast where a nearer tile
-already covers the pixel. Every strategy writes depth from the same reversed-Z projection, so a world point has one depth whichever draws it.
+already covers the pixel. Every strategy writes depth from the same reversed-Z projection, so a world point has
+one depth whichever draws it.
 
 Frame time (``wall_ms``) is what a user waits for a frame: the CPU planning (tile selection, and for the
 mixed policies the features and choices) plus the drawing, wall clock with ctx.finish() on both sides.

@@ -179,12 +179,15 @@ class OnlineModel:
         base = table[picks, np.arange(len(picks))]
         chosen = [names[j] for j in used]
         frame = self.model.frame_ms(base, set(chosen))
-        offers = [o for i in range(len(names)) if i not in used and (o := self._whole(table, names, i, frame))]
+        levels = self._levels(names)
+        offers = [
+            o for i in range(len(names)) if i not in used and (o := self._whole(table, names, i, frame, levels[i]))
+        ]
         if not offers:
             todo = [
                 i for i, s in enumerate(names) if i not in used and not self.holds(s) and np.isfinite(table[i]).any()
             ]
-            offers = [o for i in todo if (o := self._offer(table, base, names, i)) is not None]
+            offers = [o for i in todo if (o := self._offer(table, base, names, i, levels[i])) is not None]
         if not offers:
             return None
         least = min(len(self.rows[names[i]]) for i, _ in offers)  # a candidate it can pay for, known least first
@@ -193,35 +196,43 @@ class OnlineModel:
         picks[tiles] = i
         return Exploration(names[i], tiles, float(base[tiles].sum()), frame, len(chosen) == 1)
 
-    def _level(self, strategy: str) -> float:
-        """The share of its predicted ms at which exploration prices a strategy: 1 once it has its own level,
-        else at most 1 (the starting model's level where the machine's scale, set by the other strategies'
+    def _levels(self, names: tuple) -> list[float]:
+        """Per candidate, the share of its predicted ms at which exploration prices it: 1 once it has its own
+        level, else at most 1 (the starting model's level where the machine's scale, set by the other strategies'
         rows, would raise it: a strategy never drawn is given the benefit of the doubt, so it gets explored)."""
-        return 1.0 if strategy in self._own else min(1.0, 1.0 / max(self.machine_scale(), 1e-9))
+        if all(s in self._own for s in names):
+            return [1.0] * len(names)
+        unknown = min(1.0, 1.0 / max(self.machine_scale(), 1e-9))  # once a frame: it reads every row window
+        return [1.0 if s in self._own else unknown for s in names]
 
-    def _whole(self, table: np.ndarray, names: tuple, i: int, frame: float) -> tuple[int, np.ndarray] | None:
+    def _whole(
+        self, table: np.ndarray, names: tuple, i: int, frame: float, level: float
+    ) -> tuple[int, np.ndarray] | None:
         """(candidate i, every tile) where candidate i has drawn fewer than ``level_rows`` passes of more than a
         few tiles, could draw the whole frame (every tile's cost known), might beat the frame as chosen
-        (``frame`` ms predicted) at ``OPTIMISM`` times its price, and the budget covers the difference: a pass
-        of a few explored tiles prices a strategy's expensive tiles, not its frames."""
+        (``frame`` ms predicted) at ``OPTIMISM`` times its price (its prediction times ``level``), and the budget
+        covers the difference: a pass of a few explored tiles prices a strategy's expensive tiles, not its frames."""
         s, o = names[i], self.options
         if s not in self._seen or self._broad[s] >= o.level_rows or len(table[i]) <= o.explore_tiles:
             return None  # a strategy's first pass (uncharged: it compiles) is a few tiles, never a frame
         if not np.isfinite(table[i]).all():
             return None
-        whole = self._level(s) * (self.model.overhead.get(s, 0.0) + float(table[i].sum()))
+        whole = level * (self.model.overhead.get(s, 0.0) + float(table[i].sum()))
         if OPTIMISM * whole >= frame or max(whole - frame, self._spent.get(s, 0.0)) > self.credit:
             return None
         return i, np.arange(len(table[i]))
 
-    def _offer(self, table: np.ndarray, base: np.ndarray, names: tuple, i: int) -> tuple[int, np.ndarray] | None:
-        """(candidate i, the tiles to give it) where the budget covers exploring it and it might pay, else None."""
+    def _offer(
+        self, table: np.ndarray, base: np.ndarray, names: tuple, i: int, level: float
+    ) -> tuple[int, np.ndarray] | None:
+        """(candidate i, the tiles to give it) where the budget covers exploring it (priced at ``level`` times its
+        prediction) and it might pay, else None."""
         ratio = np.where(np.isfinite(table[i]), table[i] / np.maximum(base, 1e-9), np.inf)
         k = min(self.options.explore_tiles, int(np.isfinite(ratio).sum()))
         pool = np.argsort(ratio, kind="stable")[: max(2 * k, 1)]
         tiles = np.sort(self._rng.choice(pool, size=k, replace=False))
         m = self.model
-        own_ms = self._level(names[i]) * (m.overhead.get(names[i], 0.0) + float(table[i, tiles].sum()))
+        own_ms = level * (m.overhead.get(names[i], 0.0) + float(table[i, tiles].sum()))
         cost = own_ms + m.mix_overhead - float(base[tiles].sum())
         if max(cost, self._spent.get(names[i], 0.0)) > self.credit or not self._might_pay(table[i], base, names[i]):
             return None
