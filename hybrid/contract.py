@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, fields, replace
-from typing import Any, Literal, NamedTuple, Protocol, get_args, runtime_checkable
+from typing import Any, ClassVar, Literal, NamedTuple, Protocol, get_args, runtime_checkable
 
 from hybrid.camera.view import View
 from hybrid.errors import TerrabenchError
@@ -60,6 +60,14 @@ class DrawOptions:
     def values(self) -> dict[str, Any]:
         """The options by name, as keywords of the strategy's ``draw_tiles`` (not copied)."""
         return {f.name: getattr(self, f.name) for f in fields(self)}  # type: ignore[arg-type]
+
+    # names of the options that shape what a tile's upload makes (a texture format): fixed when the strategy is
+    # made, passed to its constructor, and refused by a draw that asks for another value
+    upload_fields: ClassVar[tuple[str, ...]] = ()
+
+    def upload_options(self) -> dict[str, Any]:
+        """The options that shape a tile's upload (``upload_fields``), as the strategy's constructor keywords."""
+        return {name: getattr(self, name) for name in self.upload_fields}
 
 
 def check_flags(options, names: tuple[str, ...]) -> None:

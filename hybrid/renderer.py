@@ -93,8 +93,9 @@ class Renderer:
         self._own_pyramid = pyramid is None  # made here: closed (its loader thread) on release
         self.pyramid = pyramid or pyramid_for(hf, tile_size)
         self.cache = ResidencyCache(budget_bytes)
-        self.strategies = {n: make_strategy(n, ctx, hf) for n in (candidates() if self.mixed else (policy,))}
-        self.options = resolve_options(self.strategies, strategy_options, options)
+        names = candidates() if self.mixed else (policy,)
+        self.options = resolve_options(dict.fromkeys(names), strategy_options, options)
+        self.strategies = {n: make_strategy(n, ctx, hf, **self.options[n].upload_options()) for n in names}
         self._model = cost_model or (load_cost_model(gl_info(ctx).renderer) if self.mixed else None)
         self.online = (
             OnlineModel(self._model, adapt if isinstance(adapt, AdaptOptions) else None)

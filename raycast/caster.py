@@ -124,6 +124,7 @@ class RaycastStrategy:
             opts.shadows,
             mode,
             bool(opts.occluders),
+            opts.heights,
         )
         if key not in self.programs:
             defines = {
@@ -136,6 +137,7 @@ class RaycastStrategy:
                 "MODE": MODES.index(mode),
                 "OCCLUDERS": int(bool(opts.occluders)),
                 "UNDER": int(under),
+                "HF32": int(opts.heights == "float32"),
                 **LAYOUT_DEFINES,
             }
             prog = program(self.ctx, "raycast", "box.vert.glsl", "raycast.frag.glsl", defines=defines)
@@ -157,22 +159,23 @@ class RaycastStrategy:
     # --- tiles ------------------------------------------------------------------------------------
     @staticmethod
     def bytes_per_sample(n: int) -> float:
-        """GPU bytes per height sample of an n-cell tile, max mipmap included (the textures ``upload`` makes)."""
+        """GPU bytes per height sample of an n-cell tile of 16-bit codes, max mipmap included (the textures
+        ``upload`` makes; twice that for ``heights='float32'`` tiles)."""
         return bytes_per_sample(n)
 
     host_product = "raycast.codes"  # the name of what host_prepare makes of a tile (StorePyramid.derive)
 
-    @staticmethod
-    def host_prepare(heights: np.ndarray, source_step=None) -> HostTile:
-        """The CPU part of a tile's upload, which a store's loader thread runs ahead: its 16-bit codes and max mipmap."""
-        return prepare_heights(heights, source_step)
+    def host_prepare(self, heights: np.ndarray, source_step=None) -> HostTile:
+        """The CPU part of a tile's upload, which a store's loader thread runs ahead: its 16-bit codes (or float32
+        metres, with ``heights='float32'``) and their max mipmap."""
+        return prepare_heights(heights, source_step, self.options.heights)
 
     def upload(self, tile) -> GpuTile:
-        """Put a tile's (N+1)² heights on the GPU as 16-bit codes with their max mipmap, made on the host (taken
-        from what the store's loader thread made of them, ``tile.host``, when it did)."""
+        """Put a tile's (N+1)² heights on the GPU as 16-bit codes (or float32 metres) with their max mipmap, made
+        on the host (taken from what the store's loader thread made of them, ``tile.host``, when it did)."""
         host = getattr(tile, "host", {}).pop(self.host_product, None)
         if host is None:
-            host = prepare_heights(tile.heights, getattr(tile, "source_step", None))
+            host = self.host_prepare(tile.heights, getattr(tile, "source_step", None))
         g = upload_prepared(self.ctx, host)
         g.row, g.bounds = tile_row(g, tile), (tile.clip, tile.zmin, tile.zmax)
         return g
@@ -222,6 +225,11 @@ class RaycastStrategy:
         ``tau`` (px) is the frame's bound; the caster refines to it only when the ``lod`` option asks.
         """
         opts = self._resolved(self.options.updated(**options))
+        if opts.heights != self.options.heights:
+            raise TerrabenchError(
+                f"heights={opts.heights!r} asked of a caster whose tiles are {self.options.heights!r} "
+                "(the tiles' format is fixed when the strategy is made)"
+            )
         mode = self._check_mode(opts)
         prog, vao = self._program(opts, mode, may_start_under(self.hf, view.eye))
         W, H = int(view.width), int(view.height)

@@ -15,9 +15,9 @@ from typing import Any, cast
 
 import numpy as np
 
-from hybrid.gl.context import write_r16ui_level
+from hybrid.gl.context import write_red_level
 from hybrid.terrain.edits import Window
-from hybrid.tiles.quantize import quantize
+from hybrid.tiles.quantize import Quantized, quantize
 
 from .gpu_tile import GpuTile, code_mips
 from .maxmip import texel_windows
@@ -27,7 +27,10 @@ from .tile_params import tile_row
 def follow_tile(gpu: GpuTile, tile, win: Window) -> bool:
     """Bring a resident tile up to date with ``tile`` (the pyramid's tile after the edit) whose samples changed
     over ``win`` (tile-local rows and columns, clipped to the tile); True when only the window was written."""
-    qz = quantize(tile.heights, getattr(tile, "source_step", None))
+    if gpu.fmt == "float32":  # metres as they are: the same meaning whatever the edit
+        qz = Quantized(np.ascontiguousarray(tile.heights, dtype=np.float32), 0.0, 1.0, 0, 0.0)
+    else:
+        qz = quantize(tile.heights, getattr(tile, "source_step", None))
     same = (qz.offset, qz.step, qz.base) == (gpu.offset, gpu.step, gpu.base)
     n, heights = gpu.n, cast(Any, gpu.heights)  # a moderngl texture
     if not (same and win.empty):
@@ -45,13 +48,13 @@ def follow_tile(gpu: GpuTile, tile, win: Window) -> bool:
 
 
 def write_mips(tex, mips, windows=None) -> None:
-    """Write host max-mip levels (``code_mips``: levels 1..log2 N, uint16) into a tile's R16UI max-mip texture,
+    """Write host max-mip levels (``code_mips``: levels 1..log2 N, uint16 or float32) into a tile's max-mip texture,
     level k of the texture from ``mips[k]``: each level whole, or only each level's (r0, r1, c0, c1) texel window
     of ``windows``."""
     for k, m in enumerate(mips):
         r0, r1, c0, c1 = (0, m.shape[0], 0, m.shape[1]) if windows is None else windows[k]
         if r1 > r0 and c1 > c0:
-            write_r16ui_level(tex, k, m[r0:r1, c0:c1], c0, r0)
+            write_red_level(tex, k, m[r0:r1, c0:c1], c0, r0)
 
 
 def _viewport(r0: int, r1: int, c0: int, c1: int) -> tuple[int, int, int, int]:

@@ -4,7 +4,9 @@ A tile is 16-bit height codes (hybrid.tiles.quantize: exact on a 16-bit source's
 the error measured) in an R16UI (N+1)² texture, and its max mipmap of codes without level 0 in an R16UI (N/2)²
 texture (raycast.maxmip). A tile's codes and max mipmap are made on the host (``prepare_heights``: CPU work that
 a tile store's loader thread does ahead of the frame) and put on the GPU as they are (``upload_prepared``: the
-frame's part, two texture uploads); a grid's max mipmap is built on the GPU (``upload_heights``).
+frame's part, two texture uploads); a grid's max mipmap is built on the GPU (``upload_heights``). A tile may
+instead hold float32 metres in R32F textures (``heights='float32'``, raycast.options): the baseline that measures
+what the codes cost.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from hybrid.errors import TerrabenchError
-from hybrid.gl.context import r16ui_mip_texture
+from hybrid.gl.context import red_mip_texture
 from hybrid.tiles.quantize import Quantized, quantize
 
 from .maxmip import level_count, tile_nbytes
@@ -23,8 +25,9 @@ from .maxmip import level_count, tile_nbytes
 
 @dataclass
 class GpuTile:
-    """One tile on the GPU: R16UI (N+1)² height codes and their R16UI (N/2)² max mipmap (levels 1..log2 N);
-    exact byte count; metres = offset + step * (code + base); quant_error: largest |height - dequantised| (m)."""
+    """One tile on the GPU: R16UI (N+1)² height codes and their R16UI (N/2)² max mipmap (levels 1..log2 N), or
+    R32F metres where ``fmt`` is 'float32'; exact byte count; metres = offset + step * (code + base);
+    quant_error: largest |height - dequantised| (m)."""
 
     heights: Any  # moderngl textures
     maxmip: Any
@@ -36,6 +39,7 @@ class GpuTile:
     quant_error: float = 0.0
     row: np.ndarray | None = None  # tile_row of the tile uploaded (None: a grid, not a tile)
     bounds: tuple = ()  # that tile's clip, zmin and zmax, to tell it from a tile drawn in its place
+    fmt: str = "uint16"  # texel format: 'uint16' codes or 'float32' metres (raycast.options.HeightFormat)
 
     @property
     def bytes_per_sample(self) -> float:
@@ -61,7 +65,8 @@ class ShadowGrid:
 
 @dataclass(frozen=True)
 class HostTile:
-    """A tile's ray-cast upload made on the host: its 16-bit codes and their max mipmap (levels 1..log2 N, uint16)."""
+    """A tile's ray-cast upload made on the host: its 16-bit codes and their max mipmap (levels 1..log2 N, uint16),
+    or float32 metres and their max mipmap (codes.q float32, offset 0, step 1)."""
 
     codes: Quantized
     mips: tuple[np.ndarray, ...]
@@ -82,12 +87,13 @@ def _check_tile(heights) -> np.ndarray:
 
 
 def code_mips(q: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Max-mip levels 1..log2 N of (N+1)² uint16 codes (``raycast.maxmip.maxmip_levels(q)[1:]``): level 1 is the
-    largest code of each 3 x 3 samples at stride 2 (its 2 x 2 cells' corners), each next one a 2 x 2 maximum;
-    views of one array made in one compiled pass (``raycast.mip_loops``)."""
+    """Max-mip levels 1..log2 N of (N+1)² uint16 codes or float32 metres (``raycast.maxmip.maxmip_levels(q)[1:]``):
+    level 1 is the largest value of each 3 x 3 samples at stride 2 (its 2 x 2 cells' corners), each next one a
+    2 x 2 maximum; views of one array made in one compiled pass (``raycast.mip_loops``)."""
     from .mip_loops import code_mip_levels
 
-    flat = code_mip_levels(np.ascontiguousarray(q, dtype=np.uint16))
+    q = np.asarray(q)
+    flat = code_mip_levels(np.ascontiguousarray(q, dtype=np.float32 if q.dtype == np.float32 else np.uint16))
     out, start, m = [], 0, (q.shape[0] - 1) // 2
     while m >= 1:
         out.append(flat[start : start + m * m].reshape(m, m))
@@ -95,22 +101,28 @@ def code_mips(q: np.ndarray) -> tuple[np.ndarray, ...]:
     return tuple(out)
 
 
-def prepare_heights(heights, source_step=None) -> HostTile:
-    """A tile's (N+1)² heights (float32 metres relative to origin z) as 16-bit codes (exact on ``source_step``)
-    with their max mipmap, on the host: everything of its upload that needs no GL context."""
+def prepare_heights(heights, source_step=None, fmt: str = "uint16") -> HostTile:
+    """A tile's (N+1)² heights (float32 metres relative to origin z) as 16-bit codes (exact on ``source_step``),
+    or as float32 metres where ``fmt`` is 'float32', with their max mipmap, on the host: everything of its upload
+    that needs no GL context."""
+    if fmt == "float32":
+        h = np.ascontiguousarray(_check_tile(heights))
+        return HostTile(Quantized(h, 0.0, 1.0, 0, 0.0), code_mips(h))
     qz = quantize(_check_tile(heights), source_step)
     q = np.ascontiguousarray(qz.q)
     return HostTile(Quantized(q, qz.offset, qz.step, qz.base, qz.error), code_mips(q))
 
 
 def upload_prepared(ctx, host: HostTile) -> GpuTile:
-    """Put a host-prepared tile on the GPU: its codes and its max mipmap, two textures filled as they are."""
+    """Put a host-prepared tile on the GPU: its codes (or float32 metres) and its max mipmap, two textures filled
+    as they are."""
     qz = host.codes
-    n = qz.q.shape[0] - 1
-    ht = ctx.texture((n + 1, n + 1), 1, qz.q, dtype="u2", alignment=1)
+    n, wide = qz.q.shape[0] - 1, qz.q.dtype == np.float32
+    ht = ctx.texture((n + 1, n + 1), 1, qz.q, dtype="f4" if wide else "u2", alignment=1)
     ht.filter = (ctx.NEAREST, ctx.NEAREST)
-    mm = r16ui_mip_texture(ctx, n // 2, level_count(n) - 1, list(host.mips))
-    return GpuTile(ht, mm, n, tile_nbytes(n), qz.offset, qz.step, qz.base, qz.error)
+    mm = red_mip_texture(ctx, n // 2, level_count(n) - 1, list(host.mips), qz.q.dtype)
+    fmt = "float32" if wide else "uint16"
+    return GpuTile(ht, mm, n, tile_nbytes(n, qz.q.dtype.itemsize), qz.offset, qz.step, qz.base, qz.error, fmt=fmt)
 
 
 def upload_heights(ctx, builder, heights: np.ndarray, source_step=None) -> GpuTile:

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from hybrid.errors import TerrabenchError
-from hybrid.gl.context import r16ui_mip_texture, read_r16ui_level
+from hybrid.gl.context import read_r16ui_level, red_mip_texture
 from hybrid.gl.programs import compute_shader
 from hybrid.terrain.edits import Window
 
@@ -80,24 +80,25 @@ def update_levels(levels: list[np.ndarray], heights, win: Window) -> None:
         levels[k][r0:r1, c0:c1] = below.reshape(m0, 2, m1, 2).max(axis=(1, 3))
 
 
-def maxmip_nbytes(n: int) -> int:
-    """Bytes of the stored R16UI max mipmap of an n-cell tile (levels 1..log2 n): 2 (n²/4 + n²/16 + ... + 1)."""
-    return sum(2 * (n >> l) ** 2 for l in range(1, level_count(n)))
+def maxmip_nbytes(n: int, itemsize: int = 2) -> int:
+    """Bytes of the stored max mipmap of an n-cell tile (levels 1..log2 n) of ``itemsize``-byte texels (2: R16UI
+    codes, 4: R32F metres): itemsize (n²/4 + n²/16 + ... + 1)."""
+    return sum(itemsize * (n >> l) ** 2 for l in range(1, level_count(n)))
 
 
-def heights_nbytes(n: int) -> int:
-    """Bytes of an n-cell tile's R16UI height texture: 2 (n+1)²."""
-    return 2 * (int(n) + 1) ** 2
+def heights_nbytes(n: int, itemsize: int = 2) -> int:
+    """Bytes of an n-cell tile's height texture of ``itemsize``-byte texels: itemsize (n+1)²."""
+    return itemsize * (int(n) + 1) ** 2
 
 
-def tile_nbytes(n: int) -> int:
-    """GPU bytes of one n-cell ray-cast tile: heights and max mipmap."""
-    return heights_nbytes(n) + maxmip_nbytes(n)
+def tile_nbytes(n: int, itemsize: int = 2) -> int:
+    """GPU bytes of one n-cell ray-cast tile of ``itemsize``-byte texels: heights and max mipmap."""
+    return heights_nbytes(n, itemsize) + maxmip_nbytes(n, itemsize)
 
 
-def bytes_per_sample(n: int) -> float:
+def bytes_per_sample(n: int, itemsize: int = 2) -> float:
     """GPU bytes a height sample of an n-cell tile, max mipmap included: tile_nbytes / (n+1)²."""
-    return tile_nbytes(n) / (int(n) + 1) ** 2
+    return tile_nbytes(n, itemsize) / (int(n) + 1) ** 2
 
 
 class MaxMipBuilder:
@@ -110,7 +111,7 @@ class MaxMipBuilder:
 
     def allocate(self, n: int):
         """An R16UI (n/2)² texture with log2(n) mip levels allocated (contents undefined)."""
-        return r16ui_mip_texture(self.ctx, n // 2, level_count(n) - 1)
+        return red_mip_texture(self.ctx, n // 2, level_count(n) - 1)
 
     def build(self, height_tex, n: int, out_tex=None):
         """Fill (or allocate and fill) the max-mip texture of an R16UI (n+1)² height texture; returns it."""

@@ -1,7 +1,7 @@
 #version 430
 // Max-mip level 1 of a tile (texture level 0): texel (i, j) = max of the 3x3 height codes of the 2x2 cells
 // (2i..2i+1, 2j..2j+1). Level 0 (one cell's four corners) is not stored: the traversal takes it from the
-// heights (rc_bound in traverse.glsl).
+// heights (rc_code in traverse.glsl).
 layout(local_size_x = 8, local_size_y = 8) in;
 uniform usampler2D heights;                // R16UI (N+1)², row 0 = south
 uniform ivec2 extent;                     // texels (x, y) to fill from first (a whole level: its side)

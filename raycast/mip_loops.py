@@ -1,4 +1,4 @@
-"""A tile's max mipmap of 16-bit codes on the host, compiled by numba: one pass a level where numpy made a
+"""A tile's max mipmap of 16-bit codes (or float32 heights) on the host, compiled by numba: one pass a level where numpy made a
 temporary array per maximum. Imported where first called, so that a process that never makes one does not load
 numba."""
 
@@ -10,15 +10,15 @@ from numba import njit
 
 @njit(cache=True)
 def code_mip_levels(q):
-    """Max-mip levels 1..log2 N of (N+1)² uint16 codes, level after level in one flat uint16 array (level 1,
-    (N/2)² texels, first): level 1 is the largest code of each 3 x 3 samples at stride 2, each next one a 2 x 2
-    maximum."""
+    """Max-mip levels 1..log2 N of (N+1)² uint16 codes or float32 heights, level after level in one flat array of
+    their dtype (level 1, (N/2)² texels, first): level 1 is the largest value of each 3 x 3 samples at stride 2,
+    each next one a 2 x 2 maximum."""
     n = q.shape[0] - 1
     total, m = 0, n // 2
     while m >= 1:
         total += m * m
         m //= 2
-    out = np.empty(total, np.uint16)
+    out = np.empty(total, q.dtype)
     m = n // 2
     for r in range(m):
         for c in range(m):

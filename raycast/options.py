@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal, get_args
+from typing import ClassVar, Literal, get_args
 
 from hybrid.contract import DrawOptions, check_flags
 from hybrid.errors import TerrabenchError
@@ -14,6 +14,8 @@ CastMode = Literal["texture", "texture_plain", "shaded", "height", "normal", "de
 RECONSTRUCTIONS: tuple[str, ...] = get_args(Reconstruction)
 TRAVERSALS: tuple[str, ...] = get_args(Traversal)
 MODES: tuple[str, ...] = get_args(CastMode)
+HeightFormat = Literal["uint16", "float32"]
+HEIGHT_FORMATS: tuple[str, ...] = get_args(HeightFormat)
 
 
 @dataclass(frozen=True)
@@ -35,7 +37,12 @@ class CastOptions(DrawOptions):
     max_steps: step cap per ray (None = 8 N + 64 for a grid of N cells); capped rays are misses.
     stats: count rays, hits, steps and capped rays per tile, exactly (summed per subgroup, then atomics).
     heat_max: steps mapped to the top of the 'steps' heat map.
+    heights: texel format of a tile's heights and max mipmap: 'uint16' (16-bit codes, hybrid.tiles.quantize;
+      2.67 bytes a sample) or 'float32' (metres as they are, 5.33 bytes a sample: the baseline that measures what
+      the codes cost). Fixed when the strategy is made (``upload_fields``); 'float32' tiles cast no shadows.
     """
+
+    upload_fields: ClassVar[tuple[str, ...]] = ("heights",)
 
     reconstruction: Reconstruction = "triangles"
     traversal: Traversal = "maxmip"
@@ -47,6 +54,7 @@ class CastOptions(DrawOptions):
     max_steps: int | None = None
     stats: bool = True
     heat_max: float = 64.0
+    heights: HeightFormat = "uint16"
 
     def __post_init__(self):
         if self.reconstruction not in RECONSTRUCTIONS:
@@ -60,6 +68,10 @@ class CastOptions(DrawOptions):
         if self.prepass is not None and not isinstance(self.prepass, bool):
             raise TerrabenchError(f"prepass must be True, False or None (the device's default), got {self.prepass!r}")
         check_flags(self, ("shadows", "stats"))
+        if self.heights not in HEIGHT_FORMATS:
+            raise TerrabenchError(f"heights must be one of {', '.join(HEIGHT_FORMATS)}, got {self.heights!r}")
+        if self.heights == "float32" and self.shadows:
+            raise TerrabenchError("shadows need heights='uint16' (the shadow rays' grid is 16-bit codes)")
         if self.occluders is not None and not isinstance(self.occluders, bool):
             raise TerrabenchError(f"occluders must be True, False or None (the renderer's), got {self.occluders!r}")
         if self.lod is not None:

@@ -1,7 +1,7 @@
 #version 430
 // One tile's ray-casting pass: the fragment of a back face of the tile's box casts the pixel-centre ray.
 // Defines (set by raycast.caster): RECON, NAIVE, LOD, PREPASS, STATS, SHADOWS, MODE, OCCLUDERS, UNDER (whether any
-// ray of the view may start under the terrain sheet)
+// ray of the view may start under the terrain sheet), HF32 (tiles of float32 metres)
 // MODE: 0 texture (textureGrad), 1 texture_plain (texture), 2 shaded, 3 height, 4 normal, 5 depth,
 //       6 level, 7 steps
 #if STATS
@@ -21,8 +21,8 @@ uniform vec2 viewport;         // pixels
 uniform float near_plane;      // metres (view depth)
 uniform float far_plane;
 // --- tile ---
-uniform usampler2D hmap;       // R16UI (N+1)² height codes (metres = rc_height(code, dq, dq_base))
-uniform usampler2D mmap;       // R16UI (N/2)², max-mip levels 1..log2 N as texture levels 0..log2 N - 1
+uniform RC_SAMPLER hmap;      // R16UI (N+1)² height codes (metres = rc_height(code, dq, dq_base)); HF32: R32F metres
+uniform RC_SAMPLER mmap;      // the same format (N/2)², max-mip levels 1..log2 N as texture levels 0..log2 N - 1
 #if OCCLUDERS
 uniform sampler2D prior_depth; // reversed-Z depth of what the frame's earlier passes drew (0: nothing)
 uniform vec2 depth_ab;         // (a, b): reversed-Z depth = b / view depth - a
@@ -36,7 +36,7 @@ uniform float heat_max;        // steps at the top of the heat map
 // --- shadows: the whole terrain as one grid ---
 uniform usampler2D g_hmap;
 uniform usampler2D g_mmap;
-uniform dvec2 g_dq;
+uniform vec2 g_dq;
 uniform int g_dq_base;
 uniform int g_cells;
 uniform int g_levels;

@@ -1,7 +1,7 @@
 // One ray-cast tile's parameters, a block of the frame's uniform buffer (std140; raycast.caster.TILE_BLOCK
 // writes it with the same offsets). The box, vertex and pre-pass shaders read the same block.
 layout(std140, binding = TILE_PARAMS_BINDING) uniform TileParams {
-    dvec2 dq;              // (offset, step) metres: height = offset + step * (code + dq_base)
+    vec2 dq;               // (offset, step) metres: height = offset + step * (code + dq_base), float32
     vec3 box_lo;           // box min corner minus eye, metres
     int dq_base;
     vec3 box_hi;           // box max corner minus eye, metres

@@ -40,7 +40,7 @@ TILE_BLOCK = np.dtype(
             "tile_id",
         ],
         "formats": [
-            ("<f8", 2),
+            ("<f4", 2),
             ("<f4", 3),
             "<i4",
             ("<f4", 3),

@@ -9,51 +9,67 @@
 //
 // Heights are 16-bit codes (R16UI, hybrid/tiles/quantize.py): metres = float32(dq.x + dq.y * (q + dqb)). The
 // max mipmap texture holds levels 1..log2 N (its level k is max-mip level k + 1). A level-0 step reads its
-// parent's level-1 code (or the largest of the cell's four corner codes, where exact0: rc_code); steps
-// compare against a float32 upper bound of the code (rc_bound). Maxima are taken on codes: dequantisation is
-// monotone. On a SIMD rasterizer a branch compiled into the loop runs for every lane, so each step makes one fetch.
+// parent's level-1 code (or the largest of the cell's four corner codes, where exact0: rc_code). Maxima are
+// taken on codes: dequantisation is monotone. The traversal runs in code space, z measured in codes
+// (z_c = (z - dq.x) / dq.y - dqb), so a code is its own height and neither a step nor a cell test decodes one:
+// the map is affine in z, so it keeps the ray straight, its parameter t and every fraction along a segment.
+// Only the hit and its cell's corners go back to metres. On a SIMD rasterizer a branch compiled into the loop
+// runs for every lane, so each step makes one fetch and one conversion.
 //
 // Defines: RECON 0 planes (piecewise constant: a cell is a box of its max-mip height), 1 linear approximation
 // planes (Qu 3.1), 2 triangle mesh with the SW-NE diagonal (Qu 3.2), 3 bilinear patch (analytic);
 // NAIVE 1 = step level-0 (or lmin) texels only; LOD 1 = stop descending where the projected texel is small.
+
+// HF32 1: the tile holds float32 metres (R32F) in place of codes: a code is its height, and its bound is itself.
+#if HF32
+#define RC_SAMPLER sampler2D
+#define RC_CODE float
+#define RC_CODE4 vec4
+#else
+#define RC_SAMPLER usampler2D
+#define RC_CODE uint
+#define RC_CODE4 uvec4
+#endif
 
 #define RC_MISS 0
 #define RC_HIT 1
 #define RC_CAPPED 2
 #define RC_FAR 1e30
 
-// Metres (relative to the terrain's origin z) of a height code: offset + step * (q + base) in double, rounded
-// once to float32 as the CPU does, so heights on a source's step (a 16-bit file) come back bit for bit
-// (float32 arithmetic would round k * step differently for about one k in five). `precise`: no fma.
-float rc_height(uint q, dvec2 dq, int dqb) {
-    precise double v = dq.x + dq.y * double(int(q) + dqb);
-    return float(v);
-}
+// Metres (relative to the terrain's origin z) of a height code, in float32: offset + step * (q + base), within
+// a float32 unit or two of the stored heights (the shading's gradients read it; the traversal reads codes).
+float rc_height(uint q, vec2 dq, int dqb) { return dq.x + dq.y * float(int(q) + dqb); }
+float rc_height(float h, vec2 dq, int dqb) { return h; }
 
 // An upper bound (max-mip code) of the heights of texel ri at level l: level l - 1 of the max-mip texture; for a
 // level-0 cell its level-1 parent's (one fetch a step: the cell's own corners are read where the ray enters
 // its parent's box), or, where `exact0`, the largest of its four corner codes. Used for every bound the
 // traversal reads (steps and LOD parents).
-uint rc_code(usampler2D hmap, usampler2D mmap, int l, ivec2 ri, bool exact0) {
+RC_CODE rc_code(RC_SAMPLER hmap, RC_SAMPLER mmap, int l, ivec2 ri, bool exact0) {
     // exact0 is a compile-time false in the caster's common variant (no planes, no ray under the sheet), so
     // the gather is compiled out there: a SIMD rasterizer runs a branch for every lane whenever it is compiled
     if (l == 0 && exact0) {
         // the four corners in one gather: the 2x2 texels around the cell's north-east corner (ri + 1)
-        uvec4 c = textureGather(hmap, (vec2(ri) + 1.0) / vec2(textureSize(hmap, 0)), 0);
+        RC_CODE4 c = textureGather(hmap, (vec2(ri) + 1.0) / vec2(textureSize(hmap, 0)), 0);
         return max(max(c.x, c.y), max(c.z, c.w));
     }
     return texelFetch(mmap, l == 0 ? ri >> 1 : ri, max(l - 1, 0)).r;
 }
 
-// An upper bound (metres) of rc_height(q) in float32 arithmetic, for the traversal's steps: the float
-// evaluation is within a few float32 units of the double one, and the margin (5 units of the terms' size)
-// covers that, so a bound is never below the heights it bounds. The exact height (rc_height) is taken only
-// for the cell a ray may hit.
+// An upper bound (metres) of the height of code q in float32 arithmetic, for the level of detail's distances
+// (which take metres): the float evaluation is within a few float32 units of the stored height, and the margin
+// (5 units of the terms' size) covers that.
 float rc_bound(uint q, vec2 dqf, int dqb) {
     float k = float(int(q) + dqb);
     float v = dqf.x + dqf.y * k;
     return v + 6e-7 * (abs(dqf.x) + abs(dqf.y * k));
 }
+float rc_bound(float h, vec2 dqf, int dqb) { return h; }
+
+// A texel's value as a float: a code (exact: codes are below 2^16; the signed conversion is one instruction
+// where an unsigned one is not), or float32 metres as they are (HF32).
+float rc_val(uint q) { return float(int(q)); }
+float rc_val(float h) { return h; }
 
 // Offset of the point at fraction f of a cell from the interpolating surface of its corners (bilinear).
 float rc_bilin(vec4 hc, vec2 f) {
@@ -148,11 +164,19 @@ bool rc_climbs(vec2 ij, bool cx, bool cy) {
 // (near plane); tmax: largest (RC_FAR: none; a ray stopped there is a miss); lmin: the finest level to descend to; steps: texels visited. under: the ray starts under the
 // terrain sheet (hybrid/gl/edges.glsl): its hit is where it first comes up through the surface (the sheet's
 // underside, as the two-sided reference draws it), found by stepping every lmin texel (no LOD).
-int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int LMAX, vec2 elo, vec2 ext, vec2 zr,
+int rc_traverse(RC_SAMPLER hmap, RC_SAMPLER mmap, vec2 dq, int dqb, int N, int LMAX, vec2 elo, vec2 ext, vec2 zr,
                 vec3 O, vec3 D,
                 float tmin, float tmax, int lmin, vec2 spacing, float lod_k, int max_steps, int outer,
                 bool under, out vec3 hit, out ivec2 cell, out int level, out vec4 hc, out int steps) {
     steps = 0; level = 0; cell = ivec2(0); hit = vec3(0.0); hc = vec4(0.0);
+    // to code space (z only; the step is > 0: a flat tile has step 1); the LOD's distances keep metres
+    vec2 dqf = dq;
+    float zsc = 1.0 / dqf.y, zb = float(dqb);
+    float Oz_m = O.z;
+    vec2 zr_m = zr;
+    O.z = (O.z - dqf.x) * zsc - zb;
+    D.z *= zsc;
+    zr = (zr - dqf.x) * zsc - zb;
     // entry into the box; `face` is the box side the ray enters through (EDGE_W/E/S/N bits, 0 for the top,
     // the bottom or a start inside at tmin). The terrain is a sheet without side walls: a ray on the wrong
     // side of the surface where it enters the box through the terrain's outer boundary, or (under) through
@@ -191,7 +215,7 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
     bool mx = D.x < 0.0, my = D.y < 0.0;
     vec3 P = O + t0 * D;
     if (zentry) P.z = D.z > 0.0 ? zr.x : zr.y;
-    vec3 Om = O;
+    vec3 Om = vec3(O.xy, Oz_m);
     if (mx) { P.x = Nf - P.x; D.x = -D.x; Om.x = Nf - O.x; }
     if (my) { P.y = Nf - P.y; D.y = -D.y; Om.y = Nf - O.y; }
     vec2 lo = vec2(mx ? Nf - ext.x : elo.x, my ? Nf - ext.y : elo.y);
@@ -222,8 +246,7 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
     // per ray: the reciprocal direction and the exit through the bottom or top of the box, which every step shares
     vec2 invD = vec2(D.x > 0.0 ? 1.0 / D.x : 0.0, D.y > 0.0 ? 1.0 / D.y : 0.0);
     float dtz = D.z < 0.0 ? (zr.x - P0.z) / D.z : (D.z > 0.0 ? (zr.y - P0.z) / D.z : RC_FAR);
-    uint mc = 0u;
-    vec2 dqf = vec2(dq);
+    RC_CODE mc = RC_CODE(0);
     vec2 ij, e;
     ivec2 ri;
     bool cx, cy, cz;
@@ -244,13 +267,13 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
                 vec2 pij = floor(ij * 0.5);
                 ivec2 pri = ivec2(mx ? (nl >> 1) - 1 - int(pij.x) : int(pij.x), my ? (nl >> 1) - 1 - int(pij.y) : int(pij.y));
                 float PH = rc_bound(rc_code(hmap, mmap, l + 1, pri, false), dqf, dqb);
-                if (!rc_lod_final(l + 1, pij, PH, Om, zr.x, spacing, lod_k)) break;
+                if (!rc_lod_final(l + 1, pij, PH, Om, zr_m.x, spacing, lod_k)) break;
                 l++; s *= 2.0; ij = pij; nl >>= 1;
             }
 #endif
             ri = ivec2(mx ? nl - 1 - int(ij.x) : int(ij.x), my ? nl - 1 - int(ij.y) : int(ij.y));
             mc = rc_code(hmap, mmap, l, ri, exact0);
-            H = rc_bound(mc, dqf, dqb);
+            H = rc_val(mc);
             e = (ij + 1.0) * s;
             float dtx = D.x > 0.0 ? (e.x - P0.x) * invD.x : RC_FAR;
             float dty = D.y > 0.0 ? (e.y - P0.y) * invD.y : RC_FAR;
@@ -263,7 +286,7 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
             bool boxhit = D.z >= 0.0 ? P.z <= H : X.z <= H;
             bool fin = l <= lmin;
 #if LOD
-            fin = fin || rc_lod_final(l, ij, H, Om, zr.x, spacing, lod_k);
+            fin = fin || rc_lod_final(l, ij, rc_bound(mc, dqf, dqb), Om, zr_m.x, spacing, lod_k);
 #endif
             if (boxhit && fin) { cand = true; break; }
             if (!boxhit && cz) return RC_MISS;
@@ -291,12 +314,11 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
         if (my) { A.y = Nf - A.y; B.y = Nf - B.y; }
         ivec2 c0 = ri * (1 << l);
         int S = 1 << l;
-        vec4 h4 = vec4(rc_height(texelFetch(hmap, c0, 0).r, dq, dqb), rc_height(texelFetch(hmap, c0 + ivec2(S, 0), 0).r, dq, dqb),
-                       rc_height(texelFetch(hmap, c0 + ivec2(0, S), 0).r, dq, dqb),
-                       rc_height(texelFetch(hmap, c0 + ivec2(S, S), 0).r, dq, dqb));
+        vec4 h4 = vec4(rc_val(texelFetch(hmap, c0, 0).r), rc_val(texelFetch(hmap, c0 + ivec2(S, 0), 0).r),
+                       rc_val(texelFetch(hmap, c0 + ivec2(0, S), 0).r), rc_val(texelFetch(hmap, c0 + ivec2(S, S), 0).r));
         // the exact bound, the planes reconstruction's surface: a level-0 cell's own corners (its step read its
         // parent's bound), else the texel's max-mip height
-        H = l == 0 ? max(max(h4.x, h4.y), max(h4.z, h4.w)) : rc_height(mc, dq, dqb);
+        H = l == 0 ? max(max(h4.x, h4.y), max(h4.z, h4.w)) : rc_val(mc);
         // a ray under the sheet crosses it upward: the same test with heights and ray z mirrored (z -> -z)
         float sg = under ? -1.0 : 1.0;
         float u = rc_cell_hit(vec3(A.xy, sg * A.z), vec3(B.xy, sg * B.z), vec2(c0), float(S), sg * h4, sg * H);
@@ -305,7 +327,8 @@ int rc_traverse(usampler2D hmap, usampler2D mmap, dvec2 dq, int dqb, int N, int 
             vec3 Q = mix(A, B, u);
             if (Q.x > ext.x + 1e-4 || Q.y > ext.y + 1e-4) return RC_MISS;   // first hit lies in the padding
             Q.xy = clamp(Q.xy, elo, ext);
-            hit = Q; cell = ri; level = l; hc = h4;
+            Q.z = (Q.z + zb) * dqf.y + dqf.x;   // back to metres
+            hit = Q; cell = ri; level = l; hc = (h4 + zb) * dqf.y + dqf.x;
             return RC_HIT;
         }
         if (cz) return RC_MISS;

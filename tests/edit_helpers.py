@@ -35,7 +35,14 @@ def assert_draws_as_fresh(ctx, r: Renderer, ref: ReferenceRenderer, views, befor
     tile_size = r.pyramid.n
     with (
         Renderer(
-            ctx, fresh_hf, r.policy, tile_size=tile_size, adapt=False, cost_model=r.model, reuse_choice=1
+            ctx,
+            fresh_hf,
+            r.policy,
+            tile_size=tile_size,
+            adapt=False,
+            cost_model=r.model,
+            reuse_choice=1,
+            strategy_options=r.options,  # the same tile formats and draw options
         ) as fresh,
         ReferenceRenderer(ctx, fresh_hf) as fresh_ref,
     ):

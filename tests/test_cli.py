@@ -127,4 +127,4 @@ def test_bench_tables_are_dataframes(ctx):
     tables = run(ctx, frames=1, dataset="fbm", width=48, height=32)
     ((title, df),) = tables.items()
     assert "ray caster on fbm" in title
-    assert list(df["config"]) == ["naive", "maxmip", "maxmip+prepass"] and (df["steps/ray"] > 0).all()
+    assert list(df["config"]) == ["naive", "maxmip", "maxmip+prepass", "maxmip float32"] and (df["steps/ray"] > 0).all()

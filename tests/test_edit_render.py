@@ -13,8 +13,11 @@ from hybrid.terrain.edits import Crater, Raise
 SIZE = (320, 180)
 
 
-@pytest.mark.parametrize("policy", ["raster", "raster_gs", "raycast", "hybrid"])
-def test_strategies_follow_edits_across_tile_borders(ctx, policy):
+@pytest.mark.parametrize(
+    ("policy", "options"),
+    [("raster", {}), ("raster_gs", {}), ("raycast", {}), ("raycast", {"heights": "float32"}), ("hybrid", {})],
+)
+def test_strategies_follow_edits_across_tile_borders(ctx, policy, options):
     hf = copy_terrain(puget(size=257))
     ox, oy, _ = hf.origin
     edits = [
@@ -23,7 +26,8 @@ def test_strategies_follow_edits_across_tile_borders(ctx, policy):
     ]  # on a tile border
     fly = preset("flyover", hf, 6, *SIZE)
     views = [fly.view(1), fly.view(3)]
-    r = Renderer(ctx, hf, policy, tile_size=64, adapt=False, reuse_choice=1)  # every frame planned: features compared
+    # every frame planned: features compared
+    r = Renderer(ctx, hf, policy, tile_size=64, adapt=False, reuse_choice=1, **options)
     ref = ReferenceRenderer(ctx, hf)
     editor = TerrainEditor(ctx, hf, r, ref)
     try:

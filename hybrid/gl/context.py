@@ -249,32 +249,43 @@ _BYTES_PER_TEXEL = {
 # R32F RGBA8 RGB8 R32UI DEPTH32F DEPTH24 R8 R16F RGBA32F RGB32F RG32F R16UI
 
 
-def r16ui_mip_texture(ctx, size: int, levels: int, data: list[np.ndarray] | None = None):
-    """A size x size R16UI texture with ``levels`` mip levels allocated, NEAREST filtered: filled from ``data``
-    (one C-contiguous uint16 array per level, level 0 first), else with contents undefined.
+# single-channel texel formats of max-mip textures: numpy dtype -> (moderngl dtype, internal format, format, type)
+RED_FORMATS = {
+    np.dtype(np.uint16): ("u2", 0x8234, 0x8D94, 0x1403),  # R16UI, RED_INTEGER, UNSIGNED_SHORT
+    np.dtype(np.float32): ("f4", 0x822E, 0x1903, 0x1406),  # R32F, RED, FLOAT
+}
+
+
+def _red_format(dtype) -> tuple[str, int, int, int]:
+    """(moderngl dtype, internal format, format, type) of a single-channel texel dtype, else refused."""
+    fmt = RED_FORMATS.get(np.dtype(dtype))
+    if fmt is None:
+        raise TerrabenchError(f"mip textures hold uint16 or float32 texels, got {np.dtype(dtype)}")
+    return fmt
+
+
+def red_mip_texture(ctx, size: int, levels: int, data: list[np.ndarray] | None = None, dtype=np.uint16):
+    """A size x size single-channel texture (R16UI for uint16, R32F for float32) with ``levels`` mip levels
+    allocated, NEAREST filtered: filled from ``data`` (one C-contiguous array of ``dtype`` per level, level 0
+    first), else with contents undefined.
 
     moderngl allocates only level 0 and cannot build mipmaps of integer textures (glGenerateMipmap refuses
-    them), so the coarser levels are specified through the driver directly.
+    them, and would average floats), so the coarser levels are specified through the driver directly.
     """
-    tex = ctx.texture((int(size), int(size)), 1, None if data is None else data[0], dtype="u2", alignment=1)
+    mgl, internal, fmt, typ = _red_format(dtype)
+    tex = ctx.texture((int(size), int(size)), 1, None if data is None else data[0], dtype=mgl, alignment=1)
     u, i = ctypes.c_uint, ctypes.c_int
     bind = _gl_function(b"glBindTexture", u, u)
     image = _gl_function(b"glTexImage2D", u, i, i, i, i, i, u, u, ctypes.c_void_p)
     param = _gl_function(b"glTexParameteri", u, u, i)
     if data is not None:
         _gl_function(b"glPixelStorei", u, i)(0x0CF5, 1)  # GL_UNPACK_ALIGNMENT: rows of any width
-    GL_TEXTURE_2D, GL_R16UI, GL_RED_INTEGER, GL_UNSIGNED_SHORT, GL_TEXTURE_MAX_LEVEL = (
-        0x0DE1,
-        0x8234,
-        0x8D94,
-        0x1403,
-        0x813D,
-    )
+    GL_TEXTURE_2D, GL_TEXTURE_MAX_LEVEL = 0x0DE1, 0x813D
     bind(GL_TEXTURE_2D, tex.glo)
     for level in range(1, int(levels)):
         m = max(int(size) >> level, 1)
-        pixels = None if data is None else _level_pixels(data[level], m)
-        image(GL_TEXTURE_2D, level, GL_R16UI, m, m, 0, GL_RED_INTEGER, GL_UNSIGNED_SHORT, pixels)
+        pixels = None if data is None else _level_pixels(data[level], m, dtype)
+        image(GL_TEXTURE_2D, level, internal, m, m, 0, fmt, typ, pixels)
     param(GL_TEXTURE_2D, GL_TEXTURE_MAX_LEVEL, int(levels) - 1)
     bind(GL_TEXTURE_2D, 0)
     tex.filter = (ctx.NEAREST_MIPMAP_NEAREST if levels > 1 else ctx.NEAREST, ctx.NEAREST)
@@ -282,23 +293,26 @@ def r16ui_mip_texture(ctx, size: int, levels: int, data: list[np.ndarray] | None
     return tex
 
 
-def _level_pixels(a: np.ndarray, m: int):
-    """The address of one mip level's m x m uint16 codes (refused if they are not that, C-contiguous)."""
-    if a.dtype != np.uint16 or a.shape != (m, m) or not a.flags.c_contiguous:
-        raise TerrabenchError(f"mip level data must be C-contiguous uint16 ({m}, {m}), got {a.dtype} {a.shape}")
+def _level_pixels(a: np.ndarray, m: int, dtype):
+    """The address of one mip level's m x m texels (refused if they are not that, C-contiguous ``dtype``)."""
+    if a.dtype != np.dtype(dtype) or a.shape != (m, m) or not a.flags.c_contiguous:
+        raise TerrabenchError(
+            f"mip level data must be C-contiguous {np.dtype(dtype)} ({m}, {m}), got {a.dtype} {a.shape}"
+        )
     return a.ctypes.data
 
 
-def write_r16ui_level(tex, level: int, codes: np.ndarray, x: int = 0, y: int = 0) -> None:
-    """Write uint16 codes (rows, columns) into one mip level of an R16UI texture, its texel (x, y) first
-    (glTextureSubImage2D: moderngl writes only the levels it allocated itself)."""
-    a = np.ascontiguousarray(codes, dtype=np.uint16)
+def write_red_level(tex, level: int, values: np.ndarray, x: int = 0, y: int = 0) -> None:
+    """Write uint16 codes or float32 heights (rows, columns) into one mip level of an R16UI or R32F texture, its
+    texel (x, y) first (glTextureSubImage2D: moderngl writes only the levels it allocated itself)."""
+    a = np.ascontiguousarray(values)
+    _, _, fmt, typ = _red_format(a.dtype)
     if a.ndim != 2:
-        raise TerrabenchError(f"mip level codes must be 2-D, got shape {a.shape}")
+        raise TerrabenchError(f"mip level texels must be 2-D, got shape {a.shape}")
     u, i = ctypes.c_uint, ctypes.c_int
     _gl_function(b"glPixelStorei", u, i)(0x0CF5, 1)  # GL_UNPACK_ALIGNMENT: rows of any width
     sub = _gl_function(b"glTextureSubImage2D", u, i, i, i, i, i, u, u, ctypes.c_void_p)
-    sub(tex.glo, int(level), int(x), int(y), a.shape[1], a.shape[0], 0x8D94, 0x1403, a.ctypes.data)
+    sub(tex.glo, int(level), int(x), int(y), a.shape[1], a.shape[0], fmt, typ, a.ctypes.data)
 
 
 def read_r16ui_level(tex, level: int) -> np.ndarray:
