@@ -246,6 +246,8 @@ int rc_traverse(RC_SAMPLER hmap, RC_SAMPLER mmap, vec2 dq, int dqb, int N, int L
     // per ray: the reciprocal direction and the exit through the bottom or top of the box, which every step shares
     vec2 invD = vec2(D.x > 0.0 ? 1.0 / D.x : 0.0, D.y > 0.0 ? 1.0 / D.y : 0.0);
     float dtz = D.z < 0.0 ? (zr.x - P0.z) / D.z : (D.z > 0.0 ? (zr.y - P0.z) / D.z : RC_FAR);
+    float invDz = D.z < 0.0 ? 1.0 / D.z : 0.0;     // the descent's division, as a product
+    float ztop = D.z >= 0.0 ? zr.y : RC_FAR;        // a rising ray above the box has left it
     RC_CODE mc = RC_CODE(0);
     vec2 ij, e;
     ivec2 ri;
@@ -254,9 +256,7 @@ int rc_traverse(RC_SAMPLER hmap, RC_SAMPLER mmap, vec2 dq, int dqb, int N, int L
     for (;;) {
         bool cand = false;
         while (steps < max_steps) {
-            if (P.x >= hi.x || P.y >= hi.y) return RC_MISS;
-            if (D.z >= 0.0 && P.z > zr.y) return RC_MISS;
-            if (sP > s_max) return RC_MISS;
+            if (P.x >= hi.x || P.y >= hi.y || P.z > ztop || sP > s_max) return RC_MISS;
             steps++;
             s = float(1 << l);
             ij = floor(ldexp(P.xy, ivec2(-l)));
@@ -293,7 +293,7 @@ int rc_traverse(RC_SAMPLER hmap, RC_SAMPLER mmap, vec2 dq, int dqb, int N, int L
             // one step, with selects rather than branches (a SIMD rasterizer runs every branch for every lane):
             // where the box is hit, descend a level (down to where the ray meets the box's top, if later); else
             // move to the exit X and, leaving through an even-level border, ascend
-            float sa = D.z < 0.0 ? (H - P0.z) / D.z : -1.0;
+            float sa = D.z < 0.0 ? (H - P0.z) * invDz : -1.0;
             bool adv = boxhit && sa > sP;
             vec3 Pa = P0 + sa * D;
             Pa.xy = min(Pa.xy, e);
