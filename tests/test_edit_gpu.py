@@ -80,3 +80,19 @@ def test_gpu_brush_crossing_tile_borders_changes_its_window_only(ctx, hf):
     assert changed[:, 1].min() >= win.j0 and changed[:, 1].max() < win.j1
     # both sides of the border at row 16 moved: an edit across tiles is one surface
     assert np.abs(hf.heights[15:18, 30:34] - before[15:18, 30:34]).min() > 1.0
+
+
+@pytest.mark.parametrize(("limit", "count"), [(24, 9), (33, 4), (64, 4), (65, 1)])
+def test_height_blocks_tile_the_grid_without_overlap(ctx, hf, limit, count):
+    gpu = GpuHeights(ctx, hf, limit)
+    try:
+        assert len(gpu.blocks) == count
+        held = np.zeros(hf.heights.shape, np.int64)
+        for b in gpu.blocks:
+            assert b.rows <= limit and b.cols <= limit
+            held[b.i0 : b.i0 + b.rows, b.j0 : b.j0 + b.cols] += 1
+        assert (held == 1).all()  # every sample in exactly one block
+        assert gpu.nbytes == 4 * hf.heights.size + gpu.brushes.nbytes  # float32 a sample, nothing held twice
+        np.testing.assert_array_equal(gpu.read(), hf.heights)
+    finally:
+        gpu.release()

@@ -4,16 +4,21 @@
 // brush reads its neighbours' heights before the edit. SNAPSHOT 0: the brush itself, each texel from the scratch
 // copy, or from itself where the brush reads its own texel only (direct: all but smooth), in the CPU
 // reference's float32 order of operations (precise: no fused ops).
-// The grid may be held in blocks (textures of at most the GL's size limit): each dispatch reads and writes one
-// block, texel = sample - origin, and leaves the samples outside it to the other blocks' dispatches.
+// The grid may be held in blocks (textures of at most the GL's size limit): a dispatch reads and writes up to
+// four blocks (BLOCKS_PER_PASS), texel = sample - origin, and leaves samples outside them to other dispatches.
 layout(local_size_x = 8, local_size_y = 8) in;
-layout(r32f, binding = 0) uniform image2D heights;     // the grid, texel (j, i) = sample (i, j), row 0 = south
+// the dispatch's blocks of the grid, texel (j, i) = sample (i, j) - origin, row 0 = south (unused units repeat one)
+layout(r32f, binding = 0) uniform image2D heights0;
+layout(r32f, binding = 2) uniform image2D heights1;
+layout(r32f, binding = 3) uniform image2D heights2;
+layout(r32f, binding = 4) uniform image2D heights3;
 layout(r32f, binding = 1) uniform image2D scratch;     // the window grown by one sample
 uniform ivec2 win0;                                    // first (column, row) of the window
 uniform ivec2 win_size;                                // (columns, rows) of the window
 uniform ivec2 grid;                                    // (columns, rows) of the grid
-uniform ivec2 origin;                                  // the block's first (column, row) in the grid
-uniform ivec2 block;                                   // the block's (columns, rows)
+uniform ivec2 origins[4];                              // each block's first (column, row) in the grid
+uniform ivec2 blocks[4];                               // each block's (columns, rows)
+uniform int nblocks;                                   // blocks of this dispatch (1 to 4)
 uniform vec2 centre;                                   // (cj, ci): the brush centre in fractional samples
 uniform vec2 spacing;                                  // (sx, sy) metres between samples
 uniform float radius2;                                 // radius² (m²)
@@ -33,19 +38,46 @@ float crater(float q, float depth) {
     return bowl + ring;
 }
 
+// Whether the dispatch's block k holds grid sample g (column, row), and g's texel there. Where blocks share
+// samples, every block holding one is written, and each holds the same height there.
+bool holds(int k, ivec2 g, out ivec2 texel) {
+    texel = g - origins[k];
+    return k < nblocks && all(greaterThanEqual(texel, ivec2(0))) && all(lessThan(texel, blocks[k]));
+}
+
+float load_height(int k, ivec2 t) {
+    if (k == 0) return imageLoad(heights0, t).r;
+    if (k == 1) return imageLoad(heights1, t).r;
+    if (k == 2) return imageLoad(heights2, t).r;
+    return imageLoad(heights3, t).r;
+}
+
+void store_height(int k, ivec2 t, float h) {
+    if (k == 0) imageStore(heights0, t, vec4(h));
+    else if (k == 1) imageStore(heights1, t, vec4(h));
+    else if (k == 2) imageStore(heights2, t, vec4(h));
+    else imageStore(heights3, t, vec4(h));
+}
+
 void main() {
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
 #if SNAPSHOT
     if (p.x >= win_size.x + 2 || p.y >= win_size.y + 2) return;
-    ivec2 src = clamp(win0 - 1 + p, ivec2(0), grid - 1) - origin;
-    if (any(lessThan(src, ivec2(0))) || any(greaterThanEqual(src, block))) return;
-    imageStore(scratch, p, imageLoad(heights, src));
+    ivec2 g = clamp(win0 - 1 + p, ivec2(0), grid - 1), src;
+    for (int k = 0; k < 4; k++) {
+        if (holds(k, g, src)) {
+            imageStore(scratch, p, vec4(load_height(k, src)));
+            break;
+        }
+    }
 #else
     if (p.x >= win_size.x || p.y >= win_size.y) return;
-    ivec2 texel = win0 + p - origin;
-    if (any(lessThan(texel, ivec2(0))) || any(greaterThanEqual(texel, block))) return;
+    ivec2 texel;
+    int k = 0;
+    while (k < 4 && !holds(k, win0 + p, texel)) k++;
+    if (k == 4) return;                                 // another dispatch's blocks hold it
     ivec2 s = p + 1;                                    // this sample in the scratch image
-    precise float old = direct ? imageLoad(heights, texel).r : imageLoad(scratch, s).r;
+    precise float old = direct ? load_height(k, texel) : imageLoad(scratch, s).r;
     vec2 ij = vec2(win0 + p);
     precise float dx = (ij.x - centre.x) * spacing.x;
     precise float dy = (ij.y - centre.y) * spacing.y;
@@ -66,6 +98,7 @@ void main() {
     } else {
         h = old + crater(sqrt(t), strength);
     }
-    imageStore(heights, texel, vec4(h));
+    for (int b = 0; b < 4; b++)
+        if (holds(b, win0 + p, texel)) store_height(b, texel, h);
 #endif
 }

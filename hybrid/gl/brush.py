@@ -3,8 +3,8 @@
 ``GpuHeights`` holds a terrain's full-resolution heights (metres, relative to the origin z) in R32F textures,
 texel (j, i) = sample (i, j), rows south to north: one texture where the grid fits the GL's size limit, else
 blocks of equal size that tile the grid without overlap (``HeightBlock``), so that a grid of any size is edited.
-``BrushPass`` applies a brush (``hybrid.terrain.edits``) in place with a compute dispatch a block the touched
-window meets, in the CPU reference's float32 arithmetic; the smooth brush, which reads its neighbours, first
+``BrushPass`` applies a brush (``hybrid.terrain.edits``) in place with one compute dispatch for up to four of the
+blocks the touched window meets, in the CPU reference's float32 arithmetic; the smooth brush, which reads its neighbours, first
 snapshots the window grown by one sample into one scratch image and reads that, so that across block borders it
 reads the heights before the edit, as in one texture. ``edit`` runs it and then writes the window back to the
 height field's CPU array (write-through: the GPU changes first, the CPU copy follows).
@@ -66,12 +66,13 @@ def block_starts(n: int, limit: int) -> list[int]:
 
 
 def height_blocks(ctx, heights: np.ndarray, limit: int) -> list[HeightBlock]:
-    """R32F textures of float32 heights (rows, cols), in blocks of at most ``limit`` texels a side."""
+    """R32F textures of float32 heights (rows, cols), in blocks of at most ``limit`` texels a side that tile the grid
+    without overlap (``block_starts``)."""
     rows, cols = heights.shape
     out = []
-    for i0 in block_starts(rows, limit):
-        for j0 in block_starts(cols, limit):
-            i1, j1 = min(i0 + limit, rows), min(j0 + limit, cols)
+    row_starts, col_starts = block_starts(rows, limit), block_starts(cols, limit)
+    for i0, i1 in zip(row_starts, [*row_starts[1:], rows], strict=True):
+        for j0, j1 in zip(col_starts, [*col_starts[1:], cols], strict=True):
             r, c = i1 - i0, j1 - j0
             part = np.ascontiguousarray(heights[i0:i1, j0:j1], dtype=np.float32)
             tex = ctx.texture((c, r), 1, part.tobytes(), dtype="f4")
@@ -92,6 +93,21 @@ def read_blocks(blocks: list[HeightBlock], win: Window) -> np.ndarray:
             b.texture, local
         )
     return out
+
+
+BLOCKS_PER_PASS = 4  # height blocks one brush dispatch reads and writes (brush.comp.glsl's image units)
+BLOCK_UNITS = (0, 2, 3, 4)  # their image units (1 is the scratch image)
+
+
+def _bind_blocks(prog, batch: list[HeightBlock]) -> None:
+    """Bind up to four height blocks to the brush program's image units, with their origins and sizes (units
+    past the batch repeat its first block, which the shader never selects for them)."""
+    for unit, b in zip(BLOCK_UNITS, batch + batch[:1] * (BLOCKS_PER_PASS - len(batch)), strict=True):
+        b.texture.bind_to_image(unit, read=True, write=True)
+    pad = [(0, 0)] * (BLOCKS_PER_PASS - len(batch))
+    prog["origins"].write(np.array([(b.j0, b.i0) for b in batch] + pad, dtype=np.int32).tobytes())
+    prog["blocks"].write(np.array([(b.cols, b.rows) for b in batch] + pad, dtype=np.int32).tobytes())
+    prog["nblocks"].value = len(batch)
 
 
 class BrushPass:
@@ -138,13 +154,14 @@ class BrushPass:
         passes = [(self.snapshot, grown, 2)] if p.code == KINDS["smooth"] else []  # only smooth reads neighbours
         values["direct"] = not passes
         for prog, reach, extra in (*passes, (self.brush, win, 0)):
-            for b in blocks:  # the snapshot whole before any block is brushed: borders read the old heights
-                if b.part(reach).empty:  # the window, or the samples its snapshot reads, clamped to the grid
-                    continue
-                for k, v in {**values, "origin": (b.j0, b.i0), "block": (b.cols, b.rows)}.items():
-                    if k in prog:
-                        prog[k].value = v
-                b.texture.bind_to_image(0, read=True, write=True)
+            for k, v in values.items():
+                if k in prog:
+                    prog[k].value = v
+            # the blocks the window (or the samples its snapshot reads, clamped to the grid) meets, up to four a
+            # dispatch; the snapshot whole before any block is brushed: borders read the old heights
+            met = [b for b in blocks if not b.part(reach).empty]
+            for first in range(0, len(met), BLOCKS_PER_PASS):
+                _bind_blocks(prog, met[first : first + BLOCKS_PER_PASS])
                 prog.run(-(-(size[0] + extra) // GROUP), -(-(size[1] + extra) // GROUP), 1)
             self.ctx.memory_barrier()
         return win
