@@ -21,7 +21,7 @@ import numpy as np
 
 from hybrid.terrain.edits import Window
 from hybrid.tiles.bounds import BLOCK_CELLS, _reduce
-from hybrid.tiles.quantize import Q_MAX, error_bound, on_step_cells
+from hybrid.tiles.quantize import _HALF_ULP, Q_MAX, on_step_cells
 
 Touched = list[tuple[range, range]]
 """Per level, (rows ty, columns tx) of the tiles an edit touched (``touched_tiles``)."""
@@ -101,24 +101,28 @@ def edit_bounds(h: np.ndarray, n: int, a: LevelArrays, blocks: DeviationBlocks, 
             i0, i1, j0, j1 = _tile_cells(h, n, 0, ty, tx)
             sub = h[i0 : i1 + 1, j0 : j1 + 1]
             a.zmax[0][ty, tx], a.zmin[0][ty, tx] = sub.max(), sub.min()  # every sample is some cell's corner
+    from .pyramid_edit_loops import follow_level_bounds
+
+    w = np.array([win.i0, win.i1, win.j0, win.j1], dtype=np.int64)
     for level in range(1, len(touched)):
-        k, dev, sup, s = 1 << level, blocks.dev[level], blocks.sup[level], blocks.s
-        # block a depends on samples [a k, (a + 1) k] only (its last sample's surface gives the next coarse
-        # cell's far corner weight 0): the blocks whose closed range meets the window
-        a0, a1 = max((win.i0 - 1) // k, 0), min((win.i1 - 1) // k + 1, dev.shape[0])
-        b0, b1 = max((win.j0 - 1) // k, 0), min((win.j1 - 1) // k + 1, dev.shape[1])
-        dev[a0:a1, b0:b1] = _deviation_blocks(h, k, a0, a1, b0, b1)
-        r0, r1, c0, c1 = a0 // s, -(-a1 // s), b0 // s, -(-b1 // s)
-        sup[r0:r1, c0:c1] = _reduce(dev[r0 * s : r1 * s, c0 * s : c1 * s], s, np.maximum)
-        m = n // s  # super-blocks a tile side
         rows, cols = touched[level]
-        for ty in rows:
-            for tx in cols:
-                kids = (slice(ty * k, (ty + 1) * k), slice(tx * k, (tx + 1) * k))
-                a.zmax[level][ty, tx], a.zmin[level][ty, tx] = a.zmax[0][kids].max(), a.zmin[0][kids].min()
-                mine = sup[ty * m : (ty + 1) * m, tx * m : (tx + 1) * m].max()
-                below = a.err[level - 1][2 * ty : 2 * ty + 2, 2 * tx : 2 * tx + 2].max()
-                a.err[level][ty, tx] = max(mine, below)
+        tiles = np.array([rows.start, rows.stop, cols.start, cols.stop], dtype=np.int64)
+        follow_level_bounds(
+            h,
+            1 << level,
+            w,
+            blocks.dev[level],
+            blocks.sup[level],
+            blocks.s,
+            tiles,
+            a.zmax[0],
+            a.zmin[0],
+            a.zmax[level],
+            a.zmin[level],
+            a.err[level],
+            a.err[level - 1],
+            n // blocks.s,
+        )
 
 
 def follow_on_step(on_step: np.ndarray, h: np.ndarray, step, win: Window) -> None:
@@ -147,13 +151,6 @@ def follow_on_tiles(on_tiles: dict, h: np.ndarray, n: int, on_step, touched: Tou
                     flags[ty, tx] = below[2 * ty : 2 * ty + 2, 2 * tx : 2 * tx + 2].all()
 
 
-def tile_qerr(lo: float, hi: float, step, on_tile: bool) -> float:
-    """One tile's quantisation bound (lo, hi its bounds in metres; ``on_tile``: every cell it covers on the source
-    step), as ``TilePyramid.quantization_errors_at`` computes every tile's."""
-    exact = step is not None and on_tile and (float(hi) - float(lo)) / float(step[0]) <= Q_MAX - 0.5
-    return float(error_bound(lo, hi, exact))
-
-
 def follow_caches(pyramid: Any, caches: dict[str, Any], win: Window, touched: Touched) -> None:
     """Bring the pyramid's per-level caches made on first use up to date over the touched tiles, in place
     (``caches``: its ``qerr``, ``boxes`` and ``tables`` per level and its ``on_step`` flags, or None)."""
@@ -162,21 +159,36 @@ def follow_caches(pyramid: Any, caches: dict[str, Any], win: Window, touched: To
         follow_on_step(on_step, h, step, win)
     on_tiles = caches["on_tiles"]
     follow_on_tiles(on_tiles, h, n, on_step, touched)
+    from .pyramid_edit_loops import follow_level_caches
+
+    hf = pyramid.hf
+    ox, oy, oz = (float(v) for v in hf.origin)
+    x_end, y_end = ox + (hf.cols - 1) * hf.spacing_x, oy + (hf.rows - 1) * hf.spacing_y
+    q = np.array([float(Q_MAX), _HALF_ULP])
+    none = np.zeros((0, 0))
     for level, (rows, cols) in enumerate(touched):
-        keys = [(ty, tx) for ty in rows for tx in cols]
-        if not keys:
+        if not (len(rows) and len(cols)):
             continue
-        ty, tx = (np.array(a, dtype=np.int64) for a in zip(*keys, strict=True))
-        if level in caches["qerr"]:
-            zmin, zmax, _ = pyramid.level_arrays(level)
-            on = on_tiles.get(level)
-            caches["qerr"][level][ty, tx] = [
-                tile_qerr(zmin[a, b], zmax[a, b], step, on is not None and bool(on[a, b])) for a, b in keys
-            ]
-        if level in caches["boxes"]:
-            lo, hi = pyramid.aabbs(np.full(ty.size, level), tx, ty)
-            caches["boxes"][level][0][ty, tx], caches["boxes"][level][1][ty, tx] = lo, hi
-        if level in caches["tables"]:
-            lo, hi = pyramid.boxes_at(level, tx, ty)
-            e = pyramid.errors_at(level, tx, ty) + pyramid.quantization_errors_at(level, tx, ty)
-            caches["tables"][level][ty, tx] = np.concatenate([lo, hi, e[:, None]], axis=1)
+        tables = caches["tables"].get(level)
+        if tables is not None:  # the table reads the level's boxes and bounds: made whole where not yet
+            pyramid.boxes_at(level, np.zeros(1, np.int64), np.zeros(1, np.int64))
+            pyramid.quantization_errors_at(level, np.zeros(1, np.int64), np.zeros(1, np.int64))
+        boxes = caches["boxes"].get(level)
+        zmin, zmax, err = pyramid.level_arrays(level)
+        on = on_tiles.get(level)
+        cells = pyramid.n << level
+        geo = np.array([ox, oy, oz, cells * hf.spacing_x, cells * hf.spacing_y, x_end, y_end])
+        follow_level_caches(
+            np.array([rows.start, rows.stop, cols.start, cols.stop], dtype=np.int64),
+            geo,
+            zmin,
+            zmax,
+            err,
+            np.zeros((0, 0), np.bool_) if on is None else on,
+            float(step[0]) if step is not None else -1.0,
+            q,
+            caches["qerr"].get(level, none),
+            none.reshape(0, 0, 3) if boxes is None else boxes[0],
+            none.reshape(0, 0, 3) if boxes is None else boxes[1],
+            none.reshape(0, 0, 7) if tables is None else tables,
+        )
