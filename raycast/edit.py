@@ -17,9 +17,9 @@ import numpy as np
 
 from hybrid.gl.context import write_red_level
 from hybrid.terrain.edits import Window
-from hybrid.tiles.quantize import Quantized, quantize
+from hybrid.tiles.quantize import quantize
 
-from .gpu_tile import GpuTile, code_mips
+from .gpu_tile import GpuTile, code_mips, metres_as_codes
 from .maxmip import texel_windows
 from .tile_params import tile_row
 
@@ -28,7 +28,7 @@ def follow_tile(gpu: GpuTile, tile, win: Window) -> bool:
     """Bring a resident tile up to date with ``tile`` (the pyramid's tile after the edit) whose samples changed
     over ``win`` (tile-local rows and columns, clipped to the tile); True when only the window was written."""
     if gpu.fmt == "float32":  # metres as they are: the same meaning whatever the edit
-        qz = Quantized(np.ascontiguousarray(tile.heights, dtype=np.float32), 0.0, 1.0, 0, 0.0)
+        qz = metres_as_codes(tile.heights)
     else:
         qz = quantize(tile.heights, getattr(tile, "source_step", None))
     same = (qz.offset, qz.step, qz.base) == (gpu.offset, gpu.step, gpu.base)

@@ -101,13 +101,19 @@ def code_mips(q: np.ndarray) -> tuple[np.ndarray, ...]:
     return tuple(out)
 
 
+def metres_as_codes(heights) -> Quantized:
+    """A tile's float32 heights (metres relative to origin z) as the 'codes' of a float32 tile: the metres
+    themselves, offset 0, step 1, exact."""
+    return Quantized(np.ascontiguousarray(heights, dtype=np.float32), 0.0, 1.0, 0, 0.0)
+
+
 def prepare_heights(heights, source_step=None, fmt: str = "uint16") -> HostTile:
     """A tile's (N+1)² heights (float32 metres relative to origin z) as 16-bit codes (exact on ``source_step``),
     or as float32 metres where ``fmt`` is 'float32', with their max mipmap, on the host: everything of its upload
     that needs no GL context."""
     if fmt == "float32":
-        h = np.ascontiguousarray(_check_tile(heights))
-        return HostTile(Quantized(h, 0.0, 1.0, 0, 0.0), code_mips(h))
+        qf = metres_as_codes(_check_tile(heights))
+        return HostTile(qf, code_mips(qf.q))
     qz = quantize(_check_tile(heights), source_step)
     q = np.ascontiguousarray(qz.q)
     return HostTile(Quantized(q, qz.offset, qz.step, qz.base, qz.error), code_mips(q))

@@ -38,8 +38,7 @@ float crater(float q, float depth) {
     return bowl + ring;
 }
 
-// Whether the dispatch's block k holds grid sample g (column, row), and g's texel there. Where blocks share
-// samples, every block holding one is written, and each holds the same height there.
+// Whether the dispatch's block k holds grid sample g (column, row), and g's texel there (blocks do not overlap).
 bool holds(int k, ivec2 g, out ivec2 texel) {
     texel = g - origins[k];
     return k < nblocks && all(greaterThanEqual(texel, ivec2(0))) && all(lessThan(texel, blocks[k]));
@@ -98,7 +97,6 @@ void main() {
     } else {
         h = old + crater(sqrt(t), strength);
     }
-    for (int b = 0; b < 4; b++)
-        if (holds(b, win0 + p, texel)) store_height(b, texel, h);
+    store_height(k, texel, h);
 #endif
 }

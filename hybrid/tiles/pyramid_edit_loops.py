@@ -37,7 +37,7 @@ def follow_level_bounds(h, k, win, dev, sup, s, tiles, zmax0, zmin0, zmax, zmin,
 
 @njit(cache=True)
 def tile_qerr(lo, hi, step, on_tile, q_max, half_ulp):
-    """One tile's quantisation bound (``hybrid.tiles.pyramid_edit.tile_qerr``, ``quantize.error_bound``'s
+    """One tile's quantisation bound, as ``TilePyramid.quantization_errors_at`` makes it (``quantize.error_bound``'s
     arithmetic): lo, hi its bounds (float32 metres), step the source step (<= 0: none), on_tile whether every cell
     it covers is on that step."""
     lo, hi = np.float64(lo), np.float64(hi)
