@@ -3,48 +3,85 @@
 A tile's 16-bit codes (``hybrid.tiles.quantize``) keep their meaning while the tile's offset, step and base stay
 the same: then only the codes of the changed samples are written and only the max-mip texels over them
 (``raycast.maxmip.texel_windows``). An edit that changes the tile's quantisation (its height range, or heights
-leaving the source's step) changes every code, and the whole tile is written again into the same textures. The
-max mipmap is made on the host from the codes, as a tile's upload makes it (``raycast.gpu_tile.code_mips``), and
-written level by level: a texture write a level, where building it on the GPU took a dispatch and a barrier a
-level (on a CPU rasterizer each of those costs as much as the whole write).
+leaving the source's step) changes every code, and the whole tile is written again into the same textures. From
+its first edit a tile keeps its codes, max mipmap and per-row summaries on the host (``HostCodes``), so that a
+later edit re-makes the window's codes and texels only (``raycast.edit_loops``) where re-quantising the whole
+tile cost more than the rest of the follow. The max mipmap is written level by level: a texture write a level,
+where building it on the GPU took a dispatch and a barrier a level (on a CPU rasterizer each of those costs as
+much as the whole write).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, cast
 
 import numpy as np
 
 from hybrid.gl.context import write_red_level
 from hybrid.terrain.edits import Window
-from hybrid.tiles.quantize import quantize
+from hybrid.tiles.quantize import Q_MAX
 
-from .gpu_tile import GpuTile, code_mips, metres_as_codes
+from .gpu_tile import GpuTile, level_views
 from .maxmip import texel_windows
 from .tile_params import tile_row
 
 
+@dataclass
+class HostCodes:
+    """A resident tile's codes and max mipmap kept on the host from its first edit (``raycast.edit_loops``):
+    codes q ((N+1)², uint16 or float32 metres), max-mip levels 1..log2 N in one flat array, per-row lowest,
+    highest and off-step counts (3, N+1), per-row largest errors (N+1) and the quantisation (offset, step, base,
+    kind)."""
+
+    q: np.ndarray
+    flat: np.ndarray
+    sums: np.ndarray
+    err: np.ndarray
+    params: np.ndarray
+
+    @classmethod
+    def empty(cls, n: int, dtype) -> HostCodes:
+        """Arrays for a tile of n cells, filled by its first follow."""
+        levels = sum((n >> k) ** 2 for k in range(1, n.bit_length()))
+        rows = np.zeros(n + 1)
+        return cls(np.zeros((n + 1, n + 1), dtype), np.zeros(levels, dtype), np.zeros((3, n + 1)), rows, np.zeros(4))
+
+
 def follow_tile(gpu: GpuTile, tile, win: Window) -> bool:
     """Bring a resident tile up to date with ``tile`` (the pyramid's tile after the edit) whose samples changed
-    over ``win`` (tile-local rows and columns, clipped to the tile); True when only the window was written."""
-    if gpu.fmt == "float32":  # metres as they are: the same meaning whatever the edit
-        qz = metres_as_codes(tile.heights)
+    over ``win`` (tile-local rows and columns, clipped to the tile); True when only the window was written. The
+    first follow of a tile makes its host codes whole; later ones re-make the window's (``raycast.edit_loops``)."""
+    from .edit_loops import follow_codes, update_mips
+
+    n, whole = gpu.n, gpu.host is None
+    wide = gpu.fmt == "float32"  # metres as they are: the same meaning whatever the edit
+    if whole:
+        gpu.host = HostCodes.empty(n, np.float32 if wide else np.uint16)
+        gpu.host.params[:] = (gpu.offset, gpu.step, gpu.base, -1)
+    s, h = gpu.host, np.ascontiguousarray(tile.heights, dtype=np.float32)
+    wins = np.array(texel_windows(n, win), dtype=np.int64).reshape(-1, 4)
+    if wide:
+        part = Window(0, n + 1, 0, n + 1) if whole else win
+        s.q[part.slices()] = h[part.slices()]
+        update_mips(s.q, s.flat, np.array(texel_windows(n, part), dtype=np.int64).reshape(-1, 4))
+        error, same = 0.0, True
     else:
-        qz = quantize(tile.heights, getattr(tile, "source_step", None))
-    same = (qz.offset, qz.step, qz.base) == (gpu.offset, gpu.step, gpu.base)
-    n, heights = gpu.n, cast(Any, gpu.heights)  # a moderngl texture
-    if not (same and win.empty):
-        q = np.ascontiguousarray(qz.q)
-        mips = code_mips(q)
-        if same:
-            heights.write(np.ascontiguousarray(q[win.slices()]), viewport=_viewport(win.i0, win.i1, win.j0, win.j1))
-            write_mips(gpu.maxmip, mips, texel_windows(n, win))
-        else:
-            heights.write(q)
-            write_mips(gpu.maxmip, mips)
-    gpu.offset, gpu.step, gpu.base, gpu.quant_error = qz.offset, qz.step, qz.base, qz.error
+        step = getattr(tile, "source_step", None)
+        src = np.array(step if step is not None else (-1.0, 0.0), dtype=np.float64)
+        w = np.array([win.i0, win.i1, win.j0, win.j1], dtype=np.int64)
+        error, same = follow_codes(h, s.q, s.flat, s.sums, s.err, s.params, w, wins, src, whole, float(Q_MAX))
+    mips, heights = level_views(s.flat, n), cast(Any, gpu.heights)  # a moderngl texture
+    if not same:
+        heights.write(s.q)
+        write_mips(gpu.maxmip, mips)
+    elif not win.empty:
+        heights.write(np.ascontiguousarray(s.q[win.slices()]), viewport=_viewport(win.i0, win.i1, win.j0, win.j1))
+        write_mips(gpu.maxmip, mips, wins)
+    gpu.offset, gpu.step, gpu.base = float(s.params[0]), float(s.params[1]), int(s.params[2])
+    gpu.quant_error = float(error)
     gpu.row, gpu.bounds = tile_row(gpu, tile), (tile.clip, tile.zmin, tile.zmax)
-    return same
+    return bool(same)
 
 
 def write_mips(tex, mips, windows=None) -> None:

@@ -40,6 +40,7 @@ class GpuTile:
     row: np.ndarray | None = None  # tile_row of the tile uploaded (None: a grid, not a tile)
     bounds: tuple = ()  # that tile's clip, zmin and zmax, to tell it from a tile drawn in its place
     fmt: str = "uint16"  # texel format: 'uint16' codes or 'float32' metres (raycast.options.HeightFormat)
+    host: Any = None  # the codes kept on the host once an edit reached the tile (raycast.edit.HostCodes)
 
     @property
     def bytes_per_sample(self) -> float:
@@ -94,7 +95,12 @@ def code_mips(q: np.ndarray) -> tuple[np.ndarray, ...]:
 
     q = np.asarray(q)
     flat = code_mip_levels(np.ascontiguousarray(q, dtype=np.float32 if q.dtype == np.float32 else np.uint16))
-    out, start, m = [], 0, (q.shape[0] - 1) // 2
+    return level_views(flat, q.shape[0] - 1)
+
+
+def level_views(flat: np.ndarray, n: int) -> tuple[np.ndarray, ...]:
+    """The (m, m) views of max-mip levels 1..log2 n held one after another in a flat array (``code_mip_levels``)."""
+    out, start, m = [], 0, n // 2
     while m >= 1:
         out.append(flat[start : start + m * m].reshape(m, m))
         start, m = start + m * m, m // 2
