@@ -36,12 +36,16 @@ def _pyramid_arrays(p):
     return out
 
 
-@pytest.mark.parametrize("name", ["puget", "fbm"])
-def test_pyramid_after_edits_equals_a_rebuild(small_puget, name):
+@pytest.mark.parametrize(("name", "cached"), [("puget", "all"), ("fbm", "all"), ("puget", "one level")])
+def test_pyramid_after_edits_equals_a_rebuild(small_puget, name, cached):
     hf = crop(small_puget, 97) if name == "puget" else get_dataset("fbm", 97)
     p = TilePyramid(hf, 16)
-    _pyramid_arrays(p)  # every cache made before the edit
-    tile_table(p)
+    if cached == "all":
+        _pyramid_arrays(p)  # every cache made before the edit
+        tile_table(p)
+    else:  # level 1's only: the others made after it, from the edited heights
+        p.level_table(1)
+        p.quantization_errors_at(1, np.zeros(1, np.int64), np.zeros(1, np.int64))
     cx, cy = hf.origin[0] + 32 * hf.spacing_x, hf.origin[1] + 48 * hf.spacing_y
     win = _edit(
         hf,

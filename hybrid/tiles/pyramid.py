@@ -200,12 +200,10 @@ class TilePyramid:
         self.hf.heights_changed()
         if self._dev_blocks is None:
             self._dev_blocks = pedit.level_blocks(self.hf.heights, self.max_level, self.n)
-        touched = [pedit.touched_tiles(self, win, level) for level in range(self.max_level + 1)]
         arrays = pedit.LevelArrays(self._zmax, self._zmin, self._err)
-        pedit.edit_bounds(self.hf.heights, self.n, arrays, self._dev_blocks, win, touched)
         caches = {"qerr": self._qerr, "boxes": self._boxes, "tables": self._tables, "on_step": self._on_step}
         caches["on_tiles"] = self._on_tiles
-        pedit.follow_caches(self, caches, win, touched)
+        pedit.follow_levels(self, arrays, caches, self._dev_blocks, win)
         self.edits += 1
         return self.touched_keys(win)
 

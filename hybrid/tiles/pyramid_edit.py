@@ -3,10 +3,11 @@ touched tiles only (``TilePyramid.follow_edit`` runs it over its own arrays).
 
 After samples of a window of the level-0 grid change (``hybrid.terrain.edits.Window``), a tile's height bounds and
 geometric error can change only where the tile's samples meet the window (its own cells' corners; a level-l tile's
-error reads the level-0 samples it covers). ``edit_bounds`` recomputes exactly those tiles at every level with
+error reads the level-0 samples it covers). ``follow_levels`` recomputes exactly those tiles at every level with
 the arithmetic of ``hybrid.tiles.bounds.level_bounds`` (maxima and minima are exact; each deviation is the same
-operations on the same samples), so the arrays equal a full rebuild; ``follow_caches`` updates the per-level caches
-made on first use (boxes, selection tables, quantisation bounds, on-step flags) over the same tiles.
+operations on the same samples), so the arrays equal a full rebuild, and updates the per-level caches made on
+first use (boxes, selection tables, quantisation bounds, on-step flags) over the same tiles: one compiled call
+for every level, since a call a level cost more in its Python and numpy glue than in arithmetic.
 
 This module sits below ``hybrid.tiles.pyramid`` (which imports it), so it names the pyramid only by what it reads:
 its tile size ``n``, ``tile_counts``, ``hf`` and the public per-tile look-ups.
@@ -21,7 +22,7 @@ import numpy as np
 
 from hybrid.terrain.edits import Window
 from hybrid.tiles.bounds import BLOCK_CELLS, _reduce
-from hybrid.tiles.quantize import _HALF_ULP, Q_MAX, on_step_cells
+from hybrid.tiles.quantize import _HALF_ULP, Q_MAX
 
 Touched = list[tuple[range, range]]
 """Per level, (rows ty, columns tx) of the tiles an edit touched (``touched_tiles``)."""
@@ -37,12 +38,6 @@ def touched_tiles(pyramid: Any, win: Window, level: int) -> tuple[range, range]:
     r0, r1 = max((win.i0 - 1) // b, 0) if win.i0 > 0 else 0, min((win.i1 - 1) // b + 1, rows)
     c0, c1 = max((win.j0 - 1) // b, 0) if win.j0 > 0 else 0, min((win.j1 - 1) // b + 1, cols)
     return range(r0, r1), range(c0, c1)
-
-
-def _tile_cells(h: np.ndarray, n: int, level: int, ty: int, tx: int) -> tuple[int, int, int, int]:
-    """Cell rows [i0, i1) and columns [j0, j1) of level-0 cells a tile covers (clipped to the grid)."""
-    b = n << level
-    return ty * b, min((ty + 1) * b, h.shape[0] - 1), tx * b, min((tx + 1) * b, h.shape[1] - 1)
 
 
 def _deviation_blocks(h: np.ndarray, k: int, a0: int, a1: int, b0: int, b1: int) -> np.ndarray:
@@ -61,11 +56,15 @@ SUPER = 16
 class DeviationBlocks:
     """Per level >= 1, the deviation maxima per block of 2^l x 2^l level-0 cells (``dev``) and their maxima per
     ``s`` x ``s`` blocks (``sup``, s dividing the tile size), so that an edit re-measures only the blocks around it
-    and a touched tile's error reads (n / s)² super-blocks rather than n² blocks."""
+    and a touched tile's error reads (n / s)² super-blocks rather than n² blocks; and the highest and lowest
+    sample of each s x s block of level-0 cells, borders included (``zhi``, ``zlo``), from which a touched level-0
+    tile's bounds are read."""
 
     dev: dict[int, np.ndarray]
     sup: dict[int, np.ndarray]
     s: int
+    zhi: np.ndarray
+    zlo: np.ndarray
 
 
 def level_blocks(h: np.ndarray, max_level: int, n: int) -> DeviationBlocks:
@@ -80,7 +79,12 @@ def level_blocks(h: np.ndarray, max_level: int, n: int) -> DeviationBlocks:
             [_deviation_blocks(h, k, a, min(a + step, rows), 0, -(-cells_c // k)) for a in range(0, rows, step)]
         )
         sup[level] = _reduce(dev[level], s, np.maximum)
-    return DeviationBlocks(dev, sup, s)
+    from .pyramid_edit_loops import sample_block_bounds
+
+    zhi = np.empty((-(-cells_r // s), -(-cells_c // s)), h.dtype)
+    zlo = np.empty_like(zhi)
+    sample_block_bounds(h, s, 0, zhi.shape[0], 0, zhi.shape[1], zhi, zlo)
+    return DeviationBlocks(dev, sup, s, zhi, zlo)
 
 
 @dataclass
@@ -92,103 +96,51 @@ class LevelArrays:
     err: dict[int, np.ndarray]
 
 
-def edit_bounds(h: np.ndarray, n: int, a: LevelArrays, blocks: DeviationBlocks, win: Window, touched: Touched) -> None:
-    """Recompute zmax, zmin and err of the touched tiles of every level (``level_bounds``' values) in place,
-    and the deviation ``blocks`` (``level_blocks``) around the window."""
-    rows0, cols0 = touched[0]
-    for ty in rows0:
-        for tx in cols0:
-            i0, i1, j0, j1 = _tile_cells(h, n, 0, ty, tx)
-            sub = h[i0 : i1 + 1, j0 : j1 + 1]
-            a.zmax[0][ty, tx], a.zmin[0][ty, tx] = sub.max(), sub.min()  # every sample is some cell's corner
-    from .pyramid_edit_loops import follow_level_bounds
+def follow_levels(pyramid: Any, a: LevelArrays, caches: dict[str, Any], blocks: DeviationBlocks, win: Window) -> None:
+    """Recompute zmax, zmin and err of the touched tiles of every level (``level_bounds``' values), the deviation
+    ``blocks`` around the window, the on-step flags and the per-level caches made on first use (``caches``: its
+    ``qerr``, ``boxes``, ``tables`` and ``on_tiles`` per level and its ``on_step`` flags, or None) over the
+    touched tiles, in place, in one compiled call (``pyramid_edit_loops.follow_pyramid``)."""
+    from .pyramid_edit_loops import follow_pyramid
 
-    w = np.array([win.i0, win.i1, win.j0, win.j1], dtype=np.int64)
-    for level in range(1, len(touched)):
-        rows, cols = touched[level]
-        tiles = np.array([rows.start, rows.stop, cols.start, cols.stop], dtype=np.int64)
-        follow_level_bounds(
-            h,
-            1 << level,
-            w,
-            blocks.dev[level],
-            blocks.sup[level],
-            blocks.s,
-            tiles,
-            a.zmax[0],
-            a.zmin[0],
-            a.zmax[level],
-            a.zmin[level],
-            a.err[level],
-            a.err[level - 1],
-            n // blocks.s,
-        )
-
-
-def follow_on_step(on_step: np.ndarray, h: np.ndarray, step, win: Window) -> None:
-    """The per-cell on-step flags over the cells whose corners the window holds, in place."""
-    grown = win.grown(1, *h.shape)
-    cells = on_step_cells(h[grown.slices()], step)
-    if cells is not None:
-        on_step[grown.i0 : grown.i0 + cells.shape[0], grown.j0 : grown.j0 + cells.shape[1]] = cells
-
-
-def follow_on_tiles(on_tiles: dict, h: np.ndarray, n: int, on_step, touched: Touched) -> None:
-    """The per-level on-step flags of the touched tiles (``TilePyramid._on_step_tiles``), finest level first, in
-    place: a level-0 tile from its cells, a coarser one from its children where their level is kept (an AND of
-    at most four flags, not of every cell it covers)."""
-    for level, (rows, cols) in enumerate(touched):
-        flags = on_tiles.get(level)
-        if flags is None or on_step is None:
-            continue
-        below = on_tiles.get(level - 1)
-        for ty in rows:
-            for tx in cols:
-                if below is None:
-                    i0, i1, j0, j1 = _tile_cells(h, n, level, ty, tx)
-                    flags[ty, tx] = on_step[i0:i1, j0:j1].all()
-                else:
-                    flags[ty, tx] = below[2 * ty : 2 * ty + 2, 2 * tx : 2 * tx + 2].all()
-
-
-def follow_caches(pyramid: Any, caches: dict[str, Any], win: Window, touched: Touched) -> None:
-    """Bring the pyramid's per-level caches made on first use up to date over the touched tiles, in place
-    (``caches``: its ``qerr``, ``boxes`` and ``tables`` per level and its ``on_step`` flags, or None)."""
-    h, n, step, on_step = pyramid.hf.heights, pyramid.n, getattr(pyramid.hf, "source_step", None), caches["on_step"]
-    if on_step is not None:
-        follow_on_step(on_step, h, step, win)
-    on_tiles = caches["on_tiles"]
-    follow_on_tiles(on_tiles, h, n, on_step, touched)
-    from .pyramid_edit_loops import follow_level_caches
-
-    hf = pyramid.hf
-    ox, oy, oz = (float(v) for v in hf.origin)
-    x_end, y_end = ox + (hf.cols - 1) * hf.spacing_x, oy + (hf.rows - 1) * hf.spacing_y
-    q = np.array([float(Q_MAX), _HALF_ULP])
-    none = np.zeros((0, 0))
-    for level, (rows, cols) in enumerate(touched):
-        if not (len(rows) and len(cols)):
-            continue
-        tables = caches["tables"].get(level)
-        if tables is not None:  # the table reads the level's boxes and bounds: made whole where not yet
+    hf, n, levels = pyramid.hf, pyramid.n, range(len(a.zmax))
+    h, step, on_step = hf.heights, getattr(hf, "source_step", None), caches["on_step"]
+    for level in levels:
+        if level in caches["tables"]:  # the table reads the level's boxes and bounds: made whole where not yet
             pyramid.boxes_at(level, np.zeros(1, np.int64), np.zeros(1, np.int64))
             pyramid.quantization_errors_at(level, np.zeros(1, np.int64), np.zeros(1, np.int64))
-        boxes = caches["boxes"].get(level)
-        zmin, zmax, err = pyramid.level_arrays(level)
-        on = on_tiles.get(level)
-        cells = pyramid.n << level
-        geo = np.array([ox, oy, oz, cells * hf.spacing_x, cells * hf.spacing_y, x_end, y_end])
-        follow_level_caches(
-            np.array([rows.start, rows.stop, cols.start, cols.stop], dtype=np.int64),
-            geo,
-            zmin,
-            zmax,
-            err,
-            np.zeros((0, 0), np.bool_) if on is None else on,
-            float(step[0]) if step is not None else -1.0,
-            q,
-            caches["qerr"].get(level, none),
-            none.reshape(0, 0, 3) if boxes is None else boxes[0],
-            none.reshape(0, 0, 3) if boxes is None else boxes[1],
-            none.reshape(0, 0, 7) if tables is None else tables,
-        )
+    touched = [touched_tiles(pyramid, win, level) for level in levels]
+    tiles = np.array([[r.start, r.stop, c.start, c.stop] for r, c in touched], dtype=np.int64)
+    f2, f3, b2 = np.zeros((0, 0)), np.zeros((0, 0, 3)), np.zeros((0, 0), np.bool_)
+    bounds = tuple(tuple(d[level] for level in levels) for d in (a.zmax, a.zmin, a.err))
+    dev = tuple((blocks.dev if level else {}).get(level, f2) for level in levels)
+    sup = tuple((blocks.sup if level else {}).get(level, f2) for level in levels)
+    boxes = caches["boxes"]
+    made = (
+        tuple(caches["qerr"].get(level, f2) for level in levels),
+        tuple(boxes[level][0] if level in boxes else f3 for level in levels),
+        tuple(boxes[level][1] if level in boxes else f3 for level in levels),
+        tuple(caches["tables"].get(level, np.zeros((0, 0, 7))) for level in levels),
+    )
+    on_tiles = tuple(caches["on_tiles"].get(level, b2) for level in levels)
+    ox, oy, oz = (float(v) for v in hf.origin)
+    x_end, y_end = ox + (hf.cols - 1) * hf.spacing_x, oy + (hf.rows - 1) * hf.spacing_y
+    geo = np.array([ox, oy, oz, n * hf.spacing_x, n * hf.spacing_y, x_end, y_end])
+    g = win.grown(1, *h.shape)
+    follow_pyramid(
+        h,
+        n,
+        np.array([win.i0, win.i1, win.j0, win.j1], dtype=np.int64),
+        tiles,
+        bounds,
+        (dev, sup),
+        blocks.s,
+        (blocks.zhi, blocks.zlo),
+        b2 if on_step is None or step is None else on_step,
+        np.array([g.i0, g.i1, g.j0, g.j1], dtype=np.int64),
+        np.array(step if step is not None else (-1.0, 0.0), dtype=np.float64),
+        on_tiles,
+        made,
+        geo,
+        np.array([float(Q_MAX), _HALF_ULP]),
+    )
