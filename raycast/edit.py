@@ -64,20 +64,20 @@ def follow_tile(gpu: GpuTile, tile, win: Window) -> bool:
     if wide:
         part = Window(0, n + 1, 0, n + 1) if whole else win
         s.q[part.slices()] = h[part.slices()]
-        update_mips(s.q, s.flat, np.array(texel_windows(n, part), dtype=np.int64).reshape(-1, 4))
+        levels = update_mips(s.q, s.flat, np.array(texel_windows(n, part), dtype=np.int64).reshape(-1, 4))
         error, same = 0.0, True
     else:
         step = getattr(tile, "source_step", None)
         src = np.array(step if step is not None else (-1.0, 0.0), dtype=np.float64)
         w = np.array([win.i0, win.i1, win.j0, win.j1], dtype=np.int64)
-        error, same = follow_codes(h, s.q, s.flat, s.sums, s.err, s.params, w, wins, src, whole, float(Q_MAX))
+        error, same, levels = follow_codes(h, s.q, s.flat, s.sums, s.err, s.params, w, wins, src, whole, float(Q_MAX))
     mips, heights = level_views(s.flat, n), cast(Any, gpu.heights)  # a moderngl texture
     if not same:
         heights.write(s.q)
         write_mips(gpu.maxmip, mips)
     elif not win.empty:
         heights.write(np.ascontiguousarray(s.q[win.slices()]), viewport=_viewport(win.i0, win.i1, win.j0, win.j1))
-        write_mips(gpu.maxmip, mips, wins)
+        write_mips(gpu.maxmip, mips if whole else mips[:levels], wins)
     gpu.offset, gpu.step, gpu.base = float(s.params[0]), float(s.params[1]), int(s.params[2])
     gpu.quant_error = float(error)
     gpu.row, gpu.bounds = tile_row(gpu, tile), (tile.clip, tile.zmin, tile.zmax)

@@ -74,24 +74,33 @@ def row_errors(h, q, r0, r1, offset, step, err):
 @njit(cache=True)
 def update_mips(q, flat, wins):
     """Max-mip levels 1..log2 N (``code_mip_levels``' flat array) of codes q over each level's texel window
-    ``wins[k]`` (r0, r1, c0, c1) only, in place."""
+    ``wins[k]`` (r0, r1, c0, c1) only, in place; returns how many levels, from level 1, changed: a level whose
+    window kept every value leaves the coarser ones as they were, and they are not visited."""
     m, start = (q.shape[0] - 1) // 2, 0
     r0, r1, c0, c1 = wins[0]
+    changed = False
     for r in range(r0, r1):
         for c in range(c0, c1):
             best = q[2 * r, 2 * c]
             for i in range(2 * r, 2 * r + 3):
                 for j in range(2 * c, 2 * c + 3):
                     best = max(best, q[i, j])
+            changed |= flat[r * m + c] != best
             flat[r * m + c] = best
     for k in range(1, wins.shape[0]):
+        if not changed:
+            return k
         half, nxt = m // 2, start + m * m
         r0, r1, c0, c1 = wins[k]
+        changed = False
         for r in range(r0, r1):
             for c in range(c0, c1):
                 a = start + 2 * r * m + 2 * c
-                flat[nxt + r * half + c] = max(flat[a], flat[a + 1], flat[a + m], flat[a + m + 1])
+                v = max(flat[a], flat[a + 1], flat[a + m], flat[a + m + 1])
+                changed |= flat[nxt + r * half + c] != v
+                flat[nxt + r * half + c] = v
         start, m = nxt, half
+    return wins.shape[0] if changed else wins.shape[0] - 1
 
 
 @njit(cache=True)
@@ -100,7 +109,8 @@ def follow_codes(h, q, flat, sums, err, params, win, wins, src, whole, q_max):
     samples off the step) and row errors ``err`` up to date after samples ``win`` (i0, i1, j0, j1) of its heights
     h changed, in place; ``whole`` re-makes everything (no host state yet). ``params`` (offset, step, base, kind;
     kind < 0: not known) is the quantisation the codes had and becomes the new one. Returns (largest error,
-    same): same where the quantisation stayed, so that the codes changed over the window only."""
+    same, levels): same where the quantisation stayed, so that the codes changed over the window only, and then
+    the max-mip levels whose window changed (``update_mips``)."""
     i0, i1, j0, j1 = win
     rows = q.shape[0]
     r0, r1 = (0, rows) if whole else (i0, i1)
@@ -116,12 +126,12 @@ def follow_codes(h, q, flat, sums, err, params, win, wins, src, whole, q_max):
         for k in range(wins.shape[0]):
             full[k] = (0, m, 0, m)
             m //= 2
-        update_mips(q, flat, full)
+        levels = update_mips(q, flat, full)
     else:
         write_codes(h, q, i0, i1, j0, j1, kind, offset, step, base, q_max)
-        update_mips(q, flat, wins)
+        levels = update_mips(q, flat, wins)
     error = 0.0
     if kind == RANGE:
         row_errors(h, q, r0, r1, offset, step, err)
         error = err.max()
-    return error, same
+    return error, same, levels

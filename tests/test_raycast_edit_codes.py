@@ -52,7 +52,7 @@ def test_host_codes_follow_equals_a_whole_tile_quantisation_after_every_edit(sou
     for k in range(300):
         win = _random_edit(rng, h)
         w, wins = np.array([win.i0, win.i1, win.j0, win.j1]), np.array(texel_windows(N, win))
-        err, same = follow_codes(h, s.q, s.flat, s.sums, s.err, s.params, w, wins, src, k == 0, float(Q_MAX))
+        err, same, _levels = follow_codes(h, s.q, s.flat, s.sums, s.err, s.params, w, wins, src, k == 0, float(Q_MAX))
         want = quantize(h, source_step)
         assert tuple(s.params[:3]) == (want.offset, want.step, want.base)
         assert err == want.error
