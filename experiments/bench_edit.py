@@ -8,6 +8,8 @@ from 16385² the GPU heights are held in blocks, ``hybrid.gl.brush``), a camera 
 its caches are what the next edit meets. Per size and method: the median ms of each update step and of the whole
 update over the edits after the first two; the first edit apart (it makes the pyramid's deviation blocks and the
 raster nodes' edit state, one pass over the grid); the frame; and the update against the smallest terrain's.
+Then as many edits back to back, with no frame between, along a path of their own: the same work with the CPU's
+caches warm, which tells the edit's own growth with the terrain from what a frame leaves cold.
 Target: the same brush costs within 1.3x on the larger grids.
 """
 
@@ -59,10 +61,12 @@ def measure(ctx, size: int, method: str, edits: int) -> dict:
                 steps.setdefault(s, []).append(ms)
             refreshed.append(sum(rep.refreshed.values()))
             frames.append(r.render(view, 2 / 3, read=False).stats.wall_ms)
+        warm = [sum(editor.apply(Crater((cx - 400.0 * k, cy), 2000.0, 300.0)).ms.values()) for k in range(edits)]
     row = {"size": size, "method": method, "setup s": setup, "first edit ms": steps["total"][0]}
     row.update({f"{s} ms": float(np.median(v[2:])) for s, v in steps.items() if s != "total"})
     row.update({"update ms": float(np.median(steps["total"][2:])), "refreshed tiles": float(np.median(refreshed))})
     row["frame ms"] = float(np.median(frames[2:]))
+    row["back to back ms"] = float(np.median(warm[2:]))
     return row
 
 
@@ -73,6 +77,7 @@ def run(ctx, sizes=SIZES, methods=METHODS, edits: int = 8) -> dict[str, pd.DataF
     smallest = df.groupby("method")["update ms"].transform("first")
     df.insert(df.columns.get_loc("update ms") + 1, TARGET, df["update ms"] / smallest)
     df["share of frame"] = df["update ms"] / df["frame ms"]
+    df["back to back / smallest"] = df["back to back ms"] / df.groupby("method")["back to back ms"].transform("first")
     title = (
         f"one 2 km crater an edit on Puget tiled to larger grids (640x360, tiles of 256, median of {edits - 2} edits "
         "after two, a frame between edits)"
