@@ -6,7 +6,10 @@ their count; a tile whose leaves do not fit draws nothing and is counted as over
 grows the arena and draws the frame again (raster.tilelets), so no frame it returns misses a leaf. Between
 draw calls the arena is made again for twice the last call's leaves when they filled over three quarters of it
 (so that a frame rarely overflows), and for twice the largest of 64 calls in a row that all filled under a
-quarter of it (single tiles drawn by a timing pass do not shrink it under the frames around them). Capacity is
+quarter of it (single tiles drawn by a timing pass do not shrink it under the frames around them). A call with
+more tiles than the last is sized ahead for them at the leaves a tile of the last call of several tiles took
+(``FLOOR_RATE`` at least): the first frame of a flight, or a camera jump, then fits where it overflowed and was
+drawn twice. Capacity is
 in leaves: a leaf is one 13-word record (geometry-shader path) or 9 vertices and 24 indices (indexed path); with
 lean full-resolution leaves (``full_res`` "lean", raster.tilelets) a 15-word record (the SE and NW cells' turns
 added) or 11 vertices and 36 indices (their centre posts and 4 triangles each).
@@ -28,6 +31,7 @@ GROW = 2.0  # a grown or shrunk arena holds this many times the frame's leaves
 GROW_ABOVE = 0.75  # grow before the next frame when the frame's leaves fill more than this share
 SHRINK_BELOW = 0.25  # shrink when the calls' leaves fill less than this share ...
 SHRINK_AFTER = 64  # ... in this many draw calls in a row
+FLOOR_RATE = 32.0  # leaves a tile at least, when a call with more tiles than the last is sized ahead
 LEAF_SIZES = {"exact": (13, 9, 24), "lean": (15, 11, 36)}
 """A leaf's (record words (raster.selection.LEAF_FORMAT), vec4 vertices, indices) by full-resolution rule."""
 LAYOUTS = {rule: (words * 4, vertices * 16, indices * 4) for rule, (words, vertices, indices) in LEAF_SIZES.items()}
@@ -58,8 +62,9 @@ class LeafArena:
     layout (``LAYOUTS``; "exact" until ``use_layout``). ``version`` counts allocations: vertex arrays made over the
     buffers are stale when it has changed."""
 
-    def __init__(self, ctx, writes: str, capacity: int = MIN_LEAVES):
+    def __init__(self, ctx, writes: str, capacity: int = MIN_LEAVES, floor_rate: float = FLOOR_RATE):
         self.ctx, self.writes, self.full_res = ctx, writes, "exact"
+        self.items, self.rate, self.floor_rate = 1, 0.0, float(floor_rate)  # the last call's tiles; leaves a tile
         self.capacity = 0
         self.records: moderngl.Buffer | None = None  # the buffers are None once released
         self.vertices: moderngl.Buffer | None = None
@@ -89,20 +94,27 @@ class LeafArena:
             self.full_res = full_res
             self._allocate(self.capacity)
 
-    def note(self, leaves: int) -> None:
-        """Record a draw call's leaves (every call: whole frames, and the single tiles a timing pass draws)."""
-        self.last = int(leaves)
+    def note(self, leaves: int, items: int = 1) -> None:
+        """Record a draw call's leaves and tiles (every call: whole frames, and the single tiles a timing pass
+        draws; only calls of several tiles set the leaves a tile)."""
+        self.last, self.items = int(leaves), max(int(items), 1)
+        if self.items > 1:
+            self.rate = self.last / self.items
         if self.last < SHRINK_BELOW * self.capacity and self.capacity > MIN_LEAVES:
             self.sparse += 1
             self.sparse_peak = max(self.sparse_peak, self.last)
         else:
             self.sparse, self.sparse_peak = 0, 0
 
-    def prepare(self) -> bool:
-        """Before a draw call: grow for the last call's leaves if they filled over GROW_ABOVE of the arena, shrink
-        for the largest of a run of SHRINK_AFTER calls that all filled under SHRINK_BELOW; True if remade."""
-        if self.last > GROW_ABOVE * self.capacity:
-            return self.remake(self.last)
+    def prepare(self, items: int = 1) -> bool:
+        """Before a draw call of ``items`` tiles: grow for the leaves expected (the last call's, or for more tiles
+        than it had their count at the leaves a tile) if they fill over GROW_ABOVE of the arena, shrink for the
+        largest of a run of SHRINK_AFTER calls that all filled under SHRINK_BELOW; True if remade."""
+        need = self.last
+        if items > self.items:
+            need = max(need, int(np.ceil(items * max(self.rate, self.floor_rate))))
+        if need > GROW_ABOVE * self.capacity:
+            return self.remake(need)
         if self.sparse >= SHRINK_AFTER:
             return self.remake(self.sparse_peak)
         return False

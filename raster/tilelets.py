@@ -172,7 +172,7 @@ class TileletDrawing(TileletSelection):
         self.set_selection("morph", bool(morph))
         self.set_selection("stitch", bool(stitching))
         self.set_selection("lean", bool(lean))
-        self.arena.prepare()  # sized for the recent calls' leaves, with room to grow
+        self.arena.prepare(len(items))  # sized for the recent calls' leaves, with room to grow
         counters = self._select_draw(target, view, items, tau, mode, wireframe, culling, skirts, lod_eye)
         regrown = 0
         if counters["arena_overflow"]:  # some tiles did not fit and drew nothing: grow, draw them
@@ -184,7 +184,7 @@ class TileletDrawing(TileletSelection):
                     f"leaf arena of {self.arena.capacity} leaves overflowed after growing for "
                     f"{counters['arena_leaves']}"
                 )
-        self.arena.note(counters["arena_leaves"])
+        self.arena.note(counters["arena_leaves"], len(items))
         counters["arena_regrown"] = regrown
         return counters
 
