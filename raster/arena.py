@@ -31,7 +31,7 @@ GROW = 2.0  # a grown or shrunk arena holds this many times the frame's leaves
 GROW_ABOVE = 0.75  # grow before the next frame when the frame's leaves fill more than this share
 SHRINK_BELOW = 0.25  # shrink when the calls' leaves fill less than this share ...
 SHRINK_AFTER = 64  # ... in this many draw calls in a row
-FLOOR_RATE = 32.0  # leaves a tile at least, when a call with more tiles than the last is sized ahead
+PIXELS_PER_LEAF = 16  # the first call of several tiles is sized for one leaf per this many pixels of its view
 LEAF_SIZES = {"exact": (13, 9, 24), "lean": (15, 11, 36)}
 """A leaf's (record words (raster.selection.LEAF_FORMAT), vec4 vertices, indices) by full-resolution rule."""
 LAYOUTS = {rule: (words * 4, vertices * 16, indices * 4) for rule, (words, vertices, indices) in LEAF_SIZES.items()}
@@ -62,9 +62,9 @@ class LeafArena:
     layout (``LAYOUTS``; "exact" until ``use_layout``). ``version`` counts allocations: vertex arrays made over the
     buffers are stale when it has changed."""
 
-    def __init__(self, ctx, writes: str, capacity: int = MIN_LEAVES, floor_rate: float = FLOOR_RATE):
+    def __init__(self, ctx, writes: str, capacity: int = MIN_LEAVES, ahead: bool = True):
         self.ctx, self.writes, self.full_res = ctx, writes, "exact"
-        self.items, self.rate, self.floor_rate = 1, 0.0, float(floor_rate)  # the last call's tiles; leaves a tile
+        self.items, self.rate, self.ahead = 1, 0.0, bool(ahead)  # the last call's tiles; leaves a tile; sized ahead
         self.capacity = 0
         self.records: moderngl.Buffer | None = None  # the buffers are None once released
         self.vertices: moderngl.Buffer | None = None
@@ -106,13 +106,15 @@ class LeafArena:
         else:
             self.sparse, self.sparse_peak = 0, 0
 
-    def prepare(self, items: int = 1) -> bool:
-        """Before a draw call of ``items`` tiles: grow for the leaves expected (the last call's, or for more tiles
-        than it had their count at the leaves a tile) if they fill over GROW_ABOVE of the arena, shrink for the
-        largest of a run of SHRINK_AFTER calls that all filled under SHRINK_BELOW; True if remade."""
+    def prepare(self, items: int = 1, pixels: int = 0) -> bool:
+        """Before a draw call of ``items`` tiles into a view of ``pixels`` pixels: grow for the leaves expected (the
+        last call's; for more tiles than it had, their count at the leaves a tile, or before any call of several
+        tiles one a PIXELS_PER_LEAF pixels) if they fill over GROW_ABOVE of the arena, shrink for the largest of a
+        run of SHRINK_AFTER calls that all filled under SHRINK_BELOW; True if remade."""
         need = self.last
-        if items > self.items:
-            need = max(need, int(np.ceil(items * max(self.rate, self.floor_rate))))
+        if self.ahead and items > self.items:
+            guess = items * self.rate if self.rate else pixels / PIXELS_PER_LEAF
+            need = max(need, int(np.ceil(guess)))
         if need > GROW_ABOVE * self.capacity:
             return self.remake(need)
         if self.sparse >= SHRINK_AFTER:

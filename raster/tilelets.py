@@ -172,7 +172,7 @@ class TileletDrawing(TileletSelection):
         self.set_selection("morph", bool(morph))
         self.set_selection("stitch", bool(stitching))
         self.set_selection("lean", bool(lean))
-        self.arena.prepare(len(items))  # sized for the recent calls' leaves, with room to grow
+        self.arena.prepare(len(items), view.width * view.height)  # for the recent calls' leaves, with room to grow
         counters = self._select_draw(target, view, items, tau, mode, wireframe, culling, skirts, lod_eye)
         regrown = 0
         if counters["arena_overflow"]:  # some tiles did not fit and drew nothing: grow, draw them

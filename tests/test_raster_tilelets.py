@@ -201,7 +201,7 @@ def test_arena_overflow_grows_and_draws_every_leaf(ctx, puget257, strategy):
         want = roomy.render(view, mode="shaded", tau=0.5)
         s = tight.strategies[strategy]
         s.arena.release()
-        s.arena = LeafArena(ctx, s.writes, capacity=16, floor_rate=0.0)  # not sized ahead: it overflows
+        s.arena = LeafArena(ctx, s.writes, capacity=16, ahead=False)  # not sized ahead: it overflows
         got = tight.render(view, mode="shaded", tau=0.5)
         c = got.stats.counters
         assert c["arena_regrown"] == 1 and c["arena_overflow"] == 0
@@ -331,22 +331,23 @@ def test_one_multi_draw_shades_as_the_per_tile_draws(ctx, puget257):
 
 
 def test_a_call_of_more_tiles_is_sized_ahead_at_the_leaves_a_tile_took(ctx):
-    """The first call of many tiles after single ones is sized for FLOOR_RATE leaves a tile; once a call of
-    several tiles was drawn, a call of more tiles is sized at its leaves a tile; a single tile changes nothing."""
-    from raster.arena import FLOOR_RATE, MIN_LEAVES, LeafArena, arena_leaves
+    """The first call of several tiles after single ones is sized for a leaf per PIXELS_PER_LEAF pixels; once a
+    call of several tiles was drawn, a call of more tiles is sized at its leaves a tile; a single tile changes
+    nothing."""
+    from raster.arena import MIN_LEAVES, PIXELS_PER_LEAF, LeafArena, arena_leaves
 
     a = LeafArena(ctx, "mesh")
     try:
         a.note(4, 1)  # a warm-up: one tile, four leaves
-        assert a.prepare(519) and a.capacity == arena_leaves(519 * FLOOR_RATE)
+        assert a.prepare(519, 640 * 360) and a.capacity == arena_leaves(640 * 360 / PIXELS_PER_LEAF)
         a.note(17886, 519)
-        assert not a.prepare(519)  # as many tiles: the last call's leaves fit
-        assert a.prepare(1000) and a.capacity == arena_leaves(np.ceil(1000 * 17886 / 519))
+        assert not a.prepare(519, 640 * 360)  # as many tiles: the last call's leaves fit
+        assert a.prepare(1000, 640 * 360) and a.capacity == arena_leaves(np.ceil(1000 * 17886 / 519))
         a.note(100, 1)  # a timing pass's single tile keeps the leaves a tile
-        assert not a.prepare(1) and a.rate == 17886 / 519
-        b = LeafArena(ctx, "mesh", floor_rate=0.0)
+        assert not a.prepare(1, 640 * 360) and a.rate == 17886 / 519
+        b = LeafArena(ctx, "mesh", ahead=False)
         b.note(4, 1)
-        assert not b.prepare(519) and b.capacity == MIN_LEAVES
+        assert not b.prepare(519, 640 * 360) and b.capacity == MIN_LEAVES
         b.release()
     finally:
         a.release()
