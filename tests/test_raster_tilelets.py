@@ -334,11 +334,13 @@ def test_a_call_of_more_tiles_is_sized_ahead_at_the_leaves_a_tile_took(ctx):
     """The first call of several tiles after single ones is sized for a leaf per PIXELS_PER_LEAF pixels; once a
     call of several tiles was drawn, a call of more tiles is sized at its leaves a tile; a single tile changes
     nothing."""
-    from raster.arena import MIN_LEAVES, PIXELS_PER_LEAF, LeafArena, arena_leaves
+    from raster.arena import MIN_LEAVES, PIXELS_PER_LEAF, TILE_LEAVES, LeafArena, arena_leaves
 
     a = LeafArena(ctx, "mesh")
     try:
         a.note(4, 1)  # a warm-up: one tile, four leaves
+        assert not a.prepare(2, 640 * 360)  # two tiles: TILE_LEAVES each fit the arena as it is
+        assert 2 * TILE_LEAVES <= 0.75 * MIN_LEAVES
         assert a.prepare(519, 640 * 360) and a.capacity == arena_leaves(640 * 360 / PIXELS_PER_LEAF)
         a.note(17886, 519)
         assert not a.prepare(519, 640 * 360)  # as many tiles: the last call's leaves fit
