@@ -32,7 +32,7 @@ GROW_ABOVE = 0.75  # grow before the next frame when the frame's leaves fill mor
 SHRINK_BELOW = 0.25  # shrink when the calls' leaves fill less than this share ...
 SHRINK_AFTER = 64  # ... in this many draw calls in a row
 PIXELS_PER_LEAF = 16  # the first call of several tiles is sized for one leaf per this many pixels of its view ...
-TILE_LEAVES = 1024  # ... and at most this many leaves a tile
+TILE_LEAVES = 256  # ... and at most this many leaves a tile
 LEAF_SIZES = {"exact": (13, 9, 24), "lean": (15, 11, 36)}
 """A leaf's (record words (raster.selection.LEAF_FORMAT), vec4 vertices, indices) by full-resolution rule."""
 LAYOUTS = {rule: (words * 4, vertices * 16, indices * 4) for rule, (words, vertices, indices) in LEAF_SIZES.items()}
@@ -66,6 +66,7 @@ class LeafArena:
     def __init__(self, ctx, writes: str, capacity: int = MIN_LEAVES, ahead: bool = True):
         self.ctx, self.writes, self.full_res = ctx, writes, "exact"
         self.items, self.rate, self.ahead = 1, 0.0, bool(ahead)  # the last call's tiles; leaves a tile; sized ahead
+        self.guessed = False  # the size was guessed before any call of several tiles
         self.capacity = 0
         self.records: moderngl.Buffer | None = None  # the buffers are None once released
         self.vertices: moderngl.Buffer | None = None
@@ -110,12 +111,19 @@ class LeafArena:
     def prepare(self, items: int = 1, pixels: int = 0) -> bool:
         """Before a draw call of ``items`` tiles into a view of ``pixels`` pixels: grow for the leaves expected (the
         last call's; for more tiles than it had, their count at the leaves a tile, or before any call of several
-        tiles one a PIXELS_PER_LEAF pixels, TILE_LEAVES a tile at most) if they fill over GROW_ABOVE of the arena, shrink for the largest of a
-        run of SHRINK_AFTER calls that all filled under SHRINK_BELOW; True if remade."""
+        tiles one a PIXELS_PER_LEAF pixels, TILE_LEAVES a tile at most) if they fill over GROW_ABOVE of the arena;
+        shrink for the last call's leaves where a guessed size held under SHRINK_BELOW of them, or for the largest
+        of a run of SHRINK_AFTER calls that all filled under SHRINK_BELOW; True if remade."""
         need = self.last
+        if self.guessed and self.rate:  # the guess met its first call of several tiles: keep what it needed
+            self.guessed = False
+            if need < SHRINK_BELOW * self.capacity:
+                return self.remake(need)
         if self.ahead and items > self.items:
             guess = items * self.rate if self.rate else min(pixels / PIXELS_PER_LEAF, items * TILE_LEAVES)
             need = max(need, int(np.ceil(guess)))
+            if need > GROW_ABOVE * self.capacity and not self.rate:
+                self.guessed = True
         if need > GROW_ABOVE * self.capacity:
             return self.remake(need)
         if self.sparse >= SHRINK_AFTER:

@@ -331,25 +331,27 @@ def test_one_multi_draw_shades_as_the_per_tile_draws(ctx, puget257):
 
 
 def test_a_call_of_more_tiles_is_sized_ahead_at_the_leaves_a_tile_took(ctx):
-    """The first call of several tiles after single ones is sized for a leaf per PIXELS_PER_LEAF pixels; once a
-    call of several tiles was drawn, a call of more tiles is sized at its leaves a tile; a single tile changes
-    nothing."""
+    """The first call of several tiles after single ones is sized for a leaf per PIXELS_PER_LEAF pixels, at most
+    TILE_LEAVES a tile, and made again at once where that guess was four times too large; once a call of several
+    tiles was drawn, a call of more tiles is sized at its leaves a tile; a single tile changes nothing."""
     from raster.arena import MIN_LEAVES, PIXELS_PER_LEAF, TILE_LEAVES, LeafArena, arena_leaves
 
-    a = LeafArena(ctx, "mesh")
+    a, b, c = LeafArena(ctx, "mesh"), LeafArena(ctx, "mesh"), LeafArena(ctx, "mesh", ahead=False)
     try:
-        a.note(4, 1)  # a warm-up: one tile, four leaves
+        for x in (a, b, c):
+            x.note(4, 1)  # a warm-up: one tile, four leaves
         assert not a.prepare(2, 640 * 360)  # two tiles: TILE_LEAVES each fit the arena as it is
         assert 2 * TILE_LEAVES <= 0.75 * MIN_LEAVES
-        assert a.prepare(519, 640 * 360) and a.capacity == arena_leaves(640 * 360 / PIXELS_PER_LEAF)
-        a.note(17886, 519)
-        assert not a.prepare(519, 640 * 360)  # as many tiles: the last call's leaves fit
-        assert a.prepare(1000, 640 * 360) and a.capacity == arena_leaves(np.ceil(1000 * 17886 / 519))
-        a.note(100, 1)  # a timing pass's single tile keeps the leaves a tile
-        assert not a.prepare(1, 640 * 360) and a.rate == 17886 / 519
-        b = LeafArena(ctx, "mesh", ahead=False)
-        b.note(4, 1)
-        assert not b.prepare(519, 640 * 360) and b.capacity == MIN_LEAVES
-        b.release()
+        assert a.prepare(30, 640 * 360) and a.capacity == arena_leaves(30 * TILE_LEAVES)
+        a.note(900, 30)  # the guess was over four times too large: made again for what the call took
+        assert a.prepare(30, 640 * 360) and a.capacity == MIN_LEAVES
+        assert b.prepare(519, 640 * 360) and b.capacity == arena_leaves(640 * 360 / PIXELS_PER_LEAF)
+        b.note(17886, 519)
+        assert not b.prepare(519, 640 * 360)  # as many tiles: the last call's leaves fit
+        assert b.prepare(1000, 640 * 360) and b.capacity == arena_leaves(np.ceil(1000 * 17886 / 519))
+        b.note(100, 1)  # a timing pass's single tile keeps the leaves a tile
+        assert not b.prepare(1, 640 * 360) and b.rate == 17886 / 519
+        assert not c.prepare(519, 640 * 360) and c.capacity == MIN_LEAVES  # not sized ahead
     finally:
-        a.release()
+        for x in (a, b, c):
+            x.release()
