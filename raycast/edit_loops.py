@@ -14,6 +14,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .mip_loops import code_mip_levels
+
 STEP, RANGE, FLAT = 0, 1, 2  # the three quantisations of ``quantize``
 
 
@@ -74,8 +76,9 @@ def row_errors(h, q, r0, r1, offset, step, err):
 @njit(cache=True)
 def update_mips(q, flat, wins):
     """Max-mip levels 1..log2 N (``code_mip_levels``' flat array) of codes q over each level's texel window
-    ``wins[k]`` (r0, r1, c0, c1) only, in place; returns how many levels, from level 1, changed: a level whose
-    window kept every value leaves the coarser ones as they were, and they are not visited."""
+    ``wins[k]`` (r0, r1, c0, c1) only, in place (``code_mip_levels``' arithmetic, which is faster over a whole
+    tile); returns how many levels, from level 1, changed: a level whose window kept every value leaves the
+    coarser ones as they were, and they are not visited."""
     m, start = (q.shape[0] - 1) // 2, 0
     r0, r1, c0, c1 = wins[0]
     changed = False
@@ -121,12 +124,8 @@ def follow_codes(h, q, flat, sums, err, params, win, wins, src, whole, q_max):
     if whole or not same:
         r0, r1 = 0, rows
         write_codes(h, q, 0, rows, 0, rows, kind, offset, step, base, q_max)
-        full = np.empty((wins.shape[0], 4), np.int64)
-        m = (rows - 1) // 2
-        for k in range(wins.shape[0]):
-            full[k] = (0, m, 0, m)
-            m //= 2
-        levels = update_mips(q, flat, full)
+        flat[:] = code_mip_levels(q)  # a fresh array, which the compiler vectorises: several times update_mips'
+        levels = wins.shape[0]
     else:
         write_codes(h, q, i0, i1, j0, j1, kind, offset, step, base, q_max)
         levels = update_mips(q, flat, wins)
