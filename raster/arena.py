@@ -7,10 +7,12 @@ grows the arena and draws the frame again (raster.tilelets), so no frame it retu
 draw calls the arena is made again for twice the last call's leaves when they filled over three quarters of it
 (so that a frame rarely overflows), and for twice the largest of 64 calls in a row that all filled under a
 quarter of it (single tiles drawn by a timing pass do not shrink it under the frames around them). A call with
-more tiles than the last is sized ahead for them at the leaves a tile of the last call of several tiles took
-(``FLOOR_RATE`` at least): the first frame of a flight, or a camera jump, then fits where it overflowed and was
-drawn twice. Capacity is
-in leaves: a leaf is one 13-word record (geometry-shader path) or 9 vertices and 24 indices (indexed path); with
+more tiles than the last is sized ahead for them, so that it fits where it overflowed and was drawn twice: at the
+leaves a tile of the last call of several tiles (a camera jump), or before any such call at one leaf per
+``PIXELS_PER_LEAF`` pixels of the view and at most ``TILE_LEAVES`` a tile (a flight's first frame after a warm-up
+of one tile; the cap keeps a mixed frame's few raster tiles from sizing it for the whole view). A size so guessed
+that the call then fills under SHRINK_BELOW is made again for that call's leaves before the next. Capacity is in
+leaves: a leaf is one 13-word record (geometry-shader path) or 9 vertices and 24 indices (indexed path); with
 lean full-resolution leaves (``full_res`` "lean", raster.tilelets) a 15-word record (the SE and NW cells' turns
 added) or 11 vertices and 36 indices (their centre posts and 4 triangles each).
 """

@@ -24,9 +24,6 @@ from hybrid.terrain.edits import Window
 from hybrid.tiles.bounds import BLOCK_CELLS, _reduce
 from hybrid.tiles.quantize import _HALF_ULP, Q_MAX
 
-Touched = list[tuple[range, range]]
-"""Per level, (rows ty, columns tx) of the tiles an edit touched (``touched_tiles``)."""
-
 
 def touched_tiles(pyramid: Any, win: Window, level: int) -> tuple[range, range]:
     """(rows ty, columns tx) of the level's tiles whose samples meet a window of level-0 samples."""
