@@ -160,9 +160,12 @@ class Renderer:
 
     # --- edits (hybrid.editing) ---------------------------------------------------------------------
     def tiles_changed(self, keys) -> None:
-        """Drop the CPU copies of tiles whose samples or bounds changed (the pyramid followed an edit)."""
+        """Drop the CPU copies of tiles whose samples or bounds changed (the pyramid followed an edit), and what a
+        loader made ahead for the others' uploads (a raster node block reads its neighbours' samples too)."""
         for k in keys:
             self._tiles.pop(k, None)
+        for t in self._tiles.values():
+            getattr(t, "host", {}).clear()
 
     def follow_edit(self, name: str, change: TerrainChange) -> int:
         """Bring strategy ``name``'s resident tiles up to date after an edit the pyramid followed: in place where

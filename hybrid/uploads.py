@@ -63,9 +63,9 @@ def host_jobs(strategies: dict, plans, n: int, pyramid=None) -> tuple[dict, set]
     """A frame's host work for a store's loader thread: (key -> callables, the (choice, key) uploads waiting for
     it). ``plans`` are the tiles whose upload is missing; strategies with a ``host_work(key, n)`` (the raster
     ones) give theirs, which their upload waits for. With the store's ``pyramid``, a strategy with a
-    ``host_prepare(heights, source_step)`` (the ray caster) has it made of the tile's samples
-    (``StorePyramid.derive``) so that its upload is the GL's part alone; an upload does not wait for that (it
-    prepares its tile itself)."""
+    ``host_prepare(heights, source_step, key)`` (the ray caster's codes, the raster strategies' node blocks) has
+    it made for the tile (``StorePyramid.derive``) so that its upload is mostly the GL's part; an upload does not
+    wait for that (it prepares its tile itself)."""
     work: dict = {}
     waiting = set()
     for p in plans:
@@ -83,7 +83,7 @@ def host_jobs(strategies: dict, plans, n: int, pyramid=None) -> tuple[dict, set]
         made = pyramid.derived_keys(keys, product)
         for k in keys:
             if k not in made:
-                work.setdefault(k, []).append(partial(pyramid.derive, k, product, prepare))
+                work.setdefault(k, []).append(partial(pyramid.derive, k, product, partial(prepare, key=k)))
     return work, waiting
 
 

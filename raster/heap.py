@@ -88,8 +88,9 @@ class TileHeap:
         slot = HeapSlot(self, index)
         self.owners[slot.index] = slot
         assert self.heights is not None and self.nodes is not None  # _remake made them; not released
-        self.heights.write(np.ascontiguousarray(heights, dtype=np.float32).tobytes(), offset=slot.heights_base * 4)
-        self.nodes.write(np.ascontiguousarray(nodes, dtype=np.float32).tobytes(), offset=slot.nodes_base * 16)
+        # written from the arrays' own memory (a buffer, not a bytes copy)
+        self.heights.write(np.ascontiguousarray(heights, dtype=np.float32), offset=slot.heights_base * 4)
+        self.nodes.write(np.ascontiguousarray(nodes, dtype=np.float32), offset=slot.nodes_base * 16)
         return slot
 
     def free(self, slot: HeapSlot) -> None:

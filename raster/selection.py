@@ -20,10 +20,12 @@ from hybrid.gl.programs import UniformCache, compute_shader, write_uniform
 from hybrid.gl.textures import terrain_texture
 
 from .arena import LeafArena, arena_defines
+from .bounds_loops import level_extremes
 from .frame_items import COMMANDS_PER_ITEM, CONTROL_WORDS, ITEM_DEFINES, LOCAL, FrameItems
 from .heap import HEAP_DEFINES, TileHeap
+from .host_nodes import HostNodes, bounds_rows, host_nodes, level_starts
 from .morph import TURN_FROM
-from .nodes import nodes_for, pending_cut, tile_levels, tile_node_block
+from .nodes import nodes_for, pending_cut, tile_levels
 from .quadtree import GPU_BETA, check_full_res
 from .tileblock import (
     BLOCK,
@@ -69,23 +71,11 @@ def select_defines(full_res: str, k: int) -> dict:
     }
 
 
-def level_starts(n: int) -> np.ndarray:
-    """Invocation index of the first node of each local level in the listing pass (levels + 1 entries): level 0
-    is listed by its split parents (levels 0 and 1 both start at 0), except in a 2-cell tile."""
-    levels = tile_levels(n)
-    counts = [0 if levels > 1 else 1] + [(n >> (m + 1)) ** 2 for m in range(1, levels)]
-    return np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
-
-
 def level_bounds(data: np.ndarray, offsets: np.ndarray, n: int, spacing_xy: tuple[float, float]):
-    """Per local level of a tile: largest effective error (m) and the union of its own nodes' boxes (tile-local m);
-    ``spacing_xy`` is the tile's (x, y) sample spacing in metres."""
-    from .bounds_loops import level_extremes
-
+    """Per local level of a tile: largest effective error (m) and the union of its own nodes' boxes (tile-local
+    m); ``spacing_xy`` is the tile's (x, y) sample spacing in metres."""
     err, zlo, zhi = level_extremes(np.asarray(data, np.float32), np.asarray(offsets, np.int64), int(n))
-    sp = np.asarray(spacing_xy, dtype=np.float64)
-    grow = (2 << np.arange(len(err)))[:, None] * sp  # (levels, 2): each level's node side, x and y
-    return err, np.column_stack([-grow, zlo]), np.column_stack([n * sp + grow, zhi])
+    return bounds_rows(HostNodes(None, 0.0, data, offsets, err, zlo, zhi), n, spacing_xy)
 
 
 def _level_bounds_numpy(data: np.ndarray, offsets: np.ndarray, n: int, spacing_xy: tuple[float, float]):
@@ -128,16 +118,18 @@ class SelectedTileletTile:
             raise TerrabenchError(f"tile heights must be (n+1)² with n a power of two >= 2, got shape {h.shape}")
         self.n = h.shape[0] - 1
         self.key = tile.key
-        nodes = nodes_for(strategy.hf, self.n, strategy.beta)
-        data, self.offsets = tile_node_block(nodes, int(tile.key.level), int(tile.key.tx), int(tile.key.ty), self.n)
-        self.side_errors = nodes.sides is not None  # the terrain's nodes carry side codes
+        host = getattr(tile, "host", {}).pop(strategy.host_product, None)  # made by a store's loader thread
+        if not isinstance(host, HostNodes) or host.key != tile.key or host.beta != strategy.beta:
+            host = host_nodes(strategy.hf, self.n, strategy.beta, tile.key)
+        data, self.offsets = host.data, host.offsets
+        self.side_errors = nodes_for(strategy.hf, self.n, strategy.beta).sides is not None  # side codes held
         self.starts = level_starts(self.n)
         if len(self.starts) > MAX_STARTS:
             raise TerrabenchError(
                 f"tiles of {self.n} cells have {len(self.starts) - 1} local levels; the raster "
                 f"selection handles at most {MAX_STARTS - 1}"
             )
-        err, lo, hi = level_bounds(data, self.offsets, self.n, tile.spacing_xy)
+        err, lo, hi = bounds_rows(host, self.n, tile.spacing_xy)
         constants, self.clip = tile_constants(tile), tile.clip  # the tile block's own part ...
         block = static_blocks(strategy.hf, constants[None])  # ... and what the view leaves
         block["shape"][:, 0], block["shape"][:, 1] = self.n, tile_levels(self.n) - 1  # as it is (node offsets
@@ -219,6 +211,13 @@ class TileletSelection:
     def upload(self, tile) -> SelectedTileletTile:
         """Put one tile on the GPU: heights, node errors and boxes, in its heap."""
         return SelectedTileletTile(self, tile)
+
+    host_product = "raster.nodes"  # the name of what host_prepare makes of a tile (StorePyramid.derive)
+
+    def host_prepare(self, heights: np.ndarray, source_step=None, key=None) -> HostNodes:
+        """The CPU part of tile ``key``'s upload, which a store's loader thread runs ahead: its node block and the
+        block's per-level extremes (``raster.host_nodes``); ``heights`` give its cell count."""
+        return host_nodes(self.hf, int(heights.shape[0]) - 1, self.beta, key)
 
     def host_work(self, key, n: int):
         """Slow CPU work of tile ``key``'s upload (n cells a side) that a loader thread can do ahead, as a callable

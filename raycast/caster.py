@@ -165,9 +165,9 @@ class RaycastStrategy:
 
     host_product = "raycast.codes"  # the name of what host_prepare makes of a tile (StorePyramid.derive)
 
-    def host_prepare(self, heights: np.ndarray, source_step=None) -> HostTile:
+    def host_prepare(self, heights: np.ndarray, source_step=None, key=None) -> HostTile:
         """The CPU part of a tile's upload, which a store's loader thread runs ahead: its 16-bit codes (or float32
-        metres, with ``heights='float32'``) and their max mipmap."""
+        metres, with ``heights='float32'``) and their max mipmap (of its samples alone: ``key`` is not read)."""
         return prepare_heights(heights, source_step, self.options.heights)
 
     def upload(self, tile) -> GpuTile:

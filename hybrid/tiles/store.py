@@ -73,11 +73,13 @@ class StorePyramid(TilePyramid):
     def derive(self, key, name: str, make) -> None:
         """Make ``make(samples, source_step)`` of the tile's samples (a strategy's host work for its upload, such as
         the ray caster's 16-bit codes and max mipmap) and keep it beside them, counted in the host cache, until
-        a Tile of ``key`` takes it (``host_products``) or the samples leave the cache; thread-safe."""
+        a Tile of ``key`` takes it (``host_products``) or the samples leave the cache; thread-safe. What was made
+        while a write-through came in is dropped: it may have read node arrays that the write changed."""
+        edits = self.edits
         h = self.samples(key)
         made = make(h, getattr(self.hf, "source_step", None))
         with self._lock:
-            if self._cache.get(key) is h:  # the samples it was made of are still the tile's
+            if self._cache.get(key) is h and self.edits == edits:  # made of what the tile still is
                 old = self._derived.setdefault(key, {}).pop(name, None)
                 self._derived[key][name] = made
                 self.cache_bytes += made.nbytes - (0 if old is None else old.nbytes)
@@ -182,8 +184,10 @@ class StorePyramid(TilePyramid):
             for mine, theirs in zip((self._zmin, self._zmax, self._err), source.level_arrays(level), strict=True):
                 mine[level][at] = theirs[at]
         with self._lock:
-            for k in keys:
+            self.edits += 1
+            for k in list(self._derived):  # a tile's node block also reads its neighbours' samples: all made again
                 self._drop_derived(k)
+            for k in keys:
                 if k in self._cache:
                     self.cache_bytes -= self._cache.pop(k).nbytes
             for chunk in [c for c in self._chunks if _chunk_meets(c, self.n, win)]:
@@ -191,7 +195,6 @@ class StorePyramid(TilePyramid):
                 self.chunk_bytes -= old.nbytes
                 self.cache_bytes -= old.nbytes
         self._new_caches()
-        self.edits += 1
         return keys
 
     def _on_step_tiles(self, level: int, step) -> np.ndarray:
