@@ -13,7 +13,6 @@ from functools import lru_cache
 
 import numpy as np
 
-from .bounds_loops import level_extremes
 from .nodes import nodes_for, tile_levels, tile_node_block
 
 
@@ -39,6 +38,8 @@ class HostNodes:
 
 def host_nodes(hf, n: int, beta: float, key) -> HostNodes:
     """The node block and per-level extremes of tile ``key`` (n cells a side) of terrain ``hf`` at ``beta``."""
+    from .bounds_loops import level_extremes  # numba: imported on first use, not with the package
+
     nodes = nodes_for(hf, n, beta)
     data, offsets = tile_node_block(nodes, int(key.level), int(key.tx), int(key.ty), n)
     err, zlo, zhi = level_extremes(np.asarray(data, np.float32), np.asarray(offsets, np.int64), int(n))
