@@ -125,7 +125,8 @@ def _flight_sentences(table: pd.DataFrame) -> list[str]:
             if over.empty
             else f"Resident tiles' GPU bytes passed the budget in {len(over)} flights"
         )
-        + f"; the strategies' shared objects (terrain texture, pre-pass targets, leaf arenas, frame counters) add up to "
+        + f"; the strategies' shared objects (terrain texture, pre-pass targets, leaf arenas, frame counters, and the "
+        f"raster heaps' free slots: a streaming renderer's heaps hold the budget's share from the start) add up to "
         f"{shared:.0f} MiB on top."
     )
     out.append(
@@ -144,12 +145,13 @@ def _memory_sentences(table: pd.DataFrame, refused: pd.DataFrame) -> list[str]:
     """Raster memory against the ray caster's per store size, and the methods not drawn."""
     out = []
     ras = table[table["method"].isin(["raster", "raster_gs"])]
-    ray = table[table["method"] == "raycast"].set_index("side")["peak_gpu_mib"]
+    ray = table[table["method"] == "raycast"].set_index("side")
     for side, m in ras.groupby("side"):
         if side in ray.index:
+            held = ", ".join(f"{x.method} {x.peak_resident_mib:.0f} MiB ({x.peak_gpu_mib:.0f})" for x in m.itertuples())
             out.append(
-                f"{int(side)}²: raster memory {', '.join(f'{x.method} {x.peak_gpu_mib:.0f} MiB' for x in m.itertuples())}"
-                f" against the ray caster's {ray[side]:.0f} MiB."
+                f"{int(side)}²: resident tiles' memory at most (with the shared objects) {held} against the ray "
+                f"caster's {ray.at[side, 'peak_resident_mib']:.0f} MiB ({ray.at[side, 'peak_gpu_mib']:.0f})."
             )
     for x in refused.itertuples():
         out.append(f"{x.method} on {x.store}: not drawn ({x.reason}).")

@@ -40,7 +40,7 @@ from hybrid.frame_stats import add_frame_costs, frame_stats
 from hybrid.gl.context import gl_info
 from hybrid.gl.target import FrameTarget, RenderResult
 from hybrid.reference import ReferenceRenderer
-from hybrid.residency import ResidencyCache
+from hybrid.residency import ResidencyCache, reserve_pools
 from hybrid.strategies import (
     STRATEGIES,
     candidates,
@@ -114,6 +114,8 @@ class Renderer:
         if upload_budget_ms is not None and not (np.isfinite(upload_budget_ms) and upload_budget_ms >= 0):
             raise TerrabenchError(f"upload budget must be a finite number of ms >= 0, got {upload_budget_ms!r}")
         self.upload_budget_ms = upload_budget_ms
+        if upload_budget_ms is not None and budget_bytes is not None:  # streaming: tile pools of the budget's size
+            reserve_pools(self.strategies, budget_bytes, self.pyramid.n)
         self.job_costs = JobCosts()  # upload jobs' expected ms: a frame starts those that fit its budget
         self._fallbacks: dict = {}
         self._tiles: OrderedDict = OrderedDict()

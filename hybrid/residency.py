@@ -101,3 +101,12 @@ class ResidencyCache:
         for k in list(self.entries):
             self._evict(k)
         self.stats.evictions = 0
+
+
+def reserve_pools(strategies: dict, budget_bytes: int, n: int) -> None:
+    """Have every strategy that keeps its n-cell tiles in a pool of its own (``reserve(n, nbytes)``: the raster
+    heaps) hold an even share of the resident tiles' GPU budget from the start, so that a streaming frame never
+    pays for a pool's growth."""
+    pooled = [s for s in strategies.values() if callable(getattr(s, "reserve", None))]
+    for s in pooled:
+        s.reserve(n, budget_bytes // len(pooled))

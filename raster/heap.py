@@ -4,7 +4,10 @@ The leaf selection (select.comp.glsl) runs as one dispatch over every tile of a 
 tile's own buffers: each tile's data lies in a slot of its cell count's heap instead, and the tile's block
 carries where (raster.tileblock). A heap grows by doubling (a GPU copy of the used slots), and when eviction
 leaves it under a quarter full it is made again for twice what it holds, its tiles moved down to the first
-slots. Bytes: a tile counts its slot's; what the heaps hold unused is shared (``spare_nbytes``).
+slots. A heap may be made with a floor of slots (``min_slots``: a renderer's GPU budget of tiles, as a streaming
+tile pool is sized): it starts there and never shrinks below, so that no growth, whose allocation costs a
+software rasterizer about 0.4 ms a MB, lands in a frame. Bytes: a tile counts its slot's; what the heaps hold
+unused is shared (``spare_nbytes``).
 """
 
 from __future__ import annotations
@@ -24,6 +27,11 @@ HEAP_DEFINES = {"NODES_BINDING": NODES_BINDING, "HEIGHTS_BINDING": HEIGHTS_BINDI
 
 MIN_SLOTS = 4  # smallest heap, tiles
 SHRINK_BELOW = 0.25  # remake a heap whose tiles fill less than this share of it ...
+
+
+def slot_bytes(n: int, node_rows: int) -> int:
+    """GPU bytes of one n-cell tile's heap slot: its (n+1)² float32 heights and ``node_rows`` vec4 node rows."""
+    return 4 * (int(n) + 1) ** 2 + 16 * int(node_rows)
 
 
 class HeapSlot:
@@ -57,15 +65,16 @@ class HeapSlot:
 class TileHeap:
     """Heights ((n+1)² float32) and node rows (``node_rows`` vec4) of every resident n-cell tile of a strategy."""
 
-    def __init__(self, ctx, n: int, node_rows: int):
+    def __init__(self, ctx, n: int, node_rows: int, min_slots: int = MIN_SLOTS):
         self.ctx, self.n, self.node_rows = ctx, int(n), int(node_rows)
+        self.min_slots = max(int(min_slots), MIN_SLOTS)
         self.height_words = (self.n + 1) ** 2
-        self.slot_bytes = 4 * self.height_words + 16 * self.node_rows
+        self.slot_bytes = slot_bytes(self.n, self.node_rows)
         self.capacity = 0
         self.heights: moderngl.Buffer | None = None  # None once released
         self.nodes: moderngl.Buffer | None = None
         self.owners: list[HeapSlot | None] = []
-        self._remake(MIN_SLOTS)
+        self._remake(self.min_slots)
 
     def _copy(self, src: int, dst: int, heights, nodes) -> None:
         """GPU copy of slot ``src`` of the current buffers to slot ``dst`` of ``heights`` and ``nodes``."""
@@ -95,13 +104,13 @@ class TileHeap:
 
     def free(self, slot: HeapSlot) -> None:
         """Give a slot back; a heap left under SHRINK_BELOW full is remade for twice its tiles (at least
-        MIN_SLOTS), its tiles moved to the first slots."""
+        ``min_slots``), its tiles moved to the first slots."""
         if slot.index >= len(self.owners) or self.owners[slot.index] is not slot:
             return
         self.owners[slot.index] = None
         used = self.used
-        if self.capacity > MIN_SLOTS and used < SHRINK_BELOW * self.capacity:
-            self._remake(max(MIN_SLOTS, 2 * used))
+        if self.capacity > self.min_slots and used < SHRINK_BELOW * self.capacity:
+            self._remake(max(self.min_slots, 2 * used))
 
     def _remake(self, capacity: int) -> None:
         """Make the buffers again for ``capacity`` slots, the used slots copied to the first ones in slot order

@@ -20,9 +20,8 @@ from hybrid.gl.programs import UniformCache, compute_shader, write_uniform
 from hybrid.gl.textures import terrain_texture
 
 from .arena import LeafArena, arena_defines
-from .bounds_loops import level_extremes
 from .frame_items import COMMANDS_PER_ITEM, CONTROL_WORDS, ITEM_DEFINES, LOCAL, FrameItems
-from .heap import HEAP_DEFINES, TileHeap
+from .heap import HEAP_DEFINES, TileHeap, slot_bytes
 from .host_nodes import HostNodes, bounds_rows, host_nodes, level_starts
 from .morph import TURN_FROM
 from .nodes import nodes_for, pending_cut, tile_levels
@@ -47,6 +46,7 @@ LEAF_FORMAT = "4i 4f 4f 1f"  # a leaf record: j0, i0, level, dropped edges, nine
 LEAN_LEAF_FORMAT = "4i 4f 4f 1f 2f"  # full_res "lean": and the SE and NW cells' turns (15 words)
 FRAME_FIELDS = ("triangles", "tilelets", "tilelets_culled", "skirt_segments", "arena_leaves", "arena_overflow")
 FRAME_BINDING = 4  # storage binding of the frame's counters (FRAME_FIELDS)
+MAX_RESERVED_BYTES = 1 << 30  # the most GPU memory a heap holds from the start, whatever the budget
 
 
 def full_res_defines(full_res: str) -> dict:
@@ -74,6 +74,8 @@ def select_defines(full_res: str, k: int) -> dict:
 def level_bounds(data: np.ndarray, offsets: np.ndarray, n: int, spacing_xy: tuple[float, float]):
     """Per local level of a tile: largest effective error (m) and the union of its own nodes' boxes (tile-local
     m); ``spacing_xy`` is the tile's (x, y) sample spacing in metres."""
+    from .bounds_loops import level_extremes  # numba: imported on first use, not with the package
+
     err, zlo, zhi = level_extremes(np.asarray(data, np.float32), np.asarray(offsets, np.int64), int(n))
     return bounds_rows(HostNodes(None, 0.0, data, offsets, err, zlo, zhi), n, spacing_xy)
 
@@ -173,6 +175,7 @@ class TileletSelection:
         self.arena = LeafArena(ctx, self.writes)
         self.items = FrameItems(ctx)
         self.heaps: dict[int, TileHeap] = {}  # cell count -> heap of resident tiles
+        self._reserved: dict[int, int] = {}  # cell count -> GPU bytes its heap holds from the start (reserve)
         self.item_of: dict[int, int] = {}  # id(tile) -> its first item in the last selection
         self.uniforms = UniformCache()  # the selection passes' and the draw programs'
 
@@ -192,10 +195,17 @@ class TileletSelection:
         self.arena.use_layout(full_res)
 
     def heap(self, n: int, node_rows: int) -> TileHeap:
-        """The heap of n-cell tiles (made at the first)."""
+        """The heap of n-cell tiles (made at the first, with the slots ``reserve`` asked for)."""
         if n not in self.heaps:
-            self.heaps[n] = TileHeap(self.ctx, n, node_rows)
+            want = min(self._reserved.get(n, 0), MAX_RESERVED_BYTES) // slot_bytes(n, node_rows)
+            # one slot beyond: an upload takes its slot before the residency cache evicts to make room for it
+            self.heaps[n] = TileHeap(self.ctx, n, node_rows, min_slots=want + 1 if want else 0)
         return self.heaps[n]
+
+    def reserve(self, n: int, nbytes: int) -> None:
+        """Hold about ``nbytes`` of GPU memory for n-cell tiles from the heap's making on (a renderer's budget of
+        resident tiles), so that the heap does not grow inside a frame."""
+        self._reserved[int(n)] = max(int(nbytes), 0)
 
     @property
     def shared_nbytes(self) -> int:

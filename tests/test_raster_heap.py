@@ -94,3 +94,27 @@ def test_one_selection_of_tiles_of_two_cell_counts_is_refused_by_name(ctx, puget
             s.select_leaves(view, items, 2 / 3)
     finally:
         s.release()
+
+
+@pytest.mark.parametrize(("policy", "share"), [("raster", 1), ("hybrid", 2)])
+def test_a_streaming_renderers_heaps_hold_the_budget_from_the_start(ctx, puget257, policy, share):
+    """With an upload budget (streaming), each raster heap is made with room for its share of the GPU budget of
+    tiles and one more, and neither grows nor shrinks as tiles come and go within the budget; without, it starts
+    at MIN_SLOTS."""
+    fly = preset("flyover", puget257, 6, *SIZE)
+    with Renderer(ctx, puget257, "raster", tile_size=32) as probe:
+        probe.render(fly.view(1), 0.5)
+        slot = next(iter(probe.strategies["raster"].heaps.values())).slot_bytes
+        assert all(h.capacity in {MIN_SLOTS << k for k in range(16)} for h in probe.strategies["raster"].heaps.values())
+    budget = 12 * slot
+    runs = [(fly.view(1), 0.5), (fly.view(3), 0.5), (fly.view(5), 60.0), (fly.view(1), 0.5)]
+    with Renderer(ctx, puget257, policy, tile_size=32, budget_bytes=budget, upload_budget_ms=1e3) as r:
+        pooled = [s for s in r.strategies.values() if hasattr(s, "heaps")]
+        assert len(pooled) == share
+        for v, tau in runs:
+            r.render(v, tau)
+            for s in pooled:
+                for h in s.heaps.values():
+                    assert h.capacity == budget // share // slot + 1
+        if policy == "raster":
+            assert r.cache.stats.evictions > 0 and r.cache.bytes <= budget
