@@ -115,7 +115,7 @@ class Renderer:
             raise TerrabenchError(f"upload budget must be a finite number of ms >= 0, got {upload_budget_ms!r}")
         self.upload_budget_ms = upload_budget_ms
         if upload_budget_ms is not None and budget_bytes is not None:  # streaming: tile pools of the budget's size
-            reserve_pools(self.strategies, budget_bytes, self.pyramid.n)
+            reserve_pools(self.strategies, budget_bytes, self.pyramid)
         self.job_costs = JobCosts()  # upload jobs' expected ms: a frame starts those that fit its budget
         self._fallbacks: dict = {}
         self._tiles: OrderedDict = OrderedDict()

@@ -103,10 +103,11 @@ class ResidencyCache:
         self.stats.evictions = 0
 
 
-def reserve_pools(strategies: dict, budget_bytes: int, n: int) -> None:
-    """Have every strategy that keeps its n-cell tiles in a pool of its own (``reserve(n, nbytes)``: the raster
-    heaps) hold an even share of the resident tiles' GPU budget from the start, so that a streaming frame never
-    pays for a pool's growth."""
+def reserve_pools(strategies: dict, budget_bytes: int, pyramid) -> None:
+    """Have every strategy that keeps its tiles in a pool of its own (``reserve(n, nbytes, tiles)``: the raster
+    heaps) hold an even share of the resident tiles' GPU budget from the start, and no more than room for every
+    tile of the pyramid, so that a streaming frame never pays for a pool's growth."""
     pooled = [s for s in strategies.values() if callable(getattr(s, "reserve", None))]
+    tiles = sum(r * c for r, c in (pyramid.tile_counts(level) for level in range(pyramid.max_level + 1)))
     for s in pooled:
-        s.reserve(n, budget_bytes // len(pooled))
+        s.reserve(pyramid.n, budget_bytes // len(pooled), tiles)

@@ -46,7 +46,7 @@ LEAF_FORMAT = "4i 4f 4f 1f"  # a leaf record: j0, i0, level, dropped edges, nine
 LEAN_LEAF_FORMAT = "4i 4f 4f 1f 2f"  # full_res "lean": and the SE and NW cells' turns (15 words)
 FRAME_FIELDS = ("triangles", "tilelets", "tilelets_culled", "skirt_segments", "arena_leaves", "arena_overflow")
 FRAME_BINDING = 4  # storage binding of the frame's counters (FRAME_FIELDS)
-MAX_RESERVED_BYTES = 1 << 30  # the most GPU memory a heap holds from the start, whatever the budget
+MAX_RESERVED_BYTES = 512 << 20  # the most GPU memory a heap holds from the start, whatever the budget
 
 
 def full_res_defines(full_res: str) -> dict:
@@ -175,7 +175,7 @@ class TileletSelection:
         self.arena = LeafArena(ctx, self.writes)
         self.items = FrameItems(ctx)
         self.heaps: dict[int, TileHeap] = {}  # cell count -> heap of resident tiles
-        self._reserved: dict[int, int] = {}  # cell count -> GPU bytes its heap holds from the start (reserve)
+        self._reserved: dict[int, tuple[int, int]] = {}  # cell count -> (bytes, tiles) its heap holds at first
         self.item_of: dict[int, int] = {}  # id(tile) -> its first item in the last selection
         self.uniforms = UniformCache()  # the selection passes' and the draw programs'
 
@@ -197,15 +197,17 @@ class TileletSelection:
     def heap(self, n: int, node_rows: int) -> TileHeap:
         """The heap of n-cell tiles (made at the first, with the slots ``reserve`` asked for)."""
         if n not in self.heaps:
-            want = min(self._reserved.get(n, 0), MAX_RESERVED_BYTES) // slot_bytes(n, node_rows)
+            nbytes, tiles = self._reserved.get(n, (0, 0))
+            want = min(min(nbytes, MAX_RESERVED_BYTES) // slot_bytes(n, node_rows), tiles)
             # one slot beyond: an upload takes its slot before the residency cache evicts to make room for it
             self.heaps[n] = TileHeap(self.ctx, n, node_rows, min_slots=want + 1 if want else 0)
         return self.heaps[n]
 
-    def reserve(self, n: int, nbytes: int) -> None:
-        """Hold about ``nbytes`` of GPU memory for n-cell tiles from the heap's making on (a renderer's budget of
-        resident tiles), so that the heap does not grow inside a frame."""
-        self._reserved[int(n)] = max(int(nbytes), 0)
+    def reserve(self, n: int, nbytes: int, tiles: int) -> None:
+        """Hold about ``nbytes`` of GPU memory (at most ``MAX_RESERVED_BYTES``), or room for ``tiles`` n-cell tiles if
+        less, from the heap's making on (a renderer's budget of resident tiles, and its pyramid's tiles), so that
+        the heap does not grow inside a frame."""
+        self._reserved[int(n)] = (max(int(nbytes), 0), max(int(tiles), 0))
 
     @property
     def shared_nbytes(self) -> int:

@@ -118,3 +118,13 @@ def test_a_streaming_renderers_heaps_hold_the_budget_from_the_start(ctx, puget25
                     assert h.capacity == budget // share // slot + 1
         if policy == "raster":
             assert r.cache.stats.evictions > 0 and r.cache.bytes <= budget
+
+
+def test_a_streaming_heap_holds_no_more_than_every_tile_of_the_pyramid(ctx, puget257):
+    fly = preset("flyover", puget257, 6, *SIZE)
+    with Renderer(ctx, puget257, "raster", tile_size=32, budget_bytes=1 << 30, upload_budget_ms=1e3) as r:
+        r.render(fly.view(1), 0.5)
+        p = r.pyramid
+        tiles = sum(a * b for a, b in (p.tile_counts(lev) for lev in range(p.max_level + 1)))
+        (heap,) = r.strategies["raster"].heaps.values()
+        assert tiles == 85 and heap.capacity == tiles + 1
