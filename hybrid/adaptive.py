@@ -82,14 +82,26 @@ def explore(online: OnlineModel, plans: list[TilePlan]) -> Exploration | None:
 
 
 def observe(
-    online: OnlineModel, plans: list[TilePlan], pass_ms: dict, draw_ms: float, explored: Exploration | None
+    online: OnlineModel,
+    plans: list[TilePlan],
+    pass_ms: dict,
+    draw_ms: float,
+    explored: Exploration | None,
+    predicted: float | None,
 ) -> None:
     """Hand one drawn frame (its plans, each strategy's pass ms and the drawing's ms) to the online model, with the
-    model's prediction of the frame as drawn."""
+    model's prediction of the frame as drawn, made before it (ms; None: not known)."""
     frame = frame_columns(plans)
     if frame is not None:
-        predicted = predicted_frame_ms(online.model, plans)
         online.observe(frame.columns, [p.choice for p in plans], pass_ms, draw_ms, explored, predicted, frame.terms)
+
+
+def timed_prediction(model, plans: list[TilePlan]) -> tuple[float | None, float]:
+    """(``model``'s predicted ms of the frame of ``plans`` as they will be drawn, or None without a model; its
+    CPU ms): made before the frame is drawn and learnt from, so that it is an honest prediction."""
+    t0 = time.perf_counter()
+    predicted = predicted_frame_ms(model, plans) if model is not None else None
+    return predicted, (time.perf_counter() - t0) * 1e3
 
 
 def timed_explore(online: OnlineModel | None, plans: list[TilePlan], learn: bool) -> tuple[Exploration | None, float]:
@@ -107,9 +119,10 @@ def learn(
     gpu_ms: float | None,
     issue_ms: float,
     explored: Exploration | None,
+    predicted: float | None = None,
 ) -> float:
     """Hand the drawn frame to the online model (each pass's ms: the clock's, or the whole drawing for a frame of
-    one strategy); its CPU ms back."""
+    one strategy; ``predicted``: ``timed_prediction``'s); its CPU ms back."""
     t0 = time.perf_counter()
     passes = (
         clock.passes()
@@ -118,5 +131,5 @@ def learn(
         if plans
         else {}
     )
-    observe(online, plans, passes, draw_ms, explored)
+    observe(online, plans, passes, draw_ms, explored, predicted)
     return (time.perf_counter() - t0) * 1e3

@@ -6,7 +6,6 @@ Functions of a ``hybrid.renderer.Renderer`` (its residency cache, strategies and
 from __future__ import annotations
 
 from hybrid.contract import FrameStats
-from hybrid.cost.planner import predicted_frame_ms
 
 
 def gpu_bytes_by_kind(r) -> tuple[dict[str, int], int]:
@@ -22,12 +21,11 @@ def gpu_bytes_by_kind(r) -> tuple[dict[str, int], int]:
     return by_kind, shared
 
 
-def frame_stats(r, plans, plan_ms, draw, gpu, counters, together) -> FrameStats:
-    """The FrameStats of renderer ``r``'s frame of ``plans``: times, tiles, GPU bytes and, when mixed, the
-    predicted cost."""
+def frame_stats(r, plans, plan_ms, draw, gpu, counters, together, pred: float | None) -> FrameStats:
+    """The FrameStats of renderer ``r``'s frame of ``plans``: times, tiles, GPU bytes and ``pred``, the model's
+    prediction of the frame made before the frame was drawn (None: not mixed, or not known)."""
     by_kind, shared = gpu_bytes_by_kind(r)
     n_raster = sum(r.kind(p.choice) == "raster" for p in plans)
-    pred = predicted_frame_ms(r.model, plans) if r.mixed else None
     return FrameStats(
         wall_ms=plan_ms + draw,
         plan_ms=plan_ms,

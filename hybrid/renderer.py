@@ -321,11 +321,13 @@ class Renderer:
             together = oracle.measure_plans(self, view, plans, target, pinned, tau) if measure else {}
             motion, self._eye = (None if self._eye is None else view.eye - self._eye), view.eye
             streamed = make_resident(self, plans, pinned, prep_ms, motion)
+            predicted, ms = adaptive.timed_prediction(self.model if self.mixed else None, plans)  # before it learns
+            adapt_ms += ms if learn else 0.0
             clock = adaptive.PassClock(self.ctx, learn and len({p.choice for p in plans}) > 1)
             counters, draw, gpu, issue = timed_draw(self, target, view, plans, pinned, tau, opts, clock)
             if learn and self.online is not None and not (streamed and streamed.fallback_tiles):
-                adapt_ms += adaptive.learn(self.online, clock, plans, draw, gpu, issue, explored)
-            stats = frame_stats(self, plans, plan_ms, draw, gpu, counters, together)
+                adapt_ms += adaptive.learn(self.online, clock, plans, draw, gpu, issue, explored, predicted)
+            stats = frame_stats(self, plans, plan_ms, draw, gpu, counters, together, predicted)
             stats.choice_reused = own and self.reuse is not None and self.reuse.reused
             add_frame_costs(self, stats, prep_ms, issue, adapt_ms, explored, streamed, before)
             if overlay is not None:

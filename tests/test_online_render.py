@@ -65,9 +65,9 @@ def test_mixed_frames_time_each_pass(ctx, puget257, flight):
     with Renderer(ctx, puget257, "hybrid", 64, cost_model=skewed(ctx), adapt=explore, reuse_choice=1) as r:
         real = adaptive.observe
 
-        def spy(online, plans, passes, draw_ms, explored):
+        def spy(online, plans, passes, draw_ms, explored, predicted):
             seen.append((sorted({p.choice for p in plans}), passes, draw_ms))
-            real(online, plans, passes, draw_ms, explored)
+            real(online, plans, passes, draw_ms, explored, predicted)
 
         adaptive.observe = spy
         try:
@@ -89,3 +89,21 @@ def test_frozen_hybrid_chooses_the_same_every_run(ctx, puget257, flight):
             runs.append([[p.choice for p in r.render(v, 2 / 3, read=False).plans] for v in flight[:8]])
             assert r.online is None
     assert runs[0] == runs[1]
+
+
+def test_a_frames_prediction_is_made_before_the_model_learns_from_it(ctx, puget257, flight):
+    """pred_ms is the model's prediction of the frame as it was before the frame: on a frame that refits the
+    model, the refitted model would predict it otherwise."""
+    import copy
+
+    from hybrid.cost.planner import predicted_frame_ms
+
+    differed = 0
+    with Renderer(ctx, puget257, "hybrid", 64, cost_model=skewed(ctx), reuse_choice=1) as r:
+        for v in flight:
+            before, refits = copy.deepcopy(r.model), r.online.stats.refits
+            st = r.render(v, 2 / 3, read=False).stats
+            assert st.pred_ms == predicted_frame_ms(before, st.plans)
+            if r.online.stats.refits > refits:
+                differed += predicted_frame_ms(r.model, st.plans) != st.pred_ms
+    assert differed > 0
