@@ -9,7 +9,11 @@ its caches are what the next edit meets. Per size and method: the median ms of e
 update over the edits after the first two; the first edit apart (it makes the pyramid's deviation blocks and the
 raster nodes' edit state, one pass over the grid); the frame; and the update against the smallest terrain's.
 Then as many edits back to back, with no frame between, along a path of their own: the same work with the CPU's
-caches warm, which tells the edit's own growth with the terrain from what a frame leaves cold.
+caches warm, which tells the edit's own growth with the terrain from what a frame leaves cold. Then as many again,
+each after a pause of ``PAUSE_S`` with nothing drawn: on a shared machine work that follows a long frame finds its
+memory gone from the caches, whatever the frame drew (a probe of a quarter millisecond takes five times as long
+after 180 ms asleep as back to back), and a larger grid's frame is longer; after the same pause every size meets
+the same cold caches.
 Target: the same brush costs within 1.3x on the larger grids.
 """
 
@@ -24,6 +28,7 @@ import pandas as pd
 SIZES = (1025, 4097, 8193)
 METHODS = ("raycast", "raster")
 TARGET = "update / smallest (target <= 1.3)"
+PAUSE_S = 0.2  # the pause before each edit of the third series: longer than a 16385² frame here
 
 
 def tiled_puget(size: int):
@@ -62,12 +67,20 @@ def measure(ctx, size: int, method: str, edits: int) -> dict:
             refreshed.append(sum(rep.refreshed.values()))
             frames.append(r.render(view, 2 / 3, read=False).stats.wall_ms)
         warm = [sum(editor.apply(Crater((cx - 400.0 * k, cy), 2000.0, 300.0)).ms.values()) for k in range(edits)]
+        paused = [_after_pause(editor, Crater((cx, cy - 400.0 * k), 2000.0, 300.0)) for k in range(edits)]
     row = {"size": size, "method": method, "setup s": setup, "first edit ms": steps["total"][0]}
     row.update({f"{s} ms": float(np.median(v[2:])) for s, v in steps.items() if s != "total"})
     row.update({"update ms": float(np.median(steps["total"][2:])), "refreshed tiles": float(np.median(refreshed))})
     row["frame ms"] = float(np.median(frames[2:]))
     row["back to back ms"] = float(np.median(warm[2:]))
+    row["after a pause ms"] = float(np.median(paused[2:]))
     return row
+
+
+def _after_pause(editor, brush) -> float:
+    """The update ms of one edit applied after ``PAUSE_S`` with nothing drawn."""
+    time.sleep(PAUSE_S)
+    return sum(editor.apply(brush).ms.values())
 
 
 def run(ctx, sizes=SIZES, methods=METHODS, edits: int = 8) -> dict[str, pd.DataFrame]:
@@ -77,7 +90,8 @@ def run(ctx, sizes=SIZES, methods=METHODS, edits: int = 8) -> dict[str, pd.DataF
     smallest = df.groupby("method")["update ms"].transform("first")
     df.insert(df.columns.get_loc("update ms") + 1, TARGET, df["update ms"] / smallest)
     df["share of frame"] = df["update ms"] / df["frame ms"]
-    df["back to back / smallest"] = df["back to back ms"] / df.groupby("method")["back to back ms"].transform("first")
+    for col, name in (("back to back ms", "back to back / smallest"), ("after a pause ms", "after a pause / smallest")):
+        df[name] = df[col] / df.groupby("method")[col].transform("first")
     title = (
         f"one 2 km crater an edit on Puget tiled to larger grids (640x360, tiles of 256, median of {edits - 2} edits "
         "after two, a frame between edits)"
