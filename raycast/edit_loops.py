@@ -14,6 +14,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from hybrid.tiles.quantize_loops import range_code, range_error, step_of
+
 from .mip_loops import code_mip_levels
 
 STEP, RANGE, FLAT = 0, 1, 2  # the three quantisations of ``quantize``
@@ -28,10 +30,8 @@ def row_summaries(h, r0, r1, src, lo, hi, off):
         for j in range(h.shape[1]):
             v = np.float64(h[i, j])
             a, b = min(a, v), max(b, v)
-            if src[0] > 0.0:
-                k = np.rint((v - src[1]) / src[0])
-                if np.float32(src[1] + src[0] * k) != h[i, j]:
-                    o += 1.0
+            if src[0] > 0.0 and not step_of(h[i, j], src[0], src[1])[1]:
+                o += 1.0
         lo[i], hi[i], off[i] = a, b, o
 
 
@@ -55,9 +55,9 @@ def write_codes(h, q, i0, i1, j0, j1, kind, offset, step, base, q_max):
         for j in range(j0, j1):
             v = np.float64(h[i, j])
             if kind == STEP:
-                q[i, j] = np.uint16(np.rint((v - offset) / step) - base)
+                q[i, j] = np.uint16(step_of(h[i, j], step, offset)[0] - base)
             elif kind == RANGE:
-                q[i, j] = np.uint16(min(max(np.rint((v - offset) / step), 0.0), q_max))
+                q[i, j] = np.uint16(range_code(v, offset, step, q_max))
             else:
                 q[i, j] = 0
 
@@ -68,8 +68,7 @@ def row_errors(h, q, r0, r1, offset, step, err):
     for i in range(r0, r1):
         e = 0.0
         for j in range(h.shape[1]):
-            v = np.float64(h[i, j])
-            e = max(e, abs(np.float64(np.float32(offset + step * (q[i, j] + 0.0))) - v))
+            e = max(e, range_error(np.float64(h[i, j]), offset, step, q[i, j]))
         err[i] = e
 
 

@@ -10,6 +10,7 @@ import numpy as np
 from numba import njit
 
 from .bounds_loops import deviation_block_max
+from .quantize_loops import step_of
 
 
 @njit(cache=True)
@@ -110,8 +111,7 @@ def follow_on_step(h, grown, src, on_step):
     ok = np.empty((i1 - i0, j1 - j0), np.bool_)
     for i in range(i0, i1):
         for j in range(j0, j1):
-            k = np.rint((np.float64(h[i, j]) - src[1]) / src[0])
-            ok[i - i0, j - j0] = np.float32(src[1] + src[0] * k) == h[i, j]
+            ok[i - i0, j - j0] = step_of(h[i, j], src[0], src[1])[1]
     for i in range(i1 - i0 - 1):
         for j in range(j1 - j0 - 1):
             on_step[i0 + i, j0 + j] = ok[i, j] and ok[i, j + 1] and ok[i + 1, j] and ok[i + 1, j + 1]

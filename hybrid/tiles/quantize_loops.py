@@ -9,6 +9,27 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, inline="always")
+def step_of(h, step, offset):
+    """(k, on) of one float32 height h on a source's step: the nearest step index k (float64) and whether
+    float32(offset + step k) is h. The edits' compiled follows (``raycast.edit_loops``, ``pyramid_edit_loops``)
+    call it too, so that their codes and flags are this arithmetic's."""
+    k = np.rint((np.float64(h) - offset) / step)
+    return k, np.float32(offset + step * k) == h
+
+
+@njit(cache=True, inline="always")
+def range_code(v, lo, step, q_max):
+    """The range code (float64, 0..q_max) of height v (float64 metres) over the range from ``lo`` in ``step``s."""
+    return min(max(np.rint((v - lo) / step), 0.0), q_max)
+
+
+@njit(cache=True, inline="always")
+def range_error(v, lo, step, c):
+    """|v - float32(lo + step * c)|: how far range code c lies from height v (float64 metres)."""
+    return abs(np.float64(np.float32(lo + step * (c + 0.0))) - v)
+
+
 @njit(cache=True)
 def height_range(h):
     """(lowest, highest) of a 2-D float32 array, as float64."""
@@ -29,8 +50,8 @@ def step_codes(h, step, offset, q_max):
     kmin, kmax = np.inf, -np.inf
     for i in range(rows):
         for j in range(cols):
-            v = np.rint((np.float64(h[i, j]) - offset) / step)
-            if np.float32(offset + step * v) != h[i, j]:
+            v, on = step_of(h[i, j], step, offset)
+            if not on:
                 return np.zeros((0, 0), np.uint16), 0, False
             k[i, j] = v
             kmin, kmax = min(kmin, v), max(kmax, v)
@@ -53,7 +74,7 @@ def range_codes(h, lo, step, q_max):
     for i in range(rows):
         for j in range(cols):
             v = np.float64(h[i, j])
-            c = min(max(np.rint((v - lo) / step), 0.0), q_max)
+            c = range_code(v, lo, step, q_max)
             q[i, j] = np.uint16(c)
-            err = max(err, abs(np.float64(np.float32(lo + step * (c + 0.0))) - v))
+            err = max(err, range_error(v, lo, step, c))
     return q, err
