@@ -53,6 +53,7 @@ def follow_tile(gpu: GpuTile, tile, win: Window) -> bool:
     over ``win`` (tile-local rows and columns, clipped to the tile); True when only the window was written. The
     first follow of a tile makes its host codes whole; later ones re-make the window's (``raycast.edit_loops``)."""
     from .edit_loops import follow_codes, update_mips
+    from .mip_loops import code_mip_levels
 
     n, whole = gpu.n, gpu.host is None
     wide = gpu.fmt == "float32"  # metres as they are: the same meaning whatever the edit
@@ -62,9 +63,13 @@ def follow_tile(gpu: GpuTile, tile, win: Window) -> bool:
     s, h = gpu.host, np.ascontiguousarray(tile.heights, dtype=np.float32)
     wins = np.array(texel_windows(n, win), dtype=np.int64).reshape(-1, 4)
     if wide:
-        part = Window(0, n + 1, 0, n + 1) if whole else win
-        s.q[part.slices()] = h[part.slices()]
-        levels = update_mips(s.q, s.flat, np.array(texel_windows(n, part), dtype=np.int64).reshape(-1, 4))
+        if whole:  # code_mip_levels over a whole tile, as follow_codes makes it: several times update_mips'
+            s.q[:] = h
+            s.flat[:] = code_mip_levels(s.q)
+            levels = len(wins)
+        else:
+            s.q[win.slices()] = h[win.slices()]
+            levels = update_mips(s.q, s.flat, wins)
         error, same = 0.0, True
     else:
         step = getattr(tile, "source_step", None)
