@@ -46,12 +46,13 @@ def host_nodes(hf, n: int, beta: float, key) -> HostNodes:
     return HostNodes(key, float(beta), data, offsets, err, zlo, zhi)
 
 
-def bounds_rows(host: HostNodes, n: int, spacing_xy: tuple[float, float]):
-    """(largest effective error, lower box corners, upper box corners) per local level of a tile (tile-local
-    metres; ``spacing_xy`` its (x, y) sample spacing): a level's box grows by its node side on every side."""
+def bounds_rows(err: np.ndarray, zlo: np.ndarray, zhi: np.ndarray, n: int, spacing_xy: tuple[float, float]):
+    """(largest effective error, lower box corners, upper box corners) per local level of an n-cell tile from its
+    levels' extremes (tile-local metres; ``spacing_xy`` its (x, y) sample spacing): a level's box grows by its
+    node side on every side."""
     sp = np.asarray(spacing_xy, dtype=np.float64)
-    grow = (2 << np.arange(len(host.err)))[:, None] * sp  # (levels, 2): each level's node side, x and y
-    return host.err, np.column_stack([-grow, host.zlo]), np.column_stack([n * sp + grow, host.zhi])
+    grow = (2 << np.arange(len(err)))[:, None] * sp  # (levels, 2): each level's node side, x and y
+    return err, np.column_stack([-grow, zlo]), np.column_stack([n * sp + grow, zhi])
 
 
 @lru_cache(maxsize=16)

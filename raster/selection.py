@@ -77,7 +77,7 @@ def level_bounds(data: np.ndarray, offsets: np.ndarray, n: int, spacing_xy: tupl
     from .bounds_loops import level_extremes  # numba: imported on first use, not with the package
 
     err, zlo, zhi = level_extremes(np.asarray(data, np.float32), np.asarray(offsets, np.int64), int(n))
-    return bounds_rows(HostNodes(None, 0.0, data, offsets, err, zlo, zhi), n, spacing_xy)
+    return bounds_rows(err, zlo, zhi, n, spacing_xy)
 
 
 def _level_bounds_numpy(data: np.ndarray, offsets: np.ndarray, n: int, spacing_xy: tuple[float, float]):
@@ -131,7 +131,7 @@ class SelectedTileletTile:
                 f"tiles of {self.n} cells have {len(self.starts) - 1} local levels; the raster "
                 f"selection handles at most {MAX_STARTS - 1}"
             )
-        err, lo, hi = bounds_rows(host, self.n, tile.spacing_xy)
+        err, lo, hi = bounds_rows(host.err, host.zlo, host.zhi, self.n, tile.spacing_xy)
         constants, self.clip = tile_constants(tile), tile.clip  # the tile block's own part ...
         block = static_blocks(strategy.hf, constants[None])  # ... and what the view leaves
         block["shape"][:, 0], block["shape"][:, 1] = self.n, tile_levels(self.n) - 1  # as it is (node offsets
