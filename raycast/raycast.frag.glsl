@@ -158,7 +158,7 @@ void main() {
     if (zp > 0.0) tmax = depth_ab.y / (zp + depth_ab.x) * 1.00001;
 #endif
     int r = rc_traverse(hmap, mmap, dq, dq_base, n_cells, n_levels, ext_lo, ext, zr, eye_tex, D, near_plane, tmax, 0, spacing, lod_k,
-                        max_steps, outer, under, Q, cell, lev, hc, steps);
+                        max_steps, outer, under, LOD == 0, Q, cell, lev, hc, steps);
 #if STATS
     ivec2 bin = ivec2(gl_FragCoord.xy) >> STAT_BIN_SHIFT;
     int base = (tile_index * STAT_SLOTS + ((bin.x + bin.y * stat_bins_x) & (STAT_SLOTS - 1))) * STAT_WORDS;
@@ -183,7 +183,7 @@ void main() {
         vec3 Dg = vec3(L.xy / g_spacing, L.z);
         vec3 Qs; ivec2 cs; int ls; vec4 hs; int ssteps;
         int rs = rc_traverse(g_hmap, g_mmap, g_dq, g_dq_base, g_cells, g_levels, vec2(0.0), g_ext, g_zr, Og, Dg, 0.0, RC_FAR, gl, g_spacing, 0.0,
-                             g_max_steps, 15, false, Qs, cs, ls, hs, ssteps);
+                             g_max_steps, 15, false, false, Qs, cs, ls, hs, ssteps);
         if (rs != RC_MISS) lit = 0.0;
 #if STATS
         stats_add(base + 5, base + 7, rs == RC_CAPPED, -1, false, base + 6, -1, uint(ssteps));

@@ -71,6 +71,19 @@ float rc_bound(float h, vec2 dqf, int dqb) { return h; }
 float rc_val(uint q) { return float(int(q)); }
 float rc_val(float h) { return h; }
 
+// The corner codes (h00, h01 east, h10 north, h11) of the cell at corner c0 of size S, as floats. Where `unit`
+// (a compile-time constant of the call: every final cell of the traversal is a level-0 cell, S == 1) the four are
+// the 2x2 texels around the cell's north-east corner and one gather reads them, in place of four fetches.
+vec4 rc_corners(RC_SAMPLER hmap, ivec2 c0, int S, bool unit) {
+    if (unit) {
+        // gather order for the 2x2 footprint (x0, x1) x (y0, y1): (x0, y1), (x1, y1), (x1, y0), (x0, y0)
+        RC_CODE4 c = textureGather(hmap, (vec2(c0) + 1.0) / vec2(textureSize(hmap, 0)), 0);
+        return vec4(rc_val(c.w), rc_val(c.z), rc_val(c.x), rc_val(c.y));
+    }
+    return vec4(rc_val(texelFetch(hmap, c0, 0).r), rc_val(texelFetch(hmap, c0 + ivec2(S, 0), 0).r),
+                rc_val(texelFetch(hmap, c0 + ivec2(0, S), 0).r), rc_val(texelFetch(hmap, c0 + ivec2(S, S), 0).r));
+}
+
 // Offset of the point at fraction f of a cell from the interpolating surface of its corners (bilinear).
 float rc_bilin(vec4 hc, vec2 f) {
     return mix(mix(hc.x, hc.y, f.x), mix(hc.z, hc.w, f.x), f.y);
@@ -114,13 +127,15 @@ float rc_cell_hit(vec3 A, vec3 B, vec2 c0, float S, vec4 hc, float H) {
     }
     return -1.0;
 #else
-    vec2 df = fb - fa;
-    float a = hc.y - hc.x, b = hc.z - hc.x, c = hc.x - hc.y - hc.z + hc.w;
-    float k0 = A.z - (hc.x + a * fa.x + b * fa.y + c * fa.x * fa.y);
+    // precise: the quadratic's coefficients cancel, so whether a compiler fuses their products into
+    // multiply-adds would move the root; every variant of the shader evaluates them the same way
+    precise vec2 df = fb - fa;
+    precise float a = hc.y - hc.x, b = hc.z - hc.x, c = hc.x - hc.y - hc.z + hc.w;
+    precise float k0 = A.z - (hc.x + a * fa.x + b * fa.y + c * fa.x * fa.y);
     if (k0 <= 0.0) return 0.0;
-    float k1 = (B.z - A.z) - (a * df.x + b * df.y + c * (fa.x * df.y + fa.y * df.x));
-    float k2 = -c * df.x * df.y;
-    float dend = k0 + k1 + k2;
+    precise float k1 = (B.z - A.z) - (a * df.x + b * df.y + c * (fa.x * df.y + fa.y * df.x));
+    precise float k2 = -c * df.x * df.y;
+    precise float dend = k0 + k1 + k2;
     if (abs(k2) <= 1e-6 * (abs(k1) + abs(k0))) {
         if (dend <= 0.0) return k0 / (k0 - dend);
         return -1.0;
@@ -163,11 +178,12 @@ bool rc_climbs(vec2 ij, bool cx, bool cy) {
 // space), cell the hit texel (x, y) at level `level`, hc its corner heights. tmin: smallest ray parameter
 // (near plane); tmax: largest (RC_FAR: none; a ray stopped there is a miss); lmin: the finest level to descend to; steps: texels visited. under: the ray starts under the
 // terrain sheet (hybrid/gl/edges.glsl): its hit is where it first comes up through the surface (the sheet's
-// underside, as the two-sided reference draws it), found by stepping every lmin texel (no LOD).
+// underside, as the two-sided reference draws it), found by stepping every lmin texel (no LOD). unit_cells: a
+// compile-time constant, true where lmin is 0 and there is no LOD, so every cell tested is a level-0 cell.
 int rc_traverse(RC_SAMPLER hmap, RC_SAMPLER mmap, vec2 dq, int dqb, int N, int LMAX, vec2 elo, vec2 ext, vec2 zr,
                 vec3 O, vec3 D,
                 float tmin, float tmax, int lmin, vec2 spacing, float lod_k, int max_steps, int outer,
-                bool under, out vec3 hit, out ivec2 cell, out int level, out vec4 hc, out int steps) {
+                bool under, bool unit_cells, out vec3 hit, out ivec2 cell, out int level, out vec4 hc, out int steps) {
     steps = 0; level = 0; cell = ivec2(0); hit = vec3(0.0); hc = vec4(0.0);
     // to code space (z only; the step is > 0: a flat tile has step 1); the LOD's distances keep metres
     vec2 dqf = dq;
@@ -314,8 +330,7 @@ int rc_traverse(RC_SAMPLER hmap, RC_SAMPLER mmap, vec2 dq, int dqb, int N, int L
         if (my) { A.y = Nf - A.y; B.y = Nf - B.y; }
         ivec2 c0 = ri * (1 << l);
         int S = 1 << l;
-        vec4 h4 = vec4(rc_val(texelFetch(hmap, c0, 0).r), rc_val(texelFetch(hmap, c0 + ivec2(S, 0), 0).r),
-                       rc_val(texelFetch(hmap, c0 + ivec2(0, S), 0).r), rc_val(texelFetch(hmap, c0 + ivec2(S, S), 0).r));
+        vec4 h4 = rc_corners(hmap, c0, S, unit_cells);
         // the exact bound, the planes reconstruction's surface: a level-0 cell's own corners (its step read its
         // parent's bound), else the texel's max-mip height
         H = l == 0 ? max(max(h4.x, h4.y), max(h4.z, h4.w)) : rc_val(mc);
