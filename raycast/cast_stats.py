@@ -14,14 +14,16 @@ STAT_SLOTS = 64  # copies of each tile's counters (one per screen bin, modulo)
 STAT_STRIDE = 64  # bytes between copies (16 uints: one cache line, 8 used)
 STAT_BIN_SHIFT = 6  # screen bins of 2^6 = 64 pixels a side
 STATS_BINDING, TILE_PARAMS_BINDING = 0, 3  # storage binding of the counters, uniform binding of a tile's block
+MIPS_BINDING = 1  # storage binding of the cast tile's max mipmap (raycast.maxmip.mip_buffer)
 LAYOUT_DEFINES = {
     "STAT_SLOTS": STAT_SLOTS,
     "STAT_WORDS": STAT_STRIDE // 4,
     "STAT_BIN_SHIFT": STAT_BIN_SHIFT,
     "STATS_BINDING": STATS_BINDING,
     "TILE_PARAMS_BINDING": TILE_PARAMS_BINDING,
+    "MIPS_BINDING": MIPS_BINDING,
 }
-"""The layout above as the shaders' defines (raycast.frag.glsl, tile_block.glsl): their only source of it."""
+"""The layout above as the shaders' defines (raycast.frag.glsl, tile_block.glsl, traverse.glsl): their only source of it."""
 
 
 def read_tile_stats(buf, n_items: int) -> np.ndarray:

@@ -33,7 +33,6 @@ def view_uniforms(prog, prepass_prog, view, hf, texture, edges, heat_max: float)
         texture.use(2)
         set_uniform(prog, "tex", 2)
     set_uniform(prog, "hmap", 0)
-    set_uniform(prog, "mmap", 1)
     edges.bind(prog, hf, view, 6)
 
 

@@ -1,9 +1,10 @@
-"""The ray-cast tile strategy on the GPU: per-tile height + max-mip textures, one box pass per tile.
+"""The ray-cast tile strategy on the GPU: per-tile height texture + max-mip buffer, one box pass per tile.
 
 A tile is 16-bit height codes (hybrid.tiles.quantize: exact on a 16-bit source's step, else range/65535 with
 the error measured, reported per frame as ``quant_error_max_m``) in an R16UI (N+1)² texture, and its max
-mipmap of codes without level 0 in an R16UI (N/2)² texture (raycast.maxmip): 2.67 bytes a sample for large
-N, ``bytes_per_sample``. The shadow grid (the whole terrain for shadow rays) has the same form.
+mipmap of codes without level 0 in a storage buffer (raycast.mip_buffer): 2.67 bytes a sample for large N,
+``bytes_per_sample``. The shadow grid (the whole terrain for shadow rays) keeps its max mipmap in an R16UI
+(N/2)² texture with log2 N levels (raycast.maxmip), since it can outgrow a storage block.
 
 Satisfies ``hybrid.contract.TileStrategy``: ``upload(tile) -> GpuTile``, ``draw_tiles(target, view, items,
 tau, **options) -> dict``, ``shared_nbytes``, ``release()``.
@@ -30,6 +31,7 @@ from hybrid.terrain.edges import may_start_under
 
 from .cast_stats import (
     LAYOUT_DEFINES,
+    MIPS_BINDING,
     STAT_BIN_SHIFT,
     STAT_FIELDS,
     STAT_SLOTS,
@@ -298,7 +300,7 @@ class RaycastStrategy:
                     target.fbo.use()
                     ctx.depth_func = ">"
                 g.heights.use(0)
-                g.maxmip.use(1)
+                g.maxmip.bind_to_storage_buffer(MIPS_BINDING)
                 vao.render()
         finally:
             ctx.disable(ctx.CULL_FACE)

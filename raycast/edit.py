@@ -3,12 +3,12 @@
 A tile's 16-bit codes (``hybrid.tiles.quantize``) keep their meaning while the tile's offset, step and base stay
 the same: then only the codes of the changed samples are written and only the max-mip texels over them
 (``raycast.maxmip.texel_windows``). An edit that changes the tile's quantisation (its height range, or heights
-leaving the source's step) changes every code, and the whole tile is written again into the same textures. From
-its first edit a tile keeps its codes, max mipmap and per-row summaries on the host (``HostCodes``), so that a
-later edit re-makes the window's codes and texels only (``raycast.edit_loops``) where re-quantising the whole
-tile cost more than the rest of the follow. The max mipmap is written level by level: a texture write a level,
-where building it on the GPU took a dispatch and a barrier a level (on a CPU rasterizer each of those costs as
-much as the whole write).
+leaving the source's step) changes every code, and the whole tile is written again into the same texture and
+buffer. From its first edit a tile keeps its codes, max mipmap and per-row summaries on the host (``HostCodes``),
+so that a later edit re-makes the window's codes and texels only (``raycast.edit_loops``) where re-quantising the
+whole tile cost more than the rest of the follow. The max mipmap is written level by level, the window's whole
+rows in one buffer write a level (``raycast.mip_buffer.write_mip_rows``), where building it on the GPU took a
+dispatch and a barrier a level (on a CPU rasterizer each of those costs as much as the whole write).
 """
 
 from __future__ import annotations
@@ -18,12 +18,12 @@ from typing import Any, cast
 
 import numpy as np
 
-from hybrid.gl.context import write_red_level
 from hybrid.terrain.edits import Window
 from hybrid.tiles.quantize import Q_MAX
 
 from .gpu_tile import GpuTile, level_views
 from .maxmip import texel_windows
+from .mip_buffer import write_mip_rows
 from .tile_params import tile_row
 
 
@@ -79,24 +79,14 @@ def follow_tile(gpu: GpuTile, tile, win: Window) -> bool:
     mips, heights = level_views(s.flat, n), cast(Any, gpu.heights)  # a moderngl texture
     if not same:
         heights.write(s.q)
-        write_mips(gpu.maxmip, mips)
+        write_mip_rows(gpu.maxmip, mips)
     elif not win.empty:
         heights.write(np.ascontiguousarray(s.q[win.slices()]), viewport=_viewport(win.i0, win.i1, win.j0, win.j1))
-        write_mips(gpu.maxmip, mips if whole else mips[:levels], wins)
+        write_mip_rows(gpu.maxmip, mips if whole else mips[:levels], wins)
     gpu.offset, gpu.step, gpu.base = float(s.params[0]), float(s.params[1]), int(s.params[2])
     gpu.quant_error = float(error)
     gpu.row, gpu.bounds = tile_row(gpu, tile), (tile.clip, tile.zmin, tile.zmax)
     return bool(same)
-
-
-def write_mips(tex, mips, windows=None) -> None:
-    """Write host max-mip levels (``code_mips``: levels 1..log2 N, uint16 or float32) into a tile's max-mip texture,
-    level k of the texture from ``mips[k]``: each level whole, or only each level's (r0, r1, c0, c1) texel window
-    of ``windows``."""
-    for k, m in enumerate(mips):
-        r0, r1, c0, c1 = (0, m.shape[0], 0, m.shape[1]) if windows is None else windows[k]
-        if r1 > r0 and c1 > c0:
-            write_red_level(tex, k, m[r0:r1, c0:c1], c0, r0)
 
 
 def _viewport(r0: int, r1: int, c0: int, c1: int) -> tuple[int, int, int, int]:

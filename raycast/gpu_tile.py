@@ -1,12 +1,12 @@
 """A ray-cast tile on the GPU: its 16-bit height codes and their max mipmap, and the shadow rays' whole-terrain grid.
 
 A tile is 16-bit height codes (hybrid.tiles.quantize: exact on a 16-bit source's step, else range/65535 with
-the error measured) in an R16UI (N+1)² texture, and its max mipmap of codes without level 0 in an R16UI (N/2)²
-texture (raycast.maxmip). A tile's codes and max mipmap are made on the host (``prepare_heights``: CPU work that
-a tile store's loader thread does ahead of the frame) and put on the GPU as they are (``upload_prepared``: the
-frame's part, two texture uploads); a grid's max mipmap is built on the GPU (``upload_heights``). A tile may
-instead hold float32 metres in R32F textures (``heights='float32'``, raycast.options): the baseline that measures
-what the codes cost.
+the error measured) in an R16UI (N+1)² texture, and its max mipmap of codes without level 0 in a storage buffer
+(raycast.mip_buffer). A tile's codes and max mipmap are made on the host (``prepare_heights``: CPU work that a
+tile store's loader thread does ahead of the frame) and put on the GPU as they are (``upload_prepared``: the
+frame's part, a texture and a buffer filled). A grid's max mipmap is an R16UI (N/2)² texture built on the GPU
+(``upload_heights``). A tile may instead hold float32 metres (an R32F texture and a float32 buffer,
+``heights='float32'``, raycast.options): the baseline that measures what the codes cost.
 """
 
 from __future__ import annotations
@@ -17,20 +17,20 @@ from typing import Any
 import numpy as np
 
 from hybrid.errors import TerrabenchError
-from hybrid.gl.context import red_mip_texture
 from hybrid.tiles.quantize import Quantized, quantize
 
-from .maxmip import level_count, tile_nbytes
+from .maxmip import heights_nbytes, maxmip_nbytes, tile_nbytes
+from .mip_buffer import mip_buffer
 
 
 @dataclass
 class GpuTile:
-    """One tile on the GPU: R16UI (N+1)² height codes and their R16UI (N/2)² max mipmap (levels 1..log2 N), or
-    R32F metres where ``fmt`` is 'float32'; exact byte count; metres = offset + step * (code + base);
-    quant_error: largest |height - dequantised| (m)."""
+    """One tile on the GPU: R16UI (N+1)² height codes and their max mipmap (levels 1..log2 N) in a storage buffer
+    (a grid's: an R16UI (N/2)² texture), or float32 metres where ``fmt`` is 'float32'; exact byte count;
+    metres = offset + step * (code + base); quant_error: largest |height - dequantised| (m)."""
 
-    heights: Any  # moderngl textures
-    maxmip: Any
+    heights: Any  # a moderngl texture
+    maxmip: Any  # a moderngl buffer (raycast.mip_buffer), or a texture for a shadow grid (upload_heights)
     n: int
     nbytes: int
     offset: float = 0.0
@@ -48,7 +48,7 @@ class GpuTile:
         return self.nbytes / (self.n + 1) ** 2
 
     def release(self) -> None:
-        """Free both textures."""
+        """Free the height texture and the max mipmap."""
         self.heights.release()
         self.maxmip.release()
 
@@ -126,13 +126,13 @@ def prepare_heights(heights, source_step=None, fmt: str = "uint16") -> HostTile:
 
 
 def upload_prepared(ctx, host: HostTile) -> GpuTile:
-    """Put a host-prepared tile on the GPU: its codes (or float32 metres) and its max mipmap, two textures filled
-    as they are."""
+    """Put a host-prepared tile on the GPU: its codes (or float32 metres) in a texture and its max mipmap in a
+    storage buffer, filled as they are."""
     qz = host.codes
     n, wide = qz.q.shape[0] - 1, qz.q.dtype == np.float32
     ht = ctx.texture((n + 1, n + 1), 1, qz.q, dtype="f4" if wide else "u2", alignment=1)
     ht.filter = (ctx.NEAREST, ctx.NEAREST)
-    mm = red_mip_texture(ctx, n // 2, level_count(n) - 1, list(host.mips), qz.q.dtype)
+    mm = mip_buffer(ctx, host.mips)
     fmt = "float32" if wide else "uint16"
     return GpuTile(ht, mm, n, tile_nbytes(n, qz.q.dtype.itemsize), qz.offset, qz.step, qz.base, qz.error, fmt=fmt)
 
@@ -147,7 +147,7 @@ def upload_heights(ctx, builder, heights: np.ndarray, source_step=None) -> GpuTi
     ht = ctx.texture((n + 1, n + 1), 1, np.ascontiguousarray(qz.q).tobytes(), dtype="u2")
     ht.filter = (ctx.NEAREST, ctx.NEAREST)
     mm = builder.build(ht, n)
-    return GpuTile(ht, mm, n, tile_nbytes(n), qz.offset, qz.step, qz.base, qz.error)
+    return GpuTile(ht, mm, n, heights_nbytes(n) + maxmip_nbytes(n), qz.offset, qz.step, qz.base, qz.error)
 
 
 def shadow_grid(hf, upload) -> ShadowGrid:

@@ -5,11 +5,12 @@ square [j, j+1] x [i, i+1]; it holds the largest of the cell's four corner heigh
 reconstruction that interpolates those corners (planes, linear planes, triangles, bilinear). Level l texel
 (i, j) covers cells [i*2^l, (i+1)*2^l) x [j*2^l, (j+1)*2^l). Rows run south to north.
 
-On the GPU a tile is two R16UI textures of 16-bit height codes (hybrid.tiles.quantize): the (N+1)² heights
-and the max mipmap without level 0, an (N/2)² texture with log2(N) levels whose level k holds max-mip level
-k+1; the traversal takes level 0 from the four corner heights. Dequantisation is monotone, so the maximum
-of codes is the code of the maximum, and the GPU builder (compute shaders) gives exactly ``maxmip_levels``
-of the codes. Bytes: 2 (N+1)² + 2 (N²/4) 4/3, about 2.67 a sample.
+On the GPU a tile is its (N+1)² 16-bit height codes (hybrid.tiles.quantize) in an R16UI texture and its max
+mipmap without level 0 (levels 1..log2 N) in a storage buffer (raycast.mip_buffer); the traversal takes level 0
+from the four corner heights. The shadow rays' whole-terrain grid keeps its max mipmap in an (N/2)² R16UI texture
+with log2(N) levels whose level k holds max-mip level k+1, built by the GPU builder (compute shaders) below.
+Dequantisation is monotone, so the maximum of codes is the code of the maximum, and the builder gives exactly
+``maxmip_levels`` of the codes. Bytes of a tile: 2 (N+1)² + 2 (N²/4) 4/3, about 2.67 a sample.
 """
 
 from __future__ import annotations
@@ -86,14 +87,21 @@ def maxmip_nbytes(n: int, itemsize: int = 2) -> int:
     return sum(itemsize * (n >> l) ** 2 for l in range(1, level_count(n)))
 
 
+def mip_buffer_nbytes(n: int, itemsize: int = 2) -> int:
+    """Bytes of the storage buffer holding an n-cell tile's max mipmap (``raycast.mip_buffer``): its texels padded
+    to whole 32-bit words."""
+    return -(-maxmip_nbytes(n, itemsize) // 4) * 4
+
+
 def heights_nbytes(n: int, itemsize: int = 2) -> int:
     """Bytes of an n-cell tile's height texture of ``itemsize``-byte texels: itemsize (n+1)²."""
     return itemsize * (int(n) + 1) ** 2
 
 
 def tile_nbytes(n: int, itemsize: int = 2) -> int:
-    """GPU bytes of one n-cell ray-cast tile of ``itemsize``-byte texels: heights and max mipmap."""
-    return heights_nbytes(n, itemsize) + maxmip_nbytes(n, itemsize)
+    """GPU bytes of one n-cell ray-cast tile of ``itemsize``-byte texels: its height texture and its max mipmap's
+    storage buffer."""
+    return heights_nbytes(n, itemsize) + mip_buffer_nbytes(n, itemsize)
 
 
 def bytes_per_sample(n: int, itemsize: int = 2) -> float:
@@ -102,7 +110,7 @@ def bytes_per_sample(n: int, itemsize: int = 2) -> float:
 
 
 class MaxMipBuilder:
-    """Compute-shader programs that fill a tile's max-mip texture from its height-code texture, level by level."""
+    """Compute-shader programs that fill a grid's max-mip texture from its height-code texture, level by level."""
 
     def __init__(self, ctx):
         self.ctx = ctx

@@ -22,7 +22,7 @@ uniform float near_plane;      // metres (view depth)
 uniform float far_plane;
 // --- tile ---
 uniform RC_SAMPLER hmap;      // R16UI (N+1)² height codes (metres = rc_height(code, dq, dq_base)); HF32: R32F metres
-uniform RC_SAMPLER mmap;      // the same format (N/2)², max-mip levels 1..log2 N as texture levels 0..log2 N - 1
+// (its max mipmap: the storage buffer at MIPS_BINDING, traverse.glsl)
 #if OCCLUDERS
 uniform sampler2D prior_depth; // reversed-Z depth of what the frame's earlier passes drew (0: nothing)
 uniform vec2 depth_ab;         // (a, b): reversed-Z depth = b / view depth - a
@@ -157,7 +157,8 @@ void main() {
     float zp = texelFetch(prior_depth, ivec2(gl_FragCoord.xy), 0).r;
     if (zp > 0.0) tmax = depth_ab.y / (zp + depth_ab.x) * 1.00001;
 #endif
-    int r = rc_traverse(hmap, mmap, dq, dq_base, n_cells, n_levels, ext_lo, ext, zr, eye_tex, D, near_plane, tmax, 0, spacing, lod_k,
+    // mbuf: the tile's max mipmap is its storage buffer, so the texture passed for it (hmap) is not read
+    int r = rc_traverse(hmap, hmap, true, dq, dq_base, n_cells, n_levels, ext_lo, ext, zr, eye_tex, D, near_plane, tmax, 0, spacing, lod_k,
                         max_steps, outer, under, LOD == 0, Q, cell, lev, hc, steps);
 #if STATS
     ivec2 bin = ivec2(gl_FragCoord.xy) >> STAT_BIN_SHIFT;
@@ -182,7 +183,7 @@ void main() {
         vec3 Og = vec3(g_tile_off + Q.xy * k, Q.z + 1e-3 * max(spacing.x, spacing.y) * float(S) + 0.01);
         vec3 Dg = vec3(L.xy / g_spacing, L.z);
         vec3 Qs; ivec2 cs; int ls; vec4 hs; int ssteps;
-        int rs = rc_traverse(g_hmap, g_mmap, g_dq, g_dq_base, g_cells, g_levels, vec2(0.0), g_ext, g_zr, Og, Dg, 0.0, RC_FAR, gl, g_spacing, 0.0,
+        int rs = rc_traverse(g_hmap, g_mmap, false, g_dq, g_dq_base, g_cells, g_levels, vec2(0.0), g_ext, g_zr, Og, Dg, 0.0, RC_FAR, gl, g_spacing, 0.0,
                              g_max_steps, 15, false, false, Qs, cs, ls, hs, ssteps);
         if (rs != RC_MISS) lit = 0.0;
 #if STATS

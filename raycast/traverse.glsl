@@ -8,7 +8,8 @@
 // D = (d.x / spacing.x, d.y / spacing.y, d.z), so t stays the world ray parameter and hit depths stay metres.
 //
 // Heights are 16-bit codes (R16UI, hybrid/tiles/quantize.py): metres = float32(dq.x + dq.y * (q + dqb)). The
-// max mipmap texture holds levels 1..log2 N (its level k is max-mip level k + 1). A level-0 step reads its
+// max mipmap holds levels 1..log2 N (rc_code: a tile's in a storage buffer, the shadow grid's in a texture). A
+// level-0 step reads its
 // parent's level-1 code (or the largest of the cell's four corner codes, where exact0: rc_code). Maxima are
 // taken on codes: dequantisation is monotone. The traversal runs in code space, z measured in codes
 // (z_c = (z - dq.x) / dq.y - dqb), so a code is its own height and neither a step nor a cell test decodes one:
@@ -41,11 +42,25 @@
 float rc_height(uint q, vec2 dq, int dqb) { return dq.x + dq.y * float(int(q) + dqb); }
 float rc_height(float h, vec2 dq, int dqb) { return h; }
 
-// An upper bound (max-mip code) of the heights of texel ri at level l: level l - 1 of the max-mip texture; for a
-// level-0 cell its level-1 parent's (one fetch a step: the cell's own corners are read where the ray enters
-// its parent's box), or, where `exact0`, the largest of its four corner codes. Used for every bound the
-// traversal reads (steps and LOD parents).
-RC_CODE rc_code(RC_SAMPLER hmap, RC_SAMPLER mmap, int l, ivec2 ri, bool exact0) {
+// A tile's max mipmap is a storage buffer (raycast/maxmip.py, ``mip_buffer``): max-mip levels 1..log2 N one after
+// another, each row by row, level l starting at texel (N² - 4 (N >> l)²) / 3; uint16 codes two to a word (the low
+// half first), or float32 metres (HF32). A buffer read is an index and a load where a texture fetch at a per-lane
+// level computes that level's offset and size first. The shadow rays' whole-terrain grid keeps its max mipmap in a
+// texture (it can outgrow a storage block), whose level k is max-mip level k + 1.
+#if HF32
+layout(std430, binding = MIPS_BINDING) readonly buffer TileMips { float tile_mips[]; };
+float rc_mip_texel(int i) { return tile_mips[i]; }
+#else
+layout(std430, binding = MIPS_BINDING) readonly buffer TileMips { uint tile_mips[]; };
+uint rc_mip_texel(int i) { return (tile_mips[i >> 1] >> ((i & 1) << 4)) & 0xFFFFu; }
+#endif
+
+// An upper bound (max-mip code) of the heights of texel ri at level l of an N-cell grid: its max-mip texel, read
+// from the tile's buffer where `mbuf` (a compile-time constant of the call), else from texture mmap; for a
+// level-0 cell its level-1 parent's (one read a step: the cell's own corners are read where the ray enters its
+// parent's box), or, where `exact0`, the largest of its four corner codes. Used for every bound the traversal
+// reads (steps and LOD parents).
+RC_CODE rc_code(RC_SAMPLER hmap, RC_SAMPLER mmap, bool mbuf, int N, int l, ivec2 ri, bool exact0) {
     // exact0 is a compile-time false in the caster's common variant (no planes, no ray under the sheet), so
     // the gather is compiled out there: a SIMD rasterizer runs a branch for every lane whenever it is compiled
     if (l == 0 && exact0) {
@@ -53,7 +68,13 @@ RC_CODE rc_code(RC_SAMPLER hmap, RC_SAMPLER mmap, int l, ivec2 ri, bool exact0) 
         RC_CODE4 c = textureGather(hmap, (vec2(ri) + 1.0) / vec2(textureSize(hmap, 0)), 0);
         return max(max(c.x, c.y), max(c.z, c.w));
     }
-    return texelFetch(mmap, l == 0 ? ri >> 1 : ri, max(l - 1, 0)).r;
+    int lp = max(l, 1);
+    ivec2 rp = l == 0 ? ri >> 1 : ri;
+    if (mbuf) {
+        int m = N >> lp;
+        return rc_mip_texel((N * N - 4 * m * m) / 3 + rp.y * m + rp.x);
+    }
+    return texelFetch(mmap, rp, lp - 1).r;
 }
 
 // An upper bound (metres) of the height of code q in float32 arithmetic, for the level of detail's distances
@@ -173,14 +194,15 @@ bool rc_climbs(vec2 ij, bool cx, bool cy) {
     return (cx && ((int(ij.x) + 1) & 1) == 0) || (cy && ((int(ij.y) + 1) & 1) == 0);
 }
 
-// Cast one ray through the grid (height codes hmap, max mipmap mmap, dequantised by dq, dqb): returns RC_MISS,
+// Cast one ray through the grid (height codes hmap, max mipmap in the tile's buffer where mbuf, else texture mmap;
+// dequantised by dq, dqb): returns RC_MISS,
 // RC_HIT or RC_CAPPED. On a hit, hit is the point (real texel
 // space), cell the hit texel (x, y) at level `level`, hc its corner heights. tmin: smallest ray parameter
 // (near plane); tmax: largest (RC_FAR: none; a ray stopped there is a miss); lmin: the finest level to descend to; steps: texels visited. under: the ray starts under the
 // terrain sheet (hybrid/gl/edges.glsl): its hit is where it first comes up through the surface (the sheet's
 // underside, as the two-sided reference draws it), found by stepping every lmin texel (no LOD). unit_cells: a
 // compile-time constant, true where lmin is 0 and there is no LOD, so every cell tested is a level-0 cell.
-int rc_traverse(RC_SAMPLER hmap, RC_SAMPLER mmap, vec2 dq, int dqb, int N, int LMAX, vec2 elo, vec2 ext, vec2 zr,
+int rc_traverse(RC_SAMPLER hmap, RC_SAMPLER mmap, bool mbuf, vec2 dq, int dqb, int N, int LMAX, vec2 elo, vec2 ext, vec2 zr,
                 vec3 O, vec3 D,
                 float tmin, float tmax, int lmin, vec2 spacing, float lod_k, int max_steps, int outer,
                 bool under, bool unit_cells, out vec3 hit, out ivec2 cell, out int level, out vec4 hc, out int steps) {
@@ -282,13 +304,13 @@ int rc_traverse(RC_SAMPLER hmap, RC_SAMPLER mmap, vec2 dq, int dqb, int N, int L
             while (!under && l < ltop) {
                 vec2 pij = floor(ij * 0.5);
                 ivec2 pri = ivec2(mx ? (nl >> 1) - 1 - int(pij.x) : int(pij.x), my ? (nl >> 1) - 1 - int(pij.y) : int(pij.y));
-                float PH = rc_bound(rc_code(hmap, mmap, l + 1, pri, false), dqf, dqb);
+                float PH = rc_bound(rc_code(hmap, mmap, mbuf, N, l + 1, pri, false), dqf, dqb);
                 if (!rc_lod_final(l + 1, pij, PH, Om, zr_m.x, spacing, lod_k)) break;
                 l++; s *= 2.0; ij = pij; nl >>= 1;
             }
 #endif
             ri = ivec2(mx ? nl - 1 - int(ij.x) : int(ij.x), my ? nl - 1 - int(ij.y) : int(ij.y));
-            mc = rc_code(hmap, mmap, l, ri, exact0);
+            mc = rc_code(hmap, mmap, mbuf, N, l, ri, exact0);
             H = rc_val(mc);
             e = (ij + 1.0) * s;
             float dtx = D.x > 0.0 ? (e.x - P0.x) * invD.x : RC_FAR;

@@ -100,32 +100,32 @@ def test_local_window_of_a_coarse_tile_includes_its_repeated_edge_samples():
 
 
 def test_gpu_max_mipmap_updated_over_the_window_equals_a_rebuild(ctx):
-    """The host's max-mip texels over each changed window, written level by level into the tile's texture, against
+    """The host's max-mip texels over each changed window, written level by level into the tile's buffer, against
     the GPU builder's whole max mipmap of the changed codes."""
     from hybrid.terrain.edits import Window
-    from raycast.edit import write_mips
     from raycast.gpu_tile import code_mips
     from raycast.maxmip import MaxMipBuilder, read_maxmip, texel_windows
+    from raycast.mip_buffer import mip_buffer, read_mip_buffer, write_mip_rows
 
     rng = np.random.default_rng(5)
     n = 64
     h = rng.integers(0, 60000, (n + 1, n + 1)).astype(np.uint16)
     b = MaxMipBuilder(ctx)
     ht = ctx.texture((n + 1, n + 1), 1, h.tobytes(), dtype="u2")
-    tex = b.build(ht, n)
+    buf = mip_buffer(ctx, code_mips(h))
     try:
         for win in (Window(10, 14, 40, 41), Window(0, 3, 0, 65), Window(63, 65, 62, 65)):
             h[win.slices()] = rng.integers(60000, 65535, (win.i1 - win.i0, win.j1 - win.j0))
             part = np.ascontiguousarray(h[win.slices()])
             ht.write(part.tobytes(), viewport=(win.j0, win.i0, win.j1 - win.j0, win.i1 - win.i0))
-            write_mips(tex, code_mips(h), texel_windows(n, win))
+            write_mip_rows(buf, code_mips(h), texel_windows(n, win))
             full = b.build(ht, n)
-            for got, want in zip(read_maxmip(tex, n), read_maxmip(full, n), strict=True):
+            for got, want in zip(read_mip_buffer(buf, n), read_maxmip(full, n), strict=True):
                 np.testing.assert_array_equal(got, want)
             full.release()
-        assert read_maxmip(tex, n)[-1][0, 0] >= 60000
+        assert read_mip_buffer(buf, n)[-1][0, 0] >= 60000
     finally:
-        for o in (ht, tex, b):
+        for o in (ht, buf, b):
             o.release()
 
 

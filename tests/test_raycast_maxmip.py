@@ -10,7 +10,8 @@ from hybrid.terrain.datasets import fbm
 from hybrid.tiles.pyramid import TilePyramid
 from hybrid.tiles.quantize import quantize
 from raycast import RaycastStrategy
-from raycast.maxmip import MaxMipBuilder, level_count, maxmip_levels, maxmip_nbytes, read_maxmip
+from raycast.maxmip import MaxMipBuilder, level_count, maxmip_levels, maxmip_nbytes, mip_buffer_nbytes, read_maxmip
+from raycast.mip_buffer import level_starts, read_mip_buffer
 
 
 def test_numpy_levels_match_definition():
@@ -68,11 +69,15 @@ def test_byte_counts(ctx, puget257):
         pyr = TilePyramid(puget257, 128)
         tile = pyr.tile(pyr.keys(0)[0])
         g = s.upload(tile)
-        assert len(level_texels(g.maxmip)) == level_count(128) - 1  # levels 1..log2 N, no more
-        assert level_texels(g.maxmip)[0] == 64 * 64 and level_texels(g.heights) == [129 * 129]
-        assert object_bytes(g.maxmip) == maxmip_nbytes(128)
+        # levels 1..log2 N, no more: 64² + 32² + ... + 1 texels of 2 bytes, padded to a whole word
+        assert object_bytes(g.maxmip) == maxmip_nbytes(128) + 2 == 2 * (4**7 - 1) // 3 + 2 == mip_buffer_nbytes(128)
+        assert level_texels(g.heights) == [129 * 129]
         assert g.nbytes == allocated_bytes(g) == object_bytes(g.heights) + object_bytes(g.maxmip)
-        assert g.heights.dtype == g.maxmip.dtype == "u2"
+        assert g.heights.dtype == "u2"
+        levels = read_mip_buffer(g.maxmip, 128)
+        want = maxmip_levels(quantize(tile.heights, tile.source_step).q)[1:]
+        assert [a.shape for a in levels] == [(64 >> k, 64 >> k) for k in range(7)]
+        assert all(np.array_equal(a, b) for a, b in zip(levels, want, strict=True))
         g.release()
     finally:
         s.release()
@@ -80,7 +85,7 @@ def test_byte_counts(ctx, puget257):
 
 @pytest.mark.parametrize("n", [64, 128, 256])
 def test_bytes_per_sample_within_target(ctx, n):
-    # from the textures' allocated sizes: at most 2.7 bytes a held sample, max mipmap included
+    # from the texture's and the buffer's allocated sizes: at most 2.7 bytes a held sample, max mipmap included
     hf = fbm(n + 1, seed=1)
     s = RaycastStrategy(ctx, hf)
     try:
@@ -98,3 +103,10 @@ def test_bytes_per_sample_within_target(ctx, n):
 def test_bad_heights_raise(shape):
     with pytest.raises(TerrabenchError, match="heights"):
         maxmip_levels(np.zeros(shape, np.float32))
+
+
+@pytest.mark.parametrize("n", [2, 4, 64, 256, 1024])
+def test_buffer_level_starts_follow_the_levels_before_them(n):
+    # the shader's closed form against the running sum of the level sizes (m² texels for m = n/2, n/4, ..., 1)
+    sizes = [(n >> k) ** 2 for k in range(1, level_count(n))]
+    assert level_starts(n) == [sum(sizes[:k]) for k in range(len(sizes))]

@@ -264,55 +264,29 @@ def _red_format(dtype) -> tuple[str, int, int, int]:
     return fmt
 
 
-def red_mip_texture(ctx, size: int, levels: int, data: list[np.ndarray] | None = None, dtype=np.uint16):
+def red_mip_texture(ctx, size: int, levels: int, dtype=np.uint16):
     """A size x size single-channel texture (R16UI for uint16, R32F for float32) with ``levels`` mip levels
-    allocated, NEAREST filtered: filled from ``data`` (one C-contiguous array of ``dtype`` per level, level 0
-    first), else with contents undefined.
+    allocated, NEAREST filtered, contents undefined (a compute pass fills them).
 
     moderngl allocates only level 0 and cannot build mipmaps of integer textures (glGenerateMipmap refuses
     them, and would average floats), so the coarser levels are specified through the driver directly.
     """
     mgl, internal, fmt, typ = _red_format(dtype)
-    tex = ctx.texture((int(size), int(size)), 1, None if data is None else data[0], dtype=mgl, alignment=1)
+    tex = ctx.texture((int(size), int(size)), 1, None, dtype=mgl, alignment=1)
     u, i = ctypes.c_uint, ctypes.c_int
     bind = _gl_function(b"glBindTexture", u, u)
     image = _gl_function(b"glTexImage2D", u, i, i, i, i, i, u, u, ctypes.c_void_p)
     param = _gl_function(b"glTexParameteri", u, u, i)
-    if data is not None:
-        _gl_function(b"glPixelStorei", u, i)(0x0CF5, 1)  # GL_UNPACK_ALIGNMENT: rows of any width
     GL_TEXTURE_2D, GL_TEXTURE_MAX_LEVEL = 0x0DE1, 0x813D
     bind(GL_TEXTURE_2D, tex.glo)
     for level in range(1, int(levels)):
         m = max(int(size) >> level, 1)
-        pixels = None if data is None else _level_pixels(data[level], m, dtype)
-        image(GL_TEXTURE_2D, level, internal, m, m, 0, fmt, typ, pixels)
+        image(GL_TEXTURE_2D, level, internal, m, m, 0, fmt, typ, None)
     param(GL_TEXTURE_2D, GL_TEXTURE_MAX_LEVEL, int(levels) - 1)
     bind(GL_TEXTURE_2D, 0)
     tex.filter = (ctx.NEAREST_MIPMAP_NEAREST if levels > 1 else ctx.NEAREST, ctx.NEAREST)
     tex.repeat_x = tex.repeat_y = False
     return tex
-
-
-def _level_pixels(a: np.ndarray, m: int, dtype):
-    """The address of one mip level's m x m texels (refused if they are not that, C-contiguous ``dtype``)."""
-    if a.dtype != np.dtype(dtype) or a.shape != (m, m) or not a.flags.c_contiguous:
-        raise TerrabenchError(
-            f"mip level data must be C-contiguous {np.dtype(dtype)} ({m}, {m}), got {a.dtype} {a.shape}"
-        )
-    return a.ctypes.data
-
-
-def write_red_level(tex, level: int, values: np.ndarray, x: int = 0, y: int = 0) -> None:
-    """Write uint16 codes or float32 heights (rows, columns) into one mip level of an R16UI or R32F texture, its
-    texel (x, y) first (glTextureSubImage2D: moderngl writes only the levels it allocated itself)."""
-    a = np.ascontiguousarray(values)
-    _, _, fmt, typ = _red_format(a.dtype)
-    if a.ndim != 2:
-        raise TerrabenchError(f"mip level texels must be 2-D, got shape {a.shape}")
-    u, i = ctypes.c_uint, ctypes.c_int
-    _gl_function(b"glPixelStorei", u, i)(0x0CF5, 1)  # GL_UNPACK_ALIGNMENT: rows of any width
-    sub = _gl_function(b"glTextureSubImage2D", u, i, i, i, i, i, u, u, ctypes.c_void_p)
-    sub(tex.glo, int(level), int(x), int(y), a.shape[1], a.shape[0], fmt, typ, a.ctypes.data)
 
 
 def read_r16ui_level(tex, level: int) -> np.ndarray:
