@@ -406,6 +406,7 @@ def test_a_strategy_seen_on_a_few_tiles_is_given_a_whole_frame_until_it_drew_som
     table = TRUE.predict_table(cols)
     r, c = names.index("raster"), names.index("raycast")
     table[r] = 0.5 * table[c]  # raster would beat the frame
+    table[names.index("raster_gs")] = np.inf  # cannot draw these tiles: not a candidate here
     picks = np.full(12, c)
     online.credit = 50.0
     for _ in range(AdaptOptions().level_rows):
@@ -416,3 +417,39 @@ def test_a_strategy_seen_on_a_few_tiles_is_given_a_whole_frame_until_it_drew_som
         online.credit = 50.0
     e = online.explore(table, picks.copy(), names)
     assert e is None or len(e.tiles) <= AdaptOptions().explore_tiles
+
+
+def test_a_strategy_never_drawn_is_explored_before_another_is_given_a_whole_frame():
+    """Of the candidates the budget covers, the one known least goes first: a strategy with no pass yet gets its
+    few tiles before one already seen is given a whole frame, and its price leaves out the machine's scale."""
+    rng = np.random.default_rng(23)
+    online = OnlineModel(TRUE)
+    names = TRUE.candidates
+    cols = columns(rng, 12)
+    chosen = np.array(["raster"] * 12, dtype=object)
+    chosen[:2] = "raster_gs"
+    for _ in range(2):  # raster_gs's first pass (uncharged), then one row of each
+        online.observe(cols, chosen.tolist(), true_passes(cols, chosen, rng), 30.0)
+    table = TRUE.predict_table(cols)
+    r, g = names.index("raster"), names.index("raster_gs")
+    table[g] = 0.5 * table[r]  # raster_gs might beat the frame: a whole frame would be offered it alone
+    online.credit = 50.0
+    e = online.explore(table, np.full(12, r), names)
+    assert e is not None and e.strategy == "raycast" and len(e.tiles) <= AdaptOptions().explore_tiles
+
+
+def test_a_strategy_never_drawn_is_priced_at_the_starting_level_on_a_slower_machine():
+    """On a machine 8x slower than the starting model, a strategy never drawn carries that scale in the model's
+    overhead, but exploration prices it at the starting model's level, so the budget can still reach it."""
+    rng = np.random.default_rng(24)
+    online = OnlineModel(TRUE)
+    cols = columns(rng, 12)
+    chosen = ["raster"] * 12
+    for _ in range(2 + AdaptOptions().level_rows):
+        passes = {k: 8.0 * v for k, v in true_passes(cols, np.array(chosen, dtype=object), rng).items()}
+        online.observe(cols, chosen, passes, 8.0 * sum(passes.values()))
+    assert online.machine_scale() > 6.0
+    scaled_overhead = online.model.overhead["raycast"]
+    assert scaled_overhead > 6.0 * TRUE.overhead["raycast"]
+    online.credit = 2.0 * TRUE.overhead["raycast"]  # covers the starting level, far from the scaled one
+    assert online.credit < scaled_overhead and online.may_explore({"raster"})

@@ -158,10 +158,14 @@ class OnlineModel:
 
     def may_explore(self, used: set) -> bool:
         """Whether the budget could pay to explore any candidate outside ``used`` not ``known`` (its per-frame
-        overhead at least): a cheap test before any table is built."""
+        overhead at least, at the level exploration prices it, ``_levels``: a strategy not drawn yet is not charged
+        the machine's scale): a cheap test before any table is built."""
         m = self.model
-        costs = [m.overhead.get(s, 0.0) for s in m.candidates if s not in used and not self.known(s)]
-        return bool(costs) and min(costs) <= self.credit
+        todo = tuple(s for s in m.candidates if s not in used and not self.known(s))
+        if not todo:
+            return False
+        costs = [m.overhead.get(s, 0.0) for s in todo]
+        return min(costs) <= self.credit or min(c * v for c, v in zip(costs, self._levels(todo))) <= self.credit
 
     def known(self, strategy: str) -> bool:
         """Whether the strategy's predictions hold and it drew ``level_rows`` passes of more than a few tiles
@@ -171,7 +175,8 @@ class OnlineModel:
     def explore(self, table: np.ndarray, picks: np.ndarray, names: tuple) -> Exploration | None:
         """Give a candidate the frame does not use a whole frame (``_whole``: one not yet drawn on many tiles),
         else a few tiles (``_offer``: one whose predictions do not hold), when the budget covers its predicted
-        cost (of those it covers, the candidate known least); ``picks`` (B,) indices into ``names`` are changed
+        cost; of the candidates it covers, the one known least (fewest rows), so that a strategy never drawn is
+        not kept waiting by whole frames of one already drawn. ``picks`` (B,) indices into ``names`` are changed
         in place."""
         used = set(picks.tolist())
         if len(picks) == 0:
@@ -180,14 +185,12 @@ class OnlineModel:
         chosen = [names[j] for j in used]
         frame = self.model.frame_ms(base, set(chosen))
         levels = self._levels(names)
-        offers = [
-            o for i in range(len(names)) if i not in used and (o := self._whole(table, names, i, frame, levels[i]))
-        ]
-        if not offers:
-            todo = [
-                i for i, s in enumerate(names) if i not in used and not self.holds(s) and np.isfinite(table[i]).any()
-            ]
-            offers = [o for i in todo if (o := self._offer(table, base, names, i, levels[i])) is not None]
+        offers = []
+        for i, s in enumerate(names):
+            o = None if i in used else self._whole(table, names, i, frame, levels[i])
+            if o is None and i not in used and not self.holds(s) and np.isfinite(table[i]).any():
+                o = self._offer(table, base, names, i, levels[i])
+            offers += [] if o is None else [o]
         if not offers:
             return None
         least = min(len(self.rows[names[i]]) for i, _ in offers)  # a candidate it can pay for, known least first
