@@ -9,9 +9,8 @@
 //
 // Heights are 16-bit codes (R16UI, hybrid/tiles/quantize.py): metres = float32(dq.x + dq.y * (q + dqb)). The
 // max mipmap holds levels 1..log2 N (rc_code: a tile's in a storage buffer, the shadow grid's in a texture). A
-// level-0 step reads its
-// parent's level-1 code (or the largest of the cell's four corner codes, where exact0: rc_code). Maxima are
-// taken on codes: dequantisation is monotone. The traversal runs in code space, z measured in codes
+// level-0 step reads its parent's level-1 code (or the largest of the cell's four corner codes, where exact0:
+// rc_code). Maxima are taken on codes: dequantisation is monotone. The traversal runs in code space, z measured in codes
 // (z_c = (z - dq.x) / dq.y - dqb), so a code is its own height and neither a step nor a cell test decodes one:
 // the map is affine in z, so it keeps the ray straight, its parameter t and every fraction along a segment.
 // Only the hit and its cell's corners go back to metres. On a SIMD rasterizer a branch compiled into the loop
@@ -42,7 +41,7 @@
 float rc_height(uint q, vec2 dq, int dqb) { return dq.x + dq.y * float(int(q) + dqb); }
 float rc_height(float h, vec2 dq, int dqb) { return h; }
 
-// A tile's max mipmap is a storage buffer (raycast/maxmip.py, ``mip_buffer``): max-mip levels 1..log2 N one after
+// A tile's max mipmap is a storage buffer (raycast/mip_buffer.py): max-mip levels 1..log2 N one after
 // another, each row by row, level l starting at texel (N² - 4 (N >> l)²) / 3; uint16 codes two to a word (the low
 // half first), or float32 metres (HF32). A buffer read is an index and a load where a texture fetch at a per-lane
 // level computes that level's offset and size first. The shadow rays' whole-terrain grid keeps its max mipmap in a
@@ -195,8 +194,7 @@ bool rc_climbs(vec2 ij, bool cx, bool cy) {
 }
 
 // Cast one ray through the grid (height codes hmap, max mipmap in the tile's buffer where mbuf, else texture mmap;
-// dequantised by dq, dqb): returns RC_MISS,
-// RC_HIT or RC_CAPPED. On a hit, hit is the point (real texel
+// dequantised by dq, dqb): returns RC_MISS, RC_HIT or RC_CAPPED. On a hit, hit is the point (real texel
 // space), cell the hit texel (x, y) at level `level`, hc its corner heights. tmin: smallest ray parameter
 // (near plane); tmax: largest (RC_FAR: none; a ray stopped there is a miss); lmin: the finest level to descend to; steps: texels visited. under: the ray starts under the
 // terrain sheet (hybrid/gl/edges.glsl): its hit is where it first comes up through the surface (the sheet's
