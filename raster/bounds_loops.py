@@ -1,4 +1,4 @@
-"""The per-level extremes of a tile's node block (``raster.selection.level_bounds``), compiled by numba: one pass
+"""The per-level extremes of a tile's node block (``raster.host_nodes``), compiled by numba: one pass
 over the block's inner nodes, where numpy took three reductions a level (two dozen calls a tile upload)."""
 
 from __future__ import annotations

@@ -71,33 +71,9 @@ def select_defines(full_res: str, k: int) -> dict:
     }
 
 
-def level_bounds(data: np.ndarray, offsets: np.ndarray, n: int, spacing_xy: tuple[float, float]):
-    """Per local level of a tile: largest effective error (m) and the union of its own nodes' boxes (tile-local
-    m); ``spacing_xy`` is the tile's (x, y) sample spacing in metres."""
-    from .bounds_loops import level_extremes  # numba: imported on first use, not with the package
-
-    err, zlo, zhi = level_extremes(np.asarray(data, np.float32), np.asarray(offsets, np.int64), int(n))
-    return bounds_rows(err, zlo, zhi, n, spacing_xy)
-
-
-def _level_bounds_numpy(data: np.ndarray, offsets: np.ndarray, n: int, spacing_xy: tuple[float, float]):
-    """``level_bounds`` by numpy reductions, level by level (the reference the compiled loop is tested against)."""
-    levels = len(offsets) - 1
-    sp = np.asarray(spacing_xy, dtype=np.float64)
-    err, lo, hi = np.zeros(levels), np.zeros((levels, 3)), np.zeros((levels, 3))
-    for m in range(levels):
-        side = n >> (m + 1)
-        own = data[offsets[m] : offsets[m + 1]].reshape(side + 2, side + 2, 4)[1:-1, 1:-1]
-        grow = (2 << m) * sp
-        err[m] = own[..., 0].max()
-        lo[m] = (*(-grow), own[..., 1].min())
-        hi[m] = (*(n * sp + grow), own[..., 2].max())
-    return err, lo, hi
-
-
 def first_levels(bounds: np.ndarray, eye_local: np.ndarray, k_tau: float) -> np.ndarray:
     """Per tile (all of one cell count), the finest local level that can hold a leaf in this view (below it no
-    parent can split); ``bounds`` (B, levels, 7) are the tiles' ``level_bounds`` rows (lo, hi, error), ``eye_local``
+    parent can split); ``bounds`` (B, levels, 7) are the tiles' ``host_nodes.bounds_rows`` rows (lo, hi, error), ``eye_local``
     (B, 3) is the eye minus each tile's origin, metres."""
     lo, hi, err = bounds[..., 0:3], bounds[..., 3:6], bounds[..., 6]
     gap = np.maximum(np.maximum(lo - eye_local[:, None], eye_local[:, None] - hi), 0.0)
