@@ -393,16 +393,24 @@ def test_a_strategy_the_others_rows_price_up_is_explored_at_its_starting_level()
     assert any(e is not None and e.strategy == "raster" for e in found)
 
 
+def _observed(seed: int, most: str, first_two: str, frames: int):
+    """(online model, rng, columns) after ``frames`` observed frames of 12 tiles: the first two drawn by
+    ``first_two``, the rest by ``most``."""
+    rng = np.random.default_rng(seed)
+    online = OnlineModel(TRUE)
+    cols = columns(rng, 12)
+    chosen = np.array([most] * 12, dtype=object)
+    chosen[:2] = first_two
+    for _ in range(frames):
+        online.observe(cols, chosen.tolist(), true_passes(cols, chosen, rng), 30.0)
+    return online, rng, cols
+
+
 def test_a_strategy_seen_on_a_few_tiles_is_given_a_whole_frame_until_it_drew_some():
     """After its first pass (a few tiles, compiles), a strategy that might beat the frame is given every tile of
     a frame the budget covers, until it drew ``level_rows`` such passes; then a few tiles again."""
-    rng = np.random.default_rng(22)
-    online = OnlineModel(TRUE)
+    online, rng, cols = _observed(22, "raycast", "raster", 1)  # raster's first pass
     names = TRUE.candidates
-    cols = columns(rng, 12)
-    chosen = np.array(["raycast"] * 12, dtype=object)
-    chosen[:2] = "raster"
-    online.observe(cols, chosen.tolist(), true_passes(cols, chosen, rng), 30.0)  # raster's first pass
     table = TRUE.predict_table(cols)
     r, c = names.index("raster"), names.index("raycast")
     table[r] = 0.5 * table[c]  # raster would beat the frame
@@ -422,14 +430,8 @@ def test_a_strategy_seen_on_a_few_tiles_is_given_a_whole_frame_until_it_drew_som
 def test_a_strategy_never_drawn_is_explored_before_another_is_given_a_whole_frame():
     """Of the candidates the budget covers, the one known least goes first: a strategy with no pass yet gets its
     few tiles before one already seen is given a whole frame, and its price leaves out the machine's scale."""
-    rng = np.random.default_rng(23)
-    online = OnlineModel(TRUE)
+    online, _, cols = _observed(23, "raster", "raster_gs", 2)  # raster_gs's first pass (uncharged), then a row each
     names = TRUE.candidates
-    cols = columns(rng, 12)
-    chosen = np.array(["raster"] * 12, dtype=object)
-    chosen[:2] = "raster_gs"
-    for _ in range(2):  # raster_gs's first pass (uncharged), then one row of each
-        online.observe(cols, chosen.tolist(), true_passes(cols, chosen, rng), 30.0)
     table = TRUE.predict_table(cols)
     r, g = names.index("raster"), names.index("raster_gs")
     table[g] = 0.5 * table[r]  # raster_gs might beat the frame: a whole frame would be offered it alone
