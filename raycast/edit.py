@@ -21,9 +21,9 @@ import numpy as np
 from hybrid.terrain.edits import Window
 from hybrid.tiles.quantize import Q_MAX
 
-from .gpu_tile import GpuTile, level_views
+from .gpu_tile import GpuTile
 from .maxmip import texel_windows
-from .mip_buffer import write_mip_rows
+from .mip_buffer import level_views, write_mip_rows
 from .tile_params import tile_row
 
 

@@ -20,7 +20,7 @@ from hybrid.errors import TerrabenchError
 from hybrid.tiles.quantize import Quantized, quantize
 
 from .maxmip import heights_nbytes, maxmip_nbytes, tile_nbytes
-from .mip_buffer import mip_buffer
+from .mip_buffer import level_views, mip_buffer
 
 
 @dataclass
@@ -96,15 +96,6 @@ def code_mips(q: np.ndarray) -> tuple[np.ndarray, ...]:
     q = np.asarray(q)
     flat = code_mip_levels(np.ascontiguousarray(q, dtype=np.float32 if q.dtype == np.float32 else np.uint16))
     return level_views(flat, q.shape[0] - 1)
-
-
-def level_views(flat: np.ndarray, n: int) -> tuple[np.ndarray, ...]:
-    """The (m, m) views of max-mip levels 1..log2 n held one after another in a flat array (``code_mip_levels``)."""
-    out, start, m = [], 0, n // 2
-    while m >= 1:
-        out.append(flat[start : start + m * m].reshape(m, m))
-        start, m = start + m * m, m // 2
-    return tuple(out)
 
 
 def metres_as_codes(heights) -> Quantized:

@@ -19,22 +19,23 @@ def level_starts(n: int) -> list[int]:
     return [(n * n - 4 * (n >> lev) ** 2) // 3 for lev in range(1, level_count(n))]
 
 
-def flat_levels(mips) -> np.ndarray:
-    """Max-mip levels 1..log2 N (uint16 or float32 (m, m) arrays, finest first) as the buffer's texels, one array."""
-    return np.concatenate([np.ascontiguousarray(m).ravel() for m in mips])
+def level_views(flat: np.ndarray, n: int) -> tuple[np.ndarray, ...]:
+    """The (n >> l)² views of max-mip levels 1..log2 n of an n-cell tile held one after another in ``flat`` (the
+    buffer's layout, as ``code_mip_levels`` makes it)."""
+    return tuple(flat[s : s + (n >> lev) ** 2].reshape(n >> lev, n >> lev) for lev, s in enumerate(level_starts(n), 1))
 
 
 def mip_buffer(ctx, mips):
     """A storage buffer holding a tile's max-mip levels 1..log2 N (``code_mips``), padded to whole 32-bit words."""
-    flat = flat_levels(mips)
-    pad = mip_buffer_nbytes(int(mips[0].shape[0]) * 2, flat.itemsize) - flat.nbytes
-    return ctx.buffer(flat.tobytes() + bytes(pad))
+    flat = np.concatenate([np.ascontiguousarray(m).ravel() for m in mips])
+    buf = ctx.buffer(reserve=mip_buffer_nbytes(int(mips[0].shape[0]) * 2, flat.itemsize))
+    buf.write(flat)
+    return buf
 
 
-def read_mip_buffer(buf, n: int, dtype=np.uint16) -> list[np.ndarray]:
+def read_mip_buffer(buf, n: int, dtype=np.uint16) -> tuple[np.ndarray, ...]:
     """A tile's max-mip levels 1..log2 n read back from its buffer: (n >> l)² arrays of ``dtype`` texels."""
-    flat = np.frombuffer(buf.read(), dtype=dtype)
-    return [flat[s : s + (n >> lev) ** 2].reshape(n >> lev, n >> lev) for lev, s in enumerate(level_starts(n), 1)]
+    return level_views(np.frombuffer(buf.read(), dtype=dtype), n)
 
 
 def write_mip_rows(buf, mips, windows=None) -> None:
@@ -45,4 +46,4 @@ def write_mip_rows(buf, mips, windows=None) -> None:
         r0, r1 = (0, m.shape[0]) if win is None else (int(win[0]), int(win[1]))
         if r1 > r0 and (win is None or win[3] > win[2]):
             rows = np.ascontiguousarray(m[r0:r1])
-            buf.write(rows.tobytes(), offset=(start + r0 * m.shape[1]) * rows.itemsize)
+            buf.write(rows, offset=(start + r0 * m.shape[1]) * rows.itemsize)

@@ -7,8 +7,9 @@ import pytest
 from hybrid.terrain.edits import Window
 from hybrid.tiles.quantize import Q_MAX, quantize
 from raycast.edit import HostCodes
-from raycast.gpu_tile import code_mips, level_views
+from raycast.gpu_tile import code_mips
 from raycast.maxmip import texel_windows
+from raycast.mip_buffer import level_views
 
 N = 64
 STEP = (0.1, 0.0)
