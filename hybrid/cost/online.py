@@ -186,9 +186,9 @@ class OnlineModel:
         frame = self.model.frame_ms(base, set(chosen))
         levels = self._levels(names)
         offers = []
-        for i, s in enumerate(names):
-            o = None if i in used else self._whole(table, names, i, frame, levels[i])
-            if o is None and i not in used and not self.holds(s) and np.isfinite(table[i]).any():
+        for i in (i for i in range(len(names)) if i not in used):
+            o = self._whole(table, names, i, frame, levels[i])
+            if o is None and not self.holds(names[i]) and np.isfinite(table[i]).any():
                 o = self._offer(table, base, names, i, levels[i])
             offers += [] if o is None else [o]
         if not offers:
