@@ -104,10 +104,20 @@ class ResidencyCache:
 
 
 def reserve_pools(strategies: dict, budget_bytes: int, pyramid) -> None:
-    """Have every strategy that keeps its tiles in a pool of its own (``reserve(n, nbytes, tiles)``: the raster
-    heaps) hold an even share of the resident tiles' GPU budget from the start, and no more than room for every
-    tile of the pyramid, so that a streaming frame never pays for a pool's growth."""
+    """Have the strategies that keep their tiles in pools (``reserve(n, nbytes, tiles)``: the raster heaps) hold
+    the resident tiles' GPU budget from the start, and no more than room for every tile of the pyramid, so that a
+    streaming frame never pays for a pool's growth. Strategies that can share a pool (``share_heaps``: the two
+    raster strategies of a hybrid) fill one of the whole budget, which either may fill alone however the choices
+    lean; others each hold an even share."""
     pooled = [s for s in strategies.values() if callable(getattr(s, "reserve", None))]
+    if not pooled:
+        return
     tiles = sum(r * c for r, c in (pyramid.tile_counts(level) for level in range(pyramid.max_level + 1)))
-    for s in pooled:
-        s.reserve(pyramid.n, budget_bytes // len(pooled), tiles)
+    owner, rest = pooled[0], pooled[1:]
+    key = getattr(owner, "heap_key", None)
+    sharing = [s for s in rest if key is not None and getattr(s, "heap_key", None) == key]
+    for s in sharing:
+        s.share_heaps(owner)
+    alone = [owner] + [s for s in rest if s not in sharing]
+    for s in alone:
+        s.reserve(pyramid.n, budget_bytes // len(alone), tiles)

@@ -152,6 +152,7 @@ class TileletSelection:
         self.items = FrameItems(ctx)
         self.heaps: dict[int, TileHeap] = {}  # cell count -> heap of resident tiles
         self._reserved: dict[int, tuple[int, int]] = {}  # cell count -> (bytes, tiles) its heap holds at first
+        self._counts_spare = True  # whether shared_nbytes counts the heaps' spare bytes (not where another does)
         self.item_of: dict[int, int] = {}  # id(tile) -> its first item in the last selection
         self.uniforms = UniformCache()  # the selection passes' and the draw programs'
 
@@ -186,15 +187,33 @@ class TileletSelection:
         self._reserved[int(n)] = (max(int(nbytes), 0), max(int(tiles), 0))
 
     @property
+    def heap_key(self) -> tuple[int, float]:
+        """What a heap slot's layout depends on (the terrain, beta): strategies of equal keys may share heaps."""
+        return (id(self.hf), self.beta)
+
+    def share_heaps(self, owner: TileletSelection) -> None:
+        """Keep this strategy's resident tiles in ``owner``'s heaps from now on (before any upload): the raster
+        strategies of one renderer then fill one pool, which either may fill alone, where pools of their own
+        would each hold part of the budget and grow whenever the choices lean one way. ``owner`` counts the
+        heaps' spare bytes; its ``reserve`` sizes them."""
+        if self.heaps:
+            raise TerrabenchError("a strategy shares heaps before its first upload, not after")
+        if owner.heap_key != self.heap_key:
+            raise TerrabenchError("strategies share heaps only over one terrain and one beta (their slots' layout)")
+        self.heaps, self._reserved, self._counts_spare = owner.heaps, owner._reserved, False
+
+    @property
+    def spare_nbytes(self) -> int:
+        """GPU bytes of the heaps that no tile holds, as the driver reports them; 0 where the heaps are another
+        strategy's (``share_heaps``), which counts them."""
+        return sum(h.spare_nbytes for h in self.heaps.values()) if self._counts_spare else 0
+
+    @property
     def shared_nbytes(self) -> int:
         """GPU bytes shared by all tiles, as the driver reports them: colour texture, frame counters, tile
-        blocks, item buffers, leaf arena, and the heaps' bytes no tile holds."""
-        return (
-            gl_bytes(self.texture, self.frame, self.blocks.buffer)
-            + self.arena.nbytes
-            + self.items.nbytes
-            + sum(h.spare_nbytes for h in self.heaps.values())
-        )
+        blocks, item buffers, leaf arena, and the heaps' bytes no tile holds (``spare_nbytes``)."""
+        g = gl_bytes(self.texture, self.frame, self.blocks.buffer)
+        return g + self.arena.nbytes + self.items.nbytes + self.spare_nbytes
 
     def upload(self, tile) -> SelectedTileletTile:
         """Put one tile on the GPU: heights, node errors and boxes, in its heap."""

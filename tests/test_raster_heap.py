@@ -96,11 +96,11 @@ def test_one_selection_of_tiles_of_two_cell_counts_is_refused_by_name(ctx, puget
         s.release()
 
 
-@pytest.mark.parametrize(("policy", "share"), [("raster", 1), ("hybrid", 2)])
-def test_a_streaming_renderers_heaps_hold_the_budget_from_the_start(ctx, puget257, policy, share):
-    """With an upload budget (streaming), each raster heap is made with room for its share of the GPU budget of
-    tiles and one more, and neither grows nor shrinks as tiles come and go within the budget; without, it starts
-    at MIN_SLOTS."""
+@pytest.mark.parametrize("policy", ["raster", "hybrid"])
+def test_a_streaming_renderers_heaps_hold_the_budget_from_the_start(ctx, puget257, policy):
+    """With an upload budget (streaming), the raster heap is made with room for the GPU budget of tiles and one
+    more (a hybrid's two raster strategies fill that one heap), and neither grows nor shrinks as tiles come and go
+    within the budget; without, it starts at MIN_SLOTS."""
     fly = preset("flyover", puget257, 6, *SIZE)
     with Renderer(ctx, puget257, "raster", tile_size=32) as probe:
         probe.render(fly.view(1), 0.5)
@@ -110,14 +110,42 @@ def test_a_streaming_renderers_heaps_hold_the_budget_from_the_start(ctx, puget25
     runs = [(fly.view(1), 0.5), (fly.view(3), 0.5), (fly.view(5), 60.0), (fly.view(1), 0.5)]
     with Renderer(ctx, puget257, policy, tile_size=32, budget_bytes=budget, upload_budget_ms=1e3) as r:
         pooled = [s for s in r.strategies.values() if hasattr(s, "heaps")]
-        assert len(pooled) == share
+        assert len(pooled) == (2 if policy == "hybrid" else 1)
         for v, tau in runs:
             r.render(v, tau)
-            for s in pooled:
-                for h in s.heaps.values():
-                    assert h.capacity == budget // share // slot + 1
+            assert all(s.heaps is pooled[0].heaps for s in pooled)
+            for heap in pooled[0].heaps.values():  # made at the first raster tile's upload
+                assert heap.capacity == budget // slot + 1
         if policy == "raster":
             assert r.cache.stats.evictions > 0 and r.cache.bytes <= budget
+
+
+def test_a_streaming_hybrid_whose_choices_lean_one_way_keeps_its_heap(ctx, puget257):
+    """A streaming hybrid whose frames give every tile to one raster strategy, then every tile to the other, keeps
+    its one heap at the size the budget made it (either strategy may fill it), draws what the pure strategy draws,
+    and counts the heap's spare bytes once."""
+    fly = preset("flyover", puget257, 6, *SIZE)
+    view, tau = fly.view(3), 0.5
+    with Renderer(ctx, puget257, "raster", tile_size=32) as probe:
+        probe.render(view, tau)
+        slot = next(iter(probe.strategies["raster"].heaps.values())).slot_bytes
+    budget = 24 * slot
+    with Renderer(ctx, puget257, "hybrid", tile_size=32, budget_bytes=budget, upload_budget_ms=1e3) as r:
+        for name in ("raster", "raster_gs", "raster"):
+            plans = r.plan(view, tau)
+            # more than half the pool (pools of half the budget each would grow), all of it resident
+            assert budget // slot // 2 < len(plans) < budget // slot
+            for p in plans:
+                p.choice = name
+            got = r.render(view, tau, plans=plans)
+            (heap,) = r.strategies[name].heaps.values()
+            assert heap.capacity == budget // slot + 1
+            assert r.strategies["raster"].heaps is r.strategies["raster_gs"].heaps
+            with Renderer(ctx, puget257, name, tile_size=32) as pure:
+                want = pure.render(view, tau)
+            assert np.array_equal(got.colour, want.colour)
+        spare = [r.strategies[n].spare_nbytes for n in ("raster", "raster_gs")]
+        assert heap.spare_nbytes > 0 and sorted(spare) == [0, heap.spare_nbytes]
 
 
 def test_a_streaming_heap_holds_no_more_than_every_tile_of_the_pyramid(ctx, puget257):
