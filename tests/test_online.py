@@ -297,7 +297,8 @@ def test_a_strategys_first_pass_is_not_charged_to_the_exploration_budget():
     names = TRUE.candidates
     cols = columns(rng, 10)
     chosen = np.array(["raster"] * 10, dtype=object)
-    online.observe(cols, chosen.tolist(), true_passes(cols, chosen, rng), 20.0)  # raster's own first pass
+    first = true_passes(cols, chosen, rng)
+    online.observe(cols, chosen.tolist(), first, sum(first.values()))  # raster's own first pass
     online.credit = 5.0
     chosen[:2] = "raycast"
     passes = {**true_passes(cols, chosen, rng), "raycast": 2000.0}  # its shaders compiled in this pass
@@ -305,7 +306,7 @@ def test_a_strategys_first_pass_is_not_charged_to_the_exploration_budget():
     assert online.credit > 5.0 and online.stats.explore_ms == 0.0  # the compile is not exploration's cost
     assert online.explore(TRUE.predict_table(cols), np.zeros(10, int), names) is not None  # still affordable
     passes["raycast"] = 4.0
-    online.observe(cols, chosen.tolist(), passes, 24.0, Exploration("raycast", np.arange(2), 1.0))
+    online.observe(cols, chosen.tolist(), passes, sum(passes.values()), Exploration("raycast", np.arange(2), 1.0))
     assert online.stats.explore_ms == pytest.approx(3.0)  # a later pass is charged what it cost beyond the base
 
 
@@ -332,24 +333,28 @@ def test_a_learned_model_never_overwrites_the_calibrated_one(tmp_path):
     )  # the calibration serves again
 
 
-def test_exploring_is_charged_what_the_whole_frame_cost_beyond_its_prediction():
+def test_exploring_is_charged_what_the_frame_cost_beyond_its_chosen_passes():
+    """An explored frame is charged its measured ms beyond the chosen strategy's pass measured in it, the explored
+    tiles' predicted ms in that strategy and the gap one-strategy frames leave around their pass, however far the
+    model's prediction of the frame as chosen is off."""
     rng = np.random.default_rng(16)
-    online = OnlineModel(TRUE)
+    online = OnlineModel(scaled(TRUE, "raster", 1.5))  # predicts raster frames 1.5x too costly
     cols = columns(rng, 10)
     chosen = np.array(["raster"] * 10, dtype=object)
-    for _ in range(4):  # one-strategy frames measured at 1.1x their prediction
+    for _ in range(4):  # one-strategy frames measured at 1.1x their pass
         passes = true_passes(cols, chosen, rng, noise=0.0)
-        online.observe(cols, chosen.tolist(), passes, 1.1 * passes["raster"], None, passes["raster"])
+        online.observe(cols, chosen.tolist(), passes, 1.1 * passes["raster"], None, 1.5 * passes["raster"])
+    gap = 0.1 * passes["raster"]
     chosen[:2] = "raycast"
     passes = true_passes(cols, chosen, rng, noise=0.0)
     online.observe(cols, chosen.tolist(), passes, sum(passes.values()))  # raycast's first pass: one-off costs
     online.credit = 10.0
-    pure_frame = 20.0  # predicted ms of the frame as chosen, all raster
-    passes = {"raster": 18.0, "raycast": 3.0}  # the explored pass: 2 ms beyond the tiles' 1 ms as raster
-    explored = Exploration("raycast", np.arange(2), 1.0, pure_frame, True)
-    online.observe(cols, chosen.tolist(), passes, 30.0, explored)
-    assert online.stats.explore_ms == pytest.approx(30.0 - 1.1 * pure_frame)  # the frame's 8 ms, not the pass's 2
-    assert online.credit == pytest.approx(10.0 + 0.05 * 30.0 - 8.0)
+    rest = 0.8 * passes["raster"]  # the chosen pass, on the tiles not explored
+    passes = {"raster": rest, "raycast": 3.0}  # the explored pass: 2 ms beyond the tiles' 1 ms as raster
+    frame = rest + 3.0 + gap + 6.0  # and 6 ms more around the passes (split timing, a depth copy)
+    online.observe(cols, chosen.tolist(), passes, frame, Exploration("raycast", np.arange(2), 1.0, True))
+    assert online.stats.explore_ms == pytest.approx(8.0)  # 2 ms in the pass and 6 around it
+    assert online.credit == pytest.approx(10.0 + 0.05 * frame - 8.0)
 
 
 def test_a_candidate_the_budget_cannot_pay_for_does_not_hold_back_one_it_can():

@@ -20,9 +20,10 @@ strategy not drawn yet does not look cheap beside one that is.
 A strategy the hybrid does not choose gives no rows, so it may be given a few tiles of a frame (exploration):
 at most ``explore_tiles`` tiles, those it is predicted to draw cheapest against the frame's choice, paid from a
 budget that earns ``explore_share`` of every observed frame's measured ms and is charged the exploration's
-measured cost: the frame's measured ms beyond the frame as chosen (predicted, at the level such frames were
-recently measured at), or its pass less the chosen strategy's predicted cost of those tiles if that is more (a
-strategy's first pass, which pays one-off costs such as compiling its shaders, is neither charged nor a row).
+measured cost: the frame's measured ms beyond the frame as chosen (the chosen strategies' passes as measured in
+it, the explored tiles at their predicted cost in them, and the gap such frames leave around their passes), or its
+pass less the chosen strategy's predicted cost of those tiles if that is more (a strategy's first pass, which pays
+one-off costs such as compiling its shaders, is neither charged nor a row).
 A strategy with no level of its own yet is priced for exploration at no more than the starting model's level: the
 machine's scale, set by the other strategies' rows, may say more about them than about it. A few explored tiles
 are a strategy's costly ones and price its tiles, not its frames, so once past its first pass a strategy that drew
@@ -92,13 +93,11 @@ class AdaptOptions:
 @dataclass
 class Exploration:
     """Tiles of one frame given to a strategy to learn it: their indices, the predicted ms the chosen
-    strategies would have drawn them in, and the predicted ms of the frame as chosen (0: not known) and whether
-    that frame used one strategy."""
+    strategies would have drawn them in, and whether the frame as chosen used one strategy."""
 
     strategy: str
     tiles: np.ndarray
     base_ms: float
-    frame_ms: float = 0.0
     pure: bool = True
 
 
@@ -197,7 +196,7 @@ class OnlineModel:
         ties = [o for o in offers if len(self.rows[names[o[0]]]) == least]
         i, tiles = ties[int(self._rng.integers(len(ties)))]
         picks[tiles] = i
-        return Exploration(names[i], tiles, float(base[tiles].sum()), frame, len(chosen) == 1)
+        return Exploration(names[i], tiles, float(base[tiles].sum()), len(chosen) == 1)
 
     def _levels(self, names: tuple) -> list[float]:
         """Per candidate, the share of its predicted ms at which exploration prices it: 1 once it has its own
@@ -293,6 +292,9 @@ class OnlineModel:
             if self._fresh[s] >= self._cadence(s):
                 learnt.append(s)
         kind = "mixed" if len(pass_ms) > 1 else "pure"
+        spent = None  # what exploring cost, against the window's frames before this one
+        if explored is not None and explored.strategy in pass_ms:
+            spent = self._explore_cost(explored, pass_ms, frame_ms) if explored.strategy not in first else 0.0
         self.residual[kind].append(frame_ms - sum(pass_ms.values()))
         if explored is None and not first and predicted_ms is not None and predicted_ms > 0:
             self.checks[kind].append((self.stats.frames, frame_ms / predicted_ms))
@@ -303,8 +305,7 @@ class OnlineModel:
         self.credit = min(
             self.credit + self.options.explore_share * frame_ms, 20 * self.options.explore_share * frame_ms
         )
-        if explored is not None and explored.strategy in pass_ms:
-            spent = self._explore_cost(explored, pass_ms, frame_ms) if explored.strategy not in first else 0.0
+        if explored is not None and spent is not None:
             self._spent[explored.strategy] = spent
             self.credit -= spent
             self.stats.explored_frames += 1
@@ -325,13 +326,14 @@ class OnlineModel:
         return max(median_of(mixed) / (median_of(pure) if pure else 1.0) - 1.0, 0.0)
 
     def _explore_cost(self, explored: Exploration, pass_ms: dict, frame_ms: float) -> float:
-        """What exploring cost a frame (ms): its measured ms beyond the frame as chosen (predicted, times the
-        window's measured / predicted of such frames), or the explored pass beyond the tiles' predicted ms if
-        that is more. A mixed frame costs more than its explored pass: the split timing, the depth copy."""
-        kind = "pure" if explored.pure else "mixed"
-        recent = [r for _, r in self.checks[kind]]
-        expected = explored.frame_ms * (median_of(recent) if recent else 1.0)
-        whole = frame_ms - expected if explored.frame_ms > 0 else 0.0
+        """What exploring cost a frame (ms): its measured ms beyond the frame as chosen, which is the chosen
+        strategies' passes as measured in this frame, the explored tiles at their predicted ms in them, and the
+        window's median gap (frame ms less its passes' ms) of frames like the one chosen (one-strategy or mixed);
+        or the explored pass beyond the tiles' predicted ms if that is more. Split timing, a depth copy and a
+        pass's fixed work are exploration's cost where the frame as chosen has none of them."""
+        gaps = self.residual["pure" if explored.pure else "mixed"]
+        chosen = sum(ms for s, ms in pass_ms.items() if s != explored.strategy)
+        whole = frame_ms - chosen - explored.base_ms - (max(median_of(gaps), 0.0) if gaps else 0.0)
         return max(whole, pass_ms[explored.strategy] - explored.base_ms, 0.0)
 
     def _cadence(self, s: str) -> int:
