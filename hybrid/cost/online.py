@@ -19,11 +19,8 @@ strategy not drawn yet does not look cheap beside one that is.
 
 A strategy the hybrid does not choose gives no rows, so it may be given a few tiles of a frame (exploration):
 at most ``explore_tiles`` tiles, those it is predicted to draw cheapest against the frame's choice, paid from a
-budget that earns ``explore_share`` of every observed frame's measured ms and is charged the exploration's
-measured cost: the frame's measured ms beyond the frame as chosen (the chosen strategies' passes as measured in
-it, the explored tiles at their predicted cost in them, and the gap such frames leave around their passes), or its
-pass less the chosen strategy's predicted cost of those tiles if that is more (a strategy's first pass, which pays
-one-off costs such as compiling its shaders, is neither charged nor a row).
+budget that earns ``explore_share`` of every observed frame's measured ms and is charged what the exploration cost
+(``_explore_cost``; a strategy's first pass, which compiles its shaders, is neither charged nor a row).
 A strategy with no level of its own yet is priced for exploration at no more than the starting model's level: the
 machine's scale, set by the other strategies' rows, may say more about them than about it. A few explored tiles
 are a strategy's costly ones and price its tiles, not its frames, so once past its first pass a strategy that drew
@@ -292,9 +289,7 @@ class OnlineModel:
             if self._fresh[s] >= self._cadence(s):
                 learnt.append(s)
         kind = "mixed" if len(pass_ms) > 1 else "pure"
-        spent = None  # what exploring cost, against the window's frames before this one
-        if explored is not None and explored.strategy in pass_ms:
-            spent = self._explore_cost(explored, pass_ms, frame_ms) if explored.strategy not in first else 0.0
+        spent = self._explore_cost(explored, pass_ms, frame_ms, first)  # before this frame's gap joins the window
         self.residual[kind].append(frame_ms - sum(pass_ms.values()))
         if explored is None and not first and predicted_ms is not None and predicted_ms > 0:
             self.checks[kind].append((self.stats.frames, frame_ms / predicted_ms))
@@ -325,12 +320,17 @@ class OnlineModel:
         pure = [r for k, r in self.checks["pure"] if k >= since]
         return max(median_of(mixed) / (median_of(pure) if pure else 1.0) - 1.0, 0.0)
 
-    def _explore_cost(self, explored: Exploration, pass_ms: dict, frame_ms: float) -> float:
+    def _explore_cost(self, explored: Exploration | None, pass_ms: dict, frame_ms: float, first: set) -> float | None:
         """What exploring cost a frame (ms): its measured ms beyond the frame as chosen, which is the chosen
         strategies' passes as measured in this frame, the explored tiles at their predicted ms in them, and the
         window's median gap (frame ms less its passes' ms) of frames like the one chosen (one-strategy or mixed);
         or the explored pass beyond the tiles' predicted ms if that is more. Split timing, a depth copy and a
-        pass's fixed work are exploration's cost where the frame as chosen has none of them."""
+        pass's fixed work are exploration's cost where the frame as chosen has none of them. None: nothing was
+        explored; 0: the explored strategy's first pass (one-off costs), in ``first``."""
+        if explored is None or explored.strategy not in pass_ms:
+            return None
+        if explored.strategy in first:
+            return 0.0
         gaps = self.residual["pure" if explored.pure else "mixed"]
         chosen = sum(ms for s, ms in pass_ms.items() if s != explored.strategy)
         whole = frame_ms - chosen - explored.base_ms - (max(median_of(gaps), 0.0) if gaps else 0.0)
