@@ -26,10 +26,10 @@ def level_views(flat: np.ndarray, n: int) -> tuple[np.ndarray, ...]:
 
 
 def mip_buffer(ctx, mips):
-    """A storage buffer holding a tile's max-mip levels 1..log2 N (``code_mips``), padded to whole 32-bit words."""
-    flat = np.concatenate([np.ascontiguousarray(m).ravel() for m in mips])
-    buf = ctx.buffer(reserve=mip_buffer_nbytes(int(mips[0].shape[0]) * 2, flat.itemsize))
-    buf.write(flat)
+    """A storage buffer holding a tile's max-mip levels 1..log2 N (``code_mips``), padded to whole 32-bit words:
+    each level written at its start (``write_mip_rows``)."""
+    buf = ctx.buffer(reserve=mip_buffer_nbytes(int(mips[0].shape[0]) * 2, mips[0].itemsize))
+    write_mip_rows(buf, mips)
     return buf
 
 
