@@ -54,6 +54,12 @@ layout(std430, binding = MIPS_BINDING) readonly buffer TileMips { uint tile_mips
 uint rc_mip_texel(int i) { return (tile_mips[i >> 1] >> ((i & 1) << 4)) & 0xFFFFu; }
 #endif
 
+// The 2x2 height texels around corner c + 1 in one gather: a level-0 cell's four corners (cell c), in the gather's
+// order for the footprint (x0, x1) x (y0, y1): (x0, y1), (x1, y1), (x1, y0), (x0, y0).
+RC_CODE4 rc_gather(RC_SAMPLER hmap, ivec2 c) {
+    return textureGather(hmap, (vec2(c) + 1.0) / vec2(textureSize(hmap, 0)), 0);
+}
+
 // An upper bound (max-mip code) of the heights of texel ri at level l of an N-cell grid: its max-mip texel, read
 // from the tile's buffer where `mbuf` (a compile-time constant of the call), else from texture mmap; for a
 // level-0 cell its level-1 parent's (one read a step: the cell's own corners are read where the ray enters its
@@ -63,8 +69,7 @@ RC_CODE rc_code(RC_SAMPLER hmap, RC_SAMPLER mmap, bool mbuf, int N, int l, ivec2
     // exact0 is a compile-time false in the caster's common variant (no planes, no ray under the sheet), so
     // the gather is compiled out there: a SIMD rasterizer runs a branch for every lane whenever it is compiled
     if (l == 0 && exact0) {
-        // the four corners in one gather: the 2x2 texels around the cell's north-east corner (ri + 1)
-        RC_CODE4 c = textureGather(hmap, (vec2(ri) + 1.0) / vec2(textureSize(hmap, 0)), 0);
+        RC_CODE4 c = rc_gather(hmap, ri);   // the cell's four corners
         return max(max(c.x, c.y), max(c.z, c.w));
     }
     int lp = max(l, 1);
@@ -96,8 +101,7 @@ float rc_val(float h) { return h; }
 // the 2x2 texels around the cell's north-east corner and one gather reads them, in place of four fetches.
 vec4 rc_corners(RC_SAMPLER hmap, ivec2 c0, int S, bool unit) {
     if (unit) {
-        // gather order for the 2x2 footprint (x0, x1) x (y0, y1): (x0, y1), (x1, y1), (x1, y0), (x0, y0)
-        RC_CODE4 c = textureGather(hmap, (vec2(c0) + 1.0) / vec2(textureSize(hmap, 0)), 0);
+        RC_CODE4 c = rc_gather(hmap, c0);
         return vec4(rc_val(c.w), rc_val(c.z), rc_val(c.x), rc_val(c.y));
     }
     return vec4(rc_val(texelFetch(hmap, c0, 0).r), rc_val(texelFetch(hmap, c0 + ivec2(S, 0), 0).r),
