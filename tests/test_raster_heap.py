@@ -156,3 +156,31 @@ def test_a_streaming_heap_holds_no_more_than_every_tile_of_the_pyramid(ctx, puge
         tiles = sum(a * b for a, b in (p.tile_counts(lev) for lev in range(p.max_level + 1)))
         (heap,) = r.strategies["raster"].heaps.values()
         assert tiles == 85 and heap.capacity == tiles + 1
+
+
+def test_heaps_are_shared_only_before_an_upload_and_over_one_slot_layout(ctx, puget257):
+    """Sharing another strategy's heaps is refused by name after a first upload, or where the slots' layout (beta)
+    differs; where allowed, both strategies' tiles land in one heap."""
+    from hybrid.errors import TerrabenchError
+    from hybrid.tiles.pyramid import TilePyramid
+    from raster.tilelets import TileletStrategy
+
+    pyr = TilePyramid(puget257, 32)
+    key = pyr.keys(0)[0]
+    owner, other = IndexedTileletStrategy(ctx, puget257), TileletStrategy(ctx, puget257, beta=0.25)
+    late, sharer = IndexedTileletStrategy(ctx, puget257), TileletStrategy(ctx, puget257)
+    try:
+        with pytest.raises(TerrabenchError, match="one beta"):
+            other.share_heaps(owner)
+        g = late.upload(pyr.tile(key))
+        with pytest.raises(TerrabenchError, match="before its first upload"):
+            late.share_heaps(owner)
+        g.release()
+        sharer.share_heaps(owner)
+        a, b = owner.upload(pyr.tile(key)), sharer.upload(pyr.tile(key))
+        assert a.slot.heap is b.slot.heap and a.slot.index != b.slot.index
+        a.release()
+        b.release()
+    finally:
+        for s in (owner, other, late, sharer):
+            s.release()
