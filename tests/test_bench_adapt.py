@@ -4,7 +4,7 @@ import copy
 
 import numpy as np
 
-from experiments.bench_adapt import TARGET, draw_flight, run, start_models
+from experiments.bench_adapt import FLOOR, SETTLED_FROM, TARGET, draw_flight, run, start_models
 from hybrid.camera.flight import preset
 from hybrid.cost.model import load_cost_model, save_cost_model, shipped_cost_model
 from hybrid.gl.context import gl_info
@@ -15,9 +15,10 @@ def test_each_repeat_starts_the_adapting_hybrid_cold(ctx, puget257):
     views = preset("orbit", puget257, 3, 160, 90).views()
     models = {"skewed": start_models(gl_info(ctx).renderer)["skewed"]}
     df = draw_flight(ctx, puget257, views, 2.0, models, repeats=2, tile_size=64)
-    assert set(df.method) == {"raster", "raster_gs", "raycast", "frozen:skewed", "hybrid:skewed"}
+    pure = {"raster", "raster_gs", "raycast"}
+    assert set(df.method) == pure | {f"{p} (again)" for p in pure} | {"frozen:skewed", "hybrid:skewed"}
     assert all(len(w) == 2 for w in df.wall_ms_repeats) and (df.wall_ms > 0).all()
-    assert len(df) == 5 * len(views)
+    assert len(df) == 8 * len(views)
 
 
 def test_the_device_start_is_the_shipped_model_not_the_users_file(ctx, tmp_path, monkeypatch):
@@ -41,3 +42,8 @@ def test_the_benchmark_reports_its_target_per_start(ctx):
     )
     (conv,) = [t for t in tables.values() if TARGET in t.columns]
     assert set(conv.start) == {"skewed", "device"} and (conv[TARGET] > 0).all()
+    (frames,) = [t for t in tables.values() if "frame" in t.columns]
+    late = frames[frames.frame >= SETTLED_FROM]  # one repeat: each frame's own ms
+    best = conv["better pure"].iloc[0]
+    floor = late[f"{best} (again)"].median() / late[best].median()
+    assert np.allclose(conv[FLOOR], floor) and np.isfinite(floor) and floor > 0
