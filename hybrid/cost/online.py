@@ -106,6 +106,21 @@ class OnlineModel:
         costs = [m.overhead.get(s, 0.0) for s in todo]
         return min(costs) <= self.credit or min(c * v for c, v in zip(costs, self._levels(todo))) <= self.credit
 
+    def level_known(self, strategy: str) -> bool:
+        """Whether the strategy's level is known within ``hold_error`` though its passes scatter more than that:
+        the standard error of its window's measured / predicted ms (their median absolute deviation, scaled to a
+        standard deviation, over the root of their count) is under it, over ``hold_rows`` rows or more. More passes
+        of a few explored tiles would not tell it closer than the hedge asks."""
+        X, y = self.rows[strategy].arrays()
+        pred = X @ self._theta(self.model, strategy)
+        ok = pred > 0
+        if int(ok.sum()) < self.options.hold_rows:
+            return False
+        r = y[ok] / pred[ok]
+        mid = float(np.median(r))
+        spread = 1.4826 * float(np.median(np.abs(r - mid))) / mid
+        return spread / np.sqrt(len(r)) < self.options.hold_error
+
     def known(self, strategy: str) -> bool:
         """Whether the strategy's predictions hold and it drew ``level_rows`` passes of more than a few tiles
         (its level is then its own frames', not that of the few tiles it was explored on)."""
@@ -127,7 +142,12 @@ class OnlineModel:
         offers = []
         for i in (i for i in range(len(names)) if i not in used):
             o = self._whole(table, names, i, frame, levels[i])
-            if o is None and not self.holds(names[i]) and np.isfinite(table[i]).any():
+            if (
+                o is None
+                and not self.holds(names[i])
+                and not self.level_known(names[i])
+                and np.isfinite(table[i]).any()
+            ):
                 o = self._offer(table, base, names, i, levels[i])
             offers += [] if o is None else [o]
         if not offers:
