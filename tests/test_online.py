@@ -7,7 +7,7 @@ import warnings
 
 import numpy as np
 import pytest
-from cost_helpers import true_model
+from cost_helpers import columns, true_model
 
 from hybrid.cost.model import (
     ONLINE_FIT_VERSION,
@@ -22,19 +22,6 @@ from hybrid.cost.online_fit import fit_rows
 from hybrid.errors import TerrabenchError
 
 TRUE = true_model(overhead={"raster": 2.0, "raster_gs": 3.0, "raycast": 1.5}, mix_overhead=0.8)
-
-
-def columns(rng, n):
-    """Feature columns of n synthetic tiles."""
-    return {
-        "pixels": rng.uniform(500, 40000, n),
-        "triangles": rng.uniform(0, 100000, n),
-        "slab_cells": rng.uniform(0, 300, n),
-        "level": rng.integers(0, 3, n).astype(float),
-        "distance": rng.uniform(1e3, 1e5, n),
-        "visible": rng.uniform(0.1, 1.0, n),
-        "surface_pixels": rng.uniform(0, 30000, n),
-    }
 
 
 def true_passes(cols, picks, rng, noise=0.03):

@@ -2,24 +2,11 @@
 their predictions to hold one by one."""
 
 import numpy as np
-from cost_helpers import true_model
+from cost_helpers import columns, true_model
 
 from hybrid.cost.online import AdaptOptions, OnlineModel
 
 TRUE = true_model(overhead={"raster": 2.0, "raster_gs": 3.0, "raycast": 1.5}, mix_overhead=0.8)
-
-
-def columns(rng, n):
-    """Feature columns of n synthetic tiles."""
-    return {
-        "pixels": rng.uniform(500, 40000, n),
-        "triangles": rng.uniform(0, 100000, n),
-        "slab_cells": rng.uniform(0, 300, n),
-        "level": rng.integers(0, 3, n).astype(float),
-        "distance": rng.uniform(1e3, 1e5, n),
-        "visible": rng.uniform(0.1, 1.0, n),
-        "surface_pixels": rng.uniform(0, 30000, n),
-    }
 
 
 def explored_passes(online, rng, n, sigma, tiles=2):
