@@ -29,7 +29,8 @@ might beat the frame as chosen at ``OPTIMISM`` times its price and the budget co
 Until a strategy has ``shape_rows`` passes of more than ``explore_tiles`` tiles, its passes of a few tiles set its
 per-frame overhead and its tiles keep the starting model's split (``hybrid.cost.online_fit``). A strategy whose last
 ``hold_rows`` predictions were within ``hold_error`` (median relative error of passes predicted before they
-were fitted) holds, and is explored no more while it holds.
+were fitted) holds, and is explored no more while it holds; nor is it offered a few tiles once its level is
+known (``level_known``) though its passes scatter too much to hold one by one.
 
 A mixed frame's own overhead is the median of (frame ms - its passes' ms) over the window's mixed frames less
 that of its one-strategy frames.
