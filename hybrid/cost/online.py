@@ -118,8 +118,8 @@ class OnlineModel:
         if int(ok.sum()) < self.options.hold_rows:
             return False
         r = y[ok] / pred[ok]
-        mid = float(np.median(r))
-        spread = 1.4826 * float(np.median(np.abs(r - mid))) / mid
+        mid = median_of(r.tolist())
+        spread = 1.4826 * median_of(np.abs(r - mid).tolist()) / mid
         return spread / np.sqrt(len(r)) < self.options.hold_error
 
     def known(self, strategy: str) -> bool:
@@ -146,8 +146,8 @@ class OnlineModel:
             if (
                 o is None
                 and not self.holds(names[i])
-                and not self.level_known(names[i])
                 and np.isfinite(table[i]).any()
+                and not self.level_known(names[i])
             ):
                 o = self._offer(table, base, names, i, levels[i])
             offers += [] if o is None else [o]
